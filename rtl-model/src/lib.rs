@@ -1,0 +1,1 @@
+//! Bit-accurate register-transfer model of the occlusion engine and OccU Control (no floats).

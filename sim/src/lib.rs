@@ -1,0 +1,1 @@
+//! Timing models of the occlusion-query hardware. This crate does no file IO.

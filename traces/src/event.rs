@@ -1,0 +1,40 @@
+//! The vocabulary every consumer of a fragment stream speaks: the golden model emits it, the
+//! trace format stores it, the timing models replay it.
+
+use crate::query::{QueryResult, QuerySpec};
+use crate::state::{DepthFunc, Rect};
+use serde::{Deserialize, Serialize};
+
+/// One fragment after rasterization and scissor, before the depth test.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct Fragment {
+    /// Window x of the pixel (0 at the left).
+    pub x: u16,
+    /// Window y of the pixel (0 at the bottom, as GL).
+    pub y: u16,
+    /// Window depth as 24-bit unsigned normalised: k means k / (2^24 - 1).
+    pub z: u32,
+}
+
+/// Largest depth value: 1.0 in 24-bit unsigned normalised form.
+pub const DEPTH_ONE: u32 = (1 << 24) - 1;
+
+/// An item of a fragment stream, in pipeline order.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Event {
+    /// Depth := 1.0 everywhere (ignores scissor and depth mask).
+    Clear,
+    DepthFunc(DepthFunc),
+    DepthMask(bool),
+    DepthTest(bool),
+    Cull(bool),
+    Scissor(Option<Rect>),
+    QueryBegin(QuerySpec),
+    /// End of the open query.
+    QueryEnd,
+    /// A primitive reached triangle setup; its fragments follow.
+    Primitive,
+    Fragment(Fragment),
+    /// The golden model's answer to the query that just ended.
+    QueryResult(QueryResult),
+}

@@ -1,0 +1,326 @@
+//! The functional golden model: a depth buffer and the query semantics, giving every query's
+//! exact result. Every timing model must reproduce its counts.
+
+use crate::event::{Event, Fragment, DEPTH_ONE};
+use crate::query::{verbose_hits_kept, QueryMode, QueryResult, QuerySpec, TileResult};
+use crate::raster::{rasterize_triangle, RasterSink};
+use crate::scene::Command;
+use crate::state::RenderState;
+
+/// The depth buffer: 24-bit depths, one per pixel, row by row from the bottom.
+pub struct DepthBuffer {
+    width: u32,
+    depths: Vec<u32>,
+}
+
+impl DepthBuffer {
+    /// A buffer cleared to 1.0.
+    pub fn new(width: u32, height: u32) -> DepthBuffer {
+        DepthBuffer {
+            width,
+            depths: vec![DEPTH_ONE; width as usize * height as usize],
+        }
+    }
+
+    pub fn clear(&mut self) {
+        self.depths.fill(DEPTH_ONE);
+    }
+
+    pub fn get(&self, x: u16, y: u16) -> u32 {
+        self.depths[y as usize * self.width as usize + x as usize]
+    }
+
+    /// The depth test and write of one fragment under `state`. Returns whether it passed.
+    /// `writes_allowed` is false in the occlusion render modes, which never write.
+    #[inline(always)]
+    pub fn test(&mut self, state: &RenderState, fragment: Fragment, writes_allowed: bool) -> bool {
+        if !state.depth_test {
+            return true;
+        }
+        let slot =
+            &mut self.depths[fragment.y as usize * self.width as usize + fragment.x as usize];
+        let passed = state.depth_func.passes(fragment.z, *slot);
+        if passed && state.depth_mask && writes_allowed {
+            *slot = fragment.z;
+        }
+        passed
+    }
+}
+
+/// Finds the tiles of a query that hold a pixel. Few tiles are scanned; many are bucketed
+/// into a coarse grid so a grid of thousands of cells costs a lookup, not a scan.
+struct TileIndex {
+    /// log2 of a bucket's side in pixels.
+    shift: u32,
+    columns: usize,
+    /// Per bucket, the range in `entries` of the tiles overlapping it.
+    buckets: Vec<(u32, u32)>,
+    entries: Vec<u32>,
+}
+
+/// Tile counts up to which a plain scan beats the index.
+const SCAN_TILES: usize = 8;
+/// Most tile references the index may hold (bounds memory for many large overlapping tiles).
+const MAX_INDEX_ENTRIES: u64 = 1 << 24;
+
+impl TileIndex {
+    fn build(spec: &QuerySpec, state: &RenderState) -> Option<TileIndex> {
+        if spec.tiles.len() <= SCAN_TILES {
+            return None;
+        }
+        let shift = 5;
+        let columns = (state.width as usize).div_ceil(1 << shift);
+        let rows = (state.height as usize).div_ceil(1 << shift);
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); columns * rows];
+        let mut total = 0u64;
+        for (index, tile) in spec.tiles.iter().enumerate() {
+            let (c0, c1) = (tile.x >> shift, (tile.x + tile.width - 1) >> shift);
+            let (r0, r1) = (tile.y >> shift, (tile.y + tile.height - 1) >> shift);
+            total += (c1 - c0 + 1) as u64 * (r1 - r0 + 1) as u64;
+            if total > MAX_INDEX_ENTRIES {
+                return None;
+            }
+            for r in r0..=r1 {
+                for c in c0..=c1 {
+                    lists[r as usize * columns + c as usize].push(index as u32);
+                }
+            }
+        }
+        let mut buckets = Vec::with_capacity(lists.len());
+        let mut entries = Vec::with_capacity(total as usize);
+        for list in lists {
+            let start = entries.len() as u32;
+            entries.extend(list);
+            buckets.push((start, entries.len() as u32));
+        }
+        Some(TileIndex {
+            shift,
+            columns,
+            buckets,
+            entries,
+        })
+    }
+
+    fn candidates(&self, x: u16, y: u16) -> &[u32] {
+        let bucket = (y as usize >> self.shift) * self.columns + (x as usize >> self.shift);
+        let (start, end) = self.buckets[bucket];
+        &self.entries[start as usize..end as usize]
+    }
+}
+
+/// The open query's running results.
+struct OpenQuery {
+    spec: QuerySpec,
+    tiles: Vec<TileResult>,
+    index: Option<TileIndex>,
+    /// Hit-list room per tile when every hit fits (verbose only).
+    hit_room: usize,
+}
+
+impl OpenQuery {
+    fn new(spec: QuerySpec, state: &RenderState) -> OpenQuery {
+        let tiles = vec![TileResult::default(); spec.tiles.len()];
+        let index = TileIndex::build(&spec, state);
+        let hit_room = match spec.mode {
+            QueryMode::Verbose => spec.hit_capacity() as usize,
+            _ => 0,
+        };
+        OpenQuery {
+            spec,
+            tiles,
+            index,
+            hit_room,
+        }
+    }
+
+    /// Account a fragment in every tile that holds it.
+    #[inline]
+    fn record(&mut self, fragment: Fragment, passed: bool) {
+        let OpenQuery {
+            spec,
+            tiles,
+            index,
+            hit_room,
+        } = self;
+        let (x, y) = (fragment.x as u32, fragment.y as u32);
+        let mut record_in = |tile: usize| {
+            if spec.tiles[tile].contains(x, y) {
+                let result = &mut tiles[tile];
+                result.record(fragment.x, fragment.y, fragment.z, passed);
+                // Hits beyond the room are only counted (nohc); `finish` trims on overflow.
+                if passed && result.hits.len() < *hit_room {
+                    result.hits.push((fragment.x, fragment.y));
+                }
+            }
+        };
+        match index {
+            None => (0..spec.tiles.len()).for_each(&mut record_in),
+            Some(index) => index
+                .candidates(fragment.x, fragment.y)
+                .iter()
+                .for_each(|&tile| record_in(tile as usize)),
+        }
+    }
+
+    fn finish(mut self) -> QueryResult {
+        let mut overflowed_buffers = 0;
+        if self.spec.mode == QueryMode::Verbose {
+            for tile in &mut self.tiles {
+                let (kept, overflowed) = verbose_hits_kept(self.spec.buffer_entries, tile.nohc);
+                tile.hits.truncate(kept as usize);
+                tile.overflowed = overflowed;
+                overflowed_buffers += overflowed as u32;
+            }
+        }
+        QueryResult {
+            id: self.spec.id,
+            mode: self.spec.mode,
+            tiles: self.tiles,
+            overflowed_buffers,
+        }
+    }
+}
+
+/// The golden model's semantics over a fragment stream: state, depth buffer, queries.
+/// It consumes [`Event`]s, so it replays a trace as readily as it follows the rasterizer.
+pub struct FunctionalModel {
+    state: RenderState,
+    depth: DepthBuffer,
+    query: Option<OpenQuery>,
+}
+
+impl FunctionalModel {
+    pub fn new(width: u32, height: u32) -> FunctionalModel {
+        FunctionalModel {
+            state: RenderState::new(width, height),
+            depth: DepthBuffer::new(width, height),
+            query: None,
+        }
+    }
+
+    pub fn state(&self) -> &RenderState {
+        &self.state
+    }
+
+    pub fn depth_buffer(&self) -> &DepthBuffer {
+        &self.depth
+    }
+
+    /// Test one fragment and account it in the open query.
+    #[inline(always)]
+    pub fn fragment(&mut self, fragment: Fragment) {
+        let writes_allowed = !self
+            .query
+            .as_ref()
+            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
+        let passed = self.depth.test(&self.state, fragment, writes_allowed);
+        if let Some(query) = &mut self.query {
+            query.record(fragment, passed);
+        }
+    }
+
+    /// Apply one event; a `QueryEnd` returns the query's result. `QueryResult` events (the
+    /// answers stored in a trace) are ignored: this model computes its own.
+    pub fn event(&mut self, event: &Event) -> Option<QueryResult> {
+        match event {
+            Event::Clear => self.depth.clear(),
+            Event::DepthFunc(f) => self.state.depth_func = *f,
+            Event::DepthMask(b) => self.state.depth_mask = *b,
+            Event::DepthTest(b) => self.state.depth_test = *b,
+            Event::Cull(b) => self.state.cull_back = *b,
+            Event::Scissor(s) => self.state.scissor = *s,
+            Event::QueryBegin(spec) => {
+                self.query = Some(OpenQuery::new(spec.clone(), &self.state));
+            }
+            Event::QueryEnd => return self.query.take().map(OpenQuery::finish),
+            Event::Fragment(f) => self.fragment(*f),
+            Event::Primitive | Event::QueryResult(_) => {}
+        }
+        None
+    }
+}
+
+/// Receives the golden model's event stream (a trace writer, say).
+pub trait EventSink {
+    fn event(&mut self, event: &Event);
+}
+
+/// A sink that keeps nothing.
+pub struct Discard;
+
+impl EventSink for Discard {
+    #[inline(always)]
+    fn event(&mut self, _: &Event) {}
+}
+
+impl EventSink for Vec<Event> {
+    fn event(&mut self, event: &Event) {
+        self.push(event.clone());
+    }
+}
+
+/// Scene commands in, events and query results out.
+pub struct GoldenModel {
+    functional: FunctionalModel,
+}
+
+struct Forward<'a, S: EventSink> {
+    functional: &'a mut FunctionalModel,
+    sink: &'a mut S,
+}
+
+impl<S: EventSink> RasterSink for Forward<'_, S> {
+    #[inline(always)]
+    fn primitive(&mut self) {
+        self.sink.event(&Event::Primitive);
+    }
+
+    #[inline(always)]
+    fn fragment(&mut self, fragment: Fragment) {
+        self.functional.fragment(fragment);
+        self.sink.event(&Event::Fragment(fragment));
+    }
+}
+
+impl GoldenModel {
+    pub fn new(width: u32, height: u32) -> GoldenModel {
+        GoldenModel {
+            functional: FunctionalModel::new(width, height),
+        }
+    }
+
+    pub fn state(&self) -> &RenderState {
+        self.functional.state()
+    }
+
+    /// Execute one command (the scene's `viewport` is the constructor's business and is
+    /// ignored here), sending its events to `sink`. Returns the result of a query it ends.
+    pub fn execute(&mut self, command: &Command, sink: &mut impl EventSink) -> Option<QueryResult> {
+        let event = match command {
+            Command::Viewport { .. } => return None,
+            Command::Tri(vertices) => {
+                let state = *self.functional.state();
+                let mut forward = Forward {
+                    functional: &mut self.functional,
+                    sink,
+                };
+                rasterize_triangle(&state, vertices, &mut forward);
+                return None;
+            }
+            Command::Clear => Event::Clear,
+            Command::DepthFunc(f) => Event::DepthFunc(*f),
+            Command::DepthMask(b) => Event::DepthMask(*b),
+            Command::DepthTest(b) => Event::DepthTest(*b),
+            Command::Cull(b) => Event::Cull(*b),
+            Command::Scissor(s) => Event::Scissor(*s),
+            Command::Begin(spec) => Event::QueryBegin(spec.clone()),
+            Command::End => Event::QueryEnd,
+        };
+        sink.event(&event);
+        let result = self.functional.event(&event);
+        if let Some(result) = &result {
+            sink.event(&Event::QueryResult(result.clone()));
+        }
+        result
+    }
+}

@@ -1,0 +1,24 @@
+//! The front half of occsim's data flow: scene -> rasterizer -> golden model -> fragment trace.
+//!
+//! - [`scene`]: the text scene language (one OpenGL-like command a line).
+//! - [`raster`]: the exact reference rasterizer (integer edge functions, no epsilons).
+//! - [`golden`]: the functional golden model (depth buffer and query semantics).
+//! - [`trace`]: the `.occt` binary fragment trace format (streaming reader and writer).
+//! - [`builtin`]: built-in scenes (`demo`, `hardcases`).
+
+pub mod builtin;
+pub mod event;
+pub mod golden;
+pub mod query;
+pub mod raster;
+pub mod scene;
+pub mod state;
+pub mod trace;
+
+pub use event::{Event, Fragment};
+pub use query::{QueryMode, QueryResult, QuerySpec, Tile, TileResult};
+pub use scene::{Command, SceneError, SceneLine};
+pub use state::{DepthFunc, Rect};
+
+/// Version of the generator, recorded in every trace header.
+pub const GENERATOR_VERSION: &str = concat!("occsim-traces ", env!("CARGO_PKG_VERSION"));

@@ -1,0 +1,192 @@
+//! Query semantics: what a query asks (its mode, tiles, buffers) and what it answers.
+
+use crate::state::Rect;
+use serde::{Deserialize, Serialize};
+
+/// Entries of the brief record at the head of every occlusion buffer:
+/// NOHC, PHC, Xmin, Xmax, Ymin, Ymax, Zmin, Zmax.
+pub const BRIEF_RECORD_ENTRIES: u32 = 8;
+/// Default occlusion buffer size in entries for brief mode (just the record).
+pub const DEFAULT_BRIEF_BUFFER: u32 = BRIEF_RECORD_ENTRIES;
+/// Default occlusion buffer size in entries for verbose mode (the record and 256 hits).
+pub const DEFAULT_VERBOSE_BUFFER: u32 = BRIEF_RECORD_ENTRIES + 256;
+/// Largest occlusion buffer accepted, in entries (bounds memory on hostile input).
+pub const MAX_BUFFER_ENTRIES: u32 = 1 << 24;
+/// Largest number of tiles in one query (`GL_MAX_OCCLUSION_TILES`).
+pub const MAX_TILES: usize = 65536;
+
+/// What a query measures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum QueryMode {
+    /// `GL_SAMPLES_PASSED`: the number of fragments that pass; draws write as the state says.
+    Samples,
+    /// `GL_ANY_SAMPLES_PASSED`: did any fragment pass.
+    Any,
+    /// `GL_BRIEF_OCCLUSION`: per tile NOHC, PHC, box and z range; the framebuffer is untouched.
+    Brief,
+    /// `GL_VERBOSE_OCCLUSION`: brief, plus the list of passing pixels up to the buffer size.
+    Verbose,
+}
+
+impl QueryMode {
+    pub const ALL: [QueryMode; 4] = [
+        QueryMode::Samples,
+        QueryMode::Any,
+        QueryMode::Brief,
+        QueryMode::Verbose,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            QueryMode::Samples => "samples",
+            QueryMode::Any => "any",
+            QueryMode::Brief => "brief",
+            QueryMode::Verbose => "verbose",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<QueryMode> {
+        QueryMode::ALL.into_iter().find(|m| m.name() == name)
+    }
+
+    /// Occlusion render modes never change the framebuffer (like `GL_SELECT`).
+    pub fn is_occlusion_render_mode(self) -> bool {
+        matches!(self, QueryMode::Brief | QueryMode::Verbose)
+    }
+
+    pub fn code(self) -> u8 {
+        self as u8
+    }
+
+    pub fn from_code(code: u8) -> Option<QueryMode> {
+        QueryMode::ALL.get(code as usize).copied()
+    }
+}
+
+/// An occlusion tile: a window rectangle whose fragments one engine counts.
+pub type Tile = Rect;
+
+/// A query as `begin` states it.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct QuerySpec {
+    /// The application's name for the query (need not be unique).
+    pub id: u32,
+    pub mode: QueryMode,
+    /// Occlusion buffer size per tile, in entries (at least 8: the brief record).
+    pub buffer_entries: u32,
+    /// The occlusion tiles; `samples` and `any` queries have exactly one, the viewport.
+    pub tiles: Vec<Tile>,
+}
+
+impl QuerySpec {
+    /// Room for hits in one verbose buffer, in entries, when they all fit.
+    pub fn hit_capacity(&self) -> u32 {
+        self.buffer_entries - BRIEF_RECORD_ENTRIES
+    }
+}
+
+/// One tile's answer: the brief record and, in verbose mode, the stored hits.
+///
+/// Empty box and z range (no passing fragment) read as min = `u32::MAX`, max = 0, as the
+/// hardware's reset values.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TileResult {
+    /// Non-occlusion hits: fragments inside the tile that passed the depth test.
+    pub nohc: u64,
+    /// Projection hits: fragments inside the tile.
+    pub phc: u64,
+    pub xmin: u32,
+    pub xmax: u32,
+    pub ymin: u32,
+    pub ymax: u32,
+    pub zmin: u32,
+    pub zmax: u32,
+    /// Verbose mode: the (x, y) of passing fragments, in arrival order, as many as fit.
+    pub hits: Vec<(u16, u16)>,
+    /// Verbose mode: more hits arrived than the buffer holds (it ends with -1 then).
+    pub overflowed: bool,
+}
+
+impl Default for TileResult {
+    fn default() -> TileResult {
+        TileResult {
+            nohc: 0,
+            phc: 0,
+            xmin: u32::MAX,
+            xmax: 0,
+            ymin: u32::MAX,
+            ymax: 0,
+            zmin: u32::MAX,
+            zmax: 0,
+            hits: Vec::new(),
+            overflowed: false,
+        }
+    }
+}
+
+impl TileResult {
+    /// Account one fragment inside this tile.
+    #[inline]
+    pub fn record(&mut self, x: u16, y: u16, z: u32, passed: bool) {
+        self.phc += 1;
+        if passed {
+            self.nohc += 1;
+            self.xmin = self.xmin.min(x as u32);
+            self.xmax = self.xmax.max(x as u32);
+            self.ymin = self.ymin.min(y as u32);
+            self.ymax = self.ymax.max(y as u32);
+            self.zmin = self.zmin.min(z);
+            self.zmax = self.zmax.max(z);
+        }
+    }
+
+    /// Fold another partial result for the same tile into this one (hits concatenated).
+    pub fn merge(&mut self, other: &TileResult) {
+        self.nohc += other.nohc;
+        self.phc += other.phc;
+        self.xmin = self.xmin.min(other.xmin);
+        self.xmax = self.xmax.max(other.xmax);
+        self.ymin = self.ymin.min(other.ymin);
+        self.ymax = self.ymax.max(other.ymax);
+        self.zmin = self.zmin.min(other.zmin);
+        self.zmax = self.zmax.max(other.zmax);
+        self.hits.extend_from_slice(&other.hits);
+        self.overflowed |= other.overflowed;
+    }
+}
+
+/// Hits a verbose buffer of `buffer_entries` keeps out of `total_hits`, and whether it
+/// overflowed. On overflow the last entry holds the -1 terminator, so one hit fewer fits;
+/// a buffer of exactly 8 entries has no room for hits nor terminator.
+pub fn verbose_hits_kept(buffer_entries: u32, total_hits: u64) -> (u64, bool) {
+    let room = (buffer_entries - BRIEF_RECORD_ENTRIES) as u64;
+    if total_hits <= room {
+        (total_hits, false)
+    } else {
+        (room.saturating_sub(1), true)
+    }
+}
+
+/// A query's answer.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct QueryResult {
+    pub id: u32,
+    pub mode: QueryMode,
+    /// One per tile, in the order the query listed them.
+    pub tiles: Vec<TileResult>,
+    /// How many tiles' verbose buffers overflowed (what `glRenderMode(GL_RENDER)` returns).
+    pub overflowed_buffers: u32,
+}
+
+impl QueryResult {
+    /// The value a GL program reads: the passing count for `samples`, 0 or 1 for `any`,
+    /// the NOHC sum over tiles for the occlusion modes.
+    pub fn value(&self) -> u64 {
+        let passed: u64 = self.tiles.iter().map(|t| t.nohc).sum();
+        match self.mode {
+            QueryMode::Any => (passed > 0) as u64,
+            _ => passed,
+        }
+    }
+}

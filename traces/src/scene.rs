@@ -1,0 +1,542 @@
+//! The scene language: one OpenGL-like command a line, `#` starts a comment.
+//!
+//! ```text
+//! viewport W H
+//! clear
+//! depth_func never|less|equal|lequal|greater|notequal|gequal|always
+//! depth_mask 0|1
+//! depth_test 0|1
+//! cull 0|1
+//! scissor X Y W H | scissor off
+//! begin ID [samples|any|brief|verbose] [buffer=N] [tile=X,Y,W,H]...
+//! end
+//! tri x y z w  x y z w  x y z w
+//! ```
+//! `viewport` comes first and once. Queries do not nest. Coordinates are clip coordinates,
+//! parsed as 32-bit floats; NaN and infinities are rejected.
+
+use crate::query::{
+    QueryMode, QuerySpec, Tile, BRIEF_RECORD_ENTRIES, DEFAULT_BRIEF_BUFFER, DEFAULT_VERBOSE_BUFFER,
+    MAX_BUFFER_ENTRIES, MAX_TILES,
+};
+use crate::state::{DepthFunc, Rect, MAX_VIEWPORT_SIDE};
+use std::io::BufRead;
+
+/// A scene command, one per line.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Command {
+    Viewport {
+        width: u32,
+        height: u32,
+    },
+    Clear,
+    DepthFunc(DepthFunc),
+    DepthMask(bool),
+    DepthTest(bool),
+    Cull(bool),
+    Scissor(Option<Rect>),
+    Begin(QuerySpec),
+    End,
+    /// A triangle's three vertices in clip coordinates (x, y, z, w).
+    Tri([[f32; 4]; 3]),
+}
+
+/// A command and the line it came from (1-based).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SceneLine {
+    pub line: u32,
+    pub command: Command,
+}
+
+/// A scene that cannot be read, with the place it went wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("{file}:{line}: {message}")]
+    Syntax {
+        file: String,
+        line: u32,
+        message: String,
+    },
+    #[error("{file}: {source}")]
+    Io {
+        file: String,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Longest scene line accepted, in bytes: no command needs more than a few hundred, and a
+/// bound keeps a hostile file from growing one line without limit.
+const MAX_LINE_BYTES: usize = 1 << 20;
+
+/// Streams commands out of a scene text, checking each line as it comes.
+pub struct SceneReader<R> {
+    input: R,
+    file: String,
+    line_number: u32,
+    buffer: Vec<u8>,
+    viewport: Option<(u32, u32)>,
+    open_query: Option<u32>,
+    finished: bool,
+}
+
+impl<R: BufRead> SceneReader<R> {
+    /// `file` names the input in error messages.
+    pub fn new(input: R, file: impl Into<String>) -> SceneReader<R> {
+        SceneReader {
+            input,
+            file: file.into(),
+            line_number: 0,
+            buffer: Vec::new(),
+            viewport: None,
+            open_query: None,
+            finished: false,
+        }
+    }
+
+    fn error(&self, message: impl Into<String>) -> SceneError {
+        SceneError::Syntax {
+            file: self.file.clone(),
+            line: self.line_number,
+            message: message.into(),
+        }
+    }
+
+    /// Read one raw line into `self.buffer`; false at end of input.
+    fn read_line(&mut self) -> Result<bool, SceneError> {
+        self.buffer.clear();
+        let mut limited = std::io::Read::take(&mut self.input, MAX_LINE_BYTES as u64 + 1);
+        let n = limited
+            .read_until(b'\n', &mut self.buffer)
+            .map_err(|source| SceneError::Io {
+                file: self.file.clone(),
+                source,
+            })?;
+        if n == 0 {
+            return Ok(false);
+        }
+        self.line_number += 1;
+        if self.buffer.len() > MAX_LINE_BYTES {
+            return Err(self.error(format!("line longer than {MAX_LINE_BYTES} bytes")));
+        }
+        Ok(true)
+    }
+
+    fn next_command(&mut self) -> Result<Option<SceneLine>, SceneError> {
+        while self.read_line()? {
+            let text = std::str::from_utf8(&self.buffer)
+                .map_err(|_| self.error("line is not valid UTF-8"))?;
+            let text = text.split('#').next().unwrap_or("").trim().to_owned();
+            if text.is_empty() {
+                continue;
+            }
+            let command = self.parse_command(&text)?;
+            return Ok(Some(SceneLine {
+                line: self.line_number,
+                command,
+            }));
+        }
+        if let Some(id) = self.open_query {
+            return Err(self.error(format!("end of scene inside query {id}: expected `end`")));
+        }
+        if self.viewport.is_none() {
+            return Err(self.error("empty scene: expected `viewport W H`"));
+        }
+        Ok(None)
+    }
+
+    fn parse_command(&mut self, text: &str) -> Result<Command, SceneError> {
+        let mut words = text.split_whitespace();
+        let keyword = words.next().unwrap_or("");
+        let args: Vec<&str> = words.collect();
+        if keyword != "viewport" && self.viewport.is_none() {
+            return Err(self.error(format!(
+                "`{keyword}` before `viewport`: a scene starts with `viewport W H`"
+            )));
+        }
+        let command = match keyword {
+            "viewport" => self.parse_viewport(&args)?,
+            "clear" => {
+                self.expect_args(keyword, &args, 0, "clear")?;
+                Command::Clear
+            }
+            "depth_func" => {
+                self.expect_args(keyword, &args, 1, "depth_func never|less|equal|lequal|greater|notequal|gequal|always")?;
+                Command::DepthFunc(DepthFunc::from_name(args[0]).ok_or_else(|| {
+                    self.error(format!(
+                        "unknown depth function `{}`: expected never, less, equal, lequal, greater, notequal, gequal or always",
+                        args[0]
+                    ))
+                })?)
+            }
+            "depth_mask" => Command::DepthMask(self.parse_flag(keyword, &args)?),
+            "depth_test" => Command::DepthTest(self.parse_flag(keyword, &args)?),
+            "cull" => Command::Cull(self.parse_flag(keyword, &args)?),
+            "scissor" => self.parse_scissor(&args)?,
+            "begin" => self.parse_begin(&args)?,
+            "end" => {
+                self.expect_args(keyword, &args, 0, "end")?;
+                if self.open_query.take().is_none() {
+                    return Err(self.error("`end` without an open query"));
+                }
+                Command::End
+            }
+            "tri" => self.parse_tri(&args)?,
+            other => {
+                return Err(self.error(format!(
+                    "unknown command `{other}`: expected viewport, clear, depth_func, depth_mask, depth_test, cull, scissor, begin, end or tri"
+                )))
+            }
+        };
+        Ok(command)
+    }
+
+    fn expect_args(
+        &self,
+        keyword: &str,
+        args: &[&str],
+        count: usize,
+        usage: &str,
+    ) -> Result<(), SceneError> {
+        if args.len() != count {
+            return Err(self.error(format!(
+                "`{keyword}` takes {count} argument{}, found {}: expected `{usage}`",
+                if count == 1 { "" } else { "s" },
+                args.len()
+            )));
+        }
+        Ok(())
+    }
+
+    fn parse_u32(&self, what: &str, word: &str) -> Result<u32, SceneError> {
+        word.parse::<u32>().map_err(|_| {
+            self.error(format!(
+                "{what}: expected a whole number from 0 to {}, found `{word}`",
+                u32::MAX
+            ))
+        })
+    }
+
+    fn parse_flag(&self, keyword: &str, args: &[&str]) -> Result<bool, SceneError> {
+        self.expect_args(keyword, args, 1, &format!("{keyword} 0|1"))?;
+        match args[0] {
+            "0" => Ok(false),
+            "1" => Ok(true),
+            other => Err(self.error(format!("`{keyword}` takes 0 or 1, found `{other}`"))),
+        }
+    }
+
+    fn parse_viewport(&mut self, args: &[&str]) -> Result<Command, SceneError> {
+        if self.viewport.is_some() {
+            return Err(self.error("second `viewport`: a scene has one viewport, given first"));
+        }
+        self.expect_args("viewport", args, 2, "viewport W H")?;
+        let width = self.parse_u32("viewport width", args[0])?;
+        let height = self.parse_u32("viewport height", args[1])?;
+        for (name, side) in [("width", width), ("height", height)] {
+            if side == 0 || side > MAX_VIEWPORT_SIDE {
+                return Err(self.error(format!(
+                    "viewport {name} {side} out of range: expected 1 to {MAX_VIEWPORT_SIDE}"
+                )));
+            }
+        }
+        self.viewport = Some((width, height));
+        Ok(Command::Viewport { width, height })
+    }
+
+    fn parse_scissor(&self, args: &[&str]) -> Result<Command, SceneError> {
+        if args == ["off"] {
+            return Ok(Command::Scissor(None));
+        }
+        self.expect_args("scissor", args, 4, "scissor X Y W H | scissor off")?;
+        let v: Vec<u32> = args
+            .iter()
+            .zip(["scissor x", "scissor y", "scissor width", "scissor height"])
+            .map(|(a, what)| self.parse_u32(what, a))
+            .collect::<Result<_, _>>()?;
+        Ok(Command::Scissor(Some(Rect::new(v[0], v[1], v[2], v[3]))))
+    }
+
+    fn parse_begin(&mut self, args: &[&str]) -> Result<Command, SceneError> {
+        let usage = "begin ID [samples|any|brief|verbose] [buffer=N] [tile=X,Y,W,H]...";
+        if let Some(open) = self.open_query {
+            return Err(self.error(format!(
+                "`begin` inside query {open}: queries do not nest, expected `end` first"
+            )));
+        }
+        let Some((id_word, rest)) = args.split_first() else {
+            return Err(self.error(format!("`begin` needs a query id: expected `{usage}`")));
+        };
+        let id = self.parse_u32("query id", id_word)?;
+        let mut mode = None;
+        let mut buffer = None;
+        let mut tiles = Vec::new();
+        for word in rest {
+            if let Some(value) = word.strip_prefix("buffer=") {
+                if buffer.is_some() {
+                    return Err(self.error("`buffer=` given twice"));
+                }
+                buffer = Some(self.parse_u32("buffer size", value)?);
+            } else if let Some(value) = word.strip_prefix("tile=") {
+                if tiles.len() == MAX_TILES {
+                    return Err(self.error(format!("more than {MAX_TILES} tiles in one query")));
+                }
+                tiles.push(self.parse_tile(value)?);
+            } else if let Some(m) = QueryMode::from_name(word) {
+                if mode.is_some() {
+                    return Err(self.error("query mode given twice"));
+                }
+                mode = Some(m);
+            } else {
+                return Err(self.error(format!(
+                    "unexpected `{word}` in `begin`: expected `{usage}`"
+                )));
+            }
+        }
+        let mode = mode.unwrap_or(QueryMode::Samples);
+        let (width, height) = self.viewport.unwrap_or((0, 0));
+        if !mode.is_occlusion_render_mode() {
+            if buffer.is_some() || !tiles.is_empty() {
+                return Err(self.error(format!(
+                    "`{}` queries take no tiles or buffer: those belong to brief and verbose",
+                    mode.name()
+                )));
+            }
+        }
+        let buffer_entries = buffer.unwrap_or(match mode {
+            QueryMode::Verbose => DEFAULT_VERBOSE_BUFFER,
+            _ => DEFAULT_BRIEF_BUFFER,
+        });
+        if !(BRIEF_RECORD_ENTRIES..=MAX_BUFFER_ENTRIES).contains(&buffer_entries) {
+            return Err(self.error(format!(
+                "buffer={buffer_entries} out of range: expected {BRIEF_RECORD_ENTRIES} (the brief record) to {MAX_BUFFER_ENTRIES} entries"
+            )));
+        }
+        for tile in &tiles {
+            if tile.x as u64 + tile.width as u64 > width as u64
+                || tile.y as u64 + tile.height as u64 > height as u64
+            {
+                return Err(self.error(format!(
+                    "tile={},{},{},{} reaches outside the {width}x{height} viewport",
+                    tile.x, tile.y, tile.width, tile.height
+                )));
+            }
+        }
+        if tiles.is_empty() {
+            tiles.push(Rect::new(0, 0, width, height));
+        }
+        self.open_query = Some(id);
+        Ok(Command::Begin(QuerySpec {
+            id,
+            mode,
+            buffer_entries,
+            tiles,
+        }))
+    }
+
+    fn parse_tile(&self, value: &str) -> Result<Tile, SceneError> {
+        let parts: Vec<&str> = value.split(',').collect();
+        if parts.len() != 4 {
+            return Err(self.error(format!("tile=`{value}`: expected four numbers X,Y,W,H")));
+        }
+        let v: Vec<u32> = parts
+            .iter()
+            .map(|p| self.parse_u32("tile coordinate", p))
+            .collect::<Result<_, _>>()?;
+        if v[2] == 0 || v[3] == 0 {
+            return Err(self.error(format!(
+                "tile={value} is empty: width and height must be at least 1"
+            )));
+        }
+        Ok(Rect::new(v[0], v[1], v[2], v[3]))
+    }
+
+    fn parse_tri(&self, args: &[&str]) -> Result<Command, SceneError> {
+        self.expect_args("tri", args, 12, "tri x y z w  x y z w  x y z w")?;
+        let mut vertices = [[0f32; 4]; 3];
+        for (i, word) in args.iter().enumerate() {
+            let value: f32 = word.parse().map_err(|_| {
+                self.error(format!("tri coordinate {} `{word}` is not a number", i + 1))
+            })?;
+            if !value.is_finite() {
+                return Err(self.error(format!(
+                    "tri coordinate {} is `{word}`: coordinates must be finite (no NaN or infinity)",
+                    i + 1
+                )));
+            }
+            vertices[i / 4][i % 4] = value;
+        }
+        Ok(Command::Tri(vertices))
+    }
+}
+
+impl<R: BufRead> Iterator for SceneReader<R> {
+    type Item = Result<SceneLine, SceneError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.finished {
+            return None;
+        }
+        let item = self.next_command().transpose();
+        if !matches!(item, Some(Ok(_))) {
+            self.finished = true;
+        }
+        item
+    }
+}
+
+/// Parse a whole scene held in memory.
+pub fn parse_scene(text: &str, file: &str) -> Result<Vec<SceneLine>, SceneError> {
+    SceneReader::new(text.as_bytes(), file).collect()
+}
+
+/// Write a command back in the scene language (floats print so that they read back exactly).
+pub fn format_command(command: &Command) -> String {
+    fn flag(b: bool) -> u8 {
+        b as u8
+    }
+    match command {
+        Command::Viewport { width, height } => format!("viewport {width} {height}"),
+        Command::Clear => "clear".into(),
+        Command::DepthFunc(f) => format!("depth_func {}", f.name()),
+        Command::DepthMask(b) => format!("depth_mask {}", flag(*b)),
+        Command::DepthTest(b) => format!("depth_test {}", flag(*b)),
+        Command::Cull(b) => format!("cull {}", flag(*b)),
+        Command::Scissor(None) => "scissor off".into(),
+        Command::Scissor(Some(r)) => format!("scissor {} {} {} {}", r.x, r.y, r.width, r.height),
+        Command::Begin(q) => {
+            let mut s = format!("begin {} {}", q.id, q.mode.name());
+            if q.mode.is_occlusion_render_mode() {
+                s += &format!(" buffer={}", q.buffer_entries);
+                for t in &q.tiles {
+                    s += &format!(" tile={},{},{},{}", t.x, t.y, t.width, t.height);
+                }
+            }
+            s
+        }
+        Command::End => "end".into(),
+        Command::Tri(v) => {
+            let mut s = String::from("tri");
+            for vertex in v {
+                for c in vertex {
+                    s += &format!(" {c:?}");
+                }
+                s += " ";
+            }
+            s.trim_end().to_owned()
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn error_of(text: &str) -> String {
+        parse_scene(text, "s.scene").unwrap_err().to_string()
+    }
+
+    #[test]
+    fn parses_every_command() {
+        let text = "viewport 64 32 # size\n\nclear\ndepth_func lequal\ndepth_mask 0\ndepth_test 1\ncull 1\nscissor 1 2 3 4\nscissor off\nbegin 7 verbose buffer=9 tile=0,0,8,8 tile=8,0,8,8\ntri 0 0 0 1  1 0 0 1  0 1 0.5 1\nend\n";
+        let lines = parse_scene(text, "s.scene").unwrap();
+        assert_eq!(lines.len(), 11);
+        assert_eq!(
+            lines[0].command,
+            Command::Viewport {
+                width: 64,
+                height: 32
+            }
+        );
+        assert_eq!(lines[1].line, 3);
+        assert_eq!(lines[3].command, Command::DepthMask(false));
+        assert_eq!(
+            lines[6].command,
+            Command::Scissor(Some(Rect::new(1, 2, 3, 4)))
+        );
+        let Command::Begin(q) = &lines[8].command else {
+            panic!("not a begin")
+        };
+        assert_eq!((q.id, q.mode, q.buffer_entries), (7, QueryMode::Verbose, 9));
+        assert_eq!(q.tiles, vec![Rect::new(0, 0, 8, 8), Rect::new(8, 0, 8, 8)]);
+        assert_eq!(
+            lines[9].command,
+            Command::Tri([[0., 0., 0., 1.], [1., 0., 0., 1.], [0., 1., 0.5, 1.]])
+        );
+    }
+
+    #[test]
+    fn begin_defaults_to_samples_over_the_viewport() {
+        let lines = parse_scene("viewport 10 20\nbegin 3\nend\n", "s").unwrap();
+        let Command::Begin(q) = &lines[1].command else {
+            panic!("not a begin")
+        };
+        assert_eq!(q.mode, QueryMode::Samples);
+        assert_eq!(q.tiles, vec![Rect::new(0, 0, 10, 20)]);
+        assert_eq!(q.buffer_entries, 8);
+    }
+
+    #[test]
+    fn errors_name_file_line_and_expectation() {
+        assert_eq!(
+            error_of("viewport 4 4\n\nfrobnicate\n"),
+            "s.scene:3: unknown command `frobnicate`: expected viewport, clear, depth_func, depth_mask, depth_test, cull, scissor, begin, end or tri"
+        );
+        assert!(error_of("viewport 4 4\ntri 0 0 0 1 0 0 0 1 0 0 0\n")
+            .starts_with("s.scene:2: `tri` takes 12 arguments, found 11"));
+        assert!(error_of("viewport 4 4\ntri 0 0 0 1 0 0 0 1 0 0 0 x\n")
+            .starts_with("s.scene:2: tri coordinate 12 `x` is not a number"));
+    }
+
+    #[test]
+    fn rejects_nan_and_infinity() {
+        for bad in ["NaN", "inf", "-inf", "infinity", "1e39"] {
+            let text = format!("viewport 4 4\ntri 0 0 0 1 0 0 0 1 0 0 0 {bad}\n");
+            let message = error_of(&text);
+            assert!(
+                message.starts_with("s.scene:2: tri coordinate 12"),
+                "{bad}: {message}"
+            );
+            assert!(message.contains("finite"), "{bad}: {message}");
+        }
+    }
+
+    #[test]
+    fn rejects_structural_mistakes() {
+        assert!(error_of("clear\n").starts_with("s.scene:1: `clear` before `viewport`"));
+        assert!(
+            error_of("viewport 4 4\nviewport 4 4\n").starts_with("s.scene:2: second `viewport`")
+        );
+        assert!(error_of("viewport 0 4\n").contains("out of range"));
+        assert!(error_of("viewport 16385 4\n").contains("out of range"));
+        assert!(error_of("viewport 4 4\nbegin 1\nbegin 2\n")
+            .starts_with("s.scene:3: `begin` inside query 1"));
+        assert!(
+            error_of("viewport 4 4\nend\n").starts_with("s.scene:2: `end` without an open query")
+        );
+        assert!(error_of("viewport 4 4\nbegin 1\n")
+            .starts_with("s.scene:2: end of scene inside query 1"));
+        assert!(
+            error_of("viewport 4 4\nbegin 1 brief buffer=7\n").contains("buffer=7 out of range")
+        );
+        assert!(error_of("viewport 4 4\nbegin 1 samples tile=0,0,1,1\n").contains("take no tiles"));
+        assert!(error_of("viewport 4 4\nbegin 1 brief tile=0,0,5,1\n")
+            .contains("outside the 4x4 viewport"));
+        assert!(error_of("viewport 4 4\nbegin 1 brief tile=0,0,0,1\n").contains("empty"));
+        assert!(error_of("viewport 4 4\ndepth_mask 2\n").contains("takes 0 or 1"));
+        assert!(error_of("").contains("empty scene"));
+    }
+
+    #[test]
+    fn format_round_trips() {
+        let text = "viewport 64 32\nclear\ndepth_func gequal\nscissor 1 2 3 4\nbegin 7 verbose buffer=9 tile=0,0,8,8\ntri 0.1 0 0 1  1 0 0 1  0 1 0.5 1\nend\nbegin 8 any\nend\n";
+        let lines = parse_scene(text, "s").unwrap();
+        let again: String = lines
+            .iter()
+            .map(|l| format_command(&l.command) + "\n")
+            .collect();
+        let reparsed = parse_scene(&again, "s").unwrap();
+        let commands = |ls: &[SceneLine]| ls.iter().map(|l| l.command.clone()).collect::<Vec<_>>();
+        assert_eq!(commands(&lines), commands(&reparsed));
+    }
+}

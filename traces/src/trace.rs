@@ -1,0 +1,1 @@
+//! The `.occt` fragment trace format. (Being written: see the trace format task.)
