@@ -1,1 +1,43 @@
-fn main() {}
+//! `occsim`: the command line. Thin: parsing arguments, file IO and printing; the work is
+//! done by the traces, sim and rtl-model crates.
+
+mod commands;
+mod output;
+mod scene_input;
+
+use clap::{Parser, Subcommand};
+
+/// Cycle-level simulator of occlusion-query hardware (Bartz, Meissner, Huettner 1998).
+#[derive(Parser)]
+#[command(name = "occsim", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the built-in demo scene end to end and print what its queries cost.
+    Demo(commands::demo::DemoArgs),
+    /// Run a scene through the golden model and print every samples query's count.
+    Count(commands::count::CountArgs),
+    /// Make, inspect and dump fragment traces (.occt).
+    #[command(subcommand)]
+    Trace(commands::trace::TraceCommand),
+}
+
+fn main() -> std::process::ExitCode {
+    let cli = Cli::parse();
+    let outcome = match cli.command {
+        Command::Demo(args) => commands::demo::run(args),
+        Command::Count(args) => commands::count::run(args),
+        Command::Trace(command) => commands::trace::run(command),
+    };
+    match outcome {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("occsim: error: {error:#}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}

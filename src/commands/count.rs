@@ -1,0 +1,42 @@
+//! `occsim count SCENE`: the golden model's answer to every query.
+
+use crate::scene_input::open_scene;
+use occsim_traces::golden::{Discard, GoldenModel};
+use occsim_traces::QueryMode;
+use std::io::Write;
+
+#[derive(clap::Args)]
+pub struct CountArgs {
+    /// A scene file, or a built-in scene: demo, hardcases.
+    pub scene: String,
+    /// Print every query's full result (all modes, every tile) as JSON instead.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Prints `query ID N` for every samples query, in order, exactly as a GL program printing
+/// GL_SAMPLES_PASSED would.
+pub fn run(args: CountArgs) -> anyhow::Result<()> {
+    let mut scene = open_scene(&args.scene)?;
+    let mut golden = GoldenModel::new(scene.width, scene.height);
+    let stdout = std::io::stdout();
+    let mut out = std::io::BufWriter::new(stdout.lock());
+    let mut results = Vec::new();
+    for line in &mut scene.reader {
+        let line = line?;
+        let Some(result) = golden.execute(&line.command, &mut Discard) else {
+            continue;
+        };
+        if args.json {
+            results.push(result);
+        } else if result.mode == QueryMode::Samples {
+            writeln!(out, "query {} {}", result.id, result.value())?;
+        }
+    }
+    if args.json {
+        serde_json::to_writer_pretty(&mut out, &results)?;
+        writeln!(out)?;
+    }
+    out.flush()?;
+    Ok(())
+}

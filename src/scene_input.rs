@@ -1,0 +1,46 @@
+//! Resolving a SCENE argument: a built-in name or a scene file, read as a stream.
+
+use anyhow::Context;
+use occsim_traces::builtin;
+use occsim_traces::scene::{Command, SceneReader};
+use std::io::{BufRead, BufReader, Cursor};
+
+/// A scene being read: its commands as they come, and its size from the first line.
+pub struct SceneInput {
+    /// The name errors and trace headers use (the file path or the built-in name).
+    pub name: String,
+    pub width: u32,
+    pub height: u32,
+    pub reader: SceneReader<Box<dyn BufRead>>,
+}
+
+/// Open SCENE: a built-in name (`demo`, `hardcases`) or a path to a scene file.
+pub fn open_scene(scene: &str) -> anyhow::Result<SceneInput> {
+    let input: Box<dyn BufRead> = match builtin::scene_text(scene) {
+        Some(text) => Box::new(Cursor::new(text.into_bytes())),
+        None => {
+            let file = std::fs::File::open(scene).with_context(|| {
+                format!(
+                    "cannot open scene `{scene}` (not a file, and not a built-in scene: {})",
+                    builtin::NAMES.join(", ")
+                )
+            })?;
+            Box::new(BufReader::with_capacity(1 << 16, file))
+        }
+    };
+    let mut reader = SceneReader::new(input, scene);
+    // The parser guarantees the first command is the viewport.
+    let first = reader
+        .next()
+        .transpose()?
+        .map(|line| line.command);
+    let Some(Command::Viewport { width, height }) = first else {
+        anyhow::bail!("{scene}: expected `viewport W H` first");
+    };
+    Ok(SceneInput {
+        name: scene.to_owned(),
+        width,
+        height,
+        reader,
+    })
+}
