@@ -1,0 +1,148 @@
+//! End-to-end tests of the `occsim` command line.
+
+use std::process::{Command, Output};
+
+fn occsim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_occsim"))
+        .args(args)
+        .output()
+        .expect("occsim runs")
+}
+
+fn stdout_of(args: &[&str]) -> String {
+    let output = occsim(args);
+    assert!(
+        output.status.success(),
+        "occsim {args:?} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8(output.stdout).expect("utf-8 output")
+}
+
+fn stderr_of_failure(args: &[&str]) -> String {
+    let output = occsim(args);
+    assert!(!output.status.success(), "occsim {args:?} should fail");
+    String::from_utf8(output.stderr).expect("utf-8 output")
+}
+
+fn scratch_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("occsim-cli-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The hand-worked counts of tests/../traces/src/builtin/hardcases.scene (see its comments).
+#[test]
+fn count_hardcases_gives_the_hand_worked_counts() {
+    let out = stdout_of(&["count", "hardcases"]);
+    let counts: std::collections::BTreeMap<u32, u64> = out
+        .lines()
+        .map(|line| {
+            let words: Vec<&str> = line.split(' ').collect();
+            assert_eq!(words.len(), 3, "line `{line}`");
+            assert_eq!(words[0], "query");
+            (words[1].parse().unwrap(), words[2].parse().unwrap())
+        })
+        .collect();
+    let expected: [(u32, u64); 20] = [
+        (1, 4096),
+        (2, 0),
+        (3, 4096),
+        (4, 4096),
+        (5, 256),
+        (6, 256),
+        (7, 0),
+        (9, 4096),
+        (10, 0),
+        (13, 4096),
+        (14, 0),
+        (15, 4096),
+        (16, 25),
+        (17, 0),
+        (18, 4096),
+        (19, 4096),
+        (20, 4096),
+        (21, 4096),
+        (22, 4096),
+        (28, 4096),
+    ];
+    for (id, count) in expected {
+        assert_eq!(counts.get(&id), Some(&count), "query {id}");
+    }
+    // Only samples queries print: 23 (any) and 24-27 (verbose, brief) do not.
+    for id in [23, 24, 25, 26, 27] {
+        assert!(!counts.contains_key(&id), "query {id} printed");
+    }
+}
+
+#[test]
+fn count_json_gives_verbose_buffers_and_tiles() {
+    let out = stdout_of(&["count", "hardcases", "--json"]);
+    let results: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let by_id = |id: u64| {
+        results
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["id"] == id)
+            .unwrap_or_else(|| panic!("query {id} missing"))
+            .clone()
+    };
+    assert_eq!(by_id(23)["mode"], "any");
+    assert_eq!(by_id(23)["tiles"][0]["nohc"], 1);
+    // A 2x2-pixel square at window (30..32, 30..32): 4 hits.
+    let fits = by_id(24);
+    assert_eq!(fits["tiles"][0]["hits"].as_array().unwrap().len(), 4);
+    assert_eq!(fits["tiles"][0]["overflowed"], false);
+    assert_eq!(fits["overflowed_buffers"], 0);
+    assert_eq!(fits["tiles"][0]["xmin"], 30);
+    assert_eq!(fits["tiles"][0]["xmax"], 31);
+    let by_one = by_id(25);
+    assert_eq!(by_one["tiles"][0]["hits"].as_array().unwrap().len(), 2);
+    assert_eq!(by_one["tiles"][0]["overflowed"], true);
+    assert_eq!(by_one["overflowed_buffers"], 1);
+    let minimum = by_id(26);
+    assert_eq!(minimum["tiles"][0]["hits"].as_array().unwrap().len(), 0);
+    assert_eq!(minimum["tiles"][0]["nohc"], 4);
+    assert_eq!(minimum["overflowed_buffers"], 1);
+    let brief = by_id(27);
+    let tiles = brief["tiles"].as_array().unwrap();
+    assert_eq!(tiles.len(), 5);
+    assert_eq!(tiles[0]["nohc"], 4096);
+    assert_eq!(tiles[0]["phc"], 4096);
+    for quadrant in &tiles[1..] {
+        assert_eq!(quadrant["nohc"], 1024);
+    }
+    assert_eq!((tiles[0]["xmin"].clone(), tiles[0]["xmax"].clone()), (0.into(), 63.into()));
+    assert_eq!((tiles[2]["xmin"].clone(), tiles[2]["ymax"].clone()), (32.into(), 31.into()));
+}
+
+#[test]
+fn count_matches_a_scene_file_written_by_hand() {
+    let dir = scratch_dir("count");
+    let path = dir.join("two.scene");
+    // A 4x4 viewport; the left half (8 pixels) drawn, then the whole screen behind it.
+    std::fs::write(
+        &path,
+        "viewport 4 4\nbegin 10\ntri -1 -1 0 1  0 -1 0 1  0 1 0 1\ntri -1 -1 0 1  0 1 0 1  -1 1 0 1\nend\n\
+         begin 11\ntri -1 -1 0.5 1  1 -1 0.5 1  1 1 0.5 1\ntri -1 -1 0.5 1  1 1 0.5 1  -1 1 0.5 1\nend\n",
+    )
+    .unwrap();
+    assert_eq!(stdout_of(&["count", path.to_str().unwrap()]), "query 10 8\nquery 11 8\n");
+}
+
+#[test]
+fn bad_scenes_name_file_and_line_and_exit_non_zero() {
+    let dir = scratch_dir("bad");
+    let path = dir.join("bad.scene");
+    std::fs::write(&path, "viewport 8 8\nbegin 1\ntri 0 0 0 1 1 0 0 1 0 1 nan 1\nend\n").unwrap();
+    let path = path.to_str().unwrap();
+    let error = stderr_of_failure(&["count", path]);
+    assert!(
+        error.contains(&format!("{path}:3: tri coordinate 11 is `nan`")),
+        "{error}"
+    );
+    let error = stderr_of_failure(&["count", "no-such-scene"]);
+    assert!(error.contains("cannot open scene `no-such-scene`"), "{error}");
+    assert!(error.contains("demo, hardcases"), "{error}");
+}
