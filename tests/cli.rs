@@ -144,5 +144,5 @@ fn bad_scenes_name_file_and_line_and_exit_non_zero() {
     );
     let error = stderr_of_failure(&["count", "no-such-scene"]);
     assert!(error.contains("cannot open scene `no-such-scene`"), "{error}");
-    assert!(error.contains("demo, hardcases"), "{error}");
+    assert!(error.contains("demo, hardcases, random"), "{error}");
 }
