@@ -215,7 +215,8 @@ impl SpanPredictor {
     #[inline(always)]
     fn end(&mut self, first: i64, last: i64, len: usize) {
         if len >= 2 {
-            self.slope_x = (last - first).div_euclid(len as i64 - 1);
+            // 32-bit division (the operands fit) is much cheaper than 64-bit on the decode path.
+            self.slope_x = ((last - first) as i32).div_euclid(len as i32 - 1) as i64;
         }
     }
 }
@@ -465,6 +466,15 @@ impl BlockDecoder {
         self.span.remaining == 0 && self.pos >= payload.len()
     }
 
+    /// The next fragment if the decoder is inside a span (the common, cheap case).
+    #[inline(always)]
+    pub(crate) fn next_fragment_in_span(
+        &mut self,
+        payload: &[u8],
+    ) -> Option<Result<Fragment, PayloadError>> {
+        (self.span.remaining > 0).then(|| self.next_span_fragment(payload))
+    }
+
     /// The next event, or None at the end of the payload.
     pub(crate) fn next_event(
         &mut self,
@@ -498,7 +508,15 @@ impl BlockDecoder {
             let fragment = self.next_span_fragment(payload)?;
             sink.event(&Event::Fragment(fragment));
         }
-        while self.pos < payload.len() {
+        while let Some(&t) = payload.get(self.pos) {
+            // Spans are most records: skip the general dispatch for them.
+            if t == tag::SPAN && ctx.assembly.is_empty() {
+                let mut c = Cursor::new(payload, self.pos + 1);
+                self.span_header(&mut c, ctx)?;
+                self.pos = c.pos;
+                self.drain_span(payload, sink)?;
+                continue;
+            }
             match self.record(payload, ctx)? {
                 Record::Event(event) => sink.event(&event),
                 Record::Span => self.drain_span(payload, sink)?,
@@ -574,6 +592,7 @@ impl BlockDecoder {
     }
 
     /// Read a span header, check the span lies in the viewport, and set up `self.span`.
+    #[inline(always)]
     fn span_header(&mut self, c: &mut Cursor, ctx: &mut DecodeContext) -> Result<(), PayloadError> {
         let start = c.pos - 1;
         let dy = c.zz()?;

@@ -331,6 +331,16 @@ impl<R: Read> TraceReader<R> {
         if self.at_end() {
             return Ok(None);
         }
+        if self.in_block {
+            match self.decoder.next_fragment_in_span(&self.payload) {
+                Some(Ok(fragment)) => return Ok(Some(Event::Fragment(fragment))),
+                Some(Err(e)) => {
+                    self.failed = true;
+                    return Err(self.corrupt(e));
+                }
+                None => {}
+            }
+        }
         self.guarded(|reader| loop {
             if !reader.in_block {
                 if !reader.load_block(true)? {

@@ -225,12 +225,10 @@ fn same_events_give_the_same_bytes() {
     let scene = large_triangles(50_000);
     let header = TraceHeader::new(scene.width, scene.height);
     let encode = || {
-        let mut writer = TraceWriter::new(Vec::new(), &header).unwrap();
-        generate(&scene, &mut writer);
         let mut out = Vec::new();
-        let mut writer2 = TraceWriter::new(&mut out, &header).unwrap();
-        generate(&scene, &mut writer2);
-        writer2.finish().unwrap();
+        let mut writer = TraceWriter::new(&mut out, &header).unwrap();
+        generate(&scene, &mut writer);
+        writer.finish().unwrap();
         out
     };
     assert_eq!(encode(), encode());
@@ -479,7 +477,6 @@ proptest! {
         // so the event decoder (not the checksum) meets the damage.
         let events = every_kind();
         let clean = write(&TraceHeader::new(SIDE, SIDE), WriterOptions { block_bytes: 4096, zstd_level: 1 }, &events).0;
-        let mut reader = TraceReader::new(&clean[..]).unwrap();
         let block = first_block_offset(&clean);
         let fields: [u8; BLOCK_HEADER_BYTES] = clean[block..block + BLOCK_HEADER_BYTES].try_into().unwrap();
         let (header, _) = BlockHeader::parse(&fields).unwrap();
@@ -500,6 +497,5 @@ proptest! {
         bytes.extend_from_slice(&payload);
         bytes.extend_from_slice(&clean[block + BLOCK_HEADER_BYTES + header.stored_len as usize..]);
         read_anything(&bytes);
-        let _ = reader.next_event();
     }
 }
