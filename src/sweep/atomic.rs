@@ -1,0 +1,66 @@
+//! Whole-file writes that a crash cannot leave half done: write a temporary file in the same
+//! directory (so the rename stays on one file system), flush it to disk, then rename over.
+
+use anyhow::{Context, Result};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+/// Replaces `path` with `contents` atomically.
+pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<()> {
+    let temp = temp_path_beside(path)?;
+    let outcome = write_and_sync(&temp, contents).and_then(|()| {
+        std::fs::rename(&temp, path)
+            .with_context(|| format!("cannot rename {} to {}", temp.display(), path.display()))
+    });
+    if outcome.is_err() {
+        // Best effort: do not leave the temporary file behind; the original error matters more.
+        let _ = std::fs::remove_file(&temp);
+    }
+    outcome
+}
+
+fn write_and_sync(temp: &Path, contents: &[u8]) -> Result<()> {
+    let mut file =
+        std::fs::File::create(temp).with_context(|| format!("cannot create {}", temp.display()))?;
+    file.write_all(contents)
+        .and_then(|()| file.sync_all())
+        .with_context(|| format!("cannot write {}", temp.display()))
+}
+
+/// `dir/.name.tmp-PID`: hidden, unique per process, in the target's own directory.
+fn temp_path_beside(path: &Path) -> Result<PathBuf> {
+    let name = path
+        .file_name()
+        .with_context(|| format!("{} is not a file path", path.display()))?;
+    let mut temp_name = std::ffi::OsString::from(".");
+    temp_name.push(name);
+    temp_name.push(format!(".tmp-{}", std::process::id()));
+    Ok(path.with_file_name(temp_name))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn replaces_contents_and_leaves_no_temporary_file() {
+        let dir = crate::sweep::test_dir("atomic");
+        let path = dir.join("out.txt");
+        std::fs::write(&path, "old contents that are longer").unwrap();
+        write_atomically(&path, b"new").unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "new");
+        let names: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, ["out.txt"]);
+    }
+
+    #[test]
+    fn missing_directory_is_an_error_naming_the_path() {
+        let dir = crate::sweep::test_dir("atomic-missing");
+        let path = dir.join("no-such-dir").join("out.txt");
+        let err = format!("{:#}", write_atomically(&path, b"x").unwrap_err());
+        assert!(err.contains("no-such-dir"), "{err}");
+    }
+}
