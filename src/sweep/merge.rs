@@ -77,7 +77,7 @@ pub fn merge_results(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Res
             }
             continue;
         }
-        by_point.insert(line.line.point, line);
+        by_point.insert(line.line.point, line.compact());
     }
 
     let missing: Vec<String> = (0..grid.len())

@@ -60,6 +60,17 @@ pub struct StoredLine {
     pub origin: String,
 }
 
+impl StoredLine {
+    /// Drops what is no longer needed once the line is checked and its text kept: the axes
+    /// (equal to the grid's) and the resolved architecture (still in the text). Keeps the
+    /// memory held per point near the size of its line.
+    pub fn compact(mut self) -> StoredLine {
+        self.line.axes = Vec::new();
+        self.line.resolved_arch = Value::Null;
+        self
+    }
+}
+
 /// The complete lines of a results file, plus whether an unterminated last line was dropped.
 #[derive(Debug)]
 pub struct StoredFile {

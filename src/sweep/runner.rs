@@ -141,7 +141,7 @@ fn load_previous(
                 );
             }
         }
-        done.insert(stored.line.point, stored);
+        done.insert(stored.line.point, stored.compact());
     }
     if file.torn_tail_dropped {
         let refs: Vec<&StoredLine> = done.values().collect();
@@ -193,18 +193,20 @@ fn evaluate_points(
         })?;
         let line = line_for(&point, options, record);
         let text = line.to_json()?;
+        let stored = StoredLine {
+            line,
+            text,
+            origin: String::new(),
+        }
+        .compact();
         let mut guard = sink
             .lock()
             .map_err(|_| anyhow!("a worker thread panicked"))?;
         let (file, lines) = &mut *guard;
-        file.write_all(format!("{text}\n").as_bytes())
+        file.write_all(format!("{}\n", stored.text).as_bytes())
             .and_then(|()| file.flush())
             .with_context(|| format!("cannot append to {}", options.out.display()))?;
-        lines.push(StoredLine {
-            line,
-            text,
-            origin: String::new(),
-        });
+        lines.push(stored);
         bar.inc(1);
         Ok(())
     };

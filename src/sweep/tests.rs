@@ -232,15 +232,14 @@ fn merge_rejects_shards_of_another_trace_or_grid() {
 }
 
 /// Evaluates with the fake machine, recording every successful evaluation in `log`, and
-/// fails ("crashes") on point `crash_at_index` or once `successes_before_crash` have succeeded.
+/// fails ("crashes") once `successes_before_crash` have succeeded, whatever the job count.
 fn crashing_machine<'a>(
     log: &'a Mutex<Vec<usize>>,
-    crash_at_index: Option<usize>,
     successes_before_crash: usize,
 ) -> impl Fn(&Point) -> Result<PointRecord> + Sync + 'a {
     move |p: &Point| {
         let mut log = log.lock().unwrap();
-        if crash_at_index == Some(p.index) || log.len() >= successes_before_crash {
+        if log.len() >= successes_before_crash {
             bail!("simulated crash");
         }
         log.push(p.index);
@@ -263,13 +262,14 @@ fn interrupted_sweep_resumes_without_losing_or_repeating_points() {
     let mut resuming = options(&g, &out, 2);
     resuming.resume = true;
 
-    // Run 1: the machine crashes on point 5; every finished point must be in the file.
+    // Run 1: the machine crashes after 5 points; every finished point must be in the file.
     let run1 = Mutex::new(Vec::new());
-    let err = run_sweep(&options(&g, &out, 2), &crashing_machine(&run1, Some(5), 12));
+    let err = run_sweep(&options(&g, &out, 2), &crashing_machine(&run1, 5));
     let err = format!("{:#}", err.unwrap_err());
-    assert!(err.contains("point 5 (boards=2,engines=2) failed"), "{err}");
+    assert!(err.contains("failed; finished points are kept in"), "{err}");
     assert!(err.contains("simulated crash"), "{err}");
     let run1 = run1.into_inner().unwrap();
+    assert_eq!(run1.len(), 5);
     assert_eq!(
         read(&out).lines().count(),
         run1.len(),
@@ -286,13 +286,13 @@ fn interrupted_sweep_resumes_without_losing_or_repeating_points() {
     let run2 = Mutex::new(Vec::new());
     let mut one_job = options(&g, &out, 1);
     one_job.resume = true;
-    assert!(run_sweep(&one_job, &crashing_machine(&run2, None, 2)).is_err());
+    assert!(run_sweep(&one_job, &crashing_machine(&run2, 2)).is_err());
     let run2 = run2.into_inner().unwrap();
     assert_eq!(run2.len(), 2);
 
     // Run 3 finishes the sweep.
     let run3 = Mutex::new(Vec::new());
-    let outcome = run_sweep(&resuming, &crashing_machine(&run3, None, 12)).unwrap();
+    let outcome = run_sweep(&resuming, &crashing_machine(&run3, 12)).unwrap();
     assert!(!outcome.torn_tail_dropped);
     assert_eq!(outcome.reused, run1.len() + 2);
     let mut all: Vec<usize> = [run1, run2, run3.into_inner().unwrap()].concat();
