@@ -244,7 +244,7 @@ mod clip {
                     n += 1;
                 }
                 if (dc >= 0.0) != (dn >= 0.0) && n < MAX_VERTICES {
-                    out[n] = intersect(&current, &next, &distance);
+                    out[n] = intersect(&current, &next, plane);
                     n += 1;
                 }
             }
@@ -256,7 +256,9 @@ mod clip {
 
     /// The point where the edge a-b crosses the plane, computed from the endpoints in a
     /// canonical order so the same edge always gives the same bits.
-    fn intersect(a: &[f32; 4], b: &[f32; 4], distance: &impl Fn(&[f32; 4]) -> f32) -> [f32; 4] {
+    fn intersect(a: &[f32; 4], b: &[f32; 4], plane: &Plane) -> [f32; 4] {
+        let distance =
+            |v: &[f32; 4]| plane[0] * v[0] + plane[1] * v[1] + plane[2] * v[2] + plane[3] * v[3];
         let key = |v: &[f32; 4]| v.map(f32::to_bits);
         let (p, q) = if key(a) <= key(b) { (a, b) } else { (b, a) };
         let (dp, dq) = (distance(p), distance(q));
@@ -264,6 +266,11 @@ mod clip {
         let mut v = [0.0f32; 4];
         for k in 0..4 {
             v[k] = p[k] + t * (q[k] - p[k]);
+        }
+        // Put the clipped coordinate exactly on the plane (s·v[axis] + a_w·w = 0): with huge
+        // endpoints the interpolation's rounding could otherwise throw it far off.
+        if let Some(axis) = (0..3).find(|&k| plane[k] != 0.0) {
+            v[axis] = -plane[axis] * plane[3] * v[3];
         }
         v
     }
