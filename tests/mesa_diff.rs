@@ -2,7 +2,8 @@
 //! depth semantics) must equal Mesa llvmpipe's, on structured and seeded random scenes.
 //!
 //! Without libEGL the check prints `mesa_diff: SKIPPED: ...` and passes, except when
-//! `CI=true`, where a missing Mesa fails it (CI installs Mesa).
+//! `CI=true`, where a missing Mesa fails it (CI installs Mesa). `OCCSIM_LIBEGL=/nonexistent`
+//! shows the skip path.
 //!
 //! What is kept out of the exact-equality scenes, and why:
 //! - Geometry that Mesa clips (a vertex outside -w <= x, y, z <= w): llvmpipe's draw module
@@ -347,7 +348,7 @@ impl Random {
 }
 
 /// A random scene inside the viewport (no clipping by Mesa), coordinates on the exact grid.
-fn random_scene(seed: u64, width: u32, height: u32) -> String {
+fn random_scene(seed: u64, width: u32, height: u32, exact_grid: bool) -> String {
     let mut rng = Random(seed);
     let mut text = format!("viewport {width} {height}\n");
     for query in 0..12 {
@@ -389,19 +390,29 @@ fn random_scene(seed: u64, width: u32, height: u32) -> String {
         }
         text += "\n";
         for _ in 0..1 + rng.below(6) {
-            // w a power of two keeps x·(1/w) exact; window coordinates on a 1/512 grid.
-            let w = [0.5, 1.0, 2.0, 4.0][rng.below(4) as usize];
             text += "tri";
             for _ in 0..3 {
-                let xw = rng.below(width as u64 * 512 + 1) as f64 / 512.0;
-                let yw = rng.below(height as u64 * 512 + 1) as f64 / 512.0;
-                let z = (rng.below(2049) as f64 - 1024.0) / 1024.0;
-                text += &format!(
-                    "  {} {} {} {w}",
-                    clip(xw, width) * w,
-                    clip(yw, height) * w,
-                    z * w
-                );
+                if exact_grid {
+                    // w a power of two keeps x·(1/w) exact; window coordinates on a 1/512
+                    // grid.
+                    let w = [0.5, 1.0, 2.0, 4.0][rng.below(4) as usize];
+                    let xw = rng.below(width as u64 * 512 + 1) as f64 / 512.0;
+                    let yw = rng.below(height as u64 * 512 + 1) as f64 / 512.0;
+                    let z = (rng.below(2049) as f64 - 1024.0) / 1024.0;
+                    text += &format!(
+                        "  {} {} {} {w}",
+                        clip(xw, width) * w,
+                        clip(yw, height) * w,
+                        z * w
+                    );
+                } else {
+                    // Arbitrary f32 clip coordinates inside the view volume.
+                    let unit =
+                        |rng: &mut Random| (rng.below(1 << 24) as f32 / (1 << 23) as f32) - 1.0;
+                    let w = 0.25 + rng.below(1 << 20) as f32 / (1 << 18) as f32;
+                    let (x, y, z) = (unit(&mut rng) * w, unit(&mut rng) * w, unit(&mut rng) * w);
+                    text += &format!("  {x:?} {y:?} {z:?} {w:?}");
+                }
             }
             text += "\n";
         }
@@ -428,12 +439,14 @@ fn golden_model_matches_mesa_llvmpipe() {
 
     let (width, height) = (64, 32);
     let mut gl = GlReplay::new(width, height).expect("third context");
-    for seed in 0..40 {
-        let text = random_scene(seed, width, height);
-        assert_same_counts(
-            &format!("random scene, seed {seed}"),
-            &scene(&text),
-            &mut gl,
-        );
+    for seed in 0..200 {
+        let text = random_scene(seed, width, height, true);
+        let name = format!("random grid scene, seed {seed}");
+        assert_same_counts(&name, &scene(&text), &mut gl);
+    }
+    for seed in 0..200 {
+        let text = random_scene(seed, width, height, false);
+        let name = format!("random float scene, seed {seed}");
+        assert_same_counts(&name, &scene(&text), &mut gl);
     }
 }

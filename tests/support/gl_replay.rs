@@ -82,9 +82,12 @@ impl GlReplay {
     pub fn new(width: u32, height: u32) -> Result<GlReplay, String> {
         std::env::set_var("LIBGL_ALWAYS_SOFTWARE", "1");
         std::env::set_var("GALLIUM_DRIVER", "llvmpipe");
-        // SAFETY: loading the system libEGL; its symbols follow the EGL ABI.
-        let egl = unsafe { egl::DynamicInstance::<egl::EGL1_5>::load_required() }
-            .map_err(|e| format!("libEGL not found ({e})"))?;
+        // `OCCSIM_LIBEGL` names another libEGL (a missing one exercises the skip path).
+        let library = std::env::var("OCCSIM_LIBEGL").unwrap_or_else(|_| "libEGL.so.1".into());
+        // SAFETY: loading libEGL; its symbols follow the EGL ABI.
+        let egl =
+            unsafe { egl::DynamicInstance::<egl::EGL1_5>::load_required_from_filename(&library) }
+                .map_err(|e| format!("libEGL not found ({library}: {e})"))?;
         // SAFETY: the surfaceless platform takes no native display.
         let display = unsafe {
             egl.get_platform_display(

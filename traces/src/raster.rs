@@ -88,11 +88,12 @@ pub fn rasterize_triangle(
     if !polygon.clip(&guard) {
         return;
     }
-    let window: Vec<Option<WindowVertex>> = polygon
-        .vertices()
-        .iter()
-        .map(|v| WindowVertex::from_clip(v, state))
-        .collect();
+    let clipped = polygon.vertices();
+    let mut window = [None; clip::MAX_VERTICES];
+    for (slot, vertex) in window.iter_mut().zip(clipped) {
+        *slot = WindowVertex::from_clip(vertex, state);
+    }
+    let window = &window[..clipped.len()];
     for i in 1..window.len().saturating_sub(1) {
         if let (Some(a), Some(b), Some(c)) = (window[0], window[i], window[i + 1]) {
             setup::rasterize_snapped(state, [a, b, c], sink);
@@ -169,7 +170,7 @@ mod clip {
     //! Sutherland-Hodgman clipping in clip space against near, far and the x/y guard band.
 
     /// Most vertices a triangle clipped by six planes can have.
-    const MAX_VERTICES: usize = 3 + 6;
+    pub const MAX_VERTICES: usize = 3 + 6;
 
     /// x/y guard-band factors: a vertex is kept unclipped while |x| <= gx·w, |y| <= gy·w.
     pub struct GuardBand {
