@@ -11,7 +11,10 @@
 //!    `generate_viewport`): `inv_w = 1 / w`, `n = c * inv_w`, `window = fma(n, side/2, side/2)`
 //!    for x and y, and `fma(n_z, 0.5, 0.5)` for z (depth range 0..1). The fused multiply-add
 //!    is what LLVM emits for `llvm.fmuladd` on a host with FMA; on scenes whose products are
-//!    exact (see tests/mesa_diff.rs) fused and unfused agree.
+//!    exact (see tests/mesa_diff.rs) fused and unfused agree. Vertices far beyond the guard
+//!    band are clipped in f32: the clipped coordinate is set exactly onto its plane, the
+//!    others carry the interpolation's rounding (harmless for coverage inside the viewport,
+//!    checked up to |coordinates| = 3e30).
 //! 3. **Snapping** to 8 sub-pixel bits as llvmpipe's `calc_fixed_position`:
 //!    `X = round_ties_even((x_window - 0.5) * 256)`, the subtraction in f32. In these
 //!    *offset* fixed-point coordinates the centre of pixel (px, py) is (256·px, 256·py).
@@ -39,9 +42,11 @@
 //! with 8 extra fraction bits, ties up, computed exactly from the f32's bits). The plane
 //! through the three (X, Y, zq) is evaluated exactly at each pixel centre and rounded to
 //! nearest (ties up) unorm24: `depth = round(Z / 2^8)`, clamped to [0, 2^24 - 1]. A vertex at
-//! depth exactly 0 or 1 gives 0 or 2^24 - 1 at a pixel centre on it. llvmpipe interpolates
-//! z in f32 instead, so its depths may differ from these by one unit; only comparisons
-//! between different primitives within one unit of each other can see it.
+//! depth exactly 0 or 1 gives 0 or 2^24 - 1 at a pixel centre on it. llvmpipe differs
+//! here: it builds the depth plane from the *unsnapped* f32 window positions and evaluates
+//! it in f32, so its depths can differ from these by about |dz/dpixel|·2^-9 plus a few units
+//! of f32 rounding. Only depth comparisons between different primitives that close to each
+//! other can see it (tests/mesa_diff.rs keeps such scenes out of its exact comparison).
 //!
 //! # Fragment order
 //!
