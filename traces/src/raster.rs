@@ -2,7 +2,7 @@
 //!
 //! # Pipeline (OpenGL conventions, matching Mesa llvmpipe where it decides pixels)
 //!
-//! 1. **Clipping** ([`clip`]) in clip space, f32: near (z >= -w) and far (z <= w) always,
+//! 1. **Clipping** (module `clip`) in clip space, f32: near (z >= -w) and far (z <= w) always,
 //!    and a guard band in x/y (|x|, |y| <= g·w, g = 2^17 / side - 2 per axis) only when a
 //!    vertex lies outside it. Sutherland-Hodgman, result fanned from its first vertex. An
 //!    edge's intersection is computed from its endpoints in a canonical (bitwise) order, so
