@@ -30,6 +30,20 @@ impl DepthBuffer {
         self.depths[y as usize * self.width as usize + x as usize]
     }
 
+    /// Start fetching the depths of pixels `first..=last` of row `y` into the cache: a span
+    /// of a mid-sized triangle is a few cache lines a row apart, cold in a large buffer, and
+    /// waiting for each row's first miss would dominate the depth test's cost.
+    #[inline(always)]
+    pub fn prefetch(&self, y: u16, first: u16, last: u16) {
+        let row = y as usize * self.width as usize;
+        let span = row + first as usize..row + last as usize + 1;
+        if let Some(depths) = self.depths.get(span) {
+            for line in depths.chunks(16) {
+                prefetch_line(line.as_ptr());
+            }
+        }
+    }
+
     /// The depth test and write of one fragment under `state`. Returns whether it passed.
     /// `writes_allowed` is false in the occlusion render modes, which never write.
     #[inline(always)]
@@ -45,6 +59,19 @@ impl DepthBuffer {
         }
         passed
     }
+}
+
+/// A hint to the cache that the line at `address` will be read soon; no effect on results.
+#[inline(always)]
+fn prefetch_line(address: *const u32) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: prefetching is only a hint: it never faults, reads nothing into the program
+    // and is defined for any address.
+    unsafe {
+        std::arch::x86_64::_mm_prefetch(address as *const i8, std::arch::x86_64::_MM_HINT_T0);
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = address;
 }
 
 /// Finds the tiles of a query that hold a pixel. Few tiles are scanned; many are bucketed
@@ -108,6 +135,16 @@ impl TileIndex {
     }
 }
 
+/// Account a fragment inside a tile. Hits beyond `hit_room` are only counted (in NOHC);
+/// `OpenQuery::finish` trims the list on overflow.
+#[inline(always)]
+fn record_in_tile(result: &mut TileResult, fragment: Fragment, passed: bool, hit_room: usize) {
+    result.record(fragment.x, fragment.y, fragment.z, passed);
+    if passed && result.hits.len() < hit_room {
+        result.hits.push((fragment.x, fragment.y));
+    }
+}
+
 /// The open query's running results.
 struct OpenQuery {
     spec: QuerySpec,
@@ -134,7 +171,7 @@ impl OpenQuery {
     }
 
     /// Account a fragment in every tile that holds it.
-    #[inline]
+    #[inline(always)]
     fn record(&mut self, fragment: Fragment, passed: bool) {
         let OpenQuery {
             spec,
@@ -143,14 +180,16 @@ impl OpenQuery {
             hit_room,
         } = self;
         let (x, y) = (fragment.x as u32, fragment.y as u32);
+        if let ([tile], [result]) = (&spec.tiles[..], &mut tiles[..]) {
+            // One tile (every samples and any query): no index, no loop.
+            if tile.contains(x, y) {
+                record_in_tile(result, fragment, passed, *hit_room);
+            }
+            return;
+        }
         let mut record_in = |tile: usize| {
             if spec.tiles[tile].contains(x, y) {
-                let result = &mut tiles[tile];
-                result.record(fragment.x, fragment.y, fragment.z, passed);
-                // Hits beyond the room are only counted (nohc); `finish` trims on overflow.
-                if passed && result.hits.len() < *hit_room {
-                    result.hits.push((fragment.x, fragment.y));
-                }
+                record_in_tile(&mut tiles[tile], fragment, passed, *hit_room);
             }
         };
         match index {
@@ -270,6 +309,11 @@ struct Forward<'a, S: EventSink> {
 }
 
 impl<S: EventSink> RasterSink for Forward<'_, S> {
+    #[inline(always)]
+    fn next_span(&mut self, y: u16, first: u16, last: u16) {
+        self.functional.depth.prefetch(y, first, last);
+    }
+
     #[inline(always)]
     fn primitive(&mut self) {
         self.sink.event(&Event::Primitive);

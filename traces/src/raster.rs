@@ -79,6 +79,13 @@ pub trait RasterSink {
     fn primitive(&mut self);
     /// A fragment inside the triangle and the raster bounds (viewport cut by scissor).
     fn fragment(&mut self, fragment: Fragment);
+    /// The span of the row after the one being emitted: pixels `first..=last` of row `y`.
+    /// A sink backed by a large buffer can start fetching it (as the O2's depth prefetch
+    /// does); the default ignores it. Never changes what is emitted.
+    #[inline(always)]
+    fn next_span(&mut self, y: u16, first: u16, last: u16) {
+        let _ = (y, first, last);
+    }
 }
 
 /// Rasterize one triangle given in clip coordinates under `state`.
@@ -423,15 +430,24 @@ mod setup {
             return;
         }
         let plane = DepthPlane::new(&v, area);
-        for py in row_first..=row_last {
+        let span = |py: i64| {
             let (mut first, mut last) = (column_first, column_last);
             for edge in &edges {
                 edge.clamp_span(py, &mut first, &mut last);
             }
-            if first > last {
-                continue;
+            (first, last)
+        };
+        // One row of lookahead, so the sink hears of a row before its fragments arrive.
+        let mut current = span(row_first);
+        for py in row_first..=row_last {
+            let next = if py < row_last { span(py + 1) } else { (1, 0) };
+            if next.0 <= next.1 {
+                sink.next_span((py + 1) as u16, next.0 as u16, next.1 as u16);
             }
-            emit_span(&plane, first, last, py, sink);
+            if current.0 <= current.1 {
+                emit_span(&plane, current.0, current.1, py, sink);
+            }
+            current = next;
         }
     }
 
