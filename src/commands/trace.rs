@@ -142,8 +142,8 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
     println!("generator   {}", header.generator);
     println!("viewport    {}x{}", header.width, header.height);
     println!(
-        "raster      {} sub-pixel bits, {} fill rule, {} depth",
-        header.subpixel_bits, header.fill_rule, header.depth_format
+        "raster      {} sub-pixel bits, {} depth, fill rule {}",
+        header.subpixel_bits, header.depth_format, header.fill_rule
     );
     println!("fragments   {}", summary.fragments);
     println!("primitives  {}", summary.primitives);

@@ -68,6 +68,9 @@
 use crate::event::{Fragment, DEPTH_ONE};
 use crate::state::{RenderState, MAX_VIEWPORT_SIDE};
 
+/// Which pixel centres on an edge a triangle owns: Direct3D's and Gallium's top-left rule
+/// with y down, which in GL window coordinates (y up) owns left and bottom edges.
+pub const FILL_RULE: &str = "top-left with y down (left and bottom edges in GL window coordinates)";
 /// Sub-pixel bits of snapped window coordinates.
 pub const SUBPIXEL_BITS: u32 = 8;
 /// Extra fraction bits of quantised vertex depth below one unorm24 unit.

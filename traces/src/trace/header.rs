@@ -32,8 +32,8 @@ impl TraceHeader {
         TraceHeader {
             width,
             height,
-            subpixel_bits: 8,
-            fill_rule: "top-left".to_owned(),
+            subpixel_bits: crate::raster::SUBPIXEL_BITS,
+            fill_rule: crate::raster::FILL_RULE.to_owned(),
             depth_format: "unorm24".to_owned(),
             generator: crate::GENERATOR_VERSION.to_owned(),
             scene: String::new(),
