@@ -28,7 +28,12 @@ impl EventSink for FragmentCounter {
 }
 
 /// The golden model over the scene: every samples count, in order.
-fn golden_counts(lines: &[SceneLine], width: u32, height: u32, sink: &mut impl EventSink) -> Vec<u64> {
+fn golden_counts(
+    lines: &[SceneLine],
+    width: u32,
+    height: u32,
+    sink: &mut impl EventSink,
+) -> Vec<u64> {
     let mut golden = GoldenModel::new(width, height);
     lines
         .iter()
@@ -73,7 +78,8 @@ fn main() {
         std::hint::black_box(golden_counts(&lines, width, height, &mut Discard));
     });
 
-    let scene_file = std::env::temp_dir().join(format!("occsim-bench-{}.scene", std::process::id()));
+    let scene_file =
+        std::env::temp_dir().join(format!("occsim-bench-{}.scene", std::process::id()));
     std::fs::write(&scene_file, &text).expect("temporary scene file");
     let command_time = best_of(|| {
         let output = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
@@ -82,11 +88,17 @@ fn main() {
             .output()
             .expect("occsim count runs");
         assert!(output.status.success(), "occsim count failed");
-        assert_eq!(String::from_utf8_lossy(&output.stdout).lines().count(), expected.len());
+        assert_eq!(
+            String::from_utf8_lossy(&output.stdout).lines().count(),
+            expected.len()
+        );
     });
     let _ = std::fs::remove_file(&scene_file);
 
-    println!("{:<34} {:>10} {:>14} {:>12}", "counter", "seconds", "M fragments/s", "vs llvmpipe");
+    println!(
+        "{:<34} {:>10} {:>14} {:>12}",
+        "counter", "seconds", "M fragments/s", "vs llvmpipe"
+    );
     let mut rows = vec![
         ("occsim golden model (in process)", golden_time),
         ("occsim count (end to end)", command_time),
@@ -101,8 +113,16 @@ fn main() {
             // evaluates its depth plane in f32 from unsnapped vertices, we evaluate it exactly
             // from snapped ones, so where random triangles interpenetrate a few pixels differ.
             assert_eq!(gl_counts.len(), expected.len(), "query counts differ");
-            let equal = gl_counts.iter().zip(&expected).filter(|(a, b)| a == b).count();
-            let differing: u64 = gl_counts.iter().zip(&expected).map(|(a, b)| a.abs_diff(*b)).sum();
+            let equal = gl_counts
+                .iter()
+                .zip(&expected)
+                .filter(|(a, b)| a == b)
+                .count();
+            let differing: u64 = gl_counts
+                .iter()
+                .zip(&expected)
+                .map(|(a, b)| a.abs_diff(*b))
+                .sum();
             println!(
                 "llvmpipe agrees exactly on {equal} of {} queries; {differing} fragments differ in all \
                  ({:.4}%), from depth evaluation at interpenetrations",
@@ -122,7 +142,12 @@ fn main() {
         }
         Err(reason) => {
             for (name, time) in &rows {
-                println!("{name:<34} {:>10.3} {:>14.1} {:>12}", time.as_secs_f64(), rate(fragments, *time), "-");
+                println!(
+                    "{name:<34} {:>10.3} {:>14.1} {:>12}",
+                    time.as_secs_f64(),
+                    rate(fragments, *time),
+                    "-"
+                );
             }
             println!("llvmpipe: SKIPPED ({reason})");
         }

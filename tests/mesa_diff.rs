@@ -502,9 +502,17 @@ fn builtin_scenes_match_mesa_llvmpipe() {
     let mut differing_queries = 0;
     let (mut differing_pixels, mut total_pixels) = (0u64, 0u64);
     for (a, b) in ours.iter().zip(&theirs) {
-        assert_eq!((a.id, a.mode, a.counts.len()), (b.id, b.mode, b.counts.len()));
+        assert_eq!(
+            (a.id, a.mode, a.counts.len()),
+            (b.id, b.mode, b.counts.len())
+        );
         total_pixels += a.counts.iter().sum::<u64>();
-        let differ: u64 = a.counts.iter().zip(&b.counts).map(|(x, y)| x.abs_diff(*y)).sum();
+        let differ: u64 = a
+            .counts
+            .iter()
+            .zip(&b.counts)
+            .map(|(x, y)| x.abs_diff(*y))
+            .sum();
         differing_pixels += differ;
         differing_queries += (differ > 0) as usize;
     }

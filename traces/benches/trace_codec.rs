@@ -1,10 +1,13 @@
 //! Encode and decode rates of the `.occt` trace format on synthetic rasterizer-shaped streams
-//! (spans of linearly varying depth, rounded to 24 bits). Prints fragments/s and bytes per
-//! fragment; no assertions (timings are not tests).
+//! (spans of linearly varying depth, rounded to 24 bits), and size and decode rate on the
+//! built-in `demo` (1280x1024) and `random` scenes as the real rasterizer makes them. Prints
+//! fragments/s and bytes per fragment; no assertions (timings are not tests).
 //!
 //! Run: `cargo bench -p occsim-traces --bench trace_codec`
 
-use occsim_traces::golden::EventSink;
+use occsim_traces::builtin::scene_text;
+use occsim_traces::golden::{EventSink, GoldenModel};
+use occsim_traces::scene::{parse_scene, Command};
 use occsim_traces::trace::synthetic::{generate, SyntheticScene};
 use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter, WriterOptions};
 use occsim_traces::Event;
@@ -88,7 +91,40 @@ fn bench_scene(name: &str, scene: &SyntheticScene) {
     }
 }
 
+/// Size and bulk decode rate of a built-in scene's trace, written at the default level.
+fn bench_builtin(name: &str) {
+    let text = scene_text(name).expect("a built-in scene");
+    let lines = parse_scene(&text, name).expect("it parses");
+    let Command::Viewport { width, height } = lines[0].command else {
+        panic!("{name}: no viewport first");
+    };
+    let mut bytes = Vec::new();
+    let header = TraceHeader::new(width, height).with_scene(name);
+    let mut writer = TraceWriter::new(&mut bytes, &header).expect("header");
+    let mut golden = GoldenModel::new(width, height);
+    for line in &lines {
+        golden.execute(&line.command, &mut writer);
+    }
+    let summary = writer.finish().expect("encode");
+    let (bulk_s, sum) = best_of(3, || {
+        let mut sum = Checksum::default();
+        let mut reader = TraceReader::new(&bytes[..]).expect("header");
+        reader.read_into(&mut sum).expect("decode");
+        sum
+    });
+    assert_eq!(sum.fragments, summary.fragments);
+    println!(
+        "built-in {name} ({width}x{height}): {} fragments, {:.3} bytes/fragment ({} bytes) | decode bulk {:6.1} M frag/s",
+        summary.fragments,
+        bytes.len() as f64 / summary.fragments as f64,
+        bytes.len(),
+        summary.fragments as f64 / bulk_s / 1e6
+    );
+}
+
 fn main() {
+    bench_builtin("demo");
+    bench_builtin("random");
     let large = SyntheticScene {
         width: 1920,
         height: 1080,

@@ -247,12 +247,23 @@ fn screen_rect(bounds: &Aabb, view_projection: &Mat4, width: u32, height: u32) -
         hi = hi.max(ndc);
     }
     let to_pixels = |ndc: f32, size: u32| ((ndc + 1.0) * 0.5 * size as f32).clamp(0.0, size as f32);
-    let (x0, x1) = (to_pixels(lo.x, width).floor(), to_pixels(hi.x, width).ceil());
-    let (y0, y1) = (to_pixels(lo.y, height).floor(), to_pixels(hi.y, height).ceil());
+    let (x0, x1) = (
+        to_pixels(lo.x, width).floor(),
+        to_pixels(hi.x, width).ceil(),
+    );
+    let (y0, y1) = (
+        to_pixels(lo.y, height).floor(),
+        to_pixels(hi.y, height).ceil(),
+    );
     if x1 <= x0 || y1 <= y0 || lo.z > 1.0 {
         return None;
     }
-    Some(Rect::new(x0 as u32, y0 as u32, (x1 - x0) as u32, (y1 - y0) as u32))
+    Some(Rect::new(
+        x0 as u32,
+        y0 as u32,
+        (x1 - x0) as u32,
+        (y1 - y0) as u32,
+    ))
 }
 
 /// A 2x2 quadtree level over `rect` (fewer tiles when it is one pixel wide or high).
@@ -298,7 +309,11 @@ pub fn demo_scene(options: &DemoOptions) -> String {
         ] {
             recorder.emit(command);
         }
-        recorder.query(QueryMode::Samples, BRIEF_RECORD_ENTRIES, vec![Rect::new(0, 0, width, height)]);
+        recorder.query(
+            QueryMode::Samples,
+            BRIEF_RECORD_ENTRIES,
+            vec![Rect::new(0, 0, width, height)],
+        );
         recorder.emit_triangles(&view_projection, &ground.triangles());
         recorder.emit(Command::End);
 
@@ -320,7 +335,11 @@ pub fn demo_scene(options: &DemoOptions) -> String {
             recorder.emit_triangles(&view_projection, &building.bounds.triangles());
             let visible = recorder.emit(Command::End).is_some_and(|r| r.value() > 0);
             if visible {
-                recorder.query(QueryMode::Samples, BRIEF_RECORD_ENTRIES, vec![Rect::new(0, 0, width, height)]);
+                recorder.query(
+                    QueryMode::Samples,
+                    BRIEF_RECORD_ENTRIES,
+                    vec![Rect::new(0, 0, width, height)],
+                );
                 for part in &building.parts {
                     recorder.emit_triangles(&view_projection, &part.triangles());
                 }
@@ -345,13 +364,20 @@ mod tests {
         for [a, bb, c] in b.triangles() {
             let normal = (bb - a).cross(c - a);
             let centre_of_triangle = (a + bb + c) / 3.0;
-            assert!(normal.dot(centre_of_triangle) > 0.0, "inward triangle {a} {bb} {c}");
+            assert!(
+                normal.dot(centre_of_triangle) > 0.0,
+                "inward triangle {a} {bb} {c}"
+            );
         }
     }
 
     #[test]
     fn quad_tiles_cover_the_rect_once() {
-        for rect in [Rect::new(3, 4, 5, 7), Rect::new(0, 0, 1, 9), Rect::new(2, 2, 1, 1)] {
+        for rect in [
+            Rect::new(3, 4, 5, 7),
+            Rect::new(0, 0, 1, 9),
+            Rect::new(2, 2, 1, 1),
+        ] {
             let tiles = quad_tiles(rect);
             let area: u64 = tiles.iter().map(Rect::area).sum();
             assert_eq!(area, rect.area());
