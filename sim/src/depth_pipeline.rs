@@ -68,21 +68,33 @@ impl DepthPipeline {
         self.depth.clear();
     }
 
-    /// Test one fragment. `out_slot` is when the depth-to-OccU FIFO has room;
-    /// `occlusion_mode` suppresses depth writes.
-    #[inline]
-    pub fn fragment(
+    /// Front end: fetch the depth of a fragment readable from `arrive`; returns the cycle
+    /// its data is ready. `read` is whether the depth test is on when the fragment arrives.
+    #[inline(always)]
+    pub fn fetch(
         &mut self,
         fragment: Fragment,
         arrive: u64,
+        read: bool,
+        port: &mut MemoryPort,
+    ) -> u64 {
+        self.prefetch
+            .fetch(arrive, fragment.x, fragment.y, read, port)
+    }
+
+    /// Back end: test one fragment whose data is ready in `data_ready`. `out_slot` is when the
+    /// depth-to-OccU FIFO has room; `occlusion_mode` suppresses depth writes.
+    #[inline]
+    pub fn test(
+        &mut self,
+        fragment: Fragment,
+        arrive: u64,
+        data_ready: u64,
         out_slot: u64,
         occlusion_mode: bool,
         port: &mut MemoryPort,
     ) -> DepthOutcome {
         let state = &self.state;
-        let data_ready =
-            self.prefetch
-                .fetch(arrive, fragment.x, fragment.y, state.depth_test, port);
         let passed = self.depth.test(state, fragment, !occlusion_mode);
         let writes = passed && state.depth_test && state.depth_mask && !occlusion_mode;
         let in_order = arrive.max(self.free);

@@ -24,8 +24,12 @@
 //!    `s = max_e k_e` cycles (1 with `all_tiles_one_cycle` or no open query); its hit words
 //!    enter OccU Control's buffer from `o_i + s - 1`; it leaves in `c_i`, the cycle its last
 //!    hit word entered (or `o_i + s - 1`).
-//! 5. Memory port ([`crate::memory_port`]): each cycle, ready requests oldest first (trace
-//!    order; read, write, OccU words within a fragment), each granted if its bits fit.
+//! 5. Memory port ([`crate::memory_port`]): in-order. Request order: the depth reads of
+//!    fragments `0..L` first; then, for each fragment `j` in trace order: its depth write,
+//!    its OccU hit words, then the depth read of fragment `j + L`, where
+//!    `L = min(prefetch_depth_fragments, fifo_raster_to_depth_entries)` (the prefetcher sees
+//!    only fragments in the FIFO); a query's records come at the end's place in the trace
+//!    among these (after the read that follows the preceding fragment's hit words).
 //! 6. Query end: the `end` token enters in `t_end` = the rasterizer's first free cycle and
 //!    takes no slot; it passes the depth pipeline in `td = max(t_end + 1, d_last + 1)` and
 //!    the OccU in `to = max(td + 1, c_last + 1)`; OccU Control's records are ready in
@@ -47,9 +51,10 @@ use crate::report::{
     nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
     Summary, TileReport,
 };
-use occsim_traces::query::MAX_TILES;
+use occsim_traces::query::{BRIEF_RECORD_ENTRIES, MAX_TILES};
 use occsim_traces::state::MAX_VIEWPORT_SIDE;
 use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, TileResult};
+use std::collections::VecDeque;
 
 /// The shortest possible query latency: the end token crosses the FIFO into the depth
 /// pipeline (1), the depth pipeline (1), the OccU (1), enters OccU Control's buffer (1) and
@@ -59,6 +64,22 @@ pub const MIN_QUERY_LATENCY_CYCLES: u64 = 5;
 struct OpenQuery {
     spec: QuerySpec,
     fragments: u64,
+}
+
+/// An item that passed the front end (rasterizer and prefetch) and waits for the back end
+/// (depth test, OccU, OccU Control).
+enum Pending {
+    Fragment {
+        fragment: Fragment,
+        /// First cycle the depth pipeline can read it from the rasterizer FIFO.
+        arrive: u64,
+        /// Cycle its depth data is ready.
+        data_ready: u64,
+    },
+    /// A query end that entered the pipe in `entered`.
+    QueryEnd { entered: u64, event: u64 },
+    /// Any other event, applied in order by the back end.
+    Other { event: Event, index: u64 },
 }
 
 pub struct O2Machine {
@@ -73,6 +94,16 @@ pub struct O2Machine {
     occu: OcclusionUnit,
     control: OccuControl,
     port: MemoryPort,
+    /// Items between front and back end, at most `lookahead` fragments.
+    pending: VecDeque<Pending>,
+    pending_fragments: usize,
+    /// How many fragments the front end runs ahead of the depth test:
+    /// min(prefetch_depth_fragments, fifo_raster_to_depth_entries).
+    lookahead: usize,
+    /// The depth test enable as the front end sees it (decides whether to read).
+    front_depth_test: bool,
+    /// Queries begun minus ended, as the front end sees them (for stream errors).
+    front_open: Option<u32>,
     open: Option<OpenQuery>,
     /// The result of the query that just ended, waiting for the stream's golden result.
     awaiting_golden: Option<(usize, QueryResult)>,
@@ -101,6 +132,7 @@ impl O2Machine {
             })
             .collect();
         Ok(O2Machine {
+            arch: o2.clone(),
             input: FragmentInput::new(o2.primitive_setup_cycles),
             raster_to_depth: Fifo::new(o2.fifo_raster_to_depth_entries),
             depth: DepthPipeline::new(&o2, width, height),
@@ -108,10 +140,16 @@ impl O2Machine {
             occu: OcclusionUnit::new(&o2),
             control: OccuControl::new(o2.occu_write_buffer_words),
             port: MemoryPort::new(o2.memory_port_bits_per_cycle),
-            arch: o2,
             arch_entries,
             width,
             height,
+            pending: VecDeque::new(),
+            pending_fragments: 0,
+            lookahead: o2
+                .prefetch_depth_fragments
+                .min(o2.fifo_raster_to_depth_entries),
+            front_depth_test: true,
+            front_open: None,
             open: None,
             awaiting_golden: None,
             queries: Vec::new(),
@@ -127,23 +165,45 @@ impl O2Machine {
         let index = self.events;
         self.events += 1;
         match event {
-            Event::Fragment(f) => return self.fragment(*f, index),
+            Event::Fragment(f) => return self.front_fragment(*f, index),
             Event::Primitive => self.input.primitive(),
-            Event::Clear => self.depth.clear(),
-            Event::DepthFunc(f) => self.depth.state.depth_func = *f,
-            Event::DepthMask(b) => self.depth.state.depth_mask = *b,
-            Event::DepthTest(b) => self.depth.state.depth_test = *b,
-            Event::Cull(b) => self.depth.state.cull_back = *b,
-            Event::Scissor(s) => self.depth.state.scissor = *s,
-            Event::QueryBegin(spec) => return self.begin(spec, index),
-            Event::QueryEnd => return self.end(index),
-            Event::QueryResult(golden) => return self.check(golden, index),
+            Event::DepthTest(on) => {
+                self.front_depth_test = *on;
+                self.pending.push_back(Pending::Other {
+                    event: event.clone(),
+                    index,
+                });
+            }
+            Event::QueryBegin(spec) => {
+                check_spec(spec, index, self.front_open)?;
+                self.front_open = Some(spec.id);
+                self.pending.push_back(Pending::Other {
+                    event: event.clone(),
+                    index,
+                });
+            }
+            Event::QueryEnd => {
+                if self.front_open.take().is_none() {
+                    return Err(SimError::EndWithoutBegin { event: index });
+                }
+                let entered = self.input.free_cycle();
+                self.pending.push_back(Pending::QueryEnd {
+                    entered,
+                    event: index,
+                });
+            }
+            _ => self.pending.push_back(Pending::Other {
+                event: event.clone(),
+                index,
+            }),
         }
         Ok(())
     }
 
+    /// Front end: emit the fragment and issue its depth read, once the back end has tested
+    /// the fragment `lookahead` places earlier (which frees its FIFO and prefetch slots).
     #[inline]
-    fn fragment(&mut self, fragment: Fragment, event: u64) -> Result<(), SimError> {
+    fn front_fragment(&mut self, fragment: Fragment, event: u64) -> Result<(), SimError> {
         if fragment.x as u32 >= self.width || fragment.y as u32 >= self.height {
             return Err(SimError::FragmentOutside {
                 event,
@@ -153,16 +213,68 @@ impl O2Machine {
                 height: self.height,
             });
         }
+        while self.pending_fragments >= self.lookahead {
+            self.back_one()?;
+        }
+        let emitted = self.input.emit(self.raster_to_depth.slot_free_cycle());
+        let arrive = emitted + 1;
+        let data_ready = self
+            .depth
+            .fetch(fragment, arrive, self.front_depth_test, &mut self.port);
+        self.pending.push_back(Pending::Fragment {
+            fragment,
+            arrive,
+            data_ready,
+        });
+        self.pending_fragments += 1;
+        Ok(())
+    }
+
+    /// Back end: process the oldest pending item.
+    fn back_one(&mut self) -> Result<(), SimError> {
+        match self.pending.pop_front() {
+            Some(Pending::Fragment {
+                fragment,
+                arrive,
+                data_ready,
+            }) => {
+                self.pending_fragments -= 1;
+                self.back_fragment(fragment, arrive, data_ready);
+            }
+            Some(Pending::QueryEnd { entered, event }) => self.end(entered, event)?,
+            Some(Pending::Other { event, index }) => self.back_event(&event, index)?,
+            None => {}
+        }
+        Ok(())
+    }
+
+    fn back_event(&mut self, event: &Event, index: u64) -> Result<(), SimError> {
+        match event {
+            Event::Clear => self.depth.clear(),
+            Event::DepthFunc(f) => self.depth.state.depth_func = *f,
+            Event::DepthMask(b) => self.depth.state.depth_mask = *b,
+            Event::DepthTest(b) => self.depth.state.depth_test = *b,
+            Event::Cull(b) => self.depth.state.cull_back = *b,
+            Event::Scissor(s) => self.depth.state.scissor = *s,
+            Event::QueryBegin(spec) => self.begin(spec),
+            Event::QueryResult(golden) => return self.check(golden, index),
+            Event::Fragment(_) | Event::Primitive | Event::QueryEnd => {}
+        }
+        Ok(())
+    }
+
+    #[inline]
+    fn back_fragment(&mut self, fragment: Fragment, arrive: u64, data_ready: u64) {
         let query_open = self.open.is_some();
         let occlusion_mode = self
             .open
             .as_ref()
             .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
-        let emitted = self.input.emit(self.raster_to_depth.slot_free_cycle());
         let out_slot = self.depth_to_occu.slot_free_cycle();
-        let tested = self.depth.fragment(
+        let tested = self.depth.test(
             fragment,
-            emitted + 1,
+            arrive,
+            data_ready,
             out_slot,
             occlusion_mode,
             &mut self.port,
@@ -178,48 +290,22 @@ impl O2Machine {
         if let Some(query) = &mut self.open {
             query.fragments += 1;
         }
-        // Every later request is ready after the rasterizer's next free cycle.
-        self.port.close_before(self.input.free_cycle());
-        Ok(())
     }
 
-    fn begin(&mut self, spec: &QuerySpec, event: u64) -> Result<(), SimError> {
-        if let Some(open) = &self.open {
-            return Err(SimError::NestedQuery {
-                event,
-                id: spec.id,
-                open_id: open.spec.id,
-            });
-        }
-        if spec.buffer_entries < occsim_traces::query::BRIEF_RECORD_ENTRIES {
-            return Err(SimError::BufferTooSmall {
-                event,
-                id: spec.id,
-                entries: spec.buffer_entries,
-            });
-        }
-        if spec.tiles.is_empty() || spec.tiles.len() > MAX_TILES {
-            return Err(SimError::TileCount {
-                event,
-                id: spec.id,
-                count: spec.tiles.len(),
-                max: MAX_TILES,
-            });
-        }
+    fn begin(&mut self, spec: &QuerySpec) {
         self.occu.begin(spec);
         self.open = Some(OpenQuery {
             spec: spec.clone(),
             fragments: 0,
         });
-        Ok(())
     }
 
-    fn end(&mut self, event: u64) -> Result<(), SimError> {
+    /// The back end reaches a query end that entered the pipe in `end_cycle`.
+    fn end(&mut self, end_cycle: u64, event: u64) -> Result<(), SimError> {
         let query = self
             .open
             .take()
             .ok_or(SimError::EndWithoutBegin { event })?;
-        let end_cycle = self.input.free_cycle();
         let through_depth = (end_cycle + 1).max(self.depth.free_cycle());
         let through_occu = (through_depth + 1).max(self.occu.free_cycle());
         let mut tiles = self.occu.end(query.spec.tiles.len());
@@ -280,9 +366,12 @@ impl O2Machine {
     }
 
     /// End of the stream: the report.
-    pub fn finish(self) -> Result<Report, SimError> {
-        if let Some(open) = &self.open {
-            return Err(SimError::OpenAtEnd { id: open.spec.id });
+    pub fn finish(mut self) -> Result<Report, SimError> {
+        if let Some(id) = self.front_open {
+            return Err(SimError::OpenAtEnd { id });
+        }
+        while !self.pending.is_empty() {
+            self.back_one()?;
         }
         let cycles_before_port = self.total_cycles();
         let prefetch = &self.depth.prefetch;
@@ -392,6 +481,33 @@ fn tile_report(tile: &TileResult) -> TileReport {
         hits_written: tile.hits.len() as u64,
         overflowed: tile.overflowed,
     }
+}
+
+/// Reject a query the hardware cannot take.
+fn check_spec(spec: &QuerySpec, event: u64, open: Option<u32>) -> Result<(), SimError> {
+    if let Some(open_id) = open {
+        return Err(SimError::NestedQuery {
+            event,
+            id: spec.id,
+            open_id,
+        });
+    }
+    if spec.buffer_entries < BRIEF_RECORD_ENTRIES {
+        return Err(SimError::BufferTooSmall {
+            event,
+            id: spec.id,
+            entries: spec.buffer_entries,
+        });
+    }
+    if spec.tiles.is_empty() || spec.tiles.len() > MAX_TILES {
+        return Err(SimError::TileCount {
+            event,
+            id: spec.id,
+            count: spec.tiles.len(),
+            max: MAX_TILES,
+        });
+    }
+    Ok(())
 }
 
 /// The first field where the simulated result differs from the golden one, whose counters
