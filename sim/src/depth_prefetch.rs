@@ -32,12 +32,12 @@ pub struct DepthPrefetch {
     page_hit_latency: u64,
     page_miss_latency: u64,
     word_bits: u32,
-    tile_width: u32,
-    tile_height: u32,
+    tile_width: Divider,
+    tile_height: Divider,
     tiles_per_row: u64,
     words_per_tile_row: u64,
     words_per_tile: u64,
-    pixels_per_word: u32,
+    pixels_per_word: Divider,
     pub word_hits: u64,
     pub page_hits: u64,
     pub page_misses: u64,
@@ -56,12 +56,12 @@ impl DepthPrefetch {
             page_hit_latency: arch.page_hit_latency_cycles,
             page_miss_latency: arch.page_miss_latency_cycles,
             word_bits: arch.memory_port_bits_per_cycle,
-            tile_width,
-            tile_height: arch.framebuffer_tile_height_pixels,
+            tile_width: Divider::new(tile_width),
+            tile_height: Divider::new(arch.framebuffer_tile_height_pixels),
             tiles_per_row: viewport_width.div_ceil(tile_width) as u64,
             words_per_tile_row,
             words_per_tile: words_per_tile_row * arch.framebuffer_tile_height_pixels as u64,
-            pixels_per_word: arch.pixels_per_word(),
+            pixels_per_word: Divider::new(arch.pixels_per_word()),
             word_hits: 0,
             page_hits: 0,
             page_misses: 0,
@@ -79,12 +79,12 @@ impl DepthPrefetch {
         if !read {
             return 0;
         }
-        let (x, y) = (x as u32, y as u32);
-        let page =
-            (y / self.tile_height) as u64 * self.tiles_per_row + (x / self.tile_width) as u64;
+        let (tile_x, in_tile_x) = self.tile_width.divide(x as u32);
+        let (tile_y, in_tile_y) = self.tile_height.divide(y as u32);
+        let page = tile_y as u64 * self.tiles_per_row + tile_x as u64;
         let word = page * self.words_per_tile
-            + (y % self.tile_height) as u64 * self.words_per_tile_row
-            + ((x % self.tile_width) / self.pixels_per_word) as u64;
+            + in_tile_y as u64 * self.words_per_tile_row
+            + self.pixels_per_word.divide(in_tile_x).0 as u64;
         if self.last_word == Some(word) {
             self.word_hits += 1;
             return self.last_data_ready;
@@ -107,5 +107,31 @@ impl DepthPrefetch {
     #[inline(always)]
     pub fn retire(&mut self, cycle: u64) {
         self.slots.depart(cycle);
+    }
+}
+
+/// Division by a constant that takes a shift when the divisor is a power of two (the usual
+/// case: 128-pixel tiles, 8 pixels a word), which keeps divisions off the per-fragment path.
+#[derive(Clone, Copy, Debug)]
+struct Divider {
+    divisor: u32,
+    shift: Option<u32>,
+}
+
+impl Divider {
+    fn new(divisor: u32) -> Divider {
+        Divider {
+            divisor,
+            shift: divisor.is_power_of_two().then(|| divisor.trailing_zeros()),
+        }
+    }
+
+    /// (quotient, remainder)
+    #[inline(always)]
+    fn divide(self, value: u32) -> (u32, u32) {
+        match self.shift {
+            Some(shift) => (value >> shift, value & (self.divisor - 1)),
+            None => (value / self.divisor, value % self.divisor),
+        }
     }
 }

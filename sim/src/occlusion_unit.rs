@@ -22,6 +22,11 @@ pub struct OcclusionUnit {
     service_cycles: u64,
     /// Per engine, cycles one fragment keeps it testing.
     engine_cycles: Vec<u64>,
+    /// Engines holding at least one tile of the open query.
+    active: usize,
+    /// Fragments and stall cycles of the open query (for the engines' statistics).
+    query_fragments: u64,
+    query_stall_cycles: u64,
     /// First cycle the unit is free.
     free: u64,
     pub busy_cycles: u64,
@@ -36,6 +41,9 @@ impl OcclusionUnit {
             counter_max: arch.counter_max(),
             service_cycles: 1,
             engine_cycles: vec![0; arch.engines],
+            active: 0,
+            query_fragments: 0,
+            query_stall_cycles: 0,
             free: 0,
             busy_cycles: 0,
             stall_cycles: 0,
@@ -70,6 +78,7 @@ impl OcclusionUnit {
             };
         }
         self.service_cycles = self.engine_cycles.iter().copied().max().unwrap_or(0).max(1);
+        self.active = count.min(spec.tiles.len());
     }
 
     /// Cycles one fragment occupies the unit now.
@@ -90,7 +99,8 @@ impl OcclusionUnit {
         let start = ready.max(self.free);
         let mut hit_words = 0;
         if query_open {
-            for engine in &mut self.engines {
+            // Round-robin dealing gives tiles to engines 0..active only.
+            for engine in &mut self.engines[..self.active] {
                 hit_words += engine.fragment(fragment, passed);
             }
         }
@@ -105,12 +115,9 @@ impl OcclusionUnit {
         self.busy_cycles += self.service_cycles;
         self.stall_cycles += stalled;
         if query_open {
-            for (engine, &cycles) in self.engines.iter_mut().zip(&self.engine_cycles) {
-                engine.busy_cycles += cycles;
-                if cycles > 0 {
-                    engine.stall_cycles += stalled;
-                }
-            }
+            // Engine statistics are settled at the query's end, keeping this path short.
+            self.query_fragments += 1;
+            self.query_stall_cycles += stalled;
         }
         self.free = leave + 1;
     }
@@ -122,6 +129,14 @@ impl OcclusionUnit {
 
     /// Collect the tiles' results in the query's order and return the unit to pass-through.
     pub fn end(&mut self, tile_count: usize) -> Vec<TileResult> {
+        for (engine, &cycles) in self.engines.iter_mut().zip(&self.engine_cycles) {
+            engine.busy_cycles += cycles * self.query_fragments;
+            if cycles > 0 {
+                engine.stall_cycles += self.query_stall_cycles;
+            }
+        }
+        self.query_fragments = 0;
+        self.query_stall_cycles = 0;
         let mut results = vec![TileResult::default(); tile_count];
         for engine in &mut self.engines {
             for (index, result) in engine.drain() {
@@ -130,6 +145,7 @@ impl OcclusionUnit {
         }
         self.service_cycles = 1;
         self.engine_cycles.fill(0);
+        self.active = 0;
         results
     }
 }
