@@ -177,6 +177,8 @@ pub enum ArchError {
     BadAssignment(String),
     #[error("impossible configuration: {0}")]
     Impossible(String),
+    #[error("line {line}: {error}")]
+    AtLine { line: usize, error: Box<ArchError> },
 }
 
 /// A resolved architecture: a machine and a value for each of its parameters.
@@ -238,9 +240,15 @@ impl Arch {
                 ("machine", _) => {}
                 (section, toml::Value::Table(entries)) if section == machine.name() => {
                     for (name, value) in entries {
-                        let text = value.to_string();
-                        let parsed = arch.parse_value(name, value_as_text(value, &text))?;
-                        let index = arch.index(name)?;
+                        let rendered = value.to_string();
+                        let at_line = |error| ArchError::AtLine {
+                            line: line_of_key(text, name),
+                            error: Box::new(error),
+                        };
+                        let parsed = arch
+                            .parse_value(name, value_as_text(value, &rendered))
+                            .map_err(at_line)?;
+                        let index = arch.index(name).map_err(at_line)?;
                         arch.values[index] = parsed;
                     }
                 }
@@ -416,6 +424,17 @@ fn value_as_text<'a>(value: &'a toml::Value, rendered: &'a str) -> &'a str {
         toml::Value::String(s) => s,
         _ => rendered,
     }
+}
+
+/// The 1-based line where `key` is assigned in a TOML text (0 when not found).
+fn line_of_key(text: &str, key: &str) -> usize {
+    text.lines()
+        .position(|line| {
+            let line = line.trim_start();
+            line.strip_prefix(key)
+                .is_some_and(|rest| rest.trim_start().starts_with('='))
+        })
+        .map_or(0, |index| index + 1)
 }
 
 /// " (did you mean a, b?)" for the keys close to `key`, or the list of all keys.
