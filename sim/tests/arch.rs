@@ -63,10 +63,15 @@ fn unknown_keys_name_the_close_ones() {
     let err = Arch::from_toml("machine = \"o2\"\n[o2]\ncounter_bit = 3\n").unwrap_err();
     assert!(err.to_string().contains("counter_bits"), "{err}");
     assert!(err.to_string().starts_with("line 3: "), "{err}");
-    let err = Arch::from_toml("machine = \"o2\"\n\n[o2]\nengines = 2\nengines_x = 0\n").unwrap_err();
+    let err =
+        Arch::from_toml("machine = \"o2\"\n\n[o2]\nengines = 2\nengines_x = 0\n").unwrap_err();
     assert!(err.to_string().starts_with("line 5: "), "{err}");
     let err = Arch::from_toml("machine = \"o2\"\n[o2]\nengines = \"four\"\n").unwrap_err();
-    assert!(err.to_string().starts_with("line 3: parameter 'engines' = four"), "{err}");
+    assert!(
+        err.to_string()
+            .starts_with("line 3: parameter 'engines' = four"),
+        "{err}"
+    );
 }
 
 #[test]

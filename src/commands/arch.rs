@@ -59,7 +59,8 @@ pub fn resolve(name: &str, file: Option<&Path>, sets: &[String]) -> anyhow::Resu
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .with_context(|| format!("cannot read architecture file {}", path.display()))?;
-            Arch::from_toml(&text).with_context(|| format!("{}: invalid architecture", path.display()))?
+            Arch::from_toml(&text)
+                .with_context(|| format!("{}: invalid architecture", path.display()))?
         }
         None => Arch::builtin(name)?,
     };

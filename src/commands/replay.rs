@@ -50,15 +50,24 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             .context("--engines")?;
     }
     let path = args.trace.display().to_string();
-    let file = std::fs::File::open(&args.trace).with_context(|| format!("cannot open trace {path}"))?;
+    let file =
+        std::fs::File::open(&args.trace).with_context(|| format!("cannot open trace {path}"))?;
     let mut reader = TraceReader::new(std::io::BufReader::with_capacity(1 << 20, file))
         .with_context(|| format!("{path}: not a readable occsim trace"))?;
     let (width, height) = (reader.header().width, reader.header().height);
-    let machine = O2Machine::new(&arch, width, height).with_context(|| format!("{path}: cannot replay"))?;
-    let mut sink = MachineSink { machine, error: None };
-    while reader.next_block(&mut sink).with_context(|| format!("{path}: cannot read trace"))? {
+    let machine =
+        O2Machine::new(&arch, width, height).with_context(|| format!("{path}: cannot replay"))?;
+    let mut sink = MachineSink {
+        machine,
+        error: None,
+    };
+    while reader
+        .next_block(&mut sink)
+        .with_context(|| format!("{path}: cannot read trace"))?
+    {
         if let Some(error) = sink.error.take() {
-            return Err(error).with_context(|| format!("{path}: replay on {}", arch.machine().name()));
+            return Err(error)
+                .with_context(|| format!("{path}: replay on {}", arch.machine().name()));
         }
     }
     reader
