@@ -68,18 +68,19 @@ impl DepthPipeline {
         self.depth.clear();
     }
 
-    /// Front end: fetch the depth of a fragment readable from `arrive`; returns the cycle
+    /// Front end: fetch the depth of fragment number `index`, readable from `arrive`; returns the cycle
     /// its data is ready. `read` is whether the depth test is on when the fragment arrives.
     #[inline(always)]
     pub fn fetch(
         &mut self,
+        index: usize,
         fragment: Fragment,
         arrive: u64,
         read: bool,
         port: &mut MemoryPort,
     ) -> u64 {
         self.prefetch
-            .fetch(arrive, fragment.x, fragment.y, read, port)
+            .fetch(index, arrive, fragment.x, fragment.y, read, port)
     }
 
     /// Back end: test one fragment whose data is ready in `data_ready`. `out_slot` is when the

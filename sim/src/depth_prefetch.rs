@@ -68,10 +68,19 @@ impl DepthPrefetch {
         }
     }
 
-    /// Fetch fragment (x, y)'s depth; returns the cycle its data is ready.
+    /// Fetch the depth of fragment number `index` at (x, y); returns the cycle its data is
+    /// ready.
     #[inline]
-    pub fn fetch(&mut self, arrive: u64, x: u16, y: u16, read: bool, port: &mut MemoryPort) -> u64 {
-        let mut request = arrive.max(self.slots.slot_free_cycle());
+    pub fn fetch(
+        &mut self,
+        index: usize,
+        arrive: u64,
+        x: u16,
+        y: u16,
+        read: bool,
+        port: &mut MemoryPort,
+    ) -> u64 {
+        let mut request = arrive.max(self.slots.slot_free_cycle_for(index));
         if let Some(last) = self.last_request {
             request = request.max(last + 1);
         }

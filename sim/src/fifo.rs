@@ -21,7 +21,9 @@ impl Fifo {
     /// A FIFO of `capacity` entries; `capacity` >= 1.
     pub fn new(capacity: usize) -> Fifo {
         assert!(capacity >= 1, "a FIFO needs at least one entry");
-        let size = (capacity + 1).next_power_of_two();
+        // Room for the last `2 * capacity` departures: a writer may run up to `capacity`
+        // entries ahead of the departures recorded so far (see `slot_free_cycle_for`).
+        let size = (2 * capacity + 1).next_power_of_two();
         Fifo {
             capacity,
             departures: vec![0; size],
@@ -43,6 +45,22 @@ impl Fifo {
         } else {
             self.departures[(self.count - self.capacity) & self.mask]
         }
+    }
+
+    /// The earliest cycle entry `entry` may be written, when the departures recorded so far
+    /// may lag behind the writes: entry `entry - capacity` must have departed already, and
+    /// `entry` may be at most `capacity` ahead of the departures recorded.
+    #[inline(always)]
+    pub fn slot_free_cycle_for(&self, entry: usize) -> u64 {
+        if entry < self.capacity {
+            return 0;
+        }
+        debug_assert!(
+            entry - self.capacity < self.count,
+            "entry {entry} waits for an unrecorded departure"
+        );
+        debug_assert!(entry <= self.count + self.capacity);
+        self.departures[(entry - self.capacity) & self.mask]
     }
 
     /// Record the departure cycle of the next entry, in entry order.
@@ -71,5 +89,17 @@ mod tests {
         );
         fifo.depart(9);
         assert_eq!(fifo.slot_free_cycle(), 7);
+    }
+
+    #[test]
+    fn a_writer_ahead_of_the_departures_sees_the_right_entry() {
+        let mut fifo = Fifo::new(3);
+        for cycle in [10, 20, 30, 40] {
+            fifo.depart(cycle);
+        }
+        // Entries 0..=3 departed; entry 6 waits for entry 3, entry 4 for entry 1.
+        assert_eq!(fifo.slot_free_cycle_for(6), 40);
+        assert_eq!(fifo.slot_free_cycle_for(4), 20);
+        assert_eq!(fifo.slot_free_cycle_for(2), 0);
     }
 }

@@ -216,11 +216,20 @@ impl O2Machine {
         while self.pending_fragments >= self.lookahead {
             self.back_one()?;
         }
-        let emitted = self.input.emit(self.raster_to_depth.slot_free_cycle());
+        // The back end lags up to `lookahead` fragments behind: address the FIFO and the
+        // prefetch slots by this fragment's number, not by the departures recorded so far.
+        let index = self.input.fragments as usize;
+        let emitted = self
+            .input
+            .emit(self.raster_to_depth.slot_free_cycle_for(index));
         let arrive = emitted + 1;
-        let data_ready = self
-            .depth
-            .fetch(fragment, arrive, self.front_depth_test, &mut self.port);
+        let data_ready = self.depth.fetch(
+            index,
+            fragment,
+            arrive,
+            self.front_depth_test,
+            &mut self.port,
+        );
         self.pending.push_back(Pending::Fragment {
             fragment,
             arrive,

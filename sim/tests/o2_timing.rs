@@ -194,3 +194,45 @@ fn reads_wait_in_order_behind_older_depth_writes() {
     // Port busy in cycles 1, 10, 11, 14, 15, 18, 21.
     assert_eq!(report.memory_port.busy_cycles, 7);
 }
+
+#[test]
+fn full_fifos_hold_back_the_rasterizer_and_the_depth_test() {
+    // Depth test off (no memory traffic), no setup, raster-to-depth FIFO of 2 (so the
+    // prefetcher looks 2 ahead), depth-to-OccU FIFO of 1, three tiles on one engine: s = 3.
+    // a_i = max(a_{i-1} + 1, d_{i-2}); d_i = max(a_i + 1, d_{i-1} + 1, o_{i-1});
+    // o_i = max(d_i + 1, c_{i-1} + 1); c_i = o_i + 2.
+    // F0: a 0, d 1, o 2, c 4.      F1: a 1, d max(2, 2, 2) = 2, o max(3, 5) = 5, c 7.
+    // F2: a max(2, 1) = 2, d max(3, 3, 5) = 5, o 8, c 10.
+    // F3: a max(3, 2) = 3, d max(4, 6, 8) = 8, o 11, c 13.
+    // F4: a max(4, 5) = 5 (1 stall), d max(6, 9, 11) = 11, o 14, c 16.
+    // End enters at 6; through depth max(7, 12) = 12; through OccU max(13, 17) = 17; 24
+    // record words enter 18, granted 19, 20, 21; available 22; latency 16.
+    // Depth back-pressure stall: F2 5 - 3, F3 8 - 6, F4 11 - 9: 6 cycles.
+    let tiles = vec![
+        Rect::new(0, 0, 8, 8),
+        Rect::new(0, 0, 4, 4),
+        Rect::new(4, 4, 4, 4),
+    ];
+    let mut events = vec![
+        Event::DepthTest(false),
+        query(3, QueryMode::Brief, 8, tiles),
+    ];
+    events.extend((0..5).map(|x| fragment(x, 0, 1)));
+    events.push(Event::QueryEnd);
+    let arch = o2(&[
+        "engines=1",
+        "primitive_setup_cycles=0",
+        "fifo_raster_to_depth_entries=2",
+        "fifo_depth_to_occu_entries=1",
+    ]);
+    let report = run(&arch, &events);
+    let q = &report.queries[0];
+    assert_eq!(
+        (q.end_cycle, q.available_cycle, q.latency_cycles),
+        (6, 22, 16)
+    );
+    assert_eq!(report.stages[0].stall_cycles, 1, "rasterizer");
+    assert_eq!(report.stages[1].stall_cycles, 6, "depth test");
+    assert_eq!(report.stages[2].busy_cycles, 15, "OccU");
+    assert_eq!(report.engines[0].busy_cycles, 15);
+}
