@@ -79,7 +79,8 @@ enum Pending {
     /// A query end that entered the pipe in `entered`.
     QueryEnd { entered: u64, event: u64 },
     /// Any other event, applied in order by the back end.
-    Other { event: Event, index: u64 },
+    /// (Boxed: fragments, the common item, stay small.)
+    Other { event: Box<Event>, index: u64 },
 }
 
 pub struct O2Machine {
@@ -170,7 +171,7 @@ impl O2Machine {
             Event::DepthTest(on) => {
                 self.front_depth_test = *on;
                 self.pending.push_back(Pending::Other {
-                    event: event.clone(),
+                    event: Box::new(event.clone()),
                     index,
                 });
             }
@@ -178,7 +179,7 @@ impl O2Machine {
                 check_spec(spec, index, self.front_open)?;
                 self.front_open = Some(spec.id);
                 self.pending.push_back(Pending::Other {
-                    event: event.clone(),
+                    event: Box::new(event.clone()),
                     index,
                 });
             }
@@ -193,7 +194,7 @@ impl O2Machine {
                 });
             }
             _ => self.pending.push_back(Pending::Other {
-                event: event.clone(),
+                event: Box::new(event.clone()),
                 index,
             }),
         }
