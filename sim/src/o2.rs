@@ -24,12 +24,15 @@
 //!    `s = max_e k_e` cycles (1 with `all_tiles_one_cycle` or no open query); its hit words
 //!    enter OccU Control's buffer from `o_i + s - 1`; it leaves in `c_i`, the cycle its last
 //!    hit word entered (or `o_i + s - 1`).
-//! 5. Memory port ([`crate::memory_port`]): in-order. Request order: the depth reads of
-//!    fragments `0..L` first; then, for each fragment `j` in trace order: its depth write,
-//!    its OccU hit words, then the depth read of fragment `j + L`, where
-//!    `L = min(prefetch_depth_fragments, fifo_raster_to_depth_entries)` (the prefetcher sees
-//!    only fragments in the FIFO); a query's records come at the end's place in the trace
-//!    among these (after the read that follows the preceding fragment's hit words).
+//! 5. Memory port ([`crate::memory_port`]): in-order, in this request order. With
+//!    `L = min(prefetch_depth_fragments, fifo_raster_to_depth_entries)` (the prefetcher
+//!    only sees fragments in the FIFO): first the depth reads of fragments `0..L`; then for
+//!    each fragment `j` in trace order: (a) the records of the queries that ended just before
+//!    it, (b) its depth write, (c) its OccU hit words, (d) the depth read of fragment
+//!    `j + L`; last the records of queries that end after the last fragment. Within one
+//!    fragment the engines' hit words go round-robin (engine 0, 1, ...); records go tile by
+//!    tile in query order, which is round-robin over the engines too. All OccU words are 32
+//!    bits, so their order inside a group never changes a cycle count.
 //! 6. Query end: the `end` token enters in `t_end` = the rasterizer's first free cycle and
 //!    takes no slot; it passes the depth pipeline in `td = max(t_end + 1, d_last + 1)` and
 //!    the OccU in `to = max(td + 1, c_last + 1)`; OccU Control's records are ready in
@@ -393,30 +396,35 @@ impl O2Machine {
         let port_width = self.port.bits_per_cycle();
         let port = self.port.finish();
         let cycles = cycles_before_port.max(port.end_cycle);
-        let stage = |name: &str, busy: u64, stall: u64| StageReport {
+        let stage = |name: &str, busy: u64, stall: u64, memory_stall: u64| StageReport {
             name: name.to_string(),
             busy_cycles: busy,
             stall_cycles: stall,
+            memory_stall_cycles: memory_stall,
             busy_percent: percent(busy, cycles),
             stall_percent: percent(stall, cycles),
         };
+        let depth = &self.depth;
         let stages = vec![
             stage(
                 "fragment_input",
                 self.input.busy_cycles,
                 self.input.stall_cycles,
+                0,
             ),
             stage(
                 "depth_test",
-                self.depth.busy_cycles,
-                self.depth.stall_memory_cycles + self.depth.stall_backpressure_cycles,
+                depth.busy_cycles,
+                depth.stall_memory_cycles + depth.stall_backpressure_cycles,
+                depth.stall_memory_cycles,
             ),
             stage(
                 "occlusion_unit",
                 self.occu.busy_cycles,
                 self.occu.stall_cycles,
+                0,
             ),
-            stage("occu_control", occu_port_cycles, 0),
+            stage("occu_control", occu_port_cycles, 0, 0),
         ];
         let engines = self
             .occu

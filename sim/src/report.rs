@@ -48,6 +48,8 @@ pub struct StageReport {
     pub busy_cycles: u64,
     /// Cycles a ready item waited for memory data or for room downstream.
     pub stall_cycles: u64,
+    /// The part of `stall_cycles` spent waiting for memory data.
+    pub memory_stall_cycles: u64,
     pub busy_percent: f64,
     pub stall_percent: f64,
 }
@@ -160,14 +162,19 @@ impl Report {
         );
         let _ = writeln!(
             out,
-            "\n{:<16} {:>12} {:>7} {:>12} {:>7}",
-            "stage", "busy", "busy%", "stall", "stall%"
+            "\n{:<16} {:>12} {:>7} {:>12} {:>7} {:>12}",
+            "stage", "busy", "busy%", "stall", "stall%", "memory stall"
         );
         for s in &self.stages {
             let _ = writeln!(
                 out,
-                "{:<16} {:>12} {:>6.1}% {:>12} {:>6.1}%",
-                s.name, s.busy_cycles, s.busy_percent, s.stall_cycles, s.stall_percent
+                "{:<16} {:>12} {:>6.1}% {:>12} {:>6.1}% {:>12}",
+                s.name,
+                s.busy_cycles,
+                s.busy_percent,
+                s.stall_cycles,
+                s.stall_percent,
+                s.memory_stall_cycles
             );
         }
         let p = &self.memory_port;
