@@ -11,8 +11,15 @@
 //! The model is an exact event-timestamp formulation of an in-order pipeline: each block
 //! computes the cycle a fragment leaves from the cycle it arrives and the cycle the block is
 //! free; FIFO back-pressure comes from the departure cycle of the entry `capacity` places
-//! earlier. The timing rules are stated in each block's module documentation and
-//! summarised in [`o2`].
+//! earlier; the memory port grants requests in a fixed order. The timing rules are stated
+//! in each block's module documentation and summarised in [`o2`].
+//!
+//! Invariants:
+//! - this crate does no file IO (architectures are parsed from `&str`);
+//! - counts equal the functional golden model's, saturated to `counter_bits`;
+//! - every cycle is a max-plus function of earlier cycles in a fixed order, so making any
+//!   block faster (more engines, say) never makes a query finish later;
+//! - same events and architecture, same report, bit for bit.
 
 pub mod arch;
 pub mod depth_pipeline;
