@@ -17,7 +17,7 @@
 //! Invariants:
 //! - this crate does no file IO (architectures are parsed from `&str`);
 //! - counts equal the functional golden model's, saturated to `counter_bits`;
-//! - every cycle is a max-plus function of earlier cycles in a fixed order, so making any
+//! - every cycle is a monotone function of earlier cycles taken in a fixed order, so making any
 //!   block faster (more engines, say) never makes a query finish later;
 //! - same events and architecture, same report, bit for bit.
 

@@ -298,3 +298,37 @@ proptest! {
         prop_assert!(port.busy_cycles <= report.summary.cycles);
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn any_buffer_sizes_keep_the_counts_and_the_minimum_latency(
+        seed in any::<u64>(),
+        raster_fifo in 1usize..5,
+        occu_fifo in 1usize..4,
+        prefetch in 1usize..20,
+        depth_writes in 1usize..4,
+        occu_words in 1usize..10,
+        engines in 1usize..6,
+        setup in 0u64..3,
+    ) {
+        let sets = [
+            format!("fifo_raster_to_depth_entries={raster_fifo}"),
+            format!("fifo_depth_to_occu_entries={occu_fifo}"),
+            format!("prefetch_depth_fragments={prefetch}"),
+            format!("depth_write_buffer_entries={depth_writes}"),
+            format!("occu_write_buffer_words={occu_words}"),
+            format!("engines={engines}"),
+            format!("primitive_setup_cycles={setup}"),
+        ];
+        let events = generated_stream(seed, 8);
+        let report = replay(&arch(&sets), &events).unwrap();
+        let queries = events.iter().filter(|e| matches!(e, Event::QueryEnd)).count() as u64;
+        prop_assert_eq!(report.summary.checked_queries, queries);
+        for q in &report.queries {
+            prop_assert!(q.latency_cycles >= MIN_QUERY_LATENCY_CYCLES);
+        }
+        prop_assert!(report.summary.cycles >= report.summary.fragments);
+    }
+}
