@@ -26,6 +26,10 @@ enum Command {
     /// Make, inspect and dump fragment traces (.occt).
     #[command(subcommand)]
     Trace(commands::trace::TraceCommand),
+    /// Replay a trace on a machine model, cycle by cycle, and report what each query cost.
+    Replay(commands::replay::ReplayArgs),
+    /// Show the built-in architectures and their parameters.
+    Arch(commands::arch::ArchArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -34,6 +38,8 @@ fn main() -> std::process::ExitCode {
         Command::Demo(args) => commands::demo::run(args),
         Command::Count(args) => commands::count::run(args),
         Command::Trace(command) => commands::trace::run(command),
+        Command::Replay(args) => commands::replay::run(args),
+        Command::Arch(args) => commands::arch::run(args),
     };
     match outcome {
         Ok(()) => std::process::ExitCode::SUCCESS,

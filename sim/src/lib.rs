@@ -1,1 +1,41 @@
 //! Timing models of the occlusion-query hardware. This crate does no file IO.
+//!
+//! - [`arch`]: architecture parameters (one documented table per machine), TOML and `--set`.
+//! - [`o2`]: the O2-like machine: [`O2Machine`] consumes [`occsim_traces::Event`]s and
+//!   produces a [`Report`]. Its blocks, one module each, in pipeline order:
+//!   [`fragment_input`] -> [`fifo`] -> [`depth_pipeline`] ([`depth_prefetch`],
+//!   [`write_buffer`]) -> [`fifo`] -> [`occlusion_unit`] ([`occlusion_engine`]) ->
+//!   [`occu_control`], all sharing one [`memory_port`].
+//! - [`report`]: the replay report (serde) and its text form.
+//!
+//! The model is an exact event-timestamp formulation of an in-order pipeline: each block
+//! computes the cycle a fragment leaves from the cycle it arrives and the cycle the block is
+//! free; FIFO back-pressure comes from the departure cycle of the entry `capacity` places
+//! earlier; the memory port grants requests in a fixed order. The timing rules are stated
+//! in each block's module documentation and summarised in [`o2`].
+//!
+//! Invariants:
+//! - this crate does no file IO (architectures are parsed from `&str`);
+//! - counts equal the functional golden model's, saturated to `counter_bits`;
+//! - every cycle is a monotone function of earlier cycles taken in a fixed order, so making any
+//!   block faster (more engines, say) never makes a query finish later;
+//! - same events and architecture, same report, bit for bit.
+
+pub mod arch;
+pub mod depth_pipeline;
+pub mod depth_prefetch;
+pub mod error;
+pub mod fifo;
+pub mod fragment_input;
+pub mod memory_port;
+pub mod o2;
+pub mod occlusion_engine;
+pub mod occlusion_unit;
+pub mod occu_control;
+pub mod report;
+pub mod write_buffer;
+
+pub use arch::{Arch, ArchError, O2Arch};
+pub use error::SimError;
+pub use o2::O2Machine;
+pub use report::Report;

@@ -1,0 +1,530 @@
+//! Architecture files: every timing parameter of a machine, with its unit and meaning.
+//!
+//! One table per machine ([`O2_PARAMS`]) is the single source of truth: the built-in
+//! defaults are built from it, `arch show` prints it, TOML files and `--set key=value` are
+//! validated against it. A file names its machine and holds one section per machine:
+//!
+//! ```toml
+//! machine = "o2"
+//!
+//! [o2]
+//! clock_mhz = 66.67
+//! engines = 4
+//! ```
+//!
+//! Keys carry their unit (`_mhz`, `_cycles`, `_entries`, `_bits`, ...). A later machine (the
+//! InfiniteReality-like one) adds its own table and section through the same mechanism.
+
+use std::fmt::Write as _;
+use thiserror::Error;
+
+/// The type and legal range of one parameter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ParamKind {
+    /// A real number in `min..=max`.
+    Float {
+        min: f64,
+        max: f64,
+    },
+    /// An unsigned integer in `min..=max`.
+    Int {
+        min: u64,
+        max: u64,
+    },
+    Bool,
+}
+
+/// One parameter's value.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Value {
+    Float(f64),
+    Int(u64),
+    Bool(bool),
+}
+
+impl std::fmt::Display for Value {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            // `{:?}` keeps a decimal point, so the text reads back as a TOML float.
+            Value::Float(v) => write!(f, "{v:?}"),
+            Value::Int(v) => write!(f, "{v}"),
+            Value::Bool(v) => write!(f, "{v}"),
+        }
+    }
+}
+
+/// A parameter's declaration: name (with unit suffix), unit, default, range and meaning.
+#[derive(Clone, Copy, Debug)]
+pub struct Param {
+    pub key: &'static str,
+    pub unit: &'static str,
+    pub default: Value,
+    pub kind: ParamKind,
+    pub meaning: &'static str,
+}
+
+impl ParamKind {
+    fn describe(&self) -> String {
+        match self {
+            ParamKind::Float { min, max } => format!("a number in {min:?}..={max:?}"),
+            ParamKind::Int { min, max } => format!("an integer in {min}..={max}"),
+            ParamKind::Bool => "true or false".to_string(),
+        }
+    }
+}
+
+const fn int(
+    key: &'static str,
+    unit: &'static str,
+    default: u64,
+    min: u64,
+    max: u64,
+    meaning: &'static str,
+) -> Param {
+    Param {
+        key,
+        unit,
+        default: Value::Int(default),
+        kind: ParamKind::Int { min, max },
+        meaning,
+    }
+}
+
+/// The O2-like machine's parameters. Marks in the meanings: (V) read in a primary source,
+/// (I) inferred; see `shared/reference/occlusion-unit.md`.
+pub const O2_PARAMS: &[Param] = &[
+    Param {
+        key: "clock_mhz",
+        unit: "MHz",
+        default: Value::Float(66.67),
+        kind: ParamKind::Float { min: 0.001, max: 100_000.0 },
+        meaning: "rendering engine clock; one pipeline cycle (V)",
+    },
+    int("primitive_setup_cycles", "cycles", 4, 0, 1 << 20, "rasterizer cycles spent setting up each primitive before its first fragment (I)"),
+    int("fifo_raster_to_depth_entries", "fragments", 16, 1, 1 << 16, "FIFO between rasterizer and depth/stencil pipeline"),
+    int("prefetch_depth_fragments", "fragments", 16, 1, 1 << 16, "how many fragments ahead of the depth test the prefetch buffer may issue depth reads"),
+    int("page_hit_latency_cycles", "cycles", 2, 1, 1 << 16, "depth read latency when the word lies in the same 64 KB tile as the previous read (V: CAS 2)"),
+    int("page_miss_latency_cycles", "cycles", 8, 1, 1 << 16, "depth read latency when the word lies in another 64 KB tile (I: 6-10)"),
+    int("framebuffer_tile_width_pixels", "pixels", 128, 1, 1 << 14, "width of one depth buffer tile (one memory page) (V)"),
+    int("framebuffer_tile_height_pixels", "pixels", 128, 1, 1 << 14, "height of one depth buffer tile (one memory page) (V)"),
+    int("depth_bits_per_pixel", "bits", 32, 8, 256, "depth+stencil bits stored per pixel (V: 24 + 8)"),
+    int("depth_write_buffer_entries", "writes", 16, 1, 1 << 16, "depth writes buffered between depth test and memory port"),
+    int("fifo_depth_to_occu_entries", "fragments", 8, 1, 1 << 16, "FIFO between depth test and Occlusion Unit"),
+    int("engines", "engines", 4, 1, 1024, "occlusion engines in the Occlusion Unit; tiles are dealt to them round-robin"),
+    int("counter_bits", "bits", 32, 1, 64, "width of the NOHC and PHC counters; they saturate at 2^bits - 1 (V: >= 32)"),
+    Param {
+        key: "all_tiles_one_cycle",
+        unit: "bool",
+        default: Value::Bool(false),
+        kind: ParamKind::Bool,
+        meaning: "what-if: an engine tests all its tiles in one cycle instead of one tile per cycle",
+    },
+    int("occu_write_buffer_words", "words", 32, 1, 1 << 20, "OccU Control write buffer (32-bit words) for records and hits; full stalls the engines"),
+    int("memory_port_bits_per_cycle", "bits", 256, 32, 1 << 14, "the one main-memory port shared by depth reads, depth writes and OccU Control (V)"),
+];
+
+/// Machines that have a parameter table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Machine {
+    O2,
+}
+
+impl Machine {
+    pub const ALL: [Machine; 1] = [Machine::O2];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Machine::O2 => "o2",
+        }
+    }
+
+    pub fn params(self) -> &'static [Param] {
+        match self {
+            Machine::O2 => O2_PARAMS,
+        }
+    }
+
+    pub fn title(self) -> &'static str {
+        match self {
+            Machine::O2 => "O2-like: one rasterizer, one pixel pipeline, unified memory",
+        }
+    }
+
+    fn from_name(name: &str) -> Option<Machine> {
+        Machine::ALL.into_iter().find(|m| m.name() == name)
+    }
+}
+
+#[derive(Debug, Error, PartialEq)]
+pub enum ArchError {
+    #[error("unknown architecture '{name}' (built-in: {known})")]
+    UnknownBuiltin { name: String, known: String },
+    #[error("architecture file: {0}")]
+    Toml(String),
+    #[error("architecture file: missing `machine = \"...\"` (known machines: {0})")]
+    MissingMachine(String),
+    #[error("unknown machine '{name}' (known machines: {known})")]
+    UnknownMachine { name: String, known: String },
+    #[error("unknown parameter '{key}'{hint}")]
+    UnknownKey { key: String, hint: String },
+    #[error("parameter '{key}' = {value}: expected {expected}")]
+    BadValue {
+        key: String,
+        value: String,
+        expected: String,
+    },
+    #[error("--set expects key=value, got '{0}'")]
+    BadAssignment(String),
+    #[error("impossible configuration: {0}")]
+    Impossible(String),
+    #[error("line {line}: {error}")]
+    AtLine { line: usize, error: Box<ArchError> },
+}
+
+/// A resolved architecture: a machine and a value for each of its parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Arch {
+    machine: Machine,
+    /// Parallel to `machine.params()`.
+    values: Vec<Value>,
+}
+
+/// Names of the built-in architectures.
+pub const BUILTIN_ARCHS: &[&str] = &["o2"];
+
+impl Arch {
+    /// The machine's defaults.
+    pub fn defaults(machine: Machine) -> Arch {
+        Arch {
+            machine,
+            values: machine.params().iter().map(|p| p.default).collect(),
+        }
+    }
+
+    /// A built-in architecture by name.
+    pub fn builtin(name: &str) -> Result<Arch, ArchError> {
+        match name {
+            "o2" => Ok(Arch::defaults(Machine::O2)),
+            _ => Err(ArchError::UnknownBuiltin {
+                name: name.to_string(),
+                known: BUILTIN_ARCHS.join(", "),
+            }),
+        }
+    }
+
+    /// Parse an architecture file. Parameters it leaves out keep their defaults.
+    pub fn from_toml(text: &str) -> Result<Arch, ArchError> {
+        let table: toml::Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| ArchError::Toml(e.to_string()))?;
+        let machines = || Machine::ALL.map(|m| m.name()).join(", ");
+        let machine = match table.get("machine") {
+            None => return Err(ArchError::MissingMachine(machines())),
+            Some(toml::Value::String(name)) => {
+                Machine::from_name(name).ok_or_else(|| ArchError::UnknownMachine {
+                    name: name.clone(),
+                    known: machines(),
+                })?
+            }
+            Some(other) => {
+                return Err(ArchError::BadValue {
+                    key: "machine".into(),
+                    value: other.to_string(),
+                    expected: format!("a string naming a machine ({})", machines()),
+                })
+            }
+        };
+        let mut arch = Arch::defaults(machine);
+        for (key, value) in &table {
+            match (key.as_str(), value) {
+                ("machine", _) => {}
+                (section, toml::Value::Table(entries)) if section == machine.name() => {
+                    for (name, value) in entries {
+                        let rendered = value.to_string();
+                        let at_line = |error| ArchError::AtLine {
+                            line: line_of_key(text, name),
+                            error: Box::new(error),
+                        };
+                        let parsed = arch
+                            .parse_value(name, value_as_text(value, &rendered))
+                            .map_err(at_line)?;
+                        let index = arch.index(name).map_err(at_line)?;
+                        arch.values[index] = parsed;
+                    }
+                }
+                _ => {
+                    return Err(ArchError::UnknownKey {
+                        key: key.clone(),
+                        hint: format!(
+                            " at top level (expected `machine` and a [{}] section)",
+                            machine.name()
+                        ),
+                    })
+                }
+            }
+        }
+        arch.check()?;
+        Ok(arch)
+    }
+
+    pub fn machine(&self) -> Machine {
+        self.machine
+    }
+
+    /// Apply one `key=value` override (key with or without the `machine.` prefix).
+    pub fn set(&mut self, assignment: &str) -> Result<(), ArchError> {
+        let (key, value) = assignment
+            .split_once('=')
+            .ok_or_else(|| ArchError::BadAssignment(assignment.to_string()))?;
+        self.set_value(key.trim(), value.trim())
+    }
+
+    /// Set one parameter from its text form; the whole configuration is re-checked.
+    pub fn set_value(&mut self, key: &str, value: &str) -> Result<(), ArchError> {
+        let prefix = format!("{}.", self.machine.name());
+        let key = key.strip_prefix(&prefix).unwrap_or(key);
+        let parsed = self.parse_value(key, value)?;
+        let index = self.index(key)?;
+        let old = std::mem::replace(&mut self.values[index], parsed);
+        if let Err(e) = self.check() {
+            self.values[index] = old;
+            return Err(e);
+        }
+        Ok(())
+    }
+
+    /// A parameter's value by key.
+    pub fn get(&self, key: &str) -> Option<Value> {
+        self.index(key).ok().map(|i| self.values[i])
+    }
+
+    /// `(key, value)` for every parameter, in table order.
+    pub fn entries(&self) -> impl Iterator<Item = (&'static Param, Value)> + '_ {
+        self.machine
+            .params()
+            .iter()
+            .zip(self.values.iter().copied())
+    }
+
+    /// The architecture as a TOML file with every parameter's unit and meaning as a comment;
+    /// it reads back as the same architecture.
+    pub fn to_documented_toml(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(out, "# {}", self.machine.title());
+        let _ = writeln!(
+            out,
+            "machine = \"{}\"\n\n[{}]",
+            self.machine.name(),
+            self.machine.name()
+        );
+        let width = self
+            .entries()
+            .map(|(p, v)| p.key.len() + v.to_string().len())
+            .max()
+            .unwrap_or(0);
+        for (param, value) in self.entries() {
+            let assignment = format!("{} = {}", param.key, value);
+            let _ = writeln!(
+                out,
+                "{assignment:<w$}  # [{}] {}",
+                param.unit,
+                param.meaning,
+                w = width + 3
+            );
+        }
+        out
+    }
+
+    /// The O2-like machine's typed parameters.
+    pub fn o2(&self) -> Result<O2Arch, ArchError> {
+        if self.machine != Machine::O2 {
+            return Err(ArchError::Impossible(format!(
+                "the '{}' machine is not the O2-like machine",
+                self.machine.name()
+            )));
+        }
+        let int = |key: &str| match self.get(key) {
+            Some(Value::Int(v)) => v,
+            _ => unreachable!("O2_PARAMS declares {key} as an integer"),
+        };
+        let arch = O2Arch {
+            clock_mhz: match self.get("clock_mhz") {
+                Some(Value::Float(v)) => v,
+                _ => unreachable!("O2_PARAMS declares clock_mhz as a float"),
+            },
+            primitive_setup_cycles: int("primitive_setup_cycles"),
+            fifo_raster_to_depth_entries: int("fifo_raster_to_depth_entries") as usize,
+            prefetch_depth_fragments: int("prefetch_depth_fragments") as usize,
+            page_hit_latency_cycles: int("page_hit_latency_cycles"),
+            page_miss_latency_cycles: int("page_miss_latency_cycles"),
+            framebuffer_tile_width_pixels: int("framebuffer_tile_width_pixels") as u32,
+            framebuffer_tile_height_pixels: int("framebuffer_tile_height_pixels") as u32,
+            depth_bits_per_pixel: int("depth_bits_per_pixel") as u32,
+            depth_write_buffer_entries: int("depth_write_buffer_entries") as usize,
+            fifo_depth_to_occu_entries: int("fifo_depth_to_occu_entries") as usize,
+            engines: int("engines") as usize,
+            counter_bits: int("counter_bits") as u32,
+            all_tiles_one_cycle: matches!(self.get("all_tiles_one_cycle"), Some(Value::Bool(true))),
+            occu_write_buffer_words: int("occu_write_buffer_words") as usize,
+            memory_port_bits_per_cycle: int("memory_port_bits_per_cycle") as u32,
+        };
+        arch.check()?;
+        Ok(arch)
+    }
+
+    fn check(&self) -> Result<(), ArchError> {
+        match self.machine {
+            Machine::O2 => self.o2().map(|_| ()),
+        }
+    }
+
+    fn index(&self, key: &str) -> Result<usize, ArchError> {
+        let params = self.machine.params();
+        params
+            .iter()
+            .position(|p| p.key == key)
+            .ok_or_else(|| ArchError::UnknownKey {
+                key: key.to_string(),
+                hint: close_keys_hint(key, params),
+            })
+    }
+
+    fn parse_value(&self, key: &str, text: &str) -> Result<Value, ArchError> {
+        let param = &self.machine.params()[self.index(key)?];
+        let bad = || ArchError::BadValue {
+            key: key.to_string(),
+            value: text.to_string(),
+            expected: param.kind.describe(),
+        };
+        let value = match param.kind {
+            ParamKind::Float { min, max } => {
+                let v: f64 = text.parse().map_err(|_| bad())?;
+                if !(min..=max).contains(&v) {
+                    return Err(bad());
+                }
+                Value::Float(v)
+            }
+            ParamKind::Int { min, max } => {
+                let v: u64 = text.parse().map_err(|_| bad())?;
+                if !(min..=max).contains(&v) {
+                    return Err(bad());
+                }
+                Value::Int(v)
+            }
+            ParamKind::Bool => Value::Bool(text.parse().map_err(|_| bad())?),
+        };
+        Ok(value)
+    }
+}
+
+/// The text of a TOML scalar as `--set` would spell it (strings lose their quotes so they
+/// fail as numbers with a clear message rather than parse).
+fn value_as_text<'a>(value: &'a toml::Value, rendered: &'a str) -> &'a str {
+    match value {
+        toml::Value::String(s) => s,
+        _ => rendered,
+    }
+}
+
+/// The 1-based line where `key` is assigned in a TOML text (0 when not found).
+fn line_of_key(text: &str, key: &str) -> usize {
+    text.lines()
+        .position(|line| {
+            let line = line.trim_start();
+            line.strip_prefix(key)
+                .is_some_and(|rest| rest.trim_start().starts_with('='))
+        })
+        .map_or(0, |index| index + 1)
+}
+
+/// " (did you mean a, b?)" for the keys close to `key`, or the list of all keys.
+fn close_keys_hint(key: &str, params: &[Param]) -> String {
+    let close: Vec<&str> = params
+        .iter()
+        .map(|p| p.key)
+        .filter(|k| {
+            edit_distance(k, key) <= 3 || k.contains(key) || (key.len() >= 4 && key.contains(k))
+        })
+        .collect();
+    if close.is_empty() {
+        let all: Vec<&str> = params.iter().map(|p| p.key).collect();
+        format!(" (known: {})", all.join(", "))
+    } else {
+        format!(" (did you mean {}?)", close.join(", "))
+    }
+}
+
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut diagonal = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let substitution = diagonal + (ca != cb) as usize;
+            diagonal = row[j + 1];
+            row[j + 1] = substitution.min(row[j] + 1).min(row[j + 1] + 1);
+        }
+    }
+    row[b.len()]
+}
+
+/// The O2-like machine's parameters, typed. See [`O2_PARAMS`] for units and meanings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct O2Arch {
+    pub clock_mhz: f64,
+    pub primitive_setup_cycles: u64,
+    pub fifo_raster_to_depth_entries: usize,
+    pub prefetch_depth_fragments: usize,
+    pub page_hit_latency_cycles: u64,
+    pub page_miss_latency_cycles: u64,
+    pub framebuffer_tile_width_pixels: u32,
+    pub framebuffer_tile_height_pixels: u32,
+    pub depth_bits_per_pixel: u32,
+    pub depth_write_buffer_entries: usize,
+    pub fifo_depth_to_occu_entries: usize,
+    pub engines: usize,
+    pub counter_bits: u32,
+    pub all_tiles_one_cycle: bool,
+    pub occu_write_buffer_words: usize,
+    pub memory_port_bits_per_cycle: u32,
+}
+
+/// Bits of one OccU Control word (a record entry or a hit).
+pub const OCCU_WORD_BITS: u32 = 32;
+
+impl O2Arch {
+    /// Cross-parameter rules the per-key ranges cannot express.
+    fn check(&self) -> Result<(), ArchError> {
+        let port = self.memory_port_bits_per_cycle;
+        if port % self.depth_bits_per_pixel != 0 {
+            return Err(ArchError::Impossible(format!(
+                "memory_port_bits_per_cycle ({port}) must be a multiple of depth_bits_per_pixel ({})",
+                self.depth_bits_per_pixel
+            )));
+        }
+        if port % OCCU_WORD_BITS != 0 {
+            return Err(ArchError::Impossible(format!(
+                "memory_port_bits_per_cycle ({port}) must be a multiple of the {OCCU_WORD_BITS}-bit OccU word"
+            )));
+        }
+        if self.framebuffer_tile_width_pixels % self.pixels_per_word() != 0 {
+            return Err(ArchError::Impossible(format!(
+                "framebuffer_tile_width_pixels ({}) must be a multiple of the {} pixels in one memory word",
+                self.framebuffer_tile_width_pixels,
+                self.pixels_per_word()
+            )));
+        }
+        Ok(())
+    }
+
+    /// Depth pixels in one memory word.
+    pub fn pixels_per_word(&self) -> u32 {
+        self.memory_port_bits_per_cycle / self.depth_bits_per_pixel
+    }
+
+    /// Largest counter value: 2^counter_bits - 1.
+    pub fn counter_max(&self) -> u64 {
+        u64::MAX >> (64 - self.counter_bits)
+    }
+}

@@ -1,0 +1,120 @@
+//! The depth/stencil pipeline: prefetch buffer, depth test, depth write buffer.
+//!
+//! Rules, for fragment `i` readable from the rasterizer FIFO from cycle `arrive_i`
+//! (= emission cycle + 1):
+//! - its depth word is fetched by the [`DepthPrefetch`] (data ready in `r_i`);
+//! - the test takes one cycle, one fragment per cycle, in order, in cycle
+//!   `d_i = max(arrive_i, d_{i-1} + 1, r_i, out_slot, write_slot)`, where `out_slot` is the
+//!   cycle the depth-to-OccU FIFO has room and, when the fragment will write depth,
+//!   `write_slot` the cycle the depth write buffer has room (the test leaves its result in
+//!   both in cycle `d_i`; the OccU can read it from `d_i + 1`);
+//! - it writes depth when the depth test is on, the fragment passed, the depth mask is on and
+//!   no occlusion render mode (brief, verbose) is active; the write enters the
+//!   [`WriteBuffer`] in cycle `d_i` and drains one `depth_bits_per_pixel` transfer;
+//! - the pass signal is the functional depth test ([`DepthBuffer`]) under the current state.
+//!
+//! Stall accounting: cycles between `max(arrive_i, d_{i-1} + 1)` and `d_i` count as memory
+//! stall while waiting for `r_i`, the rest as back-pressure stall.
+
+use crate::arch::O2Arch;
+use crate::depth_prefetch::DepthPrefetch;
+use crate::memory_port::{MemoryPort, PortClient};
+use crate::write_buffer::WriteBuffer;
+use occsim_traces::golden::DepthBuffer;
+use occsim_traces::state::RenderState;
+use occsim_traces::Fragment;
+
+pub struct DepthPipeline {
+    pub state: RenderState,
+    depth: DepthBuffer,
+    pub prefetch: DepthPrefetch,
+    pub write_buffer: WriteBuffer,
+    /// First cycle the depth test is free.
+    free: u64,
+    pub busy_cycles: u64,
+    pub stall_memory_cycles: u64,
+    pub stall_backpressure_cycles: u64,
+}
+
+/// What the depth test decided for one fragment.
+#[derive(Clone, Copy, Debug)]
+pub struct DepthOutcome {
+    /// The cycle of the test.
+    pub cycle: u64,
+    /// The depth test's write-enable signal (pass).
+    pub passed: bool,
+}
+
+impl DepthPipeline {
+    pub fn new(arch: &O2Arch, width: u32, height: u32) -> DepthPipeline {
+        DepthPipeline {
+            state: RenderState::new(width, height),
+            depth: DepthBuffer::new(width, height),
+            prefetch: DepthPrefetch::new(arch, width),
+            write_buffer: WriteBuffer::new(
+                arch.depth_write_buffer_entries,
+                arch.depth_bits_per_pixel,
+                PortClient::DepthWrite,
+            ),
+            free: 0,
+            busy_cycles: 0,
+            stall_memory_cycles: 0,
+            stall_backpressure_cycles: 0,
+        }
+    }
+
+    /// Depth := 1.0 everywhere. Modelled as free (a fast clear); its traffic is not simulated.
+    pub fn clear(&mut self) {
+        self.depth.clear();
+    }
+
+    /// Front end: fetch the depth of fragment number `index`, readable from `arrive`; returns the cycle
+    /// its data is ready. `read` is whether the depth test is on when the fragment arrives.
+    #[inline(always)]
+    pub fn fetch(
+        &mut self,
+        index: usize,
+        fragment: Fragment,
+        arrive: u64,
+        read: bool,
+        port: &mut MemoryPort,
+    ) -> u64 {
+        self.prefetch
+            .fetch(index, arrive, fragment.x, fragment.y, read, port)
+    }
+
+    /// Back end: test one fragment whose data is ready in `data_ready`. `out_slot` is when the
+    /// depth-to-OccU FIFO has room; `occlusion_mode` suppresses depth writes.
+    #[inline]
+    pub fn test(
+        &mut self,
+        fragment: Fragment,
+        arrive: u64,
+        data_ready: u64,
+        out_slot: u64,
+        occlusion_mode: bool,
+        port: &mut MemoryPort,
+    ) -> DepthOutcome {
+        let state = &self.state;
+        let passed = self.depth.test(state, fragment, !occlusion_mode);
+        let writes = passed && state.depth_test && state.depth_mask && !occlusion_mode;
+        let in_order = arrive.max(self.free);
+        let after_memory = in_order.max(data_ready);
+        let mut cycle = after_memory.max(out_slot);
+        if writes {
+            cycle = cycle.max(self.write_buffer.slot_free_cycle());
+            self.write_buffer.push(cycle, port);
+        }
+        self.stall_memory_cycles += after_memory - in_order;
+        self.stall_backpressure_cycles += cycle - after_memory;
+        self.busy_cycles += 1;
+        self.free = cycle + 1;
+        self.prefetch.retire(cycle);
+        DepthOutcome { cycle, passed }
+    }
+
+    /// First cycle the depth test is free.
+    pub fn free_cycle(&self) -> u64 {
+        self.free
+    }
+}

@@ -1,0 +1,146 @@
+//! The depth prefetch buffer: issues depth reads ahead of the depth test to hide memory
+//! latency.
+//!
+//! Memory layout: the depth buffer is stored as framebuffer tiles (pages) of
+//! `framebuffer_tile_width_pixels` x `framebuffer_tile_height_pixels` pixels, tiles row by
+//! row from the bottom left; inside a tile, pixels row by row, packed into memory words of
+//! `memory_port_bits_per_cycle` bits (`pixels_per_word` pixels each).
+//!
+//! Rules, for fragment `i` that arrived at the depth pipeline in cycle `arrive_i` (its FIFO
+//! entry is readable):
+//! - every fragment takes one of `prefetch_depth_fragments` slots (P) and frees it in the
+//!   cycle it enters the depth test, so the request cycle is
+//!   `q_i = max(arrive_i, test_{i-P}, q_{i-1} + 1)` (one request decision per cycle);
+//! - with the depth test off nothing is read: the data is ready at once;
+//! - if the fragment's word is the word of the last read, it is a hit: its data is ready
+//!   when that read's data is;
+//! - otherwise it is a miss: one word is read on the port, granted in cycle `g` at or after
+//!   `q_i`, and the data is ready in cycle `g + page_hit_latency_cycles` when the word lies
+//!   in the same page as the last read, `g + page_miss_latency_cycles` otherwise (also for
+//!   the first read).
+
+use crate::arch::O2Arch;
+use crate::fifo::Fifo;
+use crate::memory_port::{MemoryPort, PortClient};
+
+pub struct DepthPrefetch {
+    slots: Fifo,
+    last_request: Option<u64>,
+    last_word: Option<u64>,
+    last_page: Option<u64>,
+    last_data_ready: u64,
+    page_hit_latency: u64,
+    page_miss_latency: u64,
+    word_bits: u32,
+    tile_width: Divider,
+    tile_height: Divider,
+    tiles_per_row: u64,
+    words_per_tile_row: u64,
+    words_per_tile: u64,
+    pixels_per_word: Divider,
+    pub word_hits: u64,
+    pub page_hits: u64,
+    pub page_misses: u64,
+}
+
+impl DepthPrefetch {
+    pub fn new(arch: &O2Arch, viewport_width: u32) -> DepthPrefetch {
+        let tile_width = arch.framebuffer_tile_width_pixels;
+        let words_per_tile_row = (tile_width / arch.pixels_per_word()) as u64;
+        DepthPrefetch {
+            slots: Fifo::new(arch.prefetch_depth_fragments),
+            last_request: None,
+            last_word: None,
+            last_page: None,
+            last_data_ready: 0,
+            page_hit_latency: arch.page_hit_latency_cycles,
+            page_miss_latency: arch.page_miss_latency_cycles,
+            word_bits: arch.memory_port_bits_per_cycle,
+            tile_width: Divider::new(tile_width),
+            tile_height: Divider::new(arch.framebuffer_tile_height_pixels),
+            tiles_per_row: viewport_width.div_ceil(tile_width) as u64,
+            words_per_tile_row,
+            words_per_tile: words_per_tile_row * arch.framebuffer_tile_height_pixels as u64,
+            pixels_per_word: Divider::new(arch.pixels_per_word()),
+            word_hits: 0,
+            page_hits: 0,
+            page_misses: 0,
+        }
+    }
+
+    /// Fetch the depth of fragment number `index` at (x, y); returns the cycle its data is
+    /// ready.
+    #[inline]
+    pub fn fetch(
+        &mut self,
+        index: usize,
+        arrive: u64,
+        x: u16,
+        y: u16,
+        read: bool,
+        port: &mut MemoryPort,
+    ) -> u64 {
+        let mut request = arrive.max(self.slots.slot_free_cycle_for(index));
+        if let Some(last) = self.last_request {
+            request = request.max(last + 1);
+        }
+        self.last_request = Some(request);
+        if !read {
+            return 0;
+        }
+        let (tile_x, in_tile_x) = self.tile_width.divide(x as u32);
+        let (tile_y, in_tile_y) = self.tile_height.divide(y as u32);
+        let page = tile_y as u64 * self.tiles_per_row + tile_x as u64;
+        let word = page * self.words_per_tile
+            + in_tile_y as u64 * self.words_per_tile_row
+            + self.pixels_per_word.divide(in_tile_x).0 as u64;
+        if self.last_word == Some(word) {
+            self.word_hits += 1;
+            return self.last_data_ready;
+        }
+        let grant = port.claim(request, self.word_bits, PortClient::DepthRead);
+        let latency = if self.last_page == Some(page) {
+            self.page_hits += 1;
+            self.page_hit_latency
+        } else {
+            self.page_misses += 1;
+            self.page_miss_latency
+        };
+        self.last_word = Some(word);
+        self.last_page = Some(page);
+        self.last_data_ready = grant + latency;
+        self.last_data_ready
+    }
+
+    /// The fragment fetched longest ago entered the depth test in `cycle`.
+    #[inline(always)]
+    pub fn retire(&mut self, cycle: u64) {
+        self.slots.depart(cycle);
+    }
+}
+
+/// Division by a constant that takes a shift when the divisor is a power of two (the usual
+/// case: 128-pixel tiles, 8 pixels a word), which keeps divisions off the per-fragment path.
+#[derive(Clone, Copy, Debug)]
+struct Divider {
+    divisor: u32,
+    shift: Option<u32>,
+}
+
+impl Divider {
+    fn new(divisor: u32) -> Divider {
+        Divider {
+            divisor,
+            shift: divisor.is_power_of_two().then(|| divisor.trailing_zeros()),
+        }
+    }
+
+    /// (quotient, remainder)
+    #[inline(always)]
+    fn divide(self, value: u32) -> (u32, u32) {
+        match self.shift {
+            Some(shift) => (value >> shift, value & (self.divisor - 1)),
+            None => (value / self.divisor, value % self.divisor),
+        }
+    }
+}

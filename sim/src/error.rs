@@ -1,0 +1,45 @@
+//! What can go wrong while replaying a fragment stream.
+
+use crate::arch::ArchError;
+use thiserror::Error;
+
+#[derive(Debug, Error, PartialEq)]
+pub enum SimError {
+    #[error(transparent)]
+    Arch(#[from] ArchError),
+    #[error("viewport {width}x{height}: each side must be in 1..={max}")]
+    Viewport { width: u32, height: u32, max: u32 },
+    #[error("event {event}: fragment ({x}, {y}) lies outside the {width}x{height} viewport")]
+    FragmentOutside {
+        event: u64,
+        x: u16,
+        y: u16,
+        width: u32,
+        height: u32,
+    },
+    #[error("event {event}: query {id} begins while query {open_id} is open")]
+    NestedQuery { event: u64, id: u32, open_id: u32 },
+    #[error("event {event}: query end without an open query")]
+    EndWithoutBegin { event: u64 },
+    #[error("event {event}: golden result for query {id}, but no query just ended")]
+    ResultWithoutQuery { event: u64, id: u32 },
+    #[error("event {event}: query {id} has {entries}-entry occlusion buffers; the minimum is 8")]
+    BufferTooSmall { event: u64, id: u32, entries: u32 },
+    #[error("event {event}: query {id} has {count} tiles; allowed 1..={max}")]
+    TileCount {
+        event: u64,
+        id: u32,
+        count: usize,
+        max: usize,
+    },
+    #[error("query {id} (query #{index} in the trace): {field} differs: simulated {simulated}, golden {golden}")]
+    Mismatch {
+        id: u32,
+        index: usize,
+        field: String,
+        simulated: String,
+        golden: String,
+    },
+    #[error("the stream ended with query {id} still open")]
+    OpenAtEnd { id: u32 },
+}

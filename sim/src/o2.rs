@@ -1,0 +1,592 @@
+//! The O2-like machine: one rasterizer and one pixel pipeline with the Occlusion Unit, all
+//! clocked at the rendering engine's clock and sharing one main-memory port.
+//!
+//! ```text
+//! fragment_input -> FIFO -> depth_pipeline (prefetch, test, write buffer) -> FIFO
+//!   -> occlusion_unit (E engines) -> occu_control -> memory_port
+//! ```
+//!
+//! # Timing rules (the RTL model must match them cycle for cycle)
+//! Cycles count from 0. `X_{i-n}` for a fragment before the first reads as 0.
+//! 1. Rasterizer ([`crate::fragment_input`]): a primitive costs `primitive_setup_cycles`;
+//!    fragment `i` is emitted in `a_i = max(free, slot)`, one per cycle, where the
+//!    raster-to-depth FIFO slot frees when fragment `i - fifo_raster_to_depth_entries`
+//!    entered the depth test (same-cycle reuse).
+//! 2. Prefetch ([`crate::depth_prefetch`]): request cycle
+//!    `q_i = max(a_i + 1, d_{i-P}, q_{i-1} + 1)`; a fragment whose word is the last word read
+//!    reuses that read's data; otherwise one port word is granted in `g >= q_i` and the data
+//!    is ready in `g + page_hit_latency_cycles` (same 64 KB tile as the last read) or
+//!    `g + page_miss_latency_cycles`. Nothing is read when the depth test is off.
+//! 3. Depth test ([`crate::depth_pipeline`]): `d_i = max(a_i + 1, d_{i-1} + 1, r_i,
+//!    o_{i-C2}, w)` with `C2 = fifo_depth_to_occu_entries` and `w` the depth write buffer's
+//!    slot when the fragment writes; the write asks the port from `d_i + 1`, in order.
+//! 4. Occlusion Unit ([`crate::occlusion_unit`]): `o_i = max(d_i + 1, c_{i-1} + 1)`, busy
+//!    `s = max_e k_e` cycles (1 with `all_tiles_one_cycle` or no open query); its hit words
+//!    enter OccU Control's buffer from `o_i + s - 1`; it leaves in `c_i`, the cycle its last
+//!    hit word entered (or `o_i + s - 1`).
+//! 5. Memory port ([`crate::memory_port`]): in-order, in this request order. With
+//!    `L = min(prefetch_depth_fragments, fifo_raster_to_depth_entries)` (the prefetcher
+//!    only sees fragments in the FIFO): first the depth reads of fragments `0..L`; then for
+//!    each fragment `j` in trace order: (a) the records of the queries that ended just before
+//!    it, (b) its depth write, (c) its OccU hit words, (d) the depth read of fragment
+//!    `j + L`; last the records of queries that end after the last fragment. Within one
+//!    fragment the engines' hit words go round-robin (engine 0, 1, ...); records go tile by
+//!    tile in query order, which is round-robin over the engines too. All OccU words are 32
+//!    bits, so their order inside a group never changes a cycle count.
+//! 6. Query end: the `end` token enters in `t_end` = the rasterizer's first free cycle and
+//!    takes no slot; it passes the depth pipeline in `td = max(t_end + 1, d_last + 1)` and
+//!    the OccU in `to = max(td + 1, c_last + 1)`; OccU Control's records are ready in
+//!    `to + 1` ([`crate::occu_control`]); the result is available in the cycle after the
+//!    last record word's grant. Latency = available - `t_end`, at least
+//!    [`MIN_QUERY_LATENCY_CYCLES`].
+//! 7. State changes, `begin`, and `clear` take no cycles (clear is a fast clear; colour and
+//!    stencil traffic and blending are not modelled).
+
+use crate::arch::{Arch, O2Arch};
+use crate::depth_pipeline::DepthPipeline;
+use crate::error::SimError;
+use crate::fifo::Fifo;
+use crate::fragment_input::FragmentInput;
+use crate::memory_port::MemoryPort;
+use crate::occlusion_unit::OcclusionUnit;
+use crate::occu_control::OccuControl;
+use crate::report::{
+    nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
+    Summary, TileReport,
+};
+use occsim_traces::query::{BRIEF_RECORD_ENTRIES, MAX_TILES};
+use occsim_traces::state::MAX_VIEWPORT_SIDE;
+use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, TileResult};
+use std::collections::VecDeque;
+
+/// The shortest possible query latency: the end token crosses the FIFO into the depth
+/// pipeline (1), the depth pipeline (1), the OccU (1), enters OccU Control's buffer (1) and
+/// is written (1).
+pub const MIN_QUERY_LATENCY_CYCLES: u64 = 5;
+
+struct OpenQuery {
+    spec: QuerySpec,
+    fragments: u64,
+}
+
+/// An item that passed the front end (rasterizer and prefetch) and waits for the back end
+/// (depth test, OccU, OccU Control).
+enum Pending {
+    Fragment {
+        fragment: Fragment,
+        /// First cycle the depth pipeline can read it from the rasterizer FIFO.
+        arrive: u64,
+        /// Cycle its depth data is ready.
+        data_ready: u64,
+    },
+    /// A query end that entered the pipe in `entered`.
+    QueryEnd { entered: u64, event: u64 },
+    /// Any other event, applied in order by the back end.
+    /// (Boxed: fragments, the common item, stay small.)
+    Other { event: Box<Event>, index: u64 },
+}
+
+pub struct O2Machine {
+    arch: O2Arch,
+    arch_entries: Vec<ArchEntry>,
+    width: u32,
+    height: u32,
+    input: FragmentInput,
+    raster_to_depth: Fifo,
+    depth: DepthPipeline,
+    depth_to_occu: Fifo,
+    occu: OcclusionUnit,
+    control: OccuControl,
+    port: MemoryPort,
+    /// Items between front and back end, at most `lookahead` fragments.
+    pending: VecDeque<Pending>,
+    pending_fragments: usize,
+    /// How many fragments the front end runs ahead of the depth test:
+    /// min(prefetch_depth_fragments, fifo_raster_to_depth_entries).
+    lookahead: usize,
+    /// The depth test enable as the front end sees it (decides whether to read).
+    front_depth_test: bool,
+    /// Queries begun minus ended, as the front end sees them (for stream errors).
+    front_open: Option<u32>,
+    open: Option<OpenQuery>,
+    /// The result of the query that just ended, waiting for the stream's golden result.
+    awaiting_golden: Option<(usize, QueryResult)>,
+    queries: Vec<QueryReport>,
+    checked_queries: u64,
+    events: u64,
+    last_available: u64,
+}
+
+impl O2Machine {
+    pub fn new(arch: &Arch, width: u32, height: u32) -> Result<O2Machine, SimError> {
+        let o2 = arch.o2()?;
+        if !(1..=MAX_VIEWPORT_SIDE).contains(&width) || !(1..=MAX_VIEWPORT_SIDE).contains(&height) {
+            return Err(SimError::Viewport {
+                width,
+                height,
+                max: MAX_VIEWPORT_SIDE,
+            });
+        }
+        let arch_entries = arch
+            .entries()
+            .map(|(param, value)| ArchEntry {
+                key: param.key.to_string(),
+                value: value.to_string(),
+                unit: param.unit.to_string(),
+            })
+            .collect();
+        Ok(O2Machine {
+            arch: o2.clone(),
+            input: FragmentInput::new(o2.primitive_setup_cycles),
+            raster_to_depth: Fifo::new(o2.fifo_raster_to_depth_entries),
+            depth: DepthPipeline::new(&o2, width, height),
+            depth_to_occu: Fifo::new(o2.fifo_depth_to_occu_entries),
+            occu: OcclusionUnit::new(&o2),
+            control: OccuControl::new(o2.occu_write_buffer_words),
+            port: MemoryPort::new(o2.memory_port_bits_per_cycle),
+            arch_entries,
+            width,
+            height,
+            pending: VecDeque::new(),
+            pending_fragments: 0,
+            lookahead: o2
+                .prefetch_depth_fragments
+                .min(o2.fifo_raster_to_depth_entries),
+            front_depth_test: true,
+            front_open: None,
+            open: None,
+            awaiting_golden: None,
+            queries: Vec::new(),
+            checked_queries: 0,
+            events: 0,
+            last_available: 0,
+        })
+    }
+
+    /// Feed one event of the stream.
+    #[inline]
+    pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        let index = self.events;
+        self.events += 1;
+        match event {
+            Event::Fragment(f) => return self.front_fragment(*f, index),
+            Event::Primitive => self.input.primitive(),
+            Event::DepthTest(on) => {
+                self.front_depth_test = *on;
+                self.pending.push_back(Pending::Other {
+                    event: Box::new(event.clone()),
+                    index,
+                });
+            }
+            Event::QueryBegin(spec) => {
+                check_spec(spec, index, self.front_open)?;
+                self.front_open = Some(spec.id);
+                self.pending.push_back(Pending::Other {
+                    event: Box::new(event.clone()),
+                    index,
+                });
+            }
+            Event::QueryEnd => {
+                if self.front_open.take().is_none() {
+                    return Err(SimError::EndWithoutBegin { event: index });
+                }
+                let entered = self.input.free_cycle();
+                self.pending.push_back(Pending::QueryEnd {
+                    entered,
+                    event: index,
+                });
+            }
+            _ => self.pending.push_back(Pending::Other {
+                event: Box::new(event.clone()),
+                index,
+            }),
+        }
+        Ok(())
+    }
+
+    /// Front end: emit the fragment and issue its depth read, once the back end has tested
+    /// the fragment `lookahead` places earlier (which frees its FIFO and prefetch slots).
+    #[inline]
+    fn front_fragment(&mut self, fragment: Fragment, event: u64) -> Result<(), SimError> {
+        if fragment.x as u32 >= self.width || fragment.y as u32 >= self.height {
+            return Err(SimError::FragmentOutside {
+                event,
+                x: fragment.x,
+                y: fragment.y,
+                width: self.width,
+                height: self.height,
+            });
+        }
+        while self.pending_fragments >= self.lookahead {
+            self.back_one()?;
+        }
+        // The back end lags up to `lookahead` fragments behind: address the FIFO and the
+        // prefetch slots by this fragment's number, not by the departures recorded so far.
+        let index = self.input.fragments as usize;
+        let emitted = self
+            .input
+            .emit(self.raster_to_depth.slot_free_cycle_for(index));
+        let arrive = emitted + 1;
+        let data_ready = self.depth.fetch(
+            index,
+            fragment,
+            arrive,
+            self.front_depth_test,
+            &mut self.port,
+        );
+        self.pending.push_back(Pending::Fragment {
+            fragment,
+            arrive,
+            data_ready,
+        });
+        self.pending_fragments += 1;
+        Ok(())
+    }
+
+    /// Back end: process the oldest pending item.
+    fn back_one(&mut self) -> Result<(), SimError> {
+        match self.pending.pop_front() {
+            Some(Pending::Fragment {
+                fragment,
+                arrive,
+                data_ready,
+            }) => {
+                self.pending_fragments -= 1;
+                self.back_fragment(fragment, arrive, data_ready);
+            }
+            Some(Pending::QueryEnd { entered, event }) => self.end(entered, event)?,
+            Some(Pending::Other { event, index }) => self.back_event(&event, index)?,
+            None => {}
+        }
+        Ok(())
+    }
+
+    fn back_event(&mut self, event: &Event, index: u64) -> Result<(), SimError> {
+        match event {
+            Event::Clear => self.depth.clear(),
+            Event::DepthFunc(f) => self.depth.state.depth_func = *f,
+            Event::DepthMask(b) => self.depth.state.depth_mask = *b,
+            Event::DepthTest(b) => self.depth.state.depth_test = *b,
+            Event::Cull(b) => self.depth.state.cull_back = *b,
+            Event::Scissor(s) => self.depth.state.scissor = *s,
+            Event::QueryBegin(spec) => self.begin(spec),
+            Event::QueryResult(golden) => return self.check(golden, index),
+            Event::Fragment(_) | Event::Primitive | Event::QueryEnd => {}
+        }
+        Ok(())
+    }
+
+    #[inline]
+    fn back_fragment(&mut self, fragment: Fragment, arrive: u64, data_ready: u64) {
+        let query_open = self.open.is_some();
+        let occlusion_mode = self
+            .open
+            .as_ref()
+            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
+        let out_slot = self.depth_to_occu.slot_free_cycle();
+        let tested = self.depth.test(
+            fragment,
+            arrive,
+            data_ready,
+            out_slot,
+            occlusion_mode,
+            &mut self.port,
+        );
+        self.raster_to_depth.depart(tested.cycle);
+        let (start, hit_words) =
+            self.occu
+                .fragment(fragment, tested.passed, tested.cycle + 1, query_open);
+        self.depth_to_occu.depart(start);
+        let counted = start + self.occu.service_cycles() - 1;
+        let leave = self.control.hits(hit_words, counted, &mut self.port);
+        self.occu.complete(start, leave, query_open);
+        if let Some(query) = &mut self.open {
+            query.fragments += 1;
+        }
+    }
+
+    fn begin(&mut self, spec: &QuerySpec) {
+        self.occu.begin(spec);
+        self.open = Some(OpenQuery {
+            spec: spec.clone(),
+            fragments: 0,
+        });
+    }
+
+    /// The back end reaches a query end that entered the pipe in `end_cycle`.
+    fn end(&mut self, end_cycle: u64, event: u64) -> Result<(), SimError> {
+        let query = self
+            .open
+            .take()
+            .ok_or(SimError::EndWithoutBegin { event })?;
+        let through_depth = (end_cycle + 1).max(self.depth.free_cycle());
+        let through_occu = (through_depth + 1).max(self.occu.free_cycle());
+        let mut tiles = self.occu.end(query.spec.tiles.len());
+        let (available, overflowed_buffers) =
+            self.control
+                .records(&query.spec, &mut tiles, through_occu + 1, &mut self.port);
+        self.last_available = self.last_available.max(available);
+        self.queries.push(QueryReport {
+            id: query.spec.id,
+            mode: query.spec.mode,
+            latency_cycles: available - end_cycle,
+            end_cycle,
+            available_cycle: available,
+            fragments: query.fragments,
+            overflowed_buffers,
+            tiles: tiles.iter().map(tile_report).collect(),
+        });
+        let result = QueryResult {
+            id: query.spec.id,
+            mode: query.spec.mode,
+            tiles,
+            overflowed_buffers,
+        };
+        self.awaiting_golden = Some((self.queries.len() - 1, result));
+        Ok(())
+    }
+
+    fn check(&mut self, golden: &QueryResult, event: u64) -> Result<(), SimError> {
+        let (index, simulated) =
+            self.awaiting_golden
+                .take()
+                .ok_or(SimError::ResultWithoutQuery {
+                    event,
+                    id: golden.id,
+                })?;
+        if let Some((field, simulated, golden)) =
+            first_difference(&simulated, golden, self.arch.counter_max())
+        {
+            return Err(SimError::Mismatch {
+                id: self.queries[index].id,
+                index,
+                field,
+                simulated,
+                golden,
+            });
+        }
+        self.checked_queries += 1;
+        Ok(())
+    }
+
+    /// The cycle by which every block is idle.
+    fn total_cycles(&self) -> u64 {
+        self.input
+            .free_cycle()
+            .max(self.depth.free_cycle())
+            .max(self.occu.free_cycle())
+            .max(self.last_available)
+    }
+
+    /// End of the stream: the report.
+    pub fn finish(mut self) -> Result<Report, SimError> {
+        if let Some(id) = self.front_open {
+            return Err(SimError::OpenAtEnd { id });
+        }
+        while !self.pending.is_empty() {
+            self.back_one()?;
+        }
+        let cycles_before_port = self.total_cycles();
+        let prefetch = &self.depth.prefetch;
+        let (word_hits, page_hits, page_misses) =
+            (prefetch.word_hits, prefetch.page_hits, prefetch.page_misses);
+        let depth_writes = self.depth.write_buffer.entries_written;
+        let occu_words = self.control.words_written();
+        let occu_port_cycles = self.control.port_cycles();
+        let port_width = self.port.bits_per_cycle();
+        let port = self.port.finish();
+        let cycles = cycles_before_port.max(port.end_cycle);
+        let stage = |name: &str, busy: u64, stall: u64, memory_stall: u64| StageReport {
+            name: name.to_string(),
+            busy_cycles: busy,
+            stall_cycles: stall,
+            memory_stall_cycles: memory_stall,
+            busy_percent: percent(busy, cycles),
+            stall_percent: percent(stall, cycles),
+        };
+        let depth = &self.depth;
+        let stages = vec![
+            stage(
+                "fragment_input",
+                self.input.busy_cycles,
+                self.input.stall_cycles,
+                0,
+            ),
+            stage(
+                "depth_test",
+                depth.busy_cycles,
+                depth.stall_memory_cycles + depth.stall_backpressure_cycles,
+                depth.stall_memory_cycles,
+            ),
+            stage(
+                "occlusion_unit",
+                self.occu.busy_cycles,
+                self.occu.stall_cycles,
+                0,
+            ),
+            stage("occu_control", occu_port_cycles, 0, 0),
+        ];
+        let engines = self
+            .occu
+            .engines
+            .iter()
+            .enumerate()
+            .map(|(engine, e)| EngineReport {
+                engine,
+                busy_cycles: e.busy_cycles,
+                stall_cycles: e.stall_cycles,
+                busy_percent: percent(e.busy_cycles, cycles),
+            })
+            .collect();
+        let mut latencies: Vec<u64> = self.queries.iter().map(|q| q.latency_cycles).collect();
+        latencies.sort_unstable();
+        let fragments = self.input.fragments;
+        Ok(Report {
+            machine: "o2".to_string(),
+            arch: self.arch_entries,
+            viewport_width: self.width,
+            viewport_height: self.height,
+            summary: Summary {
+                cycles,
+                simulated_seconds: cycles as f64 / (self.arch.clock_mhz * 1e6),
+                fragments,
+                primitives: self.input.primitives,
+                fragments_per_cycle: if cycles == 0 {
+                    0.0
+                } else {
+                    fragments as f64 / cycles as f64
+                },
+                queries: self.queries.len() as u64,
+                checked_queries: self.checked_queries,
+                latency_p50_cycles: nearest_rank(&latencies, 50),
+                latency_p95_cycles: nearest_rank(&latencies, 95),
+                latency_max_cycles: latencies.last().copied().unwrap_or(0),
+            },
+            stages,
+            memory_port: PortReport {
+                bits_per_cycle: port_width,
+                busy_cycles: port.busy_cycles,
+                busy_percent: percent(port.busy_cycles, cycles),
+                bits_transferred: port.bits_transferred,
+                utilization_percent: percent(
+                    port.bits_transferred,
+                    cycles.saturating_mul(port_width as u64),
+                ),
+                max_bits_in_one_cycle: port.max_bits_in_one_cycle,
+                depth_read_words: port.depth_read_transfers,
+                depth_read_word_hits: word_hits,
+                depth_read_page_hits: page_hits,
+                depth_read_page_misses: page_misses,
+                depth_writes,
+                occu_words,
+            },
+            engines,
+            queries: self.queries,
+        })
+    }
+}
+
+fn tile_report(tile: &TileResult) -> TileReport {
+    TileReport {
+        nohc: tile.nohc,
+        phc: tile.phc,
+        xmin: tile.xmin,
+        xmax: tile.xmax,
+        ymin: tile.ymin,
+        ymax: tile.ymax,
+        zmin: tile.zmin,
+        zmax: tile.zmax,
+        hits_written: tile.hits.len() as u64,
+        overflowed: tile.overflowed,
+    }
+}
+
+/// Reject a query the hardware cannot take.
+fn check_spec(spec: &QuerySpec, event: u64, open: Option<u32>) -> Result<(), SimError> {
+    if let Some(open_id) = open {
+        return Err(SimError::NestedQuery {
+            event,
+            id: spec.id,
+            open_id,
+        });
+    }
+    if spec.buffer_entries < BRIEF_RECORD_ENTRIES {
+        return Err(SimError::BufferTooSmall {
+            event,
+            id: spec.id,
+            entries: spec.buffer_entries,
+        });
+    }
+    if spec.tiles.is_empty() || spec.tiles.len() > MAX_TILES {
+        return Err(SimError::TileCount {
+            event,
+            id: spec.id,
+            count: spec.tiles.len(),
+            max: MAX_TILES,
+        });
+    }
+    Ok(())
+}
+
+/// The first field where the simulated result differs from the golden one, whose counters
+/// are first saturated to the hardware's width: `(field, simulated, golden)`.
+pub fn first_difference(
+    simulated: &QueryResult,
+    golden: &QueryResult,
+    counter_max: u64,
+) -> Option<(String, String, String)> {
+    let differ = |field: String, s: &dyn std::fmt::Debug, g: &dyn std::fmt::Debug| {
+        Some((field, format!("{s:?}"), format!("{g:?}")))
+    };
+    if simulated.id != golden.id {
+        return differ("id".into(), &simulated.id, &golden.id);
+    }
+    if simulated.mode != golden.mode {
+        return differ("mode".into(), &simulated.mode, &golden.mode);
+    }
+    if simulated.tiles.len() != golden.tiles.len() {
+        return differ(
+            "tile count".into(),
+            &simulated.tiles.len(),
+            &golden.tiles.len(),
+        );
+    }
+    for (t, (s, g)) in simulated.tiles.iter().zip(&golden.tiles).enumerate() {
+        let fields: [(&str, u64, u64); 8] = [
+            ("nohc", s.nohc, g.nohc.min(counter_max)),
+            ("phc", s.phc, g.phc.min(counter_max)),
+            ("xmin", s.xmin as u64, g.xmin as u64),
+            ("xmax", s.xmax as u64, g.xmax as u64),
+            ("ymin", s.ymin as u64, g.ymin as u64),
+            ("ymax", s.ymax as u64, g.ymax as u64),
+            ("zmin", s.zmin as u64, g.zmin as u64),
+            ("zmax", s.zmax as u64, g.zmax as u64),
+        ];
+        for (name, sv, gv) in fields {
+            if sv != gv {
+                return differ(format!("tile {t} {name}"), &sv, &gv);
+            }
+        }
+        if s.hits.len() != g.hits.len() {
+            return differ(
+                format!("tile {t} hits_written"),
+                &s.hits.len(),
+                &g.hits.len(),
+            );
+        }
+        if let Some(h) = (0..s.hits.len()).find(|&h| s.hits[h] != g.hits[h]) {
+            return differ(format!("tile {t} hit {h}"), &s.hits[h], &g.hits[h]);
+        }
+        if s.overflowed != g.overflowed {
+            return differ(format!("tile {t} overflowed"), &s.overflowed, &g.overflowed);
+        }
+    }
+    if simulated.overflowed_buffers != golden.overflowed_buffers {
+        return differ(
+            "overflowed_buffers".into(),
+            &simulated.overflowed_buffers,
+            &golden.overflowed_buffers,
+        );
+    }
+    None
+}

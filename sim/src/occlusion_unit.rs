@@ -1,0 +1,151 @@
+//! The Occlusion Unit: `engines` Occlusion Engines behind the depth test, in lockstep.
+//!
+//! Rules: a query's tiles are dealt to the engines round-robin (tile t to engine t mod E), so
+//! engine e holds k_e tiles. The unit takes one fragment at a time from the depth-to-OccU
+//! FIFO; every engine tests its tiles one per cycle, so the fragment occupies the unit for
+//! `s = max(1, max_e k_e)` cycles (`s = 1` with `all_tiles_one_cycle`, and `s = 1` when no
+//! query is open: the fragment just passes). Fragment `i`, readable from `ready_i`
+//! (= depth test cycle + 1), starts in `o_i = max(ready_i, c_{i-1} + 1)` and is done counting
+//! in `o_i + s - 1`; it leaves the unit in `c_i`, which is later only when OccU Control's
+//! write buffer has no room for its hit words ([`crate::occu_control`]). The unit reads the
+//! FIFO entry (frees its slot) in `o_i`.
+
+use crate::arch::O2Arch;
+use crate::occlusion_engine::{hit_room, OcclusionEngine};
+use occsim_traces::{Fragment, QueryMode, QuerySpec, TileResult};
+
+pub struct OcclusionUnit {
+    pub engines: Vec<OcclusionEngine>,
+    all_tiles_one_cycle: bool,
+    counter_max: u64,
+    /// Cycles one fragment occupies the unit under the open query.
+    service_cycles: u64,
+    /// Per engine, cycles one fragment keeps it testing.
+    engine_cycles: Vec<u64>,
+    /// Engines holding at least one tile of the open query.
+    active: usize,
+    /// Fragments and stall cycles of the open query (for the engines' statistics).
+    query_fragments: u64,
+    query_stall_cycles: u64,
+    /// First cycle the unit is free.
+    free: u64,
+    pub busy_cycles: u64,
+    pub stall_cycles: u64,
+}
+
+impl OcclusionUnit {
+    pub fn new(arch: &O2Arch) -> OcclusionUnit {
+        OcclusionUnit {
+            engines: vec![OcclusionEngine::default(); arch.engines],
+            all_tiles_one_cycle: arch.all_tiles_one_cycle,
+            counter_max: arch.counter_max(),
+            service_cycles: 1,
+            engine_cycles: vec![0; arch.engines],
+            active: 0,
+            query_fragments: 0,
+            query_stall_cycles: 0,
+            free: 0,
+            busy_cycles: 0,
+            stall_cycles: 0,
+        }
+    }
+
+    /// Configure the engines for a query.
+    pub fn begin(&mut self, spec: &QuerySpec) {
+        let count = self.engines.len();
+        let verbose = spec.mode == QueryMode::Verbose;
+        let room = if verbose {
+            hit_room(spec.buffer_entries)
+        } else {
+            0
+        };
+        for (e, engine) in self.engines.iter_mut().enumerate() {
+            let dealt = spec
+                .tiles
+                .iter()
+                .copied()
+                .enumerate()
+                .skip(e)
+                .step_by(count);
+            engine.load(dealt, verbose, room, self.counter_max);
+        }
+        for (cycles, engine) in self.engine_cycles.iter_mut().zip(&self.engines) {
+            let k = engine.tile_count() as u64;
+            *cycles = if self.all_tiles_one_cycle {
+                k.min(1)
+            } else {
+                k
+            };
+        }
+        self.service_cycles = self.engine_cycles.iter().copied().max().unwrap_or(0).max(1);
+        self.active = count.min(spec.tiles.len());
+    }
+
+    /// Cycles one fragment occupies the unit now.
+    pub fn service_cycles(&self) -> u64 {
+        self.service_cycles
+    }
+
+    /// Count one fragment readable from `ready`; returns its start cycle and the hit words it
+    /// sends to OccU Control.
+    #[inline]
+    pub fn fragment(
+        &mut self,
+        fragment: Fragment,
+        passed: bool,
+        ready: u64,
+        query_open: bool,
+    ) -> (u64, u32) {
+        let start = ready.max(self.free);
+        let mut hit_words = 0;
+        if query_open {
+            // Round-robin dealing gives tiles to engines 0..active only.
+            for engine in &mut self.engines[..self.active] {
+                hit_words += engine.fragment(fragment, passed);
+            }
+        }
+        (start, hit_words)
+    }
+
+    /// The fragment that started in `start` leaves in `leave` (>= start + s - 1).
+    #[inline]
+    pub fn complete(&mut self, start: u64, leave: u64, query_open: bool) {
+        let done = start + self.service_cycles - 1;
+        let stalled = leave - done;
+        self.busy_cycles += self.service_cycles;
+        self.stall_cycles += stalled;
+        if query_open {
+            // Engine statistics are settled at the query's end, keeping this path short.
+            self.query_fragments += 1;
+            self.query_stall_cycles += stalled;
+        }
+        self.free = leave + 1;
+    }
+
+    /// First cycle the unit is free.
+    pub fn free_cycle(&self) -> u64 {
+        self.free
+    }
+
+    /// Collect the tiles' results in the query's order and return the unit to pass-through.
+    pub fn end(&mut self, tile_count: usize) -> Vec<TileResult> {
+        for (engine, &cycles) in self.engines.iter_mut().zip(&self.engine_cycles) {
+            engine.busy_cycles += cycles * self.query_fragments;
+            if cycles > 0 {
+                engine.stall_cycles += self.query_stall_cycles;
+            }
+        }
+        self.query_fragments = 0;
+        self.query_stall_cycles = 0;
+        let mut results = vec![TileResult::default(); tile_count];
+        for engine in &mut self.engines {
+            for (index, result) in engine.drain() {
+                results[index] = result;
+            }
+        }
+        self.service_cycles = 1;
+        self.engine_cycles.fill(0);
+        self.active = 0;
+        results
+    }
+}

@@ -1,0 +1,233 @@
+//! The replay report: what a run measured, as data (serde) and as text.
+
+use occsim_traces::QueryMode;
+use serde::Serialize;
+use std::fmt::Write as _;
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Report {
+    pub machine: String,
+    /// The fully resolved architecture the run used.
+    pub arch: Vec<ArchEntry>,
+    pub viewport_width: u32,
+    pub viewport_height: u32,
+    pub summary: Summary,
+    pub stages: Vec<StageReport>,
+    pub memory_port: PortReport,
+    pub engines: Vec<EngineReport>,
+    pub queries: Vec<QueryReport>,
+}
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct ArchEntry {
+    pub key: String,
+    pub value: String,
+    pub unit: String,
+}
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Summary {
+    /// Cycles until every block is idle.
+    pub cycles: u64,
+    pub simulated_seconds: f64,
+    pub fragments: u64,
+    pub primitives: u64,
+    pub fragments_per_cycle: f64,
+    pub queries: u64,
+    /// Queries whose result was compared with a golden result in the stream.
+    pub checked_queries: u64,
+    /// Nearest-rank percentiles of the query latencies (0 without queries).
+    pub latency_p50_cycles: u64,
+    pub latency_p95_cycles: u64,
+    pub latency_max_cycles: u64,
+}
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct StageReport {
+    pub name: String,
+    pub busy_cycles: u64,
+    /// Cycles a ready item waited for memory data or for room downstream.
+    pub stall_cycles: u64,
+    /// The part of `stall_cycles` spent waiting for memory data.
+    pub memory_stall_cycles: u64,
+    pub busy_percent: f64,
+    pub stall_percent: f64,
+}
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct PortReport {
+    pub bits_per_cycle: u32,
+    pub busy_cycles: u64,
+    pub busy_percent: f64,
+    pub bits_transferred: u64,
+    /// Bits carried over bits the port could have carried in the run.
+    pub utilization_percent: f64,
+    pub max_bits_in_one_cycle: u32,
+    pub depth_read_words: u64,
+    pub depth_read_word_hits: u64,
+    pub depth_read_page_hits: u64,
+    pub depth_read_page_misses: u64,
+    pub depth_writes: u64,
+    pub occu_words: u64,
+}
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct EngineReport {
+    pub engine: usize,
+    pub busy_cycles: u64,
+    pub stall_cycles: u64,
+    pub busy_percent: f64,
+}
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct QueryReport {
+    pub id: u32,
+    pub mode: QueryMode,
+    /// Cycles from the query's `end` entering the pipe to its records being written.
+    pub latency_cycles: u64,
+    pub end_cycle: u64,
+    pub available_cycle: u64,
+    pub fragments: u64,
+    pub overflowed_buffers: u32,
+    pub tiles: Vec<TileReport>,
+}
+
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct TileReport {
+    pub nohc: u64,
+    pub phc: u64,
+    pub xmin: u32,
+    pub xmax: u32,
+    pub ymin: u32,
+    pub ymax: u32,
+    pub zmin: u32,
+    pub zmax: u32,
+    pub hits_written: u64,
+    pub overflowed: bool,
+}
+
+/// `part` as a percentage of `whole` (0 when `whole` is 0).
+pub fn percent(part: u64, whole: u64) -> f64 {
+    if whole == 0 {
+        0.0
+    } else {
+        100.0 * part as f64 / whole as f64
+    }
+}
+
+/// Nearest-rank percentile of sorted values: the value at rank ceil(p/100 * n).
+pub fn nearest_rank(sorted: &[u64], p: u64) -> u64 {
+    if sorted.is_empty() {
+        return 0;
+    }
+    let rank = (p as usize * sorted.len()).div_ceil(100).max(1);
+    sorted[rank - 1]
+}
+
+impl Report {
+    /// The one-line summary.
+    pub fn summary_line(&self) -> String {
+        let s = &self.summary;
+        format!(
+            "{} cycles ({:.6} s at {}), {} fragments, {:.3} fragments/cycle, {} queries, latency p50 {} p95 {} max {} cycles",
+            s.cycles,
+            s.simulated_seconds,
+            self.clock_text(),
+            s.fragments,
+            s.fragments_per_cycle,
+            s.queries,
+            s.latency_p50_cycles,
+            s.latency_p95_cycles,
+            s.latency_max_cycles
+        )
+    }
+
+    fn clock_text(&self) -> String {
+        self.arch
+            .iter()
+            .find(|e| e.key == "clock_mhz")
+            .map(|e| format!("{} MHz", e.value))
+            .unwrap_or_default()
+    }
+
+    /// The readable report: summary line, stages, memory port, engines, and with
+    /// `with_queries` a table of every query.
+    pub fn to_text(&self, with_queries: bool) -> String {
+        let mut out = String::new();
+        let _ = writeln!(out, "{}", self.summary_line());
+        let _ = writeln!(
+            out,
+            "machine {}, viewport {}x{}, {} queries checked against golden results",
+            self.machine, self.viewport_width, self.viewport_height, self.summary.checked_queries
+        );
+        let _ = writeln!(
+            out,
+            "\n{:<16} {:>12} {:>7} {:>12} {:>7} {:>12}",
+            "stage", "busy", "busy%", "stall", "stall%", "memory stall"
+        );
+        for s in &self.stages {
+            let _ = writeln!(
+                out,
+                "{:<16} {:>12} {:>6.1}% {:>12} {:>6.1}% {:>12}",
+                s.name,
+                s.busy_cycles,
+                s.busy_percent,
+                s.stall_cycles,
+                s.stall_percent,
+                s.memory_stall_cycles
+            );
+        }
+        let p = &self.memory_port;
+        let _ = writeln!(
+            out,
+            "\nmemory port: {} bits/cycle, busy {} cycles ({:.1}%), utilization {:.1}%, max {} bits in a cycle",
+            p.bits_per_cycle, p.busy_cycles, p.busy_percent, p.utilization_percent, p.max_bits_in_one_cycle
+        );
+        let _ = writeln!(
+            out,
+            "  depth reads {} words ({} word hits, {} page hits, {} page misses), depth writes {}, OccU words {}",
+            p.depth_read_words, p.depth_read_word_hits, p.depth_read_page_hits, p.depth_read_page_misses, p.depth_writes, p.occu_words
+        );
+        let _ = writeln!(
+            out,
+            "\n{:<8} {:>12} {:>7} {:>12}",
+            "engine", "busy", "busy%", "stall"
+        );
+        for e in &self.engines {
+            let _ = writeln!(
+                out,
+                "{:<8} {:>12} {:>6.1}% {:>12}",
+                e.engine, e.busy_cycles, e.busy_percent, e.stall_cycles
+            );
+        }
+        if with_queries {
+            self.write_query_table(&mut out);
+        }
+        out
+    }
+
+    fn write_query_table(&self, out: &mut String) {
+        let _ = writeln!(
+            out,
+            "\n{:>6} {:>10} {:<8} {:>6} {:>10} {:>9} {:>12} {:>12} {:>10}",
+            "#", "id", "mode", "tiles", "latency", "overflow", "nohc", "phc", "fragments"
+        );
+        for (index, q) in self.queries.iter().enumerate() {
+            let nohc: u64 = q.tiles.iter().map(|t| t.nohc).sum();
+            let phc: u64 = q.tiles.iter().map(|t| t.phc).sum();
+            let _ = writeln!(
+                out,
+                "{:>6} {:>10} {:<8} {:>6} {:>10} {:>9} {:>12} {:>12} {:>10}",
+                index,
+                q.id,
+                q.mode.name(),
+                q.tiles.len(),
+                q.latency_cycles,
+                q.overflowed_buffers,
+                nohc,
+                phc,
+                q.fragments
+            );
+        }
+    }
+}

@@ -1,0 +1,143 @@
+//! Architecture files: defaults, overrides, documented output, and clear rejections.
+
+use occsim_sim::arch::{Arch, ArchError, Value, O2_PARAMS};
+
+#[test]
+fn the_builtin_o2_has_the_documented_defaults() {
+    let o2 = Arch::builtin("o2").unwrap().o2().unwrap();
+    assert_eq!(o2.clock_mhz, 66.67);
+    assert_eq!(o2.memory_port_bits_per_cycle, 256);
+    assert_eq!(
+        (
+            o2.framebuffer_tile_width_pixels,
+            o2.framebuffer_tile_height_pixels
+        ),
+        (128, 128)
+    );
+    assert_eq!(
+        (o2.engines, o2.counter_bits, o2.all_tiles_one_cycle),
+        (4, 32, false)
+    );
+    assert_eq!(o2.counter_max(), 0xFFFF_FFFF);
+    assert_eq!(o2.pixels_per_word(), 8);
+}
+
+#[test]
+fn every_parameter_has_a_unit_and_a_meaning() {
+    for p in O2_PARAMS {
+        assert!(!p.unit.is_empty() && !p.meaning.is_empty(), "{}", p.key);
+    }
+}
+
+#[test]
+fn arch_show_prints_every_key_with_its_meaning_and_reads_back() {
+    let mut arch = Arch::builtin("o2").unwrap();
+    arch.set("engines=9").unwrap();
+    arch.set("o2.all_tiles_one_cycle = true").unwrap();
+    let text = arch.to_documented_toml();
+    for p in O2_PARAMS {
+        let line = text
+            .lines()
+            .find(|l| l.starts_with(p.key))
+            .unwrap_or_else(|| panic!("{} missing", p.key));
+        assert!(line.contains(p.meaning), "{line}");
+    }
+    assert!(text.contains("clock_mhz = 66.67 "));
+    assert_eq!(Arch::from_toml(&text).unwrap(), arch);
+}
+
+#[test]
+fn a_file_overrides_only_what_it_names() {
+    let arch = Arch::from_toml("machine = \"o2\"\n[o2]\nengines = 16\nclock_mhz = 100\n").unwrap();
+    assert_eq!(arch.get("engines"), Some(Value::Int(16)));
+    assert_eq!(arch.get("clock_mhz"), Some(Value::Float(100.0)));
+    assert_eq!(arch.get("counter_bits"), Some(Value::Int(32)));
+}
+
+#[test]
+fn unknown_keys_name_the_close_ones() {
+    let mut arch = Arch::builtin("o2").unwrap();
+    let err = arch.set("engine=3").unwrap_err();
+    assert!(matches!(err, ArchError::UnknownKey { .. }));
+    assert!(err.to_string().contains("did you mean engines"), "{err}");
+    let err = Arch::from_toml("machine = \"o2\"\n[o2]\ncounter_bit = 3\n").unwrap_err();
+    assert!(err.to_string().contains("counter_bits"), "{err}");
+    assert!(err.to_string().starts_with("line 3: "), "{err}");
+    let err =
+        Arch::from_toml("machine = \"o2\"\n\n[o2]\nengines = 2\nengines_x = 0\n").unwrap_err();
+    assert!(err.to_string().starts_with("line 5: "), "{err}");
+    let err = Arch::from_toml("machine = \"o2\"\n[o2]\nengines = \"four\"\n").unwrap_err();
+    assert!(
+        err.to_string()
+            .starts_with("line 3: parameter 'engines' = four"),
+        "{err}"
+    );
+}
+
+#[test]
+fn bad_values_name_the_key_and_the_expected_range() {
+    let mut arch = Arch::builtin("o2").unwrap();
+    for (assignment, expected) in [
+        ("engines=0", "an integer in 1..=1024"),
+        ("counter_bits=65", "an integer in 1..=64"),
+        ("counter_bits=0", "an integer in 1..=64"),
+        ("fifo_depth_to_occu_entries=0", "an integer in 1..="),
+        ("occu_write_buffer_words=0", "an integer in 1..="),
+        ("all_tiles_one_cycle=yes", "true or false"),
+        ("clock_mhz=fast", "a number in"),
+        ("engines=-1", "an integer"),
+    ] {
+        let err = arch.set(assignment).unwrap_err().to_string();
+        let key = assignment.split('=').next().unwrap();
+        assert!(
+            err.contains(key) && err.contains(expected),
+            "{assignment}: {err}"
+        );
+    }
+    assert_eq!(
+        arch,
+        Arch::builtin("o2").unwrap(),
+        "failed sets change nothing"
+    );
+    assert!(matches!(
+        arch.set("engines"),
+        Err(ArchError::BadAssignment(_))
+    ));
+}
+
+#[test]
+fn impossible_combinations_are_rejected() {
+    let mut arch = Arch::builtin("o2").unwrap();
+    let err = arch.set("memory_port_bits_per_cycle=48").unwrap_err();
+    assert!(matches!(err, ArchError::Impossible(_)), "{err}");
+    let err = Arch::from_toml("machine = \"o2\"\n[o2]\nframebuffer_tile_width_pixels = 12\n")
+        .unwrap_err();
+    assert!(
+        err.to_string().contains("framebuffer_tile_width_pixels"),
+        "{err}"
+    );
+}
+
+#[test]
+fn files_must_name_a_known_machine() {
+    assert!(matches!(
+        Arch::from_toml("[o2]\nengines = 2\n"),
+        Err(ArchError::MissingMachine(_))
+    ));
+    assert!(matches!(
+        Arch::from_toml("machine = \"ir\"\n"),
+        Err(ArchError::UnknownMachine { .. })
+    ));
+    assert!(matches!(
+        Arch::from_toml("machine = \"o2\"\nengines = 2\n"),
+        Err(ArchError::UnknownKey { .. })
+    ));
+    assert!(matches!(
+        Arch::from_toml("machine = \"o2\"\n[o2\n"),
+        Err(ArchError::Toml(_))
+    ));
+    assert!(matches!(
+        Arch::builtin("o3"),
+        Err(ArchError::UnknownBuiltin { .. })
+    ));
+}

@@ -1,0 +1,87 @@
+//! `occsim arch show|list`: print a machine architecture with every parameter's unit and
+//! meaning, and the shared `--arch`, `--arch-file`, `--set` options of the commands that
+//! run a machine.
+
+use anyhow::Context;
+use occsim_sim::arch::{Arch, BUILTIN_ARCHS};
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args)]
+pub struct ArchArgs {
+    #[command(subcommand)]
+    pub command: ArchCommand,
+}
+
+#[derive(clap::Subcommand)]
+pub enum ArchCommand {
+    /// Print an architecture as a TOML file, each parameter with its unit and meaning.
+    Show(ShowArgs),
+    /// List the built-in architectures.
+    List,
+}
+
+#[derive(clap::Args)]
+pub struct ShowArgs {
+    /// A built-in architecture.
+    #[arg(default_value = "o2")]
+    pub name: String,
+    /// Load the architecture from this TOML file instead.
+    #[arg(long, value_name = "FILE")]
+    pub arch_file: Option<PathBuf>,
+    /// Override one parameter (repeatable), e.g. --set engines=8.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+}
+
+/// How a command that runs a machine picks its architecture.
+#[derive(clap::Args, Clone, Debug)]
+pub struct ArchSelection {
+    /// A built-in architecture (see `occsim arch list`).
+    #[arg(long, default_value = "o2")]
+    pub arch: String,
+    /// Load the architecture from this TOML file instead (see `occsim arch show`).
+    #[arg(long, value_name = "FILE", conflicts_with = "arch")]
+    pub arch_file: Option<PathBuf>,
+    /// Override one parameter (repeatable), e.g. --set counter_bits=16.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+}
+
+impl ArchSelection {
+    pub fn resolve(&self) -> anyhow::Result<Arch> {
+        resolve(&self.arch, self.arch_file.as_deref(), &self.set)
+    }
+}
+
+/// A built-in or file architecture with the `--set` overrides applied in order.
+pub fn resolve(name: &str, file: Option<&Path>, sets: &[String]) -> anyhow::Result<Arch> {
+    let mut arch = match file {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read architecture file {}", path.display()))?;
+            Arch::from_toml(&text)
+                .with_context(|| format!("{}: invalid architecture", path.display()))?
+        }
+        None => Arch::builtin(name)?,
+    };
+    for set in sets {
+        arch.set(set).with_context(|| format!("--set {set}"))?;
+    }
+    Ok(arch)
+}
+
+pub fn run(args: ArchArgs) -> anyhow::Result<()> {
+    match args.command {
+        ArchCommand::Show(show) => {
+            let arch = resolve(&show.name, show.arch_file.as_deref(), &show.set)?;
+            print!("{}", arch.to_documented_toml());
+        }
+        ArchCommand::List => {
+            for name in BUILTIN_ARCHS {
+                let arch = Arch::builtin(name)?;
+                println!("{name:<8} {}", arch.machine().title());
+            }
+        }
+    }
+    Ok(())
+}
