@@ -6,6 +6,7 @@
 //!   [`fragment_input`] -> [`fifo`] -> [`depth_pipeline`] ([`depth_prefetch`],
 //!   [`write_buffer`]) -> [`fifo`] -> [`occlusion_unit`] ([`occlusion_engine`]) ->
 //!   [`occu_control`], all sharing one [`memory_port`].
+//! - [`machine`]: [`MachineModel`], the machine an architecture names (the entry point).
 //! - [`report`]: the replay report (serde) and its text form.
 //!
 //! The model is an exact event-timestamp formulation of an in-order pipeline: each block
@@ -27,6 +28,7 @@ pub mod depth_prefetch;
 pub mod error;
 pub mod fifo;
 pub mod fragment_input;
+pub mod machine;
 pub mod memory_port;
 pub mod o2;
 pub mod occlusion_engine;
@@ -37,5 +39,6 @@ pub mod write_buffer;
 
 pub use arch::{Arch, ArchError, O2Arch};
 pub use error::SimError;
+pub use machine::MachineModel;
 pub use o2::O2Machine;
 pub use report::Report;

@@ -3,7 +3,7 @@
 
 use super::arch::ArchSelection;
 use anyhow::Context;
-use occsim_sim::{O2Machine, SimError};
+use occsim_sim::{MachineModel, SimError};
 use occsim_traces::golden::EventSink;
 use occsim_traces::trace::TraceReader;
 use occsim_traces::Event;
@@ -28,7 +28,7 @@ pub struct ReplayArgs {
 
 /// Feeds decoded events to the machine and keeps the first error.
 struct MachineSink {
-    machine: O2Machine,
+    machine: MachineModel,
     error: Option<SimError>,
 }
 
@@ -56,7 +56,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         .with_context(|| format!("{path}: not a readable occsim trace"))?;
     let (width, height) = (reader.header().width, reader.header().height);
     let machine =
-        O2Machine::new(&arch, width, height).with_context(|| format!("{path}: cannot replay"))?;
+        MachineModel::new(&arch, width, height).with_context(|| format!("{path}: cannot replay"))?;
     let mut sink = MachineSink {
         machine,
         error: None,

@@ -1,0 +1,37 @@
+//! A machine model of whichever kind the architecture names: the one entry point the command
+//! line, sweeps and latency reports replay traces through.
+
+use crate::arch::{Arch, Machine};
+use crate::error::SimError;
+use crate::o2::O2Machine;
+use crate::report::Report;
+use occsim_traces::Event;
+
+/// A machine being replayed.
+pub enum MachineModel {
+    O2(O2Machine),
+}
+
+impl MachineModel {
+    /// Build the machine `arch` describes for a `width` x `height` viewport.
+    pub fn new(arch: &Arch, width: u32, height: u32) -> Result<MachineModel, SimError> {
+        Ok(match arch.machine() {
+            Machine::O2 => MachineModel::O2(O2Machine::new(arch, width, height)?),
+        })
+    }
+
+    /// Replay one event.
+    #[inline]
+    pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        match self {
+            MachineModel::O2(machine) => machine.event(event),
+        }
+    }
+
+    /// End the replay and report.
+    pub fn finish(self) -> Result<Report, SimError> {
+        match self {
+            MachineModel::O2(machine) => machine.finish(),
+        }
+    }
+}
