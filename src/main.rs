@@ -30,6 +30,8 @@ enum Command {
     Replay(commands::replay::ReplayArgs),
     /// Show the built-in architectures and their parameters.
     Arch(commands::arch::ArchArgs),
+    /// Replay a trace over the cartesian product of parameter values (`--set k=v1,v2`).
+    Sweep(commands::sweep::SweepArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -40,6 +42,7 @@ fn main() -> std::process::ExitCode {
         Command::Trace(command) => commands::trace::run(command),
         Command::Replay(args) => commands::replay::run(args),
         Command::Arch(args) => commands::arch::run(args),
+        Command::Sweep(args) => commands::sweep::run(args),
     };
     match outcome {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -94,3 +94,30 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// Replay a trace file on `arch` and return the report (counts checked against the trace's
+/// golden results). The one replay path `sweep` and `latency` share.
+pub fn replay_trace(path: &std::path::Path, arch: &occsim_sim::Arch) -> anyhow::Result<occsim_sim::Report> {
+    let name = path.display().to_string();
+    let mut reader = super::trace::open_trace(path)?;
+    let (width, height) = (reader.header().width, reader.header().height);
+    let machine =
+        MachineModel::new(arch, width, height).with_context(|| format!("{name}: cannot replay"))?;
+    let mut sink = MachineSink {
+        machine,
+        error: None,
+    };
+    let on_machine = || format!("{name}: replay on {}", arch.machine().name());
+    while reader
+        .next_block(&mut sink)
+        .with_context(|| format!("{name}: cannot read trace"))?
+    {
+        if let Some(error) = sink.error.take() {
+            return Err(error).with_context(on_machine);
+        }
+    }
+    if let Some(error) = sink.error.take() {
+        return Err(error).with_context(on_machine);
+    }
+    sink.machine.finish().with_context(on_machine)
+}

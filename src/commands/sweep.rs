@@ -181,6 +181,58 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     write_plot(&args.plot, &report.grid, &report.lines)
 }
 
+/// Runs `occsim sweep` on the machine models: every point replays the trace on the base
+/// architecture with the point's values set.
+pub fn run(args: SweepArgs) -> Result<()> {
+    if let Some(SweepCommand::Merge(merge)) = &args.command {
+        return run_merge(merge);
+    }
+    let trace = args.run.trace.clone().context("sweep needs a TRACE")?;
+    let base = super::arch::resolve(
+        args.run.arch.as_deref().unwrap_or("o2"),
+        args.run.arch_file.as_deref(),
+        &[],
+    )?;
+    let digest = super::trace::trace_digest(&trace)?;
+    let validate = |key: &str, value: &str| {
+        base.clone()
+            .set_value(key, value)
+            .map_err(|e| e.to_string())
+    };
+    let evaluate = |point: &crate::sweep::Point| -> Result<crate::sweep::PointRecord> {
+        let mut arch = base.clone();
+        for (key, value) in &point.values {
+            arch.set_value(key, value)
+                .with_context(|| format!("{key}={value}"))?;
+        }
+        let report = super::replay::replay_trace(&trace, &arch)?;
+        Ok(crate::sweep::PointRecord {
+            resolved_arch: serde_json::to_value(&report.arch)?,
+            metrics: point_metrics(&report),
+        })
+    };
+    run_with(&args, &evaluate, &digest, &validate)
+}
+
+/// The metrics a sweep records for one point (no wall times: results must not depend on the
+/// machine the sweep ran on).
+fn point_metrics(report: &occsim_sim::Report) -> std::collections::BTreeMap<String, serde_json::Value> {
+    let s = &report.summary;
+    [
+        ("total_cycles", serde_json::json!(s.cycles)),
+        ("simulated_seconds", serde_json::json!(s.simulated_seconds)),
+        ("fragments", serde_json::json!(s.fragments)),
+        ("fragments_per_cycle", serde_json::json!(s.fragments_per_cycle)),
+        ("queries", serde_json::json!(s.queries)),
+        ("latency_p50_cycles", serde_json::json!(s.latency_p50_cycles)),
+        ("latency_p95_cycles", serde_json::json!(s.latency_p95_cycles)),
+        ("latency_max_cycles", serde_json::json!(s.latency_max_cycles)),
+    ]
+    .into_iter()
+    .map(|(k, v)| (k.to_owned(), v))
+    .collect()
+}
+
 fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine]) -> Result<()> {
     let Some(path) = args.plot.as_deref() else {
         return Ok(());

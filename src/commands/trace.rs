@@ -265,3 +265,27 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
     printer.out.flush()?;
     Ok(())
 }
+
+/// A trace file's identity for sweep records: FNV-1a (64-bit) over its bytes, and its length.
+/// Not cryptographic; it tells one trace from another, which is all resume and merge need.
+pub fn trace_digest(path: &Path) -> anyhow::Result<String> {
+    use std::io::Read;
+    let mut file = std::fs::File::open(path)
+        .with_context(|| format!("cannot open trace {}", path.display()))?;
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut length: u64 = 0;
+    let mut buffer = vec![0u8; 1 << 16];
+    loop {
+        let n = file
+            .read(&mut buffer)
+            .with_context(|| format!("cannot read trace {}", path.display()))?;
+        if n == 0 {
+            break;
+        }
+        length += n as u64;
+        for &byte in &buffer[..n] {
+            hash = (hash ^ byte as u64).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    Ok(format!("fnv1a64:{hash:016x}:{length}"))
+}

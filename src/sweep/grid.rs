@@ -47,6 +47,7 @@ impl Point {
     }
 
     /// The value this point gives to axis `key`, if that key is swept.
+    #[cfg(test)]
     pub fn get(&self, key: &str) -> Option<&str> {
         self.values
             .iter()
