@@ -1,11 +1,48 @@
-//! `occsim demo`: the README's first command.
+//! `occsim demo`: the README's first command. Makes the built-in demo's trace in memory
+//! (a city block whose buildings' bounding boxes are tested in brief mode front to back, then
+//! drawn when visible), replays it on the O2-like machine and prints what the queries cost.
+
+use super::arch::ArchSelection;
+use occsim_traces::builtin::{demo_scene, DemoOptions};
+use occsim_traces::golden::GoldenModel;
+use occsim_traces::scene::SceneReader;
+use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
 
 #[derive(clap::Args)]
-pub struct DemoArgs {}
+pub struct DemoArgs {
+    #[command(flatten)]
+    pub arch: ArchSelection,
+    /// Add a table of every query.
+    #[arg(long)]
+    pub queries: bool,
+}
 
-pub fn run(_args: DemoArgs) -> anyhow::Result<()> {
-    super::count::run(super::count::CountArgs {
-        scene: "demo".into(),
-        json: false,
-    })
+pub fn run(args: DemoArgs) -> anyhow::Result<()> {
+    let arch = args.arch.resolve()?;
+    let options = DemoOptions::default();
+    let (width, height) = (options.width, options.height);
+    let text = demo_scene(&options);
+    let mut trace = Vec::new();
+    let header = TraceHeader::new(width, height).with_scene("demo");
+    let mut writer = TraceWriter::new(&mut trace, &header)?;
+    let mut golden = GoldenModel::new(width, height);
+    for line in SceneReader::new(text.as_bytes(), "demo") {
+        golden.execute(&line?.command, &mut writer);
+    }
+    let summary = writer.finish()?;
+    println!(
+        "demo: a city block, {} frames at {width}x{height}: {} fragments, {} primitives, {} queries ({} brief, {} verbose, {} samples); trace {} bytes",
+        options.frames,
+        summary.fragments,
+        summary.primitives,
+        summary.queries,
+        summary.queries_by_mode.brief,
+        summary.queries_by_mode.verbose,
+        summary.queries_by_mode.samples,
+        trace.len()
+    );
+    let reader = TraceReader::new(&trace[..])?;
+    let report = super::replay::replay_reader(reader, "demo", &arch)?;
+    print!("{}", report.to_text(args.queries));
+    Ok(())
 }

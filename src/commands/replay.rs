@@ -55,8 +55,8 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let mut reader = TraceReader::new(std::io::BufReader::with_capacity(1 << 20, file))
         .with_context(|| format!("{path}: not a readable occsim trace"))?;
     let (width, height) = (reader.header().width, reader.header().height);
-    let machine =
-        MachineModel::new(&arch, width, height).with_context(|| format!("{path}: cannot replay"))?;
+    let machine = MachineModel::new(&arch, width, height)
+        .with_context(|| format!("{path}: cannot replay"))?;
     let mut sink = MachineSink {
         machine,
         error: None,
@@ -97,9 +97,20 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
 
 /// Replay a trace file on `arch` and return the report (counts checked against the trace's
 /// golden results). The one replay path `sweep` and `latency` share.
-pub fn replay_trace(path: &std::path::Path, arch: &occsim_sim::Arch) -> anyhow::Result<occsim_sim::Report> {
-    let name = path.display().to_string();
-    let mut reader = super::trace::open_trace(path)?;
+pub fn replay_trace(
+    path: &std::path::Path,
+    arch: &occsim_sim::Arch,
+) -> anyhow::Result<occsim_sim::Report> {
+    let reader = super::trace::open_trace(path)?;
+    replay_reader(reader, &path.display().to_string(), arch)
+}
+
+/// Replay a trace from any reader; `name` names it in errors.
+pub fn replay_reader<R: std::io::Read>(
+    mut reader: TraceReader<R>,
+    name: &str,
+    arch: &occsim_sim::Arch,
+) -> anyhow::Result<occsim_sim::Report> {
     let (width, height) = (reader.header().width, reader.header().height);
     let machine =
         MachineModel::new(arch, width, height).with_context(|| format!("{name}: cannot replay"))?;

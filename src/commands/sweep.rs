@@ -216,17 +216,31 @@ pub fn run(args: SweepArgs) -> Result<()> {
 
 /// The metrics a sweep records for one point (no wall times: results must not depend on the
 /// machine the sweep ran on).
-fn point_metrics(report: &occsim_sim::Report) -> std::collections::BTreeMap<String, serde_json::Value> {
+fn point_metrics(
+    report: &occsim_sim::Report,
+) -> std::collections::BTreeMap<String, serde_json::Value> {
     let s = &report.summary;
     [
         ("total_cycles", serde_json::json!(s.cycles)),
         ("simulated_seconds", serde_json::json!(s.simulated_seconds)),
         ("fragments", serde_json::json!(s.fragments)),
-        ("fragments_per_cycle", serde_json::json!(s.fragments_per_cycle)),
+        (
+            "fragments_per_cycle",
+            serde_json::json!(s.fragments_per_cycle),
+        ),
         ("queries", serde_json::json!(s.queries)),
-        ("latency_p50_cycles", serde_json::json!(s.latency_p50_cycles)),
-        ("latency_p95_cycles", serde_json::json!(s.latency_p95_cycles)),
-        ("latency_max_cycles", serde_json::json!(s.latency_max_cycles)),
+        (
+            "latency_p50_cycles",
+            serde_json::json!(s.latency_p50_cycles),
+        ),
+        (
+            "latency_p95_cycles",
+            serde_json::json!(s.latency_p95_cycles),
+        ),
+        (
+            "latency_max_cycles",
+            serde_json::json!(s.latency_max_cycles),
+        ),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_owned(), v))

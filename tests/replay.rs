@@ -1,0 +1,170 @@
+//! Replays of the built-in scenes on the O2-like machine: counts equal the golden model's at
+//! every engine count from 1 to 16, and a trace whose golden answer is wrong fails by name.
+
+use occsim_sim::{Arch, MachineModel};
+use occsim_traces::builtin::scene_text;
+use occsim_traces::golden::{EventSink, GoldenModel};
+use occsim_traces::scene::{Command, SceneReader};
+use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
+use occsim_traces::Event;
+use std::process::Command as Process;
+
+/// A built-in scene's trace, in memory.
+fn builtin_trace(name: &str) -> Vec<u8> {
+    let text = scene_text(name).expect("built-in");
+    let mut lines = SceneReader::new(text.as_bytes(), name);
+    let Some(Ok(first)) = lines.next() else {
+        panic!("{name}: empty")
+    };
+    let Command::Viewport { width, height } = first.command else {
+        panic!("{name}: no viewport")
+    };
+    let mut bytes = Vec::new();
+    let mut writer =
+        TraceWriter::new(&mut bytes, &TraceHeader::new(width, height)).expect("header");
+    let mut golden = GoldenModel::new(width, height);
+    for line in lines {
+        golden.execute(&line.expect("parses").command, &mut writer);
+    }
+    writer.finish().expect("written");
+    bytes
+}
+
+struct Replay {
+    machine: MachineModel,
+    error: Option<String>,
+}
+
+impl EventSink for Replay {
+    fn event(&mut self, event: &Event) {
+        if self.error.is_none() {
+            if let Err(e) = self.machine.event(event) {
+                self.error = Some(e.to_string());
+            }
+        }
+    }
+}
+
+/// Replays on o2 with `engines`; returns (queries, queries checked against golden results).
+fn replay(bytes: &[u8], engines: u32) -> (u64, u64) {
+    let mut reader = TraceReader::new(bytes).expect("header");
+    let mut arch = Arch::builtin("o2").unwrap();
+    arch.set_value("engines", &engines.to_string()).unwrap();
+    let (w, h) = (reader.header().width, reader.header().height);
+    let mut replay = Replay {
+        machine: MachineModel::new(&arch, w, h).expect("machine"),
+        error: None,
+    };
+    reader.read_into(&mut replay).expect("trace reads");
+    if let Some(e) = replay.error {
+        panic!("engines {engines}: {e}");
+    }
+    let report = replay.machine.finish().expect("finishes");
+    (report.summary.queries, report.summary.checked_queries)
+}
+
+#[test]
+fn every_builtin_scene_matches_the_golden_model_at_1_to_16_engines() {
+    for name in ["hardcases", "demo", "random"] {
+        let bytes = builtin_trace(name);
+        let engines: Vec<u32> = (1..=16).collect();
+        // Two threads: the machine is single-threaded and the engine counts independent.
+        let halves: Vec<Vec<(u64, u64)>> = std::thread::scope(|scope| {
+            let handles: Vec<_> = engines
+                .chunks(8)
+                .map(|chunk| {
+                    let bytes = &bytes;
+                    scope.spawn(move || chunk.iter().map(|&e| replay(bytes, e)).collect())
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        for (queries, checked) in halves.into_iter().flatten() {
+            assert!(queries > 0, "{name}: no queries");
+            assert_eq!(queries, checked, "{name}: every query checked");
+        }
+    }
+}
+
+#[test]
+fn a_wrong_golden_answer_fails_the_replay_naming_the_query() {
+    // Rewrite the hardcases trace with query 5's NOHC off by one.
+    let good = builtin_trace("hardcases");
+    let mut reader = TraceReader::new(&good[..]).unwrap();
+    let header = reader.header().clone();
+    let mut bytes = Vec::new();
+    let mut writer = TraceWriter::new(&mut bytes, &header).unwrap();
+    while let Some(mut event) = reader.next_event().unwrap() {
+        if let Event::QueryResult(result) = &mut event {
+            if result.id == 5 {
+                assert_eq!(result.tiles[0].nohc, 256, "the hand-worked count");
+                result.tiles[0].nohc = 257;
+            }
+        }
+        writer.write_event(&event).unwrap();
+    }
+    writer.finish().unwrap();
+    let path = std::env::temp_dir().join(format!("occsim-wrong-{}.occt", std::process::id()));
+    std::fs::write(&path, &bytes).unwrap();
+    let output = Process::new(env!("CARGO_BIN_EXE_occsim"))
+        .args(["replay", path.to_str().unwrap(), "--arch", "o2"])
+        .output()
+        .unwrap();
+    let _ = std::fs::remove_file(&path);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("query 5"), "{stderr}");
+    assert!(stderr.contains("257") && stderr.contains("256"), "{stderr}");
+}
+
+#[test]
+fn replay_json_has_the_documented_fields() {
+    let path = std::env::temp_dir().join(format!("occsim-json-{}.occt", std::process::id()));
+    let bytes = builtin_trace("hardcases");
+    let trace_fragments = TraceReader::new(&bytes[..])
+        .unwrap()
+        .read_into(&mut occsim_traces::golden::Discard)
+        .unwrap()
+        .fragments;
+    std::fs::write(&path, &bytes).unwrap();
+    let output = Process::new(env!("CARGO_BIN_EXE_occsim"))
+        .args(["replay", path.to_str().unwrap(), "--engines", "2", "--json"])
+        .output()
+        .unwrap();
+    let _ = std::fs::remove_file(&path);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let queries = report["queries"].as_array().unwrap();
+    assert_eq!(queries.len(), 28);
+    let q27 = queries.iter().find(|q| q["id"] == 27).unwrap();
+    assert_eq!(q27["mode"], "brief");
+    assert!(q27["latency_cycles"].as_u64().unwrap() >= 5);
+    let tile = &q27["tiles"][1];
+    for field in [
+        "nohc",
+        "phc",
+        "xmin",
+        "xmax",
+        "ymin",
+        "ymax",
+        "zmin",
+        "zmax",
+        "hits_written",
+        "overflowed",
+    ] {
+        assert!(!tile[field].is_null(), "tile field {field} missing: {tile}");
+    }
+    assert_eq!(tile["nohc"], 1024);
+    assert_eq!(
+        (tile["xmin"].as_u64(), tile["xmax"].as_u64()),
+        (Some(0), Some(31))
+    );
+    let q25 = queries.iter().find(|q| q["id"] == 25).unwrap();
+    assert_eq!(q25["tiles"][0]["overflowed"], true);
+    // The machine counted every fragment the trace writer counted.
+    assert_eq!(report["summary"]["fragments"], trace_fragments);
+}
