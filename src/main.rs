@@ -31,7 +31,7 @@ enum Command {
     /// Show the built-in architectures and their parameters.
     Arch(commands::arch::ArchArgs),
     /// Replay a trace over the cartesian product of parameter values (`--set k=v1,v2`).
-    Sweep(commands::sweep::SweepArgs),
+    Sweep(Box<commands::sweep::SweepArgs>),
 }
 
 fn main() -> std::process::ExitCode {
@@ -42,7 +42,7 @@ fn main() -> std::process::ExitCode {
         Command::Trace(command) => commands::trace::run(command),
         Command::Replay(args) => commands::replay::run(args),
         Command::Arch(args) => commands::arch::run(args),
-        Command::Sweep(args) => commands::sweep::run(args),
+        Command::Sweep(args) => commands::sweep::run(*args),
     };
     match outcome {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -442,7 +442,7 @@ fn shared_edges_crossing_the_near_plane_stay_disjoint() {
         }
     }
     assert!(counts.iter().all(|&c| c <= 1), "a pixel drawn twice");
-    assert!(counts.iter().any(|&c| c == 1));
+    assert!(counts.contains(&1));
 }
 
 #[test]
