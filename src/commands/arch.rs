@@ -74,12 +74,12 @@ pub fn run(args: ArchArgs) -> anyhow::Result<()> {
     match args.command {
         ArchCommand::Show(show) => {
             let arch = resolve(&show.name, show.arch_file.as_deref(), &show.set)?;
-            print!("{}", arch.to_documented_toml());
+            out!("{}", arch.to_documented_toml());
         }
         ArchCommand::List => {
             for name in BUILTIN_ARCHS {
                 let arch = Arch::builtin(name)?;
-                println!("{name:<8} {}", arch.machine().title());
+                outln!("{name:<8} {}", arch.machine().title());
             }
         }
     }

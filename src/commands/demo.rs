@@ -30,7 +30,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         golden.execute(&line?.command, &mut writer);
     }
     let summary = writer.finish()?;
-    println!(
+    outln!(
         "demo: a city block, {} frames at {width}x{height}: {} fragments, {} primitives, {} queries ({} brief, {} verbose, {} samples); trace {} bytes",
         options.frames,
         summary.fragments,
@@ -43,6 +43,6 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     );
     let reader = TraceReader::new(&trace[..])?;
     let report = super::replay::replay_reader(reader, "demo", &arch)?;
-    print!("{}", report.to_text(args.queries));
+    out!("{}", report.to_text(args.queries));
     Ok(())
 }

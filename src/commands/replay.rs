@@ -88,9 +88,9 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        outln!("{}", serde_json::to_string_pretty(&report)?);
     } else {
-        print!("{}", report.to_text(args.queries));
+        out!("{}", report.to_text(args.queries));
     }
     Ok(())
 }

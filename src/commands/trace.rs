@@ -69,7 +69,7 @@ fn generate(args: GenArgs) -> anyhow::Result<()> {
             .with_context(|| format!("{}: cannot write trace", args.output.display()))
     })?;
     let bytes = std::fs::metadata(&args.output)?.len();
-    println!(
+    outln!(
         "wrote {}: {} fragments, {} primitives, {} queries, {} bytes ({:.3} bytes/fragment)",
         args.output.display(),
         summary.fragments,
@@ -120,7 +120,7 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
             "header": header,
             "summary": summary,
         });
-        println!("{}", serde_json::to_string_pretty(&value)?);
+        outln!("{}", serde_json::to_string_pretty(&value)?);
         return Ok(());
     }
     let f = &summary.features;
@@ -140,24 +140,30 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
     .map(|(_, name)| *name)
     .collect();
     let q = &summary.queries_by_mode;
-    println!("trace       {}", args.trace.display());
-    println!("scene       {}", header.scene);
-    println!("generator   {}", header.generator);
-    println!("viewport    {}x{}", header.width, header.height);
-    println!(
+    outln!("trace       {}", args.trace.display());
+    outln!("scene       {}", header.scene);
+    outln!("generator   {}", header.generator);
+    outln!("viewport    {}x{}", header.width, header.height);
+    outln!(
         "raster      {} sub-pixel bits, {} depth, fill rule {}",
-        header.subpixel_bits, header.depth_format, header.fill_rule
+        header.subpixel_bits,
+        header.depth_format,
+        header.fill_rule
     );
-    println!("fragments   {}", summary.fragments);
-    println!("primitives  {}", summary.primitives);
-    println!(
+    outln!("fragments   {}", summary.fragments);
+    outln!("primitives  {}", summary.primitives);
+    outln!(
         "queries     {} (samples {}, any {}, brief {}, verbose {})",
-        summary.queries, q.samples, q.any, q.brief, q.verbose
+        summary.queries,
+        q.samples,
+        q.any,
+        q.brief,
+        q.verbose
     );
-    println!("modes       {}", modes.join(", "));
-    println!("depth funcs {}", funcs.join(", "));
-    println!("features    {}", flags.join(", "));
-    println!(
+    outln!("modes       {}", modes.join(", "));
+    outln!("depth funcs {}", funcs.join(", "));
+    outln!("features    {}", flags.join(", "));
+    outln!(
         "bytes       {bytes} in {} blocks ({} before compression), {bytes_per_fragment:.3} bytes/fragment",
         summary.blocks, summary.payload_bytes
     );
