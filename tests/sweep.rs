@@ -1,0 +1,104 @@
+//! `occsim sweep` end to end on a real trace: results do not depend on --jobs or sharding, and
+//! bad axes are rejected by name.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn occsim(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_occsim"))
+        .args(args)
+        .output()
+        .expect("occsim runs")
+}
+
+fn ok(args: &[&str]) {
+    let output = occsim(args);
+    assert!(
+        output.status.success(),
+        "occsim {args:?}: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("occsim-sweep-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+const AXES: [&str; 4] = ["--set", "engines=1,2,3", "--set", "counter_bits=8,32"];
+
+#[test]
+fn results_do_not_depend_on_jobs_or_shards() {
+    let dir = scratch("det");
+    let trace = dir.join("hard.occt");
+    ok(&["trace", "gen", "hardcases", "-o", s(&trace)]);
+    let run = |out: &Path, extra: &[&str]| {
+        let mut args = vec!["sweep", s(&trace), "--arch", "o2", "--out", s(out)];
+        args.extend(AXES);
+        args.extend(extra);
+        ok(&args);
+    };
+    let one = dir.join("one.jsonl");
+    let two = dir.join("two.jsonl");
+    run(&one, &["--jobs", "1"]);
+    run(&two, &["--jobs", "2"]);
+    let read = |p: &Path| std::fs::read(p).unwrap();
+    assert_eq!(read(&one), read(&two));
+    assert_eq!(
+        read(&one.with_extension("csv")),
+        read(&two.with_extension("csv"))
+    );
+    assert_eq!(String::from_utf8(read(&one)).unwrap().lines().count(), 6);
+
+    let shards: Vec<PathBuf> = (1..=3)
+        .map(|k| dir.join(format!("shard-{k}.jsonl")))
+        .collect();
+    for (k, shard) in shards.iter().enumerate() {
+        run(shard, &["--shard", &format!("{}/3", k + 1)]);
+    }
+    let merged = dir.join("merged.jsonl");
+    let mut args = vec!["sweep", "merge", s(&merged)];
+    args.extend(shards.iter().map(|p| s(p)));
+    ok(&args);
+    assert_eq!(read(&one), read(&merged));
+    assert_eq!(
+        read(&one.with_extension("csv")),
+        read(&merged.with_extension("csv"))
+    );
+
+    // A missing shard is reported by the keys of its points.
+    let partial = dir.join("partial.jsonl");
+    let output = occsim(&["sweep", "merge", s(&partial), s(&shards[0]), s(&shards[1])]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("2 of 6 points are missing"), "{stderr}");
+    assert!(stderr.contains("engines=2,counter_bits=8"), "{stderr}");
+}
+
+#[test]
+fn bad_axes_are_rejected_by_name() {
+    let dir = scratch("bad");
+    let trace = dir.join("hard.occt");
+    ok(&["trace", "gen", "hardcases", "-o", s(&trace)]);
+    let out = dir.join("x.jsonl");
+    for (set, expected) in [
+        (
+            "enginez=1,2",
+            "unknown parameter 'enginez' (did you mean engines?)",
+        ),
+        ("engines=0", "'engines' = 0"),
+        ("counter_bits=wide", "counter_bits"),
+        ("engines", "expected key=v1,v2"),
+    ] {
+        let output = occsim(&["sweep", s(&trace), "--set", set, "--out", s(&out)]);
+        assert!(!output.status.success(), "{set} accepted");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(stderr.contains(expected), "{set}: {stderr}");
+    }
+}
