@@ -113,8 +113,14 @@ fn count_json_gives_verbose_buffers_and_tiles() {
     for quadrant in &tiles[1..] {
         assert_eq!(quadrant["nohc"], 1024);
     }
-    assert_eq!((tiles[0]["xmin"].clone(), tiles[0]["xmax"].clone()), (0.into(), 63.into()));
-    assert_eq!((tiles[2]["xmin"].clone(), tiles[2]["ymax"].clone()), (32.into(), 31.into()));
+    assert_eq!(
+        (tiles[0]["xmin"].clone(), tiles[0]["xmax"].clone()),
+        (0.into(), 63.into())
+    );
+    assert_eq!(
+        (tiles[2]["xmin"].clone(), tiles[2]["ymax"].clone()),
+        (32.into(), 31.into())
+    );
 }
 
 #[test]
@@ -128,14 +134,21 @@ fn count_matches_a_scene_file_written_by_hand() {
          begin 11\ntri -1 -1 0.5 1  1 -1 0.5 1  1 1 0.5 1\ntri -1 -1 0.5 1  1 1 0.5 1  -1 1 0.5 1\nend\n",
     )
     .unwrap();
-    assert_eq!(stdout_of(&["count", path.to_str().unwrap()]), "query 10 8\nquery 11 8\n");
+    assert_eq!(
+        stdout_of(&["count", path.to_str().unwrap()]),
+        "query 10 8\nquery 11 8\n"
+    );
 }
 
 #[test]
 fn bad_scenes_name_file_and_line_and_exit_non_zero() {
     let dir = scratch_dir("bad");
     let path = dir.join("bad.scene");
-    std::fs::write(&path, "viewport 8 8\nbegin 1\ntri 0 0 0 1 1 0 0 1 0 1 nan 1\nend\n").unwrap();
+    std::fs::write(
+        &path,
+        "viewport 8 8\nbegin 1\ntri 0 0 0 1 1 0 0 1 0 1 nan 1\nend\n",
+    )
+    .unwrap();
     let path = path.to_str().unwrap();
     let error = stderr_of_failure(&["count", path]);
     assert!(
@@ -143,6 +156,9 @@ fn bad_scenes_name_file_and_line_and_exit_non_zero() {
         "{error}"
     );
     let error = stderr_of_failure(&["count", "no-such-scene"]);
-    assert!(error.contains("cannot open scene `no-such-scene`"), "{error}");
+    assert!(
+        error.contains("cannot open scene `no-such-scene`"),
+        "{error}"
+    );
     assert!(error.contains("demo, hardcases, random"), "{error}");
 }
