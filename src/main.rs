@@ -3,7 +3,9 @@
 
 mod commands;
 mod output;
+mod plot;
 mod scene_input;
+mod sweep;
 
 use clap::{Parser, Subcommand};
 

@@ -1,44 +1,91 @@
-//! Writing output files atomically: a reader never sees half a file, and an interrupted run
-//! leaves the previous file (or none) in place.
+//! Writing output files atomically: write a temporary file in the same directory (so the
+//! rename stays on one file system), flush it to disk, then rename it over the target. A
+//! reader never sees half a file, and an interrupted run leaves the previous file (or none).
 
-use anyhow::Context;
+use anyhow::{Context, Result};
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
-/// The temporary sibling a file is written to before it is renamed into place.
-fn temporary_path(path: &Path) -> PathBuf {
-    let mut name = path.file_name().unwrap_or_default().to_os_string();
-    name.push(format!(".tmp{}", std::process::id()));
-    path.with_file_name(name)
-}
-
-/// Write `path` through `fill`, then rename it into place; on any error nothing is left.
-pub fn write_atomically<T>(
+/// Replace `path` with what `fill` writes; on any error nothing is left behind.
+pub fn write_atomically_with<T>(
     path: &Path,
-    fill: impl FnOnce(&mut BufWriter<std::fs::File>) -> anyhow::Result<T>,
-) -> anyhow::Result<T> {
-    let temporary = temporary_path(path);
-    let result = (|| {
-        let file = std::fs::File::create(&temporary)
-            .with_context(|| format!("cannot create {}", temporary.display()))?;
+    fill: impl FnOnce(&mut BufWriter<std::fs::File>) -> Result<T>,
+) -> Result<T> {
+    let temp = temp_path_beside(path)?;
+    let outcome = (|| {
+        let file = std::fs::File::create(&temp)
+            .with_context(|| format!("cannot create {}", temp.display()))?;
         let mut writer = BufWriter::with_capacity(1 << 20, file);
         let value = fill(&mut writer)?;
         writer
             .into_inner()
             .map_err(|e| e.into_error())
             .and_then(|file| file.sync_all())
-            .with_context(|| format!("cannot write {}", temporary.display()))?;
-        std::fs::rename(&temporary, path)
-            .with_context(|| format!("cannot move {} into place", path.display()))?;
+            .with_context(|| format!("cannot write {}", temp.display()))?;
+        std::fs::rename(&temp, path)
+            .with_context(|| format!("cannot rename {} to {}", temp.display(), path.display()))?;
         Ok(value)
     })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&temporary);
+    if outcome.is_err() {
+        // Best effort: do not leave the temporary file behind; the original error matters more.
+        let _ = std::fs::remove_file(&temp);
     }
-    result
+    outcome
 }
 
-/// Write a whole string atomically.
-pub fn write_string_atomically(path: &Path, text: &str) -> anyhow::Result<()> {
-    write_atomically(path, |w| Ok(w.write_all(text.as_bytes())?))
+/// Replace `path` with `contents` atomically.
+pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<()> {
+    write_atomically_with(path, |w| Ok(w.write_all(contents)?))
+}
+
+/// `dir/.name.tmp-PID`: hidden, unique per process, in the target's own directory.
+fn temp_path_beside(path: &Path) -> Result<PathBuf> {
+    let name = path
+        .file_name()
+        .with_context(|| format!("{} is not a file path", path.display()))?;
+    let mut temp_name = std::ffi::OsString::from(".");
+    temp_name.push(name);
+    temp_name.push(format!(".tmp-{}", std::process::id()));
+    Ok(path.with_file_name(temp_name))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn replaces_contents_and_leaves_no_temporary_file() {
+        let dir = crate::sweep::test_dir("atomic");
+        let path = dir.join("out.txt");
+        std::fs::write(&path, "old contents that are longer").unwrap();
+        write_atomically(&path, b"new").unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "new");
+        let names: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names, ["out.txt"]);
+    }
+
+    #[test]
+    fn a_failed_fill_leaves_the_old_file_and_no_temporary() {
+        let dir = crate::sweep::test_dir("atomic-fail");
+        let path = dir.join("out.txt");
+        std::fs::write(&path, "old").unwrap();
+        let failed = write_atomically_with(&path, |w| {
+            w.write_all(b"half")?;
+            anyhow::bail!("interrupted")
+        });
+        assert!(failed.is_err());
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "old");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn missing_directory_is_an_error_naming_the_path() {
+        let dir = crate::sweep::test_dir("atomic-missing");
+        let path = dir.join("no-such-dir").join("out.txt");
+        let err = format!("{:#}", write_atomically(&path, b"x").unwrap_err());
+        assert!(err.contains("no-such-dir"), "{err}");
+    }
 }

@@ -162,3 +162,60 @@ fn bad_scenes_name_file_and_line_and_exit_non_zero() {
     );
     assert!(error.contains("demo, hardcases, random"), "{error}");
 }
+
+#[test]
+fn trace_gen_info_dump_round_trip() {
+    let dir = scratch_dir("trace");
+    let trace = dir.join("hard.occt");
+    let trace = trace.to_str().unwrap();
+    let gen = stdout_of(&["trace", "gen", "hardcases", "-o", trace]);
+    assert!(gen.starts_with(&format!("wrote {trace}: ")), "{gen}");
+    let info = stdout_of(&["trace", "info", trace]);
+    assert!(info.contains("viewport    64x64"), "{info}");
+    assert!(info.contains("queries     28 (samples 23, any 1, brief 1, verbose 3)"), "{info}");
+    assert!(info.contains("8 sub-pixel bits, top-left fill rule, unorm24 depth"), "{info}");
+    let scanned = stdout_of(&["trace", "info", trace, "--scan"]);
+    assert_eq!(info, scanned);
+    let json: serde_json::Value =
+        serde_json::from_str(&stdout_of(&["trace", "info", trace, "--json"])).unwrap();
+    assert_eq!(json["header"]["scene"], "hardcases");
+    assert_eq!(json["summary"]["queries"], 28);
+    let dump = stdout_of(&["trace", "dump", trace, "--limit", "3"]);
+    let lines: Vec<&str> = dump.lines().collect();
+    assert_eq!(lines.len(), 4, "{dump}");
+    assert_eq!(lines[1], "begin 1 samples buffer=8 tiles 0,0,64,64");
+    assert_eq!(lines[2], "primitive");
+}
+
+#[test]
+fn corrupted_traces_fail_with_the_file_and_byte_offset() {
+    let dir = scratch_dir("corrupt");
+    let trace = dir.join("good.occt");
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace.to_str().unwrap()]);
+    let bytes = std::fs::read(&trace).unwrap();
+
+    let bad_magic = dir.join("magic.occt");
+    let mut b = bytes.clone();
+    b[0] ^= 0xff;
+    std::fs::write(&bad_magic, &b).unwrap();
+    let error = stderr_of_failure(&["trace", "dump", bad_magic.to_str().unwrap()]);
+    assert!(error.contains("magic.occt"), "{error}");
+    assert!(error.contains("byte 0"), "{error}");
+
+    let flipped = dir.join("flipped.occt");
+    let mut b = bytes.clone();
+    let middle = b.len() / 2;
+    b[middle] ^= 0x10;
+    std::fs::write(&flipped, &b).unwrap();
+    let error = stderr_of_failure(&["trace", "dump", flipped.to_str().unwrap()]);
+    assert!(error.contains("flipped.occt"), "{error}");
+    assert!(error.contains("byte "), "{error}");
+
+    let truncated = dir.join("truncated.occt");
+    std::fs::write(&truncated, &bytes[..bytes.len() - 5]).unwrap();
+    for command in ["dump", "info"] {
+        let error = stderr_of_failure(&["trace", command, truncated.to_str().unwrap()]);
+        assert!(error.contains("truncated.occt"), "{command}: {error}");
+        assert!(error.contains("byte "), "{command}: {error}");
+    }
+}

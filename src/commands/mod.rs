@@ -2,4 +2,5 @@
 
 pub mod count;
 pub mod demo;
+pub mod sweep;
 pub mod trace;

@@ -1,8 +1,264 @@
-//! `occsim trace gen|info|dump`. (Wired once the trace format lands.)
+//! `occsim trace gen|info|dump`: make fragment traces and look inside them.
+
+use crate::output::write_atomically_with;
+use crate::scene_input::open_scene;
+use anyhow::Context;
+use occsim_traces::golden::{EventSink, GoldenModel};
+use occsim_traces::trace::{TraceHeader, TraceReader, TraceSummary, TraceWriter};
+use occsim_traces::{Event, QueryResult, QuerySpec};
+use std::io::Write;
+use std::path::{Path, PathBuf};
 
 #[derive(clap::Subcommand)]
-pub enum TraceCommand {}
+pub enum TraceCommand {
+    /// Rasterize a scene and write its fragments and golden results as a trace.
+    Gen(GenArgs),
+    /// Print a trace's header, counts, features and bytes per fragment.
+    Info(InfoArgs),
+    /// Print a trace's events, one a line.
+    Dump(DumpArgs),
+}
+
+#[derive(clap::Args)]
+pub struct GenArgs {
+    /// A scene file, or a built-in scene: demo, hardcases, random.
+    pub scene: String,
+    /// The trace file to write (written atomically).
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+#[derive(clap::Args)]
+pub struct InfoArgs {
+    pub trace: PathBuf,
+    /// Decode every block and check the summary against what the blocks hold.
+    #[arg(long)]
+    pub scan: bool,
+    /// Print the header and summary as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(clap::Args)]
+pub struct DumpArgs {
+    pub trace: PathBuf,
+    /// Stop after this many events.
+    #[arg(long)]
+    pub limit: Option<u64>,
+}
 
 pub fn run(command: TraceCommand) -> anyhow::Result<()> {
-    match command {}
+    match command {
+        TraceCommand::Gen(args) => generate(args),
+        TraceCommand::Info(args) => info(args),
+        TraceCommand::Dump(args) => dump(args),
+    }
+}
+
+fn generate(args: GenArgs) -> anyhow::Result<()> {
+    let mut scene = open_scene(&args.scene)?;
+    let header = TraceHeader::new(scene.width, scene.height).with_scene(scene.name.clone());
+    let summary = write_atomically_with(&args.output, |file| {
+        let mut writer = TraceWriter::new(file, &header)?;
+        let mut golden = GoldenModel::new(scene.width, scene.height);
+        for line in &mut scene.reader {
+            golden.execute(&line?.command, &mut writer);
+        }
+        writer
+            .finish()
+            .with_context(|| format!("{}: cannot write trace", args.output.display()))
+    })?;
+    let bytes = std::fs::metadata(&args.output)?.len();
+    println!(
+        "wrote {}: {} fragments, {} primitives, {} queries, {} bytes ({:.3} bytes/fragment)",
+        args.output.display(),
+        summary.fragments,
+        summary.primitives,
+        summary.queries,
+        bytes,
+        bytes as f64 / summary.fragments.max(1) as f64
+    );
+    Ok(())
+}
+
+/// Open a trace file for reading, naming it in every error.
+pub fn open_trace(path: &Path) -> anyhow::Result<TraceReader<std::io::BufReader<std::fs::File>>> {
+    let file = std::fs::File::open(path)
+        .with_context(|| format!("cannot open trace {}", path.display()))?;
+    TraceReader::new(std::io::BufReader::with_capacity(1 << 20, file))
+        .with_context(|| format!("{}: not a readable occsim trace", path.display()))
+}
+
+/// A trace's header and summary, by a seek to the summary (or a full scan).
+pub fn read_header_and_summary(path: &Path, scan: bool) -> anyhow::Result<(TraceHeader, TraceSummary)> {
+    let context = || format!("{}: cannot read trace", path.display());
+    if scan {
+        let mut reader = open_trace(path)?;
+        let header = reader.header().clone();
+        let summary = reader
+            .read_into(&mut occsim_traces::golden::Discard)
+            .with_context(context)?;
+        return Ok((header, summary));
+    }
+    let file = std::fs::File::open(path)
+        .with_context(|| format!("cannot open trace {}", path.display()))?;
+    TraceReader::read_summary(std::io::BufReader::new(file)).with_context(context)
+}
+
+fn info(args: InfoArgs) -> anyhow::Result<()> {
+    let (header, summary) = read_header_and_summary(&args.trace, args.scan)?;
+    let bytes = std::fs::metadata(&args.trace)?.len();
+    let bytes_per_fragment = bytes as f64 / summary.fragments.max(1) as f64;
+    if args.json {
+        let value = serde_json::json!({
+            "file": args.trace.display().to_string(),
+            "bytes": bytes,
+            "bytes_per_fragment": bytes_per_fragment,
+            "header": header,
+            "summary": summary,
+        });
+        println!("{}", serde_json::to_string_pretty(&value)?);
+        return Ok(());
+    }
+    let f = &summary.features;
+    let modes: Vec<&str> = f.query_modes.iter().map(|m| m.name()).collect();
+    let funcs: Vec<&str> = f.depth_funcs.iter().map(|m| m.name()).collect();
+    let flags: Vec<&str> = [
+        (f.scissor, "scissor"),
+        (f.culling, "culling"),
+        (f.clears, "clears"),
+        (f.depth_writes_off, "depth-writes-off"),
+        (f.depth_test_off, "depth-test-off"),
+        (f.verbose, "verbose"),
+        (f.query_results, "golden-results"),
+    ]
+    .iter()
+    .filter(|(on, _)| *on)
+    .map(|(_, name)| *name)
+    .collect();
+    let q = &summary.queries_by_mode;
+    println!("trace       {}", args.trace.display());
+    println!("scene       {}", header.scene);
+    println!("generator   {}", header.generator);
+    println!("viewport    {}x{}", header.width, header.height);
+    println!(
+        "raster      {} sub-pixel bits, {} fill rule, {} depth",
+        header.subpixel_bits, header.fill_rule, header.depth_format
+    );
+    println!("fragments   {}", summary.fragments);
+    println!("primitives  {}", summary.primitives);
+    println!(
+        "queries     {} (samples {}, any {}, brief {}, verbose {})",
+        summary.queries, q.samples, q.any, q.brief, q.verbose
+    );
+    println!("modes       {}", modes.join(", "));
+    println!("depth funcs {}", funcs.join(", "));
+    println!("features    {}", flags.join(", "));
+    println!(
+        "bytes       {bytes} in {} blocks ({} before compression), {bytes_per_fragment:.3} bytes/fragment",
+        summary.blocks, summary.payload_bytes
+    );
+    Ok(())
+}
+
+/// One event as a line of text.
+fn describe(event: &Event) -> String {
+    fn tiles(spec: &QuerySpec) -> String {
+        let t: Vec<String> = spec
+            .tiles
+            .iter()
+            .map(|t| format!("{},{},{},{}", t.x, t.y, t.width, t.height))
+            .collect();
+        t.join(" ")
+    }
+    fn result(r: &QueryResult) -> String {
+        let tiles: Vec<String> = r
+            .tiles
+            .iter()
+            .map(|t| {
+                format!(
+                    "[nohc {} phc {} x {}..{} y {}..{} z {}..{} hits {}{}]",
+                    t.nohc,
+                    t.phc,
+                    t.xmin,
+                    t.xmax,
+                    t.ymin,
+                    t.ymax,
+                    t.zmin,
+                    t.zmax,
+                    t.hits.len(),
+                    if t.overflowed { " overflowed" } else { "" }
+                )
+            })
+            .collect();
+        format!("result {} {} {}", r.id, r.mode.name(), tiles.join(" "))
+    }
+    match event {
+        Event::Clear => "clear".into(),
+        Event::DepthFunc(f) => format!("depth_func {}", f.name()),
+        Event::DepthMask(b) => format!("depth_mask {}", *b as u8),
+        Event::DepthTest(b) => format!("depth_test {}", *b as u8),
+        Event::Cull(b) => format!("cull {}", *b as u8),
+        Event::Scissor(None) => "scissor off".into(),
+        Event::Scissor(Some(r)) => format!("scissor {} {} {} {}", r.x, r.y, r.width, r.height),
+        Event::QueryBegin(q) => format!(
+            "begin {} {} buffer={} tiles {}",
+            q.id,
+            q.mode.name(),
+            q.buffer_entries,
+            tiles(q)
+        ),
+        Event::QueryEnd => "end".into(),
+        Event::Primitive => "primitive".into(),
+        Event::Fragment(f) => format!("fragment {} {} {}", f.x, f.y, f.z),
+        Event::QueryResult(r) => result(r),
+    }
+}
+
+/// Prints events until the limit; the limit is reached by an early error-free stop.
+struct Printer<W: Write> {
+    out: W,
+    remaining: u64,
+    error: Option<std::io::Error>,
+}
+
+impl<W: Write> EventSink for Printer<W> {
+    fn event(&mut self, event: &Event) {
+        if self.remaining == 0 || self.error.is_some() {
+            return;
+        }
+        self.remaining -= 1;
+        if let Err(e) = writeln!(self.out, "{}", describe(event)) {
+            self.error = Some(e);
+        }
+    }
+}
+
+fn dump(args: DumpArgs) -> anyhow::Result<()> {
+    let mut reader = open_trace(&args.trace)?;
+    let stdout = std::io::stdout();
+    let mut printer = Printer {
+        out: std::io::BufWriter::new(stdout.lock()),
+        remaining: args.limit.unwrap_or(u64::MAX),
+        error: None,
+    };
+    let header = reader.header().clone();
+    writeln!(
+        printer.out,
+        "# {} {}x{} from {}",
+        header.generator, header.width, header.height, header.scene
+    )?;
+    while printer.remaining > 0 {
+        let more = reader
+            .next_block(&mut printer)
+            .with_context(|| format!("{}: cannot read trace", args.trace.display()))?;
+        if let Some(e) = printer.error.take() {
+            return Err(e.into());
+        }
+        if !more {
+            break;
+        }
+    }
+    printer.out.flush()?;
+    Ok(())
 }

@@ -295,13 +295,11 @@ impl<R: BufRead> SceneReader<R> {
         }
         let mode = mode.unwrap_or(QueryMode::Samples);
         let (width, height) = self.viewport.unwrap_or((0, 0));
-        if !mode.is_occlusion_render_mode() {
-            if buffer.is_some() || !tiles.is_empty() {
-                return Err(self.error(format!(
-                    "`{}` queries take no tiles or buffer: those belong to brief and verbose",
-                    mode.name()
-                )));
-            }
+        if !mode.is_occlusion_render_mode() && (buffer.is_some() || !tiles.is_empty()) {
+            return Err(self.error(format!(
+                "`{}` queries take no tiles or buffer: those belong to brief and verbose",
+                mode.name()
+            )));
         }
         let buffer_entries = buffer.unwrap_or(match mode {
             QueryMode::Verbose => DEFAULT_VERBOSE_BUFFER,

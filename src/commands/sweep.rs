@@ -1,0 +1,305 @@
+//! `occsim sweep`: command-line shape of the architecture sweep and its `merge` subcommand.
+//! The machine wiring supplies the evaluator, the key/value validator and the trace digest.
+
+use crate::sweep::{
+    list_keys, merge_results, metric_chart, run_sweep, AxisValidator, Evaluator, Grid, Shard,
+    StoredLine, SweepOptions,
+};
+use anyhow::{Context, Result};
+use std::num::NonZeroUsize;
+use std::path::PathBuf;
+
+/// How to split a sweep over a cluster; shown by `occsim sweep --help`.
+const CLUSTER_HELP: &str = "\
+Results do not depend on --jobs or on sharding. On a cluster, run one shard per task and merge:
+
+  Slurm job array (8 shards):
+    #SBATCH --array=1-8
+    occsim sweep scene.trace --arch ir --set boards=1,2,4 --set engines=1,2,4,8,16 \\
+        --shard $SLURM_ARRAY_TASK_ID/8 --out shard-$SLURM_ARRAY_TASK_ID.jsonl --resume
+    # afterwards:
+    occsim sweep merge sweep.jsonl shard-*.jsonl --plot sweep.svg
+
+  GNU parallel (4 shards on this machine or over --sshlogin hosts):
+    parallel occsim sweep scene.trace --arch ir --set engines=1,2,4,8,16 \\
+        --shard {}/4 --out shard-{}.jsonl --resume ::: 1 2 3 4
+    occsim sweep merge sweep.jsonl shard-*.jsonl
+
+--resume makes a rerun of an interrupted task continue where it stopped.";
+
+/// Run a machine over the cartesian product of parameter values.
+#[derive(clap::Args, Debug)]
+#[command(
+    args_conflicts_with_subcommands = true,
+    subcommand_negates_reqs = true,
+    after_long_help = CLUSTER_HELP
+)]
+pub struct SweepArgs {
+    #[command(subcommand)]
+    pub command: Option<SweepCommand>,
+    #[command(flatten)]
+    pub run: SweepRunArgs,
+}
+
+#[derive(clap::Subcommand, Debug)]
+pub enum SweepCommand {
+    /// Join shard outputs into one results file, reporting missing points.
+    Merge(MergeArgs),
+}
+
+/// `occsim sweep TRACE --arch ir --set boards=1,2,4 --set engines=1,2,4,8,16 --out r.jsonl`
+#[derive(clap::Args, Debug)]
+pub struct SweepRunArgs {
+    /// Trace every point runs on.
+    #[arg(required = true)]
+    pub trace: Option<PathBuf>,
+    /// Built-in base architecture (e.g. o2, ir) the swept values override.
+    #[arg(long, conflicts_with = "arch_file")]
+    pub arch: Option<String>,
+    /// Base architecture from a TOML file.
+    #[arg(long, value_name = "FILE")]
+    pub arch_file: Option<PathBuf>,
+    /// A swept parameter and its values; repeat for more axes (the first is outermost).
+    #[arg(long = "set", value_name = "KEY=V1,V2,...")]
+    pub set: Vec<String>,
+    /// Worker threads [default: available parallelism]. Results do not depend on it.
+    #[arg(long)]
+    pub jobs: Option<NonZeroUsize>,
+    /// Run only every N-th point, starting at the K-th (1-based), e.g. for a job array.
+    #[arg(long, value_name = "K/N", value_parser = parse_shard)]
+    pub shard: Option<Shard>,
+    /// Continue an interrupted sweep: keep the points already in --out, run the rest.
+    #[arg(long)]
+    pub resume: bool,
+    /// Results file (one JSON line per point); the CSV view is written beside it.
+    #[arg(long, value_name = "FILE.jsonl", required = true)]
+    pub out: Option<PathBuf>,
+    #[command(flatten)]
+    pub plot: PlotArgs,
+}
+
+/// `occsim sweep merge OUT.jsonl SHARD1.jsonl SHARD2.jsonl ...`
+#[derive(clap::Args, Debug)]
+pub struct MergeArgs {
+    /// Merged results file (its CSV view is written beside it).
+    pub out: PathBuf,
+    /// Shard results files.
+    #[arg(required = true)]
+    pub shards: Vec<PathBuf>,
+    /// Write the merge even if points are missing (they are still listed).
+    #[arg(long)]
+    pub allow_missing: bool,
+    #[command(flatten)]
+    pub plot: PlotArgs,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct PlotArgs {
+    /// Draw the metric against a swept parameter into this SVG file.
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
+    /// Metric to plot.
+    #[arg(long, default_value = "total_cycles")]
+    pub metric: String,
+    /// Swept parameter on the x axis [default: the last --set]; the others make the series.
+    #[arg(long, value_name = "KEY")]
+    pub plot_x: Option<String>,
+}
+
+fn parse_shard(spec: &str) -> std::result::Result<Shard, String> {
+    Shard::parse(spec).map_err(|e| format!("{e:#}"))
+}
+
+/// Runs `occsim sweep` (or `occsim sweep merge`, which needs neither evaluator nor trace).
+/// `validate` rejects unknown keys or illegal values of the chosen machine.
+pub fn run_with(
+    args: &SweepArgs,
+    evaluator: Evaluator<'_>,
+    trace_digest: &str,
+    validate: AxisValidator<'_>,
+) -> Result<()> {
+    if let Some(SweepCommand::Merge(merge)) = &args.command {
+        return run_merge(merge);
+    }
+    let run = &args.run;
+    let out = run.out.as_deref().context("sweep needs --out FILE.jsonl")?;
+    let grid = Grid::parse(&run.set, validate)?;
+    let jobs = match run.jobs {
+        Some(jobs) => jobs.get(),
+        None => std::thread::available_parallelism().map_or(1, NonZeroUsize::get),
+    };
+    let options = SweepOptions {
+        grid: &grid,
+        shard: run.shard,
+        trace_digest,
+        out,
+        jobs,
+        resume: run.resume,
+        show_progress: true,
+    };
+    let outcome = run_sweep(&options, evaluator)?;
+    if outcome.torn_tail_dropped {
+        eprintln!(
+            "sweep: dropped a torn last line of {} (recomputed)",
+            out.display()
+        );
+    }
+    eprintln!(
+        "sweep: {} points ({} run, {} resumed) -> {}, {}",
+        outcome.lines.len(),
+        outcome.evaluated,
+        outcome.reused,
+        out.display(),
+        outcome.csv.display()
+    );
+    write_plot(&run.plot, &grid, &outcome.lines)
+}
+
+/// Runs `occsim sweep merge`.
+pub fn run_merge(args: &MergeArgs) -> Result<()> {
+    let report = merge_results(&args.out, &args.shards, args.allow_missing)?;
+    for torn in &report.torn_inputs {
+        eprintln!(
+            "sweep merge: {} ends in a torn line (its point is missing)",
+            torn.display()
+        );
+    }
+    if !report.missing.is_empty() {
+        eprintln!(
+            "sweep merge: {} of {} points missing: {}",
+            report.missing.len(),
+            report.grid.len(),
+            list_keys(&report.missing)
+        );
+    }
+    eprintln!(
+        "sweep merge: {} points -> {}, {}",
+        report.lines.len(),
+        args.out.display(),
+        report.csv.display()
+    );
+    write_plot(&args.plot, &report.grid, &report.lines)
+}
+
+fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine]) -> Result<()> {
+    let Some(path) = args.plot.as_deref() else {
+        return Ok(());
+    };
+    let chart = metric_chart(grid.axes(), lines, &args.metric, args.plot_x.as_deref())?;
+    chart.write_svg(path)?;
+    eprintln!("sweep: plot -> {}", path.display());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(clap::Parser, Debug)]
+    struct Cli {
+        #[command(subcommand)]
+        command: Top,
+    }
+
+    #[derive(clap::Subcommand, Debug)]
+    enum Top {
+        Sweep(SweepArgs),
+    }
+
+    fn parse(args: &[&str]) -> Result<SweepArgs, clap::Error> {
+        let argv = ["occsim", "sweep"].iter().chain(args);
+        Cli::try_parse_from(argv).map(|cli| match cli.command {
+            Top::Sweep(s) => s,
+        })
+    }
+
+    #[test]
+    fn run_form_parses_repeated_sets_and_shard() {
+        let args = parse(&[
+            "t.trace",
+            "--arch",
+            "ir",
+            "--set",
+            "boards=1,2",
+            "--set",
+            "engines=1,4",
+            "--jobs",
+            "2",
+            "--shard",
+            "2/3",
+            "--out",
+            "r.jsonl",
+            "--plot",
+            "r.svg",
+        ])
+        .unwrap();
+        assert!(args.command.is_none());
+        assert_eq!(args.run.set, ["boards=1,2", "engines=1,4"]);
+        assert_eq!(
+            args.run.shard,
+            Some(Shard {
+                number: 2,
+                count: 3
+            })
+        );
+        assert_eq!(args.run.plot.metric, "total_cycles");
+    }
+
+    #[test]
+    fn merge_form_parses_without_trace_or_out_flag() {
+        let args = parse(&[
+            "merge",
+            "all.jsonl",
+            "a.jsonl",
+            "b.jsonl",
+            "--allow-missing",
+        ])
+        .unwrap();
+        let Some(SweepCommand::Merge(merge)) = args.command else {
+            panic!("expected merge, got {args:?}");
+        };
+        assert_eq!(
+            merge.shards,
+            [PathBuf::from("a.jsonl"), PathBuf::from("b.jsonl")]
+        );
+        assert!(merge.allow_missing);
+    }
+
+    #[test]
+    fn bad_shard_and_missing_out_are_rejected() {
+        let err = parse(&["t.trace", "--out", "r.jsonl", "--shard", "4/3"])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("K must be between 1 and N=3"), "{err}");
+        let err = parse(&["t.trace"]).unwrap_err().to_string();
+        assert!(err.contains("--out"), "{err}");
+        let err = parse(&["t.trace", "--out", "r.jsonl", "--jobs", "0"])
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("--jobs"), "{err}");
+    }
+
+    #[test]
+    fn run_with_rejects_keys_the_machine_does_not_know() {
+        let args = parse(&["t.trace", "--out", "unused.jsonl", "--set", "engnies=1,2"]).unwrap();
+        let machine_keys = |key: &str, _: &str| -> std::result::Result<(), String> {
+            match key {
+                "boards" | "engines" => Ok(()),
+                _ => Err(format!(
+                    "unknown parameter '{key}' (known: boards, engines)"
+                )),
+            }
+        };
+        let never = |_: &crate::sweep::Point| -> Result<crate::sweep::PointRecord> {
+            anyhow::bail!("no point may run")
+        };
+        let err = run_with(&args, &never, "d", &machine_keys)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            err,
+            "bad --set engnies=1: unknown parameter 'engnies' (known: boards, engines)"
+        );
+    }
+}

@@ -1,0 +1,331 @@
+//! The results files: one JSON line per point (`FILE.jsonl`) and its CSV view (`FILE.csv`).
+//!
+//! Every line is self-contained: it repeats the sweep's axes and trace digest, so a single
+//! line tells which sweep it belongs to, shards can be merged without a header, and a torn
+//! last line loses only that line.
+
+use super::grid::{Axis, Grid};
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// Format tag written in every line; bump when the schema changes incompatibly.
+pub const FORMAT: &str = "occsim-sweep/1";
+
+/// What the caller's evaluator returns for one point.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PointRecord {
+    /// The fully resolved architecture the point ran with (every parameter, not just the
+    /// swept ones), so a result can be reproduced from its line alone.
+    pub resolved_arch: Value,
+    /// Metric name -> value (numbers, or any JSON value). Must not hold wall-clock times:
+    /// results have to be identical whatever the job count.
+    pub metrics: BTreeMap<String, Value>,
+}
+
+/// One line of `FILE.jsonl`; the field order here is the byte order on disk.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepLine {
+    pub format: String,
+    /// Index of the point in the full grid (first axis outermost).
+    pub point: usize,
+    /// Canonical key, e.g. `boards=2,engines=8`.
+    pub key: String,
+    /// The whole sweep's axes, in command-line order.
+    pub axes: Vec<Axis>,
+    pub trace_digest: String,
+    pub tool_version: String,
+    pub resolved_arch: Value,
+    pub metrics: BTreeMap<String, Value>,
+}
+
+impl SweepLine {
+    /// The JSON text of the line, without the newline. Deterministic: struct fields in
+    /// declaration order, maps sorted by key, floats in shortest round-trip form.
+    pub fn to_json(&self) -> Result<String> {
+        serde_json::to_string(self).context("cannot encode a sweep result as JSON")
+    }
+}
+
+/// A line read back from a file: the parsed record and its exact text (compared and rewritten
+/// byte for byte, never re-encoded).
+#[derive(Debug, Clone)]
+pub struct StoredLine {
+    pub line: SweepLine,
+    pub text: String,
+    /// Where the line came from, `FILE:LINE`, for messages (empty for fresh lines).
+    pub origin: String,
+}
+
+impl StoredLine {
+    /// Drops what is no longer needed once the line is checked and its text kept: the axes
+    /// (equal to the grid's) and the resolved architecture (still in the text). Keeps the
+    /// memory held per point near the size of its line.
+    pub fn compact(mut self) -> StoredLine {
+        self.line.axes = Vec::new();
+        self.line.resolved_arch = Value::Null;
+        self
+    }
+}
+
+/// The complete lines of a results file, plus whether an unterminated last line was dropped.
+#[derive(Debug)]
+pub struct StoredFile {
+    pub lines: Vec<StoredLine>,
+    pub torn_tail_dropped: bool,
+}
+
+/// Reads `path`. Only newline-terminated lines count: an unterminated last line is what an
+/// interrupted append leaves, so it is dropped (and reported). A complete line that does not
+/// parse is corruption, reported with file and line number.
+pub fn read_results(path: &Path) -> Result<StoredFile> {
+    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let (complete, tail) = match bytes.iter().rposition(|&b| b == b'\n') {
+        Some(last_newline) => bytes.split_at(last_newline + 1),
+        None => bytes.split_at(0),
+    };
+    let mut lines = Vec::new();
+    for (number, raw) in complete.split(|&b| b == b'\n').enumerate() {
+        // Blank lines carry nothing (the split also yields one empty piece after the last '\n').
+        if raw.is_empty() {
+            continue;
+        }
+        let at = || format!("{}:{}", path.display(), number + 1);
+        let text = std::str::from_utf8(raw)
+            .map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", at()))?
+            .to_string();
+        let line: SweepLine = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a sweep result line", at()))?;
+        if line.format != FORMAT {
+            bail!("{}: format '{}' is not '{FORMAT}'", at(), line.format);
+        }
+        lines.push(StoredLine {
+            line,
+            text,
+            origin: at(),
+        });
+    }
+    Ok(StoredFile {
+        lines,
+        torn_tail_dropped: !tail.is_empty(),
+    })
+}
+
+/// What a results line must match to belong to a sweep: its grid and trace digest. The
+/// strings `reference` (who set the expectation, e.g. "this sweep") and `advice` (what to do
+/// about a mismatch) shape the messages.
+pub struct Expected<'a> {
+    pub grid: &'a Grid,
+    pub trace_digest: &'a str,
+    pub reference: &'a str,
+    pub advice: &'a str,
+}
+
+/// Checks that a stored line belongs to the expected sweep, was made by this tool version, and
+/// carries the key its index gives.
+pub fn check_line_belongs(stored: &StoredLine, expected: &Expected<'_>) -> Result<()> {
+    let line = &stored.line;
+    let (at, reference, advice) = (&stored.origin, expected.reference, expected.advice);
+    if line.trace_digest != expected.trace_digest {
+        bail!(
+            "{at}: results are for trace digest {}, but {reference} has trace digest {}: \
+             they belong to another trace; {advice}",
+            line.trace_digest,
+            expected.trace_digest
+        );
+    }
+    if line.axes != expected.grid.axes() {
+        bail!(
+            "{at}: results are for the grid '{}', but {reference} has the grid '{}'; {advice}",
+            describe_axes(&line.axes),
+            describe_axes(expected.grid.axes())
+        );
+    }
+    if line.tool_version != env!("CARGO_PKG_VERSION") {
+        bail!(
+            "{at}: results were made by occsim {}, this is occsim {}; versions are not mixed",
+            line.tool_version,
+            env!("CARGO_PKG_VERSION")
+        );
+    }
+    let expected_key = expected.grid.point(line.point).map(|p| p.key());
+    if expected_key.as_deref() != Some(line.key.as_str()) {
+        bail!(
+            "{at}: point {} has key '{}', which does not match its grid",
+            line.point,
+            line.key
+        );
+    }
+    Ok(())
+}
+
+/// `boards=1,2,4 engines=1,2`: axes as the user typed them.
+pub fn describe_axes(axes: &[Axis]) -> String {
+    let specs: Vec<String> = axes
+        .iter()
+        .map(|a| format!("{}={}", a.key, a.values.join(",")))
+        .collect();
+    specs.join(" ")
+}
+
+/// `FILE.csv` beside `FILE.jsonl`. A `.csv` output path is refused (it would be overwritten).
+pub fn csv_path_for(jsonl: &Path) -> Result<PathBuf> {
+    if jsonl.extension().is_some_and(|e| e == "csv") {
+        bail!(
+            "--out {} ends in .csv; use a .jsonl name (the CSV view is written beside it)",
+            jsonl.display()
+        );
+    }
+    Ok(jsonl.with_extension("csv"))
+}
+
+/// The final JSONL: lines sorted by point index, each newline-terminated.
+pub fn render_jsonl(lines: &[&StoredLine]) -> String {
+    let mut sorted: Vec<&StoredLine> = lines.to_vec();
+    sorted.sort_by_key(|s| s.line.point);
+    sorted.iter().map(|s| format!("{}\n", s.text)).collect()
+}
+
+/// The CSV view: columns `point,key,<axes in order>,<metrics sorted by name>`, rows by point
+/// index. A metric missing from a row is an empty cell; strings appear bare, other JSON values
+/// as JSON text.
+pub fn render_csv(axes: &[Axis], lines: &[&StoredLine]) -> String {
+    let metric_names: std::collections::BTreeSet<&str> = lines
+        .iter()
+        .flat_map(|s| s.line.metrics.keys().map(String::as_str))
+        .collect();
+    let mut header: Vec<String> = vec!["point".into(), "key".into()];
+    header.extend(axes.iter().map(|a| a.key.clone()));
+    header.extend(metric_names.iter().map(|m| m.to_string()));
+    let mut out = csv_row(&header);
+    let mut sorted: Vec<&StoredLine> = lines.to_vec();
+    sorted.sort_by_key(|s| s.line.point);
+    for stored in sorted {
+        let line = &stored.line;
+        let mut row = vec![line.point.to_string(), line.key.clone()];
+        row.extend(axes.iter().map(|a| axis_value_in_key(&line.key, &a.key)));
+        row.extend(metric_names.iter().map(|m| match line.metrics.get(*m) {
+            None | Some(Value::Null) => String::new(),
+            Some(Value::String(s)) => s.clone(),
+            Some(other) => other.to_string(),
+        }));
+        out.push_str(&csv_row(&row));
+    }
+    out
+}
+
+fn axis_value_in_key(key: &str, axis: &str) -> String {
+    key.split(',')
+        .filter_map(|pair| pair.split_once('='))
+        .find(|(k, _)| *k == axis)
+        .map(|(_, v)| v.to_string())
+        .unwrap_or_default()
+}
+
+/// RFC 4180: quote a field holding a comma, quote or line break; double inner quotes.
+fn csv_row(fields: &[String]) -> String {
+    let cells: Vec<String> = fields
+        .iter()
+        .map(|f| {
+            if f.contains([',', '"', '\n', '\r']) {
+                format!("\"{}\"", f.replace('"', "\"\""))
+            } else {
+                f.clone()
+            }
+        })
+        .collect();
+    format!("{}\n", cells.join(","))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn line(point: usize, key: &str, metrics: &[(&str, Value)]) -> StoredLine {
+        let line = SweepLine {
+            format: FORMAT.into(),
+            point,
+            key: key.into(),
+            axes: vec![Axis {
+                key: "engines".into(),
+                values: vec!["1".into(), "2".into()],
+            }],
+            trace_digest: "d".into(),
+            tool_version: env!("CARGO_PKG_VERSION").into(),
+            resolved_arch: serde_json::json!({"engines": point + 1}),
+            metrics: metrics
+                .iter()
+                .map(|(k, v)| (k.to_string(), v.clone()))
+                .collect(),
+        };
+        let text = line.to_json().unwrap();
+        StoredLine {
+            line,
+            text,
+            origin: String::new(),
+        }
+    }
+
+    #[test]
+    fn line_schema_is_stable() {
+        let l = line(1, "engines=2", &[("total_cycles", Value::from(1.5))]);
+        let version = env!("CARGO_PKG_VERSION");
+        assert_eq!(
+            l.text,
+            format!(
+                "{{\"format\":\"occsim-sweep/1\",\"point\":1,\"key\":\"engines=2\",\
+                 \"axes\":[{{\"key\":\"engines\",\"values\":[\"1\",\"2\"]}}],\
+                 \"trace_digest\":\"d\",\"tool_version\":\"{version}\",\
+                 \"resolved_arch\":{{\"engines\":2}},\"metrics\":{{\"total_cycles\":1.5}}}}"
+            )
+        );
+    }
+
+    #[test]
+    fn csv_has_axes_then_sorted_metrics_and_quotes_keys() {
+        let a = line(
+            1,
+            "engines=2",
+            &[("z", Value::from(2)), ("a", Value::from("x,y"))],
+        );
+        let b = line(0, "engines=1", &[("z", Value::from(1.25))]);
+        let axes = a.line.axes.clone();
+        assert_eq!(
+            render_csv(&axes, &[&a, &b]),
+            "point,key,engines,a,z\n0,engines=1,1,,1.25\n1,engines=2,2,\"x,y\",2\n"
+        );
+    }
+
+    #[test]
+    fn torn_last_line_is_dropped_and_reported() {
+        let dir = crate::sweep::test_dir("record-torn");
+        let path = dir.join("r.jsonl");
+        let whole = line(0, "engines=1", &[]).text;
+        std::fs::write(&path, format!("{whole}\n{}", &whole[..20])).unwrap();
+        let file = read_results(&path).unwrap();
+        assert_eq!(file.lines.len(), 1);
+        assert!(file.torn_tail_dropped);
+    }
+
+    #[test]
+    fn corrupt_complete_line_is_an_error_with_file_and_line() {
+        let dir = crate::sweep::test_dir("record-corrupt");
+        let path = dir.join("r.jsonl");
+        let whole = line(0, "engines=1", &[]).text;
+        std::fs::write(&path, format!("{whole}\n{{oops\n")).unwrap();
+        let err = format!("{:#}", read_results(&path).unwrap_err());
+        assert!(err.contains("r.jsonl:2: not a sweep result line"), "{err}");
+    }
+
+    #[test]
+    fn csv_output_name_is_refused() {
+        assert!(csv_path_for(Path::new("x.csv")).is_err());
+        assert_eq!(
+            csv_path_for(Path::new("dir/x.jsonl")).unwrap(),
+            Path::new("dir/x.csv")
+        );
+    }
+}

@@ -1,0 +1,257 @@
+//! Runs the selected points of a grid in parallel and keeps the results file consistent.
+//!
+//! Architecture invariants:
+//! - each finished point is appended to `FILE.jsonl` as one line at once, so an interrupted run
+//!   loses at most the unterminated last line, which `--resume` drops and recomputes;
+//! - the finished files (JSONL sorted by point index, CSV view) are written atomically and are
+//!   byte-identical whatever `--jobs`, shard split or resume history produced them: records
+//!   hold no wall-clock time and their text is never re-encoded once written.
+
+use crate::output::write_atomically;
+use super::grid::{Grid, Point, Shard};
+use super::record::{
+    check_line_belongs, csv_path_for, read_results, render_csv, render_jsonl, Expected,
+    PointRecord, StoredLine, SweepLine, FORMAT,
+};
+use anyhow::{anyhow, bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+/// The caller's model of one point: builds the architecture from the point's values, runs it
+/// on the trace, and returns the resolved architecture and metrics. Called from many threads.
+pub type Evaluator<'a> = &'a (dyn Fn(&Point) -> Result<PointRecord> + Sync);
+
+/// What to run and where to put it.
+pub struct SweepOptions<'a> {
+    pub grid: &'a Grid,
+    /// Run only this shard's points (all points when None).
+    pub shard: Option<Shard>,
+    /// Digest of the trace every point runs on; recorded in every line, checked on resume.
+    pub trace_digest: &'a str,
+    /// The results file `FILE.jsonl`; the CSV view goes to `FILE.csv`.
+    pub out: &'a Path,
+    /// Worker threads, >= 1.
+    pub jobs: usize,
+    /// Continue the existing `out` instead of refusing to touch it.
+    pub resume: bool,
+    /// Draw a progress bar on stderr (it is hidden anyway when stderr is not a terminal).
+    pub show_progress: bool,
+}
+
+/// What a finished sweep did.
+#[derive(Debug)]
+pub struct SweepOutcome {
+    /// Every selected point's line, in point-index order.
+    pub lines: Vec<StoredLine>,
+    /// Points evaluated by this run.
+    pub evaluated: usize,
+    /// Points taken from the existing file (`--resume`).
+    pub reused: usize,
+    /// Whether `--resume` found and dropped a torn last line.
+    pub torn_tail_dropped: bool,
+    pub csv: PathBuf,
+}
+
+/// Runs the sweep described by `options`, evaluating each point not yet done with `evaluate`.
+pub fn run_sweep(options: &SweepOptions<'_>, evaluate: Evaluator<'_>) -> Result<SweepOutcome> {
+    let csv = csv_path_for(options.out)?;
+    if options.jobs == 0 {
+        bail!("--jobs must be at least 1");
+    }
+    let selected = options.grid.selected_indices(options.shard);
+    let (mut done, torn_tail_dropped) = load_previous(options, &selected)?;
+    let reused = done.len();
+    let todo: Vec<usize> = selected
+        .iter()
+        .copied()
+        .filter(|i| !done.contains_key(i))
+        .collect();
+
+    let fresh = evaluate_points(options, &todo, reused, evaluate)?;
+    let evaluated = fresh.len();
+    done.extend(fresh.into_iter().map(|s| (s.line.point, s)));
+    if done.len() != selected.len() {
+        return Err(anyhow!(
+            "internal error: {} of {} points done after the sweep",
+            done.len(),
+            selected.len()
+        ));
+    }
+
+    let lines: Vec<StoredLine> = done.into_values().collect();
+    let refs: Vec<&StoredLine> = lines.iter().collect();
+    write_atomically(options.out, render_jsonl(&refs).as_bytes())?;
+    write_atomically(&csv, render_csv(options.grid.axes(), &refs).as_bytes())?;
+    Ok(SweepOutcome {
+        lines,
+        evaluated,
+        reused,
+        torn_tail_dropped,
+        csv,
+    })
+}
+
+/// Reads the points already in `out` (when resuming), checks they belong to this sweep and
+/// shard, and repairs the file atomically if a torn last line had to be dropped.
+fn load_previous(
+    options: &SweepOptions<'_>,
+    selected: &[usize],
+) -> Result<(BTreeMap<usize, StoredLine>, bool)> {
+    let out = options.out;
+    let mut done = BTreeMap::new();
+    let exists_with_content = std::fs::metadata(out).is_ok_and(|m| m.len() > 0);
+    if !exists_with_content {
+        return Ok((done, false));
+    }
+    if !options.resume {
+        bail!(
+            "{} already holds results; pass --resume to continue that sweep, or remove it to start over",
+            out.display()
+        );
+    }
+    let file = read_results(out)?;
+    let expected = Expected {
+        grid: options.grid,
+        trace_digest: options.trace_digest,
+        reference: "this sweep",
+        advice: "choose another --out, or remove the file to start over",
+    };
+    for stored in file.lines {
+        check_line_belongs(&stored, &expected)?;
+        if selected.binary_search(&stored.line.point).is_err() {
+            bail!(
+                "{}: point '{}' is not part of shard {}; resume a shard's file with the same --shard",
+                stored.origin,
+                stored.line.key,
+                options.shard.map_or("(none)".to_string(), |s| s.to_string())
+            );
+        }
+        if let Some(earlier) = done.get(&stored.line.point) {
+            let earlier: &StoredLine = earlier;
+            if earlier.text != stored.text {
+                bail!(
+                    "{} and {} hold different results for point '{}'",
+                    earlier.origin,
+                    stored.origin,
+                    stored.line.key
+                );
+            }
+        }
+        done.insert(stored.line.point, stored.compact());
+    }
+    if file.torn_tail_dropped {
+        let refs: Vec<&StoredLine> = done.values().collect();
+        write_atomically(out, render_jsonl(&refs).as_bytes())
+            .with_context(|| format!("cannot repair the torn last line of {}", out.display()))?;
+    }
+    Ok((done, file.torn_tail_dropped))
+}
+
+/// Evaluates `todo` on a pool of `options.jobs` threads, appending each result to the file as
+/// soon as it is known. Stops at the first failing point; finished points stay in the file.
+fn evaluate_points(
+    options: &SweepOptions<'_>,
+    todo: &[usize],
+    already_done: usize,
+    evaluate: Evaluator<'_>,
+) -> Result<Vec<StoredLine>> {
+    let file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(options.out)
+        .with_context(|| format!("cannot open {} for appending", options.out.display()))?;
+    let sink = Mutex::new((file, Vec::with_capacity(todo.len())));
+    let bar = progress_bar(
+        options.show_progress,
+        todo.len() + already_done,
+        already_done,
+    );
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(options.jobs)
+        .build()
+        .context("cannot start the worker threads")?;
+
+    let run_one = |index: &usize| -> Result<()> {
+        let point = options
+            .grid
+            .point(*index)
+            .ok_or_else(|| anyhow!("internal error: point {index} outside the grid"))?;
+        // A panicking model becomes an error naming its point; the other points' lines stay.
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| evaluate(&point)))
+            .unwrap_or_else(|payload| Err(anyhow!("the model panicked: {}", panic_text(&payload))));
+        let record = outcome.with_context(|| {
+            format!(
+                "point {} ({}) failed; finished points are kept in {}, rerun with --resume",
+                point.index,
+                point.key(),
+                options.out.display()
+            )
+        })?;
+        let line = line_for(&point, options, record);
+        let text = line.to_json()?;
+        let stored = StoredLine {
+            line,
+            text,
+            origin: String::new(),
+        }
+        .compact();
+        let mut guard = sink
+            .lock()
+            .map_err(|_| anyhow!("a worker thread panicked"))?;
+        let (file, lines) = &mut *guard;
+        file.write_all(format!("{}\n", stored.text).as_bytes())
+            .and_then(|()| file.flush())
+            .with_context(|| format!("cannot append to {}", options.out.display()))?;
+        lines.push(stored);
+        bar.inc(1);
+        Ok(())
+    };
+    let outcome = pool.install(|| todo.par_iter().try_for_each(run_one));
+    bar.finish_and_clear();
+    outcome?;
+    let (_, lines) = sink
+        .into_inner()
+        .map_err(|_| anyhow!("a worker thread panicked"))?;
+    Ok(lines)
+}
+
+fn panic_text(payload: &Box<dyn std::any::Any + Send>) -> String {
+    if let Some(text) = payload.downcast_ref::<&str>() {
+        text.to_string()
+    } else if let Some(text) = payload.downcast_ref::<String>() {
+        text.clone()
+    } else {
+        "(no message)".to_string()
+    }
+}
+
+fn line_for(point: &Point, options: &SweepOptions<'_>, record: PointRecord) -> SweepLine {
+    SweepLine {
+        format: FORMAT.to_string(),
+        point: point.index,
+        key: point.key(),
+        axes: options.grid.axes().to_vec(),
+        trace_digest: options.trace_digest.to_string(),
+        tool_version: env!("CARGO_PKG_VERSION").to_string(),
+        resolved_arch: record.resolved_arch,
+        metrics: record.metrics,
+    }
+}
+
+fn progress_bar(wanted: bool, total: usize, position: usize) -> ProgressBar {
+    if !wanted || !std::io::stderr().is_terminal() {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::new(total as u64);
+    if let Ok(style) =
+        ProgressStyle::with_template("{bar:40} {pos}/{len} points  {elapsed_precise} (eta {eta})")
+    {
+        bar.set_style(style);
+    }
+    bar.set_position(position as u64);
+    bar
+}

@@ -1,0 +1,415 @@
+//! Engine-level tests: a fake machine whose metrics follow a fixed formula of the point's
+//! values (total_cycles = 1000 / (boards * engines) + 10 * boards, tiles = boards * engines).
+
+use super::*;
+use anyhow::{bail, Result};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+const DIGEST: &str = "sha256:0123abcd";
+
+fn accept_all(_: &str, _: &str) -> std::result::Result<(), String> {
+    Ok(())
+}
+
+fn grid(specs: &[&str]) -> Grid {
+    let specs: Vec<String> = specs.iter().map(|s| s.to_string()).collect();
+    Grid::parse(&specs, &accept_all).unwrap()
+}
+
+/// The 12-point grid most tests sweep.
+fn twelve_points() -> Grid {
+    grid(&["boards=1,2,4", "engines=1,2,4,8"])
+}
+
+fn fake_machine(point: &Point) -> Result<PointRecord> {
+    let boards: u64 = point.get("boards").unwrap_or("1").parse()?;
+    let engines: u64 = point.get("engines").unwrap_or("1").parse()?;
+    let cycles = 1000.0 / (boards * engines) as f64 + 10.0 * boards as f64;
+    let mut metrics = BTreeMap::new();
+    metrics.insert("total_cycles".to_string(), serde_json::Value::from(cycles));
+    metrics.insert(
+        "tiles".to_string(),
+        serde_json::Value::from(boards * engines),
+    );
+    Ok(PointRecord {
+        resolved_arch: serde_json::json!({"boards": boards, "engines": engines, "clock_mhz": 66.67}),
+        metrics,
+    })
+}
+
+fn options<'a>(grid: &'a Grid, out: &'a Path, jobs: usize) -> SweepOptions<'a> {
+    SweepOptions {
+        grid,
+        shard: None,
+        trace_digest: DIGEST,
+        out,
+        jobs,
+        resume: false,
+        show_progress: false,
+    }
+}
+
+fn read(path: &Path) -> String {
+    std::fs::read_to_string(path).unwrap()
+}
+
+/// Runs the whole grid with 1 job into `dir/full.jsonl`, the reference for other runs.
+fn reference_run(dir: &Path, grid: &Grid) -> (String, String) {
+    let out = dir.join("full.jsonl");
+    run_sweep(&options(grid, &out, 1), &fake_machine).unwrap();
+    (read(&out), read(&dir.join("full.csv")))
+}
+
+#[test]
+fn csv_view_holds_the_hand_computed_metrics() {
+    let dir = test_dir("csv-values");
+    let g = grid(&["boards=1,2", "engines=1,4"]);
+    let out = dir.join("r.jsonl");
+    let outcome = run_sweep(&options(&g, &out, 2), &fake_machine).unwrap();
+    assert_eq!((outcome.evaluated, outcome.reused), (4, 0));
+    assert_eq!(
+        read(&dir.join("r.csv")),
+        "point,key,boards,engines,tiles,total_cycles\n\
+         0,\"boards=1,engines=1\",1,1,1,1010.0\n\
+         1,\"boards=1,engines=4\",1,4,4,260.0\n\
+         2,\"boards=2,engines=1\",2,1,2,520.0\n\
+         3,\"boards=2,engines=4\",2,4,8,145.0\n"
+    );
+    let jsonl = read(&out);
+    let keys: Vec<&str> = jsonl
+        .lines()
+        .map(|l| &l[..l.find(",\"axes\"").unwrap()])
+        .collect();
+    assert_eq!(
+        keys,
+        [
+            r#"{"format":"occsim-sweep/1","point":0,"key":"boards=1,engines=1""#,
+            r#"{"format":"occsim-sweep/1","point":1,"key":"boards=1,engines=4""#,
+            r#"{"format":"occsim-sweep/1","point":2,"key":"boards=2,engines=1""#,
+            r#"{"format":"occsim-sweep/1","point":3,"key":"boards=2,engines=4""#,
+        ]
+    );
+    assert!(jsonl.contains(r#""trace_digest":"sha256:0123abcd""#));
+    assert!(jsonl.contains(r#""resolved_arch":{"boards":2,"clock_mhz":66.67,"engines":4}"#));
+}
+
+#[test]
+fn one_and_two_jobs_give_identical_files() {
+    let dir = test_dir("jobs");
+    let g = twelve_points();
+    let (jsonl, csv) = reference_run(&dir, &g);
+    let out = dir.join("two.jsonl");
+    run_sweep(&options(&g, &out, 2), &fake_machine).unwrap();
+    assert_eq!(read(&out), jsonl);
+    assert_eq!(read(&dir.join("two.csv")), csv);
+    assert_eq!(jsonl.lines().count(), 12);
+}
+
+fn run_shard(dir: &Path, g: &Grid, number: usize, count: usize) -> PathBuf {
+    let out = dir.join(format!("shard{number}.jsonl"));
+    let mut o = options(g, &out, 2);
+    o.shard = Some(Shard { number, count });
+    run_sweep(&o, &fake_machine).unwrap();
+    out
+}
+
+#[test]
+fn three_shards_merged_equal_the_unsharded_run() {
+    let dir = test_dir("shards");
+    let g = twelve_points();
+    let (jsonl, csv) = reference_run(&dir, &g);
+    let shards: Vec<PathBuf> = (1..=3).rev().map(|k| run_shard(&dir, &g, k, 3)).collect();
+    assert_eq!(
+        read(&shards[0]).lines().count(),
+        4,
+        "shard 3/3 holds points 2, 5, 8, 11"
+    );
+    let merged = dir.join("merged.jsonl");
+    let report = merge_results(&merged, &shards, false).unwrap();
+    assert!(report.missing.is_empty());
+    assert_eq!(read(&merged), jsonl);
+    assert_eq!(read(&dir.join("merged.csv")), csv);
+}
+
+#[test]
+fn merge_reports_missing_points_then_resume_fills_them() {
+    let dir = test_dir("merge-missing");
+    let g = twelve_points();
+    let (jsonl, _) = reference_run(&dir, &g);
+    let shards = vec![run_shard(&dir, &g, 1, 3), run_shard(&dir, &g, 3, 3)];
+    let merged = dir.join("merged.jsonl");
+    let err = format!("{:#}", merge_results(&merged, &shards, false).unwrap_err());
+    assert!(
+        err.starts_with(
+            "4 of 12 points are missing from the shards: 'boards=1,engines=2', \
+             'boards=2,engines=1', 'boards=2,engines=8', 'boards=4,engines=4'; nothing written"
+        ),
+        "{err}"
+    );
+    assert!(!merged.exists());
+
+    let report = merge_results(&merged, &shards, true).unwrap();
+    assert_eq!(report.missing.len(), 4);
+    assert_eq!(read(&merged).lines().count(), 8);
+
+    let evaluated = Mutex::new(Vec::new());
+    let counting = |p: &Point| {
+        evaluated.lock().unwrap().push(p.index);
+        fake_machine(p)
+    };
+    let mut o = options(&g, &merged, 2);
+    o.resume = true;
+    run_sweep(&o, &counting).unwrap();
+    let mut evaluated = evaluated.into_inner().unwrap();
+    evaluated.sort();
+    assert_eq!(evaluated, [1, 4, 7, 10]);
+    assert_eq!(read(&merged), jsonl);
+}
+
+#[test]
+fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
+    let dir = test_dir("merge-duplicates");
+    let g = twelve_points();
+    let (jsonl, _) = reference_run(&dir, &g);
+    let full = dir.join("full.jsonl");
+    let shard = run_shard(&dir, &g, 2, 3);
+    let merged = dir.join("merged.jsonl");
+    merge_results(&merged, &[shard.clone(), full.clone()], false).unwrap();
+    assert_eq!(read(&merged), jsonl);
+
+    let altered = read(&shard).replacen("\"tiles\":2", "\"tiles\":3", 1);
+    std::fs::write(&shard, altered).unwrap();
+    let err = format!(
+        "{:#}",
+        merge_results(&merged, &[shard, full], false).unwrap_err()
+    );
+    assert!(
+        err.contains("hold different results for point 'boards=1,engines=2'"),
+        "{err}"
+    );
+    assert!(err.contains("shard2.jsonl:1 and "), "{err}");
+}
+
+#[test]
+fn merge_rejects_shards_of_another_trace_or_grid() {
+    let dir = test_dir("merge-foreign");
+    let g = twelve_points();
+    let shard = run_shard(&dir, &g, 1, 2);
+    let foreign = dir.join("foreign.jsonl");
+    let mut o = options(&g, &foreign, 1);
+    o.trace_digest = "sha256:ffff";
+    o.shard = Some(Shard {
+        number: 2,
+        count: 2,
+    });
+    run_sweep(&o, &fake_machine).unwrap();
+    let err = format!(
+        "{:#}",
+        merge_results(&dir.join("m.jsonl"), &[shard.clone(), foreign], false).unwrap_err()
+    );
+    assert!(
+        err.contains("foreign.jsonl:1: results are for trace digest sha256:ffff"),
+        "{err}"
+    );
+    assert!(
+        err.contains("only shards of one sweep can be merged"),
+        "{err}"
+    );
+
+    let other_grid = grid(&["boards=1,2,4", "engines=1,2,4"]);
+    let other = dir.join("other.jsonl");
+    run_sweep(&options(&other_grid, &other, 1), &fake_machine).unwrap();
+    let err = format!(
+        "{:#}",
+        merge_results(&dir.join("m.jsonl"), &[shard, other], false).unwrap_err()
+    );
+    assert!(
+        err.contains("other.jsonl:1: results are for the grid 'boards=1,2,4 engines=1,2,4'"),
+        "{err}"
+    );
+}
+
+/// Evaluates with the fake machine, recording every successful evaluation in `log`, and
+/// fails ("crashes") once `successes_before_crash` have succeeded, whatever the job count.
+fn crashing_machine<'a>(
+    log: &'a Mutex<Vec<usize>>,
+    successes_before_crash: usize,
+) -> impl Fn(&Point) -> Result<PointRecord> + Sync + 'a {
+    move |p: &Point| {
+        let mut log = log.lock().unwrap();
+        if log.len() >= successes_before_crash {
+            bail!("simulated crash");
+        }
+        log.push(p.index);
+        fake_machine(p)
+    }
+}
+
+fn append_torn_fragment(out: &Path, of_line: &str) {
+    let mut torn = read(out);
+    torn.push_str(&of_line[..40]);
+    std::fs::write(out, torn).unwrap();
+}
+
+#[test]
+fn interrupted_sweep_resumes_without_losing_or_repeating_points() {
+    let dir = test_dir("resume");
+    let g = twelve_points();
+    let (jsonl, csv) = reference_run(&dir, &g);
+    let out = dir.join("r.jsonl");
+    let mut resuming = options(&g, &out, 2);
+    resuming.resume = true;
+
+    // Run 1: the machine crashes after 5 points; every finished point must be in the file.
+    let run1 = Mutex::new(Vec::new());
+    let err = run_sweep(&options(&g, &out, 2), &crashing_machine(&run1, 5));
+    let err = format!("{:#}", err.unwrap_err());
+    assert!(err.contains("failed; finished points are kept in"), "{err}");
+    assert!(err.contains("simulated crash"), "{err}");
+    let run1 = run1.into_inner().unwrap();
+    assert_eq!(run1.len(), 5);
+    assert_eq!(
+        read(&out).lines().count(),
+        run1.len(),
+        "every finished point was appended"
+    );
+
+    // A kill during an append leaves an unterminated fragment of a line.
+    append_torn_fragment(&out, jsonl.lines().nth(5).unwrap());
+    let without_resume = run_sweep(&options(&g, &out, 2), &fake_machine).unwrap_err();
+    assert!(format!("{without_resume:#}").contains("pass --resume"));
+
+    // Run 2 drops the fragment, then appends two points and crashes again: the appended lines
+    // must not be glued to the fragment.
+    let run2 = Mutex::new(Vec::new());
+    let mut one_job = options(&g, &out, 1);
+    one_job.resume = true;
+    assert!(run_sweep(&one_job, &crashing_machine(&run2, 2)).is_err());
+    let run2 = run2.into_inner().unwrap();
+    assert_eq!(run2.len(), 2);
+
+    // Run 3 finishes the sweep.
+    let run3 = Mutex::new(Vec::new());
+    let outcome = run_sweep(&resuming, &crashing_machine(&run3, 12)).unwrap();
+    assert!(!outcome.torn_tail_dropped);
+    assert_eq!(outcome.reused, run1.len() + 2);
+    let mut all: Vec<usize> = [run1, run2, run3.into_inner().unwrap()].concat();
+    all.sort();
+    assert_eq!(
+        all,
+        (0..12).collect::<Vec<_>>(),
+        "each point evaluated exactly once"
+    );
+    assert_eq!(read(&out), jsonl);
+    assert_eq!(read(&dir.join("r.csv")), csv);
+
+    // Resuming a finished sweep evaluates nothing and leaves the files as they are.
+    let outcome = run_sweep(&resuming, &|_: &Point| bail!("must not run")).unwrap();
+    assert_eq!((outcome.evaluated, outcome.reused), (0, 12));
+    assert_eq!(read(&out), jsonl);
+}
+
+#[test]
+fn torn_line_is_reported_when_resuming() {
+    let dir = test_dir("resume-torn");
+    let g = twelve_points();
+    let (jsonl, _) = reference_run(&dir, &g);
+    let out = dir.join("r.jsonl");
+    let first_four: String = jsonl.lines().take(4).map(|l| format!("{l}\n")).collect();
+    std::fs::write(&out, first_four).unwrap();
+    append_torn_fragment(&out, jsonl.lines().nth(4).unwrap());
+    let mut o = options(&g, &out, 2);
+    o.resume = true;
+    let outcome = run_sweep(&o, &fake_machine).unwrap();
+    assert!(outcome.torn_tail_dropped);
+    assert_eq!((outcome.evaluated, outcome.reused), (8, 4));
+    assert_eq!(read(&out), jsonl);
+}
+
+#[test]
+fn resume_refuses_results_of_another_trace_or_shard() {
+    let dir = test_dir("resume-foreign");
+    let g = twelve_points();
+    let out = run_shard(&dir, &g, 1, 3);
+
+    let mut o = options(&g, &out, 1);
+    o.resume = true;
+    o.shard = Some(Shard {
+        number: 1,
+        count: 3,
+    });
+    o.trace_digest = "sha256:other";
+    let err = format!("{:#}", run_sweep(&o, &fake_machine).unwrap_err());
+    assert!(
+        err.contains("shard1.jsonl:1: results are for trace digest sha256:0123abcd"),
+        "{err}"
+    );
+    assert!(err.contains("belong to another trace"), "{err}");
+
+    o.trace_digest = DIGEST;
+    o.shard = Some(Shard {
+        number: 2,
+        count: 3,
+    });
+    let err = format!("{:#}", run_sweep(&o, &fake_machine).unwrap_err());
+    assert!(
+        err.contains("point 'boards=1,engines=1' is not part of shard 2/3"),
+        "{err}"
+    );
+}
+
+#[test]
+fn sweep_chart_has_one_series_per_other_axis_combination() {
+    let dir = test_dir("chart");
+    let g = grid(&["boards=1,2", "engines=1,4"]);
+    let out = dir.join("r.jsonl");
+    let outcome = run_sweep(&options(&g, &out, 1), &fake_machine).unwrap();
+    let chart = metric_chart(g.axes(), &outcome.lines, "total_cycles", None).unwrap();
+    assert_eq!(chart.x_label, "engines");
+    let series: Vec<(&str, &[(f64, f64)])> = chart
+        .series
+        .iter()
+        .map(|s| (s.name.as_str(), s.points.as_slice()))
+        .collect();
+    assert_eq!(
+        series,
+        [
+            ("boards=1", &[(1.0, 1010.0), (4.0, 260.0)][..]),
+            ("boards=2", &[(1.0, 520.0), (4.0, 145.0)][..]),
+        ]
+    );
+    let err = metric_chart(g.axes(), &outcome.lines, "wall_seconds", None).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "no result has metric 'wall_seconds'; metrics present: tiles, total_cycles"
+    );
+    let err = metric_chart(g.axes(), &outcome.lines, "tiles", Some("memory")).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "cannot plot against 'memory': it is not swept (swept: boards, engines)"
+    );
+}
+
+#[test]
+fn a_panicking_model_is_an_error_naming_the_point() {
+    let dir = test_dir("panic");
+    let g = grid(&["engines=1,2,3"]);
+    let out = dir.join("r.jsonl");
+    let panicky = |p: &Point| -> Result<PointRecord> {
+        if p.index == 1 {
+            panic!("engine count {} unsupported", p.key());
+        }
+        fake_machine(p)
+    };
+    let err = format!(
+        "{:#}",
+        run_sweep(&options(&g, &out, 1), &panicky).unwrap_err()
+    );
+    assert!(err.contains("point 1 (engines=2) failed"), "{err}");
+    assert!(
+        err.contains("the model panicked: engine count engines=2 unsupported"),
+        "{err}"
+    );
+}

@@ -1,0 +1,4 @@
+//! Helpers shared by integration tests and benchmarks.
+#![allow(dead_code)]
+
+pub mod gl_replay;

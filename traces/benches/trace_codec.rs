@@ -1,0 +1,108 @@
+//! Encode and decode rates of the `.occt` trace format on synthetic rasterizer-shaped streams
+//! (spans of linearly varying depth, rounded to 24 bits). Prints fragments/s and bytes per
+//! fragment; no assertions (timings are not tests).
+//!
+//! Run: `cargo bench -p occsim-traces --bench trace_codec`
+
+use occsim_traces::golden::EventSink;
+use occsim_traces::trace::synthetic::{generate, SyntheticScene};
+use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter, WriterOptions};
+use occsim_traces::Event;
+use std::time::Instant;
+
+/// Fragments per synthetic scene.
+const FRAGMENTS: u64 = 12_000_000;
+const LEVELS: [i32; 3] = [1, 3, 9];
+
+/// Sums what it sees so the decoder's work cannot be optimised away.
+#[derive(Default)]
+struct Checksum {
+    fragments: u64,
+    depth_sum: u64,
+}
+
+impl EventSink for Checksum {
+    #[inline(always)]
+    fn event(&mut self, event: &Event) {
+        if let Event::Fragment(f) = event {
+            self.fragments += 1;
+            self.depth_sum = self.depth_sum.wrapping_add(f.z as u64 ^ f.x as u64);
+        }
+    }
+}
+
+fn best_of<T>(runs: usize, mut run: impl FnMut() -> T) -> (f64, T) {
+    let mut best = f64::MAX;
+    let mut last = None;
+    for _ in 0..runs {
+        let start = Instant::now();
+        let out = run();
+        best = best.min(start.elapsed().as_secs_f64());
+        last = Some(out);
+    }
+    (best, last.expect("at least one run"))
+}
+
+fn bench_scene(name: &str, scene: &SyntheticScene) {
+    let mut events = Vec::new();
+    let fragments = generate(scene, &mut events);
+    let header = TraceHeader::new(scene.width, scene.height).with_scene(name);
+    println!("{name}: {fragments} fragments, {} events", events.len());
+    for level in LEVELS {
+        let options = WriterOptions {
+            zstd_level: level,
+            ..WriterOptions::default()
+        };
+        let (encode_s, bytes) = best_of(2, || {
+            let mut bytes = Vec::new();
+            let mut writer =
+                TraceWriter::with_options(&mut bytes, &header, options).expect("header");
+            events.iter().for_each(|e| writer.event(e));
+            writer.finish().expect("encode");
+            bytes
+        });
+        let (bulk_s, sum) = best_of(3, || {
+            let mut sum = Checksum::default();
+            let mut reader = TraceReader::new(&bytes[..]).expect("header");
+            reader.read_into(&mut sum).expect("decode");
+            sum
+        });
+        assert_eq!(sum.fragments, fragments);
+        let (single_s, count) = best_of(2, || {
+            let reader = TraceReader::new(&bytes[..]).expect("header");
+            reader
+                .map(|e| e.expect("decode"))
+                .filter(|e| matches!(e, Event::Fragment(_)))
+                .count()
+        });
+        assert_eq!(count as u64, fragments);
+        let rate = |s: f64| fragments as f64 / s / 1e6;
+        println!(
+            "  zstd {level}: {:.3} bytes/fragment ({} bytes) | encode {:6.1} M frag/s | decode bulk {:6.1} M frag/s, next_event {:6.1} M frag/s",
+            bytes.len() as f64 / fragments as f64,
+            bytes.len(),
+            rate(encode_s),
+            rate(bulk_s),
+            rate(single_s),
+        );
+    }
+}
+
+fn main() {
+    let large = SyntheticScene {
+        width: 1920,
+        height: 1080,
+        min_radius: 60.0,
+        max_radius: 300.0,
+        fragments: FRAGMENTS,
+        seed: 7,
+    };
+    let small = SyntheticScene {
+        min_radius: 3.0,
+        max_radius: 12.0,
+        seed: 11,
+        ..large
+    };
+    bench_scene("large triangles (radius 60-300 px)", &large);
+    bench_scene("small triangles (radius 3-12 px)", &small);
+}

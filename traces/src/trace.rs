@@ -1,1 +1,0 @@
-//! The `.occt` fragment trace format. (Being written: see the trace format task.)

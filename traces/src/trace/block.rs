@@ -1,0 +1,116 @@
+//! The container: file header, block headers, trailer. Byte order is little-endian.
+
+/// The first 8 bytes of every trace (PNG-style: a CR LF and a ^Z catch text-mode mangling).
+pub const MAGIC: [u8; 8] = *b"OCCT\r\n\x1a\n";
+/// The last 8 bytes of every trace.
+pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
+/// The format version this code writes and reads.
+pub const FORMAT_VERSION: u16 = 1;
+/// Most bytes of header JSON.
+pub const MAX_HEADER_JSON_BYTES: u32 = 64 << 10;
+/// Most bytes of one block's event payload before compression.
+pub const MAX_BLOCK_BYTES: usize = 1 << 20;
+/// Most bytes of one block's payload as stored (zstd's worst-case growth is far below this).
+pub const MAX_STORED_BYTES: usize = MAX_BLOCK_BYTES + (64 << 10);
+/// Most bytes of summary JSON.
+pub const MAX_SUMMARY_JSON_BYTES: usize = 64 << 10;
+/// Bytes of the fixed part of the file header: magic, version, flags, JSON length.
+pub const FILE_HEADER_FIXED_BYTES: u64 = 16;
+/// Bytes of a block header.
+pub const BLOCK_HEADER_BYTES: usize = 20;
+/// Bytes of the trailer: summary block offset and end magic.
+pub const TRAILER_BYTES: usize = 16;
+
+/// Block kinds.
+pub(crate) const KIND_EVENTS: u8 = 1;
+pub(crate) const KIND_SUMMARY: u8 = 2;
+/// Payload codecs.
+pub(crate) const CODEC_STORED: u8 = 0;
+pub(crate) const CODEC_ZSTD: u8 = 1;
+
+/// The fixed header in front of every block.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct BlockHeader {
+    pub kind: u8,
+    pub codec: u8,
+    /// Events completed in this block (a large event counts in the block holding its end).
+    pub events: u32,
+    /// Payload bytes after decompression.
+    pub raw_len: u32,
+    /// Payload bytes as stored after this header.
+    pub stored_len: u32,
+}
+
+impl BlockHeader {
+    /// The first 16 bytes (everything but the checksum).
+    pub(crate) fn fields(&self) -> [u8; 16] {
+        let mut bytes = [0u8; 16];
+        bytes[0] = self.kind;
+        bytes[1] = self.codec;
+        // bytes[2..4]: reserved, zero.
+        bytes[4..8].copy_from_slice(&self.events.to_le_bytes());
+        bytes[8..12].copy_from_slice(&self.raw_len.to_le_bytes());
+        bytes[12..16].copy_from_slice(&self.stored_len.to_le_bytes());
+        bytes
+    }
+
+    /// The CRC32 of the header fields and the stored payload.
+    pub(crate) fn checksum(&self, stored: &[u8]) -> u32 {
+        let mut hasher = crc32fast::Hasher::new();
+        hasher.update(&self.fields());
+        hasher.update(stored);
+        hasher.finalize()
+    }
+
+    /// Parse and sanity-check a block header; the error says what is wrong.
+    pub(crate) fn parse(bytes: &[u8; BLOCK_HEADER_BYTES]) -> Result<(BlockHeader, u32), String> {
+        let word = |at: usize| {
+            u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
+        };
+        let header = BlockHeader {
+            kind: bytes[0],
+            codec: bytes[1],
+            events: word(4),
+            raw_len: word(8),
+            stored_len: word(12),
+        };
+        let (raw, stored) = (header.raw_len as usize, header.stored_len as usize);
+        match header.kind {
+            KIND_EVENTS if raw == 0 => return Err("empty event block".to_owned()),
+            KIND_EVENTS if raw > MAX_BLOCK_BYTES => {
+                return Err(format!(
+                    "block claims {raw} payload bytes (most {MAX_BLOCK_BYTES})"
+                ))
+            }
+            KIND_SUMMARY if raw > MAX_SUMMARY_JSON_BYTES || header.events != 0 => {
+                return Err(format!(
+                    "summary block claims {raw} bytes and {} events",
+                    header.events
+                ))
+            }
+            KIND_SUMMARY if header.codec != CODEC_STORED => {
+                return Err("summary block is compressed".to_owned())
+            }
+            KIND_EVENTS | KIND_SUMMARY => {}
+            kind => return Err(format!("unknown block kind {kind}")),
+        }
+        if bytes[2] != 0 || bytes[3] != 0 {
+            return Err("reserved bytes are not zero".to_owned());
+        }
+        match header.codec {
+            CODEC_STORED if stored != raw => {
+                return Err(format!(
+                    "uncompressed block stores {stored} bytes for {raw}"
+                ))
+            }
+            CODEC_ZSTD if stored > MAX_STORED_BYTES => {
+                return Err(format!(
+                    "block claims {stored} stored bytes (most {MAX_STORED_BYTES})"
+                ))
+            }
+            CODEC_STORED | CODEC_ZSTD => {}
+            codec => return Err(format!("unknown block codec {codec}")),
+        }
+        Ok((header, word(16)))
+    }
+}

@@ -1,0 +1,710 @@
+//! The event payload of a block: one tag byte per record, LEB128 varints, zigzag for signed
+//! values, and fragments grouped into spans (runs of x+1 on one row) whose positions and
+//! depths are coded as residuals from a prediction. All prediction state resets at every
+//! block start, so each block decodes on its own.
+
+use super::header::StreamTally;
+use crate::event::{Event, Fragment, DEPTH_ONE};
+use crate::golden::EventSink;
+use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult, MAX_BUFFER_ENTRIES, MAX_TILES};
+use crate::state::{DepthFunc, Rect};
+
+/// Record tags (the first byte of every record in a payload).
+pub(crate) mod tag {
+    pub const CLEAR: u8 = 0x01;
+    /// Then one byte: the `DepthFunc` code.
+    pub const DEPTH_FUNC: u8 = 0x02;
+    /// Then one byte, 0 or 1.
+    pub const DEPTH_MASK: u8 = 0x03;
+    pub const DEPTH_TEST: u8 = 0x04;
+    pub const CULL: u8 = 0x05;
+    pub const SCISSOR_OFF: u8 = 0x06;
+    /// Then x, y, width, height as varints.
+    pub const SCISSOR_ON: u8 = 0x07;
+    pub const QUERY_BEGIN: u8 = 0x08;
+    pub const QUERY_END: u8 = 0x09;
+    pub const PRIMITIVE: u8 = 0x0A;
+    /// A run of fragments on one row at x, x+1, ...
+    pub const SPAN: u8 = 0x0B;
+    pub const QUERY_RESULT: u8 = 0x0C;
+    /// Then a varint length and that many bytes of a large event (continued).
+    pub const PART: u8 = 0x0D;
+    /// As PART, and the large event is complete: its bytes are one QUERY_BEGIN or QUERY_RESULT
+    /// record.
+    pub const PART_END: u8 = 0x0E;
+}
+
+/// Most fragments in one span: a row of the widest viewport.
+pub(crate) const MAX_SPAN_FRAGMENTS: usize = crate::state::MAX_VIEWPORT_SIDE as usize;
+/// Most bytes one large event (a query begin or result) may take once its parts are joined.
+/// Bounds the reader's memory on hostile input; about 20 million verbose hits.
+pub const MAX_EVENT_BYTES: usize = 64 << 20;
+/// Most bytes a span of `n` fragments can take: tag, four header varints, n-1 residuals.
+pub(crate) fn span_bytes_bound(fragments: usize) -> usize {
+    1 + 4 * 10 + fragments.saturating_sub(1) * 10
+}
+
+#[inline(always)]
+pub(crate) fn put_uv(out: &mut Vec<u8>, mut value: u64) {
+    while value >= 0x80 {
+        out.push(value as u8 | 0x80);
+        value >>= 7;
+    }
+    out.push(value as u8);
+}
+
+#[inline(always)]
+pub(crate) fn put_zz(out: &mut Vec<u8>, value: i64) {
+    put_uv(out, ((value << 1) ^ (value >> 63)) as u64);
+}
+
+#[inline(always)]
+fn unzigzag(value: u64) -> i64 {
+    (value >> 1) as i64 ^ -((value & 1) as i64)
+}
+
+/// A malformed payload: where (in the decoded payload) and what.
+#[derive(Debug)]
+pub(crate) struct PayloadError {
+    pub pos: usize,
+    pub reason: String,
+}
+
+#[cold]
+fn bad(pos: usize, reason: impl Into<String>) -> PayloadError {
+    PayloadError {
+        pos,
+        reason: reason.into(),
+    }
+}
+
+/// Reads records from a payload slice, remembering the position for errors.
+pub(crate) struct Cursor<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Cursor<'a> {
+    pub(crate) fn new(bytes: &'a [u8], pos: usize) -> Cursor<'a> {
+        Cursor { bytes, pos }
+    }
+
+    fn at_end(&self) -> bool {
+        self.pos >= self.bytes.len()
+    }
+
+    fn remaining(&self) -> usize {
+        self.bytes.len().saturating_sub(self.pos)
+    }
+
+    #[inline(always)]
+    fn byte(&mut self) -> Result<u8, PayloadError> {
+        match self.bytes.get(self.pos) {
+            Some(&b) => {
+                self.pos += 1;
+                Ok(b)
+            }
+            None => Err(bad(self.pos, "record runs past the end of the payload")),
+        }
+    }
+
+    #[inline(always)]
+    fn uv(&mut self) -> Result<u64, PayloadError> {
+        let first = self.byte()?;
+        if first < 0x80 {
+            return Ok(first as u64);
+        }
+        self.uv_long(first)
+    }
+
+    #[inline(never)]
+    fn uv_long(&mut self, first: u8) -> Result<u64, PayloadError> {
+        let start = self.pos - 1;
+        let mut value = (first & 0x7f) as u64;
+        for shift in (7..64).step_by(7) {
+            let b = self.byte()?;
+            if shift == 63 && b > 1 {
+                return Err(bad(start, "varint overflows 64 bits"));
+            }
+            value |= ((b & 0x7f) as u64) << shift;
+            if b < 0x80 {
+                return Ok(value);
+            }
+        }
+        Err(bad(start, "varint longer than 10 bytes"))
+    }
+
+    #[inline(always)]
+    fn zz(&mut self) -> Result<i64, PayloadError> {
+        self.uv().map(unzigzag)
+    }
+
+    /// A varint that must be at most `max`.
+    fn uv_max(&mut self, max: u64, what: &str) -> Result<u64, PayloadError> {
+        let pos = self.pos;
+        let value = self.uv()?;
+        if value > max {
+            return Err(bad(pos, format!("{what} {value} exceeds {max}")));
+        }
+        Ok(value)
+    }
+
+    fn u32(&mut self, what: &str) -> Result<u32, PayloadError> {
+        self.uv_max(u32::MAX as u64, what).map(|v| v as u32)
+    }
+
+    fn flag(&mut self, what: &str) -> Result<bool, PayloadError> {
+        let pos = self.pos;
+        match self.byte()? {
+            0 => Ok(false),
+            1 => Ok(true),
+            b => Err(bad(pos, format!("{what} flag {b} is neither 0 nor 1"))),
+        }
+    }
+
+    fn mode(&mut self) -> Result<QueryMode, PayloadError> {
+        let pos = self.pos;
+        let code = self.byte()?;
+        QueryMode::from_code(code)
+            .ok_or_else(|| bad(pos, format!("unknown query mode code {code}")))
+    }
+
+    fn take(&mut self, len: usize) -> Result<&'a [u8], PayloadError> {
+        if len > self.remaining() {
+            return Err(bad(self.pos, "record runs past the end of the payload"));
+        }
+        let slice = &self.bytes[self.pos..self.pos + len];
+        self.pos += len;
+        Ok(slice)
+    }
+}
+
+/// Where the next span starts and how depth changes, predicted from the previous span.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct SpanPredictor {
+    x: i64,
+    y: i64,
+    z: i64,
+    /// Depth change per pixel step in x (from the previous span), in depth units.
+    slope_x: i64,
+    /// Depth change per row at fixed x (from the last row-to-row step), in depth units.
+    slope_y: i64,
+}
+
+const SLOPE_LIMIT: i64 = 1 << 25;
+
+impl SpanPredictor {
+    /// The predicted first depth of a span starting `dx`, `dy` from the previous one.
+    #[inline(always)]
+    fn start_depth(&self, dx: i64, dy: i64) -> i64 {
+        (self.z + self.slope_x * dx + self.slope_y * dy).clamp(0, DEPTH_ONE as i64)
+    }
+
+    /// A span starts at (x, y, z), `dx`, `dy` from the previous span.
+    #[inline(always)]
+    fn begin(&mut self, x: i64, y: i64, z: i64, dx: i64, dy: i64) {
+        if dy == 1 {
+            self.slope_y = (z - (self.z + self.slope_x * dx)).clamp(-SLOPE_LIMIT, SLOPE_LIMIT);
+        }
+        self.x = x;
+        self.y = y;
+        self.z = z;
+    }
+
+    /// The span that began at depth `first` ended at depth `last` after `len` fragments.
+    #[inline(always)]
+    fn end(&mut self, first: i64, last: i64, len: usize) {
+        if len >= 2 {
+            // 32-bit division (the operands fit) is much cheaper than 64-bit on the decode path.
+            self.slope_x = ((last - first) as i32).div_euclid(len as i32 - 1) as i64;
+        }
+    }
+}
+
+/// Append a span of fragments at (x0, y), (x0+1, y), ... with depths `depths`.
+pub(crate) fn encode_span(
+    out: &mut Vec<u8>,
+    predictor: &mut SpanPredictor,
+    x0: u16,
+    y: u16,
+    depths: &[u32],
+) {
+    debug_assert!(!depths.is_empty() && depths.len() <= MAX_SPAN_FRAGMENTS);
+    let (x, y) = (x0 as i64, y as i64);
+    let (dx, dy) = (x - predictor.x, y - predictor.y);
+    let first = depths[0] as i64;
+    out.push(tag::SPAN);
+    put_zz(out, dy);
+    put_zz(out, dx);
+    put_uv(out, depths.len() as u64 - 1);
+    put_zz(out, first - predictor.start_depth(dx, dy));
+    // Each step's depth change is predicted by the previous span's slope: rounding a linear
+    // depth leaves residuals in {0, 1} (one bit of entropy), where a second difference
+    // would leave {-1, 0, 1}.
+    let slope = predictor.slope_x;
+    predictor.begin(x, y, first, dx, dy);
+    let mut previous = first;
+    for &depth in &depths[1..] {
+        let depth = depth as i64;
+        put_zz(out, depth - previous - slope);
+        previous = depth;
+    }
+    predictor.end(first, previous, depths.len());
+}
+
+/// Append a non-fragment event whose record is small and fixed in shape.
+pub(crate) fn encode_small_event(out: &mut Vec<u8>, event: &Event) {
+    match event {
+        Event::Clear => out.push(tag::CLEAR),
+        Event::DepthFunc(f) => out.extend_from_slice(&[tag::DEPTH_FUNC, f.code()]),
+        Event::DepthMask(on) => out.extend_from_slice(&[tag::DEPTH_MASK, *on as u8]),
+        Event::DepthTest(on) => out.extend_from_slice(&[tag::DEPTH_TEST, *on as u8]),
+        Event::Cull(on) => out.extend_from_slice(&[tag::CULL, *on as u8]),
+        Event::Scissor(None) => out.push(tag::SCISSOR_OFF),
+        Event::Scissor(Some(rect)) => {
+            out.push(tag::SCISSOR_ON);
+            put_rect(out, rect);
+        }
+        Event::QueryEnd => out.push(tag::QUERY_END),
+        Event::Primitive => out.push(tag::PRIMITIVE),
+        Event::QueryBegin(_) | Event::QueryResult(_) | Event::Fragment(_) => {
+            unreachable!("not a small event: {event:?}")
+        }
+    }
+}
+
+fn put_rect(out: &mut Vec<u8>, rect: &Rect) {
+    for v in [rect.x, rect.y, rect.width, rect.height] {
+        put_uv(out, v as u64);
+    }
+}
+
+/// Append a query begin or result record (tag included); it may be large.
+pub(crate) fn encode_large_event(out: &mut Vec<u8>, event: &Event) {
+    match event {
+        Event::QueryBegin(spec) => {
+            out.push(tag::QUERY_BEGIN);
+            put_uv(out, spec.id as u64);
+            out.push(spec.mode.code());
+            put_uv(out, spec.buffer_entries as u64);
+            put_uv(out, spec.tiles.len() as u64);
+            spec.tiles.iter().for_each(|t| put_rect(out, t));
+        }
+        Event::QueryResult(result) => {
+            out.push(tag::QUERY_RESULT);
+            put_uv(out, result.id as u64);
+            out.push(result.mode.code());
+            put_uv(out, result.overflowed_buffers as u64);
+            put_uv(out, result.tiles.len() as u64);
+            result.tiles.iter().for_each(|t| put_tile_result(out, t));
+        }
+        _ => unreachable!("not a large event: {event:?}"),
+    }
+}
+
+fn put_tile_result(out: &mut Vec<u8>, tile: &TileResult) {
+    put_uv(out, tile.nohc);
+    put_uv(out, tile.phc);
+    for v in [
+        tile.xmin, tile.xmax, tile.ymin, tile.ymax, tile.zmin, tile.zmax,
+    ] {
+        put_uv(out, v as u64);
+    }
+    out.push(tile.overflowed as u8);
+    put_uv(out, tile.hits.len() as u64);
+    let (mut px, mut py) = (0i64, 0i64);
+    for &(x, y) in &tile.hits {
+        put_zz(out, x as i64 - px);
+        put_zz(out, y as i64 - py);
+        (px, py) = (x as i64, y as i64);
+    }
+}
+
+fn rect(c: &mut Cursor) -> Result<Rect, PayloadError> {
+    Ok(Rect::new(
+        c.u32("x")?,
+        c.u32("y")?,
+        c.u32("width")?,
+        c.u32("height")?,
+    ))
+}
+
+/// Decode a query begin or result record (tag included), which must fill `bytes` exactly.
+fn decode_large_event(bytes: &[u8]) -> Result<Event, PayloadError> {
+    let mut c = Cursor::new(bytes, 0);
+    let event = match c.byte()? {
+        tag::QUERY_BEGIN => Event::QueryBegin(query_spec(&mut c)?),
+        tag::QUERY_RESULT => Event::QueryResult(query_result(&mut c)?),
+        t => return Err(bad(0, format!("multi-block event has tag {t:#04x}"))),
+    };
+    if !c.at_end() {
+        return Err(bad(c.pos, "multi-block event has bytes after its end"));
+    }
+    Ok(event)
+}
+
+fn query_spec(c: &mut Cursor) -> Result<QuerySpec, PayloadError> {
+    let id = c.u32("query id")?;
+    let mode = c.mode()?;
+    let buffer_entries = c.u32("buffer entries")?;
+    let count = c.uv_max(MAX_TILES as u64, "tile count")? as usize;
+    // Every tile takes at least 4 bytes: no allocation beyond what the payload can hold.
+    let mut tiles = Vec::with_capacity(count.min(c.remaining() / 4));
+    for _ in 0..count {
+        tiles.push(rect(c)?);
+    }
+    Ok(QuerySpec {
+        id,
+        mode,
+        buffer_entries,
+        tiles,
+    })
+}
+
+fn query_result(c: &mut Cursor) -> Result<QueryResult, PayloadError> {
+    let id = c.u32("query id")?;
+    let mode = c.mode()?;
+    let overflowed_buffers = c.u32("overflowed buffers")?;
+    let count = c.uv_max(MAX_TILES as u64, "tile count")? as usize;
+    // Every tile result takes at least 10 bytes.
+    let mut tiles = Vec::with_capacity(count.min(c.remaining() / 10));
+    for _ in 0..count {
+        tiles.push(tile_result(c)?);
+    }
+    Ok(QueryResult {
+        id,
+        mode,
+        tiles,
+        overflowed_buffers,
+    })
+}
+
+fn tile_result(c: &mut Cursor) -> Result<TileResult, PayloadError> {
+    let nohc = c.uv()?;
+    let phc = c.uv()?;
+    let mut bounds = [0u32; 6];
+    for v in &mut bounds {
+        *v = c.u32("tile bound")?;
+    }
+    let [xmin, xmax, ymin, ymax, zmin, zmax] = bounds;
+    let overflowed = c.flag("overflow")?;
+    let count = c.uv_max(MAX_BUFFER_ENTRIES as u64, "hit count")? as usize;
+    // Every hit takes at least 2 bytes.
+    let mut hits = Vec::with_capacity(count.min(c.remaining() / 2));
+    let (mut x, mut y) = (0i64, 0i64);
+    for _ in 0..count {
+        let pos = c.pos;
+        x = x.wrapping_add(c.zz()?);
+        y = y.wrapping_add(c.zz()?);
+        if !(0..=u16::MAX as i64).contains(&x) || !(0..=u16::MAX as i64).contains(&y) {
+            return Err(bad(pos, "hit coordinates outside 0..=65535"));
+        }
+        hits.push((x as u16, y as u16));
+    }
+    Ok(TileResult {
+        nohc,
+        phc,
+        xmin,
+        xmax,
+        ymin,
+        ymax,
+        zmin,
+        zmax,
+        hits,
+        overflowed,
+    })
+}
+
+/// A span being handed out one fragment at a time (the `next_event` path).
+#[derive(Clone, Copy, Debug, Default)]
+struct SpanProgress {
+    /// Fragments of the span still to hand out.
+    remaining: usize,
+    len: usize,
+    x: u16,
+    y: u16,
+    first: i64,
+    depth: i64,
+    slope: i64,
+}
+
+/// The decoding state of one block's payload.
+#[derive(Debug, Default)]
+pub(crate) struct BlockDecoder {
+    pos: usize,
+    predictor: SpanPredictor,
+    span: SpanProgress,
+    /// Events completed in this block so far.
+    pub events: u64,
+}
+
+/// What the decoder needs beyond the payload: the viewport, the stream checks, and the bytes
+/// of a large event split over blocks.
+pub(crate) struct DecodeContext<'a> {
+    pub width: u32,
+    pub height: u32,
+    pub tally: &'a mut StreamTally,
+    pub assembly: &'a mut Vec<u8>,
+}
+
+/// A decoded record.
+enum Record {
+    Event(Event),
+    /// A span's header was read; its fragments follow.
+    Span,
+    /// Part of a large event was stored.
+    Part,
+}
+
+impl BlockDecoder {
+    pub(crate) fn new() -> BlockDecoder {
+        BlockDecoder::default()
+    }
+
+    /// All events of the payload handed out (the decoder is at the end of the payload).
+    pub(crate) fn is_done(&self, payload: &[u8]) -> bool {
+        self.span.remaining == 0 && self.pos >= payload.len()
+    }
+
+    /// The next fragment if the decoder is inside a span (the common, cheap case).
+    #[inline(always)]
+    pub(crate) fn next_fragment_in_span(
+        &mut self,
+        payload: &[u8],
+    ) -> Option<Result<Fragment, PayloadError>> {
+        (self.span.remaining > 0).then(|| self.next_span_fragment(payload))
+    }
+
+    /// The next event, or None at the end of the payload.
+    pub(crate) fn next_event(
+        &mut self,
+        payload: &[u8],
+        ctx: &mut DecodeContext,
+    ) -> Result<Option<Event>, PayloadError> {
+        loop {
+            if self.span.remaining > 0 {
+                return self
+                    .next_span_fragment(payload)
+                    .map(|f| Some(Event::Fragment(f)));
+            }
+            if self.pos >= payload.len() {
+                return Ok(None);
+            }
+            match self.record(payload, ctx)? {
+                Record::Event(event) => return Ok(Some(event)),
+                Record::Span | Record::Part => {}
+            }
+        }
+    }
+
+    /// Hand every remaining event of the payload to `sink`: the fast path.
+    pub(crate) fn drain(
+        &mut self,
+        payload: &[u8],
+        ctx: &mut DecodeContext,
+        sink: &mut impl EventSink,
+    ) -> Result<(), PayloadError> {
+        while self.span.remaining > 0 {
+            let fragment = self.next_span_fragment(payload)?;
+            sink.event(&Event::Fragment(fragment));
+        }
+        while let Some(&t) = payload.get(self.pos) {
+            // Spans are most records: skip the general dispatch for them.
+            if t == tag::SPAN && ctx.assembly.is_empty() {
+                let mut c = Cursor::new(payload, self.pos + 1);
+                self.span_header(&mut c, ctx)?;
+                self.pos = c.pos;
+                self.drain_span(payload, sink)?;
+                continue;
+            }
+            match self.record(payload, ctx)? {
+                Record::Event(event) => sink.event(&event),
+                Record::Span => self.drain_span(payload, sink)?,
+                Record::Part => {}
+            }
+        }
+        Ok(())
+    }
+
+    /// Read one record; a span's header only sets up `self.span`.
+    fn record(&mut self, payload: &[u8], ctx: &mut DecodeContext) -> Result<Record, PayloadError> {
+        let mut c = Cursor::new(payload, self.pos);
+        let start = c.pos;
+        let t = c.byte()?;
+        if !ctx.assembly.is_empty() && t != tag::PART && t != tag::PART_END {
+            return Err(bad(start, "record inside an unfinished multi-block event"));
+        }
+        let event = match t {
+            tag::SPAN => {
+                self.span_header(&mut c, ctx)?;
+                self.pos = c.pos;
+                return Ok(Record::Span);
+            }
+            tag::PART | tag::PART_END => {
+                let len = c.uv_max(MAX_EVENT_BYTES as u64, "part length")? as usize;
+                let bytes = c.take(len)?;
+                if ctx.assembly.len() + len > MAX_EVENT_BYTES {
+                    return Err(bad(
+                        start,
+                        format!("multi-block event exceeds {MAX_EVENT_BYTES} bytes"),
+                    ));
+                }
+                ctx.assembly.extend_from_slice(bytes);
+                self.pos = c.pos;
+                if t == tag::PART {
+                    return Ok(Record::Part);
+                }
+                let event = decode_large_event(ctx.assembly).map_err(|e| {
+                    bad(
+                        start,
+                        format!("in multi-block event at its byte {}: {}", e.pos, e.reason),
+                    )
+                })?;
+                ctx.assembly.clear();
+                event
+            }
+            tag::QUERY_BEGIN => Event::QueryBegin(query_spec(&mut c)?),
+            tag::QUERY_RESULT => Event::QueryResult(query_result(&mut c)?),
+            tag::CLEAR => Event::Clear,
+            tag::DEPTH_FUNC => {
+                let pos = c.pos;
+                let code = c.byte()?;
+                Event::DepthFunc(
+                    DepthFunc::from_code(code)
+                        .ok_or_else(|| bad(pos, format!("unknown depth function code {code}")))?,
+                )
+            }
+            tag::DEPTH_MASK => Event::DepthMask(c.flag("depth mask")?),
+            tag::DEPTH_TEST => Event::DepthTest(c.flag("depth test")?),
+            tag::CULL => Event::Cull(c.flag("cull")?),
+            tag::SCISSOR_OFF => Event::Scissor(None),
+            tag::SCISSOR_ON => Event::Scissor(Some(rect(&mut c)?)),
+            tag::QUERY_END => Event::QueryEnd,
+            tag::PRIMITIVE => Event::Primitive,
+            t => return Err(bad(start, format!("unknown record tag {t:#04x}"))),
+        };
+        ctx.tally
+            .event(&event)
+            .map_err(|reason| bad(start, reason))?;
+        self.pos = c.pos;
+        self.events += 1;
+        Ok(Record::Event(event))
+    }
+
+    /// Read a span header, check the span lies in the viewport, and set up `self.span`.
+    #[inline(always)]
+    fn span_header(&mut self, c: &mut Cursor, ctx: &mut DecodeContext) -> Result<(), PayloadError> {
+        let start = c.pos - 1;
+        let dy = c.zz()?;
+        let dx = c.zz()?;
+        let len = c.uv_max(MAX_SPAN_FRAGMENTS as u64 - 1, "span length")? as usize + 1;
+        let p = &mut self.predictor;
+        let (x, y) = (p.x.wrapping_add(dx), p.y.wrapping_add(dy));
+        if x < 0 || y < 0 || x + len as i64 > ctx.width as i64 || y >= ctx.height as i64 {
+            return Err(bad(
+                start,
+                format!(
+                    "span of {len} fragments at ({x}, {y}) outside the {}x{} viewport",
+                    ctx.width, ctx.height
+                ),
+            ));
+        }
+        let residual_pos = c.pos;
+        let first = p.start_depth(dx, dy).wrapping_add(c.zz()?);
+        if !(0..=DEPTH_ONE as i64).contains(&first) {
+            return Err(bad(
+                residual_pos,
+                format!("depth {first} outside 0..=2^24-1"),
+            ));
+        }
+        let slope = p.slope_x;
+        p.begin(x, y, first, dx, dy);
+        self.span = SpanProgress {
+            remaining: len,
+            len,
+            x: x as u16,
+            y: y as u16,
+            first,
+            depth: first,
+            slope,
+        };
+        ctx.tally.checked_fragments(len as u64);
+        self.events += len as u64;
+        Ok(())
+    }
+
+    /// One fragment of the current span (slow path, state kept in `self.span`).
+    fn next_span_fragment(&mut self, payload: &[u8]) -> Result<Fragment, PayloadError> {
+        let span = &mut self.span;
+        if span.remaining < span.len {
+            let mut c = Cursor::new(payload, self.pos);
+            let pos = c.pos;
+            span.depth = span.depth.wrapping_add(span.slope).wrapping_add(c.zz()?);
+            if !(0..=DEPTH_ONE as i64).contains(&span.depth) {
+                return Err(bad(pos, format!("depth {} outside 0..=2^24-1", span.depth)));
+            }
+            self.pos = c.pos;
+            span.x += 1;
+        }
+        span.remaining -= 1;
+        if span.remaining == 0 {
+            self.predictor.end(span.first, span.depth, span.len);
+        }
+        Ok(Fragment {
+            x: span.x,
+            y: span.y,
+            z: span.depth as u32,
+        })
+    }
+
+    /// All fragments of a span whose header was just read (fast path).
+    #[inline(always)]
+    fn drain_span(
+        &mut self,
+        payload: &[u8],
+        sink: &mut impl EventSink,
+    ) -> Result<(), PayloadError> {
+        let SpanProgress {
+            len,
+            x,
+            y,
+            first,
+            slope,
+            ..
+        } = self.span;
+        sink.event(&Event::Fragment(Fragment {
+            x,
+            y,
+            z: first as u32,
+        }));
+        let mut pos = self.pos;
+        let mut depth = first;
+        for step in 1..len {
+            let b = match payload.get(pos) {
+                Some(&b) if b < 0x80 => {
+                    pos += 1;
+                    unzigzag(b as u64)
+                }
+                _ => {
+                    let mut c = Cursor::new(payload, pos);
+                    let value = c.zz()?;
+                    pos = c.pos;
+                    value
+                }
+            };
+            depth = depth.wrapping_add(slope).wrapping_add(b);
+            if !(0..=DEPTH_ONE as i64).contains(&depth) {
+                return Err(bad(pos - 1, format!("depth {depth} outside 0..=2^24-1")));
+            }
+            sink.event(&Event::Fragment(Fragment {
+                x: x + step as u16,
+                y,
+                z: depth as u32,
+            }));
+        }
+        self.pos = pos;
+        self.span.remaining = 0;
+        self.predictor.end(first, depth, len);
+        Ok(())
+    }
+}

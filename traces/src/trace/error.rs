@@ -1,0 +1,55 @@
+//! What can go wrong reading or writing a trace, always with the byte offset (reading) or the
+//! event number (writing) where it went wrong. The caller adds the file name.
+
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum TraceError {
+    #[error("byte {offset}: {source}")]
+    Io {
+        offset: u64,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("byte {offset}: trace truncated (file ends inside {inside})")]
+    Truncated { offset: u64, inside: &'static str },
+    #[error("byte 0: not an occsim trace (wrong magic number)")]
+    BadMagic,
+    #[error(
+        "byte {offset}: unsupported trace format version {version} (this reader knows {known})"
+    )]
+    UnsupportedVersion {
+        offset: u64,
+        version: u16,
+        known: u16,
+    },
+    #[error("byte {offset}: bad trace header: {reason}")]
+    BadHeader { offset: u64, reason: String },
+    #[error("byte {offset}: bad block header: {reason}")]
+    BadBlock { offset: u64, reason: String },
+    #[error(
+        "byte {offset}: block checksum mismatch (stored {stored:#010x}, computed {computed:#010x})"
+    )]
+    ChecksumMismatch {
+        offset: u64,
+        stored: u32,
+        computed: u32,
+    },
+    #[error("byte {offset}: block does not decompress: {reason}")]
+    Decompress { offset: u64, reason: String },
+    /// The block at `offset` decompressed, but its events are malformed at `payload_offset`
+    /// (a position in the decompressed payload).
+    #[error("byte {offset}: corrupt block payload at decoded byte {payload_offset}: {reason}")]
+    Corrupt {
+        offset: u64,
+        payload_offset: usize,
+        reason: String,
+    },
+    #[error("byte {offset}: bad summary: {reason}")]
+    BadSummary { offset: u64, reason: String },
+    #[error("byte {offset}: unexpected data after the end of the trace")]
+    TrailingData { offset: u64 },
+    /// The writer was given an event stream it will not store (event numbers count from 0).
+    #[error("event {event}: {reason}")]
+    InvalidEvent { event: u64, reason: String },
+}

@@ -1,0 +1,298 @@
+//! What a trace says about itself: the header (how it was made, written first) and the
+//! summary (what it holds, written last), plus the tally both the writer and the reader keep
+//! of an event stream to produce and to check the summary.
+
+use crate::event::Event;
+use crate::query::{QueryMode, QueryResult, MAX_BUFFER_ENTRIES, MAX_TILES};
+use crate::state::{DepthFunc, MAX_VIEWPORT_SIDE};
+use serde::{Deserialize, Serialize};
+
+/// How a trace was made. Stored as JSON in the file header.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TraceHeader {
+    /// Viewport width in pixels; every fragment has x < width.
+    pub width: u32,
+    /// Viewport height in pixels; every fragment has y < height.
+    pub height: u32,
+    /// Sub-pixel precision of the rasterizer's vertex snapping, in bits.
+    pub subpixel_bits: u32,
+    /// Which pixels on a shared edge belong to a triangle.
+    pub fill_rule: String,
+    /// Encoding of fragment depth.
+    pub depth_format: String,
+    /// The program that produced the trace, with its version.
+    pub generator: String,
+    /// The scene the trace was made from (a built-in name or a file name).
+    pub scene: String,
+}
+
+impl TraceHeader {
+    /// A header for a `width` x `height` viewport with occsim's rasterizer conventions.
+    pub fn new(width: u32, height: u32) -> TraceHeader {
+        TraceHeader {
+            width,
+            height,
+            subpixel_bits: 8,
+            fill_rule: "top-left".to_owned(),
+            depth_format: "unorm24".to_owned(),
+            generator: crate::GENERATOR_VERSION.to_owned(),
+            scene: String::new(),
+        }
+    }
+
+    pub fn with_scene(mut self, scene: impl Into<String>) -> TraceHeader {
+        self.scene = scene.into();
+        self
+    }
+
+    pub fn with_generator(mut self, generator: impl Into<String>) -> TraceHeader {
+        self.generator = generator.into();
+        self
+    }
+
+    /// Why this header cannot describe a trace, if it cannot.
+    pub(crate) fn problem(&self) -> Option<String> {
+        let side = 1..=MAX_VIEWPORT_SIDE;
+        if !side.contains(&self.width) || !side.contains(&self.height) {
+            return Some(format!(
+                "viewport {}x{} outside 1..={MAX_VIEWPORT_SIDE} per side",
+                self.width, self.height
+            ));
+        }
+        None
+    }
+}
+
+/// Which pipeline features a trace exercises (computed from its events).
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TraceFeatures {
+    /// Query modes begun at least once, in `QueryMode::ALL` order.
+    pub query_modes: Vec<QueryMode>,
+    /// Depth functions set at least once, in `DepthFunc::ALL` order.
+    pub depth_funcs: Vec<DepthFunc>,
+    /// A scissor rectangle was enabled.
+    pub scissor: bool,
+    /// Back-face culling was enabled.
+    pub culling: bool,
+    /// The depth buffer was cleared.
+    pub clears: bool,
+    /// Depth writes were disabled (`depthmask off`).
+    pub depth_writes_off: bool,
+    /// The depth test was disabled.
+    pub depth_test_off: bool,
+    /// A verbose query was begun.
+    pub verbose: bool,
+    /// The trace stores the golden model's query results.
+    pub query_results: bool,
+}
+
+/// Queries begun, per mode.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct QueryModeCounts {
+    pub samples: u64,
+    pub any: u64,
+    pub brief: u64,
+    pub verbose: u64,
+}
+
+impl QueryModeCounts {
+    fn count(&mut self, mode: QueryMode) {
+        match mode {
+            QueryMode::Samples => self.samples += 1,
+            QueryMode::Any => self.any += 1,
+            QueryMode::Brief => self.brief += 1,
+            QueryMode::Verbose => self.verbose += 1,
+        }
+    }
+}
+
+/// What a trace holds. Stored as JSON in the final block; a full scan recomputes and checks it.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TraceSummary {
+    /// Events of every kind, fragments included.
+    pub events: u64,
+    pub fragments: u64,
+    pub primitives: u64,
+    /// Queries begun.
+    pub queries: u64,
+    pub queries_by_mode: QueryModeCounts,
+    /// `QueryResult` events stored.
+    pub query_results: u64,
+    pub features: TraceFeatures,
+    /// Event blocks (the summary block not counted).
+    pub blocks: u64,
+    /// Event payload bytes before compression.
+    pub payload_bytes: u64,
+    /// Event payload bytes as stored (after compression), block headers not counted.
+    pub stored_bytes: u64,
+}
+
+/// The parts of a query the stream checks need.
+#[derive(Clone, Copy, Debug)]
+struct QueryShape {
+    id: u32,
+    mode: QueryMode,
+    tiles: usize,
+    buffer_entries: u32,
+}
+
+/// Counts an event stream and checks its structure: fragments inside the viewport, queries
+/// begun before they end and not nested, results matching the query that just ended.
+#[derive(Clone, Debug)]
+pub(crate) struct StreamTally {
+    width: u32,
+    height: u32,
+    open: Option<QueryShape>,
+    awaiting_result: Option<QueryShape>,
+    summary: TraceSummary,
+    /// Bit `code` set when that query mode / depth function was seen.
+    mode_bits: u8,
+    func_bits: u8,
+}
+
+impl StreamTally {
+    pub(crate) fn new(header: &TraceHeader) -> StreamTally {
+        StreamTally {
+            width: header.width,
+            height: header.height,
+            open: None,
+            awaiting_result: None,
+            summary: TraceSummary::default(),
+            mode_bits: 0,
+            func_bits: 0,
+        }
+    }
+
+    /// Account `count` fragments already checked to lie inside the viewport.
+    #[inline(always)]
+    pub(crate) fn checked_fragments(&mut self, count: u64) {
+        self.summary.fragments += count;
+        self.summary.events += count;
+    }
+
+    /// Check and account one event. The error says what is wrong with it.
+    pub(crate) fn event(&mut self, event: &Event) -> Result<(), String> {
+        let features = &mut self.summary.features;
+        match event {
+            Event::Fragment(f) => {
+                if f.x as u32 >= self.width
+                    || f.y as u32 >= self.height
+                    || f.z > crate::event::DEPTH_ONE
+                {
+                    return Err(format!(
+                        "fragment ({}, {}, z {}) outside the {}x{} viewport or 24-bit depth",
+                        f.x, f.y, f.z, self.width, self.height
+                    ));
+                }
+                self.summary.fragments += 1;
+            }
+            Event::Primitive => self.summary.primitives += 1,
+            Event::Clear => features.clears = true,
+            Event::DepthFunc(f) => self.func_bits |= 1 << f.code(),
+            Event::DepthMask(on) => features.depth_writes_off |= !on,
+            Event::DepthTest(on) => features.depth_test_off |= !on,
+            Event::Cull(on) => features.culling |= on,
+            Event::Scissor(rect) => features.scissor |= rect.is_some(),
+            Event::QueryBegin(spec) => {
+                if let Some(open) = self.open {
+                    return Err(format!(
+                        "query {} begins inside open query {}",
+                        spec.id, open.id
+                    ));
+                }
+                if spec.tiles.len() > MAX_TILES {
+                    return Err(format!(
+                        "query {} has {} tiles (most {MAX_TILES})",
+                        spec.id,
+                        spec.tiles.len()
+                    ));
+                }
+                if !(crate::query::BRIEF_RECORD_ENTRIES..=MAX_BUFFER_ENTRIES)
+                    .contains(&spec.buffer_entries)
+                {
+                    return Err(format!(
+                        "query {} buffer of {} entries",
+                        spec.id, spec.buffer_entries
+                    ));
+                }
+                self.open = Some(QueryShape {
+                    id: spec.id,
+                    mode: spec.mode,
+                    tiles: spec.tiles.len(),
+                    buffer_entries: spec.buffer_entries,
+                });
+                self.awaiting_result = None;
+                self.summary.queries += 1;
+                self.summary.queries_by_mode.count(spec.mode);
+                self.mode_bits |= 1 << spec.mode.code();
+            }
+            Event::QueryEnd => match self.open.take() {
+                Some(open) => self.awaiting_result = Some(open),
+                None => return Err("query end without begin".to_owned()),
+            },
+            Event::QueryResult(result) => {
+                let Some(ended) = self.awaiting_result.take() else {
+                    return Err(format!(
+                        "result of query {} without a query end before it",
+                        result.id
+                    ));
+                };
+                self.check_result(ended, result)?;
+                self.summary.query_results += 1;
+            }
+        }
+        self.summary.events += 1;
+        Ok(())
+    }
+
+    fn check_result(&self, ended: QueryShape, result: &QueryResult) -> Result<(), String> {
+        if result.id != ended.id || result.mode != ended.mode || result.tiles.len() != ended.tiles {
+            return Err(format!(
+                "result (query {}, {}, {} tiles) does not match the query that ended (query {}, {}, {} tiles)",
+                result.id, result.mode.name(), result.tiles.len(), ended.id, ended.mode.name(), ended.tiles
+            ));
+        }
+        let hit_room = match ended.mode {
+            QueryMode::Verbose => {
+                (ended.buffer_entries - crate::query::BRIEF_RECORD_ENTRIES) as usize
+            }
+            _ => 0,
+        };
+        for (index, tile) in result.tiles.iter().enumerate() {
+            if tile.hits.len() > hit_room {
+                return Err(format!(
+                    "tile {index} of query {} holds {} hits (room for {hit_room})",
+                    ended.id,
+                    tile.hits.len()
+                ));
+            }
+            if let Some(&(x, y)) = tile
+                .hits
+                .iter()
+                .find(|&&(x, y)| x as u32 >= self.width || y as u32 >= self.height)
+            {
+                return Err(format!(
+                    "tile {index} of query {}: hit ({x}, {y}) outside the viewport",
+                    ended.id
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// The tally so far as a summary (block and byte counts are the caller's business).
+    pub(crate) fn summary(&self) -> TraceSummary {
+        let mut summary = self.summary.clone();
+        summary.features.query_modes = QueryMode::ALL
+            .into_iter()
+            .filter(|m| self.mode_bits & (1 << m.code()) != 0)
+            .collect();
+        summary.features.depth_funcs = DepthFunc::ALL
+            .into_iter()
+            .filter(|f| self.func_bits & (1 << f.code()) != 0)
+            .collect();
+        summary.features.verbose = self.mode_bits & (1 << QueryMode::Verbose.code()) != 0;
+        summary.features.query_results = summary.query_results > 0;
+        summary
+    }
+}

@@ -1,0 +1,47 @@
+//! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
+//!
+//! # Layout (version 1; all integers little-endian)
+//!
+//! ```text
+//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 1 | flags u16 = 0
+//!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
+//!               (the CRC covers version .. end of JSON)
+//! event blocks  block header (20) | stored payload (stored_len)
+//! summary block block header (20, kind 2, stored) | summary JSON
+//! trailer       summary block offset u64 | "OCCTEND\n" (8)
+//!
+//! block header  kind u8 (1 events, 2 summary) | codec u8 (0 stored, 1 zstd) | reserved u16 = 0
+//!               | events u32 | raw_len u32 (<= 1 MiB) | stored_len u32 | CRC32 u32
+//!               (the CRC covers the first 16 header bytes and the stored payload)
+//! ```
+//!
+//! An event payload is a sequence of records, each a tag byte and fields (varints are
+//! LEB128; signed ones zigzag). Fragments travel in spans, runs at x, x+1, ... on one row:
+//! `SPAN dy dx (len-1) z0-residual` and then one depth residual per further fragment. The
+//! span's start is coded relative to the previous span's; its first depth relative to the
+//! previous span's first depth moved along the depth slopes (per x from the previous span,
+//! per row from the last row step); each further depth relative to the one before plus the
+//! previous span's x slope. All prediction state resets at each block start, so blocks
+//! decode independently; only a query begin or result too large for one block is split
+//! into `PART` records across consecutive blocks. See `codec.rs` for the record tags.
+
+mod block;
+mod codec;
+mod error;
+mod header;
+mod reader;
+pub mod synthetic;
+mod writer;
+
+#[cfg(test)]
+mod tests;
+
+pub use block::{
+    BLOCK_HEADER_BYTES, END_MAGIC, FORMAT_VERSION, MAGIC, MAX_BLOCK_BYTES, MAX_HEADER_JSON_BYTES,
+    MAX_STORED_BYTES, MAX_SUMMARY_JSON_BYTES, TRAILER_BYTES,
+};
+pub use codec::MAX_EVENT_BYTES;
+pub use error::TraceError;
+pub use header::{QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary};
+pub use reader::TraceReader;
+pub use writer::{TraceWriter, WriterOptions};

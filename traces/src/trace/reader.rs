@@ -1,0 +1,507 @@
+//! The streaming trace reader: blocks in, events out, one block of memory.
+
+use super::block::*;
+use super::codec::{BlockDecoder, DecodeContext, PayloadError};
+use super::header::{StreamTally, TraceHeader, TraceSummary};
+use super::TraceError;
+use crate::event::Event;
+use crate::golden::EventSink;
+use std::io::{Read, Seek, SeekFrom};
+
+/// Reads a trace from `R`, checking every block's checksum and every event's sense.
+pub struct TraceReader<R: Read> {
+    input: R,
+    /// Bytes consumed so far: the file offset of the next byte.
+    offset: u64,
+    header: TraceHeader,
+    decompressor: zstd::bulk::Decompressor<'static>,
+    /// The current block's payload as stored, and decompressed.
+    stored: Vec<u8>,
+    payload: Vec<u8>,
+    decoder: BlockDecoder,
+    /// The current block's file offset and its claimed event count.
+    block_offset: u64,
+    block_events: u32,
+    in_block: bool,
+    tally: StreamTally,
+    /// The bytes gathered so far of an event split over blocks.
+    assembly: Vec<u8>,
+    blocks: u64,
+    payload_bytes: u64,
+    stored_bytes: u64,
+    /// The sum of the event counts the block headers claim.
+    claimed_events: u64,
+    /// Some blocks were skipped, not decoded: the event tally is incomplete.
+    skipped: bool,
+    summary: Option<TraceSummary>,
+    failed: bool,
+}
+
+impl<R: Read> TraceReader<R> {
+    /// Read and check the file header.
+    pub fn new(input: R) -> Result<TraceReader<R>, TraceError> {
+        let mut reader = TraceReader {
+            input,
+            offset: 0,
+            header: TraceHeader::new(1, 1),
+            decompressor: zstd::bulk::Decompressor::new().map_err(|e| TraceError::Decompress {
+                offset: 0,
+                reason: e.to_string(),
+            })?,
+            stored: Vec::new(),
+            payload: Vec::new(),
+            decoder: BlockDecoder::new(),
+            block_offset: 0,
+            block_events: 0,
+            in_block: false,
+            tally: StreamTally::new(&TraceHeader::new(1, 1)),
+            assembly: Vec::new(),
+            blocks: 0,
+            payload_bytes: 0,
+            stored_bytes: 0,
+            claimed_events: 0,
+            skipped: false,
+            summary: None,
+            failed: false,
+        };
+        reader.header = reader.read_file_header()?;
+        reader.tally = StreamTally::new(&reader.header);
+        Ok(reader)
+    }
+
+    pub fn header(&self) -> &TraceHeader {
+        &self.header
+    }
+
+    /// The summary, once the end of the trace has been reached (and checked).
+    pub fn summary(&self) -> Option<&TraceSummary> {
+        self.summary.as_ref()
+    }
+
+    /// Fill `buf` from the input, or say where the file ended.
+    fn fill(
+        &mut self,
+        buf_len: usize,
+        into_stored: bool,
+        inside: &'static str,
+    ) -> Result<(), TraceError> {
+        let buf = if into_stored {
+            &mut self.stored
+        } else {
+            &mut self.payload
+        };
+        buf.clear();
+        buf.resize(buf_len, 0);
+        let mut got = 0;
+        while got < buf_len {
+            match self.input.read(&mut buf[got..]) {
+                Ok(0) => {
+                    return Err(TraceError::Truncated {
+                        offset: self.offset + got as u64,
+                        inside,
+                    })
+                }
+                Ok(n) => got += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(source) => {
+                    return Err(TraceError::Io {
+                        offset: self.offset + got as u64,
+                        source,
+                    })
+                }
+            }
+        }
+        self.offset += buf_len as u64;
+        Ok(())
+    }
+
+    fn read_array<const N: usize>(&mut self, inside: &'static str) -> Result<[u8; N], TraceError> {
+        self.fill(N, true, inside)?;
+        let mut bytes = [0u8; N];
+        bytes.copy_from_slice(&self.stored);
+        Ok(bytes)
+    }
+
+    fn read_file_header(&mut self) -> Result<TraceHeader, TraceError> {
+        let magic: [u8; 8] = self.read_array("the magic number")?;
+        if magic != MAGIC {
+            return Err(TraceError::BadMagic);
+        }
+        let fixed: [u8; 8] = self.read_array("the file header")?;
+        let version = u16::from_le_bytes([fixed[0], fixed[1]]);
+        if version != FORMAT_VERSION {
+            return Err(TraceError::UnsupportedVersion {
+                offset: 8,
+                version,
+                known: FORMAT_VERSION,
+            });
+        }
+        if fixed[2] != 0 || fixed[3] != 0 {
+            let reason = "flags are not zero".to_owned();
+            return Err(TraceError::BadHeader { offset: 10, reason });
+        }
+        let json_len = u32::from_le_bytes([fixed[4], fixed[5], fixed[6], fixed[7]]);
+        if json_len > MAX_HEADER_JSON_BYTES {
+            let reason = format!("header JSON of {json_len} bytes exceeds {MAX_HEADER_JSON_BYTES}");
+            return Err(TraceError::BadHeader { offset: 12, reason });
+        }
+        self.fill(json_len as usize, false, "the header JSON")?;
+        let stored_crc = u32::from_le_bytes(self.read_array("the header checksum")?);
+        let mut hasher = crc32fast::Hasher::new();
+        hasher.update(&fixed);
+        hasher.update(&self.payload);
+        let computed = hasher.finalize();
+        if computed != stored_crc {
+            return Err(TraceError::ChecksumMismatch {
+                offset: 8,
+                stored: stored_crc,
+                computed,
+            });
+        }
+        let json_offset = FILE_HEADER_FIXED_BYTES;
+        let header: TraceHeader =
+            serde_json::from_slice(&self.payload).map_err(|e| TraceError::BadHeader {
+                offset: json_offset,
+                reason: e.to_string(),
+            })?;
+        if let Some(reason) = header.problem() {
+            return Err(TraceError::BadHeader {
+                offset: json_offset,
+                reason,
+            });
+        }
+        Ok(header)
+    }
+
+    /// Read the next block header and stored payload, checking the checksum. Returns the
+    /// header, the payload being in `self.stored`.
+    fn read_block(&mut self) -> Result<BlockHeader, TraceError> {
+        self.block_offset = self.offset;
+        let bytes: [u8; BLOCK_HEADER_BYTES] = self.read_array("a block header")?;
+        let offset = self.block_offset;
+        let (header, stored_crc) =
+            BlockHeader::parse(&bytes).map_err(|reason| TraceError::BadBlock { offset, reason })?;
+        self.fill(header.stored_len as usize, true, "a block")?;
+        let computed = header.checksum(&self.stored);
+        if computed != stored_crc {
+            return Err(TraceError::ChecksumMismatch {
+                offset,
+                stored: stored_crc,
+                computed,
+            });
+        }
+        Ok(header)
+    }
+
+    /// Load the next block for decoding. Returns false at the summary (the end).
+    fn load_block(&mut self, decode: bool) -> Result<bool, TraceError> {
+        let header = self.read_block()?;
+        if header.kind == KIND_SUMMARY {
+            self.finish_at_summary()?;
+            return Ok(false);
+        }
+        self.blocks += 1;
+        self.payload_bytes += header.raw_len as u64;
+        self.stored_bytes += header.stored_len as u64;
+        self.claimed_events += header.events as u64;
+        self.block_events = header.events;
+        if !decode {
+            self.skipped = true;
+            return Ok(true);
+        }
+        if header.codec == CODEC_ZSTD {
+            self.payload.clear();
+            self.payload.reserve(header.raw_len as usize);
+            let result = self
+                .decompressor
+                .decompress_to_buffer(&self.stored[..], &mut self.payload);
+            let offset = self.block_offset;
+            match result {
+                Ok(n) if n == header.raw_len as usize => {}
+                Ok(n) => {
+                    let reason =
+                        format!("decompressed to {n} bytes, header says {}", header.raw_len);
+                    return Err(TraceError::Decompress { offset, reason });
+                }
+                Err(e) => {
+                    let reason = e.to_string();
+                    return Err(TraceError::Decompress { offset, reason });
+                }
+            }
+        } else {
+            std::mem::swap(&mut self.stored, &mut self.payload);
+        }
+        self.decoder = BlockDecoder::new();
+        self.in_block = true;
+        Ok(true)
+    }
+
+    fn corrupt(&self, error: PayloadError) -> TraceError {
+        TraceError::Corrupt {
+            offset: self.block_offset,
+            payload_offset: error.pos,
+            reason: error.reason,
+        }
+    }
+
+    /// The current block is fully decoded: check its event count.
+    fn end_block(&mut self) -> Result<(), TraceError> {
+        self.in_block = false;
+        if self.decoder.events != self.block_events as u64 {
+            return Err(TraceError::Corrupt {
+                offset: self.block_offset,
+                payload_offset: self.payload.len(),
+                reason: format!(
+                    "block header claims {} events, the block holds {}",
+                    self.block_events, self.decoder.events
+                ),
+            });
+        }
+        Ok(())
+    }
+
+    /// The summary block is in `self.stored`: parse it, read the trailer, check both.
+    fn finish_at_summary(&mut self) -> Result<(), TraceError> {
+        let offset = self.block_offset;
+        let bad = |reason: String| TraceError::BadSummary { offset, reason };
+        let stored: TraceSummary =
+            serde_json::from_slice(&self.stored).map_err(|e| bad(e.to_string()))?;
+        let trailer: [u8; TRAILER_BYTES] = self.read_array("the trailer")?;
+        let pointer = u64::from_le_bytes(trailer[..8].try_into().unwrap_or_default());
+        if trailer[8..] != END_MAGIC || pointer != offset {
+            return Err(bad("the trailer does not point at the summary".to_owned()));
+        }
+        let mut extra = [0u8; 1];
+        let trailing = loop {
+            match self.input.read(&mut extra) {
+                Ok(n) => break n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(source) => {
+                    return Err(TraceError::Io {
+                        offset: self.offset,
+                        source,
+                    })
+                }
+            }
+        };
+        if trailing != 0 {
+            return Err(TraceError::TrailingData {
+                offset: self.offset,
+            });
+        }
+        let mut found = if self.skipped {
+            let mut partial = stored.clone();
+            partial.events = self.claimed_events;
+            partial
+        } else {
+            if !self.assembly.is_empty() {
+                return Err(bad("the trace ends inside a multi-block event".to_owned()));
+            }
+            self.tally.summary()
+        };
+        found.blocks = self.blocks;
+        found.payload_bytes = self.payload_bytes;
+        found.stored_bytes = self.stored_bytes;
+        if found != stored || self.claimed_events != stored.events {
+            return Err(bad(format!(
+                "it disagrees with the trace on {}",
+                differing_fields(&stored, &found)
+            )));
+        }
+        self.summary = Some(stored);
+        Ok(())
+    }
+
+    /// Run `step`, and stop the reader for good if it fails.
+    fn guarded<T>(
+        &mut self,
+        step: impl FnOnce(&mut Self) -> Result<T, TraceError>,
+    ) -> Result<T, TraceError> {
+        let result = step(self);
+        self.failed |= result.is_err();
+        result
+    }
+
+    fn at_end(&self) -> bool {
+        self.failed || self.summary.is_some()
+    }
+
+    /// The next event; None at the end of the trace (or after an error).
+    pub fn next_event(&mut self) -> Result<Option<Event>, TraceError> {
+        if self.at_end() {
+            return Ok(None);
+        }
+        if self.in_block {
+            match self.decoder.next_fragment_in_span(&self.payload) {
+                Some(Ok(fragment)) => return Ok(Some(Event::Fragment(fragment))),
+                Some(Err(e)) => {
+                    self.failed = true;
+                    return Err(self.corrupt(e));
+                }
+                None => {}
+            }
+        }
+        self.guarded(|reader| loop {
+            if !reader.in_block {
+                if !reader.load_block(true)? {
+                    return Ok(None);
+                }
+                continue;
+            }
+            let mut ctx = DecodeContext {
+                width: reader.header.width,
+                height: reader.header.height,
+                tally: &mut reader.tally,
+                assembly: &mut reader.assembly,
+            };
+            match reader.decoder.next_event(&reader.payload, &mut ctx) {
+                Ok(Some(event)) => return Ok(Some(event)),
+                Ok(None) => reader.end_block()?,
+                Err(e) => return Err(reader.corrupt(e)),
+            }
+        })
+    }
+
+    /// The fast path: hand the rest of the current block (or all of the next one) to `sink`.
+    /// Returns false at the end of the trace.
+    pub fn next_block(&mut self, sink: &mut impl EventSink) -> Result<bool, TraceError> {
+        if self.at_end() {
+            return Ok(false);
+        }
+        self.guarded(|reader| {
+            if !reader.in_block && !reader.load_block(true)? {
+                return Ok(false);
+            }
+            let mut ctx = DecodeContext {
+                width: reader.header.width,
+                height: reader.header.height,
+                tally: &mut reader.tally,
+                assembly: &mut reader.assembly,
+            };
+            if let Err(e) = reader.decoder.drain(&reader.payload, &mut ctx, sink) {
+                return Err(reader.corrupt(e));
+            }
+            debug_assert!(reader.decoder.is_done(&reader.payload));
+            reader.end_block()?;
+            Ok(true)
+        })
+    }
+
+    /// Hand every remaining event to `sink`; returns the (checked) summary.
+    pub fn read_into(&mut self, sink: &mut impl EventSink) -> Result<TraceSummary, TraceError> {
+        while self.next_block(sink)? {}
+        self.finished_summary()
+    }
+
+    /// Skip to the end without decoding the remaining blocks (their checksums are still
+    /// checked); returns the summary, checked against the block headers.
+    pub fn skip_to_summary(&mut self) -> Result<TraceSummary, TraceError> {
+        if !self.at_end() {
+            self.guarded(|reader| {
+                if reader.in_block {
+                    reader.in_block = false;
+                    reader.skipped = true;
+                }
+                while reader.load_block(false)? {}
+                Ok(())
+            })?;
+        }
+        self.finished_summary()
+    }
+
+    fn finished_summary(&self) -> Result<TraceSummary, TraceError> {
+        self.summary.clone().ok_or_else(|| TraceError::BadSummary {
+            offset: self.offset,
+            reason: "the reader stopped at an earlier error".to_owned(),
+        })
+    }
+}
+
+impl<R: Read + Seek> TraceReader<R> {
+    /// Read the header and the summary only, seeking to the summary through the trailer.
+    pub fn read_summary(input: R) -> Result<(TraceHeader, TraceSummary), TraceError> {
+        let mut reader = TraceReader::new(input)?;
+        let header_end = reader.offset;
+        let io = |offset: u64| move |source| TraceError::Io { offset, source };
+        let end = reader
+            .input
+            .seek(SeekFrom::End(0))
+            .map_err(io(header_end))?;
+        let minimum = header_end + (BLOCK_HEADER_BYTES + TRAILER_BYTES) as u64;
+        if end < minimum {
+            return Err(TraceError::Truncated {
+                offset: end,
+                inside: "the trailer",
+            });
+        }
+        let trailer_at = end - TRAILER_BYTES as u64;
+        reader
+            .input
+            .seek(SeekFrom::Start(trailer_at))
+            .map_err(io(trailer_at))?;
+        reader.offset = trailer_at;
+        let trailer: [u8; TRAILER_BYTES] = reader.read_array("the trailer")?;
+        let summary_at = u64::from_le_bytes(trailer[..8].try_into().unwrap_or_default());
+        if trailer[8..] != END_MAGIC
+            || summary_at < header_end
+            || summary_at > trailer_at - BLOCK_HEADER_BYTES as u64
+        {
+            let reason = "the trailer does not point at a summary".to_owned();
+            return Err(TraceError::BadSummary {
+                offset: trailer_at,
+                reason,
+            });
+        }
+        reader
+            .input
+            .seek(SeekFrom::Start(summary_at))
+            .map_err(io(summary_at))?;
+        reader.offset = summary_at;
+        let block = reader.read_block()?;
+        if block.kind != KIND_SUMMARY {
+            let reason = "the trailer points at an event block".to_owned();
+            return Err(TraceError::BadSummary {
+                offset: summary_at,
+                reason,
+            });
+        }
+        let summary =
+            serde_json::from_slice(&reader.stored).map_err(|e| TraceError::BadSummary {
+                offset: summary_at,
+                reason: e.to_string(),
+            })?;
+        Ok((reader.header, summary))
+    }
+}
+
+impl<R: Read> Iterator for TraceReader<R> {
+    type Item = Result<Event, TraceError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_event().transpose()
+    }
+}
+
+/// The top-level fields on which two summaries differ, for error messages.
+fn differing_fields(a: &TraceSummary, b: &TraceSummary) -> String {
+    let (Ok(serde_json::Value::Object(a)), Ok(serde_json::Value::Object(b))) =
+        (serde_json::to_value(a), serde_json::to_value(b))
+    else {
+        return "its contents".to_owned();
+    };
+    let fields: Vec<String> = a
+        .iter()
+        .filter(|(key, value)| b.get(*key) != Some(value))
+        .map(|(key, value)| {
+            format!(
+                "{key} (summary {value}, trace {})",
+                b.get(key).cloned().unwrap_or_default()
+            )
+        })
+        .collect();
+    if fields.is_empty() {
+        "the event count".to_owned()
+    } else {
+        fields.join(", ")
+    }
+}

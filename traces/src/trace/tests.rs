@@ -1,0 +1,501 @@
+use super::block::{BlockHeader, BLOCK_HEADER_BYTES};
+use super::synthetic::{generate, SyntheticScene};
+use super::*;
+use crate::event::{Event, Fragment, DEPTH_ONE};
+use crate::golden::EventSink;
+use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult};
+use crate::state::{DepthFunc, Rect};
+use proptest::prelude::*;
+use std::io::Cursor;
+
+const SIDE: u32 = 16384;
+
+fn write(
+    header: &TraceHeader,
+    options: WriterOptions,
+    events: &[Event],
+) -> (Vec<u8>, TraceSummary) {
+    let mut bytes = Vec::new();
+    let mut writer = TraceWriter::with_options(&mut bytes, header, options).unwrap();
+    for event in events {
+        writer.write_event(event).unwrap();
+    }
+    let summary = writer.finish().unwrap();
+    (bytes, summary)
+}
+
+fn write_default(events: &[Event]) -> Vec<u8> {
+    write(
+        &TraceHeader::new(SIDE, SIDE).with_scene("test"),
+        WriterOptions::default(),
+        events,
+    )
+    .0
+}
+
+/// Every event through `next_event`, then the summary.
+fn read_one_by_one(bytes: &[u8]) -> Result<(Vec<Event>, TraceSummary), TraceError> {
+    let mut reader = TraceReader::new(bytes)?;
+    let mut events = Vec::new();
+    while let Some(event) = reader.next_event()? {
+        events.push(event);
+    }
+    Ok((
+        events,
+        reader.summary().cloned().expect("summary at the end"),
+    ))
+}
+
+fn read_bulk(bytes: &[u8]) -> Result<(Vec<Event>, TraceSummary), TraceError> {
+    let mut reader = TraceReader::new(bytes)?;
+    let mut events = Vec::new();
+    let summary = reader.read_into(&mut events)?;
+    Ok((events, summary))
+}
+
+fn frag(x: u16, y: u16, z: u32) -> Event {
+    Event::Fragment(Fragment { x, y, z })
+}
+
+fn grid_tiles(columns: u32, rows: u32, side: u32) -> Vec<Rect> {
+    (0..rows)
+        .flat_map(|r| (0..columns).map(move |c| Rect::new(c * side, r * side, side, side)))
+        .collect()
+}
+
+/// A stream holding every event kind with extreme values.
+fn every_kind() -> Vec<Event> {
+    let mut events = vec![Event::Clear];
+    events.extend(DepthFunc::ALL.into_iter().map(Event::DepthFunc));
+    for on in [false, true] {
+        events.extend([Event::DepthMask(on), Event::DepthTest(on), Event::Cull(on)]);
+    }
+    events.push(Event::Scissor(Some(Rect::new(0, u32::MAX, u32::MAX, 7))));
+    events.push(Event::Scissor(None));
+    let tiles = grid_tiles(64, 64, 256);
+    events.push(Event::QueryBegin(QuerySpec {
+        id: u32::MAX,
+        mode: QueryMode::Verbose,
+        buffer_entries: 8 + 3,
+        tiles: tiles.clone(),
+    }));
+    events.push(Event::Primitive);
+    events.extend([
+        frag(0, 0, 0),
+        frag(16383, 16383, DEPTH_ONE),
+        frag(16383, 0, 0),
+        frag(0, 16383, DEPTH_ONE),
+    ]);
+    events.extend((0..300).map(|i| frag(100 + i, 7, (i as u32 * 5000) % (DEPTH_ONE + 1))));
+    events.extend((0..3).map(|i| frag(16381 + i, 9, DEPTH_ONE - i as u32)));
+    events.push(Event::Primitive);
+    events.push(Event::QueryEnd);
+    let mut result_tiles = vec![TileResult::default(); tiles.len()];
+    result_tiles[0] = TileResult {
+        nohc: u64::MAX,
+        phc: 0,
+        xmin: 0,
+        xmax: u32::MAX,
+        ymin: 3,
+        ymax: 4,
+        zmin: 0,
+        zmax: DEPTH_ONE,
+        hits: vec![(0, 0), (16383, 16383), (5, 0)],
+        overflowed: true,
+    };
+    result_tiles[4095].hits = vec![(16383, 0)];
+    events.push(Event::QueryResult(QueryResult {
+        id: u32::MAX,
+        mode: QueryMode::Verbose,
+        tiles: result_tiles,
+        overflowed_buffers: 1,
+    }));
+    events.push(Event::QueryBegin(QuerySpec {
+        id: 0,
+        mode: QueryMode::Samples,
+        buffer_entries: 8,
+        tiles: vec![Rect::new(0, 0, SIDE, SIDE)],
+    }));
+    events.push(frag(1, 1, 1));
+    events.push(Event::QueryEnd);
+    events
+}
+
+#[test]
+fn every_event_kind_round_trips_through_both_read_paths() {
+    let events = every_kind();
+    let header = TraceHeader::new(SIDE, SIDE).with_scene("every kind");
+    for options in [
+        WriterOptions::default(),
+        WriterOptions {
+            block_bytes: 4096,
+            zstd_level: 1,
+        },
+    ] {
+        let (bytes, written) = write(&header, options, &events);
+        let (one_by_one, summary) = read_one_by_one(&bytes).unwrap();
+        assert_eq!(one_by_one, events);
+        assert_eq!(summary, written);
+        let (bulk, summary) = read_bulk(&bytes).unwrap();
+        assert_eq!(bulk, events);
+        assert_eq!(summary, written);
+        assert_eq!(TraceReader::new(&bytes[..]).unwrap().header(), &header);
+    }
+}
+
+#[test]
+fn summary_counts_what_the_stream_holds() {
+    let (_, summary) = write(
+        &TraceHeader::new(SIDE, SIDE),
+        WriterOptions::default(),
+        &every_kind(),
+    );
+    // Counted by hand: 18 state and query events before the fragments, 2 primitives, 308
+    // fragments, then end, result, begin, end.
+    assert_eq!(summary.events, 18 + 2 + 308 + 4);
+    assert_eq!(summary.fragments, 4 + 300 + 3 + 1);
+    assert_eq!(summary.primitives, 2);
+    assert_eq!(summary.queries, 2);
+    assert_eq!(summary.query_results, 1);
+    assert_eq!(
+        summary.queries_by_mode,
+        QueryModeCounts {
+            samples: 1,
+            any: 0,
+            brief: 0,
+            verbose: 1
+        }
+    );
+    let features = &summary.features;
+    assert_eq!(
+        features.query_modes,
+        vec![QueryMode::Samples, QueryMode::Verbose]
+    );
+    assert_eq!(features.depth_funcs, DepthFunc::ALL.to_vec());
+    assert!(features.scissor && features.culling && features.clears && features.verbose);
+    assert!(features.depth_writes_off && features.depth_test_off && features.query_results);
+}
+
+#[test]
+fn a_result_larger_than_a_block_travels_in_parts() {
+    let tiles = grid_tiles(256, 256, 64);
+    let hits: Vec<(u16, u16)> = (0..256).map(|i| (i * 61 % 16384, i * 17)).collect();
+    let results = tiles
+        .iter()
+        .map(|_| TileResult {
+            nohc: 300,
+            phc: 300,
+            hits: hits.clone(),
+            ..TileResult::default()
+        })
+        .collect();
+    let events = vec![
+        Event::QueryBegin(QuerySpec {
+            id: 9,
+            mode: QueryMode::Verbose,
+            buffer_entries: 8 + 256,
+            tiles,
+        }),
+        Event::QueryEnd,
+        Event::QueryResult(QueryResult {
+            id: 9,
+            mode: QueryMode::Verbose,
+            tiles: results,
+            overflowed_buffers: 0,
+        }),
+        Event::Primitive,
+        frag(3, 4, 5),
+    ];
+    let (bytes, summary) = write(
+        &TraceHeader::new(SIDE, SIDE),
+        WriterOptions::default(),
+        &events,
+    );
+    assert!(
+        summary.blocks >= 10,
+        "expected the result to span blocks: {summary:?}"
+    );
+    assert_eq!(read_one_by_one(&bytes).unwrap().0, events);
+    assert_eq!(read_bulk(&bytes).unwrap().0, events);
+}
+
+#[test]
+fn same_events_give_the_same_bytes() {
+    assert_eq!(write_default(&every_kind()), write_default(&every_kind()));
+    let scene = large_triangles(50_000);
+    let header = TraceHeader::new(scene.width, scene.height);
+    let encode = || {
+        let mut out = Vec::new();
+        let mut writer = TraceWriter::new(&mut out, &header).unwrap();
+        generate(&scene, &mut writer);
+        writer.finish().unwrap();
+        out
+    };
+    assert_eq!(encode(), encode());
+}
+
+#[test]
+fn summary_paths_agree_with_a_full_scan() {
+    let bytes = write_default(&every_kind());
+    let (_, scanned) = read_bulk(&bytes).unwrap();
+    let skipped = TraceReader::new(&bytes[..])
+        .unwrap()
+        .skip_to_summary()
+        .unwrap();
+    let (header, sought) = TraceReader::read_summary(Cursor::new(&bytes)).unwrap();
+    assert_eq!(skipped, scanned);
+    assert_eq!(sought, scanned);
+    assert_eq!(header.scene, "test");
+}
+
+fn first_block_offset(bytes: &[u8]) -> usize {
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    16 + json_len + 4
+}
+
+#[test]
+fn wrong_magic_is_named() {
+    let mut bytes = write_default(&every_kind());
+    bytes[0] = b'X';
+    let error = TraceReader::new(&bytes[..]).err().unwrap();
+    assert!(matches!(error, TraceError::BadMagic), "{error}");
+    assert_eq!(
+        error.to_string(),
+        "byte 0: not an occsim trace (wrong magic number)"
+    );
+}
+
+#[test]
+fn unknown_version_is_named() {
+    let mut bytes = write_default(&every_kind());
+    bytes[8] = 2;
+    let error = TraceReader::new(&bytes[..]).err().unwrap();
+    assert!(
+        matches!(
+            error,
+            TraceError::UnsupportedVersion {
+                offset: 8,
+                version: 2,
+                ..
+            }
+        ),
+        "{error}"
+    );
+}
+
+#[test]
+fn a_flipped_byte_in_a_block_fails_its_checksum_at_the_block_offset() {
+    let clean = write_default(&every_kind());
+    let block = first_block_offset(&clean);
+    for flip_at in [block, block + 5, block + BLOCK_HEADER_BYTES + 3] {
+        let mut bytes = clean.clone();
+        bytes[flip_at] ^= 0x10;
+        let error = read_bulk(&bytes).err().unwrap();
+        match error {
+            TraceError::ChecksumMismatch { offset, .. } | TraceError::BadBlock { offset, .. } => {
+                assert_eq!(offset, block as u64, "{error}")
+            }
+            other => panic!("flip at {flip_at}: {other}"),
+        }
+    }
+    let mut bytes = clean.clone();
+    bytes[block + BLOCK_HEADER_BYTES + 3] ^= 0x10;
+    let message = read_one_by_one(&bytes).err().unwrap().to_string();
+    assert!(
+        message.starts_with(&format!("byte {block}: block checksum mismatch")),
+        "{message}"
+    );
+}
+
+#[test]
+fn a_block_claiming_the_wrong_event_count_is_caught() {
+    let mut bytes = write_default(&[Event::Primitive, frag(1, 2, 3), frag(2, 2, 3)]);
+    let block = first_block_offset(&bytes);
+    let fields: [u8; BLOCK_HEADER_BYTES] =
+        bytes[block..block + BLOCK_HEADER_BYTES].try_into().unwrap();
+    let (mut header, _) = BlockHeader::parse(&fields).unwrap();
+    header.events += 1;
+    let stored =
+        &bytes[block + BLOCK_HEADER_BYTES..block + BLOCK_HEADER_BYTES + header.stored_len as usize];
+    let crc = header.checksum(stored);
+    bytes[block..block + 16].copy_from_slice(&header.fields());
+    bytes[block + 16..block + 20].copy_from_slice(&crc.to_le_bytes());
+    let error = read_bulk(&bytes).err().unwrap();
+    assert!(
+        matches!(error, TraceError::Corrupt { offset, .. } if offset == block as u64),
+        "{error}"
+    );
+    assert!(
+        error
+            .to_string()
+            .contains("claims 4 events, the block holds 3"),
+        "{error}"
+    );
+}
+
+#[test]
+fn truncation_at_every_offset_is_a_clean_error() {
+    let bytes = write_default(&every_kind()[..30]);
+    for len in 0..bytes.len() {
+        assert!(
+            read_one_by_one(&bytes[..len]).is_err(),
+            "cut at {len} read fine"
+        );
+        assert!(read_bulk(&bytes[..len]).is_err(), "cut at {len} read fine");
+        let skipped = TraceReader::new(&bytes[..len]).and_then(|mut r| r.skip_to_summary());
+        assert!(skipped.is_err(), "cut at {len} read fine");
+    }
+    let mut longer = bytes.clone();
+    longer.push(0);
+    let error = read_bulk(&longer).err().unwrap();
+    assert!(matches!(error, TraceError::TrailingData { .. }), "{error}");
+}
+
+#[test]
+fn the_writer_refuses_malformed_streams() {
+    let header = TraceHeader::new(64, 32);
+    let cases: [(&[Event], &str); 4] = [
+        (&[Event::QueryEnd], "query end without begin"),
+        (&[frag(64, 0, 0)], "outside the 64x32 viewport"),
+        (&[frag(0, 0, DEPTH_ONE + 1)], "24-bit depth"),
+        (
+            &[Event::QueryResult(QueryResult {
+                id: 1,
+                mode: QueryMode::Any,
+                tiles: vec![],
+                overflowed_buffers: 0,
+            })],
+            "without a query end",
+        ),
+    ];
+    for (events, expected) in cases {
+        let mut writer = TraceWriter::new(Vec::new(), &header).unwrap();
+        for event in events {
+            writer.event(event);
+        }
+        let error = writer.finish().err().unwrap().to_string();
+        assert!(error.contains(expected), "{error}");
+    }
+}
+
+fn large_triangles(fragments: u64) -> SyntheticScene {
+    SyntheticScene {
+        width: 1920,
+        height: 1080,
+        min_radius: 60.0,
+        max_radius: 300.0,
+        fragments,
+        seed: 7,
+    }
+}
+
+fn small_triangles(fragments: u64) -> SyntheticScene {
+    SyntheticScene {
+        width: 1920,
+        height: 1080,
+        min_radius: 3.0,
+        max_radius: 12.0,
+        fragments,
+        seed: 11,
+    }
+}
+
+fn bytes_per_fragment(scene: &SyntheticScene) -> (f64, Vec<u8>) {
+    let mut events = Vec::new();
+    let fragments = generate(scene, &mut events);
+    let (bytes, summary) = write(
+        &TraceHeader::new(scene.width, scene.height),
+        WriterOptions::default(),
+        &events,
+    );
+    assert_eq!(summary.fragments, fragments);
+    assert_eq!(read_bulk(&bytes).unwrap().0, events);
+    // The stream must be honest: depth varies along rows.
+    let distinct: std::collections::HashSet<u32> = events
+        .iter()
+        .filter_map(|e| {
+            if let Event::Fragment(f) = e {
+                Some(f.z)
+            } else {
+                None
+            }
+        })
+        .collect();
+    assert!(distinct.len() as u64 > fragments / 4, "depths barely vary");
+    (bytes.len() as f64 / fragments as f64, bytes)
+}
+
+#[test]
+fn large_triangles_cost_well_under_a_byte_per_fragment() {
+    let (rate, _) = bytes_per_fragment(&large_triangles(400_000));
+    assert!(rate <= 0.5, "{rate} bytes per fragment");
+}
+
+#[test]
+fn small_triangles_cost_at_most_two_bytes_per_fragment() {
+    let (rate, _) = bytes_per_fragment(&small_triangles(200_000));
+    assert!(rate <= 2.0, "{rate} bytes per fragment");
+}
+
+fn read_anything(bytes: &[u8]) {
+    let _ = read_one_by_one(bytes);
+    let _ = read_bulk(bytes);
+    let _ = TraceReader::new(bytes).and_then(|mut r| r.skip_to_summary());
+    let _ = TraceReader::read_summary(Cursor::new(bytes));
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    #[test]
+    fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..2000)) {
+        read_anything(&bytes);
+        let mut with_magic = MAGIC.to_vec();
+        with_magic.extend_from_slice(&bytes);
+        read_anything(&with_magic);
+    }
+
+    #[test]
+    fn mutated_traces_never_panic(
+        flips in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+        cut in any::<prop::sample::Index>(),
+    ) {
+        let mut bytes = write(&TraceHeader::new(SIDE, SIDE), WriterOptions { block_bytes: 4096, zstd_level: 1 }, &every_kind()).0;
+        for (at, value) in flips {
+            let at = at.index(bytes.len());
+            bytes[at] = value;
+        }
+        read_anything(&bytes);
+        read_anything(&bytes[..cut.index(bytes.len())]);
+    }
+
+    #[test]
+    fn payload_mutations_with_fixed_checksums_never_panic(
+        flips in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..4),
+    ) {
+        // Corrupt the decoded payload itself and store it uncompressed with a valid checksum,
+        // so the event decoder (not the checksum) meets the damage.
+        let events = every_kind();
+        let clean = write(&TraceHeader::new(SIDE, SIDE), WriterOptions { block_bytes: 4096, zstd_level: 1 }, &events).0;
+        let block = first_block_offset(&clean);
+        let fields: [u8; BLOCK_HEADER_BYTES] = clean[block..block + BLOCK_HEADER_BYTES].try_into().unwrap();
+        let (header, _) = BlockHeader::parse(&fields).unwrap();
+        let stored = &clean[block + BLOCK_HEADER_BYTES..block + BLOCK_HEADER_BYTES + header.stored_len as usize];
+        let mut payload = if header.codec == 1 {
+            zstd::bulk::decompress(stored, MAX_BLOCK_BYTES).unwrap()
+        } else {
+            stored.to_vec()
+        };
+        for (at, value) in flips {
+            let at = at.index(payload.len());
+            payload[at] = value;
+        }
+        let new_header = BlockHeader { codec: 0, raw_len: payload.len() as u32, stored_len: payload.len() as u32, ..header };
+        let mut bytes = clean[..block].to_vec();
+        bytes.extend_from_slice(&new_header.fields());
+        bytes.extend_from_slice(&new_header.checksum(&payload).to_le_bytes());
+        bytes.extend_from_slice(&payload);
+        bytes.extend_from_slice(&clean[block + BLOCK_HEADER_BYTES + header.stored_len as usize..]);
+        read_anything(&bytes);
+    }
+}
