@@ -172,8 +172,14 @@ fn trace_gen_info_dump_round_trip() {
     assert!(gen.starts_with(&format!("wrote {trace}: ")), "{gen}");
     let info = stdout_of(&["trace", "info", trace]);
     assert!(info.contains("viewport    64x64"), "{info}");
-    assert!(info.contains("queries     28 (samples 23, any 1, brief 1, verbose 3)"), "{info}");
-    assert!(info.contains("8 sub-pixel bits, top-left fill rule, unorm24 depth"), "{info}");
+    assert!(
+        info.contains("queries     28 (samples 23, any 1, brief 1, verbose 3)"),
+        "{info}"
+    );
+    assert!(
+        info.contains("8 sub-pixel bits, top-left fill rule, unorm24 depth"),
+        "{info}"
+    );
     let scanned = stdout_of(&["trace", "info", trace, "--scan"]);
     assert_eq!(info, scanned);
     let json: serde_json::Value =

@@ -8,7 +8,7 @@ use glam::{Mat4, Vec4};
 
 /// Depth units (of 2^-24) allowed for rounding between our projection of a vertex and the
 /// rasterizer's interpolated, quantised depth.
-const DEPTH_SLACK: u32 = 2;
+const DEPTH_SLACK: u32 = 8;
 
 /// A box seen by the camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
