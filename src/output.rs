@@ -72,7 +72,7 @@ mod tests {
         let dir = crate::sweep::test_dir("atomic-fail");
         let path = dir.join("out.txt");
         std::fs::write(&path, "old").unwrap();
-        let failed = write_atomically_with(&path, |w| {
+        let failed: anyhow::Result<()> = write_atomically_with(&path, |w| {
             w.write_all(b"half")?;
             anyhow::bail!("interrupted")
         });
