@@ -209,7 +209,9 @@ pub fn compare(
             .zip(&splitter.cycles)
             .map(|(name, per_frame)| (name, per_frame.iter().sum::<u64>() as f64 / frames))
             .collect();
-        drivers.push(driver_report(&options, &scene, &walk, &stats, &full, cycles));
+        drivers.push(driver_report(
+            &options, &scene, &walk, &stats, &full, cycles,
+        ));
     }
     Ok(CompareReport {
         scene: args.scene.describe(&scene),
@@ -282,7 +284,15 @@ fn print_table(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<(
     write!(
         out,
         "{:<24} {:>7} {:>10} {:>8} {:>9} {:>10} {:>10} {:>9} {:>10}",
-        "driver (per frame)", "tris %", "triangles", "queries", "tiles", "query frag", "draw frag", "cells", "px lost"
+        "driver (per frame)",
+        "tris %",
+        "triangles",
+        "queries",
+        "tiles",
+        "query frag",
+        "draw frag",
+        "cells",
+        "px lost"
     )?;
     for machine in &machines {
         write!(out, " {:>12}", format!("cycles {machine}"))?;
@@ -305,24 +315,46 @@ fn print_table(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<(
         for (_, cycles) in &d.cycles_per_frame {
             write!(out, " {cycles:>12.0}")?;
         }
-        writeln!(out, " {:>10.2} {:>10.2}", d.traversal_ms_per_frame, d.golden_model_ms_per_frame)?;
+        writeln!(
+            out,
+            " {:>10.2} {:>10.2}",
+            d.traversal_ms_per_frame, d.golden_model_ms_per_frame
+        )?;
     }
     print_accuracy(report, &machines, out)
 }
 
 /// What accuracy costs: each adaptive row against the conservative hierarchical driver.
-fn print_accuracy(report: &CompareReport, machines: &[String], out: &mut dyn Write) -> std::io::Result<()> {
-    let Some(exact) = report.drivers.iter().find(|d| {
-        d.driver == "hierarchical" || d.driver.starts_with("hierarchical/d")
-    }) else {
+fn print_accuracy(
+    report: &CompareReport,
+    machines: &[String],
+    out: &mut dyn Write,
+) -> std::io::Result<()> {
+    let Some(exact) = report
+        .drivers
+        .iter()
+        .find(|d| d.driver == "hierarchical" || d.driver.starts_with("hierarchical/d"))
+    else {
         return Ok(());
     };
-    let adaptive: Vec<&DriverReport> = report.drivers.iter().filter(|d| d.driver.contains("/t")).collect();
+    let adaptive: Vec<&DriverReport> = report
+        .drivers
+        .iter()
+        .filter(|d| d.driver.contains("/t"))
+        .collect();
     if adaptive.is_empty() {
         return Ok(());
     }
-    writeln!(out, "\nadaptive culling against {} (per frame):", exact.driver)?;
-    write!(out, "{:<24} {:>10} {:>9} {:>15}", "driver", "px lost", "% lost", "triangles saved")?;
+    writeln!(
+        out,
+        "\nadaptive culling against {} (per frame):",
+        exact.driver
+    )?;
+    write!(
+        out,
+        "{:<24} {:>10} {:>9} {:>15}",
+        "driver", "px lost", "% lost", "triangles saved"
+    )?;
     for machine in machines {
         write!(out, " {:>16}", format!("cycles saved {machine}"))?;
     }
@@ -360,7 +392,9 @@ mod tests {
             "occsim", "--scene", "city", "--blocks", "2", "--detail", "0", "--frames", "2",
             "--width", "80", "--height", "60",
         ];
-        Cli::try_parse_from(base.iter().chain(extra)).unwrap().compare
+        Cli::try_parse_from(base.iter().chain(extra))
+            .unwrap()
+            .compare
     }
 
     /// A stand-in machine: one cycle per fragment, counted from the stream it is fed.
@@ -397,12 +431,24 @@ mod tests {
         let names: Vec<&str> = report.drivers.iter().map(|d| d.driver.as_str()).collect();
         assert_eq!(
             names,
-            ["frustum", "hierarchical", "hierarchical/q2", "lazy-grid", "busy-grid", "hierarchical/t0.3"]
+            [
+                "frustum",
+                "hierarchical",
+                "hierarchical/q2",
+                "lazy-grid",
+                "busy-grid",
+                "hierarchical/t0.3"
+            ]
         );
         for d in &report.drivers {
             // The stand-in's cycles are the fragments it saw; the driver counted its own.
             let fragments = d.draw_fragments_per_frame + d.query_fragments_per_frame;
-            assert_eq!(d.cycles_per_frame, vec![("frag".to_owned(), fragments)], "{}", d.driver);
+            assert_eq!(
+                d.cycles_per_frame,
+                vec![("frag".to_owned(), fragments)],
+                "{}",
+                d.driver
+            );
             if !d.driver.contains("/t") {
                 assert_eq!(d.pixels_lost_per_frame, 0.0, "{} is conservative", d.driver);
             }
@@ -417,8 +463,18 @@ mod tests {
     #[test]
     fn json_output_parses() {
         let mut out = Vec::new();
-        run_with(&args(&["--json", "--adaptive-threshold", "0.5", "--quadtree-levels", "0"]), &mut [], &mut out)
-            .unwrap();
+        run_with(
+            &args(&[
+                "--json",
+                "--adaptive-threshold",
+                "0.5",
+                "--quadtree-levels",
+                "0",
+            ]),
+            &mut [],
+            &mut out,
+        )
+        .unwrap();
         let value: serde_json::Value = serde_json::from_slice(&out).unwrap();
         assert_eq!(value["drivers"].as_array().unwrap().len(), 5);
         assert_eq!(value["frames"], 2);

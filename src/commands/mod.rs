@@ -1,9 +1,9 @@
 //! One module per subcommand.
 
 // Wired into main.rs by the integrator (`culling compare`, `trace gen --scene`).
+pub mod count;
 #[allow(dead_code)]
 pub mod culling;
-pub mod count;
 pub mod demo;
 pub mod sweep;
 pub mod trace;

@@ -90,7 +90,9 @@ fn parse_point(text: &str) -> Result<[f32; 3], String> {
     let numbers: Vec<f32> = parts.iter().filter_map(|p| p.parse::<f32>().ok()).collect();
     match numbers[..] {
         [x, y, z] if parts.len() == 3 && numbers.iter().all(|n| n.is_finite()) => Ok([x, y, z]),
-        _ => Err(format!("`{text}`: expected three finite numbers X,Y,Z in metres")),
+        _ => Err(format!(
+            "`{text}`: expected three finite numbers X,Y,Z in metres"
+        )),
     }
 }
 
@@ -173,7 +175,11 @@ fn load_obj_file(path: &Path) -> anyhow::Result<WorkloadScene> {
     let file = std::fs::File::open(path)
         .with_context(|| format!("cannot open OBJ model {}", path.display()))?;
     let reader = std::io::BufReader::with_capacity(1 << 16, file);
-    Ok(load_obj(reader, &path.display().to_string(), &ObjOptions::default())?)
+    Ok(load_obj(
+        reader,
+        &path.display().to_string(),
+        &ObjOptions::default(),
+    )?)
 }
 
 impl DriverArgs {
@@ -234,16 +240,42 @@ mod tests {
     #[test]
     fn flags_become_options() {
         let args = parse(&[
-            "--scene", "forest", "--trees", "20", "--detail", "4", "--driver", "lazy-grid",
-            "--grid-cell-pixels", "16", "--frames", "3", "--width", "64", "--height", "48",
-            "--camera-from", "0,2,10", "--camera-to", "0,2,-10", "--camera-target", "0,0,-50",
+            "--scene",
+            "forest",
+            "--trees",
+            "20",
+            "--detail",
+            "4",
+            "--driver",
+            "lazy-grid",
+            "--grid-cell-pixels",
+            "16",
+            "--frames",
+            "3",
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--camera-from",
+            "0,2,10",
+            "--camera-to",
+            "0,2,-10",
+            "--camera-target",
+            "0,0,-50",
         ])
         .unwrap();
         let (scene, driver, walk) = args.resolve().unwrap();
         assert_eq!(scene.object_count(), 21);
         assert_eq!(driver.kind, DriverKind::LazyGrid);
         assert_eq!(driver.grid_cell_pixels, 16);
-        assert_eq!(walk, Walk { frames: 3, width: 64, height: 48 });
+        assert_eq!(
+            walk,
+            Walk {
+                frames: 3,
+                width: 64,
+                height: 48
+            }
+        );
         assert_eq!(scene.camera().keyframes()[1].eye, [0.0, 2.0, -10.0]);
         assert_eq!(scene.camera().keyframes()[0].target, [0.0, 0.0, -50.0]);
     }
@@ -252,13 +284,22 @@ mod tests {
     fn bad_flags_are_refused_clearly() {
         assert!(resolve_error(&["--driver", "magic"]).contains("unknown driver `magic`"));
         assert!(resolve_error(&["--scene", "moon"]).contains("unknown scene `moon`"));
-        assert!(resolve_error(&["--frames", "0"]).is_empty(), "checked by generate");
+        assert!(
+            resolve_error(&["--frames", "0"]).is_empty(),
+            "checked by generate"
+        );
         assert!(resolve_error(&["--camera-from", "1,2"]).contains("expected three finite numbers"));
         assert!(resolve_error(&["--camera-from", "1,2,3"]).contains("--camera-to"));
         let missing = resolve_error(&["--scene", "obj:/no/such/model.obj"]);
-        assert!(missing.contains("cannot open OBJ model /no/such/model.obj"), "{missing}");
+        assert!(
+            missing.contains("cannot open OBJ model /no/such/model.obj"),
+            "{missing}"
+        );
         let camera = resolve_error(&["--camera-file", "/no/such/walk.toml"]);
-        assert!(camera.contains("cannot open camera file /no/such/walk.toml"), "{camera}");
+        assert!(
+            camera.contains("cannot open camera file /no/such/walk.toml"),
+            "{camera}"
+        );
         let delayed = resolve_error(&["--driver", "busy-grid", "--query-delay", "1"]);
         assert!(delayed.contains("--query-delay applies to"), "{delayed}");
     }

@@ -382,7 +382,7 @@ pub struct FrameStats {
     pub query_triangles: u64,
     /// Fragments drawn inside occlusion queries (each once, however many tiles hold it).
     pub query_fragments: u64,
-    /// Grid cells whose depth bounds a probe refreshed.
+    /// Grids: outdated cells (drawn into since their last probe) refreshed by a probe.
     pub cells_refreshed: u64,
     /// Hierarchy nodes taken from the traversal queue.
     pub nodes_visited: u64,

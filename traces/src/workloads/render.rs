@@ -147,15 +147,15 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         result
     }
 
-    /// A brief query drawing, over each tile, a screen-aligned quad at window depth
-    /// `depth` (24-bit units, 1 to 2^24 - 2). With LEQUAL a tile has hits exactly where
-    /// the stored depth is at least the quad's: the query measures the depth buffer.
-    pub(crate) fn depth_probe(&mut self, tiles: Vec<Rect>, depth: u32) -> Option<QueryResult> {
+    /// A brief query drawing, over each tile, a screen-aligned quad at that tile's window
+    /// depth (24-bit units, 1 to 2^24 - 2). With LEQUAL a tile has hits exactly where the
+    /// stored depth is at least the quad's: the query measures the depth buffer.
+    pub(crate) fn depth_probe(&mut self, tiles: &[(Rect, u32)]) -> Option<QueryResult> {
         let quads: Vec<[[f32; 4]; 3]> = tiles
             .iter()
-            .flat_map(|tile| screen_quad(*tile, depth, self.width, self.height))
+            .flat_map(|&(tile, depth)| screen_quad(tile, depth, self.width, self.height))
             .collect();
-        self.brief_query(tiles, quads)
+        self.brief_query(tiles.iter().map(|&(tile, _)| tile).collect(), quads)
     }
 }
 
