@@ -2,10 +2,12 @@
 //! the walk and the culling driver. Shared by `trace gen` (a workload as a trace) and
 //! `culling compare`.
 
+use crate::output::write_atomically_with;
 use anyhow::Context;
+use occsim_traces::trace::{TraceHeader, TraceSummary, TraceWriter};
 use occsim_traces::workloads::{
-    city, forest, load_obj, CameraPath, CityOptions, DriverKind, DriverOptions, ForestOptions,
-    ObjOptions, Walk, WorkloadScene,
+    city, forest, generate, load_obj, CameraPath, CityOptions, DriverKind, DriverOptions,
+    ForestOptions, ObjOptions, Walk, WorkloadScene, WorkloadStats,
 };
 use std::io::Read;
 use std::path::Path;
@@ -211,6 +213,25 @@ impl WorkloadArgs {
     }
 }
 
+/// `trace gen` for a workload: walk the scene with the driver, writing the golden model's
+/// events to `output` (atomically). The header's scene field describes the workload.
+pub fn write_workload_trace(
+    args: &WorkloadArgs,
+    output: &Path,
+) -> anyhow::Result<(TraceSummary, WorkloadStats)> {
+    let (scene, driver, walk) = args.resolve()?;
+    let header =
+        TraceHeader::new(walk.width, walk.height).with_scene(args.describe(&scene, &driver));
+    write_atomically_with(output, |file| {
+        let mut writer = TraceWriter::new(file, &header)?;
+        let stats = generate(&scene, &driver, &walk, &mut writer)?;
+        let summary = writer
+            .finish()
+            .with_context(|| format!("{}: cannot write trace", output.display()))?;
+        Ok((summary, stats))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -278,6 +299,51 @@ mod tests {
         );
         assert_eq!(scene.camera().keyframes()[1].eye, [0.0, 2.0, -10.0]);
         assert_eq!(scene.camera().keyframes()[0].target, [0.0, 0.0, -50.0]);
+    }
+
+    #[test]
+    fn a_workload_trace_holds_the_walk() {
+        let args = parse(&[
+            "--scene",
+            "city",
+            "--blocks",
+            "2",
+            "--detail",
+            "0",
+            "--driver",
+            "lazy-grid",
+            "--frames",
+            "2",
+            "--width",
+            "64",
+            "--height",
+            "48",
+        ])
+        .unwrap();
+        let dir =
+            std::env::temp_dir().join(format!("occsim-workload-trace-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("walk.occt");
+        let (summary, stats) = write_workload_trace(&args, &path).unwrap();
+        let fragments: u64 = stats
+            .frames
+            .iter()
+            .map(|f| f.draw_fragments + f.query_fragments)
+            .sum();
+        assert_eq!(summary.fragments, fragments);
+        let queries: u64 = stats.frames.iter().map(|f| f.queries).sum();
+        assert_eq!(summary.queries, queries);
+        let mut reader = super::super::trace::open_trace(&path).unwrap();
+        assert!(
+            reader.header().scene.contains("driver lazy-grid"),
+            "{}",
+            reader.header().scene
+        );
+        let read = reader
+            .read_into(&mut occsim_traces::golden::Discard)
+            .unwrap();
+        assert_eq!(read.fragments, fragments);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -280,6 +280,14 @@ fn bad_options_are_refused_clearly() {
     let mut threshold = DriverOptions::new(DriverKind::Hierarchical);
     threshold.adaptive_threshold = Some(1.5);
     assert!(error(&threshold, &WALK).contains("--adaptive-threshold 1.5 out of range"));
+    let mut fine_grid = lazy.clone();
+    fine_grid.grid_cell_pixels = 4;
+    let huge = Walk {
+        width: 1280,
+        height: 1024,
+        ..WALK
+    };
+    assert!(error(&fine_grid, &huge).contains("makes a 320x256 grid, more than 65536 cells"));
     let unknown = "z-pyramid".parse::<DriverKind>().unwrap_err().to_string();
     assert_eq!(
         unknown,

@@ -38,6 +38,7 @@ pub use scenes::{city, forest, CityOptions, ForestOptions};
 
 use crate::geometry::{look_at, perspective_gl, Aabb};
 use crate::golden::EventSink;
+use crate::query::MAX_TILES;
 use crate::state::MAX_VIEWPORT_SIDE;
 use bvh::Bvh;
 use glam::{Mat4, Vec3};
@@ -436,5 +437,24 @@ pub fn generate_observed(
 ) -> Result<WorkloadStats, WorkloadError> {
     walk.validate()?;
     driver.validate()?;
+    check_grid_size(driver, walk)?;
     Ok(drivers::run(scene, driver, walk, sink, commands))
+}
+
+/// One probe query may name every cell, so a grid may hold at most `MAX_TILES` cells.
+fn check_grid_size(driver: &DriverOptions, walk: &Walk) -> Result<(), WorkloadError> {
+    if !driver.is_grid() {
+        return Ok(());
+    }
+    let side = driver.grid_cell_pixels as u64;
+    let (columns, rows) = (
+        (walk.width as u64).div_ceil(side),
+        (walk.height as u64).div_ceil(side),
+    );
+    if columns * rows > MAX_TILES as u64 {
+        return Err(WorkloadError::Option(format!(
+            "--grid-cell-pixels {side} makes a {columns}x{rows} grid, more than {MAX_TILES} cells (the most tiles one query holds): use larger cells"
+        )));
+    }
+    Ok(())
 }

@@ -139,7 +139,7 @@ pub fn city(options: &CityOptions) -> WorkloadScene {
         Vec3::new(-half - 20.0, -1.0, -length - 20.0),
         Vec3::new(half + 20.0, 0.0, 40.0),
     )));
-    let avenue_x = if blocks % 2 == 0 {
+    let avenue_x = if blocks.is_multiple_of(2) {
         0.0
     } else {
         -BLOCK_PITCH * 0.5
