@@ -172,3 +172,45 @@ fn screen_quad(tile: Rect, depth: u32, width: u32, height: u32) -> [[[f32; 4]; 3
         [v(x0, y0), v(x1, y1), v(x0, y1)],
     ]
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::golden::Discard;
+
+    /// A probe at depth p over a screen filled at depth d: hits everywhere when p is well in
+    /// front of d, nowhere when well behind: the slack the grid allows for rounding holds.
+    #[test]
+    fn depth_probes_see_a_filled_screen_within_their_slack() {
+        let slack = 3; // the grid's PROBE_SLACK
+        let tile = Rect::new(0, 0, 37, 23);
+        for filled in [9u32, 1000, 1 << 20, 12_345_678, DEPTH_ONE - 9] {
+            let mut sink = Discard;
+            let mut observer = ();
+            let mut renderer = Renderer::new(37, 23, &mut sink, &mut observer);
+            renderer.start_frame();
+            for triangle in screen_quad(tile, filled, 37, 23) {
+                renderer.execute(&Command::Tri(triangle));
+            }
+            let probe = |renderer: &mut Renderer<Discard, ()>, depth: u32| {
+                let result = renderer.depth_probe(&[(tile, depth)]).expect("an answer");
+                (result.tiles[0].nohc, result.tiles[0].phc)
+            };
+            assert_eq!(
+                probe(&mut renderer, filled - 2 * slack - 1),
+                (tile.area(), tile.area())
+            );
+            assert_eq!(
+                probe(&mut renderer, filled + 2 * slack + 1),
+                (0, tile.area())
+            );
+            // In fact the rounding is tighter: one unit either side decides.
+            assert_eq!(
+                probe(&mut renderer, filled - 1).0,
+                tile.area(),
+                "depth {filled}"
+            );
+            assert_eq!(probe(&mut renderer, filled + 1).0, 0, "depth {filled}");
+        }
+    }
+}
