@@ -112,7 +112,17 @@ impl SceneArgs {
 
     /// Build (or load) the scene and put the camera on its path.
     pub fn load_scene(&self) -> anyhow::Result<WorkloadScene> {
-        let scene = match self.scene.as_str() {
+        let name = self.scene.as_str();
+        if self.blocks.is_some() && name != "city" {
+            anyhow::bail!("--blocks applies to the city scene only, not `{name}`");
+        }
+        if self.trees.is_some() && name != "forest" {
+            anyhow::bail!("--trees applies to the forest scene only, not `{name}`");
+        }
+        if self.detail.is_some() && name.starts_with("obj:") {
+            anyhow::bail!("--detail applies to the city and forest scenes, not to OBJ models");
+        }
+        let scene = match name {
             "city" => {
                 let defaults = CityOptions::default();
                 city(&CityOptions {
@@ -365,6 +375,11 @@ mod tests {
         assert!(
             camera.contains("cannot open camera file /no/such/walk.toml"),
             "{camera}"
+        );
+        let misplaced = resolve_error(&["--scene", "forest", "--blocks", "3"]);
+        assert!(
+            misplaced.contains("--blocks applies to the city"),
+            "{misplaced}"
         );
         let delayed = resolve_error(&["--driver", "busy-grid", "--query-delay", "1"]);
         assert!(delayed.contains("--query-delay applies to"), "{delayed}");

@@ -32,6 +32,9 @@ struct CameraFile {
     keyframe: Vec<CameraKeyframe>,
 }
 
+/// Largest coordinate accepted, in metres (f32 keeps cameras precise well within it).
+const MAX_COORDINATE: f32 = 1e9;
+
 /// Most keyframes a camera file may hold (bounds memory on hostile input).
 const MAX_KEYFRAMES: usize = 100_000;
 
@@ -57,9 +60,14 @@ impl CameraPath {
             return fail(format!("more than {MAX_KEYFRAMES} keyframes"));
         }
         for (index, k) in keyframes.iter().enumerate() {
-            if !k.eye.iter().chain(&k.target).all(|c| c.is_finite()) {
+            if !k
+                .eye
+                .iter()
+                .chain(&k.target)
+                .all(|c| c.abs() <= MAX_COORDINATE)
+            {
                 return fail(format!(
-                    "keyframe {}: coordinates must be finite",
+                    "keyframe {}: coordinates must be numbers within {MAX_COORDINATE:e} metres of the origin",
                     index + 1
                 ));
             }
@@ -193,6 +201,8 @@ mod tests {
         assert!(error("").contains("no keyframe"));
         assert!(error("[[keyframe]]\neye = [0, 0, 0]\n").contains("target"));
         assert!(error("[[keyframe]]\neye = [0, 0, 0]\ntarget = [0, 0, 0]\n").contains("same point"));
+        assert!(error("[[keyframe]]\neye = [0, 0, nan]\ntarget = [0, 0, 1]\n").contains("within"));
+        assert!(error("[[keyframe]]\neye = [0, 0, 1e30]\ntarget = [0, 0, 1]\n").contains("within"));
         assert!(
             error("[[keyframe]]\neye = [0, 0, 0]\ntarget = [0, 0, 1]\nfov = 3\n").contains("fov")
         );

@@ -23,6 +23,10 @@ impl Default for ObjOptions {
     }
 }
 
+/// Largest coordinate accepted, in model units: far beyond any real model, and small enough
+/// that cameras and boxes keep f32 precision without overflow.
+const MAX_COORDINATE: f32 = 1e9;
+
 /// Longest OBJ line accepted, in bytes (bounds memory on hostile input).
 const MAX_LINE_BYTES: usize = 1 << 20;
 
@@ -136,7 +140,7 @@ pub fn load_obj(
                 *positions.get(i + 1)?,
                 *positions.get(i + 2)?,
             );
-            p.is_finite().then_some(p)
+            (p.is_finite() && p.abs().max_element() <= MAX_COORDINATE).then_some(p)
         };
         let mut triangles = Vec::with_capacity(model.mesh.indices.len() / 3);
         for face in model.mesh.indices.chunks_exact(3) {
@@ -145,7 +149,7 @@ pub fn load_obj(
                 return Err(error(
                     lines,
                     format!(
-                        "object `{}` has a vertex that is not a finite number",
+                        "object `{}` has a vertex that is not a number within {MAX_COORDINATE:e} of the origin",
                         model.name
                     ),
                 ));
@@ -160,7 +164,13 @@ pub fn load_obj(
             "no faces: the model has no triangles to draw".into(),
         ));
     };
-    WorkloadScene::new(file, objects, orbit(&bounds))
+    let Some(camera) = orbit(&bounds) else {
+        return Err(error(
+            lines,
+            "the model is too small for its distance from the origin to be seen".into(),
+        ));
+    };
+    WorkloadScene::new(file, objects, camera)
         .ok_or_else(|| error(lines, "no faces: the model has no triangles to draw".into()))
 }
 
@@ -183,8 +193,9 @@ fn split_into_objects(mut triangles: Vec<[Vec3; 3]>, limit: usize, objects: &mut
     split_into_objects(upper, limit, objects);
 }
 
-/// Eight keyframes circling the model at 1.2 diagonals, a little above it.
-fn orbit(bounds: &Aabb) -> CameraPath {
+/// Eight keyframes circling the model at 1.2 diagonals, a little above it (None when f32
+/// cannot tell the eye from the centre).
+fn orbit(bounds: &Aabb) -> Option<CameraPath> {
     let centre = bounds.centre();
     let radius = (bounds.max - bounds.min).length().max(1e-3) * 1.2;
     let keyframes = (0..=8)
@@ -197,7 +208,7 @@ fn orbit(bounds: &Aabb) -> CameraPath {
             }
         })
         .collect();
-    CameraPath::new(keyframes, None, "orbit").expect("an orbit is well formed")
+    CameraPath::new(keyframes, None, "orbit").ok()
 }
 
 #[cfg(test)]
@@ -241,6 +252,14 @@ mod tests {
             error("v 0 0 0\nf 1 2 3\n")
         );
         assert!(error("# nothing\n").contains("no triangles"));
+        assert!(error("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").contains("not a number within"));
+        assert!(error("v 1e30 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").contains("not a number within"));
+        let tiny_and_far = "v 9e8 9e8 9e8\nv 9e8 9e8 9e8\nv 9e8 9e8 9e8\nf 1 2 3\n";
+        assert!(
+            error(tiny_and_far).contains("too small"),
+            "{}",
+            error(tiny_and_far)
+        );
         let long = format!("v 0 0 0\n# {}\n", "x".repeat(MAX_LINE_BYTES + 10));
         assert_eq!(
             error(&long),

@@ -80,7 +80,8 @@ pub(crate) fn project_box(
     let x1 = (to_pixel(x_hi, width).ceil() + 1.0).min(width as f64);
     let y0 = (to_pixel(y_lo, height).floor() - 1.0).max(0.0);
     let y1 = (to_pixel(y_hi, height).ceil() + 1.0).min(height as f64);
-    if x1 <= x0 || y1 <= y0 {
+    // Written so that NaN (from absurd coordinates) also counts as off screen.
+    if !(x1 > x0 && y1 > y0) {
         return BoxView::Outside;
     }
     BoxView::OnScreen {
