@@ -30,7 +30,10 @@ pub fn open_scene(scene: &str) -> anyhow::Result<SceneInput> {
     };
     let mut reader = SceneReader::new(input, scene);
     // The parser guarantees the first command is the viewport.
-    let first = reader.next().transpose()?.map(|line| line.command);
+    let first = reader
+        .next()
+        .transpose()?
+        .map(|line| line.command);
     let Some(Command::Viewport { width, height }) = first else {
         anyhow::bail!("{scene}: expected `viewport W H` first");
     };

@@ -113,14 +113,8 @@ fn count_json_gives_verbose_buffers_and_tiles() {
     for quadrant in &tiles[1..] {
         assert_eq!(quadrant["nohc"], 1024);
     }
-    assert_eq!(
-        (tiles[0]["xmin"].clone(), tiles[0]["xmax"].clone()),
-        (0.into(), 63.into())
-    );
-    assert_eq!(
-        (tiles[2]["xmin"].clone(), tiles[2]["ymax"].clone()),
-        (32.into(), 31.into())
-    );
+    assert_eq!((tiles[0]["xmin"].clone(), tiles[0]["xmax"].clone()), (0.into(), 63.into()));
+    assert_eq!((tiles[2]["xmin"].clone(), tiles[2]["ymax"].clone()), (32.into(), 31.into()));
 }
 
 #[test]
@@ -134,21 +128,14 @@ fn count_matches_a_scene_file_written_by_hand() {
          begin 11\ntri -1 -1 0.5 1  1 -1 0.5 1  1 1 0.5 1\ntri -1 -1 0.5 1  1 1 0.5 1  -1 1 0.5 1\nend\n",
     )
     .unwrap();
-    assert_eq!(
-        stdout_of(&["count", path.to_str().unwrap()]),
-        "query 10 8\nquery 11 8\n"
-    );
+    assert_eq!(stdout_of(&["count", path.to_str().unwrap()]), "query 10 8\nquery 11 8\n");
 }
 
 #[test]
 fn bad_scenes_name_file_and_line_and_exit_non_zero() {
     let dir = scratch_dir("bad");
     let path = dir.join("bad.scene");
-    std::fs::write(
-        &path,
-        "viewport 8 8\nbegin 1\ntri 0 0 0 1 1 0 0 1 0 1 nan 1\nend\n",
-    )
-    .unwrap();
+    std::fs::write(&path, "viewport 8 8\nbegin 1\ntri 0 0 0 1 1 0 0 1 0 1 nan 1\nend\n").unwrap();
     let path = path.to_str().unwrap();
     let error = stderr_of_failure(&["count", path]);
     assert!(
@@ -156,10 +143,7 @@ fn bad_scenes_name_file_and_line_and_exit_non_zero() {
         "{error}"
     );
     let error = stderr_of_failure(&["count", "no-such-scene"]);
-    assert!(
-        error.contains("cannot open scene `no-such-scene`"),
-        "{error}"
-    );
+    assert!(error.contains("cannot open scene `no-such-scene`"), "{error}");
     assert!(error.contains("demo, hardcases, random"), "{error}");
 }
 
@@ -172,14 +156,8 @@ fn trace_gen_info_dump_round_trip() {
     assert!(gen.starts_with(&format!("wrote {trace}: ")), "{gen}");
     let info = stdout_of(&["trace", "info", trace]);
     assert!(info.contains("viewport    64x64"), "{info}");
-    assert!(
-        info.contains("queries     28 (samples 23, any 1, brief 1, verbose 3)"),
-        "{info}"
-    );
-    assert!(
-        info.contains("8 sub-pixel bits, top-left fill rule, unorm24 depth"),
-        "{info}"
-    );
+    assert!(info.contains("queries     28 (samples 23, any 1, brief 1, verbose 3)"), "{info}");
+    assert!(info.contains("8 sub-pixel bits, top-left fill rule, unorm24 depth"), "{info}");
     let scanned = stdout_of(&["trace", "info", trace, "--scan"]);
     assert_eq!(info, scanned);
     let json: serde_json::Value =

@@ -90,10 +90,7 @@ pub fn open_trace(path: &Path) -> anyhow::Result<TraceReader<std::io::BufReader<
 }
 
 /// A trace's header and summary, by a seek to the summary (or a full scan).
-pub fn read_header_and_summary(
-    path: &Path,
-    scan: bool,
-) -> anyhow::Result<(TraceHeader, TraceSummary)> {
+pub fn read_header_and_summary(path: &Path, scan: bool) -> anyhow::Result<(TraceHeader, TraceSummary)> {
     let context = || format!("{}: cannot read trace", path.display());
     if scan {
         let mut reader = open_trace(path)?;

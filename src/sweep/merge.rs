@@ -4,11 +4,11 @@
 //! the first line read sets the expectation. A point found in several inputs must have the same
 //! text everywhere (results are deterministic, so a difference means a real conflict).
 
+use crate::output::write_atomically;
 use super::grid::Grid;
 use super::record::{
     check_line_belongs, csv_path_for, read_results, render_csv, render_jsonl, Expected, StoredLine,
 };
-use crate::output::write_atomically;
 use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -7,12 +7,12 @@
 //!   byte-identical whatever `--jobs`, shard split or resume history produced them: records
 //!   hold no wall-clock time and their text is never re-encoded once written.
 
+use crate::output::write_atomically;
 use super::grid::{Grid, Point, Shard};
 use super::record::{
     check_line_belongs, csv_path_for, read_results, render_csv, render_jsonl, Expected,
     PointRecord, StoredLine, SweepLine, FORMAT,
 };
-use crate::output::write_atomically;
 use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;

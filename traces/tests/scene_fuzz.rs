@@ -111,9 +111,7 @@ fn an_overlong_line_is_an_error_not_an_allocation() {
         .find_map(Result::err)
         .expect("an error");
     assert!(
-        error
-            .to_string()
-            .starts_with("long.scene:2: line longer than"),
+        error.to_string().starts_with("long.scene:2: line longer than"),
         "{error}"
     );
 }
