@@ -2,7 +2,9 @@
 
 pub mod arch;
 pub mod count;
+pub mod culling;
 pub mod demo;
 pub mod replay;
 pub mod sweep;
 pub mod trace;
+pub mod workload_args;

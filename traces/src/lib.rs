@@ -5,15 +5,19 @@
 //! - [`golden`]: the functional golden model (depth buffer and query semantics).
 //! - [`trace`]: the `.occt` binary fragment trace format (streaming reader and writer).
 //! - [`builtin`]: built-in scenes (`demo`, `hardcases`).
+//! - [`workloads`]: walkthrough workloads: parametric scenes, camera paths and the culling
+//!   drivers that issue occlusion queries while the golden model answers them.
 
 pub mod builtin;
 pub mod event;
+mod geometry;
 pub mod golden;
 pub mod query;
 pub mod raster;
 pub mod scene;
 pub mod state;
 pub mod trace;
+pub mod workloads;
 
 pub use event::{Event, Fragment};
 pub use query::{QueryMode, QueryResult, QuerySpec, Tile, TileResult};

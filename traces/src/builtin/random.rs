@@ -2,7 +2,7 @@
 //! shape of workload the peers' figures were measured on (tens of thousands of triangles,
 //! tens of millions of fragments, thousands of queries at 1280x1024).
 
-use super::city::SplitMix64;
+use crate::geometry::SplitMix64;
 use crate::query::{QueryMode, QuerySpec, BRIEF_RECORD_ENTRIES};
 use crate::scene::{format_command, Command};
 use crate::state::Rect;

@@ -1,0 +1,387 @@
+//! Command-line arguments that choose a walkthrough workload: the scene, its camera path,
+//! the walk and the culling driver. Shared by `trace gen` (a workload as a trace) and
+//! `culling compare`.
+
+use crate::output::write_atomically_with;
+use anyhow::Context;
+use occsim_traces::trace::{TraceHeader, TraceSummary, TraceWriter};
+use occsim_traces::workloads::{
+    city, forest, generate, load_obj, CameraPath, CityOptions, DriverKind, DriverOptions,
+    ForestOptions, ObjOptions, Walk, WorkloadScene, WorkloadStats,
+};
+use std::io::Read;
+use std::path::Path;
+
+/// The scene, its camera and the walk.
+#[derive(clap::Args, Clone, Debug)]
+pub struct SceneArgs {
+    /// The scene: `city`, `forest`, or `obj:PATH` for a Wavefront OBJ model.
+    #[arg(long, default_value = "city")]
+    pub scene: String,
+    /// Frames of the walkthrough.
+    #[arg(long, default_value_t = 8)]
+    pub frames: u32,
+    /// Viewport width in pixels.
+    #[arg(long, default_value_t = 1280)]
+    pub width: u32,
+    /// Viewport height in pixels.
+    #[arg(long, default_value_t = 1024)]
+    pub height: u32,
+    /// Seed of the city's or forest's layout.
+    #[arg(long, default_value_t = 1998)]
+    pub seed: u64,
+    /// City: blocks along each side (default 6; triangles grow with its square).
+    #[arg(long)]
+    pub blocks: Option<u32>,
+    /// Forest: trees in all (default 3000).
+    #[arg(long)]
+    pub trees: Option<u32>,
+    /// Detail: window sills per facade per floor (city, default 2) or sides per crown cone
+    /// (forest, default 10).
+    #[arg(long)]
+    pub detail: Option<u32>,
+    /// Camera path start X,Y,Z in metres (with --camera-to); replaces the scene's walk.
+    #[arg(long, value_parser = parse_point, requires = "camera_to", conflicts_with = "camera_file")]
+    pub camera_from: Option<[f32; 3]>,
+    /// Camera path end X,Y,Z in metres (with --camera-from).
+    #[arg(long, value_parser = parse_point, requires = "camera_from")]
+    pub camera_to: Option<[f32; 3]>,
+    /// The point X,Y,Z the camera looks at along --camera-from/--camera-to (default: the
+    /// scene's centre).
+    #[arg(long, value_parser = parse_point, requires = "camera_from")]
+    pub camera_target: Option<[f32; 3]>,
+    /// A TOML camera path: `[[keyframe]]` tables of `eye` and `target`, spread over the
+    /// frames, or walked at `metres_per_frame`.
+    #[arg(long)]
+    pub camera_file: Option<std::path::PathBuf>,
+}
+
+/// The culling driver and its options.
+#[derive(clap::Args, Clone, Debug)]
+pub struct DriverArgs {
+    /// The culling driver: frustum, hierarchical, lazy-grid or busy-grid.
+    #[arg(long, default_value = "hierarchical")]
+    pub driver: String,
+    /// Frames before a query's answer is used: 0 (at once) or 1 (frustum, hierarchical).
+    #[arg(long, default_value_t = 0)]
+    pub query_delay: u32,
+    /// Hierarchical: quadtree levels of tiles below each box's rectangle (0 to 4).
+    #[arg(long, default_value_t = 0)]
+    pub quadtree_levels: u32,
+    /// Hierarchical: skip nodes whose boxes show less than this share of their pixels
+    /// (NOHC/PHC); not conservative.
+    #[arg(long)]
+    pub adaptive_threshold: Option<f32>,
+    /// Grids: cell side in pixels.
+    #[arg(long, default_value_t = 32)]
+    pub grid_cell_pixels: u32,
+}
+
+/// Everything `trace gen` needs to make a workload trace.
+#[derive(clap::Args, Clone, Debug)]
+pub struct WorkloadArgs {
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    #[command(flatten)]
+    pub driver: DriverArgs,
+}
+
+/// Parse `X,Y,Z`.
+fn parse_point(text: &str) -> Result<[f32; 3], String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let numbers: Vec<f32> = parts.iter().filter_map(|p| p.parse::<f32>().ok()).collect();
+    match numbers[..] {
+        [x, y, z] if parts.len() == 3 && numbers.iter().all(|n| n.is_finite()) => Ok([x, y, z]),
+        _ => Err(format!(
+            "`{text}`: expected three finite numbers X,Y,Z in metres"
+        )),
+    }
+}
+
+/// Largest camera file read, in bytes.
+const MAX_CAMERA_FILE_BYTES: u64 = 16 << 20;
+
+impl SceneArgs {
+    pub fn walk(&self) -> Walk {
+        Walk {
+            frames: self.frames,
+            width: self.width,
+            height: self.height,
+        }
+    }
+
+    /// Build (or load) the scene and put the camera on its path.
+    pub fn load_scene(&self) -> anyhow::Result<WorkloadScene> {
+        let name = self.scene.as_str();
+        if self.blocks.is_some() && name != "city" {
+            anyhow::bail!("--blocks applies to the city scene only, not `{name}`");
+        }
+        if self.trees.is_some() && name != "forest" {
+            anyhow::bail!("--trees applies to the forest scene only, not `{name}`");
+        }
+        if self.detail.is_some() && name.starts_with("obj:") {
+            anyhow::bail!("--detail applies to the city and forest scenes, not to OBJ models");
+        }
+        let scene = match name {
+            "city" => {
+                let defaults = CityOptions::default();
+                city(&CityOptions {
+                    blocks: self.blocks.unwrap_or(defaults.blocks),
+                    detail: self.detail.unwrap_or(defaults.detail),
+                    seed: self.seed,
+                })
+            }
+            "forest" => {
+                let defaults = ForestOptions::default();
+                forest(&ForestOptions {
+                    trees: self.trees.unwrap_or(defaults.trees),
+                    detail: self.detail.unwrap_or(defaults.detail),
+                    seed: self.seed,
+                })
+            }
+            other => match other.strip_prefix("obj:") {
+                Some(path) => load_obj_file(Path::new(path))?,
+                None => anyhow::bail!("unknown scene `{other}`: expected city, forest or obj:PATH"),
+            },
+        };
+        match self.camera_path(&scene)? {
+            Some(path) => Ok(scene.with_camera(path)),
+            None => Ok(scene),
+        }
+    }
+
+    fn camera_path(&self, scene: &WorkloadScene) -> anyhow::Result<Option<CameraPath>> {
+        if let (Some(from), Some(to)) = (self.camera_from, self.camera_to) {
+            let target = self.camera_target.unwrap_or(scene.centre());
+            return Ok(Some(CameraPath::line(from, to, target)?));
+        }
+        let Some(file) = &self.camera_file else {
+            return Ok(None);
+        };
+        let name = file.display().to_string();
+        let mut text = String::new();
+        std::fs::File::open(file)
+            .with_context(|| format!("cannot open camera file {name}"))?
+            .take(MAX_CAMERA_FILE_BYTES)
+            .read_to_string(&mut text)
+            .with_context(|| format!("{name}: cannot read camera file (is it UTF-8 text?)"))?;
+        Ok(Some(CameraPath::from_toml(&text, &name)?))
+    }
+
+    /// A one-line account of the scene and walk, for trace headers and reports.
+    pub fn describe(&self, scene: &WorkloadScene) -> String {
+        format!(
+            "{} ({} objects, {} triangles, seed {}) {} frames at {}x{}",
+            self.scene,
+            scene.object_count(),
+            scene.triangle_count(),
+            self.seed,
+            self.frames,
+            self.width,
+            self.height
+        )
+    }
+}
+
+fn load_obj_file(path: &Path) -> anyhow::Result<WorkloadScene> {
+    let file = std::fs::File::open(path)
+        .with_context(|| format!("cannot open OBJ model {}", path.display()))?;
+    let reader = std::io::BufReader::with_capacity(1 << 16, file);
+    Ok(load_obj(
+        reader,
+        &path.display().to_string(),
+        &ObjOptions::default(),
+    )?)
+}
+
+impl DriverArgs {
+    pub fn options(&self) -> anyhow::Result<DriverOptions> {
+        let kind: DriverKind = self.driver.parse()?;
+        let options = DriverOptions {
+            kind,
+            query_delay_frames: self.query_delay,
+            quadtree_levels: self.quadtree_levels,
+            adaptive_threshold: self.adaptive_threshold,
+            grid_cell_pixels: self.grid_cell_pixels,
+        };
+        options.validate()?;
+        Ok(options)
+    }
+}
+
+impl WorkloadArgs {
+    /// The scene (camera on its path), the driver and the walk these arguments ask for.
+    pub fn resolve(&self) -> anyhow::Result<(WorkloadScene, DriverOptions, Walk)> {
+        let driver = self.driver.options()?;
+        let scene = self.scene.load_scene()?;
+        Ok((scene, driver, self.scene.walk()))
+    }
+
+    /// A one-line account for the trace header's scene field.
+    pub fn describe(&self, scene: &WorkloadScene, driver: &DriverOptions) -> String {
+        format!("{} driver {}", self.scene.describe(scene), driver.label())
+    }
+}
+
+/// `trace gen` for a workload: walk the scene with the driver, writing the golden model's
+/// events to `output` (atomically). The header's scene field describes the workload.
+pub fn write_workload_trace(
+    args: &WorkloadArgs,
+    output: &Path,
+) -> anyhow::Result<(TraceSummary, WorkloadStats)> {
+    let (scene, driver, walk) = args.resolve()?;
+    let header =
+        TraceHeader::new(walk.width, walk.height).with_scene(args.describe(&scene, &driver));
+    write_atomically_with(output, |file| {
+        let mut writer = TraceWriter::new(file, &header)?;
+        let stats = generate(&scene, &driver, &walk, &mut writer)?;
+        let summary = writer
+            .finish()
+            .with_context(|| format!("{}: cannot write trace", output.display()))?;
+        Ok((summary, stats))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        workload: WorkloadArgs,
+    }
+
+    fn parse(args: &[&str]) -> Result<WorkloadArgs, String> {
+        let argv = std::iter::once("occsim").chain(args.iter().copied());
+        Cli::try_parse_from(argv)
+            .map(|cli| cli.workload)
+            .map_err(|e| e.to_string())
+    }
+
+    fn resolve_error(args: &[&str]) -> String {
+        match parse(args).map(|a| a.resolve()) {
+            Ok(Ok(_)) => String::new(),
+            Ok(Err(error)) => format!("{error:#}"),
+            Err(error) => error,
+        }
+    }
+
+    #[test]
+    fn flags_become_options() {
+        let args = parse(&[
+            "--scene",
+            "forest",
+            "--trees",
+            "20",
+            "--detail",
+            "4",
+            "--driver",
+            "lazy-grid",
+            "--grid-cell-pixels",
+            "16",
+            "--frames",
+            "3",
+            "--width",
+            "64",
+            "--height",
+            "48",
+            "--camera-from",
+            "0,2,10",
+            "--camera-to",
+            "0,2,-10",
+            "--camera-target",
+            "0,0,-50",
+        ])
+        .unwrap();
+        let (scene, driver, walk) = args.resolve().unwrap();
+        assert_eq!(scene.object_count(), 21);
+        assert_eq!(driver.kind, DriverKind::LazyGrid);
+        assert_eq!(driver.grid_cell_pixels, 16);
+        assert_eq!(
+            walk,
+            Walk {
+                frames: 3,
+                width: 64,
+                height: 48
+            }
+        );
+        assert_eq!(scene.camera().keyframes()[1].eye, [0.0, 2.0, -10.0]);
+        assert_eq!(scene.camera().keyframes()[0].target, [0.0, 0.0, -50.0]);
+    }
+
+    #[test]
+    fn a_workload_trace_holds_the_walk() {
+        let args = parse(&[
+            "--scene",
+            "city",
+            "--blocks",
+            "2",
+            "--detail",
+            "0",
+            "--driver",
+            "lazy-grid",
+            "--frames",
+            "2",
+            "--width",
+            "64",
+            "--height",
+            "48",
+        ])
+        .unwrap();
+        let dir =
+            std::env::temp_dir().join(format!("occsim-workload-trace-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("walk.occt");
+        let (summary, stats) = write_workload_trace(&args, &path).unwrap();
+        let fragments: u64 = stats
+            .frames
+            .iter()
+            .map(|f| f.draw_fragments + f.query_fragments)
+            .sum();
+        assert_eq!(summary.fragments, fragments);
+        let queries: u64 = stats.frames.iter().map(|f| f.queries).sum();
+        assert_eq!(summary.queries, queries);
+        let mut reader = super::super::trace::open_trace(&path).unwrap();
+        assert!(
+            reader.header().scene.contains("driver lazy-grid"),
+            "{}",
+            reader.header().scene
+        );
+        let read = reader
+            .read_into(&mut occsim_traces::golden::Discard)
+            .unwrap();
+        assert_eq!(read.fragments, fragments);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn bad_flags_are_refused_clearly() {
+        assert!(resolve_error(&["--driver", "magic"]).contains("unknown driver `magic`"));
+        assert!(resolve_error(&["--scene", "moon"]).contains("unknown scene `moon`"));
+        assert!(
+            resolve_error(&["--frames", "0"]).is_empty(),
+            "checked by generate"
+        );
+        assert!(resolve_error(&["--camera-from", "1,2"]).contains("expected three finite numbers"));
+        assert!(resolve_error(&["--camera-from", "1,2,3"]).contains("--camera-to"));
+        let missing = resolve_error(&["--scene", "obj:/no/such/model.obj"]);
+        assert!(
+            missing.contains("cannot open OBJ model /no/such/model.obj"),
+            "{missing}"
+        );
+        let camera = resolve_error(&["--camera-file", "/no/such/walk.toml"]);
+        assert!(
+            camera.contains("cannot open camera file /no/such/walk.toml"),
+            "{camera}"
+        );
+        let misplaced = resolve_error(&["--scene", "forest", "--blocks", "3"]);
+        assert!(
+            misplaced.contains("--blocks applies to the city"),
+            "{misplaced}"
+        );
+        let delayed = resolve_error(&["--driver", "busy-grid", "--query-delay", "1"]);
+        assert!(delayed.contains("--query-delay applies to"), "{delayed}");
+    }
+}

@@ -1,0 +1,90 @@
+//! Workload trace generation rate: fragments per second for each culling driver walking the
+//! default city, beside the plain golden model (what `occsim count` does) replaying the very
+//! same frames' commands. The difference is the drivers' own cost: traversal, box
+//! projection, grid bookkeeping, making commands. Run with
+//! `cargo bench -p occsim-traces --bench workloads` (OCCSIM_BENCH_FRAMES, OCCSIM_BENCH_WIDTH
+//! and OCCSIM_BENCH_HEIGHT change the walk; defaults 8 frames at 1280x1024).
+
+use occsim_traces::golden::{Discard, EventSink, GoldenModel};
+use occsim_traces::workloads::{
+    city, generate, generate_observed, CityOptions, DriverKind, DriverOptions, Walk,
+};
+use occsim_traces::{Command, Event};
+use std::hint::black_box;
+use std::time::Instant;
+
+/// Counts fragments so the event stream cannot be optimised away.
+struct CountFragments(u64);
+
+impl EventSink for CountFragments {
+    #[inline(always)]
+    fn event(&mut self, event: &Event) {
+        if let Event::Fragment(_) = event {
+            self.0 += 1;
+        }
+    }
+}
+
+fn setting(name: &str, default: u32) -> u32 {
+    std::env::var(name)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(default)
+}
+
+fn main() {
+    let walk = Walk {
+        frames: setting("OCCSIM_BENCH_FRAMES", 8),
+        width: setting("OCCSIM_BENCH_WIDTH", 1280),
+        height: setting("OCCSIM_BENCH_HEIGHT", 1024),
+    };
+    let started = Instant::now();
+    let scene = city(&CityOptions::default());
+    println!(
+        "city: {} objects, {} triangles, built in {:.3} s; {} frames at {}x{}",
+        scene.object_count(),
+        scene.triangle_count(),
+        started.elapsed().as_secs_f64(),
+        walk.frames,
+        walk.width,
+        walk.height
+    );
+    let mut drivers: Vec<DriverOptions> = DriverKind::ALL
+        .into_iter()
+        .map(DriverOptions::new)
+        .collect();
+    let mut quadtree = DriverOptions::new(DriverKind::Hierarchical);
+    quadtree.quadtree_levels = 2;
+    drivers.insert(2, quadtree);
+    println!(
+        "{:<18} {:>12} {:>14} {:>16} {:>12}",
+        "driver", "fragments", "generate M/s", "golden only M/s", "driver share"
+    );
+    for driver in drivers {
+        // Generation: the driver and the golden model, events into a counting sink.
+        let mut sink = CountFragments(0);
+        let started = Instant::now();
+        generate(&scene, &driver, &walk, &mut sink).expect("valid options");
+        let generate_seconds = started.elapsed().as_secs_f64();
+        // The same frames' commands, replayed through the golden model alone.
+        let mut commands: Vec<Command> = Vec::new();
+        generate_observed(&scene, &driver, &walk, &mut Discard, &mut commands)
+            .expect("valid options");
+        let mut golden = GoldenModel::new(walk.width, walk.height);
+        let mut replay = CountFragments(0);
+        let started = Instant::now();
+        for command in &commands {
+            black_box(golden.execute(command, &mut replay));
+        }
+        let replay_seconds = started.elapsed().as_secs_f64();
+        assert_eq!(replay.0, sink.0, "the replay must see the same fragments");
+        println!(
+            "{:<18} {:>12} {:>14.1} {:>16.1} {:>11.1}%",
+            driver.label(),
+            sink.0,
+            sink.0 as f64 / generate_seconds / 1e6,
+            replay.0 as f64 / replay_seconds / 1e6,
+            100.0 * (1.0 - replay_seconds / generate_seconds).max(0.0)
+        );
+    }
+}

@@ -1,0 +1,115 @@
+//! The frame loop, the front-to-back traversal queue every driver shares, and the frustum
+//! driver (the baseline).
+
+use super::bvh::{Bvh, NodeContent};
+use super::grid::GridDriver;
+use super::hierarchical::HierarchicalDriver;
+use super::project::Frustum;
+use super::render::{CommandObserver, Renderer};
+use super::{DriverKind, DriverOptions, FrameView, Walk, WorkloadScene, WorkloadStats};
+use crate::golden::EventSink;
+use glam::Vec3;
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+use std::time::Instant;
+
+/// Hierarchy nodes in front-to-back order of their boxes' distance from the eye; equal
+/// distances in node order, so the traversal is reproducible.
+pub(crate) struct FrontToBack<T> {
+    heap: BinaryHeap<Reverse<(u32, u32, u32)>>,
+    /// Payloads the entries refer to by index.
+    payloads: Vec<T>,
+    eye: Vec3,
+}
+
+impl<T> FrontToBack<T> {
+    pub(crate) fn new(eye: Vec3) -> FrontToBack<T> {
+        FrontToBack {
+            heap: BinaryHeap::new(),
+            payloads: Vec::new(),
+            eye,
+        }
+    }
+
+    pub(crate) fn push(&mut self, bvh: &Bvh, node: u32, payload: T) {
+        // Non-negative floats order as their bit patterns do.
+        let distance = bvh.nodes[node as usize].bounds.distance_squared(self.eye);
+        self.payloads.push(payload);
+        let slot = (self.payloads.len() - 1) as u32;
+        self.heap.push(Reverse((distance.to_bits(), node, slot)));
+    }
+
+    /// The nearest node and its payload's index.
+    pub(crate) fn pop(&mut self) -> Option<(u32, &T)> {
+        let Reverse((_, node, slot)) = self.heap.pop()?;
+        Some((node, &self.payloads[slot as usize]))
+    }
+}
+
+pub(crate) fn run<S: EventSink, O: CommandObserver>(
+    scene: &WorkloadScene,
+    options: &DriverOptions,
+    walk: &Walk,
+    sink: &mut S,
+    observer: &mut O,
+) -> WorkloadStats {
+    let mut renderer = Renderer::new(walk.width, walk.height, sink, observer);
+    let mut hierarchical = HierarchicalDriver::new(options, scene.bvh.nodes.len());
+    let mut grid = GridDriver::new(options, walk.width, walk.height);
+    let mut stats = WorkloadStats {
+        scene_triangles: scene.triangle_count(),
+        ..WorkloadStats::default()
+    };
+    for frame in 0..walk.frames {
+        let started = Instant::now();
+        let view = scene.frame_view(frame, walk);
+        renderer.start_frame();
+        match options.kind {
+            DriverKind::Frustum => frustum_frame(scene, &view, &mut renderer),
+            DriverKind::Hierarchical => hierarchical.frame(frame, scene, &view, &mut renderer),
+            DriverKind::LazyGrid | DriverKind::BusyGrid => grid.frame(scene, &view, &mut renderer),
+        }
+        let (frame_stats, timing) = renderer.finish_frame(started);
+        stats.frames.push(frame_stats);
+        stats.timing.push(timing);
+    }
+    stats
+}
+
+/// Draw every leaf whose box meets the view frustum, front to back.
+fn frustum_frame<S: EventSink, O: CommandObserver>(
+    scene: &WorkloadScene,
+    view: &FrameView,
+    renderer: &mut Renderer<S, O>,
+) {
+    let bvh = &scene.bvh;
+    if bvh.nodes.is_empty() {
+        return;
+    }
+    let frustum = Frustum::new(&view.view_projection);
+    let mut queue = FrontToBack::new(view.eye);
+    queue.push(bvh, 0, ());
+    while let Some((node, _)) = queue.pop() {
+        renderer.stats.nodes_visited += 1;
+        let node = &bvh.nodes[node as usize];
+        if !frustum.may_see(&node.bounds) {
+            continue;
+        }
+        match node.content {
+            NodeContent::Leaf { first, count } => {
+                for &object in bvh.leaf_objects(first, count) {
+                    renderer.draw_object(
+                        object,
+                        &scene.objects[object as usize],
+                        &view.view_projection,
+                    );
+                }
+            }
+            NodeContent::Inner { children } => {
+                for child in children {
+                    queue.push(bvh, child, ());
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,460 @@
+//! Walkthrough workloads: parametric scenes, camera paths, and the culling drivers that
+//! issue occlusion queries while the golden model answers them.
+//!
+//! A workload is a scene ([`WorkloadScene`]: objects in world space, a bounding volume
+//! hierarchy over them and a default camera path), a walk ([`Walk`]: frames and viewport)
+//! and a driver ([`DriverOptions`]): the culling algorithm that decides, frame by frame,
+//! which objects to draw. [`generate`] runs the driver; its commands go through the golden
+//! model, whose events (the fragment stream a trace records) go to the caller's sink.
+//!
+//! Every frame's events are self-contained: the frame begins with exactly one `Clear`
+//! followed by the whole render state, so a consumer can split a stream into frames at
+//! `Clear` events.
+//!
+//! Drivers (seeds 000 and 001 of the project):
+//! - `frustum`: view-frustum culling through the hierarchy; no queries (the baseline).
+//! - `hierarchical`: occlusion-driven rendering (Bartz et al. 1998, section 3): the hierarchy
+//!   traversed front to back, each node's box drawn in brief mode, geometry drawn only for
+//!   leaves whose box has visible pixels.
+//! - `lazy-grid`, `busy-grid`: the lazy occlusion grid (Hey et al.), z-buffer variant, in
+//!   query form (see `grid.rs`).
+
+mod bvh;
+mod camera;
+mod drivers;
+mod grid;
+mod hierarchical;
+mod obj;
+mod oracle;
+mod project;
+mod render;
+mod scenes;
+
+pub use camera::{CameraKeyframe, CameraPath};
+pub use obj::{load_obj, ObjOptions};
+pub use oracle::full_render_visible_pixels;
+pub use render::CommandObserver;
+pub use scenes::{city, forest, CityOptions, ForestOptions};
+
+use crate::geometry::{look_at, perspective_gl, Aabb};
+use crate::golden::EventSink;
+use crate::query::MAX_TILES;
+use crate::state::MAX_VIEWPORT_SIDE;
+use bvh::Bvh;
+use glam::{Mat4, Vec3};
+use std::time::Duration;
+
+/// A workload that cannot be made, with what to change.
+#[derive(Debug, thiserror::Error)]
+pub enum WorkloadError {
+    #[error("{0}")]
+    Option(String),
+    #[error("unknown driver `{0}`: expected frustum, hierarchical, lazy-grid or busy-grid")]
+    UnknownDriver(String),
+    #[error("{file}:{line}: {message}")]
+    Obj {
+        file: String,
+        line: u64,
+        message: String,
+    },
+    #[error("{file}: {message}")]
+    Camera { file: String, message: String },
+}
+
+/// One object of a scene: its triangles (counter-clockwise seen from outside, world space,
+/// metres) and their bounding box.
+pub(crate) struct SceneObject {
+    pub(crate) triangles: Vec<[Vec3; 3]>,
+    pub(crate) bounds: Aabb,
+}
+
+impl SceneObject {
+    /// None when there are no triangles.
+    pub(crate) fn new(triangles: Vec<[Vec3; 3]>) -> Option<SceneObject> {
+        let bounds = Aabb::around(triangles.iter().flatten().copied())?;
+        Some(SceneObject { triangles, bounds })
+    }
+}
+
+/// A scene ready to walk through: objects, their hierarchy and a camera path.
+pub struct WorkloadScene {
+    /// The scene's name, for reports (`city`, `forest`, or the OBJ file).
+    pub name: String,
+    objects: Vec<SceneObject>,
+    bvh: Bvh,
+    bounds: Aabb,
+    camera: CameraPath,
+    /// Vertical field of view in degrees.
+    pub fov_y_degrees: f32,
+    /// How far query boxes are grown beyond the bounds they test, in metres: keeps a box's
+    /// depth in front of its contents' by more than depth rounding, so box tests stay
+    /// conservative.
+    pub box_margin: f32,
+}
+
+/// Fraction of the scene's diagonal query boxes grow by (see `box_margin`).
+const BOX_MARGIN_PER_DIAGONAL: f32 = 5e-4;
+/// Far clip distance over near clip distance (24-bit depth stays fine-grained enough).
+const FAR_OVER_NEAR: f32 = 1500.0;
+
+impl WorkloadScene {
+    /// None when there is no object.
+    pub(crate) fn new(
+        name: impl Into<String>,
+        objects: Vec<SceneObject>,
+        camera: CameraPath,
+    ) -> Option<WorkloadScene> {
+        let bounds = objects.iter().map(|o| o.bounds).reduce(Aabb::union)?;
+        let bvh = Bvh::build(&objects);
+        Some(WorkloadScene {
+            name: name.into(),
+            objects,
+            bvh,
+            bounds,
+            camera,
+            fov_y_degrees: 60.0,
+            box_margin: (bounds.max - bounds.min).length() * BOX_MARGIN_PER_DIAGONAL,
+        })
+    }
+
+    /// The same scene walked along another camera path.
+    pub fn with_camera(mut self, camera: CameraPath) -> WorkloadScene {
+        self.camera = camera;
+        self
+    }
+
+    pub fn camera(&self) -> &CameraPath {
+        &self.camera
+    }
+
+    pub fn object_count(&self) -> usize {
+        self.objects.len()
+    }
+
+    pub fn triangle_count(&self) -> u64 {
+        self.objects.iter().map(|o| o.triangles.len() as u64).sum()
+    }
+
+    /// Triangles of each object, in object order.
+    pub fn object_triangle_counts(&self) -> Vec<u64> {
+        self.objects
+            .iter()
+            .map(|o| o.triangles.len() as u64)
+            .collect()
+    }
+
+    /// The centre of the scene's bounding box (world space, metres).
+    pub fn centre(&self) -> [f32; 3] {
+        self.bounds.centre().to_array()
+    }
+
+    /// Near and far clip distances for the camera path, in metres: far reaches the scene's
+    /// farthest corner from any keyframe.
+    fn clip_range(&self) -> (f32, f32) {
+        let corners = self.bounds.corners();
+        let far = self
+            .camera
+            .keyframes()
+            .iter()
+            .flat_map(|k| corners.map(|c| (c - Vec3::from(k.eye)).length()))
+            .fold(1.0f32, f32::max)
+            * 1.05;
+        (far / FAR_OVER_NEAR, far)
+    }
+
+    /// The camera of `frame` out of `frames`.
+    pub(crate) fn frame_view(&self, frame: u32, walk: &Walk) -> FrameView {
+        let (eye, target) = self.camera.eye_and_target(frame, walk.frames);
+        let (near, far) = self.clip_range();
+        let aspect = walk.width as f32 / walk.height as f32;
+        let projection = perspective_gl(self.fov_y_degrees.to_radians(), aspect, near, far);
+        let forward = (target - eye).normalize_or(Vec3::NEG_Z);
+        // Looking straight up or down: any other up vector will do.
+        let up = if forward.cross(Vec3::Y).length_squared() < 1e-6 {
+            Vec3::Z
+        } else {
+            Vec3::Y
+        };
+        let view_projection = projection * look_at(eye, eye + forward, up);
+        FrameView {
+            view_projection,
+            eye,
+            near,
+            width: walk.width,
+            height: walk.height,
+        }
+    }
+}
+
+/// One frame's camera.
+pub(crate) struct FrameView {
+    pub(crate) view_projection: Mat4,
+    pub(crate) eye: Vec3,
+    /// Near clip distance in metres.
+    pub(crate) near: f32,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+}
+
+/// The frames and viewport of a walkthrough.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Walk {
+    /// Frames along the camera path (at least 1).
+    pub frames: u32,
+    /// Viewport width in pixels.
+    pub width: u32,
+    /// Viewport height in pixels.
+    pub height: u32,
+}
+
+impl Walk {
+    fn validate(&self) -> Result<(), WorkloadError> {
+        if self.frames == 0 {
+            return Err(WorkloadError::Option(
+                "--frames 0: a walkthrough needs at least 1 frame".into(),
+            ));
+        }
+        for (name, side) in [("--width", self.width), ("--height", self.height)] {
+            if side == 0 || side > MAX_VIEWPORT_SIDE {
+                return Err(WorkloadError::Option(format!(
+                    "{name} {side} out of range: expected 1 to {MAX_VIEWPORT_SIDE} pixels"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The culling algorithm.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum DriverKind {
+    /// View-frustum culling only.
+    Frustum,
+    /// Occlusion-driven rendering: a brief box query per hierarchy node.
+    Hierarchical,
+    /// Lazy occlusion grid, z-buffer variant, refreshed by brief probe queries.
+    LazyGrid,
+    /// The grid refreshed after every draw.
+    BusyGrid,
+}
+
+impl DriverKind {
+    pub const ALL: [DriverKind; 4] = [
+        DriverKind::Frustum,
+        DriverKind::Hierarchical,
+        DriverKind::LazyGrid,
+        DriverKind::BusyGrid,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            DriverKind::Frustum => "frustum",
+            DriverKind::Hierarchical => "hierarchical",
+            DriverKind::LazyGrid => "lazy-grid",
+            DriverKind::BusyGrid => "busy-grid",
+        }
+    }
+}
+
+impl std::str::FromStr for DriverKind {
+    type Err = WorkloadError;
+
+    fn from_str(name: &str) -> Result<DriverKind, WorkloadError> {
+        DriverKind::ALL
+            .into_iter()
+            .find(|k| k.name() == name)
+            .ok_or_else(|| WorkloadError::UnknownDriver(name.to_owned()))
+    }
+}
+
+/// Most quadtree levels below a hierarchical query's root tile (4 levels: 341 tiles).
+pub const MAX_QUADTREE_LEVELS: u32 = 4;
+
+/// How a driver culls.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DriverOptions {
+    pub kind: DriverKind,
+    /// Frames between issuing a query and reading its answer: 0 (at once) or 1 (the next
+    /// frame, as applications hide query latency; the first frame draws conservatively).
+    /// Frustum and hierarchical only.
+    pub query_delay_frames: u32,
+    /// Hierarchical: quadtree levels of tiles below the box's whole-rectangle tile (0: one
+    /// tile). Children lying wholly in tiles without hits are culled without a query.
+    pub quadtree_levels: u32,
+    /// Hierarchical: skip a node whose box has NOHC/PHC below this share (0 to 1]: adaptive,
+    /// not conservative culling. None: skip only boxes without visible pixels.
+    pub adaptive_threshold: Option<f32>,
+    /// Grids: side of a grid cell in pixels.
+    pub grid_cell_pixels: u32,
+}
+
+impl DriverOptions {
+    /// The driver's defaults: no delay, one tile, no threshold, 32-pixel cells.
+    pub fn new(kind: DriverKind) -> DriverOptions {
+        DriverOptions {
+            kind,
+            query_delay_frames: 0,
+            quadtree_levels: 0,
+            adaptive_threshold: None,
+            grid_cell_pixels: 32,
+        }
+    }
+
+    /// A short label for reports, e.g. `hierarchical/q2/t0.05/d1`.
+    pub fn label(&self) -> String {
+        let mut label = self.kind.name().to_owned();
+        if self.quadtree_levels > 0 {
+            label += &format!("/q{}", self.quadtree_levels);
+        }
+        if let Some(t) = self.adaptive_threshold {
+            label += &format!("/t{t}");
+        }
+        if self.query_delay_frames > 0 {
+            label += &format!("/d{}", self.query_delay_frames);
+        }
+        if self.grid_cell_pixels != 32 && self.is_grid() {
+            label += &format!("/c{}", self.grid_cell_pixels);
+        }
+        label
+    }
+
+    fn is_grid(&self) -> bool {
+        matches!(self.kind, DriverKind::LazyGrid | DriverKind::BusyGrid)
+    }
+
+    pub fn validate(&self) -> Result<(), WorkloadError> {
+        let fail = |message: String| Err(WorkloadError::Option(message));
+        let hierarchical = self.kind == DriverKind::Hierarchical;
+        if self.query_delay_frames > 1 {
+            return fail(format!(
+                "--query-delay {}: expected 0 (read answers at once) or 1 (a frame later)",
+                self.query_delay_frames
+            ));
+        }
+        if self.query_delay_frames > 0 && self.is_grid() {
+            return fail(format!(
+                "--query-delay applies to the frustum and hierarchical drivers: the {} driver reads its cell refreshes at once",
+                self.kind.name()
+            ));
+        }
+        if self.quadtree_levels > MAX_QUADTREE_LEVELS {
+            return fail(format!(
+                "--quadtree-levels {} out of range: expected 0 to {MAX_QUADTREE_LEVELS}",
+                self.quadtree_levels
+            ));
+        }
+        if self.quadtree_levels > 0 && !hierarchical {
+            return fail("--quadtree-levels applies to the hierarchical driver only".into());
+        }
+        if let Some(t) = self.adaptive_threshold {
+            if !(t > 0.0 && t <= 1.0) {
+                return fail(format!(
+                    "--adaptive-threshold {t} out of range: expected a share above 0 and at most 1"
+                ));
+            }
+            if !hierarchical {
+                return fail("--adaptive-threshold applies to the hierarchical driver only".into());
+            }
+        }
+        if !(4..=1024).contains(&self.grid_cell_pixels) {
+            return fail(format!(
+                "--grid-cell-pixels {} out of range: expected 4 to 1024",
+                self.grid_cell_pixels
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// What one frame cost the driver. Deterministic: equal for equal inputs.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct FrameStats {
+    /// Scene triangles drawn (sent as geometry, before back-face culling).
+    pub triangles_drawn: u64,
+    /// Indices of the objects drawn, in drawing order.
+    pub objects_drawn: Vec<u32>,
+    /// Fragments of drawn geometry.
+    pub draw_fragments: u64,
+    /// Occlusion queries issued (brief mode).
+    pub queries: u64,
+    /// Tiles over all queries.
+    pub query_tiles: u64,
+    /// Triangles drawn inside occlusion queries (boxes, probe quads).
+    pub query_triangles: u64,
+    /// Fragments drawn inside occlusion queries (each once, however many tiles hold it).
+    pub query_fragments: u64,
+    /// Grids: outdated cells (drawn into since their last probe) refreshed by a probe.
+    pub cells_refreshed: u64,
+    /// Hierarchy nodes taken from the traversal queue.
+    pub nodes_visited: u64,
+    /// Hierarchical: nodes culled by their parent's quadtree tiles, without a query.
+    pub culled_by_parent_tiles: u64,
+}
+
+/// Wall time of one frame; not deterministic, kept apart from [`FrameStats`].
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameTiming {
+    /// The whole frame: traversal and golden model.
+    pub total: Duration,
+    /// Inside the golden model (rasterizing, depth testing, counting).
+    pub golden_model: Duration,
+}
+
+impl FrameTiming {
+    /// The traversal itself: the frame less the golden model.
+    pub fn traversal(&self) -> Duration {
+        self.total.saturating_sub(self.golden_model)
+    }
+}
+
+/// What a walkthrough cost, frame by frame.
+#[derive(Clone, Debug, Default)]
+pub struct WorkloadStats {
+    pub frames: Vec<FrameStats>,
+    pub timing: Vec<FrameTiming>,
+    /// Triangles in the whole scene.
+    pub scene_triangles: u64,
+}
+
+/// Walk `scene` with `driver`, sending the golden model's events to `sink`.
+pub fn generate(
+    scene: &WorkloadScene,
+    driver: &DriverOptions,
+    walk: &Walk,
+    sink: &mut impl EventSink,
+) -> Result<WorkloadStats, WorkloadError> {
+    generate_observed(scene, driver, walk, sink, &mut ())
+}
+
+/// [`generate`], also showing every scene command to `commands` as it is executed (to
+/// replay the same frames through `occsim count`, or to write them as scene text).
+pub fn generate_observed(
+    scene: &WorkloadScene,
+    driver: &DriverOptions,
+    walk: &Walk,
+    sink: &mut impl EventSink,
+    commands: &mut impl CommandObserver,
+) -> Result<WorkloadStats, WorkloadError> {
+    walk.validate()?;
+    driver.validate()?;
+    check_grid_size(driver, walk)?;
+    Ok(drivers::run(scene, driver, walk, sink, commands))
+}
+
+/// One probe query may name every cell, so a grid may hold at most `MAX_TILES` cells.
+fn check_grid_size(driver: &DriverOptions, walk: &Walk) -> Result<(), WorkloadError> {
+    if !driver.is_grid() {
+        return Ok(());
+    }
+    let side = driver.grid_cell_pixels as u64;
+    let (columns, rows) = (
+        (walk.width as u64).div_ceil(side),
+        (walk.height as u64).div_ceil(side),
+    );
+    if columns * rows > MAX_TILES as u64 {
+        return Err(WorkloadError::Option(format!(
+            "--grid-cell-pixels {side} makes a {columns}x{rows} grid, more than {MAX_TILES} cells (the most tiles one query holds): use larger cells"
+        )));
+    }
+    Ok(())
+}

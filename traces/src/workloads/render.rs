@@ -1,0 +1,216 @@
+//! The drivers' side of the graphics API: commands go to the golden model, its events to
+//! the caller's sink, and every command is accounted in the frame's statistics.
+
+use super::{FrameStats, FrameTiming, SceneObject};
+use crate::event::{Event, DEPTH_ONE};
+use crate::geometry::to_clip;
+use crate::golden::{EventSink, GoldenModel};
+use crate::query::{QueryMode, QueryResult, QuerySpec, BRIEF_RECORD_ENTRIES};
+use crate::scene::Command;
+use crate::state::{DepthFunc, Rect};
+use glam::Mat4;
+use std::time::{Duration, Instant};
+
+/// Sees every scene command a driver executes, in order.
+pub trait CommandObserver {
+    fn command(&mut self, command: &Command);
+}
+
+/// Observes nothing.
+impl CommandObserver for () {
+    #[inline(always)]
+    fn command(&mut self, _: &Command) {}
+}
+
+/// Keeps every command.
+impl CommandObserver for Vec<Command> {
+    fn command(&mut self, command: &Command) {
+        self.push(command.clone());
+    }
+}
+
+/// Counts the fragments on their way to the caller's sink.
+struct CountingSink<'s, S> {
+    inner: &'s mut S,
+    fragments: u64,
+}
+
+impl<S: EventSink> EventSink for CountingSink<'_, S> {
+    #[inline(always)]
+    fn event(&mut self, event: &Event) {
+        if let Event::Fragment(_) = event {
+            self.fragments += 1;
+        }
+        self.inner.event(event);
+    }
+}
+
+pub(crate) struct Renderer<'s, S, O> {
+    golden: GoldenModel,
+    sink: CountingSink<'s, S>,
+    observer: &'s mut O,
+    next_query_id: u32,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) stats: FrameStats,
+    golden_time: Duration,
+}
+
+impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
+    pub(crate) fn new(width: u32, height: u32, sink: &'s mut S, observer: &'s mut O) -> Self {
+        Renderer {
+            golden: GoldenModel::new(width, height),
+            sink: CountingSink {
+                inner: sink,
+                fragments: 0,
+            },
+            observer,
+            next_query_id: 1,
+            width,
+            height,
+            stats: FrameStats::default(),
+            golden_time: Duration::ZERO,
+        }
+    }
+
+    fn execute(&mut self, command: &Command) -> Option<QueryResult> {
+        self.observer.command(command);
+        self.golden.execute(command, &mut self.sink)
+    }
+
+    /// Clear, then state every frame relies on, so each frame stands alone: back faces
+    /// culled (box counts need it), depth test LEQUAL with writes.
+    pub(crate) fn start_frame(&mut self) {
+        self.stats = FrameStats::default();
+        self.golden_time = Duration::ZERO;
+        for command in [
+            Command::Clear,
+            Command::Cull(true),
+            Command::DepthTest(true),
+            Command::DepthFunc(DepthFunc::Lequal),
+            Command::DepthMask(true),
+            Command::Scissor(None),
+        ] {
+            self.execute(&command);
+        }
+    }
+
+    /// The frame's statistics and the time spent in the golden model.
+    pub(crate) fn finish_frame(&mut self, started: Instant) -> (FrameStats, FrameTiming) {
+        let timing = FrameTiming {
+            total: started.elapsed(),
+            golden_model: self.golden_time,
+        };
+        (std::mem::take(&mut self.stats), timing)
+    }
+
+    /// Draw an object's triangles.
+    pub(crate) fn draw_object(&mut self, index: u32, object: &SceneObject, view_projection: &Mat4) {
+        let started = Instant::now();
+        let fragments_before = self.sink.fragments;
+        for triangle in &object.triangles {
+            let clip = triangle.map(|p| to_clip(view_projection, p));
+            self.execute(&Command::Tri(clip));
+        }
+        self.stats.draw_fragments += self.sink.fragments - fragments_before;
+        self.stats.triangles_drawn += object.triangles.len() as u64;
+        self.stats.objects_drawn.push(index);
+        self.golden_time += started.elapsed();
+    }
+
+    /// One brief occlusion query over `tiles` (non-empty, inside the viewport) drawing
+    /// `triangles` (clip coordinates). None only if the golden model gave no answer.
+    pub(crate) fn brief_query(
+        &mut self,
+        tiles: Vec<Rect>,
+        triangles: impl IntoIterator<Item = [[f32; 4]; 3]>,
+    ) -> Option<QueryResult> {
+        let started = Instant::now();
+        let fragments_before = self.sink.fragments;
+        self.stats.queries += 1;
+        self.stats.query_tiles += tiles.len() as u64;
+        let id = self.next_query_id;
+        self.next_query_id = self.next_query_id.wrapping_add(1);
+        self.execute(&Command::Begin(QuerySpec {
+            id,
+            mode: QueryMode::Brief,
+            buffer_entries: BRIEF_RECORD_ENTRIES,
+            tiles,
+        }));
+        for triangle in triangles {
+            self.stats.query_triangles += 1;
+            self.execute(&Command::Tri(triangle));
+        }
+        let result = self.execute(&Command::End);
+        self.stats.query_fragments += self.sink.fragments - fragments_before;
+        self.golden_time += started.elapsed();
+        result
+    }
+
+    /// A brief query drawing, over each tile, a screen-aligned quad at that tile's window
+    /// depth (24-bit units, 1 to 2^24 - 2). With LEQUAL a tile has hits exactly where the
+    /// stored depth is at least the quad's: the query measures the depth buffer.
+    pub(crate) fn depth_probe(&mut self, tiles: &[(Rect, u32)]) -> Option<QueryResult> {
+        let quads: Vec<[[f32; 4]; 3]> = tiles
+            .iter()
+            .flat_map(|&(tile, depth)| screen_quad(tile, depth, self.width, self.height))
+            .collect();
+        self.brief_query(tiles.iter().map(|&(tile, _)| tile).collect(), quads)
+    }
+}
+
+/// Two counter-clockwise triangles covering exactly the pixels of `tile` at window depth
+/// `depth` (24-bit units), in clip coordinates with w = 1.
+fn screen_quad(tile: Rect, depth: u32, width: u32, height: u32) -> [[[f32; 4]; 3]; 2] {
+    let ndc = |pixel: u32, size: u32| (2.0 * pixel as f64 / size as f64 - 1.0) as f32;
+    let (x0, x1) = (ndc(tile.x, width), ndc(tile.x + tile.width, width));
+    let (y0, y1) = (ndc(tile.y, height), ndc(tile.y + tile.height, height));
+    let z = (2.0 * depth as f64 / DEPTH_ONE as f64 - 1.0) as f32;
+    let v = |x: f32, y: f32| [x, y, z, 1.0];
+    [
+        [v(x0, y0), v(x1, y0), v(x1, y1)],
+        [v(x0, y0), v(x1, y1), v(x0, y1)],
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::golden::Discard;
+
+    /// A probe at depth p over a screen filled at depth d: hits everywhere when p is well in
+    /// front of d, nowhere when well behind: the slack the grid allows for rounding holds.
+    #[test]
+    fn depth_probes_see_a_filled_screen_within_their_slack() {
+        let slack = 3; // the grid's PROBE_SLACK
+        let tile = Rect::new(0, 0, 37, 23);
+        for filled in [9u32, 1000, 1 << 20, 12_345_678, DEPTH_ONE - 9] {
+            let mut sink = Discard;
+            let mut observer = ();
+            let mut renderer = Renderer::new(37, 23, &mut sink, &mut observer);
+            renderer.start_frame();
+            for triangle in screen_quad(tile, filled, 37, 23) {
+                renderer.execute(&Command::Tri(triangle));
+            }
+            let probe = |renderer: &mut Renderer<Discard, ()>, depth: u32| {
+                let result = renderer.depth_probe(&[(tile, depth)]).expect("an answer");
+                (result.tiles[0].nohc, result.tiles[0].phc)
+            };
+            assert_eq!(
+                probe(&mut renderer, filled - 2 * slack - 1),
+                (tile.area(), tile.area())
+            );
+            assert_eq!(
+                probe(&mut renderer, filled + 2 * slack + 1),
+                (0, tile.area())
+            );
+            // In fact the rounding is tighter: one unit either side decides.
+            assert_eq!(
+                probe(&mut renderer, filled - 1).0,
+                tile.area(),
+                "depth {filled}"
+            );
+            assert_eq!(probe(&mut renderer, filled + 1).0, 0, "depth {filled}");
+        }
+    }
+}

@@ -1,0 +1,352 @@
+//! Walkthrough workloads end to end: determinism, conservative culling against a full
+//! render, culling that pays, and clear errors for bad options.
+
+use occsim_traces::golden::Discard;
+use occsim_traces::workloads::{
+    city, forest, full_render_visible_pixels, generate, load_obj, CameraPath, CityOptions,
+    DriverKind, DriverOptions, ForestOptions, ObjOptions, Walk, WorkloadScene,
+};
+use occsim_traces::Event;
+
+fn small_city() -> WorkloadScene {
+    city(&CityOptions {
+        blocks: 4,
+        detail: 1,
+        seed: 5,
+    })
+}
+
+fn small_forest() -> WorkloadScene {
+    forest(&ForestOptions {
+        trees: 150,
+        detail: 6,
+        seed: 9,
+    })
+}
+
+const WALK: Walk = Walk {
+    frames: 5,
+    width: 160,
+    height: 120,
+};
+
+/// Every driver configuration that must never cull a visible object.
+fn conservative_drivers() -> Vec<DriverOptions> {
+    let mut quadtree = DriverOptions::new(DriverKind::Hierarchical);
+    quadtree.quadtree_levels = 2;
+    let mut coarse_grid = DriverOptions::new(DriverKind::LazyGrid);
+    coarse_grid.grid_cell_pixels = 48;
+    let mut all: Vec<DriverOptions> = DriverKind::ALL
+        .into_iter()
+        .map(DriverOptions::new)
+        .collect();
+    all.push(quadtree);
+    all.push(coarse_grid);
+    all
+}
+
+#[test]
+fn the_same_options_give_the_same_events() {
+    let scene = small_city();
+    for driver in conservative_drivers() {
+        let mut first: Vec<Event> = Vec::new();
+        let mut second: Vec<Event> = Vec::new();
+        let a = generate(&scene, &driver, &WALK, &mut first).unwrap();
+        let b = generate(&small_city(), &driver, &WALK, &mut second).unwrap();
+        assert!(first == second, "{}: event streams differ", driver.label());
+        assert_eq!(a.frames, b.frames, "{}", driver.label());
+        assert!(
+            first.iter().any(|e| matches!(e, Event::Fragment(_))),
+            "{}: no fragments",
+            driver.label()
+        );
+    }
+}
+
+#[test]
+fn every_frame_starts_with_one_clear() {
+    let scene = small_forest();
+    let mut events: Vec<Event> = Vec::new();
+    generate(
+        &scene,
+        &DriverOptions::new(DriverKind::LazyGrid),
+        &WALK,
+        &mut events,
+    )
+    .unwrap();
+    assert_eq!(events.first(), Some(&Event::Clear));
+    let clears = events.iter().filter(|e| matches!(e, Event::Clear)).count();
+    assert_eq!(clears, WALK.frames as usize);
+}
+
+/// Per frame, each object's visible pixels in the full render.
+fn full_renders(scene: &WorkloadScene, walk: &Walk) -> Vec<Vec<u64>> {
+    let full: Vec<Vec<u64>> = (0..walk.frames)
+        .map(|frame| full_render_visible_pixels(scene, frame, walk).unwrap())
+        .collect();
+    let visible_objects: usize = full
+        .iter()
+        .map(|f| f.iter().filter(|&&p| p > 0).count())
+        .sum();
+    assert!(
+        visible_objects >= walk.frames as usize,
+        "the walk sees almost nothing"
+    );
+    full
+}
+
+/// (frame, object, visible pixels) of every object visible in the full render of a frame
+/// that `driver` did not draw in that frame.
+fn missed_objects(
+    scene: &WorkloadScene,
+    walk: &Walk,
+    full: &[Vec<u64>],
+    driver: &DriverOptions,
+) -> Vec<(usize, usize, u64)> {
+    let stats = generate(scene, driver, walk, &mut Discard).unwrap();
+    let mut missed = Vec::new();
+    for (frame, (frame_stats, visible)) in stats.frames.iter().zip(full).enumerate() {
+        let mut drawn = vec![false; visible.len()];
+        for &object in &frame_stats.objects_drawn {
+            drawn[object as usize] = true;
+        }
+        for (object, &pixels) in visible.iter().enumerate() {
+            if pixels > 0 && !drawn[object] {
+                missed.push((frame, object, pixels));
+            }
+        }
+    }
+    missed
+}
+
+/// Every object with a visible pixel in the full render of a frame is drawn in that frame.
+fn check_conservative(scene: &WorkloadScene, walk: &Walk) {
+    let full = full_renders(scene, walk);
+    for driver in conservative_drivers() {
+        let missed = missed_objects(scene, walk, &full, &driver);
+        assert!(
+            missed.is_empty(),
+            "{} on {}: culls visible objects (frame, object, pixels): {missed:?}",
+            driver.label(),
+            scene.name
+        );
+    }
+}
+
+#[test]
+fn the_full_render_check_catches_an_adaptive_driver_losing_pixels() {
+    let scene = small_city();
+    let full = full_renders(&scene, &WALK);
+    let mut adaptive = DriverOptions::new(DriverKind::Hierarchical);
+    adaptive.adaptive_threshold = Some(0.9);
+    assert!(!missed_objects(&scene, &WALK, &full, &adaptive).is_empty());
+}
+
+#[test]
+fn conservative_drivers_draw_every_visible_object_in_the_city() {
+    check_conservative(&small_city(), &WALK);
+}
+
+#[test]
+fn conservative_drivers_draw_every_visible_object_in_the_forest() {
+    check_conservative(&small_forest(), &WALK);
+}
+
+#[test]
+fn conservative_drivers_draw_every_visible_object_at_odd_sizes() {
+    // A viewport that is not a multiple of the cell size, looking across the blocks.
+    let scene = small_city().with_camera(
+        CameraPath::line(
+            [-150.0, 12.0, 20.0],
+            [150.0, 30.0, -80.0],
+            [0.0, 0.0, -150.0],
+        )
+        .unwrap(),
+    );
+    let walk = Walk {
+        frames: 3,
+        width: 97,
+        height: 61,
+    };
+    check_conservative(&scene, &walk);
+}
+
+#[test]
+fn occlusion_culling_draws_fewer_triangles_than_frustum_culling_in_the_city() {
+    let scene = small_city();
+    let triangles = |driver: &DriverOptions| -> u64 {
+        let stats = generate(&scene, driver, &WALK, &mut Discard).unwrap();
+        stats.frames.iter().map(|f| f.triangles_drawn).sum()
+    };
+    let frustum = triangles(&DriverOptions::new(DriverKind::Frustum));
+    assert!(frustum > 0);
+    for kind in [
+        DriverKind::Hierarchical,
+        DriverKind::LazyGrid,
+        DriverKind::BusyGrid,
+    ] {
+        let culled = triangles(&DriverOptions::new(kind));
+        assert!(
+            culled * 4 < frustum * 3,
+            "{}: {culled} triangles against frustum culling's {frustum}",
+            kind.name()
+        );
+    }
+}
+
+#[test]
+fn the_lazy_grid_refreshes_fewer_cells_than_the_busy_grid() {
+    let scene = small_city();
+    let refreshed = |kind| -> u64 {
+        let stats = generate(&scene, &DriverOptions::new(kind), &WALK, &mut Discard).unwrap();
+        stats.frames.iter().map(|f| f.cells_refreshed).sum()
+    };
+    let (lazy, busy) = (
+        refreshed(DriverKind::LazyGrid),
+        refreshed(DriverKind::BusyGrid),
+    );
+    assert!(lazy < busy, "lazy {lazy} busy {busy}");
+}
+
+#[test]
+fn an_adaptive_threshold_draws_no_more_than_the_conservative_traversal() {
+    let scene = small_city();
+    let drawn = |threshold: Option<f32>| -> u64 {
+        let mut driver = DriverOptions::new(DriverKind::Hierarchical);
+        driver.adaptive_threshold = threshold;
+        let stats = generate(&scene, &driver, &WALK, &mut Discard).unwrap();
+        stats
+            .frames
+            .iter()
+            .map(|f| f.objects_drawn.len() as u64)
+            .sum()
+    };
+    let exact = drawn(None);
+    let adaptive = drawn(Some(0.5));
+    assert!(adaptive < exact, "adaptive {adaptive} exact {exact}");
+}
+
+#[test]
+fn a_query_delay_draws_everything_in_view_on_the_first_frame() {
+    let scene = small_city();
+    let walk = Walk { frames: 3, ..WALK };
+    let mut delayed = DriverOptions::new(DriverKind::Hierarchical);
+    delayed.query_delay_frames = 1;
+    let late = generate(&scene, &delayed, &walk, &mut Discard).unwrap();
+    let frustum = generate(
+        &scene,
+        &DriverOptions::new(DriverKind::Frustum),
+        &walk,
+        &mut Discard,
+    )
+    .unwrap();
+    assert_eq!(
+        late.frames[0].objects_drawn.len(),
+        frustum.frames[0].objects_drawn.len()
+    );
+    assert!(
+        late.frames[0].queries > 0,
+        "queries are issued for the next frame"
+    );
+    let later: u64 = late.frames[1..].iter().map(|f| f.triangles_drawn).sum();
+    let baseline: u64 = frustum.frames[1..].iter().map(|f| f.triangles_drawn).sum();
+    assert!(
+        later < baseline,
+        "delayed answers cull nothing: {later} against {baseline}"
+    );
+}
+
+#[test]
+fn bad_options_are_refused_clearly() {
+    let scene = small_forest();
+    let error = |driver: &DriverOptions, walk: &Walk| {
+        generate(&scene, driver, walk, &mut Discard)
+            .unwrap_err()
+            .to_string()
+    };
+    let lazy = DriverOptions::new(DriverKind::LazyGrid);
+    assert_eq!(
+        error(&lazy, &Walk { frames: 0, ..WALK }),
+        "--frames 0: a walkthrough needs at least 1 frame"
+    );
+    assert!(error(&lazy, &Walk { width: 0, ..WALK }).contains("--width 0 out of range"));
+    let mut delayed_grid = lazy.clone();
+    delayed_grid.query_delay_frames = 1;
+    assert!(error(&delayed_grid, &WALK)
+        .contains("--query-delay applies to the frustum and hierarchical"));
+    let mut deep = DriverOptions::new(DriverKind::Hierarchical);
+    deep.quadtree_levels = 9;
+    assert!(error(&deep, &WALK).contains("--quadtree-levels 9 out of range"));
+    let mut threshold = DriverOptions::new(DriverKind::Hierarchical);
+    threshold.adaptive_threshold = Some(1.5);
+    assert!(error(&threshold, &WALK).contains("--adaptive-threshold 1.5 out of range"));
+    let mut fine_grid = lazy.clone();
+    fine_grid.grid_cell_pixels = 4;
+    let huge = Walk {
+        width: 1280,
+        height: 1024,
+        ..WALK
+    };
+    assert!(error(&fine_grid, &huge).contains("makes a 320x256 grid, more than 65536 cells"));
+    let unknown = "z-pyramid".parse::<DriverKind>().unwrap_err().to_string();
+    assert_eq!(
+        unknown,
+        "unknown driver `z-pyramid`: expected frustum, hierarchical, lazy-grid or busy-grid"
+    );
+    let obj = load_obj(
+        "v 0 0 0\nf 1 1\n".as_bytes(),
+        "model.obj",
+        &ObjOptions::default(),
+    );
+    assert!(obj.is_err_and(|e| e.to_string().starts_with("model.obj:2: ")));
+    let camera = CameraPath::from_toml("[[keyframe]]\neye = [1, 2]\n", "walk.toml").unwrap_err();
+    assert!(camera.to_string().starts_with("walk.toml: "), "{camera}");
+}
+
+#[test]
+fn an_obj_model_walks_with_every_driver() {
+    // Two unit cubes, one behind the other as seen from the camera.
+    let mut text = String::new();
+    for (index, z) in [0.0f32, -4.0].into_iter().enumerate() {
+        let base = index * 8;
+        for corner in 0..8 {
+            let (x, y, dz) = (
+                (corner & 1) as f32,
+                ((corner >> 1) & 1) as f32,
+                ((corner >> 2) & 1) as f32,
+            );
+            text += &format!("v {x} {y} {}\n", z + dz);
+        }
+        text += &format!("o cube{index}\n");
+        // Faces counter-clockwise from outside (1-based corners: bit0 x, bit1 y, bit2 z).
+        for face in [
+            [1, 3, 4, 2],
+            [5, 6, 8, 7],
+            [1, 2, 6, 5],
+            [3, 7, 8, 4],
+            [1, 5, 7, 3],
+            [2, 4, 8, 6],
+        ] {
+            let f = face.map(|c| c + base);
+            text += &format!("f {} {} {} {}\n", f[0], f[1], f[2], f[3]);
+        }
+    }
+    let scene = load_obj(text.as_bytes(), "cubes.obj", &ObjOptions::default())
+        .unwrap()
+        .with_camera(
+            CameraPath::line([0.5, 0.5, 6.0], [0.6, 0.5, 5.0], [0.5, 0.5, -10.0]).unwrap(),
+        );
+    assert_eq!(scene.object_count(), 2);
+    let walk = Walk {
+        frames: 2,
+        width: 64,
+        height: 64,
+    };
+    check_conservative(&scene, &walk);
+    let full = full_render_visible_pixels(&scene, 0, &walk).unwrap();
+    assert!(full[0] > 0 && full[1] == 0, "{full:?}");
+    for kind in [DriverKind::Hierarchical, DriverKind::LazyGrid] {
+        let stats = generate(&scene, &DriverOptions::new(kind), &walk, &mut Discard).unwrap();
+        assert_eq!(stats.frames[0].objects_drawn, vec![0], "{}", kind.name());
+    }
+}
