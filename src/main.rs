@@ -46,8 +46,18 @@ enum Command {
     Replay(commands::replay::ReplayArgs),
     /// Show the built-in architectures and their parameters.
     Arch(commands::arch::ArchArgs),
+    /// Compare the culling drivers on a walkthrough.
+    #[command(subcommand)]
+    Culling(CullingCommand),
     /// Replay a trace over the cartesian product of parameter values (`--set k=v1,v2`).
     Sweep(Box<commands::sweep::SweepArgs>),
+}
+
+#[derive(Subcommand)]
+enum CullingCommand {
+    /// Run every culling driver on the same walkthrough and print what each draws, what its
+    /// queries cost and the simulated cycles per frame.
+    Compare(Box<commands::culling::CompareArgs>),
 }
 
 fn main() -> std::process::ExitCode {
@@ -59,6 +69,7 @@ fn main() -> std::process::ExitCode {
         Command::Replay(args) => commands::replay::run(args),
         Command::Arch(args) => commands::arch::run(args),
         Command::Sweep(args) => commands::sweep::run(*args),
+        Command::Culling(CullingCommand::Compare(args)) => commands::culling::run(*args),
     };
     match outcome {
         Ok(()) => std::process::ExitCode::SUCCESS,

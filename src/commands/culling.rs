@@ -154,8 +154,70 @@ fn drivers_to_compare(args: &CompareArgs) -> Vec<DriverOptions> {
 
 /// `culling compare` without timing models: the cycle columns are left out.
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
+    let mut models: Vec<Box<dyn FrameCycleModel>> = Vec::new();
+    for name in CYCLE_MACHINES {
+        // A machine this build does not have is simply left out of the table.
+        if let Ok(arch) = occsim_sim::Arch::builtin(name) {
+            models.push(Box::new(MachineFrames::new(name, arch)));
+        }
+    }
     let stdout = std::io::stdout();
-    run_with(&args, &mut [], &mut stdout.lock())
+    run_with(&args, &mut models, &mut stdout.lock())
+}
+
+/// The machines `culling compare` times every frame on.
+const CYCLE_MACHINES: [&str; 2] = ["o2", "ir4"];
+
+/// A sim machine as a per-frame timing model: each frame replays on a fresh machine (frames
+/// are self-contained: each begins with a clear and the whole render state).
+struct MachineFrames {
+    name: &'static str,
+    arch: occsim_sim::Arch,
+    machine: Option<occsim_sim::MachineModel>,
+    error: Option<occsim_sim::SimError>,
+}
+
+impl MachineFrames {
+    fn new(name: &'static str, arch: occsim_sim::Arch) -> MachineFrames {
+        MachineFrames {
+            name,
+            arch,
+            machine: None,
+            error: None,
+        }
+    }
+}
+
+impl FrameCycleModel for MachineFrames {
+    fn machine(&self) -> String {
+        self.name.to_owned()
+    }
+
+    fn begin_frame(&mut self, width: u32, height: u32) {
+        match occsim_sim::MachineModel::new(&self.arch, width, height) {
+            Ok(machine) => self.machine = Some(machine),
+            Err(error) => self.error = Some(error),
+        }
+    }
+
+    fn event(&mut self, event: &Event) {
+        if let (Some(machine), None) = (&mut self.machine, &self.error) {
+            if let Err(error) = machine.event(event) {
+                self.error = Some(error);
+            }
+        }
+    }
+
+    fn end_frame(&mut self) -> anyhow::Result<u64> {
+        if let Some(error) = self.error.take() {
+            return Err(anyhow::Error::new(error).context(format!("frame on {}", self.name)));
+        }
+        let machine = self
+            .machine
+            .take()
+            .ok_or_else(|| anyhow::anyhow!("{}: a frame ended before it began", self.name))?;
+        Ok(machine.finish()?.summary.cycles)
+    }
 }
 
 /// `culling compare` with the caller's timing models, one cycle column each.

@@ -19,13 +19,18 @@ pub enum TraceCommand {
     Dump(DumpArgs),
 }
 
+/// `trace gen SCENE -o FILE`, or a walkthrough: `trace gen --scene city --driver NAME -o FILE`.
 #[derive(clap::Args)]
 pub struct GenArgs {
-    /// A scene file, or a built-in scene: demo, hardcases, random.
-    pub scene: String,
+    /// A scene file, or a built-in scene: demo, hardcases, random. Leave it out to make a
+    /// walkthrough of --scene (city, forest, obj:PATH) driven by --driver instead.
+    #[arg(value_name = "SCENE")]
+    pub scene_file: Option<String>,
     /// The trace file to write (written atomically).
     #[arg(short, long)]
     pub output: PathBuf,
+    #[command(flatten)]
+    pub workload: super::workload_args::WorkloadArgs,
 }
 
 #[derive(clap::Args)]
@@ -56,7 +61,23 @@ pub fn run(command: TraceCommand) -> anyhow::Result<()> {
 }
 
 fn generate(args: GenArgs) -> anyhow::Result<()> {
-    let mut scene = open_scene(&args.scene)?;
+    let Some(scene_file) = &args.scene_file else {
+        let (summary, stats) =
+            super::workload_args::write_workload_trace(&args.workload, &args.output)?;
+        let bytes = std::fs::metadata(&args.output)?.len();
+        outln!(
+            "wrote {}: {} frames, {} fragments, {} primitives, {} queries, {} bytes ({:.3} bytes/fragment)",
+            args.output.display(),
+            stats.frames.len(),
+            summary.fragments,
+            summary.primitives,
+            summary.queries,
+            bytes,
+            bytes as f64 / summary.fragments.max(1) as f64
+        );
+        return Ok(());
+    };
+    let mut scene = open_scene(scene_file)?;
     let header = TraceHeader::new(scene.width, scene.height).with_scene(scene.name.clone());
     let summary = write_atomically_with(&args.output, |file| {
         let mut writer = TraceWriter::new(file, &header)?;
