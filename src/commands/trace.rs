@@ -61,37 +61,17 @@ pub fn run(command: TraceCommand) -> anyhow::Result<()> {
 }
 
 fn generate(args: GenArgs) -> anyhow::Result<()> {
-    let Some(scene_file) = &args.scene_file else {
-        let (summary, stats) =
-            super::workload_args::write_workload_trace(&args.workload, &args.output)?;
-        let bytes = std::fs::metadata(&args.output)?.len();
-        outln!(
-            "wrote {}: {} frames, {} fragments, {} primitives, {} queries, {} bytes ({:.3} bytes/fragment)",
-            args.output.display(),
-            stats.frames.len(),
-            summary.fragments,
-            summary.primitives,
-            summary.queries,
-            bytes,
-            bytes as f64 / summary.fragments.max(1) as f64
-        );
-        return Ok(());
-    };
-    let mut scene = open_scene(scene_file)?;
-    let header = TraceHeader::new(scene.width, scene.height).with_scene(scene.name.clone());
-    let summary = write_atomically_with(&args.output, |file| {
-        let mut writer = TraceWriter::new(file, &header)?;
-        let mut golden = GoldenModel::new(scene.width, scene.height);
-        for line in &mut scene.reader {
-            golden.execute(&line?.command, &mut writer);
+    let (summary, frames) = match &args.scene_file {
+        Some(scene_file) => (generate_scene(scene_file, &args.output)?, String::new()),
+        None => {
+            let (summary, stats) =
+                super::workload_args::write_workload_trace(&args.workload, &args.output)?;
+            (summary, format!("{} frames, ", stats.frames.len()))
         }
-        writer
-            .finish()
-            .with_context(|| format!("{}: cannot write trace", args.output.display()))
-    })?;
+    };
     let bytes = std::fs::metadata(&args.output)?.len();
     outln!(
-        "wrote {}: {} fragments, {} primitives, {} queries, {} bytes ({:.3} bytes/fragment)",
+        "wrote {}: {frames}{} fragments, {} primitives, {} queries, {} bytes ({:.3} bytes/fragment)",
         args.output.display(),
         summary.fragments,
         summary.primitives,
@@ -100,6 +80,22 @@ fn generate(args: GenArgs) -> anyhow::Result<()> {
         bytes as f64 / summary.fragments.max(1) as f64
     );
     Ok(())
+}
+
+/// A scene file or built-in scene through the rasterizer and golden model into a trace.
+fn generate_scene(scene_file: &str, output: &Path) -> anyhow::Result<TraceSummary> {
+    let mut scene = open_scene(scene_file)?;
+    let header = TraceHeader::new(scene.width, scene.height).with_scene(scene.name.clone());
+    write_atomically_with(output, |file| {
+        let mut writer = TraceWriter::new(file, &header)?;
+        let mut golden = GoldenModel::new(scene.width, scene.height);
+        for line in &mut scene.reader {
+            golden.execute(&line?.command, &mut writer);
+        }
+        writer
+            .finish()
+            .with_context(|| format!("{}: cannot write trace", output.display()))
+    })
 }
 
 /// Open a trace file for reading, naming it in every error.
