@@ -339,7 +339,7 @@ impl IrMachine {
         let ies = self.image_engines.len();
         let stages = vec![
             stage(
-                "fragment_generators",
+                "frag_generators",
                 self.generators.iter().map(|g| g.busy_cycles).sum(),
                 self.generators.iter().map(|g| g.stall_cycles).sum(),
                 self.generators.len(),

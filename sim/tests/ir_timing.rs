@@ -104,7 +104,7 @@ fn the_fragment_generator_blocks_on_a_full_image_engine_fifo() {
         &query(&[0, 2, 0]),
     );
     let generator = &report.stages[0];
-    assert_eq!(generator.name, "fragment_generators");
+    assert_eq!(generator.name, "frag_generators");
     assert_eq!(generator.stall_cycles, 2);
     let q = &report.queries[0];
     assert_eq!((q.end_cycle, q.drain_cycles, q.latency_cycles), (7, 7, 7));
