@@ -1,6 +1,6 @@
 //! Architecture files: every timing parameter of a machine, with its unit and meaning.
 //!
-//! One table per machine ([`O2_PARAMS`]) is the single source of truth: the built-in
+//! One table per machine ([`O2_PARAMS`], [`IR_PARAMS`]) is the single source of truth: the built-in
 //! defaults are built from it, `arch show` prints it, TOML files and `--set key=value` are
 //! validated against it. A file names its machine and holds one section per machine:
 //!
@@ -12,8 +12,10 @@
 //! engines = 4
 //! ```
 //!
-//! Keys carry their unit (`_mhz`, `_cycles`, `_entries`, `_bits`, ...). A later machine (the
-//! InfiniteReality-like one) adds its own table and section through the same mechanism.
+//! Keys carry their unit (`_mhz`, `_cycles`, `_entries`, `_bits`, ...). The
+//! InfiniteReality-like machine has its own table and `[ir]` section (`machine = "ir"`); the
+//! built-ins `ir1`, `ir2`, `ir4` are its defaults with 1, 2 or 4 boards. Named choices
+//! (`interleave = "morton"`) are TOML strings, and bare names with `--set`.
 
 use std::fmt::Write as _;
 use thiserror::Error;
