@@ -82,6 +82,37 @@ fn spread(v: u32) -> u64 {
 mod tests {
     use super::*;
 
+    fn interleave(kind: Interleave, boards: usize, per_board: usize) -> FramebufferInterleave {
+        FramebufferInterleave {
+            kind,
+            boards,
+            units: (boards * per_board) as u64,
+            block_width: 2,
+            block_height: 2,
+        }
+    }
+
+    #[test]
+    fn hand_worked_owners() {
+        // 2 boards x 3 Image Engines: unit g -> board g mod 2, Image Engine g / 2.
+        let columns = interleave(Interleave::Columns, 2, 3);
+        let owner = |i: &FramebufferInterleave, x, y| {
+            let o = i.owner(x, y);
+            (o.board, o.image_engine)
+        };
+        assert_eq!(owner(&columns, 0, 9), (0, 0));
+        assert_eq!(owner(&columns, 5, 0), (1, 2));
+        assert_eq!(owner(&columns, 7, 3), (1, 0), "column 7 = unit 1");
+        // Blocks of 2x2: pixel (5, 2) is block (2, 1): unit 3 -> board 1, Image Engine 1.
+        let blocks = interleave(Interleave::Blocks, 2, 3);
+        assert_eq!(owner(&blocks, 5, 2), (1, 1));
+        assert_eq!(owner(&blocks, 4, 3), (1, 1), "same block");
+        // Morton of block (2, 1) = 0b0110 = 6 -> unit 0.
+        let morton = interleave(Interleave::Morton, 2, 3);
+        assert_eq!(owner(&morton, 5, 2), (0, 0));
+        assert_eq!(owner(&morton, 3, 1), (1, 0), "block (1, 0): morton 1");
+    }
+
     #[test]
     fn morton_interleaves_bits_x_first() {
         // x = 0b11, y = 0b01 -> y1 x1 y0 x0 = 0 1 1 1.

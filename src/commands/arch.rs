@@ -79,7 +79,11 @@ pub fn run(args: ArchArgs) -> anyhow::Result<()> {
         ArchCommand::List => {
             for name in BUILTIN_ARCHS {
                 let arch = Arch::builtin(name)?;
-                println!("{name:<8} {}", arch.machine().title());
+                let boards = arch
+                    .get("boards")
+                    .map(|boards| format!(" ({boards} boards)"))
+                    .unwrap_or_default();
+                println!("{name:<8} {}{boards}", arch.machine().title());
             }
         }
     }
