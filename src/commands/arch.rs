@@ -81,7 +81,10 @@ pub fn run(args: ArchArgs) -> anyhow::Result<()> {
                 let arch = Arch::builtin(name)?;
                 let boards = arch
                     .get("boards")
-                    .map(|boards| format!(" ({boards} boards)"))
+                    .map(|boards| match boards.to_string().as_str() {
+                        "1" => " (1 board)".to_string(),
+                        n => format!(" ({n} boards)"),
+                    })
                     .unwrap_or_default();
                 println!("{name:<8} {}{boards}", arch.machine().title());
             }
