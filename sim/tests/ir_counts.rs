@@ -275,3 +275,25 @@ fn a_wrong_golden_count_is_reported() {
         "{error}"
     );
 }
+
+#[test]
+fn narrow_counters_saturate_after_merging() {
+    for seed in 0..4 {
+        let events = with_golden_results(&raw_stream(seed));
+        for boards in [1, 4] {
+            let sets = [
+                "counter_bits=3".to_string(),
+                format!("boards={boards}"),
+                "image_engines_per_board=5".to_string(),
+            ];
+            let (report, _) = replay(&arch(&sets), &events)
+                .unwrap_or_else(|e| panic!("seed {seed}, {sets:?}: {e}"));
+            assert!(report
+                .queries
+                .iter()
+                .flat_map(|q| &q.tiles)
+                .all(|t| t.nohc <= 7 && t.phc <= 7));
+            assert_eq!(report.summary.checked_queries, report.summary.queries);
+        }
+    }
+}
