@@ -44,6 +44,8 @@ enum Command {
     Trace(commands::trace::TraceCommand),
     /// Replay a trace on a machine model, cycle by cycle, and report what each query cost.
     Replay(commands::replay::ReplayArgs),
+    /// Tabulate (and plot) query latency per engine count: drain, local and global merge.
+    Latency(commands::latency::LatencyArgs),
     /// Show the built-in architectures and their parameters.
     Arch(commands::arch::ArchArgs),
     /// Compare the culling drivers on a walkthrough.
@@ -67,6 +69,7 @@ fn main() -> std::process::ExitCode {
         Command::Count(args) => commands::count::run(args),
         Command::Trace(command) => commands::trace::run(command),
         Command::Replay(args) => commands::replay::run(args),
+        Command::Latency(args) => commands::latency::run(args),
         Command::Arch(args) => commands::arch::run(args),
         Command::Sweep(args) => commands::sweep::run(*args),
         Command::Culling(CullingCommand::Compare(args)) => commands::culling::run(*args),

@@ -1,10 +1,10 @@
-//! Cycle-level replay rate of the O2-like machine on a synthetic stream of more than
-//! 10 million fragments, built in memory (one frame of about 0.49 M fragments, replayed 22
+//! Cycle-level replay rate of the O2-like and the 4-board InfiniteReality-like (`ir4`)
+//! machines on a synthetic stream of more than 10 million fragments, built in memory (one frame of about 0.49 M fragments, replayed 22
 //! times into the same machine). Prints fragments per second of wall time.
 //!
 //! Run: `cargo bench -p occsim-sim --bench replay`
 
-use occsim_sim::{Arch, O2Machine};
+use occsim_sim::{Arch, MachineModel};
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QuerySpec, Rect};
 use std::time::Instant;
@@ -109,35 +109,41 @@ fn main() {
         WIDTH,
         HEIGHT
     );
-    for engines in [1, 4, 16] {
-        let mut arch = Arch::builtin("o2").expect("built-in o2");
-        arch.set(&format!("engines={engines}")).expect("engines");
-        let mut machine = O2Machine::new(&arch, WIDTH, HEIGHT).expect("machine");
-        let start = Instant::now();
-        let cpu_start = thread_cpu_ns();
-        for _ in 0..FRAMES {
-            for event in &frame {
-                machine
-                    .event(event)
-                    .expect("replay matches the golden model");
-            }
-        }
-        let report = machine.finish().expect("report");
-        let seconds = start.elapsed().as_secs_f64();
-        let cpu_seconds = match (cpu_start, thread_cpu_ns()) {
-            (Some(a), Some(b)) => (b - a) as f64 / 1e9,
-            _ => seconds,
-        };
-        let fragments = report.summary.fragments as f64;
-        println!(
-            "engines {engines:>2}: {:.1} M fragments/s wall ({:.3} s), {:.1} M fragments/s on-CPU, {} cycles, {:.3} fragments/cycle, latency p50 {} p95 {}",
-            fragments / seconds / 1e6,
-            seconds,
-            fragments / cpu_seconds / 1e6,
-            report.summary.cycles,
-            report.summary.fragments_per_cycle,
-            report.summary.latency_p50_cycles,
-            report.summary.latency_p95_cycles
-        );
+    for (name, engines) in [("o2", 1), ("o2", 4), ("o2", 16), ("ir4", 4), ("ir4", 16)] {
+        measure(name, engines, &frame);
     }
+}
+
+/// Replay `FRAMES` copies of `frame` on the built-in `name` with `engines` engines and print
+/// the rate.
+fn measure(name: &str, engines: u32, frame: &[Event]) {
+    let mut arch = Arch::builtin(name).expect("built-in architecture");
+    arch.set(&format!("engines={engines}")).expect("engines");
+    let mut machine = MachineModel::new(&arch, WIDTH, HEIGHT).expect("machine");
+    let start = Instant::now();
+    let cpu_start = thread_cpu_ns();
+    for _ in 0..FRAMES {
+        for event in frame {
+            machine
+                .event(event)
+                .expect("replay matches the golden model");
+        }
+    }
+    let report = machine.finish().expect("report");
+    let seconds = start.elapsed().as_secs_f64();
+    let cpu_seconds = match (cpu_start, thread_cpu_ns()) {
+        (Some(a), Some(b)) => (b - a) as f64 / 1e9,
+        _ => seconds,
+    };
+    let fragments = report.summary.fragments as f64;
+    println!(
+        "{name:<4} engines {engines:>2}: {:.1} M fragments/s wall ({:.3} s), {:.1} M fragments/s on-CPU, {} cycles, {:.3} fragments/cycle, latency p50 {} p95 {}",
+        fragments / seconds / 1e6,
+        seconds,
+        fragments / cpu_seconds / 1e6,
+        report.summary.cycles,
+        report.summary.fragments_per_cycle,
+        report.summary.latency_p50_cycles,
+        report.summary.latency_p95_cycles
+    );
 }

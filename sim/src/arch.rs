@@ -1,6 +1,6 @@
 //! Architecture files: every timing parameter of a machine, with its unit and meaning.
 //!
-//! One table per machine ([`O2_PARAMS`]) is the single source of truth: the built-in
+//! One table per machine ([`O2_PARAMS`], [`IR_PARAMS`]) is the single source of truth: the built-in
 //! defaults are built from it, `arch show` prints it, TOML files and `--set key=value` are
 //! validated against it. A file names its machine and holds one section per machine:
 //!
@@ -12,8 +12,10 @@
 //! engines = 4
 //! ```
 //!
-//! Keys carry their unit (`_mhz`, `_cycles`, `_entries`, `_bits`, ...). A later machine (the
-//! InfiniteReality-like one) adds its own table and section through the same mechanism.
+//! Keys carry their unit (`_mhz`, `_cycles`, `_entries`, `_bits`, ...). The
+//! InfiniteReality-like machine has its own table and `[ir]` section (`machine = "ir"`); the
+//! built-ins `ir1`, `ir2`, `ir4` are its defaults with 1, 2 or 4 boards. Named choices
+//! (`interleave = "morton"`) are TOML strings, and bare names with `--set`.
 
 use std::fmt::Write as _;
 use thiserror::Error;
@@ -32,6 +34,10 @@ pub enum ParamKind {
         max: u64,
     },
     Bool,
+    /// One of a fixed set of names.
+    Choice {
+        choices: &'static [&'static str],
+    },
 }
 
 /// One parameter's value.
@@ -40,6 +46,8 @@ pub enum Value {
     Float(f64),
     Int(u64),
     Bool(bool),
+    /// A name from the parameter's choices.
+    Choice(&'static str),
 }
 
 impl std::fmt::Display for Value {
@@ -49,6 +57,8 @@ impl std::fmt::Display for Value {
             Value::Float(v) => write!(f, "{v:?}"),
             Value::Int(v) => write!(f, "{v}"),
             Value::Bool(v) => write!(f, "{v}"),
+            // Quoted, so the text reads back as a TOML string.
+            Value::Choice(v) => write!(f, "\"{v}\""),
         }
     }
 }
@@ -69,6 +79,7 @@ impl ParamKind {
             ParamKind::Float { min, max } => format!("a number in {min:?}..={max:?}"),
             ParamKind::Int { min, max } => format!("an integer in {min}..={max}"),
             ParamKind::Bool => "true or false".to_string(),
+            ParamKind::Choice { choices } => format!("one of {}", choices.join(", ")),
         }
     }
 }
@@ -123,30 +134,91 @@ pub const O2_PARAMS: &[Param] = &[
     int("memory_port_bits_per_cycle", "bits", 256, 32, 1 << 14, "the one main-memory port shared by depth reads, depth writes and OccU Control (V)"),
 ];
 
+const fn choice(
+    key: &'static str,
+    default: &'static str,
+    choices: &'static [&'static str],
+    meaning: &'static str,
+) -> Param {
+    Param {
+        key,
+        unit: "name",
+        default: Value::Choice(default),
+        kind: ParamKind::Choice { choices },
+        meaning,
+    }
+}
+
+/// Names of the interleaves (see [`Interleave`]).
+pub const INTERLEAVES: &[&str] = &["columns", "blocks", "morton"];
+/// Names of the merge networks (see [`MergeKind`]).
+pub const MERGE_KINDS: &[&str] = &["tree", "chain", "software"];
+
+/// The InfiniteReality-like machine's parameters. Marks: (V) primary source, (V2) secondary
+/// source, (I) inferred; see `shared/reference/occlusion-unit.md`. Timing rules: [`crate::ir`].
+pub const IR_PARAMS: &[Param] = &[
+    Param {
+        key: "clock_mhz",
+        unit: "MHz",
+        default: Value::Float(100.0),
+        kind: ParamKind::Float { min: 0.001, max: 100_000.0 },
+        meaning: "Raster Memory clock: one Fragment Generator / Image Engine cycle (I)",
+    },
+    int("boards", "boards", 4, 1, 4, "Raster Memory boards, each with one Fragment Generator (V2: 1, 2 or 4)"),
+    int("image_engines_per_board", "Image Engines", 80, 1, 1024, "Image Engines per board, each owning its interleaved pixels' depth (V2: 20 chips x 4)"),
+    choice("interleave", "columns", INTERLEAVES, "pixel -> Image Engine map: columns (x mod B*N, as SGI's VGX; I), blocks (skewed 2D blocks) or morton"),
+    int("block_width_pixels", "pixels", 4, 1, 1 << 12, "block width of the blocks and morton interleaves"),
+    int("block_height_pixels", "pixels", 4, 1, 1 << 12, "block height of the blocks and morton interleaves"),
+    int("fragment_generator_fragments_per_cycle", "fragments", 2, 1, 1024, "fragments one board's Fragment Generator emits per cycle (I: 710 Mpixel/s over 4 boards at 100 MHz)"),
+    int("fragment_generator_setup_cycles", "cycles", 4, 0, 1 << 20, "cycles every Fragment Generator spends setting up each primitive (I)"),
+    int("image_engine_cycles_per_fragment", "cycles", 45, 1, 1 << 16, "cycles one Image Engine spends on a fragment's depth test (I: ~2.2 Mpixel/s at 100 MHz)"),
+    int("image_engine_fifo_entries", "fragments", 8, 1, 1 << 16, "FIFO in front of each Image Engine; the Fragment Generator blocks while it is full (I)"),
+    int("engines", "engines", 4, 1, 1024, "occlusion engines in the Occlusion Unit of every Image Engine; tiles dealt round-robin"),
+    int("counter_bits", "bits", 32, 1, 64, "width of the NOHC and PHC counters; they saturate at 2^bits - 1 (V: >= 32)"),
+    Param {
+        key: "all_tiles_one_cycle",
+        unit: "bool",
+        default: Value::Bool(false),
+        kind: ParamKind::Bool,
+        meaning: "what-if: an engine tests all its tiles in one cycle instead of one tile per cycle",
+    },
+    int("occu_write_buffer_words", "words", 32, 1, 1 << 20, "per Image Engine: OccU hit-word buffer, drained one 32-bit word per cycle; full stalls the engines"),
+    choice("local_merge", "tree", MERGE_KINDS, "stage one, the Image Engines of a board: reduction tree, daisy chain, or host reads"),
+    int("local_merge_hop_latency_cycles", "cycles", 2, 0, 1 << 20, "tree or chain: cycles for one report to cross one hop (I)"),
+    int("local_merge_read_latency_cycles", "cycles", 40, 0, 1 << 20, "software: cycles for the host to read one Image Engine's report (I)"),
+    choice("global_merge", "tree", MERGE_KINDS, "stage two, the boards: reduction tree, daisy chain, or host reads"),
+    int("global_merge_hop_latency_cycles", "cycles", 8, 0, 1 << 20, "tree or chain: cycles for one report to cross one board-to-board hop (I)"),
+    int("global_merge_read_latency_cycles", "cycles", 100, 0, 1 << 20, "software: cycles for the host to read one board's report over the bus (I)"),
+];
+
 /// Machines that have a parameter table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Machine {
     O2,
+    Ir,
 }
 
 impl Machine {
-    pub const ALL: [Machine; 1] = [Machine::O2];
+    pub const ALL: [Machine; 2] = [Machine::O2, Machine::Ir];
 
     pub fn name(self) -> &'static str {
         match self {
             Machine::O2 => "o2",
+            Machine::Ir => "ir",
         }
     }
 
     pub fn params(self) -> &'static [Param] {
         match self {
             Machine::O2 => O2_PARAMS,
+            Machine::Ir => IR_PARAMS,
         }
     }
 
     pub fn title(self) -> &'static str {
         match self {
             Machine::O2 => "O2-like: one rasterizer, one pixel pipeline, unified memory",
+            Machine::Ir => "InfiniteReality-like: Raster Memory boards of Image Engines, an OccU at each, two-stage merge",
         }
     }
 
@@ -190,7 +262,7 @@ pub struct Arch {
 }
 
 /// Names of the built-in architectures.
-pub const BUILTIN_ARCHS: &[&str] = &["o2"];
+pub const BUILTIN_ARCHS: &[&str] = &["o2", "ir1", "ir2", "ir4"];
 
 impl Arch {
     /// The machine's defaults.
@@ -205,6 +277,11 @@ impl Arch {
     pub fn builtin(name: &str) -> Result<Arch, ArchError> {
         match name {
             "o2" => Ok(Arch::defaults(Machine::O2)),
+            "ir1" | "ir2" | "ir4" => {
+                let mut arch = Arch::defaults(Machine::Ir);
+                arch.set_value("boards", &name[2..])?;
+                Ok(arch)
+            }
             _ => Err(ArchError::UnknownBuiltin {
                 name: name.to_string(),
                 known: BUILTIN_ARCHS.join(", "),
@@ -372,9 +449,65 @@ impl Arch {
         Ok(arch)
     }
 
+    /// The InfiniteReality-like machine's typed parameters.
+    pub fn ir(&self) -> Result<IrArch, ArchError> {
+        if self.machine != Machine::Ir {
+            return Err(ArchError::Impossible(format!(
+                "the '{}' machine is not the InfiniteReality-like machine",
+                self.machine.name()
+            )));
+        }
+        let int = |key: &str| match self.get(key) {
+            Some(Value::Int(v)) => v,
+            _ => unreachable!("IR_PARAMS declares {key} as an integer"),
+        };
+        let name = |key: &str| match self.get(key) {
+            Some(Value::Choice(v)) => v,
+            _ => unreachable!("IR_PARAMS declares {key} as a choice"),
+        };
+        let merge = |kind: &str, hop: &str, read: &str| MergeNetwork {
+            kind: MergeKind::from_name(name(kind)),
+            hop_latency_cycles: int(hop),
+            read_latency_cycles: int(read),
+        };
+        let arch = IrArch {
+            clock_mhz: match self.get("clock_mhz") {
+                Some(Value::Float(v)) => v,
+                _ => unreachable!("IR_PARAMS declares clock_mhz as a float"),
+            },
+            boards: int("boards") as usize,
+            image_engines_per_board: int("image_engines_per_board") as usize,
+            interleave: Interleave::from_name(name("interleave")),
+            block_width_pixels: int("block_width_pixels") as u32,
+            block_height_pixels: int("block_height_pixels") as u32,
+            fragment_generator_fragments_per_cycle: int("fragment_generator_fragments_per_cycle")
+                as u32,
+            fragment_generator_setup_cycles: int("fragment_generator_setup_cycles"),
+            image_engine_cycles_per_fragment: int("image_engine_cycles_per_fragment"),
+            image_engine_fifo_entries: int("image_engine_fifo_entries") as usize,
+            engines: int("engines") as usize,
+            counter_bits: int("counter_bits") as u32,
+            all_tiles_one_cycle: matches!(self.get("all_tiles_one_cycle"), Some(Value::Bool(true))),
+            occu_write_buffer_words: int("occu_write_buffer_words") as usize,
+            local_merge: merge(
+                "local_merge",
+                "local_merge_hop_latency_cycles",
+                "local_merge_read_latency_cycles",
+            ),
+            global_merge: merge(
+                "global_merge",
+                "global_merge_hop_latency_cycles",
+                "global_merge_read_latency_cycles",
+            ),
+        };
+        arch.check()?;
+        Ok(arch)
+    }
+
     fn check(&self) -> Result<(), ArchError> {
         match self.machine {
             Machine::O2 => self.o2().map(|_| ()),
+            Machine::Ir => self.ir().map(|_| ()),
         }
     }
 
@@ -412,6 +545,13 @@ impl Arch {
                 Value::Int(v)
             }
             ParamKind::Bool => Value::Bool(text.parse().map_err(|_| bad())?),
+            ParamKind::Choice { choices } => Value::Choice(
+                choices
+                    .iter()
+                    .copied()
+                    .find(|c| *c == text.trim_matches('"'))
+                    .ok_or_else(bad)?,
+            ),
         };
         Ok(value)
     }
@@ -521,6 +661,114 @@ impl O2Arch {
     /// Depth pixels in one memory word.
     pub fn pixels_per_word(&self) -> u32 {
         self.memory_port_bits_per_cycle / self.depth_bits_per_pixel
+    }
+
+    /// Largest counter value: 2^counter_bits - 1.
+    pub fn counter_max(&self) -> u64 {
+        u64::MAX >> (64 - self.counter_bits)
+    }
+}
+
+/// How pixels are dealt to the Image Engines of all boards (`U = boards x
+/// image_engines_per_board` units; unit `g` is Image Engine `g / boards` of board `g mod
+/// boards`, so neighbouring units sit on different boards).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Interleave {
+    /// Column `x` belongs to unit `x mod U` (the default: SGI's VGX interleaved columns, and
+    /// the InfiniteReality interleave is not published).
+    Columns,
+    /// Blocks of `block_width x block_height` pixels; block `(bx, by)` belongs to unit
+    /// `(bx + by) mod U` (skewed, so a column of blocks also cycles through the units).
+    Blocks,
+    /// Blocks numbered in Morton (Z) order of `(bx, by)`; block `m` belongs to unit `m mod U`.
+    Morton,
+}
+
+impl Interleave {
+    fn from_name(name: &str) -> Interleave {
+        match name {
+            "blocks" => Interleave::Blocks,
+            "morton" => Interleave::Morton,
+            _ => Interleave::Columns,
+        }
+    }
+}
+
+/// How one merge stage combines its inputs' reports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MergeKind {
+    /// A binary reduction tree: each hop costs `hop_latency_cycles`.
+    Tree,
+    /// A daisy chain through the inputs in order: each hop costs `hop_latency_cycles`.
+    Chain,
+    /// The host reads every input's report over the bus, one at a time, each read costing
+    /// `read_latency_cycles`.
+    Software,
+}
+
+impl MergeKind {
+    fn from_name(name: &str) -> MergeKind {
+        match name {
+            "chain" => MergeKind::Chain,
+            "software" => MergeKind::Software,
+            _ => MergeKind::Tree,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            MergeKind::Tree => "tree",
+            MergeKind::Chain => "chain",
+            MergeKind::Software => "software",
+        }
+    }
+}
+
+/// One merge stage's network and latencies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MergeNetwork {
+    pub kind: MergeKind,
+    pub hop_latency_cycles: u64,
+    pub read_latency_cycles: u64,
+}
+
+/// The InfiniteReality-like machine's parameters, typed. See [`IR_PARAMS`] for units and
+/// meanings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct IrArch {
+    pub clock_mhz: f64,
+    pub boards: usize,
+    pub image_engines_per_board: usize,
+    pub interleave: Interleave,
+    pub block_width_pixels: u32,
+    pub block_height_pixels: u32,
+    pub fragment_generator_fragments_per_cycle: u32,
+    pub fragment_generator_setup_cycles: u64,
+    pub image_engine_cycles_per_fragment: u64,
+    pub image_engine_fifo_entries: usize,
+    pub engines: usize,
+    pub counter_bits: u32,
+    pub all_tiles_one_cycle: bool,
+    pub occu_write_buffer_words: usize,
+    pub local_merge: MergeNetwork,
+    pub global_merge: MergeNetwork,
+}
+
+impl IrArch {
+    /// Cross-parameter rules the per-key ranges cannot express.
+    fn check(&self) -> Result<(), ArchError> {
+        if ![1, 2, 4].contains(&self.boards) {
+            return Err(ArchError::Impossible(format!(
+                "boards ({}) must be 1, 2 or 4",
+                self.boards
+            )));
+        }
+        Ok(())
+    }
+
+    /// Image Engines on all boards.
+    pub fn image_engines(&self) -> usize {
+        self.boards * self.image_engines_per_board
     }
 
     /// Largest counter value: 2^counter_bits - 1.

@@ -32,6 +32,14 @@ pub enum SimError {
         count: usize,
         max: usize,
     },
+    #[error("event {event}: query {id} has {tiles} tiles: with {image_engines} Image Engines that is more than the model's {max} tile registers")]
+    TileRegisters {
+        event: u64,
+        id: u32,
+        tiles: usize,
+        image_engines: usize,
+        max: usize,
+    },
     #[error("query {id} (query #{index} in the trace): {field} differs: simulated {simulated}, golden {golden}")]
     Mismatch {
         id: u32,

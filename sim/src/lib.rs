@@ -6,6 +6,9 @@
 //!   [`fragment_input`] -> [`fifo`] -> [`depth_pipeline`] ([`depth_prefetch`],
 //!   [`write_buffer`]) -> [`fifo`] -> [`occlusion_unit`] ([`occlusion_engine`]) ->
 //!   [`occu_control`], all sharing one [`memory_port`].
+//! - [`ir`]: the InfiniteReality-like machine: [`IrMachine`]. Its blocks: [`interleave`],
+//!   [`fragment_generator`] (one per board), [`image_engine`] (each with its own
+//!   [`occlusion_unit`] and [`occu_control`]), [`merge_network`] (the two merge stages).
 //! - [`machine`]: [`MachineModel`], the machine an architecture names (the entry point).
 //! - [`report`]: the replay report (serde) and its text form.
 //!
@@ -27,9 +30,14 @@ pub mod depth_pipeline;
 pub mod depth_prefetch;
 pub mod error;
 pub mod fifo;
+pub mod fragment_generator;
 pub mod fragment_input;
+pub mod image_engine;
+pub mod interleave;
+pub mod ir;
 pub mod machine;
 pub mod memory_port;
+pub mod merge_network;
 pub mod o2;
 pub mod occlusion_engine;
 pub mod occlusion_unit;
@@ -37,8 +45,9 @@ pub mod occu_control;
 pub mod report;
 pub mod write_buffer;
 
-pub use arch::{Arch, ArchError, O2Arch};
+pub use arch::{Arch, ArchError, IrArch, O2Arch};
 pub use error::SimError;
+pub use ir::IrMachine;
 pub use machine::MachineModel;
 pub use o2::O2Machine;
 pub use report::Report;

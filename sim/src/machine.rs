@@ -3,13 +3,17 @@
 
 use crate::arch::{Arch, Machine};
 use crate::error::SimError;
+use crate::ir::IrMachine;
 use crate::o2::O2Machine;
 use crate::report::Report;
 use occsim_traces::Event;
 
 /// A machine being replayed.
+// One per replay, never in a collection: boxing would only add an indirection per event.
+#[allow(clippy::large_enum_variant)]
 pub enum MachineModel {
     O2(O2Machine),
+    Ir(IrMachine),
 }
 
 impl MachineModel {
@@ -17,6 +21,7 @@ impl MachineModel {
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<MachineModel, SimError> {
         Ok(match arch.machine() {
             Machine::O2 => MachineModel::O2(O2Machine::new(arch, width, height)?),
+            Machine::Ir => MachineModel::Ir(IrMachine::new(arch, width, height)?),
         })
     }
 
@@ -25,6 +30,7 @@ impl MachineModel {
     pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
         match self {
             MachineModel::O2(machine) => machine.event(event),
+            MachineModel::Ir(machine) => machine.event(event),
         }
     }
 
@@ -32,6 +38,7 @@ impl MachineModel {
     pub fn finish(self) -> Result<Report, SimError> {
         match self {
             MachineModel::O2(machine) => machine.finish(),
+            MachineModel::Ir(machine) => machine.finish(),
         }
     }
 }

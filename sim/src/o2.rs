@@ -330,6 +330,9 @@ impl O2Machine {
             id: query.spec.id,
             mode: query.spec.mode,
             latency_cycles: available - end_cycle,
+            drain_cycles: available - end_cycle,
+            local_merge_cycles: 0,
+            global_merge_cycles: 0,
             end_cycle,
             available_cycle: available,
             fragments: query.fragments,
@@ -481,12 +484,13 @@ impl O2Machine {
                 occu_words,
             },
             engines,
+            units: Vec::new(),
             queries: self.queries,
         })
     }
 }
 
-fn tile_report(tile: &TileResult) -> TileReport {
+pub(crate) fn tile_report(tile: &TileResult) -> TileReport {
     TileReport {
         nohc: tile.nohc,
         phc: tile.phc,
@@ -502,7 +506,7 @@ fn tile_report(tile: &TileResult) -> TileReport {
 }
 
 /// Reject a query the hardware cannot take.
-fn check_spec(spec: &QuerySpec, event: u64, open: Option<u32>) -> Result<(), SimError> {
+pub(crate) fn check_spec(spec: &QuerySpec, event: u64, open: Option<u32>) -> Result<(), SimError> {
     if let Some(open_id) = open {
         return Err(SimError::NestedQuery {
             event,

@@ -35,12 +35,21 @@ pub struct OcclusionUnit {
 
 impl OcclusionUnit {
     pub fn new(arch: &O2Arch) -> OcclusionUnit {
+        OcclusionUnit::with_engines(arch.engines, arch.all_tiles_one_cycle, arch.counter_max())
+    }
+
+    /// A unit of `engines` engines with `counter_max`-saturating counters (any machine).
+    pub fn with_engines(
+        engines: usize,
+        all_tiles_one_cycle: bool,
+        counter_max: u64,
+    ) -> OcclusionUnit {
         OcclusionUnit {
-            engines: vec![OcclusionEngine::default(); arch.engines],
-            all_tiles_one_cycle: arch.all_tiles_one_cycle,
-            counter_max: arch.counter_max(),
+            engines: vec![OcclusionEngine::default(); engines],
+            all_tiles_one_cycle,
+            counter_max,
             service_cycles: 1,
-            engine_cycles: vec![0; arch.engines],
+            engine_cycles: vec![0; engines],
             active: 0,
             query_fragments: 0,
             query_stall_cycles: 0,

@@ -102,6 +102,11 @@ impl OccuControl {
         self.buffer.grant_cycles
     }
 
+    /// The port grant of the last word written (0 before any).
+    pub fn last_grant(&self) -> u64 {
+        self.buffer.last_grant()
+    }
+
     pub fn words_written(&self) -> u64 {
         self.buffer.entries_written
     }

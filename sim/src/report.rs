@@ -15,7 +15,40 @@ pub struct Report {
     pub stages: Vec<StageReport>,
     pub memory_port: PortReport,
     pub engines: Vec<EngineReport>,
+    /// Machines of many like units (the InfiniteReality-like one): each kind's busy share as
+    /// a distribution over its units, instead of one row per unit.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub units: Vec<UnitSummary>,
     pub queries: Vec<QueryReport>,
+}
+
+/// The busy share of `count` like units (the Image Engines, say): min, mean and max.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct UnitSummary {
+    pub name: String,
+    pub count: usize,
+    pub busy_percent_min: f64,
+    pub busy_percent_mean: f64,
+    pub busy_percent_max: f64,
+}
+
+impl UnitSummary {
+    /// The summary of the units' busy cycles out of `cycles`.
+    pub fn of(name: &str, busy_cycles: impl Iterator<Item = u64>, cycles: u64) -> UnitSummary {
+        let shares: Vec<f64> = busy_cycles.map(|busy| percent(busy, cycles)).collect();
+        let count = shares.len();
+        UnitSummary {
+            name: name.to_string(),
+            count,
+            busy_percent_min: shares.iter().copied().reduce(f64::min).unwrap_or(0.0),
+            busy_percent_mean: if count == 0 {
+                0.0
+            } else {
+                shares.iter().sum::<f64>() / count as f64
+            },
+            busy_percent_max: shares.iter().copied().reduce(f64::max).unwrap_or(0.0),
+        }
+    }
 }
 
 #[derive(Clone, Debug, Serialize, PartialEq)]
@@ -54,7 +87,8 @@ pub struct StageReport {
     pub stall_percent: f64,
 }
 
-#[derive(Clone, Debug, Serialize, PartialEq)]
+/// A machine without a shared memory port (InfiniteReality-like) reports all zeros.
+#[derive(Clone, Debug, Default, Serialize, PartialEq)]
 pub struct PortReport {
     pub bits_per_cycle: u32,
     pub busy_cycles: u64,
@@ -83,8 +117,16 @@ pub struct EngineReport {
 pub struct QueryReport {
     pub id: u32,
     pub mode: QueryMode,
-    /// Cycles from the query's `end` entering the pipe to its records being written.
+    /// Cycles from the query's `end` entering the pipe to its records being written
+    /// (= drain + local merge + global merge).
     pub latency_cycles: u64,
+    /// The part of the latency until the last pixel pipeline holds its partial result (the
+    /// whole latency on the O2-like machine).
+    pub drain_cycles: u64,
+    /// The part spent merging the Image Engines' results within the boards (stage one).
+    pub local_merge_cycles: u64,
+    /// The part spent merging the boards' results (stage two).
+    pub global_merge_cycles: u64,
     pub end_cycle: u64,
     pub available_cycle: u64,
     pub fragments: u64,
@@ -178,16 +220,10 @@ impl Report {
             );
         }
         let p = &self.memory_port;
-        let _ = writeln!(
-            out,
-            "\nmemory port: {} bits/cycle, busy {} cycles ({:.1}%), utilization {:.1}%, max {} bits in a cycle",
-            p.bits_per_cycle, p.busy_cycles, p.busy_percent, p.utilization_percent, p.max_bits_in_one_cycle
-        );
-        let _ = writeln!(
-            out,
-            "  depth reads {} words ({} word hits, {} page hits, {} page misses), depth writes {}, OccU words {}",
-            p.depth_read_words, p.depth_read_word_hits, p.depth_read_page_hits, p.depth_read_page_misses, p.depth_writes, p.occu_words
-        );
+        if p.bits_per_cycle > 0 {
+            self.write_port(&mut out);
+        }
+        self.write_units(&mut out);
         let _ = writeln!(
             out,
             "\n{:<8} {:>12} {:>7} {:>12}",
@@ -206,23 +242,69 @@ impl Report {
         out
     }
 
+    fn write_units(&self, out: &mut String) {
+        if self.units.is_empty() {
+            return;
+        }
+        let _ = writeln!(
+            out,
+            "\n{:<20} {:>6} {:>7} {:>7} {:>7}",
+            "units", "count", "min%", "mean%", "max%"
+        );
+        for u in &self.units {
+            let _ = writeln!(
+                out,
+                "{:<20} {:>6} {:>6.1}% {:>6.1}% {:>6.1}%",
+                u.name, u.count, u.busy_percent_min, u.busy_percent_mean, u.busy_percent_max
+            );
+        }
+    }
+
+    fn write_port(&self, out: &mut String) {
+        let p = &self.memory_port;
+        let _ = writeln!(
+            out,
+            "\nmemory port: {} bits/cycle, busy {} cycles ({:.1}%), utilization {:.1}%, max {} bits in a cycle",
+            p.bits_per_cycle, p.busy_cycles, p.busy_percent, p.utilization_percent, p.max_bits_in_one_cycle
+        );
+        let _ = writeln!(
+            out,
+            "  depth reads {} words ({} word hits, {} page hits, {} page misses), depth writes {}, OccU words {}",
+            p.depth_read_words, p.depth_read_word_hits, p.depth_read_page_hits, p.depth_read_page_misses, p.depth_writes, p.occu_words
+        );
+    }
+
     fn write_query_table(&self, out: &mut String) {
         let _ = writeln!(
             out,
-            "\n{:>6} {:>10} {:<8} {:>6} {:>10} {:>9} {:>12} {:>12} {:>10}",
-            "#", "id", "mode", "tiles", "latency", "overflow", "nohc", "phc", "fragments"
+            "\n{:>6} {:>10} {:<8} {:>6} {:>10} {:>8} {:>8} {:>8} {:>9} {:>12} {:>12} {:>10}",
+            "#",
+            "id",
+            "mode",
+            "tiles",
+            "latency",
+            "drain",
+            "local",
+            "global",
+            "overflow",
+            "nohc",
+            "phc",
+            "fragments"
         );
         for (index, q) in self.queries.iter().enumerate() {
             let nohc: u64 = q.tiles.iter().map(|t| t.nohc).sum();
             let phc: u64 = q.tiles.iter().map(|t| t.phc).sum();
             let _ = writeln!(
                 out,
-                "{:>6} {:>10} {:<8} {:>6} {:>10} {:>9} {:>12} {:>12} {:>10}",
+                "{:>6} {:>10} {:<8} {:>6} {:>10} {:>8} {:>8} {:>8} {:>9} {:>12} {:>12} {:>10}",
                 index,
                 q.id,
                 q.mode.name(),
                 q.tiles.len(),
                 q.latency_cycles,
+                q.drain_cycles,
+                q.local_merge_cycles,
+                q.global_merge_cycles,
                 q.overflowed_buffers,
                 nohc,
                 phc,

@@ -125,7 +125,7 @@ fn files_must_name_a_known_machine() {
         Err(ArchError::MissingMachine(_))
     ));
     assert!(matches!(
-        Arch::from_toml("machine = \"ir\"\n"),
+        Arch::from_toml("machine = \"vgx\"\n"),
         Err(ArchError::UnknownMachine { .. })
     ));
     assert!(matches!(

@@ -79,7 +79,14 @@ pub fn run(args: ArchArgs) -> anyhow::Result<()> {
         ArchCommand::List => {
             for name in BUILTIN_ARCHS {
                 let arch = Arch::builtin(name)?;
-                outln!("{name:<8} {}", arch.machine().title());
+                let boards = arch
+                    .get("boards")
+                    .map(|boards| match boards.to_string().as_str() {
+                        "1" => " (1 board)".to_string(),
+                        n => format!(" ({n} boards)"),
+                    })
+                    .unwrap_or_default();
+                outln!("{name:<8} {}{boards}", arch.machine().title());
             }
         }
     }

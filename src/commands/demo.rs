@@ -42,7 +42,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         trace.len()
     );
     let reader = TraceReader::new(&trace[..])?;
-    let report = super::replay::replay_reader(reader, "demo", &arch)?;
+    let report = super::replay::replay_reader(reader, "demo", &arch, None)?;
     out!("{}", report.to_text(args.queries));
     Ok(())
 }

@@ -3,11 +3,12 @@
 
 use super::arch::ArchSelection;
 use anyhow::Context;
-use occsim_sim::{MachineModel, SimError};
+use occsim_sim::{Arch, MachineModel, Report, SimError};
 use occsim_traces::golden::EventSink;
+use occsim_traces::retile::{Retile, TileGrid};
 use occsim_traces::trace::TraceReader;
 use occsim_traces::Event;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
 pub struct ReplayArgs {
@@ -24,10 +25,14 @@ pub struct ReplayArgs {
     /// Add a table of every query.
     #[arg(long)]
     pub queries: bool,
+    /// Replace every brief query's tiles by a G by H grid over the viewport (the golden
+    /// results are recomputed), e.g. --retile 8x8.
+    #[arg(long, value_name = "GxH")]
+    pub retile: Option<TileGrid>,
 }
 
 /// Feeds decoded events to the machine and keeps the first error.
-struct MachineSink {
+pub struct MachineSink {
     machine: MachineModel,
     error: Option<SimError>,
 }
@@ -49,37 +54,8 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         arch.set_value("engines", &engines.to_string())
             .context("--engines")?;
     }
-    let path = args.trace.display().to_string();
-    let file =
-        std::fs::File::open(&args.trace).with_context(|| format!("cannot open trace {path}"))?;
-    let mut reader = TraceReader::new(std::io::BufReader::with_capacity(1 << 20, file))
-        .with_context(|| format!("{path}: not a readable occsim trace"))?;
-    let (width, height) = (reader.header().width, reader.header().height);
-    let machine = MachineModel::new(&arch, width, height)
-        .with_context(|| format!("{path}: cannot replay"))?;
-    let mut sink = MachineSink {
-        machine,
-        error: None,
-    };
-    while reader
-        .next_block(&mut sink)
-        .with_context(|| format!("{path}: cannot read trace"))?
-    {
-        if let Some(error) = sink.error.take() {
-            return Err(error)
-                .with_context(|| format!("{path}: replay on {}", arch.machine().name()));
-        }
-    }
-    reader
-        .read_into(&mut sink)
-        .with_context(|| format!("{path}: cannot read trace"))?;
-    if let Some(error) = sink.error.take() {
-        return Err(error).with_context(|| format!("{path}: replay on {}", arch.machine().name()));
-    }
-    let report = sink
-        .machine
-        .finish()
-        .with_context(|| format!("{path}: replay on {}", arch.machine().name()))?;
+    let report = replay_trace(&args.trace, &arch, args.retile)?;
+    let path = args.trace.display();
     if report.summary.checked_queries < report.summary.queries {
         eprintln!(
             "occsim: warning: {path}: {} of {} queries have no golden result in the trace; their counts were not checked",
@@ -95,40 +71,58 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Replay a trace file on `arch` and return the report (counts checked against the trace's
-/// golden results). The one replay path `sweep` and `latency` share.
-pub fn replay_trace(
-    path: &std::path::Path,
-    arch: &occsim_sim::Arch,
-) -> anyhow::Result<occsim_sim::Report> {
-    let reader = super::trace::open_trace(path)?;
-    replay_reader(reader, &path.display().to_string(), arch)
+/// Replay the trace at `trace` on `arch`, with its brief queries retiled to `retile` when
+/// given (the golden results are then recomputed), and return the report. Errors name the
+/// trace file. The one replay path `replay`, `sweep` and `latency` share.
+pub fn replay_trace(trace: &Path, arch: &Arch, retile: Option<TileGrid>) -> anyhow::Result<Report> {
+    let reader = super::trace::open_trace(trace)?;
+    replay_reader(reader, &trace.display().to_string(), arch, retile)
 }
 
 /// Replay a trace from any reader; `name` names it in errors.
 pub fn replay_reader<R: std::io::Read>(
     mut reader: TraceReader<R>,
     name: &str,
-    arch: &occsim_sim::Arch,
-) -> anyhow::Result<occsim_sim::Report> {
+    arch: &Arch,
+    retile: Option<TileGrid>,
+) -> anyhow::Result<Report> {
     let (width, height) = (reader.header().width, reader.header().height);
     let machine =
         MachineModel::new(arch, width, height).with_context(|| format!("{name}: cannot replay"))?;
-    let mut sink = MachineSink {
+    let sink = MachineSink {
         machine,
         error: None,
     };
-    let on_machine = || format!("{name}: replay on {}", arch.machine().name());
+    let on = || format!("{name}: replay on {}", arch.machine().name());
+    let sink = match retile {
+        None => feed(&mut reader, sink, |s| s, name, on)?,
+        Some(grid) => {
+            let retile = Retile::new(grid, width, height, sink)
+                .with_context(|| format!("{name}: --retile {grid}"))?;
+            feed(&mut reader, retile, Retile::inner_mut, name, on)?.into_inner()
+        }
+    };
+    sink.machine.finish().with_context(on)
+}
+
+/// Read every event of `reader` into `sink`, stopping at the machine's first error.
+fn feed<R: std::io::Read, S: EventSink>(
+    reader: &mut TraceReader<R>,
+    mut sink: S,
+    machine: impl Fn(&mut S) -> &mut MachineSink,
+    path: &str,
+    on: impl Fn() -> String,
+) -> anyhow::Result<S> {
     while reader
         .next_block(&mut sink)
-        .with_context(|| format!("{name}: cannot read trace"))?
+        .with_context(|| format!("{path}: cannot read trace"))?
     {
-        if let Some(error) = sink.error.take() {
-            return Err(error).with_context(on_machine);
+        if let Some(error) = machine(&mut sink).error.take() {
+            return Err(error).with_context(&on);
         }
     }
-    if let Some(error) = sink.error.take() {
-        return Err(error).with_context(on_machine);
+    if let Some(error) = machine(&mut sink).error.take() {
+        return Err(error).with_context(&on);
     }
-    sink.machine.finish().with_context(on_machine)
+    Ok(sink)
 }

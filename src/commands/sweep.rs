@@ -71,6 +71,10 @@ pub struct SweepRunArgs {
     /// Continue an interrupted sweep: keep the points already in --out, run the rest.
     #[arg(long)]
     pub resume: bool,
+    /// Replace every brief query's tiles by a G by H grid over the viewport (the golden
+    /// results are recomputed), so tile counts can be swept too.
+    #[arg(long, value_name = "GxH")]
+    pub retile: Option<occsim_traces::retile::TileGrid>,
     /// Results file (one JSON line per point); the CSV view is written beside it.
     #[arg(long, value_name = "FILE.jsonl", required = true)]
     pub out: Option<PathBuf>,
@@ -193,7 +197,11 @@ pub fn run(args: SweepArgs) -> Result<()> {
         args.run.arch_file.as_deref(),
         &[],
     )?;
-    let digest = super::trace::trace_digest(&trace)?;
+    // A retiled trace asks other questions: it is another input as far as results go.
+    let mut digest = super::trace::trace_digest(&trace)?;
+    if let Some(grid) = args.run.retile {
+        digest += &format!(":retile={grid}");
+    }
     let validate = |key: &str, value: &str| {
         base.clone()
             .set_value(key, value)
@@ -205,7 +213,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
             arch.set_value(key, value)
                 .with_context(|| format!("{key}={value}"))?;
         }
-        let report = super::replay::replay_trace(&trace, &arch)?;
+        let report = super::replay::replay_trace(&trace, &arch, args.run.retile)?;
         Ok(crate::sweep::PointRecord {
             resolved_arch: serde_json::to_value(&report.arch)?,
             metrics: point_metrics(&report),

@@ -4,6 +4,7 @@
 //! - [`raster`]: the exact reference rasterizer (integer edge functions, no epsilons).
 //! - [`golden`]: the functional golden model (depth buffer and query semantics).
 //! - [`trace`]: the `.occt` binary fragment trace format (streaming reader and writer).
+//! - [`retile`]: `--retile GxH`, replacing brief queries' tiles by a grid (results recomputed).
 //! - [`builtin`]: built-in scenes (`demo`, `hardcases`).
 //! - [`workloads`]: walkthrough workloads: parametric scenes, camera paths and the culling
 //!   drivers that issue occlusion queries while the golden model answers them.
@@ -14,6 +15,7 @@ mod geometry;
 pub mod golden;
 pub mod query;
 pub mod raster;
+pub mod retile;
 pub mod scene;
 pub mod state;
 pub mod trace;

@@ -141,10 +141,11 @@ impl TileResult {
         }
     }
 
-    /// Fold another partial result for the same tile into this one (hits concatenated).
+    /// Fold another partial result for the same tile into this one (hits concatenated;
+    /// counters add saturating at `u64::MAX`).
     pub fn merge(&mut self, other: &TileResult) {
-        self.nohc += other.nohc;
-        self.phc += other.phc;
+        self.nohc = self.nohc.saturating_add(other.nohc);
+        self.phc = self.phc.saturating_add(other.phc);
         self.xmin = self.xmin.min(other.xmin);
         self.xmax = self.xmax.max(other.xmax);
         self.ymin = self.ymin.min(other.ymin);

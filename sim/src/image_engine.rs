@@ -1,0 +1,125 @@
+//! One Image Engine: the FIFO in front of it, its depth test over the pixels it owns, and its
+//! own Occlusion Unit ([`crate::occlusion_unit`]) with an OccU Control write buffer
+//! ([`crate::occu_control`]) that drains hit words into the Image Engine's memory.
+//!
+//! Rules, for the Image Engine's `k`-th fragment, emitted by its board's Fragment Generator
+//! in `a_k` (`C = image_engine_cycles_per_fragment`, `F = image_engine_fifo_entries`):
+//! - FIFO: the fragment may be emitted once fragment `k - F` left the FIFO (same-cycle reuse);
+//! - depth test: it starts (and leaves the FIFO) in `s_k = max(a_k + 1, s_{k-1} + C,
+//!   o_{k-1})` and its result is ready in `s_k + C`: the engine tests one fragment every `C`
+//!   cycles and holds a tested fragment until its Occlusion Unit accepts it;
+//! - Occlusion Unit: it accepts the fragment in `o_k = max(s_k + C, c_{k-1} + 1)`, counts it
+//!   for `s` cycles (one tile per engine per cycle) and leaves in `c_k`, later than
+//!   `o_k + s - 1` only while the hit-word buffer is full; hit words drain one 32-bit word
+//!   per cycle;
+//! - query end, the end token entering in `t_end`: it enters the depth stage in
+//!   `td = max(t_end + 1, s_last + C, o_last)`, passes the OccU in `to = max(td + 1,
+//!   c_last + 1)`, and the Image Engine's partial report is ready in `r = max(to + 1, g + 1)`
+//!   with `g` the grant of its last hit word (0 without hits).
+
+use crate::arch::{IrArch, OCCU_WORD_BITS};
+use crate::fifo::Fifo;
+use crate::memory_port::MemoryPort;
+use crate::occlusion_unit::OcclusionUnit;
+use crate::occu_control::OccuControl;
+use occsim_traces::{Fragment, QuerySpec, TileResult};
+
+pub struct ImageEngine {
+    cycles_per_fragment: u64,
+    fifo: Fifo,
+    pub occu: OcclusionUnit,
+    control: OccuControl,
+    /// The Image Engine's memory port for hit words: one 32-bit word per cycle.
+    port: MemoryPort,
+    /// First cycle the depth stage may start a fragment: `max(s_last + C, o_last)`.
+    depth_free: u64,
+    /// The query generation the Occlusion Unit is loaded for (loaded at the first fragment).
+    loaded_query: u64,
+    pub fragments: u64,
+    /// Cycles spent on depth tests.
+    pub busy_cycles: u64,
+}
+
+impl ImageEngine {
+    pub fn new(arch: &IrArch) -> ImageEngine {
+        ImageEngine {
+            cycles_per_fragment: arch.image_engine_cycles_per_fragment,
+            fifo: Fifo::new(arch.image_engine_fifo_entries),
+            occu: OcclusionUnit::with_engines(
+                arch.engines,
+                arch.all_tiles_one_cycle,
+                arch.counter_max(),
+            ),
+            control: OccuControl::new(arch.occu_write_buffer_words),
+            port: MemoryPort::new(OCCU_WORD_BITS),
+            depth_free: 0,
+            loaded_query: 0,
+            fragments: 0,
+            busy_cycles: 0,
+        }
+    }
+
+    /// The cycle the FIFO has room for the next fragment.
+    #[inline]
+    pub fn slot_free_cycle(&self) -> u64 {
+        self.fifo.slot_free_cycle()
+    }
+
+    /// Make sure the Occlusion Unit holds query `generation`'s tiles (`spec`).
+    #[inline]
+    pub fn load(&mut self, generation: u64, spec: &QuerySpec) {
+        if self.loaded_query != generation {
+            self.occu.begin(spec);
+            self.loaded_query = generation;
+        }
+    }
+
+    /// Time one fragment emitted in `emitted` whose depth test `passed`.
+    #[inline]
+    pub fn fragment(&mut self, fragment: Fragment, passed: bool, emitted: u64, query_open: bool) {
+        let c = self.cycles_per_fragment;
+        let start = (emitted + 1).max(self.depth_free);
+        self.fifo.depart(start);
+        self.fragments += 1;
+        self.busy_cycles += c;
+        let (accepted, hit_words) = self.occu.fragment(fragment, passed, start + c, query_open);
+        let counted = accepted + self.occu.service_cycles() - 1;
+        let leave = self.control.hits(hit_words, counted, &mut self.port);
+        self.occu.complete(accepted, leave, query_open);
+        self.depth_free = (start + c).max(accepted);
+    }
+
+    /// The end token entering in `end_cycle`: the cycle the partial report is ready and the
+    /// partial results of query `generation` (`None` when no fragment of it came here).
+    pub fn end(
+        &mut self,
+        end_cycle: u64,
+        generation: u64,
+        tiles: usize,
+    ) -> (u64, Option<Vec<TileResult>>) {
+        let through_depth = (end_cycle + 1).max(self.depth_free);
+        let through_occu = (through_depth + 1).max(self.occu.free_cycle());
+        let hits_drained = if self.control.words_written() > 0 {
+            self.control.last_grant() + 1
+        } else {
+            0
+        };
+        let ready = (through_occu + 1).max(hits_drained);
+        let results = (self.loaded_query == generation).then(|| self.occu.end(tiles));
+        (ready, results)
+    }
+
+    /// The first cycle every part of the Image Engine is idle.
+    pub fn free_cycle(&self) -> u64 {
+        let drained = if self.control.words_written() > 0 {
+            self.control.last_grant() + 1
+        } else {
+            0
+        };
+        self.depth_free.max(self.occu.free_cycle()).max(drained)
+    }
+
+    pub fn hit_words(&self) -> u64 {
+        self.control.hit_words
+    }
+}

@@ -1,0 +1,485 @@
+//! The InfiniteReality-like machine: `B` Raster Memory boards (1, 2 or 4), each with one
+//! Fragment Generator and `N` Image Engines; the framebuffer is interleaved over the `B x N`
+//! Image Engines; an Occlusion Unit sits at every Image Engine; a query's partial results
+//! are merged in two stages, within each board and then across the boards.
+//!
+//! ```text
+//!             +-> board 0: fragment_generator -> FIFO -> image_engine 0 (depth, OccU) --+
+//! primitives -+                              \-> FIFO -> image_engine 1 (depth, OccU) --+- local merge -+
+//!             |                               ...                                        |               +- global merge -> report
+//!             +-> board 1: ...                                                          ... ------------+
+//! ```
+//!
+//! # Timing rules
+//! Cycles count from 0; everything is processed in trace order, each cycle a monotone
+//! function of earlier ones.
+//! 1. Interleave ([`crate::interleave`]): each pixel belongs to exactly one board and one
+//!    Image Engine on it.
+//! 2. Fragment Generators ([`crate::fragment_generator`]): every board sets up every
+//!    primitive (`fragment_generator_setup_cycles`) and emits only its own pixels'
+//!    fragments, at most `fragment_generator_fragments_per_cycle` a cycle, in order, blocking
+//!    while the target Image Engine's FIFO is full.
+//! 3. Image Engines ([`crate::image_engine`]): each tests one fragment every
+//!    `image_engine_cycles_per_fragment` cycles, then its own Occlusion Unit (`engines`
+//!    engines, the query's tiles dealt round-robin, one tile per engine per cycle) counts it;
+//!    hit words drain through a per-engine write buffer, one word per cycle.
+//! 4. Query end: the end token enters every board in `t_end`, the first cycle after every
+//!    Fragment Generator has emitted and set up everything before it; each Image Engine's
+//!    partial report is ready in `r` (rule in [`crate::image_engine`]).
+//! 5. Stage one merges each board's Image Engines' reports in Image Engine order, stage two
+//!    the boards' merged reports in board order ([`crate::merge_network`]: tree, chain or
+//!    software, with the per-hop or per-read latency). The result is available in the
+//!    cycle stage two outputs it. Latency = available - `t_end` = drain + local + global,
+//!    with drain = `max r - t_end`, local = `max_b board_b - max r`, global = available -
+//!    `max_b board_b`.
+//! 6. State changes, `begin` and `clear` take no cycles; every Image Engine sees them (the
+//!    depth state is broadcast); a fast clear.
+//!
+//! # What is compared with the golden model
+//! Counters (saturated to `counter_bits`), boxes, z ranges, the number of hits kept, the
+//! overflow flags and the overflowed-buffer count exactly. The hit lists are concatenated
+//! board by board, Image Engine by Image Engine, so their order differs from the golden
+//! (trace-order) list: without overflow the hit multiset must equal the golden one; on
+//! overflow the kept hits are a prefix of that concatenation, not of the trace order, so
+//! only their number (`room - 1`) and their lying in the tile's box are checked here (the
+//! tests check they are true hits of the tile).
+//!
+//! The functional depth test uses one depth buffer for the whole screen, partitioned by
+//! ownership: each pixel is only ever tested by the Image Engine that owns it.
+
+use crate::arch::{Arch, IrArch};
+use crate::error::SimError;
+use crate::fragment_generator::FragmentGenerator;
+use crate::image_engine::ImageEngine;
+use crate::interleave::FramebufferInterleave;
+use crate::merge_network::{merge_partial, merged_ready};
+use crate::o2::{check_spec, first_difference, tile_report};
+use crate::occlusion_engine::hit_room;
+use crate::report::{
+    nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
+    Summary, UnitSummary,
+};
+use occsim_traces::golden::DepthBuffer;
+use occsim_traces::state::{RenderState, MAX_VIEWPORT_SIDE};
+use occsim_traces::{Event, Fragment, QueryMode, QueryResult, QuerySpec, TileResult};
+
+/// Most tile registers (tiles x Image Engines) one query may load: bounds memory.
+pub const MAX_TILE_REGISTERS: usize = 1 << 22;
+
+struct OpenQuery {
+    spec: QuerySpec,
+    /// Distinguishes queries, so each Image Engine loads a query's tiles once, lazily.
+    generation: u64,
+    fragments: u64,
+}
+
+pub struct IrMachine {
+    arch: IrArch,
+    arch_entries: Vec<ArchEntry>,
+    width: u32,
+    height: u32,
+    interleave: FramebufferInterleave,
+    generators: Vec<FragmentGenerator>,
+    /// Board-major: Image Engine `i` of board `b` is `b * N + i`.
+    image_engines: Vec<ImageEngine>,
+    state: RenderState,
+    depth: DepthBuffer,
+    open: Option<OpenQuery>,
+    generation: u64,
+    /// The host's first free cycle (software merges).
+    host: u64,
+    awaiting_golden: Option<(usize, QueryResult)>,
+    /// The merged result of the last query that ended (hit lists included).
+    last_result: Option<QueryResult>,
+    queries: Vec<QueryReport>,
+    checked_queries: u64,
+    events: u64,
+    primitives: u64,
+    last_available: u64,
+}
+
+impl IrMachine {
+    pub fn new(arch: &Arch, width: u32, height: u32) -> Result<IrMachine, SimError> {
+        let ir = arch.ir()?;
+        if !(1..=MAX_VIEWPORT_SIDE).contains(&width) || !(1..=MAX_VIEWPORT_SIDE).contains(&height) {
+            return Err(SimError::Viewport {
+                width,
+                height,
+                max: MAX_VIEWPORT_SIDE,
+            });
+        }
+        let arch_entries = arch
+            .entries()
+            .map(|(param, value)| ArchEntry {
+                key: param.key.to_string(),
+                value: value.to_string(),
+                unit: param.unit.to_string(),
+            })
+            .collect();
+        Ok(IrMachine {
+            interleave: FramebufferInterleave::new(&ir),
+            generators: (0..ir.boards)
+                .map(|_| {
+                    FragmentGenerator::new(
+                        ir.fragment_generator_fragments_per_cycle,
+                        ir.fragment_generator_setup_cycles,
+                    )
+                })
+                .collect(),
+            image_engines: (0..ir.image_engines())
+                .map(|_| ImageEngine::new(&ir))
+                .collect(),
+            arch: ir,
+            arch_entries,
+            width,
+            height,
+            state: RenderState::new(width, height),
+            depth: DepthBuffer::new(width, height),
+            open: None,
+            generation: 0,
+            host: 0,
+            awaiting_golden: None,
+            last_result: None,
+            queries: Vec::new(),
+            checked_queries: 0,
+            events: 0,
+            primitives: 0,
+            last_available: 0,
+        })
+    }
+
+    /// Feed one event of the stream.
+    #[inline]
+    pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        let index = self.events;
+        self.events += 1;
+        match event {
+            Event::Fragment(f) => return self.fragment(*f, index),
+            Event::Primitive => {
+                self.primitives += 1;
+                self.generators
+                    .iter_mut()
+                    .for_each(FragmentGenerator::primitive);
+            }
+            Event::Clear => self.depth.clear(),
+            Event::DepthFunc(f) => self.state.depth_func = *f,
+            Event::DepthMask(b) => self.state.depth_mask = *b,
+            Event::DepthTest(b) => self.state.depth_test = *b,
+            Event::Cull(b) => self.state.cull_back = *b,
+            Event::Scissor(s) => self.state.scissor = *s,
+            Event::QueryBegin(spec) => self.begin(spec, index)?,
+            Event::QueryEnd => self.end(index)?,
+            Event::QueryResult(golden) => self.check(golden, index)?,
+        }
+        Ok(())
+    }
+
+    #[inline]
+    fn fragment(&mut self, fragment: Fragment, event: u64) -> Result<(), SimError> {
+        if fragment.x as u32 >= self.width || fragment.y as u32 >= self.height {
+            return Err(SimError::FragmentOutside {
+                event,
+                x: fragment.x,
+                y: fragment.y,
+                width: self.width,
+                height: self.height,
+            });
+        }
+        let owner = self.interleave.owner(fragment.x, fragment.y);
+        let engine = &mut self.image_engines
+            [owner.board * self.arch.image_engines_per_board + owner.image_engine];
+        let emitted = self.generators[owner.board].emit(engine.slot_free_cycle());
+        let occlusion_mode = self
+            .open
+            .as_ref()
+            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
+        let passed = self.depth.test(&self.state, fragment, !occlusion_mode);
+        if let Some(query) = &mut self.open {
+            engine.load(query.generation, &query.spec);
+            query.fragments += 1;
+        }
+        engine.fragment(fragment, passed, emitted, self.open.is_some());
+        Ok(())
+    }
+
+    fn begin(&mut self, spec: &QuerySpec, event: u64) -> Result<(), SimError> {
+        check_spec(spec, event, self.open.as_ref().map(|q| q.spec.id))?;
+        let registers = spec.tiles.len().saturating_mul(self.image_engines.len());
+        if registers > MAX_TILE_REGISTERS {
+            return Err(SimError::TileRegisters {
+                event,
+                id: spec.id,
+                tiles: spec.tiles.len(),
+                image_engines: self.image_engines.len(),
+                max: MAX_TILE_REGISTERS,
+            });
+        }
+        self.generation += 1;
+        self.open = Some(OpenQuery {
+            spec: spec.clone(),
+            generation: self.generation,
+            fragments: 0,
+        });
+        Ok(())
+    }
+
+    fn end(&mut self, event: u64) -> Result<(), SimError> {
+        let query = self
+            .open
+            .take()
+            .ok_or(SimError::EndWithoutBegin { event })?;
+        let spec = &query.spec;
+        let end_cycle = self
+            .generators
+            .iter()
+            .map(FragmentGenerator::free_cycle)
+            .max()
+            .unwrap_or(0);
+        let counter_max = self.arch.counter_max();
+        let room = match spec.mode {
+            QueryMode::Verbose => hit_room(spec.buffer_entries) as usize,
+            _ => usize::MAX,
+        };
+        let per_board = self.arch.image_engines_per_board;
+        let mut tiles = vec![TileResult::default(); spec.tiles.len()];
+        let mut board_ready = Vec::with_capacity(self.generators.len());
+        let mut last_drained = end_cycle;
+        for board in self.image_engines.chunks_mut(per_board) {
+            let mut ready = Vec::with_capacity(per_board);
+            for engine in board {
+                let (r, partial) = engine.end(end_cycle, query.generation, spec.tiles.len());
+                ready.push(r);
+                if let Some(partial) = partial {
+                    merge_partial(&mut tiles, &partial, counter_max, room);
+                }
+            }
+            last_drained = last_drained.max(ready.iter().copied().max().unwrap_or(0));
+            board_ready.push(merged_ready(&self.arch.local_merge, &ready, &mut self.host));
+        }
+        let boards_merged = board_ready.iter().copied().max().unwrap_or(last_drained);
+        let available = merged_ready(&self.arch.global_merge, &board_ready, &mut self.host);
+        let overflowed_buffers = finish_verbose(spec, &mut tiles);
+        self.last_available = self.last_available.max(available);
+        self.queries.push(QueryReport {
+            id: spec.id,
+            mode: spec.mode,
+            latency_cycles: available - end_cycle,
+            drain_cycles: last_drained - end_cycle,
+            local_merge_cycles: boards_merged - last_drained,
+            global_merge_cycles: available - boards_merged,
+            end_cycle,
+            available_cycle: available,
+            fragments: query.fragments,
+            overflowed_buffers,
+            tiles: tiles.iter().map(tile_report).collect(),
+        });
+        let result = QueryResult {
+            id: spec.id,
+            mode: spec.mode,
+            tiles,
+            overflowed_buffers,
+        };
+        self.last_result = Some(result.clone());
+        self.awaiting_golden = Some((self.queries.len() - 1, result));
+        Ok(())
+    }
+
+    /// The merged result of the last query that ended, hit lists included.
+    pub fn last_result(&self) -> Option<&QueryResult> {
+        self.last_result.as_ref()
+    }
+
+    fn check(&mut self, golden: &QueryResult, event: u64) -> Result<(), SimError> {
+        let (index, simulated) =
+            self.awaiting_golden
+                .take()
+                .ok_or(SimError::ResultWithoutQuery {
+                    event,
+                    id: golden.id,
+                })?;
+        if let Some((field, simulated, golden)) =
+            merged_difference(&simulated, golden, self.arch.counter_max())
+        {
+            return Err(SimError::Mismatch {
+                id: self.queries[index].id,
+                index,
+                field,
+                simulated,
+                golden,
+            });
+        }
+        self.checked_queries += 1;
+        Ok(())
+    }
+
+    /// End of the stream: the report.
+    pub fn finish(self) -> Result<Report, SimError> {
+        if let Some(query) = &self.open {
+            return Err(SimError::OpenAtEnd { id: query.spec.id });
+        }
+        let cycles = self
+            .generators
+            .iter()
+            .map(FragmentGenerator::free_cycle)
+            .chain(self.image_engines.iter().map(ImageEngine::free_cycle))
+            .chain([self.last_available])
+            .max()
+            .unwrap_or(0);
+        let fragments: u64 = self.generators.iter().map(|g| g.fragments).sum();
+        let engines = self.engine_reports(cycles);
+        let sum = |f: &dyn Fn(&ImageEngine) -> u64| self.image_engines.iter().map(f).sum::<u64>();
+        let stage = |name: &str, busy: u64, stall: u64, units: usize| StageReport {
+            name: name.to_string(),
+            busy_cycles: busy,
+            stall_cycles: stall,
+            memory_stall_cycles: 0,
+            busy_percent: percent(busy, cycles.saturating_mul(units as u64)),
+            stall_percent: percent(stall, cycles.saturating_mul(units as u64)),
+        };
+        let ies = self.image_engines.len();
+        let stages = vec![
+            stage(
+                "frag_generators",
+                self.generators.iter().map(|g| g.busy_cycles).sum(),
+                self.generators.iter().map(|g| g.stall_cycles).sum(),
+                self.generators.len(),
+            ),
+            stage("image_engines", sum(&|e| e.busy_cycles), 0, ies),
+            stage(
+                "occlusion_units",
+                sum(&|e| e.occu.busy_cycles),
+                sum(&|e| e.occu.stall_cycles),
+                ies,
+            ),
+        ];
+        let units = vec![
+            UnitSummary::of(
+                "fragment_generator",
+                self.generators.iter().map(|g| g.busy_cycles),
+                cycles,
+            ),
+            UnitSummary::of(
+                "image_engine",
+                self.image_engines.iter().map(|e| e.busy_cycles),
+                cycles,
+            ),
+            UnitSummary::of(
+                "occlusion_unit",
+                self.image_engines.iter().map(|e| e.occu.busy_cycles),
+                cycles,
+            ),
+        ];
+        let mut latencies: Vec<u64> = self.queries.iter().map(|q| q.latency_cycles).collect();
+        latencies.sort_unstable();
+        Ok(Report {
+            machine: "ir".to_string(),
+            arch: self.arch_entries,
+            viewport_width: self.width,
+            viewport_height: self.height,
+            summary: Summary {
+                cycles,
+                simulated_seconds: cycles as f64 / (self.arch.clock_mhz * 1e6),
+                fragments,
+                primitives: self.primitives,
+                fragments_per_cycle: if cycles == 0 {
+                    0.0
+                } else {
+                    fragments as f64 / cycles as f64
+                },
+                queries: self.queries.len() as u64,
+                checked_queries: self.checked_queries,
+                latency_p50_cycles: nearest_rank(&latencies, 50),
+                latency_p95_cycles: nearest_rank(&latencies, 95),
+                latency_max_cycles: latencies.last().copied().unwrap_or(0),
+            },
+            stages,
+            memory_port: PortReport {
+                occu_words: sum(&|e| e.hit_words()),
+                ..PortReport::default()
+            },
+            engines,
+            units,
+            queries: self.queries,
+        })
+    }
+
+    /// Engine `e`'s statistics summed over every Image Engine's Occlusion Unit; busy percent
+    /// of all those engines' cycles.
+    fn engine_reports(&self, cycles: u64) -> Vec<EngineReport> {
+        (0..self.arch.engines)
+            .map(|e| {
+                let busy = self
+                    .image_engines
+                    .iter()
+                    .map(|ie| ie.occu.engines[e].busy_cycles)
+                    .sum();
+                let stall = self
+                    .image_engines
+                    .iter()
+                    .map(|ie| ie.occu.engines[e].stall_cycles)
+                    .sum();
+                EngineReport {
+                    engine: e,
+                    busy_cycles: busy,
+                    stall_cycles: stall,
+                    busy_percent: percent(
+                        busy,
+                        cycles.saturating_mul(self.image_engines.len() as u64),
+                    ),
+                }
+            })
+            .collect()
+    }
+}
+
+/// Verbose buffers that overflowed end with the -1 terminator over their last hit (when they
+/// have room for one): keep `room - 1` hits. Returns the overflowed buffers.
+fn finish_verbose(spec: &QuerySpec, tiles: &mut [TileResult]) -> u32 {
+    if spec.mode != QueryMode::Verbose {
+        return 0;
+    }
+    let room = hit_room(spec.buffer_entries) as usize;
+    let mut overflowed = 0;
+    for tile in tiles.iter_mut().filter(|t| t.overflowed) {
+        overflowed += 1;
+        tile.hits.truncate(room.saturating_sub(1));
+    }
+    overflowed
+}
+
+/// The first difference between a merged result and the golden one, as [`first_difference`]
+/// but with hit lists compared as multisets when no buffer overflowed, and on overflow only
+/// by their length and by every kept hit lying in the tile's box (see the module docs).
+pub fn merged_difference(
+    simulated: &QueryResult,
+    golden: &QueryResult,
+    counter_max: u64,
+) -> Option<(String, String, String)> {
+    let mut simulated = simulated.clone();
+    let mut golden = golden.clone();
+    for (t, (s, g)) in simulated
+        .tiles
+        .iter_mut()
+        .zip(golden.tiles.iter_mut())
+        .enumerate()
+    {
+        if s.overflowed && g.overflowed && s.hits.len() == g.hits.len() {
+            let outside = s.hits.iter().find(|&&(x, y)| {
+                !(s.xmin..=s.xmax).contains(&(x as u32)) || !(s.ymin..=s.ymax).contains(&(y as u32))
+            });
+            if let Some(hit) = outside {
+                return Some((
+                    format!("tile {t} hit outside the box"),
+                    format!("{hit:?}"),
+                    "none".into(),
+                ));
+            }
+            s.hits.clear();
+            g.hits.clear();
+        } else {
+            s.hits.sort_unstable();
+            g.hits.sort_unstable();
+        }
+    }
+    first_difference(&simulated, &golden, counter_max)
+}

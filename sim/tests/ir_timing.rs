@@ -1,0 +1,212 @@
+//! The InfiniteReality-like machine's timing, worked by hand on tiny streams, the latency
+//! split, and the rejection of bad parameters.
+
+use occsim_sim::arch::{Arch, ArchError, IR_PARAMS};
+use occsim_sim::{IrMachine, Report};
+use occsim_traces::{Event, Fragment, QueryMode, QuerySpec, Rect};
+
+/// One board of two Image Engines, columns interleave, one fragment per cycle, setup 2,
+/// 3 cycles per fragment, one-entry FIFOs, one engine.
+fn tiny(sets: &[&str]) -> Arch {
+    let mut arch = Arch::builtin("ir1").unwrap();
+    for set in [
+        "image_engines_per_board=2",
+        "fragment_generator_fragments_per_cycle=1",
+        "fragment_generator_setup_cycles=2",
+        "image_engine_cycles_per_fragment=3",
+        "image_engine_fifo_entries=1",
+        "engines=1",
+        "local_merge_hop_latency_cycles=5",
+    ]
+    .iter()
+    .chain(sets)
+    {
+        arch.set(set).unwrap();
+    }
+    arch
+}
+
+fn query(xs: &[u16]) -> Vec<Event> {
+    let mut events = vec![
+        Event::QueryBegin(QuerySpec {
+            id: 1,
+            mode: QueryMode::Brief,
+            buffer_entries: 8,
+            tiles: vec![Rect::new(0, 0, 4, 1)],
+        }),
+        Event::Primitive,
+    ];
+    events.extend(
+        xs.iter()
+            .map(|&x| Event::Fragment(Fragment { x, y: 0, z: 9 })),
+    );
+    events.push(Event::QueryEnd);
+    events
+}
+
+fn run(arch: &Arch, events: &[Event]) -> Report {
+    let mut machine = IrMachine::new(arch, 4, 1).unwrap();
+    for event in events {
+        machine.event(event).unwrap();
+    }
+    machine.finish().unwrap()
+}
+
+#[test]
+fn hand_worked_two_image_engines_and_a_tree() {
+    // Setup ends in 2. f0 -> IE0: emitted 2, tested from 3, OccU 6. f1 -> IE1: emitted 3,
+    // tested 4, OccU 7. f2 -> IE0: emitted 4 (slot freed in 3), tested max(5, 6) = 6, OccU 9.
+    // f3 -> IE1: emitted 5, tested 7, OccU 10. End token t_end = 6.
+    // IE0: td = max(7, 9) = 9, to = 10, r = 11. IE1: td = 10, to = 11, r = 12.
+    // Tree over 2: max(11, 12) + 5 = 17; one board: the global tree adds no hop.
+    let report = run(&tiny(&[]), &query(&[0, 1, 0, 1]));
+    let q = &report.queries[0];
+    assert_eq!((q.end_cycle, q.available_cycle), (6, 17));
+    assert_eq!(
+        (q.drain_cycles, q.local_merge_cycles, q.global_merge_cycles),
+        (6, 5, 0)
+    );
+    assert_eq!(q.latency_cycles, 11);
+    assert_eq!(report.summary.cycles, 17);
+    assert_eq!(report.queries[0].tiles[0].nohc, 4);
+}
+
+#[test]
+fn hand_worked_chain_and_software_merges() {
+    // Chain: c0 = 11, c1 = max(12, 11 + 5) = 16.
+    let chain = run(&tiny(&["local_merge=chain"]), &query(&[0, 1, 0, 1]));
+    assert_eq!(chain.queries[0].local_merge_cycles, 4);
+    // Software global stage: the host reads the one board's report: 17 + 100.
+    let software = run(
+        &tiny(&[
+            "global_merge=software",
+            "global_merge_read_latency_cycles=100",
+        ]),
+        &query(&[0, 1, 0, 1]),
+    );
+    let q = &software.queries[0];
+    assert_eq!((q.global_merge_cycles, q.latency_cycles), (100, 111));
+    // Software local stage: the host reads IE0 (ready 11) then IE1 (ready 12): 51, 91.
+    let reads = run(
+        &tiny(&["local_merge=software", "local_merge_read_latency_cycles=40"]),
+        &query(&[0, 1, 0, 1]),
+    );
+    assert_eq!(reads.queries[0].local_merge_cycles, 91 - 12);
+}
+
+#[test]
+fn the_fragment_generator_blocks_on_a_full_image_engine_fifo() {
+    // All to IE0: f0 emitted 2, tested 3..5, OccU 6. f1 emitted 3 (f0 left the FIFO in 3),
+    // tested 6, OccU 9. f2 waits for f1 to leave the FIFO: emitted 6 (earliest 4: 2 cycles
+    // blocked), tested 9, OccU 12. t_end = 7; td = 12, to = 13, r = 14: drain 7.
+    let report = run(
+        &tiny(&["local_merge_hop_latency_cycles=0"]),
+        &query(&[0, 2, 0]),
+    );
+    let generator = &report.stages[0];
+    assert_eq!(generator.name, "frag_generators");
+    assert_eq!(generator.stall_cycles, 2);
+    let q = &report.queries[0];
+    assert_eq!((q.end_cycle, q.drain_cycles, q.latency_cycles), (7, 7, 7));
+}
+
+#[test]
+fn with_zero_merge_latencies_every_latency_is_its_drain() {
+    let mut events = Vec::new();
+    for i in 0..6u16 {
+        events.extend(query(&[i % 4, (i * 3) % 4, 1, 2, 3, 0, i % 2]));
+    }
+    for local in ["tree", "chain", "software"] {
+        for global in ["tree", "chain", "software"] {
+            let mut arch = tiny(&[]);
+            for set in [
+                format!("local_merge={local}"),
+                format!("global_merge={global}"),
+                "boards=2".into(),
+                "local_merge_hop_latency_cycles=0".into(),
+                "local_merge_read_latency_cycles=0".into(),
+                "global_merge_hop_latency_cycles=0".into(),
+                "global_merge_read_latency_cycles=0".into(),
+            ] {
+                arch.set(&set).unwrap();
+            }
+            let report = run(&arch, &events);
+            assert_eq!(report.queries.len(), 6);
+            for q in &report.queries {
+                assert_eq!(q.latency_cycles, q.drain_cycles, "{local}/{global}");
+                assert_eq!((q.local_merge_cycles, q.global_merge_cycles), (0, 0));
+            }
+        }
+    }
+}
+
+#[test]
+fn latency_is_the_sum_of_its_parts() {
+    let mut events = Vec::new();
+    for i in 0..5u16 {
+        events.extend(query(&[i % 4, 3, 2, 1]));
+    }
+    let report = run(&tiny(&["boards=4", "global_merge=chain"]), &events);
+    for q in &report.queries {
+        assert_eq!(
+            q.latency_cycles,
+            q.drain_cycles + q.local_merge_cycles + q.global_merge_cycles
+        );
+        assert!(q.drain_cycles >= 3, "end token: FIFO, depth stage, OccU");
+    }
+}
+
+#[test]
+fn builtins_differ_only_in_boards() {
+    for (name, boards) in [("ir1", 1), ("ir2", 2), ("ir4", 4)] {
+        let ir = Arch::builtin(name).unwrap().ir().unwrap();
+        assert_eq!(ir.boards, boards);
+        assert_eq!(ir.image_engines_per_board, 80);
+    }
+}
+
+#[test]
+fn every_parameter_has_a_unit_and_a_meaning_and_reads_back() {
+    for p in IR_PARAMS {
+        assert!(!p.unit.is_empty() && !p.meaning.is_empty(), "{}", p.key);
+    }
+    let mut arch = Arch::builtin("ir2").unwrap();
+    arch.set("interleave=morton").unwrap();
+    arch.set("ir.global_merge = software").unwrap();
+    let text = arch.to_documented_toml();
+    assert!(text.contains("interleave = \"morton\""), "{text}");
+    assert_eq!(Arch::from_toml(&text).unwrap(), arch);
+}
+
+#[test]
+fn bad_set_keys_and_values_are_rejected_clearly() {
+    let mut arch = Arch::builtin("ir4").unwrap();
+    let err = arch.set("boards=3").unwrap_err();
+    assert!(matches!(err, ArchError::Impossible(_)));
+    assert_eq!(
+        err.to_string(),
+        "impossible configuration: boards (3) must be 1, 2 or 4"
+    );
+    let err = arch.set("interleave=diagonal").unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "parameter 'interleave' = diagonal: expected one of columns, blocks, morton"
+    );
+    let err = arch.set("local_merge=bus").unwrap_err();
+    assert!(
+        err.to_string().contains("one of tree, chain, software"),
+        "{err}"
+    );
+    let err = arch.set("image_engines=8").unwrap_err();
+    assert!(matches!(err, ArchError::UnknownKey { .. }));
+    assert!(err.to_string().contains("image_engines_per_board"), "{err}");
+    let err = arch.set("image_engine_cycles_per_fragment=0").unwrap_err();
+    assert!(err.to_string().contains("an integer in 1..="), "{err}");
+    assert_eq!(
+        arch,
+        Arch::builtin("ir4").unwrap(),
+        "rejected values leave it unchanged"
+    );
+    let err = Arch::from_toml("machine = \"ir\"\n[ir]\nboards = 8\n").unwrap_err();
+    assert!(err.to_string().contains("line 3"), "{err}");
+}

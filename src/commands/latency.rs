@@ -1,0 +1,199 @@
+//! `occsim latency TRACE --arch ... --engines 1,2,4,8,16`: replay a trace once per engine
+//! count and tabulate what its queries' latency costs: p50/p95/max in cycles and
+//! microseconds, split into drain, local merge and global merge (means, which add up to the
+//! mean latency), total cycles and fragments per cycle. `--plot FILE.svg` draws the table.
+
+use super::arch::ArchSelection;
+use super::replay::replay_trace;
+use crate::plot::{LineChart, Scale, Series};
+use anyhow::{bail, Context};
+use occsim_sim::report::nearest_rank;
+use occsim_sim::Report;
+use occsim_traces::retile::TileGrid;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct LatencyArgs {
+    /// The fragment trace (.occt) to replay.
+    pub trace: PathBuf,
+    #[command(flatten)]
+    pub arch: ArchSelection,
+    /// Occlusion engines per Occlusion Unit, one replay each (comma-separated).
+    #[arg(
+        long,
+        value_name = "E,E,...",
+        value_delimiter = ',',
+        default_value = "1,2,4,8,16"
+    )]
+    pub engines: Vec<u64>,
+    /// Replace every brief query's tiles by a G by H grid over the viewport (the golden
+    /// results are recomputed), e.g. --retile 8x8.
+    #[arg(long, value_name = "GxH")]
+    pub retile: Option<TileGrid>,
+    /// Print the rows as JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    /// Also draw the table as an SVG line chart.
+    #[arg(long, value_name = "FILE.svg")]
+    pub plot: Option<PathBuf>,
+}
+
+/// One engine count's figures.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct LatencyRow {
+    pub engines: u64,
+    pub queries: u64,
+    pub latency_p50_cycles: u64,
+    pub latency_p95_cycles: u64,
+    pub latency_max_cycles: u64,
+    pub latency_p50_us: f64,
+    pub latency_p95_us: f64,
+    pub latency_max_us: f64,
+    /// Means over the queries; they add up to the mean latency.
+    pub drain_mean_cycles: f64,
+    pub local_merge_mean_cycles: f64,
+    pub global_merge_mean_cycles: f64,
+    pub total_cycles: u64,
+    pub fragments_per_cycle: f64,
+}
+
+impl LatencyRow {
+    fn of(engines: u64, report: &Report, clock_mhz: f64) -> LatencyRow {
+        let queries = &report.queries;
+        let mut latencies: Vec<u64> = queries.iter().map(|q| q.latency_cycles).collect();
+        latencies.sort_unstable();
+        let mean = |part: &dyn Fn(&occsim_sim::report::QueryReport) -> u64| {
+            if queries.is_empty() {
+                0.0
+            } else {
+                queries.iter().map(part).sum::<u64>() as f64 / queries.len() as f64
+            }
+        };
+        let us = |cycles: u64| cycles as f64 / clock_mhz;
+        let (p50, p95) = (nearest_rank(&latencies, 50), nearest_rank(&latencies, 95));
+        let max = latencies.last().copied().unwrap_or(0);
+        LatencyRow {
+            engines,
+            queries: queries.len() as u64,
+            latency_p50_cycles: p50,
+            latency_p95_cycles: p95,
+            latency_max_cycles: max,
+            latency_p50_us: us(p50),
+            latency_p95_us: us(p95),
+            latency_max_us: us(max),
+            drain_mean_cycles: mean(&|q| q.drain_cycles),
+            local_merge_mean_cycles: mean(&|q| q.local_merge_cycles),
+            global_merge_mean_cycles: mean(&|q| q.global_merge_cycles),
+            total_cycles: report.summary.cycles,
+            fragments_per_cycle: report.summary.fragments_per_cycle,
+        }
+    }
+}
+
+pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
+    if args.engines.is_empty() {
+        bail!("--engines: give at least one engine count");
+    }
+    let base = args.arch.resolve()?;
+    let clock_mhz = match base.get("clock_mhz") {
+        Some(occsim_sim::arch::Value::Float(mhz)) => mhz,
+        _ => bail!("the architecture has no clock_mhz"),
+    };
+    let rows = args
+        .engines
+        .par_iter()
+        .map(|&engines| {
+            let mut arch = base.clone();
+            arch.set_value("engines", &engines.to_string())
+                .with_context(|| format!("--engines {engines}"))?;
+            let report = replay_trace(&args.trace, &arch, args.retile)?;
+            Ok(LatencyRow::of(engines, &report, clock_mhz))
+        })
+        .collect::<anyhow::Result<Vec<LatencyRow>>>()?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        print!("{}", table(&rows));
+    }
+    if let Some(path) = &args.plot {
+        chart(&args, &rows)
+            .write_svg(path)
+            .with_context(|| format!("cannot write plot {}", path.display()))?;
+    }
+    Ok(())
+}
+
+fn table(rows: &[LatencyRow]) -> String {
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "{:>7} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>12} {:>8}",
+        "engines",
+        "queries",
+        "p50",
+        "p95",
+        "max",
+        "p50_us",
+        "p95_us",
+        "max_us",
+        "drain",
+        "local",
+        "global",
+        "cycles",
+        "frag/cyc"
+    );
+    for r in rows {
+        let _ = writeln!(
+            out,
+            "{:>7} {:>7} {:>9} {:>9} {:>9} {:>9.3} {:>9.3} {:>9.3} {:>9.1} {:>9.1} {:>9.1} {:>12} {:>8.3}",
+            r.engines,
+            r.queries,
+            r.latency_p50_cycles,
+            r.latency_p95_cycles,
+            r.latency_max_cycles,
+            r.latency_p50_us,
+            r.latency_p95_us,
+            r.latency_max_us,
+            r.drain_mean_cycles,
+            r.local_merge_mean_cycles,
+            r.global_merge_mean_cycles,
+            r.total_cycles,
+            r.fragments_per_cycle
+        );
+    }
+    let _ = writeln!(
+        out,
+        "latency in cycles; drain, local and global are mean cycles per query (they add up to the mean latency)"
+    );
+    out
+}
+
+fn chart(args: &LatencyArgs, rows: &[LatencyRow]) -> LineChart {
+    let series = |name: &str, y: &dyn Fn(&LatencyRow) -> f64| Series {
+        name: name.to_string(),
+        points: rows.iter().map(|r| (r.engines as f64, y(r))).collect(),
+    };
+    let arch = match &args.arch.arch_file {
+        Some(file) => file.display().to_string(),
+        None => args.arch.arch.clone(),
+    };
+    LineChart {
+        title: format!("query latency, {} on {arch}", args.trace.display()),
+        x_label: "occlusion engines per Occlusion Unit".to_string(),
+        y_label: "cycles".to_string(),
+        x_scale: Scale::Log10,
+        y_scale: Scale::Linear,
+        x_ticks: Some(rows.iter().map(|r| r.engines as f64).collect()),
+        series: vec![
+            series("latency p50", &|r| r.latency_p50_cycles as f64),
+            series("latency p95", &|r| r.latency_p95_cycles as f64),
+            series("latency max", &|r| r.latency_max_cycles as f64),
+            series("drain (mean)", &|r| r.drain_mean_cycles),
+            series("local merge (mean)", &|r| r.local_merge_mean_cycles),
+            series("global merge (mean)", &|r| r.global_merge_mean_cycles),
+        ],
+    }
+}

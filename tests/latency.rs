@@ -1,0 +1,156 @@
+//! End-to-end tests of `occsim latency` and of `--retile`, on the built-in hardcases trace.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn occsim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_occsim"))
+        .args(args)
+        .output()
+        .expect("occsim runs")
+}
+
+fn stdout_of(args: &[&str]) -> String {
+    let output = occsim(args);
+    assert!(
+        output.status.success(),
+        "occsim {args:?} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8(output.stdout).expect("utf-8 output")
+}
+
+/// A hardcases trace in a fresh scratch directory.
+fn hardcases_trace(name: &str) -> (PathBuf, String) {
+    let dir = std::env::temp_dir().join(format!("occsim-latency-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let trace = dir.join("hardcases.occt");
+    let trace_text = trace.to_str().unwrap().to_string();
+    stdout_of(&["trace", "gen", "hardcases", "-o", &trace_text]);
+    (dir, trace_text)
+}
+
+#[test]
+fn latency_prints_one_row_per_engine_count_and_plots() {
+    let (dir, trace) = hardcases_trace("rows");
+    let svg = dir.join("latency.svg");
+    let json = stdout_of(&[
+        "latency",
+        &trace,
+        "--arch",
+        "ir2",
+        "--engines",
+        "1,4,16",
+        "--json",
+        "--plot",
+        svg.to_str().unwrap(),
+    ]);
+    let rows: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let rows = rows.as_array().unwrap();
+    let engines: Vec<u64> = rows
+        .iter()
+        .map(|r| r["engines"].as_u64().unwrap())
+        .collect();
+    assert_eq!(engines, [1, 4, 16]);
+    for row in rows {
+        // The hardcases scene has 28 queries (its `end` lines).
+        assert_eq!(row["queries"], 28);
+        let (p50, p95, max) = (
+            row["latency_p50_cycles"].as_u64().unwrap(),
+            row["latency_p95_cycles"].as_u64().unwrap(),
+            row["latency_max_cycles"].as_u64().unwrap(),
+        );
+        assert!(3 <= p50 && p50 <= p95 && p95 <= max, "{row}");
+        // Default ir2: every path through the local tree over 80 Image Engines has at least
+        // 5 hops of 2 cycles (80, 40, 20, 10, 5, 3, 2, 1 with the odd ones passed up); the
+        // global tree over 2 boards one hop of 8 cycles.
+        assert!(
+            row["local_merge_mean_cycles"].as_f64().unwrap() >= 10.0,
+            "{row}"
+        );
+        assert_eq!(
+            row["global_merge_mean_cycles"].as_f64().unwrap(),
+            8.0,
+            "{row}"
+        );
+        // 100 MHz: microseconds are cycles / 100.
+        assert_eq!(row["latency_max_us"].as_f64().unwrap(), max as f64 / 100.0);
+    }
+    let svg = std::fs::read_to_string(svg).unwrap();
+    assert!(svg.contains("<svg") && svg.contains("latency p95") && svg.contains("global merge"));
+}
+
+#[test]
+fn with_zero_merge_latencies_the_table_shows_only_drain() {
+    let (_dir, trace) = hardcases_trace("zero");
+    let text = stdout_of(&[
+        "latency",
+        &trace,
+        "--arch",
+        "ir4",
+        "--engines",
+        "2",
+        "--set",
+        "local_merge_hop_latency_cycles=0",
+        "--set",
+        "global_merge_hop_latency_cycles=0",
+    ]);
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split_whitespace().collect();
+    assert_eq!(header[0], "engines");
+    let row: Vec<&str> = lines.next().unwrap().split_whitespace().collect();
+    let column = |name: &str| row[header.iter().position(|h| *h == name).unwrap()];
+    assert_eq!(row[0], "2");
+    assert_eq!(column("local"), "0.0");
+    assert_eq!(column("global"), "0.0");
+}
+
+#[test]
+fn retile_replays_with_recomputed_golden_results() {
+    let (_dir, trace) = hardcases_trace("retile");
+    for arch in ["o2", "ir1", "ir4"] {
+        let json = stdout_of(&[
+            "replay", &trace, "--arch", arch, "--retile", "4x3", "--json",
+        ]);
+        let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+        let summary = &report["summary"];
+        assert_eq!(summary["checked_queries"], summary["queries"], "{arch}");
+        let brief_tiles: Vec<usize> = report["queries"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|q| q["mode"] == "brief")
+            .map(|q| q["tiles"].as_array().unwrap().len())
+            .collect();
+        assert!(
+            !brief_tiles.is_empty() && brief_tiles.iter().all(|&n| n == 12),
+            "{arch}"
+        );
+    }
+}
+
+#[test]
+fn bad_options_are_rejected_with_a_clear_message() {
+    let (_dir, trace) = hardcases_trace("bad");
+    let output = occsim(&[
+        "latency",
+        &trace,
+        "--arch",
+        "ir4",
+        "--set",
+        "interleave=diagonal",
+    ]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("--set interleave=diagonal")
+            && stderr.contains("expected one of columns, blocks, morton"),
+        "{stderr}"
+    );
+    let output = occsim(&["replay", &trace, "--arch", "ir4", "--retile", "5000x1"]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        !output.status.success() && stderr.contains("--retile 5000x1"),
+        "{stderr}"
+    );
+}
