@@ -262,7 +262,7 @@ pub struct Arch {
 }
 
 /// Names of the built-in architectures.
-pub const BUILTIN_ARCHS: &[&str] = &["o2", "ir1", "ir2", "ir4"];
+pub const BUILTIN_ARCHS: &[&str] = &["o2", "ir", "ir1", "ir2", "ir4"];
 
 impl Arch {
     /// The machine's defaults.
@@ -277,6 +277,9 @@ impl Arch {
     pub fn builtin(name: &str) -> Result<Arch, ArchError> {
         match name {
             "o2" => Ok(Arch::defaults(Machine::O2)),
+            // `ir` is the InfiniteReality-like machine at its defaults (4 boards), the base a
+            // sweep over `boards` starts from.
+            "ir" => Ok(Arch::defaults(Machine::Ir)),
             "ir1" | "ir2" | "ir4" => {
                 let mut arch = Arch::defaults(Machine::Ir);
                 arch.set_value("boards", &name[2..])?;
