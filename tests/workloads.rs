@@ -45,7 +45,7 @@ fn every_driver_makes_a_trace_that_replays_against_its_golden_answers() {
 }
 
 #[test]
-fn culling_compare_lists_every_driver_with_o2_cycles() {
+fn culling_compare_lists_every_driver_with_o2_and_ir4_cycles() {
     let table = occsim(&[
         "culling", "compare", "--scene", "city", "--frames", "1", "--width", "160", "--height",
         "128",
@@ -60,4 +60,5 @@ fn culling_compare_lists_every_driver_with_o2_cycles() {
         assert!(table.contains(driver), "{driver} missing:\n{table}");
     }
     assert!(table.contains("cycles o2"), "{table}");
+    assert!(table.contains("cycles ir4"), "{table}");
 }
