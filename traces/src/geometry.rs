@@ -112,7 +112,9 @@ impl Aabb {
 
 /// OpenGL's perspective projection (gluPerspective): right-handed eye space, depth to [-1, 1].
 pub(crate) fn perspective_gl(fov_y_radians: f32, aspect: f32, near: f32, far: f32) -> Mat4 {
-    let f = 1.0 / (fov_y_radians * 0.5).tan();
+    // libm's tanf, not f32::tan: the platform's libm (or the compiler folding a constant
+    // with its own) may differ in the last bit, and scenes must be the same everywhere.
+    let f = 1.0 / libm::tanf(fov_y_radians * 0.5);
     Mat4::from_cols(
         Vec4::new(f / aspect, 0.0, 0.0, 0.0),
         Vec4::new(0.0, f, 0.0, 0.0),

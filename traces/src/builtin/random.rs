@@ -74,8 +74,8 @@ pub fn random_scene(options: &RandomOptions) -> String {
             for (k, vertex) in vertices.iter_mut().enumerate() {
                 // Three points around the centre, counter-clockwise.
                 let angle = rng.range(0.0, 1.8) + k as f32 * 2.0944;
-                let x = (cx + size * angle.cos()).clamp(0.0, width);
-                let y = (cy + size * angle.sin()).clamp(0.0, height);
+                let x = (cx + size * libm::cosf(angle)).clamp(0.0, width);
+                let y = (cy + size * libm::sinf(angle)).clamp(0.0, height);
                 let z = rng.range(-0.99, 0.99);
                 *vertex = [x / width * 2.0 - 1.0, y / height * 2.0 - 1.0, z, 1.0];
             }

@@ -60,8 +60,8 @@ pub fn generate(scene: &SyntheticScene, sink: &mut impl EventSink) -> u64 {
             let angle = start + i as f64 * std::f64::consts::TAU / 3.0 + random.range(-0.5, 0.5);
             let r = radius * random.range(0.6, 1.0);
             [
-                center.0 + r * angle.cos(),
-                center.1 + r * angle.sin(),
+                center.0 + r * libm::cos(angle),
+                center.1 + r * libm::sin(angle),
                 random.range(0.05, 0.95),
             ]
         });

@@ -201,7 +201,12 @@ fn orbit(bounds: &Aabb) -> Option<CameraPath> {
     let keyframes = (0..=8)
         .map(|k| {
             let angle = std::f32::consts::TAU * k as f32 / 8.0;
-            let eye = centre + Vec3::new(angle.sin() * radius, radius * 0.3, angle.cos() * radius);
+            let eye = centre
+                + Vec3::new(
+                    libm::sinf(angle) * radius,
+                    radius * 0.3,
+                    libm::cosf(angle) * radius,
+                );
             CameraKeyframe {
                 eye: eye.to_array(),
                 target: centre.to_array(),

@@ -199,7 +199,7 @@ fn cone(sides: u32, base: Vec3, radius: f32, apex: Vec3) -> Vec<[Vec3; 3]> {
     let rim: Vec<Vec3> = (0..sides)
         .map(|k| {
             let angle = TAU * k as f32 / sides as f32;
-            base + Vec3::new(angle.cos() * radius, 0.0, -angle.sin() * radius)
+            base + Vec3::new(libm::cosf(angle) * radius, 0.0, -libm::sinf(angle) * radius)
         })
         .collect();
     let mut triangles = Vec::with_capacity(2 * sides as usize);

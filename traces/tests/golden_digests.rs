@@ -1,0 +1,101 @@
+//! Golden digests: the built-in scenes and their fragment streams must be the same bit for
+//! bit in every build (debug or release) and on every platform. A change that alters them
+//! on purpose regenerates the digests with `OCCSIM_BLESS=1 cargo test --test golden_digests
+//! -- --nocapture` and says why in its commit.
+//!
+//! (A debug and a release build once made different demo scenes: `f32::tan` of a constant was
+//! folded by the compiler in one and computed by the platform's libm in the other.)
+
+use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions};
+use occsim_traces::golden::{EventSink, GoldenModel};
+use occsim_traces::scene::{parse_scene, Command};
+use occsim_traces::Event;
+
+/// FNV-1a, 64 bits: stable, simple, enough to tell streams apart.
+#[derive(Clone, Copy)]
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Fnv {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+
+    fn bytes(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+}
+
+impl EventSink for Fnv {
+    fn event(&mut self, event: &Event) {
+        if let Event::Fragment(f) = event {
+            self.bytes(&f.x.to_le_bytes());
+            self.bytes(&f.y.to_le_bytes());
+            self.bytes(&f.z.to_le_bytes());
+        }
+    }
+}
+
+/// (digest of the scene text, digest of its fragments).
+fn digests(text: &str) -> (u64, u64) {
+    let mut scene = Fnv::new();
+    scene.bytes(text.as_bytes());
+    let lines = parse_scene(text, "scene").expect("parses");
+    let Command::Viewport { width, height } = lines[0].command else {
+        panic!("no viewport")
+    };
+    let mut golden = GoldenModel::new(width, height);
+    let mut fragments = Fnv::new();
+    for line in &lines {
+        golden.execute(&line.command, &mut fragments);
+    }
+    (scene.0, fragments.0)
+}
+
+fn check(name: &str, text: &str, expected: (u64, u64)) {
+    let actual = digests(text);
+    if std::env::var_os("OCCSIM_BLESS").is_some() {
+        println!("{name}: (0x{:016x}, 0x{:016x})", actual.0, actual.1);
+        return;
+    }
+    assert_eq!(
+        (format!("{:016x}", actual.0), format!("{:016x}", actual.1)),
+        (
+            format!("{:016x}", expected.0),
+            format!("{:016x}", expected.1)
+        ),
+        "{name}: (scene text, fragments) digests changed"
+    );
+}
+
+#[test]
+fn small_demo_is_the_same_everywhere() {
+    let options = DemoOptions {
+        width: 320,
+        height: 256,
+        frames: 2,
+        ..DemoOptions::default()
+    };
+    check(
+        "demo 320x256",
+        &demo_scene(&options),
+        (0x6f2a23bace6ea05a, 0xee47b11edc8c92de),
+    );
+}
+
+#[test]
+fn small_random_scene_is_the_same_everywhere() {
+    let options = RandomOptions {
+        width: 320,
+        height: 256,
+        triangles: 500,
+        queries: 50,
+        ..RandomOptions::default()
+    };
+    check(
+        "random 320x256",
+        &random_scene(&options),
+        (0x4c3e5e0f1d6a2fef, 0xba8430bc7eb404ed),
+    );
+}
