@@ -28,6 +28,8 @@ enum Command {
     Trace(commands::trace::TraceCommand),
     /// Replay a trace on a machine model, cycle by cycle, and report what each query cost.
     Replay(commands::replay::ReplayArgs),
+    /// Run every fidelity level on one trace: wall time, cycles, latency and error.
+    Fidelity(commands::fidelity::FidelityArgs),
     /// Show the built-in architectures and their parameters.
     Arch(commands::arch::ArchArgs),
 }
@@ -40,6 +42,7 @@ fn main() -> std::process::ExitCode {
         Command::Trace(command) => commands::trace::run(command),
         Command::Replay(args) => commands::replay::run(args),
         Command::Arch(args) => commands::arch::run(args),
+        Command::Fidelity(args) => commands::fidelity::run(args),
     };
     match outcome {
         Ok(()) => std::process::ExitCode::SUCCESS,

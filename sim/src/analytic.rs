@@ -32,11 +32,13 @@
 //! Query latency (from the `end` token entering the pipe to its records written):
 //!
 //! ```text
-//! β       = T_w / F, ρ = raster / F         (cycles per fragment: bottleneck, rasterizer)
-//! backlog = min(F, C1 + C2) if β > ρ else 0 (C1, C2: the two FIFOs' entries; a slower
-//!                                            downstream block keeps them full)
-//! drain   = max(backlog · β, λ_last)        (λ_last: the last fragment's read latency, 0
-//!                                            when it read nothing new)
+//! β       = max(depth, occu, port, prefetch) / F   (downstream cycles per fragment)
+//! backlog = min(F, (C1 + C2) / 2)   (C1, C2: the two FIFOs' entries. No downstream block
+//!                                    is faster than the rasterizer's one fragment a cycle,
+//!                                    so entries a stall filled stay filled: half full on
+//!                                    average, a heuristic)
+//! drain   = max(backlog · β, λ_last)  (λ_last: the last fragment's read latency, 0 when
+//!                                      it read nothing new)
 //! latency = 4 + ceil(records / (V / 32)) + drain
 //! ```
 //!
@@ -46,6 +48,7 @@
 //! few integer operations per fragment.
 
 use crate::arch::O2Arch;
+use crate::depth_prefetch::Divider;
 use crate::error::SimError;
 use crate::fidelity::{FunctionalCore, LevelResult};
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
@@ -76,10 +79,10 @@ pub struct WindowPrediction {
 
 /// The word and page of a depth pixel, as [`crate::depth_prefetch`] lays the buffer out.
 struct DepthAddress {
-    tile_width: u32,
-    tile_height: u32,
+    tile_width: Divider,
+    tile_height: Divider,
     tiles_per_row: u64,
-    pixels_per_word: u32,
+    pixels_per_word: Divider,
     words_per_tile_row: u64,
     words_per_tile: u64,
 }
@@ -89,10 +92,10 @@ impl DepthAddress {
         let tile_width = arch.framebuffer_tile_width_pixels;
         let words_per_tile_row = (tile_width / arch.pixels_per_word()) as u64;
         DepthAddress {
-            tile_width,
-            tile_height: arch.framebuffer_tile_height_pixels,
+            tile_width: Divider::new(tile_width),
+            tile_height: Divider::new(arch.framebuffer_tile_height_pixels),
             tiles_per_row: width.div_ceil(tile_width) as u64,
-            pixels_per_word: arch.pixels_per_word(),
+            pixels_per_word: Divider::new(arch.pixels_per_word()),
             words_per_tile_row,
             words_per_tile: words_per_tile_row * arch.framebuffer_tile_height_pixels as u64,
         }
@@ -101,12 +104,12 @@ impl DepthAddress {
     /// `(word, page)` of pixel (x, y).
     #[inline]
     fn locate(&self, x: u16, y: u16) -> (u64, u64) {
-        let (x, y) = (x as u32, y as u32);
-        let page =
-            (y / self.tile_height) as u64 * self.tiles_per_row + (x / self.tile_width) as u64;
+        let (tile_x, in_tile_x) = self.tile_width.divide(x as u32);
+        let (tile_y, in_tile_y) = self.tile_height.divide(y as u32);
+        let page = tile_y as u64 * self.tiles_per_row + tile_x as u64;
         let word = page * self.words_per_tile
-            + (y % self.tile_height) as u64 * self.words_per_tile_row
-            + ((x % self.tile_width) / self.pixels_per_word) as u64;
+            + in_tile_y as u64 * self.words_per_tile_row
+            + self.pixels_per_word.divide(in_tile_x).0 as u64;
         (word, page)
     }
 }
@@ -157,10 +160,14 @@ impl O2Formulas {
                 / reads;
             reads * (mean_latency + 1.0) / self.lookahead()
         };
-        let cycles = raster.max(depth).max(occu).max(port).max(prefetch);
-        let backlog = if w.fragments > 0 && cycles > raster {
-            let fifo = (a.fifo_raster_to_depth_entries + a.fifo_depth_to_occu_entries) as f64;
-            fragments.min(fifo) * (cycles / fragments)
+        let downstream = depth.max(occu).max(port).max(prefetch);
+        let cycles = raster.max(downstream);
+        // Fragments ahead of the end token: the downstream blocks never run faster than one
+        // fragment a cycle, the rasterizer's own rate, so FIFO entries that a stall filled
+        // stay filled; we take them half full on average.
+        let fifo = (a.fifo_raster_to_depth_entries + a.fifo_depth_to_occu_entries) as f64;
+        let backlog = if w.fragments > 0 {
+            fragments.min(fifo / 2.0) * (downstream / fragments)
         } else {
             0.0
         };
@@ -253,7 +260,7 @@ impl AnalyticModel {
     /// Count one fragment's work (before the functional model applies it).
     #[inline]
     fn fragment(&mut self, fragment: Fragment) {
-        let state = *self.core.functional.state();
+        let state = self.core.functional.state();
         let w = &mut self.window;
         w.fragments += 1;
         w.occu_cycles += self.open.as_ref().map_or(1, |(service, _, _)| *service);
@@ -313,6 +320,7 @@ impl AnalyticModel {
         for (query, latency) in result.queries.iter_mut().zip(&latencies) {
             query.latency_cycles = Some(*latency);
         }
+        result.level = crate::fidelity::Fidelity::Analytic;
         result.set_timing(total.round() as u64);
         Ok(result)
     }

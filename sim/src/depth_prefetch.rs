@@ -137,13 +137,13 @@ impl DepthPrefetch {
 /// Division by a constant that takes a shift when the divisor is a power of two (the usual
 /// case: 128-pixel tiles, 8 pixels a word), which keeps divisions off the per-fragment path.
 #[derive(Clone, Copy, Debug)]
-struct Divider {
+pub(crate) struct Divider {
     divisor: u32,
     shift: Option<u32>,
 }
 
 impl Divider {
-    fn new(divisor: u32) -> Divider {
+    pub(crate) fn new(divisor: u32) -> Divider {
         Divider {
             divisor,
             shift: divisor.is_power_of_two().then(|| divisor.trailing_zeros()),
@@ -152,7 +152,7 @@ impl Divider {
 
     /// (quotient, remainder)
     #[inline(always)]
-    fn divide(self, value: u32) -> (u32, u32) {
+    pub(crate) fn divide(self, value: u32) -> (u32, u32) {
         match self.shift {
             Some(shift) => (value >> shift, value & (self.divisor - 1)),
             None => (value / self.divisor, value % self.divisor),

@@ -15,10 +15,12 @@
 //! - A simulated window's cost is the cycle its query's `end` entered the pipe (the next
 //!   window's first fragment cannot be emitted earlier); the final window's cost is its
 //!   machine's total cycles (it includes the drain). Its query's latency is the machine's.
-//! - A skipped window's cost is `r · (F + setup · P)`, with `r` the ratio of measured cycles
-//!   to rasterizer work `F + setup · P` summed over the simulated windows (final one
-//!   excluded); a skipped query's latency is the mean latency of the simulated queries of
-//!   the same mode (of all simulated queries when none has its mode).
+//! - A skipped window's cost is `r_c · work`, with `work = max(F + setup · P, Σ s)` (the
+//!   rasterizer's and the OccU's cycles: `s` = OccU cycles per fragment of the open query)
+//!   and `r_c` the ratio of measured cycles to work summed over the simulated (non-final)
+//!   windows of its class `c` = (its query's mode, `s`), or over all simulated windows when
+//!   none is of its class. A skipped query's latency is the mean latency of the simulated
+//!   queries of its class, else of its mode, else of all.
 //! - Bias: a fresh machine starts with an empty pipe, so it misses the backlog an earlier
 //!   window may leave (the real pipe overlaps windows): costs and latencies err low after
 //!   a window that ends backlogged; its cold prefetch makes the first read a page miss
@@ -35,15 +37,39 @@ use occsim_traces::{Event, QueryMode};
 struct Window {
     fragments: u64,
     primitives: u64,
+    /// OccU cycles: Σ over fragments of the open query's cycles per fragment (1 outside).
+    occu_cycles: u64,
+    /// OccU cycles per fragment of the open query (None: no query open).
+    service: Option<u64>,
+    /// The window's class: its query's mode code and OccU cycles per fragment.
+    class: Option<(u8, u64)>,
     /// The simulated machine, when this window is sampled.
     machine: Option<O2Machine>,
     /// The window's query ended; it closes before the next event that is not its result.
     query_ended: bool,
 }
 
+/// Extrapolation classes: (query mode code, OccU cycles per fragment) of a window's query.
+type Class = Option<(u8, u64)>;
+
+impl Window {
+    fn empty(machine: Option<O2Machine>) -> Window {
+        Window {
+            fragments: 0,
+            primitives: 0,
+            occu_cycles: 0,
+            service: None,
+            class: None,
+            machine,
+            query_ended: false,
+        }
+    }
+}
+
 /// A skipped window, remembered until the extrapolation ratio is known.
 struct Skipped {
     work: u64,
+    class: Class,
     /// The index (in the run's queries) and mode of its query, if it had one.
     query: Option<(usize, QueryMode)>,
 }
@@ -55,13 +81,19 @@ pub struct SampledModel {
     effects: Effects,
     every: u32,
     setup_cycles: u64,
+    engines: u64,
+    all_tiles_one_cycle: bool,
     core: FunctionalCore,
     window: Window,
     windows: u64,
     simulated: u64,
-    /// Σ measured cycles and Σ rasterizer work of the simulated, non-final windows.
+    /// Σ measured cycles and Σ work of the simulated, non-final windows, in all and per
+    /// class.
     measured_cycles: u64,
     measured_work: u64,
+    measured_by_class: std::collections::BTreeMap<Class, (u64, u64)>,
+    /// Per class: Σ latency and count of its simulated queries.
+    latency_by_class: std::collections::BTreeMap<Class, (u64, u64)>,
     /// Σ cost of the simulated windows (final included).
     simulated_cycles: u64,
     skipped: Vec<Skipped>,
@@ -85,17 +117,16 @@ impl SampledModel {
             effects,
             every: every.max(1),
             setup_cycles: o2.primitive_setup_cycles,
+            engines: o2.engines as u64,
+            all_tiles_one_cycle: o2.all_tiles_one_cycle,
             core: FunctionalCore::new(width, height)?,
-            window: Window {
-                fragments: 0,
-                primitives: 0,
-                machine: None,
-                query_ended: false,
-            },
+            window: Window::empty(None),
             windows: 0,
             simulated: 0,
             measured_cycles: 0,
             measured_work: 0,
+            measured_by_class: Default::default(),
+            latency_by_class: Default::default(),
             simulated_cycles: 0,
             skipped: Vec::new(),
             latencies: Vec::new(),
@@ -122,17 +153,28 @@ impl SampledModel {
     pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
         if self.window.query_ended && !matches!(event, Event::QueryResult(_)) {
             self.close_window(false)?;
-            self.window = Window {
-                fragments: 0,
-                primitives: 0,
-                machine: self.start_machine()?,
-                query_ended: false,
-            };
+            self.window = Window::empty(self.start_machine()?);
         }
+        let window = &mut self.window;
         match event {
-            Event::Fragment(_) => self.window.fragments += 1,
-            Event::Primitive => self.window.primitives += 1,
-            Event::QueryEnd => self.window.query_ended = true,
+            Event::Fragment(_) => {
+                window.fragments += 1;
+                window.occu_cycles += window.service.unwrap_or(1);
+            }
+            Event::Primitive => window.primitives += 1,
+            Event::QueryBegin(spec) => {
+                let service = if self.all_tiles_one_cycle {
+                    1
+                } else {
+                    (spec.tiles.len() as u64).div_ceil(self.engines).max(1)
+                };
+                window.service = Some(service);
+                window.class = Some((spec.mode.code(), service));
+            }
+            Event::QueryEnd => {
+                window.query_ended = true;
+                window.service = None;
+            }
             _ => {}
         }
         if let Some(machine) = &mut self.window.machine {
@@ -147,7 +189,9 @@ impl SampledModel {
     /// Close the current window: measure it or remember it for extrapolation.
     fn close_window(&mut self, last: bool) -> Result<(), SimError> {
         self.windows += 1;
-        let work = self.window.fragments + self.setup_cycles * self.window.primitives;
+        let raster = self.window.fragments + self.setup_cycles * self.window.primitives;
+        let work = raster.max(self.window.occu_cycles);
+        let class = self.window.class;
         let query = self
             .window
             .query_ended
@@ -160,6 +204,9 @@ impl SampledModel {
                 let ended = report.queries.last();
                 if let (Some(q), Some((index, _))) = (ended, query) {
                     self.latencies[index] = Some(q.latency_cycles);
+                    let entry = self.latency_by_class.entry(class).or_default();
+                    entry.0 += q.latency_cycles;
+                    entry.1 += 1;
                 }
                 let cost = match ended {
                     Some(q) if !last => q.end_cycle,
@@ -169,9 +216,12 @@ impl SampledModel {
                 if !last {
                     self.measured_cycles += cost;
                     self.measured_work += work;
+                    let entry = self.measured_by_class.entry(class).or_default();
+                    entry.0 += cost;
+                    entry.1 += work;
                 }
             }
-            None => self.skipped.push(Skipped { work, query }),
+            None => self.skipped.push(Skipped { work, class, query }),
         }
         Ok(())
     }
@@ -182,37 +232,47 @@ impl SampledModel {
 
     pub fn finish(mut self) -> Result<LevelResult, SimError> {
         self.close_window(true)?;
-        let ratio = if self.measured_work == 0 {
+        let global_ratio = if self.measured_work == 0 {
             1.0
         } else {
             self.measured_cycles as f64 / self.measured_work as f64
         };
-        let mean_latency =
-            |mode: Option<QueryMode>, latencies: &[Option<u64>], modes: &[QueryMode]| {
-                let pick: Vec<u64> = latencies
-                    .iter()
-                    .zip(modes)
-                    .filter(|(_, m)| mode.map_or(true, |mode| **m == mode))
-                    .filter_map(|(l, _)| *l)
-                    .collect();
-                (!pick.is_empty()).then(|| pick.iter().sum::<u64>() as f64 / pick.len() as f64)
-            };
+        let ratio = |class: &Class| match self.measured_by_class.get(class) {
+            Some(&(cycles, work)) if work > 0 => cycles as f64 / work as f64,
+            _ => global_ratio,
+        };
         let modes: Vec<QueryMode> = (0..self.latencies.len())
             .map(|index| self.core.query_mode(index))
             .collect();
+        // A skipped query's latency: the mean over simulated queries of its class, else of
+        // its mode, else of all.
+        let mean_of_mode = |mode: Option<QueryMode>| {
+            let pick: Vec<u64> = self
+                .latencies
+                .iter()
+                .zip(&modes)
+                .filter(|(_, m)| mode.map_or(true, |mode| **m == mode))
+                .filter_map(|(l, _)| *l)
+                .collect();
+            (!pick.is_empty()).then(|| pick.iter().sum::<u64>() as f64 / pick.len() as f64)
+        };
         let mut total = self.simulated_cycles as f64;
-        let last_window = self.windows - 1;
+        let final_skipped = (self.windows - 1) % self.every as u64 != 0;
         let skipped_count = self.skipped.len();
         let mut filled = self.latencies.clone();
         for (position, skipped) in self.skipped.iter().enumerate() {
-            total += ratio * skipped.work as f64;
+            total += ratio(&skipped.class) * skipped.work as f64;
             if let Some((index, mode)) = skipped.query {
-                let latency = mean_latency(Some(mode), &self.latencies, &modes)
-                    .or_else(|| mean_latency(None, &self.latencies, &modes))
-                    .unwrap_or(crate::o2::MIN_QUERY_LATENCY_CYCLES as f64);
+                let latency = match self.latency_by_class.get(&skipped.class) {
+                    Some(&(sum, count)) if count > 0 => Some(sum as f64 / count as f64),
+                    _ => None,
+                }
+                .or_else(|| mean_of_mode(Some(mode)))
+                .or_else(|| mean_of_mode(None))
+                .unwrap_or(crate::o2::MIN_QUERY_LATENCY_CYCLES as f64);
                 filled[index] = Some(latency.round() as u64);
                 // The final window's drain: its query's latency.
-                if position + 1 == skipped_count && self.skipped_is_last(last_window) {
+                if position + 1 == skipped_count && final_skipped {
                     total += latency;
                 }
             }
@@ -230,10 +290,5 @@ impl SampledModel {
         result.sampled_windows = Some(windows);
         result.set_timing(total.round() as u64);
         Ok(result)
-    }
-
-    /// Whether the final window was skipped (then it is the last entry of `skipped`).
-    fn skipped_is_last(&self, last_window: u64) -> bool {
-        last_window % self.every as u64 != 0
     }
 }

@@ -2,10 +2,11 @@
 //! counts against the golden results in the trace, and report the timing.
 
 use super::arch::ArchSelection;
+use super::fidelity::{effects_of_trace, FidelityArg};
 use anyhow::Context;
-use occsim_sim::{MachineModel, SimError};
+use occsim_sim::fidelity::{Fidelity, LevelModel};
+use occsim_sim::SimError;
 use occsim_traces::golden::EventSink;
-use occsim_traces::trace::TraceReader;
 use occsim_traces::Event;
 use std::path::PathBuf;
 
@@ -24,11 +25,13 @@ pub struct ReplayArgs {
     /// Add a table of every query.
     #[arg(long)]
     pub queries: bool,
+    #[command(flatten)]
+    pub level: FidelityArg,
 }
 
-/// Feeds decoded events to the machine and keeps the first error.
+/// Feeds decoded events to the machine (at the chosen level) and keeps the first error.
 struct MachineSink {
-    machine: MachineModel,
+    machine: LevelModel,
     error: Option<SimError>,
 }
 
@@ -50,12 +53,10 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             .context("--engines")?;
     }
     let path = args.trace.display().to_string();
-    let file =
-        std::fs::File::open(&args.trace).with_context(|| format!("cannot open trace {path}"))?;
-    let mut reader = TraceReader::new(std::io::BufReader::with_capacity(1 << 20, file))
-        .with_context(|| format!("{path}: not a readable occsim trace"))?;
+    let effects = effects_of_trace(args.level.effects, &arch, &args.trace)?;
+    let mut reader = super::fidelity::open_trace(&args.trace)?;
     let (width, height) = (reader.header().width, reader.header().height);
-    let machine = MachineModel::new(&arch, width, height)
+    let machine = LevelModel::new(args.level.fidelity, &arch, width, height, effects)
         .with_context(|| format!("{path}: cannot replay"))?;
     let mut sink = MachineSink {
         machine,
@@ -76,21 +77,36 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     if let Some(error) = sink.error.take() {
         return Err(error).with_context(|| format!("{path}: replay on {}", arch.machine().name()));
     }
-    let report = sink
+    let mut result = sink
         .machine
-        .finish()
+        .finish(&arch)
         .with_context(|| format!("{path}: replay on {}", arch.machine().name()))?;
-    if report.summary.checked_queries < report.summary.queries {
+    let queries = result.queries.len() as u64;
+    if result.checked_queries < queries {
         eprintln!(
             "occsim: warning: {path}: {} of {} queries have no golden result in the trace; their counts were not checked",
-            report.summary.queries - report.summary.checked_queries,
-            report.summary.queries
+            queries - result.checked_queries,
+            queries
         );
     }
+    let Some(report) = result.report.take() else {
+        // Below the cycle level: the level's own summary.
+        if args.json {
+            println!("{}", serde_json::to_string_pretty(&result)?);
+        } else {
+            print!("{}", result.to_text());
+        }
+        return Ok(());
+    };
+    debug_assert_eq!(args.level.fidelity, Fidelity::Cycle);
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
+        // The cycle report with the effect models that were built.
+        let mut json = serde_json::to_value(&report)?;
+        json["effects"] = serde_json::to_value(effects)?;
+        println!("{}", serde_json::to_string_pretty(&json)?);
     } else {
         print!("{}", report.to_text(args.queries));
+        println!("active effects: {}", effects.active_names());
     }
     Ok(())
 }
