@@ -134,9 +134,8 @@ impl EffectScan {
     pub fn event(&mut self, event: &Event) {
         match event {
             Event::Fragment(_) => {
-                if self.depth_test && self.depth_mask && !self.occlusion_mode_open {
-                    self.found.depth_write_traffic = true;
-                }
+                self.found.depth_write_traffic |=
+                    self.depth_test && self.depth_mask && !self.occlusion_mode_open;
             }
             Event::DepthTest(on) => self.depth_test = *on,
             Event::DepthMask(on) => self.depth_mask = *on,

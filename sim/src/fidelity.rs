@@ -307,9 +307,9 @@ impl FunctionalCore {
                 self.open_fragments = 0;
             }
             Event::QueryEnd => {
-                if self.open.take().is_none() {
-                    return Err(SimError::EndWithoutBegin { event: index });
-                }
+                self.open
+                    .take()
+                    .ok_or(SimError::EndWithoutBegin { event: index })?;
             }
             Event::QueryResult(golden) => {
                 self.events += 1;
@@ -380,10 +380,10 @@ impl FunctionalCore {
 
 /// A model replaying a stream at one level.
 pub enum LevelModel {
-    Functional(FunctionalCore),
-    Analytic(AnalyticModel),
+    Functional(Box<FunctionalCore>),
+    Analytic(Box<AnalyticModel>),
     Sampled(Box<SampledModel>),
-    Cycle(MachineModel, Effects),
+    Cycle(Box<MachineModel>, Effects),
 }
 
 impl LevelModel {
@@ -398,10 +398,12 @@ impl LevelModel {
     ) -> Result<LevelModel, SimError> {
         let machine = arch.machine();
         Ok(match level {
-            Fidelity::Functional => LevelModel::Functional(FunctionalCore::new(width, height)?),
+            Fidelity::Functional => {
+                LevelModel::Functional(Box::new(FunctionalCore::new(width, height)?))
+            }
             Fidelity::Analytic => match machine {
                 Machine::O2 => {
-                    LevelModel::Analytic(AnalyticModel::new(&arch.o2()?, width, height)?)
+                    LevelModel::Analytic(Box::new(AnalyticModel::new(&arch.o2()?, width, height)?))
                 }
             },
             Fidelity::Sampled { every } => match machine {
@@ -410,7 +412,7 @@ impl LevelModel {
                 )?)),
             },
             Fidelity::Cycle => LevelModel::Cycle(
-                MachineModel::with_effects(arch, width, height, effects)?,
+                Box::new(MachineModel::with_effects(arch, width, height, effects)?),
                 effects,
             ),
             // The rtl level: wired to the rtl-model crate in a later change.
