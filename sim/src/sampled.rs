@@ -8,24 +8,25 @@
 //!
 //! - Results: the functional model runs on every event, so every query's result is exact
 //!   (and checked against the golden results in the stream).
-//! - A simulated window starts a fresh O2 machine whose render state and depth buffer are
-//!   the functional model's at the window's start (so its depth tests, hence its writes,
-//!   hits and counts, are right), with empty FIFOs, an idle port and a cold prefetch (no
-//!   last word or page).
-//! - A simulated window's cost is the cycle its query's `end` entered the pipe (the next
-//!   window's first fragment cannot be emitted earlier); the final window's cost is its
-//!   machine's total cycles (it includes the drain). Its query's latency is the machine's.
-//! - A skipped window's cost is `r_c · work`, with `work = max(F + setup · P, Σ s)` (the
-//!   rasterizer's and the OccU's cycles: `s` = OccU cycles per fragment of the open query)
-//!   and `r_c` the ratio of measured cycles to work summed over the simulated (non-final)
-//!   windows of its class `c` = (its query's mode, `s`), or over all simulated windows when
-//!   none is of its class. A skipped query's latency is the mean latency of the simulated
-//!   queries of its class, else of its mode, else of all.
-//! - Bias: a fresh machine starts with an empty pipe, so it misses the backlog an earlier
-//!   window may leave (the real pipe overlaps windows): costs and latencies err low after
-//!   a window that ends backlogged; its cold prefetch makes the first read a page miss
-//!   (errs high by at most one miss latency per window). `sampled:1` simulates every
-//!   window, so its only error is this warm-up; on a stream of one window it equals `cycle`.
+//! - Warm-up: the cycle model also runs the window before each sampled one. A machine starts
+//!   (when none is running) with the functional model's render state and depth buffer at
+//!   that window's start, so its depth tests, writes, hits and counts are right, but with
+//!   empty FIFOs, an idle port and a cold prefetch; it keeps running while the next window
+//!   is sampled or warm-up too, and is dropped at the first window that is neither. For
+//!   K = 1 and K = 2 one machine runs the whole stream.
+//! - A sampled window's cost is the cycle its query's `end` entered the pipe minus that of
+//!   the window before it in the same machine (the final window: the machine's total cycles
+//!   minus that); its query's latency is the machine's.
+//! - Every other window (warm-up ones included) costs `r_c · work`, with
+//!   `work = max(F + setup · P, Σ s)` (the rasterizer's and the OccU's cycles: `s` = OccU
+//!   cycles per fragment of the open query) and `r_c` the ratio of measured cycles to work
+//!   over the sampled (non-final) windows of its class `c` = (its query's mode, `s`), or over
+//!   all sampled windows when none is of its class. Its query's latency is the mean over
+//!   sampled queries of its class, else of its mode, else of all.
+//! - Bias: a machine started at a warm-up window misses whatever backlog the pipe carried
+//!   into that window; one window of warm-up absorbs it unless the warm-up window is shorter
+//!   than the FIFOs. `sampled:1` runs one machine over the whole stream, so it equals `cycle`
+//!   exactly (tested); `sampled:2` too, except that half its costs are extrapolated.
 
 use crate::arch::Arch;
 use crate::effects::Effects;
@@ -33,6 +34,7 @@ use crate::error::SimError;
 use crate::fidelity::{FunctionalCore, LevelResult, SampledWindows};
 use crate::o2::O2Machine;
 use occsim_traces::{Event, QueryMode};
+use std::collections::BTreeMap;
 
 struct Window {
     fragments: u64,
@@ -42,36 +44,41 @@ struct Window {
     /// OccU cycles per fragment of the open query (None: no query open).
     service: Option<u64>,
     /// The window's class: its query's mode code and OccU cycles per fragment.
-    class: Option<(u8, u64)>,
-    /// The simulated machine, when this window is sampled.
-    machine: Option<O2Machine>,
+    class: Class,
     /// The window's query ended; it closes before the next event that is not its result.
     query_ended: bool,
 }
 
-/// Extrapolation classes: (query mode code, OccU cycles per fragment) of a window's query.
-type Class = Option<(u8, u64)>;
-
 impl Window {
-    fn empty(machine: Option<O2Machine>) -> Window {
+    fn empty() -> Window {
         Window {
             fragments: 0,
             primitives: 0,
             occu_cycles: 0,
             service: None,
             class: None,
-            machine,
             query_ended: false,
         }
     }
 }
 
-/// A skipped window, remembered until the extrapolation ratio is known.
-struct Skipped {
+/// Extrapolation classes: (query mode code, OccU cycles per fragment) of a window's query.
+type Class = Option<(u8, u64)>;
+
+/// A closed window, as the extrapolation needs it.
+struct Closed {
     work: u64,
     class: Class,
     /// The index (in the run's queries) and mode of its query, if it had one.
     query: Option<(usize, QueryMode)>,
+    sampled: bool,
+    last: bool,
+}
+
+/// One cycle-model machine over consecutive simulated windows.
+struct Run {
+    machine: O2Machine,
+    windows: Vec<Closed>,
 }
 
 pub struct SampledModel {
@@ -85,19 +92,19 @@ pub struct SampledModel {
     all_tiles_one_cycle: bool,
     core: FunctionalCore,
     window: Window,
+    /// Windows closed so far (the index of the current one).
     windows: u64,
-    simulated: u64,
-    /// Σ measured cycles and Σ work of the simulated, non-final windows, in all and per
-    /// class.
-    measured_cycles: u64,
-    measured_work: u64,
-    measured_by_class: std::collections::BTreeMap<Class, (u64, u64)>,
-    /// Per class: Σ latency and count of its simulated queries.
-    latency_by_class: std::collections::BTreeMap<Class, (u64, u64)>,
-    /// Σ cost of the simulated windows (final included).
-    simulated_cycles: u64,
-    skipped: Vec<Skipped>,
-    /// Per query (in order): its latency if simulated.
+    run: Option<Run>,
+    sampled: u64,
+    /// Σ measured cycles and Σ work of the sampled, non-final windows, per class.
+    measured_by_class: BTreeMap<Class, (u64, u64)>,
+    /// Per class: Σ latency and count of its sampled queries.
+    latency_by_class: BTreeMap<Class, (u64, u64)>,
+    /// Σ cost of the sampled windows (final included).
+    sampled_cycles: u64,
+    /// Windows to extrapolate.
+    extrapolated: Vec<Closed>,
+    /// Per query (in order): its latency if sampled.
     latencies: Vec<Option<u64>>,
 }
 
@@ -120,40 +127,52 @@ impl SampledModel {
             engines: o2.engines as u64,
             all_tiles_one_cycle: o2.all_tiles_one_cycle,
             core: FunctionalCore::new(width, height)?,
-            window: Window::empty(None),
+            window: Window::empty(),
             windows: 0,
-            simulated: 0,
-            measured_cycles: 0,
-            measured_work: 0,
-            measured_by_class: Default::default(),
-            latency_by_class: Default::default(),
-            simulated_cycles: 0,
-            skipped: Vec::new(),
+            run: None,
+            sampled: 0,
+            measured_by_class: BTreeMap::new(),
+            latency_by_class: BTreeMap::new(),
+            sampled_cycles: 0,
+            extrapolated: Vec::new(),
             latencies: Vec::new(),
         };
-        model.window.machine = model.start_machine()?;
+        model.start_window()?;
         Ok(model)
     }
 
-    /// A warm-started machine when the window about to start is sampled.
-    fn start_machine(&self) -> Result<Option<O2Machine>, SimError> {
-        if self.windows % self.every as u64 != 0 {
-            return Ok(None);
+    fn is_sampled(&self, window: u64) -> bool {
+        window % self.every as u64 == 0
+    }
+
+    /// The current window needs the cycle model: sampled, or the warm-up of a sampled one.
+    fn start_window(&mut self) -> Result<(), SimError> {
+        let w = self.windows;
+        let simulate = self.is_sampled(w) || self.is_sampled(w + 1);
+        if !simulate {
+            return self.flush_run();
         }
-        let mut machine =
-            O2Machine::with_effects(&self.arch, self.width, self.height, self.effects)?;
-        machine.load_functional_state(
-            self.core.functional.state(),
-            self.core.functional.depth_buffer(),
-        );
-        Ok(Some(machine))
+        if self.run.is_none() {
+            let mut machine =
+                O2Machine::with_effects(&self.arch, self.width, self.height, self.effects)?;
+            machine.load_functional_state(
+                self.core.functional.state(),
+                self.core.functional.depth_buffer(),
+            );
+            self.run = Some(Run {
+                machine,
+                windows: Vec::new(),
+            });
+        }
+        Ok(())
     }
 
     /// Feed one event.
     pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
         if self.window.query_ended && !matches!(event, Event::QueryResult(_)) {
-            self.close_window(false)?;
-            self.window = Window::empty(self.start_machine()?);
+            self.close_window(false);
+            self.window = Window::empty();
+            self.start_window()?;
         }
         let window = &mut self.window;
         match event {
@@ -177,8 +196,8 @@ impl SampledModel {
             }
             _ => {}
         }
-        if let Some(machine) = &mut self.window.machine {
-            machine.event(event)?;
+        if let Some(run) = &mut self.run {
+            run.machine.event(event)?;
         }
         if self.core.event(event)?.is_some() {
             self.latencies.push(None);
@@ -186,56 +205,79 @@ impl SampledModel {
         Ok(())
     }
 
-    /// Close the current window: measure it or remember it for extrapolation.
-    fn close_window(&mut self, last: bool) -> Result<(), SimError> {
-        self.windows += 1;
+    /// Close the current window: hand it to the running machine's run or to extrapolation.
+    fn close_window(&mut self, last: bool) {
         let raster = self.window.fragments + self.setup_cycles * self.window.primitives;
-        let work = raster.max(self.window.occu_cycles);
-        let class = self.window.class;
         let query = self
             .window
             .query_ended
             .then(|| self.latencies.len() - 1)
-            .map(|index| (index, self.core_mode(index)));
-        match self.window.machine.take() {
-            Some(machine) => {
-                self.simulated += 1;
-                let report = machine.finish()?;
-                let ended = report.queries.last();
-                if let (Some(q), Some((index, _))) = (ended, query) {
+            .map(|index| (index, self.core.query_mode(index)));
+        let closed = Closed {
+            work: raster.max(self.window.occu_cycles),
+            class: self.window.class,
+            query,
+            sampled: self.is_sampled(self.windows),
+            last,
+        };
+        self.windows += 1;
+        match &mut self.run {
+            Some(run) => run.windows.push(closed),
+            None => self.extrapolated.push(Closed {
+                sampled: false,
+                ..closed
+            }),
+        }
+    }
+
+    /// Finish the running machine and measure its sampled windows.
+    fn flush_run(&mut self) -> Result<(), SimError> {
+        let Some(run) = self.run.take() else {
+            return Ok(());
+        };
+        let report = run.machine.finish()?;
+        let mut queries = report.queries.iter();
+        let mut previous_end: Option<u64> = None;
+        for window in run.windows {
+            let query = window.query.and_then(|_| queries.next());
+            if window.sampled {
+                self.sampled += 1;
+                let end = match query {
+                    Some(q) if !window.last => q.end_cycle,
+                    _ => report.summary.cycles,
+                };
+                let cost = end.saturating_sub(previous_end.unwrap_or(0));
+                self.sampled_cycles += cost;
+                if !window.last {
+                    let entry = self.measured_by_class.entry(window.class).or_default();
+                    entry.0 += cost;
+                    entry.1 += window.work;
+                }
+                if let (Some(q), Some((index, _))) = (query, window.query) {
                     self.latencies[index] = Some(q.latency_cycles);
-                    let entry = self.latency_by_class.entry(class).or_default();
+                    let entry = self.latency_by_class.entry(window.class).or_default();
                     entry.0 += q.latency_cycles;
                     entry.1 += 1;
                 }
-                let cost = match ended {
-                    Some(q) if !last => q.end_cycle,
-                    _ => report.summary.cycles,
-                };
-                self.simulated_cycles += cost;
-                if !last {
-                    self.measured_cycles += cost;
-                    self.measured_work += work;
-                    let entry = self.measured_by_class.entry(class).or_default();
-                    entry.0 += cost;
-                    entry.1 += work;
-                }
+            } else {
+                self.extrapolated.push(window);
             }
-            None => self.skipped.push(Skipped { work, class, query }),
+            previous_end = query.map(|q| q.end_cycle).or(previous_end);
         }
         Ok(())
     }
 
-    fn core_mode(&self, index: usize) -> QueryMode {
-        self.core.query_mode(index)
-    }
-
     pub fn finish(mut self) -> Result<LevelResult, SimError> {
-        self.close_window(true)?;
-        let global_ratio = if self.measured_work == 0 {
+        self.close_window(true);
+        self.flush_run()?;
+        let (all_cycles, all_work) = self
+            .measured_by_class
+            .values()
+            .fold((0, 0), |(c, w), &(cycles, work)| (c + cycles, w + work));
+        let global_ratio = if all_work == 0 {
             1.0
         } else {
-            self.measured_cycles as f64 / self.measured_work as f64
+            all_cycles as f64 / all_work as f64
         };
         let ratio = |class: &Class| match self.measured_by_class.get(class) {
             Some(&(cycles, work)) if work > 0 => cycles as f64 / work as f64,
@@ -244,8 +286,6 @@ impl SampledModel {
         let modes: Vec<QueryMode> = (0..self.latencies.len())
             .map(|index| self.core.query_mode(index))
             .collect();
-        // A skipped query's latency: the mean over simulated queries of its class, else of
-        // its mode, else of all.
         let mean_of_mode = |mode: Option<QueryMode>| {
             let pick: Vec<u64> = self
                 .latencies
@@ -256,14 +296,12 @@ impl SampledModel {
                 .collect();
             (!pick.is_empty()).then(|| pick.iter().sum::<u64>() as f64 / pick.len() as f64)
         };
-        let mut total = self.simulated_cycles as f64;
-        let final_skipped = (self.windows - 1) % self.every as u64 != 0;
-        let skipped_count = self.skipped.len();
+        let mut total = self.sampled_cycles as f64;
         let mut filled = self.latencies.clone();
-        for (position, skipped) in self.skipped.iter().enumerate() {
-            total += ratio(&skipped.class) * skipped.work as f64;
-            if let Some((index, mode)) = skipped.query {
-                let latency = match self.latency_by_class.get(&skipped.class) {
+        for window in &self.extrapolated {
+            total += ratio(&window.class) * window.work as f64;
+            if let Some((index, mode)) = window.query {
+                let latency = match self.latency_by_class.get(&window.class) {
                     Some(&(sum, count)) if count > 0 => Some(sum as f64 / count as f64),
                     _ => None,
                 }
@@ -272,13 +310,13 @@ impl SampledModel {
                 .unwrap_or(crate::o2::MIN_QUERY_LATENCY_CYCLES as f64);
                 filled[index] = Some(latency.round() as u64);
                 // The final window's drain: its query's latency.
-                if position + 1 == skipped_count && final_skipped {
+                if window.last {
                     total += latency;
                 }
             }
         }
         let windows = SampledWindows {
-            simulated: self.simulated,
+            simulated: self.sampled,
             total: self.windows,
         };
         let mut result = self.core.finish()?;

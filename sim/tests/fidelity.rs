@@ -115,6 +115,36 @@ fn every_level_gives_the_golden_values_and_finite_predictions() {
 }
 
 #[test]
+fn sampled_every_window_equals_cycle_on_builtin_traces() {
+    // sampled:1 runs one machine over the whole stream and measures every window.
+    let arch = Arch::builtin("o2").unwrap();
+    for (name, (events, width, height)) in builtin_traces() {
+        let cycle = run_level(
+            Fidelity::Cycle,
+            &arch,
+            width,
+            height,
+            EffectsChoice::Auto,
+            &events,
+        )
+        .unwrap();
+        let sampled = run_level(
+            Fidelity::Sampled { every: 1 },
+            &arch,
+            width,
+            height,
+            EffectsChoice::Auto,
+            &events,
+        )
+        .unwrap();
+        assert_eq!(sampled.total_cycles, cycle.total_cycles, "{name}");
+        assert_eq!(sampled.queries, cycle.queries, "{name}");
+        let windows = sampled.sampled_windows.unwrap();
+        assert_eq!(windows.simulated, windows.total, "{name}");
+    }
+}
+
+#[test]
 fn sampled_windows_are_counted_and_every_kth_is_simulated() {
     let arch = Arch::builtin("o2").unwrap();
     let (events, width, height) = small_random();

@@ -7,9 +7,9 @@
 use super::arch::ArchSelection;
 use crate::plot::{LineChart, Scale, Series};
 use anyhow::Context;
+use occsim_sim::arch::Machine;
 use occsim_sim::effects::{EffectScan, Effects, EffectsChoice};
 use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult};
-use occsim_sim::arch::Machine;
 use occsim_sim::{Arch, SimError};
 use occsim_traces::golden::EventSink;
 use occsim_traces::trace::TraceReader;
