@@ -8,6 +8,10 @@
 //!
 //! - Results: the functional model runs on every event, so every query's result is exact
 //!   (and checked against the golden results in the stream).
+//! - Cool-down: after a sampled window the machine runs on for `L + 1` fragments
+//!   (`L = min(prefetch_depth_fragments, fifo_raster_to_depth_entries)`): the prefetch
+//!   issues those fragments' depth reads before the query's records reach the in-order port,
+//!   so the query's latency is final only then.
 //! - Warm-up: the cycle model also runs the window before each sampled one. A machine starts
 //!   (when none is running) with the functional model's render state and depth buffer at
 //!   that window's start, so its depth tests, writes, hits and counts are right, but with
@@ -79,6 +83,10 @@ struct Closed {
 struct Run {
     machine: O2Machine,
     windows: Vec<Closed>,
+    /// Cooling down: fragments still to feed before the machine is finished.
+    cooldown: Option<usize>,
+    /// A query is open in the machine (a cool-down may stop inside one).
+    query_open: bool,
 }
 
 pub struct SampledModel {
@@ -90,6 +98,9 @@ pub struct SampledModel {
     setup_cycles: u64,
     engines: u64,
     all_tiles_one_cycle: bool,
+    /// Fragments after a query's end that the machine must see before that query's
+    /// latency is final: the prefetch lookahead + 1.
+    cooldown_fragments: usize,
     core: FunctionalCore,
     window: Window,
     /// Windows closed so far (the index of the current one).
@@ -126,6 +137,10 @@ impl SampledModel {
             setup_cycles: o2.primitive_setup_cycles,
             engines: o2.engines as u64,
             all_tiles_one_cycle: o2.all_tiles_one_cycle,
+            cooldown_fragments: o2
+                .prefetch_depth_fragments
+                .min(o2.fifo_raster_to_depth_entries)
+                + 1,
             core: FunctionalCore::new(width, height)?,
             window: Window::empty(),
             windows: 0,
@@ -150,9 +165,14 @@ impl SampledModel {
         let w = self.windows;
         let simulate = self.is_sampled(w) || self.is_sampled(w + 1);
         if !simulate {
-            return self.flush_run();
+            if let Some(run) = &mut self.run {
+                run.cooldown.get_or_insert(self.cooldown_fragments);
+            }
+            return Ok(());
         }
-        if self.run.is_none() {
+        if let Some(run) = &mut self.run {
+            run.cooldown = None;
+        } else {
             let mut machine =
                 O2Machine::with_effects(&self.arch, self.width, self.height, self.effects)?;
             machine.load_functional_state(
@@ -162,6 +182,8 @@ impl SampledModel {
             self.run = Some(Run {
                 machine,
                 windows: Vec::new(),
+                cooldown: None,
+                query_open: false,
             });
         }
         Ok(())
@@ -198,6 +220,17 @@ impl SampledModel {
         }
         if let Some(run) = &mut self.run {
             run.machine.event(event)?;
+            match event {
+                Event::QueryBegin(_) => run.query_open = true,
+                Event::QueryEnd => run.query_open = false,
+                _ => {}
+            }
+            if let (Some(left), Event::Fragment(_)) = (&mut run.cooldown, event) {
+                *left -= 1;
+                if *left == 0 {
+                    self.flush_run()?;
+                }
+            }
         }
         if self.core.event(event)?.is_some() {
             self.latencies.push(None);
@@ -232,9 +265,13 @@ impl SampledModel {
 
     /// Finish the running machine and measure its sampled windows.
     fn flush_run(&mut self) -> Result<(), SimError> {
-        let Some(run) = self.run.take() else {
+        let Some(mut run) = self.run.take() else {
             return Ok(());
         };
+        if run.query_open {
+            // A cool-down stopped inside a query: end it (its report is not used).
+            run.machine.event(&Event::QueryEnd)?;
+        }
         let report = run.machine.finish()?;
         let mut queries = report.queries.iter();
         let mut previous_end: Option<u64> = None;
