@@ -5,16 +5,16 @@
 //!
 //! Run: `cargo bench -p occsim-sim --bench fidelity`
 
-use occsim_sim::effects::EffectsChoice;
+use occsim_sim::effects::{observe, Effects, EffectsChoice};
 use occsim_sim::fidelity::{run_level, Fidelity};
-use occsim_sim::Arch;
+use occsim_sim::{Arch, MachineModel};
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QuerySpec, Rect};
 use std::time::Instant;
 
 const FRAMES: u64 = 3;
 /// Timed repetitions of each level; the fastest counts.
-const REPEATS: usize = 3;
+const REPEATS: usize = 5;
 
 const WIDTH: u32 = 640;
 const HEIGHT: u32 = 480;
@@ -144,13 +144,69 @@ fn main() {
             cycles.map_or("-".to_string(), |c| c.to_string())
         );
     }
-    let (all, all_cycles) = time_level(Fidelity::Cycle, EffectsChoice::All, &arch, &events);
-    let (auto, auto_cycles) = time_level(Fidelity::Cycle, EffectsChoice::Auto, &arch, &events);
-    assert_eq!(all_cycles, auto_cycles, "effects must not change cycles");
+    compare_effects(&arch, &events, fragments, "the stream above");
+    compare_effects(
+        &arch,
+        &samples_only_without_depth_writes(&events),
+        fragments,
+        "the stream as samples queries, depth mask off",
+    );
+}
+
+/// The stream with every query a one-tile samples query and depth writes off: the effects
+/// scan can switch off verbose hits, multi-tile serialisation and depth-write traffic.
+fn samples_only_without_depth_writes(events: &[Event]) -> Vec<Event> {
+    let mut golden = FunctionalModel::new(WIDTH, HEIGHT);
+    golden.event(&Event::DepthMask(false));
+    let mut out = vec![Event::DepthMask(false)];
+    for event in events {
+        let event = match event {
+            Event::QueryResult(_) => continue,
+            Event::DepthMask(_) => Event::DepthMask(false),
+            Event::QueryBegin(spec) => Event::QueryBegin(QuerySpec {
+                mode: QueryMode::Samples,
+                buffer_entries: 8,
+                tiles: vec![Rect::new(0, 0, WIDTH, HEIGHT)],
+                ..spec.clone()
+            }),
+            other => other.clone(),
+        };
+        let result = golden.event(&event);
+        out.push(event);
+        if let Some(result) = result {
+            out.push(Event::QueryResult(result));
+        }
+    }
+    out
+}
+
+fn compare_effects(arch: &Arch, events: &[Event], fragments: f64, name: &str) {
+    // Effects: the replay with every model against the replay with the scanned choice,
+    // interleaved so both see the same machine load, and the scan's own cost.
+    let o2 = arch.o2().expect("o2");
+    let scan_start = Instant::now();
+    let chosen = observe(&o2, WIDTH, HEIGHT, events);
+    let scan = scan_start.elapsed().as_secs_f64();
+    let (mut all, mut auto) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..REPEATS {
+        for (effects, best) in [(Effects::ALL, &mut all), (chosen, &mut auto)] {
+            let start = Instant::now();
+            let mut machine =
+                MachineModel::with_effects(&arch, WIDTH, HEIGHT, effects).expect("machine");
+            for event in events {
+                machine.event(event).expect("replays");
+            }
+            machine.finish().expect("report");
+            *best = best.min(start.elapsed().as_secs_f64());
+        }
+    }
     println!(
-        "cycle, --effects all: {:.1} M fragments/s; auto (scan included): {:.1} M fragments/s; auto saves {:.1}%",
+        "{name}: effects chosen: {}; cycle with all: {:.1} M fragments/s, with the choice: {:.1} M fragments/s ({:+.1}%), the scan: {:.1} ms ({:.1}% of a replay)",
+        chosen.active_names(),
         fragments / all / 1e6,
         fragments / auto / 1e6,
-        100.0 * (all - auto) / all
+        100.0 * (all - auto) / all,
+        scan * 1e3,
+        100.0 * scan / all
     );
 }
