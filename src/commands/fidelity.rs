@@ -80,10 +80,11 @@ pub fn effects_of_trace(
     }
     let mut reader = open_trace(path)?;
     let (width, height) = (reader.header().width, reader.header().height);
-    let o2 = arch
-        .o2()
-        .with_context(|| format!("{}: effects", path.display()))?;
-    let mut scan = ScanSink(EffectScan::new(&o2, width, height));
+    // One scan per machine kind: a new machine adds its arm here.
+    let scan = match arch.machine() {
+        Machine::O2 => EffectScan::new(&arch.o2()?, width, height),
+    };
+    let mut scan = ScanSink(scan);
     reader
         .read_into(&mut scan)
         .with_context(|| format!("{}: cannot read trace", path.display()))?;
