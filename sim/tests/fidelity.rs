@@ -385,5 +385,11 @@ proptest! {
             let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
             prop_assert_eq!(&values, &golden);
         }
+        let cycle = run_level(Fidelity::Cycle, &arch, 64, 64, EffectsChoice::Auto, &events).unwrap();
+        let every_window =
+            run_level(Fidelity::Sampled { every: 1 }, &arch, 64, 64, EffectsChoice::Auto, &events)
+                .unwrap();
+        prop_assert_eq!(every_window.total_cycles, cycle.total_cycles);
+        prop_assert_eq!(every_window.queries, cycle.queries);
     }
 }
