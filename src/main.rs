@@ -46,6 +46,8 @@ enum Command {
     Replay(commands::replay::ReplayArgs),
     /// Tabulate (and plot) query latency per engine count: drain, local and global merge.
     Latency(commands::latency::LatencyArgs),
+    /// Run every fidelity level on one trace: wall time, cycles, latency and error.
+    Fidelity(commands::fidelity::FidelityArgs),
     /// Show the built-in architectures and their parameters.
     Arch(commands::arch::ArchArgs),
     /// Compare the culling drivers on a walkthrough.
@@ -73,6 +75,7 @@ fn main() -> std::process::ExitCode {
         Command::Arch(args) => commands::arch::run(args),
         Command::Sweep(args) => commands::sweep::run(*args),
         Command::Culling(CullingCommand::Compare(args)) => commands::culling::run(*args),
+        Command::Fidelity(args) => commands::fidelity::run(args),
     };
     match outcome {
         Ok(()) => std::process::ExitCode::SUCCESS,

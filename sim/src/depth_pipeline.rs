@@ -18,6 +18,7 @@
 
 use crate::arch::O2Arch;
 use crate::depth_prefetch::DepthPrefetch;
+use crate::effects::Effects;
 use crate::memory_port::{MemoryPort, PortClient};
 use crate::write_buffer::WriteBuffer;
 use occsim_traces::golden::DepthBuffer;
@@ -34,6 +35,8 @@ pub struct DepthPipeline {
     pub busy_cycles: u64,
     pub stall_memory_cycles: u64,
     pub stall_backpressure_cycles: u64,
+    /// Effect hook: false when a scan proved no fragment can write depth.
+    depth_write_traffic: bool,
 }
 
 /// What the depth test decided for one fragment.
@@ -46,11 +49,11 @@ pub struct DepthOutcome {
 }
 
 impl DepthPipeline {
-    pub fn new(arch: &O2Arch, width: u32, height: u32) -> DepthPipeline {
+    pub fn new(arch: &O2Arch, width: u32, height: u32, effects: Effects) -> DepthPipeline {
         DepthPipeline {
             state: RenderState::new(width, height),
             depth: DepthBuffer::new(width, height),
-            prefetch: DepthPrefetch::new(arch, width),
+            prefetch: DepthPrefetch::new(arch, width, effects.page_model),
             write_buffer: WriteBuffer::new(
                 arch.depth_write_buffer_entries,
                 arch.depth_bits_per_pixel,
@@ -60,7 +63,15 @@ impl DepthPipeline {
             busy_cycles: 0,
             stall_memory_cycles: 0,
             stall_backpressure_cycles: 0,
+            depth_write_traffic: effects.depth_write_traffic,
         }
+    }
+
+    /// Start from a functional model's render state and depth buffer (a sampled window's
+    /// warm start) instead of the reset state. Only before the first fragment.
+    pub fn load(&mut self, state: &RenderState, depth: &DepthBuffer) {
+        self.state = *state;
+        self.depth.clone_from(depth);
     }
 
     /// Depth := 1.0 everywhere. Modelled as free (a fast clear); its traffic is not simulated.
@@ -97,7 +108,15 @@ impl DepthPipeline {
     ) -> DepthOutcome {
         let state = &self.state;
         let passed = self.depth.test(state, fragment, !occlusion_mode);
-        let writes = passed && state.depth_test && state.depth_mask && !occlusion_mode;
+        let writes = if self.depth_write_traffic {
+            passed && state.depth_test && state.depth_mask && !occlusion_mode
+        } else {
+            debug_assert!(
+                !(state.depth_test && state.depth_mask && !occlusion_mode),
+                "depth_write_traffic off, yet a fragment may write"
+            );
+            false
+        };
         let in_order = arrive.max(self.free);
         let after_memory = in_order.max(data_ready);
         let mut cycle = after_memory.max(out_slot);

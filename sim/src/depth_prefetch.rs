@@ -41,10 +41,13 @@ pub struct DepthPrefetch {
     pub word_hits: u64,
     pub page_hits: u64,
     pub page_misses: u64,
+    /// Effect hook: false when the viewport lies in one page, so page 0 is every read's.
+    page_model: bool,
 }
 
 impl DepthPrefetch {
-    pub fn new(arch: &O2Arch, viewport_width: u32) -> DepthPrefetch {
+    /// `page_model` false promises that the viewport lies inside one framebuffer tile.
+    pub fn new(arch: &O2Arch, viewport_width: u32, page_model: bool) -> DepthPrefetch {
         let tile_width = arch.framebuffer_tile_width_pixels;
         let words_per_tile_row = (tile_width / arch.pixels_per_word()) as u64;
         DepthPrefetch {
@@ -65,6 +68,7 @@ impl DepthPrefetch {
             word_hits: 0,
             page_hits: 0,
             page_misses: 0,
+            page_model,
         }
     }
 
@@ -88,9 +92,20 @@ impl DepthPrefetch {
         if !read {
             return 0;
         }
-        let (tile_x, in_tile_x) = self.tile_width.divide(x as u32);
-        let (tile_y, in_tile_y) = self.tile_height.divide(y as u32);
-        let page = tile_y as u64 * self.tiles_per_row + tile_x as u64;
+        let (page, in_tile_x, in_tile_y) = if self.page_model {
+            let (tile_x, in_tile_x) = self.tile_width.divide(x as u32);
+            let (tile_y, in_tile_y) = self.tile_height.divide(y as u32);
+            (
+                tile_y as u64 * self.tiles_per_row + tile_x as u64,
+                in_tile_x,
+                in_tile_y,
+            )
+        } else {
+            // Effect hook: the whole viewport is page 0.
+            debug_assert_eq!(self.tile_width.divide(x as u32).0, 0);
+            debug_assert_eq!(self.tile_height.divide(y as u32).0, 0);
+            (0, x as u32, y as u32)
+        };
         let word = page * self.words_per_tile
             + in_tile_y as u64 * self.words_per_tile_row
             + self.pixels_per_word.divide(in_tile_x).0 as u64;
@@ -122,13 +137,13 @@ impl DepthPrefetch {
 /// Division by a constant that takes a shift when the divisor is a power of two (the usual
 /// case: 128-pixel tiles, 8 pixels a word), which keeps divisions off the per-fragment path.
 #[derive(Clone, Copy, Debug)]
-struct Divider {
+pub(crate) struct Divider {
     divisor: u32,
     shift: Option<u32>,
 }
 
 impl Divider {
-    fn new(divisor: u32) -> Divider {
+    pub(crate) fn new(divisor: u32) -> Divider {
         Divider {
             divisor,
             shift: divisor.is_power_of_two().then(|| divisor.trailing_zeros()),
@@ -137,7 +152,7 @@ impl Divider {
 
     /// (quotient, remainder)
     #[inline(always)]
-    fn divide(self, value: u32) -> (u32, u32) {
+    pub(crate) fn divide(self, value: u32) -> (u32, u32) {
         match self.shift {
             Some(shift) => (value >> shift, value & (self.divisor - 1)),
             None => (value / self.divisor, value % self.divisor),

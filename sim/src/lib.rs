@@ -10,6 +10,8 @@
 //!   [`fragment_generator`] (one per board), [`image_engine`] (each with its own
 //!   [`occlusion_unit`] and [`occu_control`]), [`merge_network`] (the two merge stages).
 //! - [`machine`]: [`MachineModel`], the machine an architecture names (the entry point).
+//! - [`fidelity`]: the fidelity ladder (functional, [`analytic`], [`sampled`], cycle) and its
+//!   common [`LevelResult`]; [`effects`]: only the effect models a trace can observe.
 //! - [`report`]: the replay report (serde) and its text form.
 //!
 //! The model is an exact event-timestamp formulation of an in-order pipeline: each block
@@ -25,10 +27,13 @@
 //!   block faster (more engines, say) never makes a query finish later;
 //! - same events and architecture, same report, bit for bit.
 
+pub mod analytic;
 pub mod arch;
 pub mod depth_pipeline;
 pub mod depth_prefetch;
+pub mod effects;
 pub mod error;
+pub mod fidelity;
 pub mod fifo;
 pub mod fragment_generator;
 pub mod fragment_input;
@@ -43,10 +48,13 @@ pub mod occlusion_engine;
 pub mod occlusion_unit;
 pub mod occu_control;
 pub mod report;
+pub mod sampled;
 pub mod write_buffer;
 
 pub use arch::{Arch, ArchError, IrArch, O2Arch};
+pub use effects::{Effects, EffectsChoice};
 pub use error::SimError;
+pub use fidelity::{Fidelity, LevelModel, LevelResult};
 pub use ir::IrMachine;
 pub use machine::MachineModel;
 pub use o2::O2Machine;

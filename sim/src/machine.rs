@@ -2,6 +2,7 @@
 //! line, sweeps and latency reports replay traces through.
 
 use crate::arch::{Arch, Machine};
+use crate::effects::Effects;
 use crate::error::SimError;
 use crate::ir::IrMachine;
 use crate::o2::O2Machine;
@@ -19,8 +20,20 @@ pub enum MachineModel {
 impl MachineModel {
     /// Build the machine `arch` describes for a `width` x `height` viewport.
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<MachineModel, SimError> {
+        MachineModel::with_effects(arch, width, height, Effects::ALL)
+    }
+
+    /// The machine building only `effects` ([`crate::effects`]; a scan must have proved the
+    /// others unobservable on the stream it will replay).
+    pub fn with_effects(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+    ) -> Result<MachineModel, SimError> {
         Ok(match arch.machine() {
-            Machine::O2 => MachineModel::O2(O2Machine::new(arch, width, height)?),
+            Machine::O2 => MachineModel::O2(O2Machine::with_effects(arch, width, height, effects)?),
+            // The InfiniteReality-like machine always builds every model it has.
             Machine::Ir => MachineModel::Ir(IrMachine::new(arch, width, height)?),
         })
     }

@@ -44,6 +44,7 @@
 
 use crate::arch::{Arch, O2Arch};
 use crate::depth_pipeline::DepthPipeline;
+use crate::effects::Effects;
 use crate::error::SimError;
 use crate::fifo::Fifo;
 use crate::fragment_input::FragmentInput;
@@ -115,10 +116,24 @@ pub struct O2Machine {
     checked_queries: u64,
     events: u64,
     last_available: u64,
+    /// The effect models built ([`crate::effects`]); all of them unless a scan proved some
+    /// unobservable.
+    effects: Effects,
 }
 
 impl O2Machine {
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<O2Machine, SimError> {
+        O2Machine::with_effects(arch, width, height, Effects::ALL)
+    }
+
+    /// A machine that builds only `effects`: the caller guarantees (by
+    /// [`crate::effects::EffectScan`]) that the others cannot be observed on its stream.
+    pub fn with_effects(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+    ) -> Result<O2Machine, SimError> {
         let o2 = arch.o2()?;
         if !(1..=MAX_VIEWPORT_SIDE).contains(&width) || !(1..=MAX_VIEWPORT_SIDE).contains(&height) {
             return Err(SimError::Viewport {
@@ -139,7 +154,7 @@ impl O2Machine {
             arch: o2.clone(),
             input: FragmentInput::new(o2.primitive_setup_cycles),
             raster_to_depth: Fifo::new(o2.fifo_raster_to_depth_entries),
-            depth: DepthPipeline::new(&o2, width, height),
+            depth: DepthPipeline::new(&o2, width, height, effects),
             depth_to_occu: Fifo::new(o2.fifo_depth_to_occu_entries),
             occu: OcclusionUnit::new(&o2),
             control: OccuControl::new(o2.occu_write_buffer_words),
@@ -160,6 +175,7 @@ impl O2Machine {
             checked_queries: 0,
             events: 0,
             last_available: 0,
+            effects,
         })
     }
 
@@ -298,7 +314,13 @@ impl O2Machine {
                 .fragment(fragment, tested.passed, tested.cycle + 1, query_open);
         self.depth_to_occu.depart(start);
         let counted = start + self.occu.service_cycles() - 1;
-        let leave = self.control.hits(hit_words, counted, &mut self.port);
+        // Effect hook: without verbose queries no fragment sends hit words.
+        let leave = if self.effects.verbose_hit_writes {
+            self.control.hits(hit_words, counted, &mut self.port)
+        } else {
+            debug_assert_eq!(hit_words, 0, "verbose_hit_writes off, yet hits");
+            counted
+        };
         self.occu.complete(start, leave, query_open);
         if let Some(query) = &mut self.open {
             query.fragments += 1;
@@ -370,6 +392,23 @@ impl O2Machine {
         }
         self.checked_queries += 1;
         Ok(())
+    }
+
+    /// Start from a functional model's render state and depth buffer instead of the reset
+    /// state (the sampled level's warm start of a window). Call before the first event.
+    pub fn load_functional_state(
+        &mut self,
+        state: &occsim_traces::state::RenderState,
+        depth: &occsim_traces::golden::DepthBuffer,
+    ) {
+        debug_assert_eq!(self.events, 0, "load the state before the first event");
+        self.depth.load(state, depth);
+        self.front_depth_test = state.depth_test;
+    }
+
+    /// The effect models this machine builds.
+    pub fn effects(&self) -> Effects {
+        self.effects
     }
 
     /// The cycle by which every block is idle.

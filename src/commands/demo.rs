@@ -3,6 +3,7 @@
 //! drawn when visible), replays it on the O2-like machine and prints what the queries cost.
 
 use super::arch::ArchSelection;
+use anyhow::Context;
 use occsim_traces::builtin::{demo_scene, DemoOptions};
 use occsim_traces::golden::GoldenModel;
 use occsim_traces::scene::SceneReader;
@@ -42,7 +43,11 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         trace.len()
     );
     let reader = TraceReader::new(&trace[..])?;
-    let report = super::replay::replay_reader(reader, "demo", &arch, None)?;
+    let options = super::replay::ReplayOptions::cycle(None);
+    let result = super::replay::replay_reader(reader, "demo", &arch, options)?;
+    let report = result
+        .report
+        .context("demo: the cycle level gave no report")?;
     out!("{}", report.to_text(args.queries));
     Ok(())
 }

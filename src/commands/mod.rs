@@ -4,6 +4,7 @@ pub mod arch;
 pub mod count;
 pub mod culling;
 pub mod demo;
+pub mod fidelity;
 pub mod latency;
 pub mod replay;
 pub mod sweep;

@@ -1,9 +1,12 @@
-//! `occsim replay TRACE`: replay a fragment trace on a machine model, check every query's
-//! counts against the golden results in the trace, and report the timing.
+//! `occsim replay TRACE`: replay a fragment trace on a machine model at a fidelity level,
+//! check every query's counts against the golden results in the trace, and report.
 
 use super::arch::ArchSelection;
+use super::fidelity::{effects_of_trace, FidelityArg};
 use anyhow::Context;
-use occsim_sim::{Arch, MachineModel, Report, SimError};
+use occsim_sim::effects::Effects;
+use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult};
+use occsim_sim::{Arch, Report, SimError};
 use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, TileGrid};
 use occsim_traces::trace::TraceReader;
@@ -29,21 +32,42 @@ pub struct ReplayArgs {
     /// results are recomputed), e.g. --retile 8x8.
     #[arg(long, value_name = "GxH")]
     pub retile: Option<TileGrid>,
+    #[command(flatten)]
+    pub level: FidelityArg,
 }
 
-/// Feeds decoded events to the machine and keeps the first error.
-pub struct MachineSink {
-    machine: MachineModel,
+/// Feeds decoded events to the model (at its level) and keeps the first error.
+struct LevelSink {
+    model: LevelModel,
     error: Option<SimError>,
 }
 
-impl EventSink for MachineSink {
+impl EventSink for LevelSink {
     #[inline]
     fn event(&mut self, event: &Event) {
         if self.error.is_none() {
-            if let Err(error) = self.machine.event(event) {
+            if let Err(error) = self.model.event(event) {
                 self.error = Some(error);
             }
+        }
+    }
+}
+
+/// How to replay: the level, the effect models to build, and an optional retiling.
+#[derive(Clone, Copy)]
+pub struct ReplayOptions {
+    pub level: Fidelity,
+    pub effects: Effects,
+    pub retile: Option<TileGrid>,
+}
+
+impl ReplayOptions {
+    /// The cycle level with every effect model: what sweeps and latency reports run.
+    pub fn cycle(retile: Option<TileGrid>) -> ReplayOptions {
+        ReplayOptions {
+            level: Fidelity::Cycle,
+            effects: Effects::ALL,
+            retile,
         }
     }
 }
@@ -54,29 +78,62 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         arch.set_value("engines", &engines.to_string())
             .context("--engines")?;
     }
-    let report = replay_trace(&args.trace, &arch, args.retile)?;
-    let path = args.trace.display();
-    if report.summary.checked_queries < report.summary.queries {
+    let path = args.trace.display().to_string();
+    // A retiled trace has other queries than the scan would see: build every model then.
+    let effects = match args.retile {
+        Some(_) => Effects::ALL,
+        None => effects_of_trace(args.level.effects, &arch, &args.trace)?,
+    };
+    let options = ReplayOptions {
+        level: args.level.fidelity,
+        effects,
+        retile: args.retile,
+    };
+    let mut result = replay_reader(
+        super::trace::open_trace(&args.trace)?,
+        &path,
+        &arch,
+        options,
+    )?;
+    let queries = result.queries.len() as u64;
+    if result.checked_queries < queries {
         eprintln!(
             "occsim: warning: {path}: {} of {} queries have no golden result in the trace; their counts were not checked",
-            report.summary.queries - report.summary.checked_queries,
-            report.summary.queries
+            queries - result.checked_queries,
+            queries
         );
     }
+    let Some(report) = result.report.take() else {
+        // Below the cycle level: the level's own summary.
+        if args.json {
+            outln!("{}", serde_json::to_string_pretty(&result)?);
+        } else {
+            out!("{}", result.to_text());
+        }
+        return Ok(());
+    };
     if args.json {
-        outln!("{}", serde_json::to_string_pretty(&report)?);
+        // The cycle report with the effect models that were built.
+        let mut json = serde_json::to_value(&report)?;
+        json["effects"] = serde_json::to_value(effects)?;
+        outln!("{}", serde_json::to_string_pretty(&json)?);
     } else {
         out!("{}", report.to_text(args.queries));
+        outln!("active effects: {}", effects.active_names());
     }
     Ok(())
 }
 
-/// Replay the trace at `trace` on `arch`, with its brief queries retiled to `retile` when
-/// given (the golden results are then recomputed), and return the report. Errors name the
-/// trace file. The one replay path `replay`, `sweep` and `latency` share.
+/// Replay the trace at `trace` on `arch` at the cycle level (brief queries retiled to
+/// `retile` when given) and return the report. The one replay path `sweep`, `latency` and
+/// `culling compare` share.
 pub fn replay_trace(trace: &Path, arch: &Arch, retile: Option<TileGrid>) -> anyhow::Result<Report> {
+    let name = trace.display().to_string();
     let reader = super::trace::open_trace(trace)?;
-    replay_reader(reader, &trace.display().to_string(), arch, retile)
+    let result = replay_reader(reader, &name, arch, ReplayOptions::cycle(retile))?;
+    result
+        .report
+        .with_context(|| format!("{name}: the cycle level gave no report"))
 }
 
 /// Replay a trace from any reader; `name` names it in errors.
@@ -84,17 +141,14 @@ pub fn replay_reader<R: std::io::Read>(
     mut reader: TraceReader<R>,
     name: &str,
     arch: &Arch,
-    retile: Option<TileGrid>,
-) -> anyhow::Result<Report> {
+    options: ReplayOptions,
+) -> anyhow::Result<LevelResult> {
     let (width, height) = (reader.header().width, reader.header().height);
-    let machine =
-        MachineModel::new(arch, width, height).with_context(|| format!("{name}: cannot replay"))?;
-    let sink = MachineSink {
-        machine,
-        error: None,
-    };
+    let model = LevelModel::new(options.level, arch, width, height, options.effects)
+        .with_context(|| format!("{name}: cannot replay"))?;
+    let sink = LevelSink { model, error: None };
     let on = || format!("{name}: replay on {}", arch.machine().name());
-    let sink = match retile {
+    let sink = match options.retile {
         None => feed(&mut reader, sink, |s| s, name, on)?,
         Some(grid) => {
             let retile = Retile::new(grid, width, height, sink)
@@ -102,14 +156,14 @@ pub fn replay_reader<R: std::io::Read>(
             feed(&mut reader, retile, Retile::inner_mut, name, on)?.into_inner()
         }
     };
-    sink.machine.finish().with_context(on)
+    sink.model.finish(arch).with_context(on)
 }
 
-/// Read every event of `reader` into `sink`, stopping at the machine's first error.
+/// Read every event of `reader` into `sink`, stopping at the model's first error.
 fn feed<R: std::io::Read, S: EventSink>(
     reader: &mut TraceReader<R>,
     mut sink: S,
-    machine: impl Fn(&mut S) -> &mut MachineSink,
+    model: impl Fn(&mut S) -> &mut LevelSink,
     path: &str,
     on: impl Fn() -> String,
 ) -> anyhow::Result<S> {
@@ -117,11 +171,11 @@ fn feed<R: std::io::Read, S: EventSink>(
         .next_block(&mut sink)
         .with_context(|| format!("{path}: cannot read trace"))?
     {
-        if let Some(error) = machine(&mut sink).error.take() {
+        if let Some(error) = model(&mut sink).error.take() {
             return Err(error).with_context(&on);
         }
     }
-    if let Some(error) = machine(&mut sink).error.take() {
+    if let Some(error) = model(&mut sink).error.take() {
         return Err(error).with_context(&on);
     }
     Ok(sink)

@@ -8,6 +8,7 @@ use crate::scene::Command;
 use crate::state::RenderState;
 
 /// The depth buffer: 24-bit depths, one per pixel, row by row from the bottom.
+#[derive(Clone)]
 pub struct DepthBuffer {
     width: u32,
     depths: Vec<u32>,

@@ -1,0 +1,212 @@
+//! What each fidelity level costs on one stream of about 1.5 million fragments, built in
+//! memory (three frames of the replay benchmark's scene, each with a clear and 120 queries
+//! of every mode): fragments per second per level, as ratios to `cycle`; and what the
+//! automatic effects choice saves over `--effects all` at the cycle level.
+//!
+//! Run: `cargo bench -p occsim-sim --bench fidelity`
+
+use occsim_sim::effects::{observe, Effects, EffectsChoice};
+use occsim_sim::fidelity::{run_level, Fidelity};
+use occsim_sim::{Arch, MachineModel};
+use occsim_traces::golden::FunctionalModel;
+use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QuerySpec, Rect};
+use std::time::Instant;
+
+const FRAMES: u64 = 3;
+/// Timed repetitions of each level; the fastest counts.
+const REPEATS: usize = 5;
+
+const WIDTH: u32 = 640;
+const HEIGHT: u32 = 480;
+
+/// A small deterministic generator (xorshift64*).
+struct Rng(u64);
+
+impl Rng {
+    fn below(&mut self, n: u64) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) % n
+    }
+}
+
+/// Rectangles drawn row by row, as spans leave a rasterizer.
+fn rectangle(rng: &mut Rng, max_side: u64, events: &mut Vec<Event>) {
+    let w = 4 + rng.below(max_side) as u32;
+    let h = 4 + rng.below(max_side) as u32;
+    let x0 = rng.below((WIDTH - w) as u64) as u32;
+    let y0 = rng.below((HEIGHT - h) as u64) as u32;
+    let z = rng.below(1 << 24) as u32;
+    events.push(Event::Primitive);
+    for y in y0..y0 + h {
+        for x in x0..x0 + w {
+            events.push(Event::Fragment(Fragment {
+                x: x as u16,
+                y: y as u16,
+                z,
+            }));
+        }
+    }
+}
+
+fn grid(columns: u32, rows: u32) -> Vec<Rect> {
+    let (w, h) = (WIDTH / columns, HEIGHT / rows);
+    (0..rows)
+        .flat_map(|r| (0..columns).map(move |c| Rect::new(c * w, r * h, w, h)))
+        .collect()
+}
+
+/// One frame: occluders drawn plainly, then samples, brief (16-tile grid) and verbose
+/// (4-tile) queries over boxes, with the golden results in the stream.
+fn frame(seed: u64) -> Vec<Event> {
+    let mut rng = Rng(seed | 1);
+    let mut raw = vec![Event::Clear, Event::DepthFunc(DepthFunc::Less)];
+    for _ in 0..60 {
+        rectangle(&mut rng, 120, &mut raw);
+    }
+    for q in 0..120u32 {
+        let (mode, tiles, buffer_entries) = match q % 3 {
+            0 => (QueryMode::Samples, vec![Rect::new(0, 0, WIDTH, HEIGHT)], 8),
+            1 => (QueryMode::Brief, grid(4, 4), 8),
+            _ => (QueryMode::Verbose, grid(2, 2), 8 + 64),
+        };
+        raw.push(Event::QueryBegin(QuerySpec {
+            id: q,
+            mode,
+            buffer_entries,
+            tiles,
+        }));
+        for _ in 0..2 {
+            rectangle(&mut rng, 60, &mut raw);
+        }
+        raw.push(Event::QueryEnd);
+    }
+    let mut golden = FunctionalModel::new(WIDTH, HEIGHT);
+    let mut events = Vec::with_capacity(raw.len() + 128);
+    for event in raw {
+        let result = golden.event(&event);
+        events.push(event);
+        if let Some(result) = result {
+            events.push(Event::QueryResult(result));
+        }
+    }
+    events
+}
+
+/// The fastest of `REPEATS` runs, in seconds, and the predicted cycles.
+fn time_level(
+    level: Fidelity,
+    effects: EffectsChoice,
+    arch: &Arch,
+    events: &[Event],
+) -> (f64, Option<u64>) {
+    let mut best = f64::INFINITY;
+    let mut cycles = None;
+    for _ in 0..REPEATS {
+        let start = Instant::now();
+        let result = run_level(level, arch, WIDTH, HEIGHT, effects, events).expect("replays");
+        best = best.min(start.elapsed().as_secs_f64());
+        cycles = result.total_cycles;
+    }
+    (best, cycles)
+}
+
+fn main() {
+    let events: Vec<Event> = (0..FRAMES).flat_map(|f| frame(42 + f)).collect();
+    let fragments = events
+        .iter()
+        .filter(|e| matches!(e, Event::Fragment(_)))
+        .count() as f64;
+    println!("stream: {fragments} fragments, {WIDTH}x{HEIGHT}, {FRAMES} frames");
+    let arch = Arch::builtin("o2").expect("built-in o2");
+    let levels = [
+        Fidelity::Functional,
+        Fidelity::Analytic,
+        Fidelity::Sampled { every: 10 },
+        Fidelity::Sampled { every: 100 },
+        Fidelity::Cycle,
+    ];
+    let timings: Vec<(Fidelity, f64, Option<u64>)> = levels
+        .iter()
+        .map(|&level| {
+            let (seconds, cycles) = time_level(level, EffectsChoice::Auto, &arch, &events);
+            (level, seconds, cycles)
+        })
+        .collect();
+    let cycle_seconds = timings.last().expect("cycle timed").1;
+    for (level, seconds, cycles) in &timings {
+        println!(
+            "{:<12} {:>8.1} M fragments/s  {:>6.2}x cycle  cycles {}",
+            level.to_string(),
+            fragments / seconds / 1e6,
+            cycle_seconds / seconds,
+            cycles.map_or("-".to_string(), |c| c.to_string())
+        );
+    }
+    compare_effects(&arch, &events, fragments, "the stream above");
+    compare_effects(
+        &arch,
+        &samples_only_without_depth_writes(&events),
+        fragments,
+        "the stream as samples queries, depth mask off",
+    );
+}
+
+/// The stream with every query a one-tile samples query and depth writes off: the effects
+/// scan can switch off verbose hits, multi-tile serialisation and depth-write traffic.
+fn samples_only_without_depth_writes(events: &[Event]) -> Vec<Event> {
+    let mut golden = FunctionalModel::new(WIDTH, HEIGHT);
+    golden.event(&Event::DepthMask(false));
+    let mut out = vec![Event::DepthMask(false)];
+    for event in events {
+        let event = match event {
+            Event::QueryResult(_) => continue,
+            Event::DepthMask(_) => Event::DepthMask(false),
+            Event::QueryBegin(spec) => Event::QueryBegin(QuerySpec {
+                mode: QueryMode::Samples,
+                buffer_entries: 8,
+                tiles: vec![Rect::new(0, 0, WIDTH, HEIGHT)],
+                ..spec.clone()
+            }),
+            other => other.clone(),
+        };
+        let result = golden.event(&event);
+        out.push(event);
+        if let Some(result) = result {
+            out.push(Event::QueryResult(result));
+        }
+    }
+    out
+}
+
+fn compare_effects(arch: &Arch, events: &[Event], fragments: f64, name: &str) {
+    // Effects: the replay with every model against the replay with the scanned choice,
+    // interleaved so both see the same machine load, and the scan's own cost.
+    let o2 = arch.o2().expect("o2");
+    let scan_start = Instant::now();
+    let chosen = observe(&o2, WIDTH, HEIGHT, events);
+    let scan = scan_start.elapsed().as_secs_f64();
+    let (mut all, mut auto) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..REPEATS {
+        for (effects, best) in [(Effects::ALL, &mut all), (chosen, &mut auto)] {
+            let start = Instant::now();
+            let mut machine =
+                MachineModel::with_effects(arch, WIDTH, HEIGHT, effects).expect("machine");
+            for event in events {
+                machine.event(event).expect("replays");
+            }
+            machine.finish().expect("report");
+            *best = best.min(start.elapsed().as_secs_f64());
+        }
+    }
+    println!(
+        "{name}: effects chosen: {}; cycle with all: {:.1} M fragments/s, with the choice: {:.1} M fragments/s ({:+.1}%), the scan: {:.1} ms ({:.1}% of a replay)",
+        chosen.active_names(),
+        fragments / all / 1e6,
+        fragments / auto / 1e6,
+        100.0 * (all - auto) / all,
+        scan * 1e3,
+        100.0 * scan / all
+    );
+}

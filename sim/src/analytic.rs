@@ -1,0 +1,327 @@
+//! The analytic level: a closed-form bottleneck model of the O2-like machine that predicts
+//! cycles and query latency from counts alone.
+//!
+//! The functional model runs on every event (results stay exact); beside it a cheap scan
+//! counts, per *window* (the events from just after one query's end to the next query's end,
+//! see [`crate::fidelity`]), what each block must do:
+//!
+//! | count | meaning |
+//! |---|---|
+//! | `F`, `P` | fragments and primitives |
+//! | `S` | OccU cycles: `Σ s` over fragments, `s = ceil(tiles / engines)` under an open query (1 with `all_tiles_one_cycle` or no query) |
+//! | `R`, `M` | depth reads (fragments, depth test on, whose memory word differs from the last read's: the prefetch's exact rule) and of them page misses (a different 64 KB page) |
+//! | `W` | depth writes (passing fragments with depth test and mask on, outside brief/verbose queries) |
+//! | `O` | OccU Control words: verbose hit words `Σ_tiles min(NOHC, entries - 8)` plus records `8 · tiles` (+1 terminator per overflowed buffer with room) |
+//!
+//! Throughput of each block over the window, in cycles (`setup` = `primitive_setup_cycles`,
+//! `V` = `memory_port_bits_per_cycle`, `L = min(prefetch_depth_fragments,
+//! fifo_raster_to_depth_entries)`, `λ̄ = (M · page_miss + (R - M) · page_hit) / R`):
+//!
+//! ```text
+//! raster   = F + setup · P
+//! depth    = F
+//! occu     = S
+//! port     = R + ceil((W · depth_bits_per_pixel + 32 · O) / V)
+//! prefetch = R · (λ̄ + 1) / L          (Little's law: L reads in flight, each λ̄ + 1 cycles)
+//! T_w      = max(raster, depth, occu, port, prefetch)
+//! ```
+//!
+//! Total cycles = `Σ_w T_w` + the last window's tail (the last query's latency, or its
+//! drain + 3 when the stream ends without a query end).
+//!
+//! Query latency (from the `end` token entering the pipe to its records written):
+//!
+//! ```text
+//! β       = max(depth, occu, port, prefetch) / F   (downstream cycles per fragment)
+//! backlog = min(F, (C1 + C2) / 2)   (C1, C2: the two FIFOs' entries. No downstream block
+//!                                    is faster than the rasterizer's one fragment a cycle,
+//!                                    so entries a stall filled stay filled: half full on
+//!                                    average, a heuristic)
+//! drain   = max(backlog · β, λ_last)  (λ_last: the last fragment's read latency, 0 when
+//!                                      it read nothing new)
+//! latency = 4 + ceil(records / (V / 32)) + drain
+//! ```
+//!
+//! The 4 is the empty pipe's path (depth pipeline, OccU, OccU Control, the grant after the
+//! last word): with one record group that fits one port cycle, latency is the machine's
+//! minimum, [`crate::o2::MIN_QUERY_LATENCY_CYCLES`]. Costs: the functional model plus a
+//! few integer operations per fragment.
+
+use crate::arch::O2Arch;
+use crate::depth_prefetch::Divider;
+use crate::error::SimError;
+use crate::fidelity::{FunctionalCore, LevelResult};
+use occsim_traces::query::BRIEF_RECORD_ENTRIES;
+use occsim_traces::{Event, Fragment, QueryMode, QueryResult, QuerySpec};
+
+/// Counts of one window (see the module table).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct WindowCounts {
+    pub fragments: u64,
+    pub primitives: u64,
+    pub occu_cycles: u64,
+    pub depth_reads: u64,
+    pub page_misses: u64,
+    pub depth_writes: u64,
+    pub occu_words: u64,
+    /// Read latency of the window's last fragment (0 when it read nothing new).
+    pub last_read_latency: u64,
+}
+
+/// What the formulas predict for one window.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WindowPrediction {
+    /// `T_w`: the window's cycles.
+    pub cycles: f64,
+    /// The pipe's drain after the window's last fragment, in cycles.
+    pub drain: f64,
+}
+
+/// The word and page of a depth pixel, as [`crate::depth_prefetch`] lays the buffer out.
+struct DepthAddress {
+    tile_width: Divider,
+    tile_height: Divider,
+    tiles_per_row: u64,
+    pixels_per_word: Divider,
+    words_per_tile_row: u64,
+    words_per_tile: u64,
+}
+
+impl DepthAddress {
+    fn new(arch: &O2Arch, width: u32) -> DepthAddress {
+        let tile_width = arch.framebuffer_tile_width_pixels;
+        let words_per_tile_row = (tile_width / arch.pixels_per_word()) as u64;
+        DepthAddress {
+            tile_width: Divider::new(tile_width),
+            tile_height: Divider::new(arch.framebuffer_tile_height_pixels),
+            tiles_per_row: width.div_ceil(tile_width) as u64,
+            pixels_per_word: Divider::new(arch.pixels_per_word()),
+            words_per_tile_row,
+            words_per_tile: words_per_tile_row * arch.framebuffer_tile_height_pixels as u64,
+        }
+    }
+
+    /// `(word, page)` of pixel (x, y).
+    #[inline]
+    fn locate(&self, x: u16, y: u16) -> (u64, u64) {
+        let (tile_x, in_tile_x) = self.tile_width.divide(x as u32);
+        let (tile_y, in_tile_y) = self.tile_height.divide(y as u32);
+        let page = tile_y as u64 * self.tiles_per_row + tile_x as u64;
+        let word = page * self.words_per_tile
+            + in_tile_y as u64 * self.words_per_tile_row
+            + self.pixels_per_word.divide(in_tile_x).0 as u64;
+        (word, page)
+    }
+}
+
+/// The O2 formulas over window counts.
+pub struct O2Formulas {
+    arch: O2Arch,
+}
+
+impl O2Formulas {
+    pub fn new(arch: &O2Arch) -> O2Formulas {
+        O2Formulas { arch: arch.clone() }
+    }
+
+    /// Lookahead `L`: fragments whose reads may be in flight.
+    fn lookahead(&self) -> f64 {
+        self.arch
+            .prefetch_depth_fragments
+            .min(self.arch.fifo_raster_to_depth_entries) as f64
+    }
+
+    /// OccU cycles per fragment under a query of `tiles` tiles.
+    pub fn service_cycles(&self, tiles: usize) -> u64 {
+        if self.arch.all_tiles_one_cycle {
+            1
+        } else {
+            (tiles.div_ceil(self.arch.engines) as u64).max(1)
+        }
+    }
+
+    /// `T_w` and the drain of a window.
+    pub fn window(&self, w: &WindowCounts) -> WindowPrediction {
+        let a = &self.arch;
+        let fragments = w.fragments as f64;
+        let raster = fragments + (a.primitive_setup_cycles * w.primitives) as f64;
+        let depth = fragments;
+        let occu = w.occu_cycles as f64;
+        let write_bits = w.depth_writes * a.depth_bits_per_pixel as u64 + 32 * w.occu_words;
+        let port =
+            w.depth_reads as f64 + write_bits.div_ceil(a.memory_port_bits_per_cycle as u64) as f64;
+        let prefetch = if w.depth_reads == 0 {
+            0.0
+        } else {
+            let misses = w.page_misses as f64;
+            let reads = w.depth_reads as f64;
+            let mean_latency = (misses * a.page_miss_latency_cycles as f64
+                + (reads - misses) * a.page_hit_latency_cycles as f64)
+                / reads;
+            reads * (mean_latency + 1.0) / self.lookahead()
+        };
+        let downstream = depth.max(occu).max(port).max(prefetch);
+        let cycles = raster.max(downstream);
+        // Fragments ahead of the end token: the downstream blocks never run faster than one
+        // fragment a cycle, the rasterizer's own rate, so FIFO entries that a stall filled
+        // stay filled; we take them half full on average.
+        let fifo = (a.fifo_raster_to_depth_entries + a.fifo_depth_to_occu_entries) as f64;
+        let backlog = if w.fragments > 0 {
+            fragments.min(fifo / 2.0) * (downstream / fragments)
+        } else {
+            0.0
+        };
+        WindowPrediction {
+            cycles,
+            drain: backlog.max(w.last_read_latency as f64),
+        }
+    }
+
+    /// Latency of a query whose records are `record_words` words, after a window that
+    /// drains in `drain` cycles.
+    pub fn latency(&self, record_words: u64, drain: f64) -> f64 {
+        let words_per_cycle = (self.arch.memory_port_bits_per_cycle / 32) as u64;
+        4.0 + record_words.div_ceil(words_per_cycle) as f64 + drain
+    }
+}
+
+/// Record words a query writes at its end, and the verbose hit words its engines sent.
+pub fn query_words(spec: &QuerySpec, result: &QueryResult) -> (u64, u64) {
+    let room = spec.buffer_entries.saturating_sub(BRIEF_RECORD_ENTRIES) as u64;
+    let mut records = 0;
+    let mut hits = 0;
+    for tile in &result.tiles {
+        records += BRIEF_RECORD_ENTRIES as u64;
+        if spec.mode == QueryMode::Verbose {
+            hits += tile.nohc.min(room);
+            if tile.overflowed && room > 0 {
+                records += 1;
+            }
+        }
+    }
+    (records, hits)
+}
+
+/// The analytic level's model for an O2 machine.
+pub struct AnalyticModel {
+    core: FunctionalCore,
+    formulas: O2Formulas,
+    address: DepthAddress,
+    last_word: Option<u64>,
+    last_page: Option<u64>,
+    window: WindowCounts,
+    /// OccU cycles per fragment and "occlusion render mode" of the open query.
+    open: Option<(u64, bool, QuerySpec)>,
+    total_cycles: f64,
+    /// The drain of the last window, and whether it closed with a query end.
+    tail: f64,
+    latencies: Vec<u64>,
+}
+
+impl AnalyticModel {
+    pub fn new(arch: &O2Arch, width: u32, height: u32) -> Result<AnalyticModel, SimError> {
+        Ok(AnalyticModel {
+            core: FunctionalCore::new(width, height)?,
+            formulas: O2Formulas::new(arch),
+            address: DepthAddress::new(arch, width),
+            last_word: None,
+            last_page: None,
+            window: WindowCounts::default(),
+            open: None,
+            total_cycles: 0.0,
+            tail: 0.0,
+            latencies: Vec::new(),
+        })
+    }
+
+    /// Feed one event.
+    pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        match event {
+            Event::Fragment(fragment) => {
+                // Check the fragment lies in the viewport before reading its depth.
+                self.core.check_fragment(fragment)?;
+                self.fragment(*fragment);
+                self.core.apply_fragment(*fragment);
+                return Ok(());
+            }
+            Event::Primitive => self.window.primitives += 1,
+            Event::QueryBegin(spec) => {
+                let service = self.formulas.service_cycles(spec.tiles.len());
+                self.open = Some((service, spec.mode.is_occlusion_render_mode(), spec.clone()));
+            }
+            _ => {}
+        }
+        if let Some(result) = self.core.event(event)? {
+            self.end_query(&result);
+        }
+        Ok(())
+    }
+
+    /// Count one fragment's work (before the functional model applies it).
+    #[inline]
+    fn fragment(&mut self, fragment: Fragment) {
+        let state = self.core.functional.state();
+        let w = &mut self.window;
+        w.fragments += 1;
+        w.occu_cycles += self.open.as_ref().map_or(1, |(service, _, _)| *service);
+        w.last_read_latency = 0;
+        if !state.depth_test {
+            return;
+        }
+        let (word, page) = self.address.locate(fragment.x, fragment.y);
+        if self.last_word != Some(word) {
+            w.depth_reads += 1;
+            let arch = &self.formulas.arch;
+            w.last_read_latency = if self.last_page == Some(page) {
+                arch.page_hit_latency_cycles
+            } else {
+                w.page_misses += 1;
+                arch.page_miss_latency_cycles
+            };
+            self.last_word = Some(word);
+            self.last_page = Some(page);
+        }
+        let occlusion_mode = self.open.as_ref().is_some_and(|(_, mode, _)| *mode);
+        if state.depth_mask && !occlusion_mode {
+            let stored = self
+                .core
+                .functional
+                .depth_buffer()
+                .get(fragment.x, fragment.y);
+            if state.depth_func.passes(fragment.z, stored) {
+                w.depth_writes += 1;
+            }
+        }
+    }
+
+    fn end_query(&mut self, result: &QueryResult) {
+        let Some((_, _, spec)) = self.open.take() else {
+            return;
+        };
+        let (records, hits) = query_words(&spec, result);
+        self.window.occu_words += records + hits;
+        let prediction = self.formulas.window(&self.window);
+        let latency = self.formulas.latency(records, prediction.drain);
+        self.total_cycles += prediction.cycles;
+        self.tail = latency;
+        self.latencies.push(latency.ceil() as u64);
+        self.window = WindowCounts::default();
+    }
+
+    pub fn finish(mut self) -> Result<LevelResult, SimError> {
+        if self.window.fragments > 0 || self.window.primitives > 0 {
+            let prediction = self.formulas.window(&self.window);
+            self.total_cycles += prediction.cycles;
+            self.tail = prediction.drain + 3.0;
+        }
+        let total = self.total_cycles + self.tail;
+        let latencies = std::mem::take(&mut self.latencies);
+        let mut result = self.core.finish()?;
+        for (query, latency) in result.queries.iter_mut().zip(&latencies) {
+            query.latency_cycles = Some(*latency);
+        }
+        result.level = crate::fidelity::Fidelity::Analytic;
+        result.set_timing(total.round() as u64);
+        Ok(result)
+    }
+}

@@ -1,0 +1,231 @@
+//! Only the effects a scene calls for: which of the cycle model's effect models a trace can
+//! observe, decided from a scan of its events before the replay.
+//!
+//! An effect is switched off only when a rule proves that its model cannot change any
+//! result, any cycle, or any statistic of the report on this trace; everything else stays on.
+//! So `--effects all` and the automatic choice give the same report, bit for bit (the tests
+//! check this on every built-in trace and on random streams, and debug builds assert each
+//! rule at the hook that relies on it).
+//!
+//! Rules (a trace is scanned in order, with the render state it sets):
+//! - `verbose_hit_writes`: on iff some query is verbose. Without one the engines send no hit
+//!   words, so OccU Control's per-fragment hit path is skipped.
+//! - `multi_tile_serialisation`: on iff some query has more tiles than the machine has
+//!   engines (and `all_tiles_one_cycle` is off). Otherwise every fragment costs the OccU one
+//!   cycle; reported, but the OccU computes its service time once per query, so nothing per
+//!   fragment is skipped.
+//! - `depth_write_traffic`: on iff some fragment arrives while the depth test and depth
+//!   writes are on and no occlusion-render-mode query (brief, verbose) is open: only such a
+//!   fragment can write depth. Otherwise the depth pipeline skips the write-buffer path.
+//! - `page_model`: on unless the viewport lies inside one framebuffer tile (page). Then every
+//!   depth read is in page 0: the first read is a page miss and every later one a page hit,
+//!   which the prefetch knows without computing pages.
+//! - InfiniteReality's tile merges (across boards and Image Engines) belong to that machine;
+//!   this O2 scan reports them as not applicable.
+
+use crate::arch::O2Arch;
+use occsim_traces::{Event, QueryMode};
+use serde::Serialize;
+
+/// Which effect models the cycle model builds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct Effects {
+    /// Verbose hit-list writes from the engines through OccU Control.
+    pub verbose_hit_writes: bool,
+    /// A fragment occupying the OccU one cycle per tile an engine holds (tiles > engines).
+    pub multi_tile_serialisation: bool,
+    /// Depth writes through the depth write buffer to the memory port.
+    pub depth_write_traffic: bool,
+    /// The prefetch's page-hit / page-miss latency distinction.
+    pub page_model: bool,
+}
+
+impl Effects {
+    /// Every effect model on (`--effects all`).
+    pub const ALL: Effects = Effects {
+        verbose_hit_writes: true,
+        multi_tile_serialisation: true,
+        depth_write_traffic: true,
+        page_model: true,
+    };
+
+    /// `(name, active)` pairs in a fixed order, for reports.
+    pub fn list(&self) -> [(&'static str, bool); 4] {
+        [
+            ("verbose_hit_writes", self.verbose_hit_writes),
+            ("multi_tile_serialisation", self.multi_tile_serialisation),
+            ("depth_write_traffic", self.depth_write_traffic),
+            ("page_model", self.page_model),
+        ]
+    }
+
+    /// The active effects' names, comma separated ("none" when none is).
+    pub fn active_names(&self) -> String {
+        let names: Vec<&str> = self
+            .list()
+            .iter()
+            .filter(|(_, on)| *on)
+            .map(|(name, _)| *name)
+            .collect();
+        if names.is_empty() {
+            "none".to_string()
+        } else {
+            names.join(", ")
+        }
+    }
+}
+
+/// How the effects are chosen (`--effects auto|all`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum EffectsChoice {
+    /// From a scan of the trace: only the effects it can observe.
+    #[default]
+    Auto,
+    /// Every effect model on.
+    All,
+}
+
+impl std::str::FromStr for EffectsChoice {
+    type Err = String;
+    fn from_str(text: &str) -> Result<EffectsChoice, String> {
+        match text {
+            "auto" => Ok(EffectsChoice::Auto),
+            "all" => Ok(EffectsChoice::All),
+            other => Err(format!("unknown effects choice '{other}' (auto or all)")),
+        }
+    }
+}
+
+/// Scans an event stream for the effects it can observe. Cheap: a few flag tests per
+/// fragment, no depth buffer.
+pub struct EffectScan {
+    engines: usize,
+    all_tiles_one_cycle: bool,
+    depth_test: bool,
+    depth_mask: bool,
+    /// An occlusion-render-mode query (no depth writes) is open.
+    occlusion_mode_open: bool,
+    found: Effects,
+    one_page: bool,
+}
+
+impl EffectScan {
+    /// A scan for the O2 machine `arch` on a `width` x `height` viewport.
+    pub fn new(arch: &O2Arch, width: u32, height: u32) -> EffectScan {
+        EffectScan {
+            engines: arch.engines,
+            all_tiles_one_cycle: arch.all_tiles_one_cycle,
+            depth_test: true,
+            depth_mask: true,
+            occlusion_mode_open: false,
+            found: Effects {
+                verbose_hit_writes: false,
+                multi_tile_serialisation: false,
+                depth_write_traffic: false,
+                page_model: false,
+            },
+            one_page: width <= arch.framebuffer_tile_width_pixels
+                && height <= arch.framebuffer_tile_height_pixels,
+        }
+    }
+
+    /// Scan one event.
+    #[inline]
+    pub fn event(&mut self, event: &Event) {
+        match event {
+            Event::Fragment(_) => {
+                self.found.depth_write_traffic |=
+                    self.depth_test && self.depth_mask && !self.occlusion_mode_open;
+            }
+            Event::DepthTest(on) => self.depth_test = *on,
+            Event::DepthMask(on) => self.depth_mask = *on,
+            Event::QueryBegin(spec) => {
+                self.occlusion_mode_open = spec.mode.is_occlusion_render_mode();
+                if spec.mode == QueryMode::Verbose {
+                    self.found.verbose_hit_writes = true;
+                }
+                if spec.tiles.len() > self.engines && !self.all_tiles_one_cycle {
+                    self.found.multi_tile_serialisation = true;
+                }
+            }
+            Event::QueryEnd => self.occlusion_mode_open = false,
+            _ => {}
+        }
+    }
+
+    /// The effects the scanned stream can observe.
+    pub fn finish(&self) -> Effects {
+        Effects {
+            page_model: !self.one_page,
+            ..self.found
+        }
+    }
+}
+
+/// The effects of `events` on the O2 machine `arch` (a scan of the whole stream).
+pub fn observe(arch: &O2Arch, width: u32, height: u32, events: &[Event]) -> Effects {
+    let mut scan = EffectScan::new(arch, width, height);
+    for event in events {
+        scan.event(event);
+    }
+    scan.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::arch::Arch;
+    use occsim_traces::{Fragment, QuerySpec, Rect};
+
+    fn o2() -> O2Arch {
+        Arch::builtin("o2").unwrap().o2().unwrap()
+    }
+
+    #[test]
+    fn plain_fragments_write_depth_and_nothing_else_is_observed() {
+        let events = [Event::Fragment(Fragment { x: 0, y: 0, z: 1 })];
+        let effects = observe(&o2(), 1024, 1024, &events);
+        assert_eq!(
+            effects,
+            Effects {
+                verbose_hit_writes: false,
+                multi_tile_serialisation: false,
+                depth_write_traffic: true,
+                page_model: true,
+            }
+        );
+    }
+
+    #[test]
+    fn a_brief_query_with_many_tiles_serialises_but_writes_no_depth() {
+        let tiles = (0..9).map(|i| Rect::new(i, 0, 1, 1)).collect();
+        let events = [
+            Event::QueryBegin(QuerySpec {
+                id: 1,
+                mode: QueryMode::Brief,
+                buffer_entries: 8,
+                tiles,
+            }),
+            Event::Fragment(Fragment { x: 0, y: 0, z: 1 }),
+            Event::QueryEnd,
+            Event::DepthMask(false),
+            Event::Fragment(Fragment { x: 0, y: 0, z: 1 }),
+        ];
+        let mut arch = o2();
+        arch.engines = 4;
+        let effects = observe(&arch, 16, 16, &events);
+        assert!(effects.multi_tile_serialisation);
+        assert!(!effects.depth_write_traffic);
+        assert!(!effects.verbose_hit_writes);
+        assert!(!effects.page_model, "16x16 fits one framebuffer tile");
+        arch.all_tiles_one_cycle = true;
+        assert!(!observe(&arch, 16, 16, &events).multi_tile_serialisation);
+    }
+
+    #[test]
+    fn effects_choice_parses() {
+        assert_eq!("auto".parse(), Ok(EffectsChoice::Auto));
+        assert_eq!("all".parse(), Ok(EffectsChoice::All));
+        assert!("some".parse::<EffectsChoice>().is_err());
+    }
+}

@@ -1,0 +1,549 @@
+//! The fidelity ladder: one trace replayed at the level of detail the user pays for.
+//!
+//! | level | what runs | time |
+//! |---|---|---|
+//! | `functional` | the golden functional model: exact results and counts | none |
+//! | `analytic` | functional + the closed-form bottleneck model ([`crate::analytic`]) | predicted |
+//! | `sampled:K` | functional on everything, the cycle model on every K-th window ([`crate::sampled`]) | measured on 1/K, extrapolated |
+//! | `cycle` | the cycle-level machine model ([`crate::MachineModel`]) | exact |
+//! | `rtl` | the bit-accurate RTL model (not in this build) | exact |
+//!
+//! A *window* is the run of events from just after one query's end (and its golden result)
+//! up to and including the next query's end and its golden result; the events after the
+//! last query end form a final window. Every level consumes events one at a time
+//! ([`LevelModel::event`]) and ends in a common [`LevelResult`].
+
+use crate::analytic::AnalyticModel;
+use crate::arch::{Arch, Machine};
+use crate::effects::{EffectScan, Effects, EffectsChoice};
+use crate::error::SimError;
+use crate::machine::MachineModel;
+use crate::o2::{check_spec, first_difference};
+use crate::report::{nearest_rank, Report};
+use crate::sampled::SampledModel;
+use occsim_traces::golden::FunctionalModel;
+use occsim_traces::state::MAX_VIEWPORT_SIDE;
+use occsim_traces::{Event, Fragment, QueryMode, QueryResult};
+use serde::Serialize;
+use std::fmt::Write as _;
+
+/// A level of the ladder.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fidelity {
+    Functional,
+    Analytic,
+    /// The cycle model on every `every`-th window (`every` >= 1).
+    Sampled {
+        every: u32,
+    },
+    Cycle,
+    Rtl,
+}
+
+impl std::fmt::Display for Fidelity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Fidelity::Functional => write!(f, "functional"),
+            Fidelity::Analytic => write!(f, "analytic"),
+            Fidelity::Sampled { every } => write!(f, "sampled:{every}"),
+            Fidelity::Cycle => write!(f, "cycle"),
+            Fidelity::Rtl => write!(f, "rtl"),
+        }
+    }
+}
+
+/// A level name that does not parse.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum FidelityParseError {
+    #[error("unknown fidelity level '{0}' (functional, analytic, sampled:K, cycle, rtl)")]
+    Unknown(String),
+    #[error("'{0}': K in sampled:K must be a whole number from 1 to 4294967295")]
+    BadEvery(String),
+}
+
+impl std::str::FromStr for Fidelity {
+    type Err = FidelityParseError;
+    fn from_str(text: &str) -> Result<Fidelity, FidelityParseError> {
+        match text {
+            "functional" => Ok(Fidelity::Functional),
+            "analytic" => Ok(Fidelity::Analytic),
+            "cycle" => Ok(Fidelity::Cycle),
+            "rtl" => Ok(Fidelity::Rtl),
+            _ => match text.strip_prefix("sampled:") {
+                Some(k) => match k.parse::<u32>() {
+                    Ok(every) if every >= 1 => Ok(Fidelity::Sampled { every }),
+                    _ => Err(FidelityParseError::BadEvery(text.to_string())),
+                },
+                None => Err(FidelityParseError::Unknown(text.to_string())),
+            },
+        }
+    }
+}
+
+impl Serialize for Fidelity {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.collect_str(self)
+    }
+}
+
+/// One query as a level saw it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct QueryOutcome {
+    pub id: u32,
+    pub mode: QueryMode,
+    pub fragments: u64,
+    /// The value a GL program reads ([`QueryResult::value`]).
+    pub value: u64,
+    /// Predicted or simulated latency in cycles; None at the functional level.
+    pub latency_cycles: Option<u64>,
+}
+
+/// Windows the sampled level simulated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+pub struct SampledWindows {
+    pub simulated: u64,
+    pub total: u64,
+}
+
+/// What a level produced, in the same shape at every level.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LevelResult {
+    pub level: Fidelity,
+    pub machine: String,
+    pub fragments: u64,
+    pub primitives: u64,
+    /// Queries compared with a golden result stored in the stream.
+    pub checked_queries: u64,
+    /// Predicted (or simulated) cycles of the whole run; None at the functional level.
+    pub total_cycles: Option<u64>,
+    pub latency_mean_cycles: Option<f64>,
+    /// Nearest-rank 95th percentile of the query latencies.
+    pub latency_p95_cycles: Option<u64>,
+    /// The effect models the cycle model built (cycle and sampled levels).
+    pub effects: Option<Effects>,
+    pub sampled_windows: Option<SampledWindows>,
+    pub queries: Vec<QueryOutcome>,
+    /// The full cycle-level report (cycle level only).
+    #[serde(skip)]
+    pub report: Option<Report>,
+}
+
+impl LevelResult {
+    /// Set the run's cycles and derive the latency statistics from the queries' latencies.
+    pub(crate) fn set_timing(&mut self, total_cycles: u64) {
+        self.total_cycles = Some(total_cycles);
+        let mut latencies: Vec<u64> = self
+            .queries
+            .iter()
+            .filter_map(|q| q.latency_cycles)
+            .collect();
+        latencies.sort_unstable();
+        self.latency_mean_cycles = Some(if latencies.is_empty() {
+            0.0
+        } else {
+            latencies.iter().sum::<u64>() as f64 / latencies.len() as f64
+        });
+        self.latency_p95_cycles = Some(nearest_rank(&latencies, 95));
+    }
+
+    /// From a cycle-level report.
+    fn from_report(report: Report, effects: Effects) -> LevelResult {
+        let queries = report
+            .queries
+            .iter()
+            .map(|q| {
+                let passed: u64 = q.tiles.iter().map(|t| t.nohc).sum();
+                QueryOutcome {
+                    id: q.id,
+                    mode: q.mode,
+                    fragments: q.fragments,
+                    value: if q.mode == QueryMode::Any {
+                        (passed > 0) as u64
+                    } else {
+                        passed
+                    },
+                    latency_cycles: Some(q.latency_cycles),
+                }
+            })
+            .collect();
+        let mut result = LevelResult {
+            level: Fidelity::Cycle,
+            machine: report.machine.clone(),
+            fragments: report.summary.fragments,
+            primitives: report.summary.primitives,
+            checked_queries: report.summary.checked_queries,
+            total_cycles: None,
+            latency_mean_cycles: None,
+            latency_p95_cycles: None,
+            effects: Some(effects),
+            sampled_windows: None,
+            queries,
+            report: None,
+        };
+        result.set_timing(report.summary.cycles);
+        result.report = Some(report);
+        result
+    }
+
+    /// A short text form (what `occsim replay --fidelity` prints below the cycle level).
+    pub fn to_text(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(out, "level: {} on {}", self.level, self.machine);
+        let _ = writeln!(
+            out,
+            "fragments: {}  primitives: {}  queries: {} ({} checked against golden results)",
+            self.fragments,
+            self.primitives,
+            self.queries.len(),
+            self.checked_queries
+        );
+        match (
+            self.total_cycles,
+            self.latency_mean_cycles,
+            self.latency_p95_cycles,
+        ) {
+            (Some(total), Some(mean), Some(p95)) => {
+                let _ = writeln!(out, "predicted cycles: {total}");
+                let _ = writeln!(out, "query latency: mean {mean:.1}  p95 {p95} cycles");
+            }
+            _ => {
+                let _ = writeln!(
+                    out,
+                    "predicted cycles: none (the functional level has no time)"
+                );
+            }
+        }
+        if let Some(windows) = self.sampled_windows {
+            let _ = writeln!(
+                out,
+                "sampled windows: {} of {} simulated",
+                windows.simulated, windows.total
+            );
+        }
+        if let Some(effects) = self.effects {
+            let _ = writeln!(out, "active effects: {}", effects.active_names());
+        }
+        out
+    }
+}
+
+/// The functional model with the stream checks every level shares: fragments inside the
+/// viewport, well-formed queries, results equal to the golden results stored in the stream.
+pub struct FunctionalCore {
+    pub(crate) functional: FunctionalModel,
+    width: u32,
+    height: u32,
+    events: u64,
+    open: Option<u32>,
+    open_fragments: u64,
+    awaiting_golden: Option<QueryResult>,
+    queries: Vec<QueryOutcome>,
+    fragments: u64,
+    primitives: u64,
+    checked_queries: u64,
+}
+
+impl FunctionalCore {
+    pub fn new(width: u32, height: u32) -> Result<FunctionalCore, SimError> {
+        if !(1..=MAX_VIEWPORT_SIDE).contains(&width) || !(1..=MAX_VIEWPORT_SIDE).contains(&height) {
+            return Err(SimError::Viewport {
+                width,
+                height,
+                max: MAX_VIEWPORT_SIDE,
+            });
+        }
+        Ok(FunctionalCore {
+            functional: FunctionalModel::new(width, height),
+            width,
+            height,
+            events: 0,
+            open: None,
+            open_fragments: 0,
+            awaiting_golden: None,
+            queries: Vec::new(),
+            fragments: 0,
+            primitives: 0,
+            checked_queries: 0,
+        })
+    }
+
+    /// Reject a fragment outside the viewport (the next event's index).
+    #[inline]
+    pub(crate) fn check_fragment(&self, fragment: &Fragment) -> Result<(), SimError> {
+        if fragment.x as u32 >= self.width || fragment.y as u32 >= self.height {
+            return Err(SimError::FragmentOutside {
+                event: self.events,
+                x: fragment.x,
+                y: fragment.y,
+                width: self.width,
+                height: self.height,
+            });
+        }
+        Ok(())
+    }
+
+    /// Apply a fragment already checked by [`Self::check_fragment`].
+    #[inline]
+    pub(crate) fn apply_fragment(&mut self, fragment: Fragment) {
+        self.events += 1;
+        self.fragments += 1;
+        self.open_fragments += 1;
+        self.functional.fragment(fragment);
+    }
+
+    /// Apply one event; returns the result of a query that ended with it.
+    pub fn event(&mut self, event: &Event) -> Result<Option<QueryResult>, SimError> {
+        let index = self.events;
+        match event {
+            Event::Fragment(fragment) => {
+                self.check_fragment(fragment)?;
+                self.apply_fragment(*fragment);
+                return Ok(None);
+            }
+            Event::Primitive => self.primitives += 1,
+            Event::QueryBegin(spec) => {
+                check_spec(spec, index, self.open)?;
+                self.open = Some(spec.id);
+                self.open_fragments = 0;
+            }
+            Event::QueryEnd => {
+                self.open
+                    .take()
+                    .ok_or(SimError::EndWithoutBegin { event: index })?;
+            }
+            Event::QueryResult(golden) => {
+                self.events += 1;
+                let simulated =
+                    self.awaiting_golden
+                        .take()
+                        .ok_or(SimError::ResultWithoutQuery {
+                            event: index,
+                            id: golden.id,
+                        })?;
+                if let Some((field, simulated_value, golden_value)) =
+                    first_difference(&simulated, golden, u64::MAX)
+                {
+                    return Err(SimError::Mismatch {
+                        id: simulated.id,
+                        index: self.queries.len() - 1,
+                        field,
+                        simulated: simulated_value,
+                        golden: golden_value,
+                    });
+                }
+                self.checked_queries += 1;
+                return Ok(None);
+            }
+            _ => {}
+        }
+        self.events += 1;
+        let ended = self.functional.event(event);
+        if let Some(result) = &ended {
+            self.queries.push(QueryOutcome {
+                id: result.id,
+                mode: result.mode,
+                fragments: self.open_fragments,
+                value: result.value(),
+                latency_cycles: None,
+            });
+            self.awaiting_golden = Some(result.clone());
+        }
+        Ok(ended)
+    }
+
+    /// The mode of the `index`-th query that ended.
+    pub(crate) fn query_mode(&self, index: usize) -> QueryMode {
+        self.queries[index].mode
+    }
+
+    /// The result without timing (the functional level's answer).
+    pub fn finish(self) -> Result<LevelResult, SimError> {
+        if let Some(id) = self.open {
+            return Err(SimError::OpenAtEnd { id });
+        }
+        Ok(LevelResult {
+            level: Fidelity::Functional,
+            machine: String::new(),
+            fragments: self.fragments,
+            primitives: self.primitives,
+            checked_queries: self.checked_queries,
+            total_cycles: None,
+            latency_mean_cycles: None,
+            latency_p95_cycles: None,
+            effects: None,
+            sampled_windows: None,
+            queries: self.queries,
+            report: None,
+        })
+    }
+}
+
+/// A model replaying a stream at one level.
+pub enum LevelModel {
+    Functional(Box<FunctionalCore>),
+    Analytic(Box<AnalyticModel>),
+    Sampled(Box<SampledModel>),
+    Cycle(Box<MachineModel>, Effects),
+}
+
+impl LevelModel {
+    /// The model of `level` for the machine `arch` names on a `width` x `height` viewport,
+    /// building only `effects` (cycle and sampled levels).
+    pub fn new(
+        level: Fidelity,
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+    ) -> Result<LevelModel, SimError> {
+        let machine = arch.machine();
+        Ok(match level {
+            Fidelity::Functional => {
+                LevelModel::Functional(Box::new(FunctionalCore::new(width, height)?))
+            }
+            Fidelity::Analytic => match machine {
+                Machine::O2 => {
+                    LevelModel::Analytic(Box::new(AnalyticModel::new(&arch.o2()?, width, height)?))
+                }
+                Machine::Ir => return Err(level_not_built(level, machine)),
+            },
+            Fidelity::Sampled { every } => match machine {
+                Machine::O2 => LevelModel::Sampled(Box::new(SampledModel::new(
+                    arch, width, height, effects, every,
+                )?)),
+                Machine::Ir => return Err(level_not_built(level, machine)),
+            },
+            Fidelity::Cycle => LevelModel::Cycle(
+                Box::new(MachineModel::with_effects(arch, width, height, effects)?),
+                effects,
+            ),
+            // The rtl level: wired to the rtl-model crate in a later change.
+            Fidelity::Rtl => return Err(SimError::RtlNotBuilt),
+        })
+    }
+
+    /// Replay one event.
+    #[inline]
+    pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        match self {
+            LevelModel::Functional(core) => core.event(event).map(|_| ()),
+            LevelModel::Analytic(model) => model.event(event),
+            LevelModel::Sampled(model) => model.event(event),
+            LevelModel::Cycle(machine, _) => machine.event(event),
+        }
+    }
+
+    /// End the replay.
+    pub fn finish(self, arch: &Arch) -> Result<LevelResult, SimError> {
+        let name = arch.machine().name().to_string();
+        let mut result = match self {
+            LevelModel::Functional(core) => core.finish()?,
+            LevelModel::Analytic(model) => model.finish()?,
+            LevelModel::Sampled(model) => model.finish()?,
+            LevelModel::Cycle(machine, effects) => {
+                LevelResult::from_report(machine.finish()?, effects)
+            }
+        };
+        result.machine = name;
+        Ok(result)
+    }
+}
+
+fn level_not_built(level: Fidelity, machine: Machine) -> SimError {
+    SimError::LevelNotBuilt {
+        level: level.to_string(),
+        machine: machine.name().to_string(),
+    }
+}
+
+/// The effects to build for `events` on `arch`: every one, or those a scan finds observable.
+pub fn choose_effects(
+    choice: EffectsChoice,
+    arch: &Arch,
+    width: u32,
+    height: u32,
+    events: &[Event],
+) -> Result<Effects, SimError> {
+    Ok(match choice {
+        EffectsChoice::All => Effects::ALL,
+        EffectsChoice::Auto => match arch.machine() {
+            Machine::O2 => {
+                let mut scan = EffectScan::new(&arch.o2()?, width, height);
+                events.iter().for_each(|event| scan.event(event));
+                scan.finish()
+            }
+            // The InfiniteReality-like machine always builds every model it has.
+            Machine::Ir => Effects::ALL,
+        },
+    })
+}
+
+/// Replay `events` at `level` (effects chosen by `choice`) and return the level's result.
+pub fn run_level(
+    level: Fidelity,
+    arch: &Arch,
+    width: u32,
+    height: u32,
+    choice: EffectsChoice,
+    events: &[Event],
+) -> Result<LevelResult, SimError> {
+    let effects = choose_effects(choice, arch, width, height, events)?;
+    let mut model = LevelModel::new(level, arch, width, height, effects)?;
+    for event in events {
+        model.event(event)?;
+    }
+    model.finish(arch)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn levels_parse_and_print_back() {
+        for text in [
+            "functional",
+            "analytic",
+            "sampled:1",
+            "sampled:10",
+            "cycle",
+            "rtl",
+        ] {
+            let level: Fidelity = text.parse().unwrap();
+            assert_eq!(level.to_string(), text);
+        }
+        assert_eq!(
+            "sampled:7".parse::<Fidelity>(),
+            Ok(Fidelity::Sampled { every: 7 })
+        );
+    }
+
+    #[test]
+    fn bad_levels_say_what_is_allowed() {
+        for bad in [
+            "sampled:0",
+            "sampled:",
+            "sampled:-3",
+            "sampled:x",
+            "sampled:99999999999",
+        ] {
+            let error = bad.parse::<Fidelity>().unwrap_err();
+            assert_eq!(error, FidelityParseError::BadEvery(bad.to_string()));
+            assert!(error.to_string().contains("from 1"), "{error}");
+        }
+        let error = "exact".parse::<Fidelity>().unwrap_err();
+        assert!(error
+            .to_string()
+            .contains("functional, analytic, sampled:K, cycle, rtl"));
+        assert!("Cycle".parse::<Fidelity>().is_err(), "names are lower case");
+    }
+
+    #[test]
+    fn the_rtl_level_is_refused_clearly() {
+        let arch = Arch::builtin("o2").unwrap();
+        let error = LevelModel::new(Fidelity::Rtl, &arch, 8, 8, Effects::ALL)
+            .err()
+            .unwrap();
+        assert_eq!(error.to_string(), "rtl level not built in this build");
+    }
+}

@@ -1,0 +1,369 @@
+//! The sampled level (`sampled:K`): the cycle model on every K-th window, the rest
+//! extrapolated.
+//!
+//! Windows are the runs of events between query ends ([`crate::fidelity`]): a query is the
+//! unit whose latency the user asks about, and a frame of the demo holds hundreds of them, so
+//! windows sample far more finely than frames would. Window `w` (from 0) is simulated when
+//! `w % K == 0`.
+//!
+//! - Results: the functional model runs on every event, so every query's result is exact
+//!   (and checked against the golden results in the stream).
+//! - Cool-down: after a sampled window the machine runs on for `L + 1` fragments
+//!   (`L = min(prefetch_depth_fragments, fifo_raster_to_depth_entries)`): the prefetch
+//!   issues those fragments' depth reads before the query's records reach the in-order port,
+//!   so the query's latency is final only then.
+//! - Warm-up: the cycle model also runs the window before each sampled one. A machine starts
+//!   (when none is running) with the functional model's render state and depth buffer at
+//!   that window's start, so its depth tests, writes, hits and counts are right, but with
+//!   empty FIFOs, an idle port and a cold prefetch; it keeps running while the next window
+//!   is sampled or warm-up too, and is dropped at the first window that is neither. For
+//!   K = 1 and K = 2 one machine runs the whole stream.
+//! - A sampled window's cost is the cycle its query's `end` entered the pipe minus that of
+//!   the window before it in the same machine (the final window: the machine's total cycles
+//!   minus that); its query's latency is the machine's.
+//! - Every other window (warm-up ones included) costs `r_c · work`, with
+//!   `work = max(F + setup · P, Σ s)` (the rasterizer's and the OccU's cycles: `s` = OccU
+//!   cycles per fragment of the open query) and `r_c` the ratio of measured cycles to work
+//!   over the sampled (non-final) windows of its class `c` = (its query's mode, `s`), or over
+//!   all sampled windows when none is of its class. Its query's latency is the mean over
+//!   sampled queries of its class, else of its mode, else of all.
+//! - Bias: a machine started at a warm-up window misses whatever backlog the pipe carried
+//!   into that window; one window of warm-up absorbs it unless the warm-up window is shorter
+//!   than the FIFOs. `sampled:1` runs one machine over the whole stream, so it equals `cycle`
+//!   exactly (tested); `sampled:2` too, except that half its costs are extrapolated.
+
+use crate::arch::Arch;
+use crate::effects::Effects;
+use crate::error::SimError;
+use crate::fidelity::{FunctionalCore, LevelResult, SampledWindows};
+use crate::o2::O2Machine;
+use occsim_traces::{Event, QueryMode};
+use std::collections::BTreeMap;
+
+struct Window {
+    fragments: u64,
+    primitives: u64,
+    /// OccU cycles: Σ over fragments of the open query's cycles per fragment (1 outside).
+    occu_cycles: u64,
+    /// OccU cycles per fragment of the open query (None: no query open).
+    service: Option<u64>,
+    /// The window's class: its query's mode code and OccU cycles per fragment.
+    class: Class,
+    /// The window's query ended; it closes before the next event that is not its result.
+    query_ended: bool,
+}
+
+impl Window {
+    fn empty() -> Window {
+        Window {
+            fragments: 0,
+            primitives: 0,
+            occu_cycles: 0,
+            service: None,
+            class: None,
+            query_ended: false,
+        }
+    }
+}
+
+/// Extrapolation classes: (query mode code, OccU cycles per fragment) of a window's query.
+type Class = Option<(u8, u64)>;
+
+/// A closed window, as the extrapolation needs it.
+struct Closed {
+    work: u64,
+    class: Class,
+    /// The index (in the run's queries) and mode of its query, if it had one.
+    query: Option<(usize, QueryMode)>,
+    sampled: bool,
+    last: bool,
+}
+
+/// One cycle-model machine over consecutive simulated windows.
+struct Run {
+    machine: O2Machine,
+    windows: Vec<Closed>,
+    /// Cooling down: fragments still to feed before the machine is finished.
+    cooldown: Option<usize>,
+    /// A query is open in the machine (a cool-down may stop inside one).
+    query_open: bool,
+}
+
+pub struct SampledModel {
+    arch: Arch,
+    width: u32,
+    height: u32,
+    effects: Effects,
+    every: u32,
+    setup_cycles: u64,
+    engines: u64,
+    all_tiles_one_cycle: bool,
+    /// Fragments after a query's end that the machine must see before that query's
+    /// latency is final: the prefetch lookahead + 1.
+    cooldown_fragments: usize,
+    core: FunctionalCore,
+    window: Window,
+    /// Windows closed so far (the index of the current one).
+    windows: u64,
+    run: Option<Run>,
+    sampled: u64,
+    /// Σ measured cycles and Σ work of the sampled, non-final windows, per class.
+    measured_by_class: BTreeMap<Class, (u64, u64)>,
+    /// Per class: Σ latency and count of its sampled queries.
+    latency_by_class: BTreeMap<Class, (u64, u64)>,
+    /// Σ cost of the sampled windows (final included).
+    sampled_cycles: u64,
+    /// Windows to extrapolate.
+    extrapolated: Vec<Closed>,
+    /// Per query (in order): its latency if sampled.
+    latencies: Vec<Option<u64>>,
+}
+
+impl SampledModel {
+    pub fn new(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+        every: u32,
+    ) -> Result<SampledModel, SimError> {
+        let o2 = arch.o2()?;
+        let mut model = SampledModel {
+            arch: arch.clone(),
+            width,
+            height,
+            effects,
+            every: every.max(1),
+            setup_cycles: o2.primitive_setup_cycles,
+            engines: o2.engines as u64,
+            all_tiles_one_cycle: o2.all_tiles_one_cycle,
+            cooldown_fragments: o2
+                .prefetch_depth_fragments
+                .min(o2.fifo_raster_to_depth_entries)
+                + 1,
+            core: FunctionalCore::new(width, height)?,
+            window: Window::empty(),
+            windows: 0,
+            run: None,
+            sampled: 0,
+            measured_by_class: BTreeMap::new(),
+            latency_by_class: BTreeMap::new(),
+            sampled_cycles: 0,
+            extrapolated: Vec::new(),
+            latencies: Vec::new(),
+        };
+        model.start_window()?;
+        Ok(model)
+    }
+
+    fn is_sampled(&self, window: u64) -> bool {
+        window % self.every as u64 == 0
+    }
+
+    /// The current window needs the cycle model: sampled, or the warm-up of a sampled one.
+    fn start_window(&mut self) -> Result<(), SimError> {
+        let w = self.windows;
+        let simulate = self.is_sampled(w) || self.is_sampled(w + 1);
+        if !simulate {
+            if let Some(run) = &mut self.run {
+                run.cooldown.get_or_insert(self.cooldown_fragments);
+            }
+            return Ok(());
+        }
+        if let Some(run) = &mut self.run {
+            run.cooldown = None;
+        } else {
+            let mut machine =
+                O2Machine::with_effects(&self.arch, self.width, self.height, self.effects)?;
+            machine.load_functional_state(
+                self.core.functional.state(),
+                self.core.functional.depth_buffer(),
+            );
+            self.run = Some(Run {
+                machine,
+                windows: Vec::new(),
+                cooldown: None,
+                query_open: false,
+            });
+        }
+        Ok(())
+    }
+
+    /// Feed one event.
+    pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        if self.window.query_ended && !matches!(event, Event::QueryResult(_)) {
+            self.close_window(false);
+            self.window = Window::empty();
+            self.start_window()?;
+        }
+        let window = &mut self.window;
+        match event {
+            Event::Fragment(_) => {
+                window.fragments += 1;
+                window.occu_cycles += window.service.unwrap_or(1);
+            }
+            Event::Primitive => window.primitives += 1,
+            Event::QueryBegin(spec) => {
+                let service = if self.all_tiles_one_cycle {
+                    1
+                } else {
+                    (spec.tiles.len() as u64).div_ceil(self.engines).max(1)
+                };
+                window.service = Some(service);
+                window.class = Some((spec.mode.code(), service));
+            }
+            Event::QueryEnd => {
+                window.query_ended = true;
+                window.service = None;
+            }
+            _ => {}
+        }
+        if let Some(run) = &mut self.run {
+            run.machine.event(event)?;
+            match event {
+                Event::QueryBegin(_) => run.query_open = true,
+                Event::QueryEnd => run.query_open = false,
+                _ => {}
+            }
+            if let (Some(left), Event::Fragment(_)) = (&mut run.cooldown, event) {
+                *left -= 1;
+                if *left == 0 {
+                    self.flush_run()?;
+                }
+            }
+        }
+        if self.core.event(event)?.is_some() {
+            self.latencies.push(None);
+        }
+        Ok(())
+    }
+
+    /// Close the current window: hand it to the running machine's run or to extrapolation.
+    fn close_window(&mut self, last: bool) {
+        let raster = self.window.fragments + self.setup_cycles * self.window.primitives;
+        let query = self
+            .window
+            .query_ended
+            .then(|| self.latencies.len() - 1)
+            .map(|index| (index, self.core.query_mode(index)));
+        let closed = Closed {
+            work: raster.max(self.window.occu_cycles),
+            class: self.window.class,
+            query,
+            sampled: self.is_sampled(self.windows),
+            last,
+        };
+        self.windows += 1;
+        match &mut self.run {
+            Some(run) => run.windows.push(closed),
+            None => self.extrapolated.push(Closed {
+                sampled: false,
+                ..closed
+            }),
+        }
+    }
+
+    /// Finish the running machine and measure its sampled windows.
+    fn flush_run(&mut self) -> Result<(), SimError> {
+        let Some(mut run) = self.run.take() else {
+            return Ok(());
+        };
+        if run.query_open {
+            // A cool-down stopped inside a query: end it (its report is not used).
+            run.machine.event(&Event::QueryEnd)?;
+        }
+        let report = run.machine.finish()?;
+        let mut queries = report.queries.iter();
+        let mut previous_end: Option<u64> = None;
+        for window in run.windows {
+            let query = window.query.and_then(|_| queries.next());
+            if window.sampled {
+                self.sampled += 1;
+                let end = match query {
+                    Some(q) if !window.last => q.end_cycle,
+                    _ => report.summary.cycles,
+                };
+                let cost = end.saturating_sub(previous_end.unwrap_or(0));
+                self.sampled_cycles += cost;
+                if !window.last {
+                    let entry = self.measured_by_class.entry(window.class).or_default();
+                    entry.0 += cost;
+                    entry.1 += window.work;
+                }
+                if let (Some(q), Some((index, _))) = (query, window.query) {
+                    self.latencies[index] = Some(q.latency_cycles);
+                    let entry = self.latency_by_class.entry(window.class).or_default();
+                    entry.0 += q.latency_cycles;
+                    entry.1 += 1;
+                }
+            } else {
+                self.extrapolated.push(window);
+            }
+            previous_end = query.map(|q| q.end_cycle).or(previous_end);
+        }
+        Ok(())
+    }
+
+    pub fn finish(mut self) -> Result<LevelResult, SimError> {
+        self.close_window(true);
+        self.flush_run()?;
+        let (all_cycles, all_work) = self
+            .measured_by_class
+            .values()
+            .fold((0, 0), |(c, w), &(cycles, work)| (c + cycles, w + work));
+        let global_ratio = if all_work == 0 {
+            1.0
+        } else {
+            all_cycles as f64 / all_work as f64
+        };
+        let ratio = |class: &Class| match self.measured_by_class.get(class) {
+            Some(&(cycles, work)) if work > 0 => cycles as f64 / work as f64,
+            _ => global_ratio,
+        };
+        let modes: Vec<QueryMode> = (0..self.latencies.len())
+            .map(|index| self.core.query_mode(index))
+            .collect();
+        let mean_of_mode = |mode: Option<QueryMode>| {
+            let pick: Vec<u64> = self
+                .latencies
+                .iter()
+                .zip(&modes)
+                .filter(|(_, m)| mode.map_or(true, |mode| **m == mode))
+                .filter_map(|(l, _)| *l)
+                .collect();
+            (!pick.is_empty()).then(|| pick.iter().sum::<u64>() as f64 / pick.len() as f64)
+        };
+        let mut total = self.sampled_cycles as f64;
+        let mut filled = self.latencies.clone();
+        for window in &self.extrapolated {
+            total += ratio(&window.class) * window.work as f64;
+            if let Some((index, mode)) = window.query {
+                let latency = match self.latency_by_class.get(&window.class) {
+                    Some(&(sum, count)) if count > 0 => Some(sum as f64 / count as f64),
+                    _ => None,
+                }
+                .or_else(|| mean_of_mode(Some(mode)))
+                .or_else(|| mean_of_mode(None))
+                .unwrap_or(crate::o2::MIN_QUERY_LATENCY_CYCLES as f64);
+                filled[index] = Some(latency.round() as u64);
+                // The final window's drain: its query's latency.
+                if window.last {
+                    total += latency;
+                }
+            }
+        }
+        let windows = SampledWindows {
+            simulated: self.sampled,
+            total: self.windows,
+        };
+        let mut result = self.core.finish()?;
+        for (query, latency) in result.queries.iter_mut().zip(filled) {
+            query.latency_cycles = latency;
+        }
+        result.level = crate::fidelity::Fidelity::Sampled { every: self.every };
+        result.effects = Some(self.effects);
+        result.sampled_windows = Some(windows);
+        result.set_timing(total.round() as u64);
+        Ok(result)
+    }
+}

@@ -1,0 +1,398 @@
+//! The fidelity ladder and the effects choice on built-in scenes and random streams:
+//! exact results at every level, finite predictions, and `--effects all` = automatic.
+
+use occsim_sim::effects::{observe, Effects, EffectsChoice};
+use occsim_sim::fidelity::{run_level, Fidelity};
+use occsim_sim::{Arch, MachineModel, Report};
+use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
+use occsim_traces::golden::{FunctionalModel, GoldenModel};
+use occsim_traces::scene::{parse_scene, Command};
+use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QuerySpec, Rect};
+use proptest::prelude::*;
+
+/// The events of a scene, with the golden results, and its viewport.
+fn scene_events(text: &str) -> (Vec<Event>, u32, u32) {
+    let lines = parse_scene(text, "scene").expect("built-in scenes parse");
+    let Command::Viewport { width, height } = lines[0].command else {
+        panic!("a scene starts with its viewport");
+    };
+    let mut golden = GoldenModel::new(width, height);
+    let mut events = Vec::new();
+    for line in &lines {
+        golden.execute(&line.command, &mut events);
+    }
+    (events, width, height)
+}
+
+fn small_demo() -> (Vec<Event>, u32, u32) {
+    scene_events(&demo_scene(&DemoOptions {
+        width: 320,
+        height: 256,
+        frames: 1,
+        lots_per_side: 8,
+        ..DemoOptions::default()
+    }))
+}
+
+fn small_random() -> (Vec<Event>, u32, u32) {
+    scene_events(&random_scene(&RandomOptions {
+        width: 256,
+        height: 192,
+        triangles: 600,
+        queries: 60,
+        ..RandomOptions::default()
+    }))
+}
+
+/// A stream of events and its viewport width and height.
+type Stream = (Vec<Event>, u32, u32);
+
+fn builtin_traces() -> Vec<(&'static str, Stream)> {
+    vec![
+        ("hardcases", scene_events(HARDCASES)),
+        ("demo", small_demo()),
+        ("random", small_random()),
+    ]
+}
+
+fn replay(arch: &Arch, width: u32, height: u32, effects: Effects, events: &[Event]) -> Report {
+    let mut machine = MachineModel::with_effects(arch, width, height, effects).unwrap();
+    for event in events {
+        machine.event(event).unwrap();
+    }
+    machine.finish().unwrap()
+}
+
+/// The golden values of every query in the stream, in order (from the stored results).
+fn golden_values(events: &[Event]) -> Vec<u64> {
+    events
+        .iter()
+        .filter_map(|e| match e {
+            Event::QueryResult(r) => Some(r.value()),
+            _ => None,
+        })
+        .collect()
+}
+
+fn archs() -> Vec<Arch> {
+    let mut few_engines = Arch::builtin("o2").unwrap();
+    few_engines.set("engines=1").unwrap();
+    let mut one_cycle = Arch::builtin("o2").unwrap();
+    one_cycle.set("all_tiles_one_cycle=true").unwrap();
+    vec![Arch::builtin("o2").unwrap(), few_engines, one_cycle]
+}
+
+#[test]
+fn every_level_gives_the_golden_values_and_finite_predictions() {
+    let arch = Arch::builtin("o2").unwrap();
+    for (name, (events, width, height)) in builtin_traces() {
+        let golden = golden_values(&events);
+        assert!(!golden.is_empty(), "{name} has queries");
+        for level in ["functional", "analytic", "sampled:1", "sampled:3", "cycle"] {
+            let level: Fidelity = level.parse().unwrap();
+            let result = run_level(level, &arch, width, height, EffectsChoice::Auto, &events)
+                .unwrap_or_else(|e| panic!("{name} at {level}: {e}"));
+            let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
+            assert_eq!(values, golden, "{name} at {level}");
+            assert_eq!(result.checked_queries, golden.len() as u64);
+            match level {
+                Fidelity::Functional => {
+                    assert_eq!(result.total_cycles, None);
+                    assert!(result.queries.iter().all(|q| q.latency_cycles.is_none()));
+                }
+                _ => {
+                    let total = result.total_cycles.unwrap();
+                    assert!(
+                        total >= result.fragments,
+                        "{name} at {level}: {total} cycles"
+                    );
+                    assert!(result.latency_mean_cycles.unwrap().is_finite());
+                    assert!(result
+                        .queries
+                        .iter()
+                        .all(|q| q.latency_cycles.is_some_and(|l| l >= 5)));
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn sampled_every_window_equals_cycle_on_builtin_traces() {
+    // sampled:1 runs one machine over the whole stream and measures every window.
+    let arch = Arch::builtin("o2").unwrap();
+    for (name, (events, width, height)) in builtin_traces() {
+        let cycle = run_level(
+            Fidelity::Cycle,
+            &arch,
+            width,
+            height,
+            EffectsChoice::Auto,
+            &events,
+        )
+        .unwrap();
+        let sampled = run_level(
+            Fidelity::Sampled { every: 1 },
+            &arch,
+            width,
+            height,
+            EffectsChoice::Auto,
+            &events,
+        )
+        .unwrap();
+        assert_eq!(sampled.total_cycles, cycle.total_cycles, "{name}");
+        assert_eq!(sampled.queries, cycle.queries, "{name}");
+        let windows = sampled.sampled_windows.unwrap();
+        assert_eq!(windows.simulated, windows.total, "{name}");
+    }
+}
+
+#[test]
+fn sampled_windows_are_counted_and_every_kth_is_simulated() {
+    let arch = Arch::builtin("o2").unwrap();
+    let (events, width, height) = small_random();
+    let queries = golden_values(&events).len() as u64;
+    let level = Fidelity::Sampled { every: 4 };
+    let result = run_level(level, &arch, width, height, EffectsChoice::All, &events).unwrap();
+    let windows = result.sampled_windows.unwrap();
+    // One window per query end, plus the tail after the last (the random scene ends with one).
+    assert!(windows.total == queries || windows.total == queries + 1);
+    assert_eq!(windows.simulated, windows.total.div_ceil(4));
+}
+
+#[test]
+fn one_window_sampled_at_every_level_of_k_equals_cycle() {
+    // A stream with a single query and nothing after it is one window: sampled:K simulates
+    // it from the same reset state the cycle level starts in.
+    let (width, height) = (64, 48);
+    let mut golden = FunctionalModel::new(width, height);
+    let mut events = vec![Event::Clear, Event::DepthFunc(DepthFunc::Less)];
+    for y in 0..40u16 {
+        events.push(Event::Primitive);
+        for x in 0..60u16 {
+            events.push(Event::Fragment(Fragment {
+                x,
+                y,
+                z: 1000 + x as u32,
+            }));
+        }
+    }
+    events.push(Event::QueryBegin(QuerySpec {
+        id: 7,
+        mode: QueryMode::Brief,
+        buffer_entries: 8,
+        tiles: (0..12).map(|i| Rect::new(i * 5, 0, 5, 48)).collect(),
+    }));
+    for y in 0..48u16 {
+        for x in 0..64u16 {
+            events.push(Event::Fragment(Fragment {
+                x,
+                y,
+                z: 900 + y as u32 * 3,
+            }));
+        }
+    }
+    events.push(Event::QueryEnd);
+    let mut stream = Vec::new();
+    for event in events {
+        let result = golden.event(&event);
+        stream.push(event);
+        if let Some(result) = result {
+            stream.push(Event::QueryResult(result));
+        }
+    }
+    let arch = Arch::builtin("o2").unwrap();
+    let cycle = run_level(
+        Fidelity::Cycle,
+        &arch,
+        width,
+        height,
+        EffectsChoice::All,
+        &stream,
+    )
+    .unwrap();
+    for every in [1, 5] {
+        let sampled = run_level(
+            Fidelity::Sampled { every },
+            &arch,
+            width,
+            height,
+            EffectsChoice::All,
+            &stream,
+        )
+        .unwrap();
+        assert_eq!(sampled.total_cycles, cycle.total_cycles);
+        assert_eq!(sampled.queries, cycle.queries);
+    }
+}
+
+#[test]
+fn analytic_reaches_the_minimum_latency_on_an_idle_pipe() {
+    // One samples query over no fragments: the records (8 words) fit one port cycle.
+    let arch = Arch::builtin("o2").unwrap();
+    let spec = QuerySpec {
+        id: 1,
+        mode: QueryMode::Samples,
+        buffer_entries: 8,
+        tiles: vec![Rect::new(0, 0, 16, 16)],
+    };
+    let events = [Event::QueryBegin(spec), Event::QueryEnd];
+    let analytic = run_level(
+        Fidelity::Analytic,
+        &arch,
+        16,
+        16,
+        EffectsChoice::Auto,
+        &events,
+    )
+    .unwrap();
+    let cycle = run_level(Fidelity::Cycle, &arch, 16, 16, EffectsChoice::Auto, &events).unwrap();
+    assert_eq!(analytic.queries[0].latency_cycles, Some(5));
+    assert_eq!(cycle.queries[0].latency_cycles, Some(5));
+}
+
+#[test]
+fn effects_forced_and_automatic_give_the_same_report_on_builtin_traces() {
+    for (name, (events, width, height)) in builtin_traces() {
+        for arch in archs() {
+            let automatic = observe(&arch.o2().unwrap(), width, height, &events);
+            let forced = replay(&arch, width, height, Effects::ALL, &events);
+            let chosen = replay(&arch, width, height, automatic, &events);
+            assert_eq!(chosen, forced, "{name}: effects {automatic:?}");
+        }
+    }
+}
+
+#[test]
+fn the_scan_switches_effects_off_on_the_builtin_traces() {
+    // Hard cases: a 64x64 viewport inside one 128x128 page; no verbose query.
+    let arch = Arch::builtin("o2").unwrap().o2().unwrap();
+    let (events, width, height) = scene_events(HARDCASES);
+    let effects = observe(&arch, width, height, &events);
+    assert!(!effects.page_model);
+    assert!(effects.depth_write_traffic);
+    let (events, width, height) = small_random();
+    let effects = observe(&arch, width, height, &events);
+    assert!(
+        !effects.verbose_hit_writes,
+        "the random scene has samples queries only"
+    );
+    assert!(effects.page_model);
+}
+
+/// A small deterministic generator (xorshift64*).
+struct Rng(u64);
+
+impl Rng {
+    fn below(&mut self, n: u64) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) % n
+    }
+}
+
+/// A random stream over a `width` x `height` viewport with state changes and every mode.
+fn random_stream(seed: u64, width: u32, height: u32) -> Vec<Event> {
+    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut golden = FunctionalModel::new(width, height);
+    let mut events = Vec::new();
+    let mut push = |event: Event, events: &mut Vec<Event>| {
+        let result = golden.event(&event);
+        events.push(event);
+        if let Some(result) = result {
+            events.push(Event::QueryResult(result));
+        }
+    };
+    for query in 0..(1 + rng.below(6)) {
+        match rng.below(5) {
+            0 => push(Event::Clear, &mut events),
+            1 => push(
+                Event::DepthFunc(DepthFunc::ALL[rng.below(8) as usize]),
+                &mut events,
+            ),
+            2 => push(Event::DepthMask(rng.below(3) == 0), &mut events),
+            3 => push(Event::DepthTest(rng.below(4) != 0), &mut events),
+            _ => {}
+        }
+        let in_query = rng.below(4) != 0;
+        if in_query {
+            let mode = QueryMode::ALL[rng.below(4) as usize];
+            let tiles = match mode {
+                QueryMode::Samples | QueryMode::Any => vec![Rect::new(0, 0, width, height)],
+                _ => (0..1 + rng.below(12))
+                    .map(|_| {
+                        let x = rng.below(width as u64) as u32;
+                        let y = rng.below(height as u64) as u32;
+                        Rect::new(
+                            x,
+                            y,
+                            1 + rng.below((width - x) as u64) as u32,
+                            1 + rng.below((height - y) as u64) as u32,
+                        )
+                    })
+                    .collect(),
+            };
+            push(
+                Event::QueryBegin(QuerySpec {
+                    id: query as u32,
+                    mode,
+                    buffer_entries: 8 + rng.below(10) as u32,
+                    tiles,
+                }),
+                &mut events,
+            );
+        }
+        for _ in 0..rng.below(5) {
+            push(Event::Primitive, &mut events);
+            let y = rng.below(height as u64) as u16;
+            let x0 = rng.below(width as u64) as u16;
+            let z = rng.below(64) as u32 * 1000;
+            for x in x0..(x0 + 1 + rng.below(40) as u16).min(width as u16) {
+                push(Event::Fragment(Fragment { x, y, z }), &mut events);
+            }
+        }
+        if in_query {
+            push(Event::QueryEnd, &mut events);
+        }
+    }
+    events
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn effects_forced_and_automatic_agree_on_random_streams(
+        seed in any::<u64>(),
+        engines in 1u64..6,
+        small_viewport in any::<bool>(),
+    ) {
+        let (width, height) = if small_viewport { (100, 90) } else { (300, 140) };
+        let events = random_stream(seed, width, height);
+        let mut arch = Arch::builtin("o2").unwrap();
+        arch.set(&format!("engines={engines}")).unwrap();
+        let automatic = observe(&arch.o2().unwrap(), width, height, &events);
+        let forced = replay(&arch, width, height, Effects::ALL, &events);
+        let chosen = replay(&arch, width, height, automatic, &events);
+        prop_assert_eq!(chosen, forced);
+    }
+
+    #[test]
+    fn every_level_counts_exactly_on_random_streams(seed in any::<u64>()) {
+        let events = random_stream(seed, 64, 64);
+        let arch = Arch::builtin("o2").unwrap();
+        let golden = golden_values(&events);
+        for level in [Fidelity::Functional, Fidelity::Analytic, Fidelity::Sampled { every: 2 }, Fidelity::Cycle] {
+            let result = run_level(level, &arch, 64, 64, EffectsChoice::Auto, &events).unwrap();
+            let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
+            prop_assert_eq!(&values, &golden);
+        }
+        let cycle = run_level(Fidelity::Cycle, &arch, 64, 64, EffectsChoice::Auto, &events).unwrap();
+        let every_window =
+            run_level(Fidelity::Sampled { every: 1 }, &arch, 64, 64, EffectsChoice::Auto, &events)
+                .unwrap();
+        prop_assert_eq!(every_window.total_cycles, cycle.total_cycles);
+        prop_assert_eq!(every_window.queries, cycle.queries);
+    }
+}

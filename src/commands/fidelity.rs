@@ -1,0 +1,357 @@
+//! `occsim fidelity TRACE`: what accuracy costs. Runs every level of the fidelity ladder on
+//! the same trace and prints, per level, wall time, fragments per second, predicted cycles,
+//! query latency and the error against the reference level (`cycle`; `rtl` is not built).
+//! Also [`FidelityArg`], the `--fidelity`/`--effects` options replay shares (and sweep and
+//! latency may add).
+
+use super::arch::ArchSelection;
+use crate::plot::{LineChart, Scale, Series};
+use anyhow::Context;
+use occsim_sim::arch::Machine;
+use occsim_sim::effects::{EffectScan, Effects, EffectsChoice};
+use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult};
+use occsim_sim::{Arch, SimError};
+use occsim_traces::golden::EventSink;
+use occsim_traces::trace::TraceReader;
+use occsim_traces::Event;
+use serde::Serialize;
+use std::io::BufReader;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// `--fidelity LEVEL --effects auto|all`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct FidelityArg {
+    /// Level of detail: functional, analytic, sampled:K (cycle model on every K-th query
+    /// window), cycle or rtl.
+    #[arg(long, value_name = "LEVEL", default_value = "cycle")]
+    pub fidelity: Fidelity,
+    /// Effect models: auto (only those the trace can observe: same results and cycles) or
+    /// all.
+    #[arg(long, value_name = "auto|all", default_value = "auto")]
+    pub effects: EffectsChoice,
+}
+
+#[derive(clap::Args)]
+pub struct FidelityArgs {
+    /// The fragment trace (.occt).
+    pub trace: PathBuf,
+    #[command(flatten)]
+    pub arch: ArchSelection,
+    /// K of the sampled level: the cycle model runs on every K-th query window.
+    #[arg(long, value_name = "K", default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
+    pub sample_every: u32,
+    /// Effect models of the cycle and sampled levels.
+    #[arg(long, value_name = "auto|all", default_value = "auto")]
+    pub effects: EffectsChoice,
+    /// Draw error against wall time (log-log) as SVG.
+    #[arg(long, value_name = "F.svg")]
+    pub plot: Option<PathBuf>,
+    /// Print the table as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Open a trace for reading.
+pub fn open_trace(path: &Path) -> anyhow::Result<TraceReader<BufReader<std::fs::File>>> {
+    let name = path.display();
+    let file = std::fs::File::open(path).with_context(|| format!("cannot open trace {name}"))?;
+    TraceReader::new(BufReader::with_capacity(1 << 20, file))
+        .with_context(|| format!("{name}: not a readable occsim trace"))
+}
+
+struct ScanSink(EffectScan);
+
+impl EventSink for ScanSink {
+    #[inline]
+    fn event(&mut self, event: &Event) {
+        self.0.event(event);
+    }
+}
+
+/// The effects to build for the trace at `path` (a first pass over it when `auto`).
+pub fn effects_of_trace(
+    choice: EffectsChoice,
+    arch: &Arch,
+    path: &Path,
+) -> anyhow::Result<Effects> {
+    if choice == EffectsChoice::All {
+        return Ok(Effects::ALL);
+    }
+    let mut reader = open_trace(path)?;
+    let (width, height) = (reader.header().width, reader.header().height);
+    // One scan per machine kind: a new machine adds its arm here.
+    let scan = match arch.machine() {
+        Machine::O2 => EffectScan::new(&arch.o2()?, width, height),
+        // The InfiniteReality-like machine always builds every model it has.
+        Machine::Ir => return Ok(Effects::ALL),
+    };
+    let mut scan = ScanSink(scan);
+    reader
+        .read_into(&mut scan)
+        .with_context(|| format!("{}: cannot read trace", path.display()))?;
+    Ok(scan.0.finish())
+}
+
+/// One row of the table.
+#[derive(Serialize)]
+struct LevelRow {
+    level: String,
+    wall_seconds: Option<f64>,
+    fragments_per_second: Option<f64>,
+    total_cycles: Option<u64>,
+    latency_mean_cycles: Option<f64>,
+    latency_p95_cycles: Option<u64>,
+    /// |predicted - reference| / reference, of the total cycles and the mean latency.
+    cycles_error: Option<f64>,
+    latency_error: Option<f64>,
+    /// Every query's value equals the reference level's.
+    results_exact: Option<bool>,
+    note: Option<String>,
+}
+
+/// Feeds decoded events to a level's model and keeps the first error.
+struct LevelSink {
+    model: LevelModel,
+    error: Option<SimError>,
+}
+
+impl EventSink for LevelSink {
+    #[inline]
+    fn event(&mut self, event: &Event) {
+        if self.error.is_none() {
+            if let Err(error) = self.model.event(event) {
+                self.error = Some(error);
+            }
+        }
+    }
+}
+
+/// Replay the trace at `path` at `level`, streaming it from the file (a demo trace holds
+/// tens of millions of fragments: too many to hold as events).
+pub fn replay_level(
+    level: Fidelity,
+    arch: &Arch,
+    path: &Path,
+    effects: EffectsChoice,
+) -> anyhow::Result<LevelResult> {
+    let name = path.display();
+    // Only the cycle-level models build effects; the others need no scan.
+    let effects = match level {
+        Fidelity::Sampled { .. } | Fidelity::Cycle | Fidelity::Rtl => {
+            effects_of_trace(effects, arch, path)?
+        }
+        Fidelity::Functional | Fidelity::Analytic => Effects::ALL,
+    };
+    let mut reader = open_trace(path)?;
+    let (width, height) = (reader.header().width, reader.header().height);
+    let model = LevelModel::new(level, arch, width, height, effects)
+        .with_context(|| format!("{name}: cannot replay at {level}"))?;
+    let mut sink = LevelSink { model, error: None };
+    while reader
+        .next_block(&mut sink)
+        .with_context(|| format!("{name}: cannot read trace"))?
+    {
+        if let Some(error) = sink.error.take() {
+            return Err(error).with_context(|| format!("{name}: {level}"));
+        }
+    }
+    if let Some(error) = sink.error.take() {
+        return Err(error).with_context(|| format!("{name}: {level}"));
+    }
+    sink.model
+        .finish(arch)
+        .with_context(|| format!("{name}: {level}"))
+}
+
+/// A level's result and wall seconds: the fastest of repeated runs within about 0.3 s
+/// (one run for a large trace). Wall time includes decoding the trace.
+fn timed(
+    level: Fidelity,
+    arch: &Arch,
+    path: &Path,
+    effects: EffectsChoice,
+) -> anyhow::Result<(LevelResult, f64)> {
+    let mut best = f64::INFINITY;
+    let mut spent = 0.0;
+    let mut result = None;
+    for _ in 0..20 {
+        let start = Instant::now();
+        let run = replay_level(level, arch, path, effects)?;
+        let seconds = start.elapsed().as_secs_f64();
+        best = best.min(seconds);
+        spent += seconds;
+        result = Some(run);
+        if spent > 0.3 {
+            break;
+        }
+    }
+    Ok((result.expect("at least one run"), best))
+}
+
+fn relative_error(value: Option<f64>, reference: Option<f64>) -> Option<f64> {
+    match (value, reference) {
+        (Some(v), Some(r)) if r > 0.0 => Some((v - r).abs() / r),
+        (Some(v), Some(_)) => Some(if v == 0.0 { 0.0 } else { 1.0 }),
+        _ => None,
+    }
+}
+
+pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
+    let arch = args.arch.resolve()?;
+    let path = args.trace.display().to_string();
+    let summary = open_trace(&args.trace)?
+        .skip_to_summary()
+        .with_context(|| format!("{path}: cannot read trace"))?;
+    let fragments = summary.fragments as f64;
+    let levels = [
+        Fidelity::Functional,
+        Fidelity::Analytic,
+        Fidelity::Sampled {
+            every: args.sample_every,
+        },
+        Fidelity::Cycle,
+    ];
+    let mut runs = Vec::new();
+    for level in levels {
+        let run = timed(level, &arch, &args.trace, args.effects)?;
+        runs.push((level, run));
+    }
+    let reference = &runs.last().expect("cycle ran").1 .0;
+    let reference_values: Vec<u64> = reference.queries.iter().map(|q| q.value).collect();
+    let mut rows: Vec<LevelRow> = runs
+        .iter()
+        .map(|(level, (result, seconds))| {
+            let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
+            LevelRow {
+                level: level.to_string(),
+                wall_seconds: Some(*seconds),
+                fragments_per_second: Some(fragments / seconds.max(1e-9)),
+                total_cycles: result.total_cycles,
+                latency_mean_cycles: result.latency_mean_cycles,
+                latency_p95_cycles: result.latency_p95_cycles,
+                cycles_error: relative_error(
+                    result.total_cycles.map(|c| c as f64),
+                    reference.total_cycles.map(|c| c as f64),
+                ),
+                latency_error: relative_error(
+                    result.latency_mean_cycles,
+                    reference.latency_mean_cycles,
+                ),
+                results_exact: Some(values == reference_values),
+                note: (*level == Fidelity::Cycle).then(|| "reference".to_string()),
+            }
+        })
+        .collect();
+    rows.push(LevelRow {
+        level: Fidelity::Rtl.to_string(),
+        wall_seconds: None,
+        fragments_per_second: None,
+        total_cycles: None,
+        latency_mean_cycles: None,
+        latency_p95_cycles: None,
+        cycles_error: None,
+        latency_error: None,
+        results_exact: None,
+        note: Some(SimError::RtlNotBuilt.to_string()),
+    });
+    if let Some(plot) = &args.plot {
+        error_chart(&rows, &path)?
+            .write_svg(plot)
+            .with_context(|| format!("cannot write {}", plot.display()))?;
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        print!("{}", table(&rows, &path, &arch, fragments as u64));
+    }
+    Ok(())
+}
+
+fn table(rows: &[LevelRow], path: &str, arch: &Arch, fragments: u64) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "{path} on {}: {fragments} fragments; errors relative to cycle",
+        arch.machine().name()
+    );
+    let _ = writeln!(
+        out,
+        "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>8}",
+        "level",
+        "wall s",
+        "fragments/s",
+        "cycles",
+        "mean lat",
+        "p95 lat",
+        "cycles err",
+        "lat err",
+        "results"
+    );
+    let float =
+        |v: Option<f64>, digits: usize| v.map_or("-".to_string(), |v| format!("{v:.digits$}"));
+    let int = |v: Option<u64>| v.map_or("-".to_string(), |v| v.to_string());
+    let percent = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.2}%", 100.0 * v));
+    for row in rows {
+        if let Some(note) = row.note.as_ref().filter(|_| row.wall_seconds.is_none()) {
+            let _ = writeln!(out, "{:<12} {note}", row.level);
+            continue;
+        }
+        let _ = writeln!(
+            out,
+            "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>8}",
+            row.level,
+            float(row.wall_seconds, 4),
+            row.fragments_per_second
+                .map_or("-".to_string(), |v| format!("{:.3e}", v)),
+            int(row.total_cycles),
+            float(row.latency_mean_cycles, 1),
+            int(row.latency_p95_cycles),
+            percent(row.cycles_error),
+            percent(row.latency_error),
+            match row.results_exact {
+                Some(true) => "exact",
+                Some(false) => "DIFFER",
+                None => "-",
+            }
+        );
+    }
+    out
+}
+
+/// The error drawn for a level whose error is 0 (the reference), so a log axis can show it.
+const ERROR_FLOOR: f64 = 1e-4;
+
+/// Error (the larger of total-cycle and mean-latency error) against wall time, log-log;
+/// one single-point series per timed level.
+fn error_chart(rows: &[LevelRow], path: &str) -> anyhow::Result<LineChart> {
+    let series = rows
+        .iter()
+        .filter_map(|row| {
+            let seconds = row.wall_seconds?;
+            let error = row.cycles_error?.max(row.latency_error?);
+            let (y, name) = if error > 0.0 {
+                (error, row.level.clone())
+            } else {
+                (
+                    ERROR_FLOOR,
+                    format!("{} (error 0, drawn at {ERROR_FLOOR})", row.level),
+                )
+            };
+            Some(Series {
+                name,
+                points: vec![(seconds.max(1e-9), y)],
+            })
+        })
+        .collect();
+    Ok(LineChart {
+        title: format!("The price of accuracy: {path} (functional has no time: not drawn)"),
+        x_label: "wall time (s)".to_string(),
+        y_label: "relative error vs cycle (worst of total cycles, mean latency)".to_string(),
+        x_scale: Scale::Log10,
+        y_scale: Scale::Log10,
+        x_ticks: None,
+        series,
+    })
+}
