@@ -55,8 +55,8 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let mut reader = TraceReader::new(std::io::BufReader::with_capacity(1 << 20, file))
         .with_context(|| format!("{path}: not a readable occsim trace"))?;
     let (width, height) = (reader.header().width, reader.header().height);
-    let machine =
-        MachineModel::new(&arch, width, height).with_context(|| format!("{path}: cannot replay"))?;
+    let machine = MachineModel::new(&arch, width, height)
+        .with_context(|| format!("{path}: cannot replay"))?;
     let mut sink = MachineSink {
         machine,
         error: None,
