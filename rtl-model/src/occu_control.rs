@@ -117,6 +117,11 @@ impl RecordBank {
         }
     }
 
+    /// The overflow register of tile `tile` (in query order).
+    pub fn overflowed(&self, tile: usize) -> bool {
+        self.slots[tile].overflowed
+    }
+
     pub fn tile_counter(&self) -> u32 {
         self.tile
     }

@@ -139,6 +139,15 @@ impl<W: Write> VcdWriter<W> {
         self.scratch = line;
     }
 
+    /// Write a last timestamp `time` (if later than every change) so that viewers show the
+    /// dump up to it.
+    pub fn end_at(&mut self, time: u64) {
+        if self.time_written.is_none_or(|t| time > t) {
+            self.put(&format!("#{time}\n"));
+            self.time_written = Some(time);
+        }
+    }
+
     /// Flush and return the writer, or the first write error.
     pub fn finish(mut self) -> io::Result<W> {
         if let Some(e) = self.error.take() {

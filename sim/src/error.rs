@@ -42,4 +42,6 @@ pub enum SimError {
     },
     #[error("the stream ended with query {id} still open")]
     OpenAtEnd { id: u32 },
+    #[error("cannot write the waveform: {0}")]
+    Waveform(String),
 }

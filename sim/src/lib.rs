@@ -6,6 +6,9 @@
 //!   [`fragment_input`] -> [`fifo`] -> [`depth_pipeline`] ([`depth_prefetch`],
 //!   [`write_buffer`]) -> [`fifo`] -> [`occlusion_unit`] ([`occlusion_engine`]) ->
 //!   [`occu_control`], all sharing one [`memory_port`].
+//! - [`occu_stage`]: the seam choosing the OccU's fidelity: `cycle` (event timestamps) or
+//!   `rtl` ([`rtl_occu`]: the `occsim-rtl` register-transfer model clocked every cycle,
+//!   with [`waveform`] VCD dumps).
 //! - [`machine`]: [`MachineModel`], the machine an architecture names (the entry point).
 //! - [`report`]: the replay report (serde) and its text form.
 //!
@@ -34,11 +37,16 @@ pub mod o2;
 pub mod occlusion_engine;
 pub mod occlusion_unit;
 pub mod occu_control;
+pub mod occu_stage;
 pub mod report;
+pub mod rtl_occu;
+pub mod waveform;
 pub mod write_buffer;
 
 pub use arch::{Arch, ArchError, O2Arch};
 pub use error::SimError;
 pub use machine::MachineModel;
 pub use o2::O2Machine;
+pub use occu_stage::OccuModel;
 pub use report::Report;
+pub use waveform::WaveformOptions;

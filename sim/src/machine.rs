@@ -4,6 +4,7 @@
 use crate::arch::{Arch, Machine};
 use crate::error::SimError;
 use crate::o2::O2Machine;
+use crate::occu_stage::OccuModel;
 use crate::report::Report;
 use occsim_traces::Event;
 
@@ -17,6 +18,19 @@ impl MachineModel {
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<MachineModel, SimError> {
         Ok(match arch.machine() {
             Machine::O2 => MachineModel::O2(O2Machine::new(arch, width, height)?),
+        })
+    }
+
+    /// Build the machine with its Occlusion Unit modelled as `occu` says (the `cycle` and
+    /// `rtl` fidelity levels).
+    pub fn with_occu_model(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        occu: OccuModel,
+    ) -> Result<MachineModel, SimError> {
+        Ok(match arch.machine() {
+            Machine::O2 => MachineModel::O2(O2Machine::with_occu_model(arch, width, height, occu)?),
         })
     }
 
