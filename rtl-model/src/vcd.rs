@@ -108,7 +108,7 @@ impl<W: Write> VcdWriter<W> {
     /// Following changes happen at `time` (ps), which must not go back.
     pub fn set_time(&mut self, time: u64) {
         debug_assert!(!self.defining);
-        debug_assert!(self.time_written.is_none_or(|t| time >= t));
+        debug_assert!(self.time_written.map_or(true, |t| time >= t));
         self.time = time;
     }
 
@@ -121,19 +121,26 @@ impl<W: Write> VcdWriter<W> {
             return;
         }
         signal.last = Some(value);
-        let mut line = std::mem::take(&mut self.scratch);
-        line.clear();
+        let width = signal.width;
         if self.time_written != Some(self.time) {
-            line.push_str(&format!("#{}\n", self.time));
+            let stamp = format!("#{}\n", self.time);
+            self.put(&stamp);
             self.time_written = Some(self.time);
         }
-        let signal = &self.signals[id.0];
-        if signal.width == 1 {
+        // Built by hand: this is the dump's hot path.
+        let mut line = std::mem::take(&mut self.scratch);
+        line.clear();
+        if width == 1 {
             line.push(if value == 1 { '1' } else { '0' });
         } else {
-            line.push_str(&format!("b{value:b} "));
+            line.push('b');
+            let top = 63 - (value | 1).leading_zeros();
+            for bit in (0..=top).rev() {
+                line.push(if value >> bit & 1 == 1 { '1' } else { '0' });
+            }
+            line.push(' ');
         }
-        line.push_str(&signal.code);
+        line.push_str(&self.signals[id.0].code);
         line.push('\n');
         self.put(&line);
         self.scratch = line;
@@ -142,7 +149,7 @@ impl<W: Write> VcdWriter<W> {
     /// Write a last timestamp `time` (if later than every change) so that viewers show the
     /// dump up to it.
     pub fn end_at(&mut self, time: u64) {
-        if self.time_written.is_none_or(|t| time > t) {
+        if self.time_written.map_or(true, |t| time > t) {
             self.put(&format!("#{time}\n"));
             self.time_written = Some(time);
         }

@@ -32,6 +32,8 @@ pub struct OccuStats {
     pub port_cycles: u64,
 }
 
+// The cycle variant is the hot path and stays inline; the rtl one is boxed.
+#[allow(clippy::large_enum_variant)]
 pub enum OccuStage {
     Cycle {
         occu: OcclusionUnit,
