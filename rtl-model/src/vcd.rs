@@ -11,6 +11,9 @@
 use crate::bits::mask;
 use std::io::{self, Write};
 
+/// Bytes gathered before one write to the destination.
+const BUFFER_BYTES: usize = 1 << 16;
+
 /// Declared kind of a signal.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum VarKind {
@@ -35,7 +38,8 @@ pub struct VcdWriter<W: Write> {
     time: u64,
     time_written: Option<u64>,
     error: Option<io::Error>,
-    scratch: String,
+    /// Value lines gathered before they go to `out` in large writes.
+    buffer: Vec<u8>,
 }
 
 fn identifier(mut n: usize) -> String {
@@ -60,18 +64,31 @@ impl<W: Write> VcdWriter<W> {
             time: 0,
             time_written: None,
             error: None,
-            scratch: String::new(),
+            buffer: Vec::with_capacity(BUFFER_BYTES),
         };
         vcd.put(&format!("$version {version} $end\n$timescale 1ps $end\n"));
         vcd
     }
 
     fn put(&mut self, text: &str) {
+        self.buffer.extend_from_slice(text.as_bytes());
+        self.spill_if_full();
+    }
+
+    #[inline]
+    fn spill_if_full(&mut self) {
+        if self.buffer.len() >= BUFFER_BYTES {
+            self.spill();
+        }
+    }
+
+    fn spill(&mut self) {
         if self.error.is_none() {
-            if let Err(e) = self.out.write_all(text.as_bytes()) {
+            if let Err(e) = self.out.write_all(&self.buffer) {
                 self.error = Some(e);
             }
         }
+        self.buffer.clear();
     }
 
     pub fn scope(&mut self, name: &str) {
@@ -128,22 +145,20 @@ impl<W: Write> VcdWriter<W> {
             self.time_written = Some(self.time);
         }
         // Built by hand: this is the dump's hot path.
-        let mut line = std::mem::take(&mut self.scratch);
-        line.clear();
+        let line = &mut self.buffer;
         if width == 1 {
-            line.push(if value == 1 { '1' } else { '0' });
+            line.push(if value == 1 { b'1' } else { b'0' });
         } else {
-            line.push('b');
+            line.push(b'b');
             let top = 63 - (value | 1).leading_zeros();
             for bit in (0..=top).rev() {
-                line.push(if value >> bit & 1 == 1 { '1' } else { '0' });
+                line.push(b'0' + (value >> bit & 1) as u8);
             }
-            line.push(' ');
+            line.push(b' ');
         }
-        line.push_str(&self.signals[id.0].code);
-        line.push('\n');
-        self.put(&line);
-        self.scratch = line;
+        line.extend_from_slice(self.signals[id.0].code.as_bytes());
+        line.push(b'\n');
+        self.spill_if_full();
     }
 
     /// Write a last timestamp `time` (if later than every change) so that viewers show the
@@ -157,6 +172,7 @@ impl<W: Write> VcdWriter<W> {
 
     /// Flush and return the writer, or the first write error.
     pub fn finish(mut self) -> io::Result<W> {
+        self.spill();
         if let Some(e) = self.error.take() {
             return Err(e);
         }
