@@ -140,24 +140,44 @@ impl<W: Write> VcdWriter<W> {
         signal.last = Some(value);
         let width = signal.width;
         if self.time_written != Some(self.time) {
-            let stamp = format!("#{}\n", self.time);
-            self.put(&stamp);
+            let mut digits = [0u8; 21];
+            let mut at = digits.len();
+            let mut t = self.time;
+            loop {
+                at -= 1;
+                digits[at] = b'0' + (t % 10) as u8;
+                t /= 10;
+                if t == 0 {
+                    break;
+                }
+            }
+            self.buffer.push(b'#');
+            self.buffer.extend_from_slice(&digits[at..]);
+            self.buffer.push(b'\n');
             self.time_written = Some(self.time);
         }
-        // Built by hand: this is the dump's hot path.
-        let line = &mut self.buffer;
+        // Built by hand in a stack buffer: this is the dump's hot path.
+        let mut line = [0u8; 80];
+        let mut n = 0;
         if width == 1 {
-            line.push(if value == 1 { b'1' } else { b'0' });
+            line[0] = b'0' + value as u8;
+            n = 1;
         } else {
-            line.push(b'b');
+            line[0] = b'b';
             let top = 63 - (value | 1).leading_zeros();
             for bit in (0..=top).rev() {
-                line.push(b'0' + (value >> bit & 1) as u8);
+                n += 1;
+                line[n] = b'0' + (value >> bit & 1) as u8;
             }
-            line.push(b' ');
+            n += 1;
+            line[n] = b' ';
+            n += 1;
         }
-        line.extend_from_slice(self.signals[id.0].code.as_bytes());
-        line.push(b'\n');
+        let code = self.signals[id.0].code.as_bytes();
+        line[n..n + code.len()].copy_from_slice(code);
+        n += code.len();
+        line[n] = b'\n';
+        self.buffer.extend_from_slice(&line[..n + 1]);
         self.spill_if_full();
     }
 
