@@ -225,3 +225,51 @@ fn corrupted_traces_fail_with_the_file_and_byte_offset() {
         assert!(error.contains("byte "), "{command}: {error}");
     }
 }
+
+#[test]
+fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
+    let dir = scratch_dir("rtl");
+    let trace = dir.join("hardcases.occt");
+    let vcd = dir.join("waves.vcd");
+    let (trace_arg, vcd_arg) = (trace.to_str().unwrap(), vcd.to_str().unwrap());
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace_arg]);
+    let cycle = stdout_of(&["replay", trace_arg, "--json"]);
+    let rtl = stdout_of(&[
+        "replay",
+        trace_arg,
+        "--json",
+        "--fidelity",
+        "rtl",
+        "--vcd",
+        vcd_arg,
+        "--window",
+        "10..200",
+    ]);
+    assert_eq!(cycle, rtl);
+    let text = std::fs::read_to_string(&vcd).unwrap();
+    assert!(text.starts_with("$version occsim-rtl $end\n$timescale 1ps $end\n"));
+    assert!(
+        text.contains("$enddefinitions $end\n#149990\n"),
+        "the dump starts at cycle 10"
+    );
+    // Flags only the rtl fidelity takes, and windows that cannot be read, fail clearly.
+    let without_rtl = stderr_of_failure(&["replay", trace_arg, "--vcd", vcd_arg]);
+    assert!(without_rtl.contains("--vcd and --window need --fidelity rtl"));
+    for (window, message) in [
+        ("5..3", "END must be greater than START"),
+        ("1-3", "expected START..END"),
+        ("a..9", "START \"a\" is not a cycle number"),
+    ] {
+        let error = stderr_of_failure(&[
+            "replay",
+            trace_arg,
+            "--fidelity",
+            "rtl",
+            "--vcd",
+            vcd_arg,
+            "--window",
+            window,
+        ]);
+        assert!(error.contains(message), "{window}: {error}");
+    }
+}

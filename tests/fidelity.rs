@@ -52,19 +52,21 @@ fn fidelity_prints_every_level_against_cycle_and_plots() {
         ["functional", "analytic", "sampled:3", "cycle", "rtl"],
         "{out}"
     );
-    for line in &lines[2..6] {
+    assert!(lines[0].contains("errors relative to rtl"), "{out}");
+    for line in &lines[2..7] {
         assert!(
             line.ends_with("exact"),
             "every level's results are exact: {line}"
         );
     }
-    // The reference has error 0; functional has no time.
+    // cycle and rtl agree to the cycle: both have error 0; functional has no time.
     assert!(lines[5].contains("0.00%      0.00%"), "{out}");
+    assert!(lines[6].contains("0.00%      0.00%"), "{out}");
     assert!(lines[2].contains(" - "), "{out}");
-    assert!(lines[6].contains("rtl level not built"), "{out}");
     let svg = std::fs::read_to_string(&plot).unwrap();
     assert!(svg.starts_with("<svg") || svg.starts_with("<?xml"), "{svg}");
     assert!(svg.contains("cycle (error 0, drawn at 0.0001)"), "{svg}");
+    assert!(svg.contains("rtl (error 0, drawn at 0.0001)"), "{svg}");
     assert!(svg.contains("analytic"));
 
     let json: serde_json::Value =
@@ -73,6 +75,8 @@ fn fidelity_prints_every_level_against_cycle_and_plots() {
     assert_eq!(rows[1]["level"], "analytic");
     assert_eq!(rows[2]["level"], "sampled:10");
     assert_eq!(rows[3]["cycles_error"], 0.0);
+    assert_eq!(rows[4]["level"], "rtl");
+    assert_eq!(rows[4]["total_cycles"], rows[3]["total_cycles"]);
     // The cycle level's total equals what replay reports.
     let replay: serde_json::Value =
         serde_json::from_str(&stdout_of(&["replay", &trace, "--json"])).unwrap();
@@ -135,11 +139,11 @@ fn bad_levels_and_the_rtl_level_fail_clearly() {
         error.contains("K in sampled:K must be a whole number from 1"),
         "{error}"
     );
-    let output = occsim(&["replay", &trace, "--fidelity", "rtl"]);
+    let output = occsim(&["replay", &trace, "--fidelity", "rtl", "--arch", "ir4"]);
     assert!(!output.status.success());
     let error = String::from_utf8_lossy(&output.stderr);
     assert!(
-        error.contains("rtl level not built in this build"),
+        error.contains("the rtl level has no model of the ir machine yet"),
         "{error}"
     );
     let output = occsim(&["replay", &trace, "--effects", "some"]);

@@ -1,1 +1,30 @@
-//! Bit-accurate register-transfer model of the occlusion engine and OccU Control (no floats).
+//! Bit-accurate register-transfer model of the Occlusion Unit: its occlusion engines, the
+//! unit sequencer that keeps them in lockstep, and OccU Control (round-robin hit arbiter,
+//! write buffer, record sequencer).
+//!
+//! Architecture invariants:
+//! - no floats anywhere (`#![deny(clippy::float_arithmetic)]`; times are integer cycles and
+//!   picoseconds);
+//! - every register has a fixed width; values are stored in `u64`/`u32` and masked to it;
+//! - two-phase discipline: each cycle [`OccuRtl::step`] first evaluates every wire from the
+//!   current registers and inputs ([`OccuRtl::eval`], `&self`), then latches the registers
+//!   from those wires ([`OccuRtl::latch`]); a waveform probe sees both in between;
+//! - the crate knows nothing of the simulator (`occsim-sim` depends on it, not the reverse);
+//! - no IO besides the [`vcd`] writer's `std::io::Write`.
+//!
+//! Blocks, one module each: [`bits`] (fixed-width helpers), [`occlusion_engine`],
+//! [`occu_control`], [`occlusion_unit`] (the top level and its ports), [`vcd`].
+
+#![deny(clippy::float_arithmetic)]
+#![forbid(unsafe_code)]
+
+pub mod bits;
+pub mod occlusion_engine;
+pub mod occlusion_unit;
+pub mod occu_control;
+pub mod vcd;
+
+pub use occlusion_unit::{
+    CycleInputs, CycleOutputs, FragmentPort, OccuParams, OccuRtl, QueryConfig, TileRect,
+};
+pub use occu_control::Word;

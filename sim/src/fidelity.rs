@@ -19,8 +19,10 @@ use crate::effects::{EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::machine::MachineModel;
 use crate::o2::{check_spec, first_difference};
+use crate::occu_stage::OccuModel;
 use crate::report::{nearest_rank, Report};
 use crate::sampled::SampledModel;
+use crate::waveform::WaveformOptions;
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::state::MAX_VIEWPORT_SIDE;
 use occsim_traces::{Event, Fragment, QueryMode, QueryResult};
@@ -396,7 +398,25 @@ impl LevelModel {
         height: u32,
         effects: Effects,
     ) -> Result<LevelModel, SimError> {
+        LevelModel::with_waveform(level, arch, width, height, effects, None)
+    }
+
+    /// As [`LevelModel::new`]; at the rtl level, `waveform` dumps the Occlusion Unit's
+    /// registers and wires as VCD (other levels have none to dump: an error).
+    pub fn with_waveform(
+        level: Fidelity,
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+        waveform: Option<WaveformOptions>,
+    ) -> Result<LevelModel, SimError> {
         let machine = arch.machine();
+        if waveform.is_some() && level != Fidelity::Rtl {
+            return Err(SimError::Waveform(format!(
+                "the {level} level has no registers to dump: use the rtl level"
+            )));
+        }
         Ok(match level {
             Fidelity::Functional => {
                 LevelModel::Functional(Box::new(FunctionalCore::new(width, height)?))
@@ -417,8 +437,17 @@ impl LevelModel {
                 Box::new(MachineModel::with_effects(arch, width, height, effects)?),
                 effects,
             ),
-            // The rtl level: wired to the rtl-model crate in a later change.
-            Fidelity::Rtl => return Err(SimError::RtlNotBuilt),
+            // The Occlusion Unit and OccU Control from the rtl-model crate, clocked every
+            // cycle; every effect model is built (the rtl model has no shortcuts).
+            Fidelity::Rtl => LevelModel::Cycle(
+                Box::new(MachineModel::with_occu_model(
+                    arch,
+                    width,
+                    height,
+                    OccuModel::Rtl { waveform },
+                )?),
+                Effects::ALL,
+            ),
         })
     }
 
@@ -539,11 +568,14 @@ mod tests {
     }
 
     #[test]
-    fn the_rtl_level_is_refused_clearly() {
-        let arch = Arch::builtin("o2").unwrap();
+    fn the_rtl_level_is_refused_clearly_where_it_has_no_model() {
+        let arch = Arch::builtin("ir4").unwrap();
         let error = LevelModel::new(Fidelity::Rtl, &arch, 8, 8, Effects::ALL)
             .err()
             .unwrap();
-        assert_eq!(error.to_string(), "rtl level not built in this build");
+        assert_eq!(
+            error.to_string(),
+            "the rtl level has no model of the ir machine yet (use functional or cycle)"
+        );
     }
 }

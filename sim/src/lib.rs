@@ -9,6 +9,9 @@
 //! - [`ir`]: the InfiniteReality-like machine: [`IrMachine`]. Its blocks: [`interleave`],
 //!   [`fragment_generator`] (one per board), [`image_engine`] (each with its own
 //!   [`occlusion_unit`] and [`occu_control`]), [`merge_network`] (the two merge stages).
+//! - [`occu_stage`]: the seam choosing the OccU's fidelity: `cycle` (event timestamps) or
+//!   `rtl` ([`rtl_occu`]: the `occsim-rtl` register-transfer model clocked every cycle,
+//!   with [`waveform`] VCD dumps).
 //! - [`machine`]: [`MachineModel`], the machine an architecture names (the entry point).
 //! - [`fidelity`]: the fidelity ladder (functional, [`analytic`], [`sampled`], cycle) and its
 //!   common [`LevelResult`]; [`effects`]: only the effect models a trace can observe.
@@ -47,8 +50,11 @@ pub mod o2;
 pub mod occlusion_engine;
 pub mod occlusion_unit;
 pub mod occu_control;
+pub mod occu_stage;
 pub mod report;
+pub mod rtl_occu;
 pub mod sampled;
+pub mod waveform;
 pub mod write_buffer;
 
 pub use arch::{Arch, ArchError, IrArch, O2Arch};
@@ -58,4 +64,6 @@ pub use fidelity::{Fidelity, LevelModel, LevelResult};
 pub use ir::IrMachine;
 pub use machine::MachineModel;
 pub use o2::O2Machine;
+pub use occu_stage::OccuModel;
 pub use report::Report;
+pub use waveform::WaveformOptions;

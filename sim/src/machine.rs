@@ -6,6 +6,7 @@ use crate::effects::Effects;
 use crate::error::SimError;
 use crate::ir::IrMachine;
 use crate::o2::O2Machine;
+use crate::occu_stage::OccuModel;
 use crate::report::Report;
 use occsim_traces::Event;
 
@@ -35,6 +36,28 @@ impl MachineModel {
             Machine::O2 => MachineModel::O2(O2Machine::with_effects(arch, width, height, effects)?),
             // The InfiniteReality-like machine always builds every model it has.
             Machine::Ir => MachineModel::Ir(IrMachine::new(arch, width, height)?),
+        })
+    }
+
+    /// Build the machine with its Occlusion Unit modelled as `occu` says (the `cycle` and
+    /// `rtl` fidelity levels).
+    pub fn with_occu_model(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        occu: OccuModel,
+    ) -> Result<MachineModel, SimError> {
+        Ok(match arch.machine() {
+            Machine::O2 => MachineModel::O2(O2Machine::with_occu_model(arch, width, height, occu)?),
+            Machine::Ir => match occu {
+                OccuModel::Cycle => MachineModel::Ir(IrMachine::new(arch, width, height)?),
+                OccuModel::Rtl { .. } => {
+                    return Err(SimError::LevelNotBuilt {
+                        level: "rtl".into(),
+                        machine: "ir".into(),
+                    })
+                }
+            },
         })
     }
 

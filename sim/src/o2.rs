@@ -49,8 +49,7 @@ use crate::error::SimError;
 use crate::fifo::Fifo;
 use crate::fragment_input::FragmentInput;
 use crate::memory_port::MemoryPort;
-use crate::occlusion_unit::OcclusionUnit;
-use crate::occu_control::OccuControl;
+use crate::occu_stage::{OccuModel, OccuStage};
 use crate::report::{
     nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
     Summary, TileReport,
@@ -96,8 +95,8 @@ pub struct O2Machine {
     raster_to_depth: Fifo,
     depth: DepthPipeline,
     depth_to_occu: Fifo,
-    occu: OcclusionUnit,
-    control: OccuControl,
+    /// The Occlusion Unit and OccU Control, at the chosen fidelity.
+    occu: OccuStage,
     port: MemoryPort,
     /// Items between front and back end, at most `lookahead` fragments.
     pending: VecDeque<Pending>,
@@ -123,7 +122,7 @@ pub struct O2Machine {
 
 impl O2Machine {
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<O2Machine, SimError> {
-        O2Machine::with_effects(arch, width, height, Effects::ALL)
+        O2Machine::build(arch, width, height, Effects::ALL, OccuModel::Cycle)
     }
 
     /// A machine that builds only `effects`: the caller guarantees (by
@@ -133,6 +132,27 @@ impl O2Machine {
         width: u32,
         height: u32,
         effects: Effects,
+    ) -> Result<O2Machine, SimError> {
+        O2Machine::build(arch, width, height, effects, OccuModel::Cycle)
+    }
+
+    /// A machine whose Occlusion Unit and OccU Control are modelled as `model` says.
+    pub fn with_occu_model(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        model: OccuModel,
+    ) -> Result<O2Machine, SimError> {
+        O2Machine::build(arch, width, height, Effects::ALL, model)
+    }
+
+    /// A machine building only `effects`, its OccU modelled as `model` says.
+    pub fn build(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+        model: OccuModel,
     ) -> Result<O2Machine, SimError> {
         let o2 = arch.o2()?;
         if !(1..=MAX_VIEWPORT_SIDE).contains(&width) || !(1..=MAX_VIEWPORT_SIDE).contains(&height) {
@@ -156,8 +176,7 @@ impl O2Machine {
             raster_to_depth: Fifo::new(o2.fifo_raster_to_depth_entries),
             depth: DepthPipeline::new(&o2, width, height, effects),
             depth_to_occu: Fifo::new(o2.fifo_depth_to_occu_entries),
-            occu: OcclusionUnit::new(&o2),
-            control: OccuControl::new(o2.occu_write_buffer_words),
+            occu: OccuStage::new(&o2, model),
             port: MemoryPort::new(o2.memory_port_bits_per_cycle),
             arch_entries,
             width,
@@ -309,19 +328,15 @@ impl O2Machine {
             &mut self.port,
         );
         self.raster_to_depth.depart(tested.cycle);
-        let (start, hit_words) =
-            self.occu
-                .fragment(fragment, tested.passed, tested.cycle + 1, query_open);
+        let start = self.occu.fragment(
+            fragment,
+            tested.passed,
+            tested.cycle + 1,
+            query_open,
+            &mut self.port,
+            self.effects.verbose_hit_writes,
+        );
         self.depth_to_occu.depart(start);
-        let counted = start + self.occu.service_cycles() - 1;
-        // Effect hook: without verbose queries no fragment sends hit words.
-        let leave = if self.effects.verbose_hit_writes {
-            self.control.hits(hit_words, counted, &mut self.port)
-        } else {
-            debug_assert_eq!(hit_words, 0, "verbose_hit_writes off, yet hits");
-            counted
-        };
-        self.occu.complete(start, leave, query_open);
         if let Some(query) = &mut self.open {
             query.fragments += 1;
         }
@@ -342,11 +357,8 @@ impl O2Machine {
             .take()
             .ok_or(SimError::EndWithoutBegin { event })?;
         let through_depth = (end_cycle + 1).max(self.depth.free_cycle());
-        let through_occu = (through_depth + 1).max(self.occu.free_cycle());
-        let mut tiles = self.occu.end(query.spec.tiles.len());
-        let (available, overflowed_buffers) =
-            self.control
-                .records(&query.spec, &mut tiles, through_occu + 1, &mut self.port);
+        let (tiles, available, overflowed_buffers) =
+            self.occu.end(&query.spec, through_depth, &mut self.port);
         self.last_available = self.last_available.max(available);
         self.queries.push(QueryReport {
             id: query.spec.id,
@@ -433,8 +445,9 @@ impl O2Machine {
         let (word_hits, page_hits, page_misses) =
             (prefetch.word_hits, prefetch.page_hits, prefetch.page_misses);
         let depth_writes = self.depth.write_buffer.entries_written;
-        let occu_words = self.control.words_written();
-        let occu_port_cycles = self.control.port_cycles();
+        let occu = self.occu.finish()?;
+        let occu_words = occu.words_written;
+        let occu_port_cycles = occu.port_cycles;
         let port_width = self.port.bits_per_cycle();
         let port = self.port.finish();
         let cycles = cycles_before_port.max(port.end_cycle);
@@ -460,24 +473,18 @@ impl O2Machine {
                 depth.stall_memory_cycles + depth.stall_backpressure_cycles,
                 depth.stall_memory_cycles,
             ),
-            stage(
-                "occlusion_unit",
-                self.occu.busy_cycles,
-                self.occu.stall_cycles,
-                0,
-            ),
+            stage("occlusion_unit", occu.busy_cycles, occu.stall_cycles, 0),
             stage("occu_control", occu_port_cycles, 0, 0),
         ];
-        let engines = self
-            .occu
+        let engines = occu
             .engines
             .iter()
             .enumerate()
-            .map(|(engine, e)| EngineReport {
+            .map(|(engine, &(busy_cycles, stall_cycles))| EngineReport {
                 engine,
-                busy_cycles: e.busy_cycles,
-                stall_cycles: e.stall_cycles,
-                busy_percent: percent(e.busy_cycles, cycles),
+                busy_cycles,
+                stall_cycles,
+                busy_percent: percent(busy_cycles, cycles),
             })
             .collect();
         let mut latencies: Vec<u64> = self.queries.iter().map(|q| q.latency_cycles).collect();

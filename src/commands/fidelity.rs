@@ -9,7 +9,7 @@ use crate::plot::{LineChart, Scale, Series};
 use anyhow::Context;
 use occsim_sim::arch::Machine;
 use occsim_sim::effects::{EffectScan, Effects, EffectsChoice};
-use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult};
+use occsim_sim::fidelity::{Fidelity, LevelResult};
 use occsim_sim::{Arch, SimError};
 use occsim_traces::golden::EventSink;
 use occsim_traces::trace::TraceReader;
@@ -44,6 +44,9 @@ pub struct FidelityArgs {
     /// Effect models of the cycle and sampled levels.
     #[arg(long, value_name = "auto|all", default_value = "auto")]
     pub effects: EffectsChoice,
+    /// Leave out the rtl level (slowest): errors are then relative to cycle.
+    #[arg(long)]
+    pub no_rtl: bool,
     /// Draw error against wall time (log-log) as SVG.
     #[arg(long, value_name = "F.svg")]
     pub plot: Option<PathBuf>,
@@ -110,23 +113,6 @@ struct LevelRow {
     note: Option<String>,
 }
 
-/// Feeds decoded events to a level's model and keeps the first error.
-struct LevelSink {
-    model: LevelModel,
-    error: Option<SimError>,
-}
-
-impl EventSink for LevelSink {
-    #[inline]
-    fn event(&mut self, event: &Event) {
-        if self.error.is_none() {
-            if let Err(error) = self.model.event(event) {
-                self.error = Some(error);
-            }
-        }
-    }
-}
-
 /// Replay the trace at `path` at `level`, streaming it from the file (a demo trace holds
 /// tens of millions of fragments: too many to hold as events).
 pub fn replay_level(
@@ -143,24 +129,13 @@ pub fn replay_level(
         }
         Fidelity::Functional | Fidelity::Analytic => Effects::ALL,
     };
-    let mut reader = open_trace(path)?;
-    let (width, height) = (reader.header().width, reader.header().height);
-    let model = LevelModel::new(level, arch, width, height, effects)
-        .with_context(|| format!("{name}: cannot replay at {level}"))?;
-    let mut sink = LevelSink { model, error: None };
-    while reader
-        .next_block(&mut sink)
-        .with_context(|| format!("{name}: cannot read trace"))?
-    {
-        if let Some(error) = sink.error.take() {
-            return Err(error).with_context(|| format!("{name}: {level}"));
-        }
-    }
-    if let Some(error) = sink.error.take() {
-        return Err(error).with_context(|| format!("{name}: {level}"));
-    }
-    sink.model
-        .finish(arch)
+    let options = super::replay::ReplayOptions {
+        level,
+        effects,
+        retile: None,
+        waveform: None,
+    };
+    super::replay::replay_reader(open_trace(path)?, &name.to_string(), arch, options)
         .with_context(|| format!("{name}: {level}"))
 }
 
@@ -189,6 +164,34 @@ fn timed(
     Ok((result.expect("at least one run"), best))
 }
 
+/// Is this the refusal of a level the machine has no model of?
+fn is_not_built(error: &anyhow::Error) -> bool {
+    error.chain().any(|cause| {
+        matches!(
+            cause.downcast_ref::<SimError>(),
+            Some(SimError::LevelNotBuilt { .. })
+        )
+    })
+}
+
+impl LevelRow {
+    /// A row for a level that did not run, saying why.
+    fn note(level: Fidelity, note: &str) -> LevelRow {
+        LevelRow {
+            level: level.to_string(),
+            wall_seconds: None,
+            fragments_per_second: None,
+            total_cycles: None,
+            latency_mean_cycles: None,
+            latency_p95_cycles: None,
+            cycles_error: None,
+            latency_error: None,
+            results_exact: None,
+            note: Some(note.to_string()),
+        }
+    }
+}
+
 fn relative_error(value: Option<f64>, reference: Option<f64>) -> Option<f64> {
     match (value, reference) {
         (Some(v), Some(r)) if r > 0.0 => Some((v - r).abs() / r),
@@ -204,7 +207,7 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
         .skip_to_summary()
         .with_context(|| format!("{path}: cannot read trace"))?;
     let fragments = summary.fragments as f64;
-    let levels = [
+    let mut levels = vec![
         Fidelity::Functional,
         Fidelity::Analytic,
         Fidelity::Sampled {
@@ -212,68 +215,81 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
         },
         Fidelity::Cycle,
     ];
+    if !args.no_rtl {
+        levels.push(Fidelity::Rtl);
+    }
+    // A level the machine has no model of yet is a row saying so, not a failure.
     let mut runs = Vec::new();
     for level in levels {
-        let run = timed(level, &arch, &args.trace, args.effects)?;
+        let run = match timed(level, &arch, &args.trace, args.effects) {
+            Ok(run) => Ok(run),
+            Err(error) if is_not_built(&error) => Err(format!("{:#}", error.root_cause())),
+            Err(error) => return Err(error),
+        };
         runs.push((level, run));
     }
-    let reference = &runs.last().expect("cycle ran").1 .0;
-    let reference_values: Vec<u64> = reference.queries.iter().map(|q| q.value).collect();
-    let mut rows: Vec<LevelRow> = runs
+    // The reference is the most detailed level that ran: rtl, else cycle.
+    let (reference_level, reference) = runs
         .iter()
-        .map(|(level, (result, seconds))| {
-            let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
-            LevelRow {
-                level: level.to_string(),
-                wall_seconds: Some(*seconds),
-                fragments_per_second: Some(fragments / seconds.max(1e-9)),
-                total_cycles: result.total_cycles,
-                latency_mean_cycles: result.latency_mean_cycles,
-                latency_p95_cycles: result.latency_p95_cycles,
-                cycles_error: relative_error(
-                    result.total_cycles.map(|c| c as f64),
-                    reference.total_cycles.map(|c| c as f64),
-                ),
-                latency_error: relative_error(
-                    result.latency_mean_cycles,
-                    reference.latency_mean_cycles,
-                ),
-                results_exact: Some(values == reference_values),
-                note: (*level == Fidelity::Cycle).then(|| "reference".to_string()),
+        .rev()
+        .find_map(|(level, run)| run.as_ref().ok().map(|(result, _)| (*level, result)))
+        .context("no level ran")?;
+    let reference_values: Vec<u64> = reference.queries.iter().map(|q| q.value).collect();
+    let rows: Vec<LevelRow> = runs
+        .iter()
+        .map(|(level, run)| match run {
+            Err(note) => LevelRow::note(*level, note),
+            Ok((result, seconds)) => {
+                let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
+                LevelRow {
+                    level: level.to_string(),
+                    wall_seconds: Some(*seconds),
+                    fragments_per_second: Some(fragments / seconds.max(1e-9)),
+                    total_cycles: result.total_cycles,
+                    latency_mean_cycles: result.latency_mean_cycles,
+                    latency_p95_cycles: result.latency_p95_cycles,
+                    cycles_error: relative_error(
+                        result.total_cycles.map(|c| c as f64),
+                        reference.total_cycles.map(|c| c as f64),
+                    ),
+                    latency_error: relative_error(
+                        result.latency_mean_cycles,
+                        reference.latency_mean_cycles,
+                    ),
+                    results_exact: Some(values == reference_values),
+                    note: (*level == reference_level).then(|| "reference".to_string()),
+                }
             }
         })
         .collect();
-    rows.push(LevelRow {
-        level: Fidelity::Rtl.to_string(),
-        wall_seconds: None,
-        fragments_per_second: None,
-        total_cycles: None,
-        latency_mean_cycles: None,
-        latency_p95_cycles: None,
-        cycles_error: None,
-        latency_error: None,
-        results_exact: None,
-        note: Some(SimError::RtlNotBuilt.to_string()),
-    });
     if let Some(plot) = &args.plot {
-        error_chart(&rows, &path)?
+        error_chart(&rows, &path, reference_level)?
             .write_svg(plot)
             .with_context(|| format!("cannot write {}", plot.display()))?;
     }
     if args.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
-        print!("{}", table(&rows, &path, &arch, fragments as u64));
+        print!(
+            "{}",
+            table(&rows, &path, &arch, fragments as u64, reference_level)
+        );
     }
     Ok(())
 }
 
-fn table(rows: &[LevelRow], path: &str, arch: &Arch, fragments: u64) -> String {
+fn table(
+    rows: &[LevelRow],
+    path: &str,
+    arch: &Arch,
+    fragments: u64,
+    reference: Fidelity,
+) -> String {
     use std::fmt::Write as _;
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "{path} on {}: {fragments} fragments; errors relative to cycle",
+        "{path} on {}: {fragments} fragments; errors relative to {reference}",
         arch.machine().name()
     );
     let _ = writeln!(
@@ -325,7 +341,7 @@ const ERROR_FLOOR: f64 = 1e-4;
 
 /// Error (the larger of total-cycle and mean-latency error) against wall time, log-log;
 /// one single-point series per timed level.
-fn error_chart(rows: &[LevelRow], path: &str) -> anyhow::Result<LineChart> {
+fn error_chart(rows: &[LevelRow], path: &str, reference: Fidelity) -> anyhow::Result<LineChart> {
     let series = rows
         .iter()
         .filter_map(|row| {
@@ -348,7 +364,7 @@ fn error_chart(rows: &[LevelRow], path: &str) -> anyhow::Result<LineChart> {
     Ok(LineChart {
         title: format!("The price of accuracy: {path} (functional has no time: not drawn)"),
         x_label: "wall time (s)".to_string(),
-        y_label: "relative error vs cycle (worst of total cycles, mean latency)".to_string(),
+        y_label: format!("relative error vs {reference} (worst of total cycles, mean latency)"),
         x_scale: Scale::Log10,
         y_scale: Scale::Log10,
         x_ticks: None,

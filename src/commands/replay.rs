@@ -1,12 +1,13 @@
 //! `occsim replay TRACE`: replay a fragment trace on a machine model at a fidelity level,
-//! check every query's counts against the golden results in the trace, and report.
+//! check every query's counts against the golden results in the trace, and report; at the
+//! rtl level, optionally dump a window of the Occlusion Unit's waveform as VCD.
 
 use super::arch::ArchSelection;
 use super::fidelity::{effects_of_trace, FidelityArg};
 use anyhow::Context;
 use occsim_sim::effects::Effects;
 use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult};
-use occsim_sim::{Arch, Report, SimError};
+use occsim_sim::{Arch, Report, SimError, WaveformOptions};
 use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, TileGrid};
 use occsim_traces::trace::TraceReader;
@@ -34,6 +35,19 @@ pub struct ReplayArgs {
     pub retile: Option<TileGrid>,
     #[command(flatten)]
     pub level: FidelityArg,
+    #[command(flatten)]
+    pub waveform: WaveformArgs,
+}
+
+#[derive(clap::Args)]
+pub struct WaveformArgs {
+    /// Write the rtl model's registers and wires as a VCD waveform to FILE (needs
+    /// --fidelity rtl).
+    #[arg(long, value_name = "FILE")]
+    pub vcd: Option<PathBuf>,
+    /// Cycles the waveform covers, START..END (END exclusive; default: the whole run).
+    #[arg(long, value_name = "START..END")]
+    pub window: Option<String>,
 }
 
 /// Feeds decoded events to the model (at its level) and keeps the first error.
@@ -53,12 +67,13 @@ impl EventSink for LevelSink {
     }
 }
 
-/// How to replay: the level, the effect models to build, and an optional retiling.
-#[derive(Clone, Copy)]
+/// How to replay: the level, the effect models to build, an optional retiling and, at the
+/// rtl level, an optional waveform.
 pub struct ReplayOptions {
     pub level: Fidelity,
     pub effects: Effects,
     pub retile: Option<TileGrid>,
+    pub waveform: Option<WaveformOptions>,
 }
 
 impl ReplayOptions {
@@ -68,6 +83,7 @@ impl ReplayOptions {
             level: Fidelity::Cycle,
             effects: Effects::ALL,
             retile,
+            waveform: None,
         }
     }
 }
@@ -79,22 +95,26 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             .context("--engines")?;
     }
     let path = args.trace.display().to_string();
-    // A retiled trace has other queries than the scan would see: build every model then.
-    let effects = match args.retile {
-        Some(_) => Effects::ALL,
-        None => effects_of_trace(args.level.effects, &arch, &args.trace)?,
+    let level = args.level.fidelity;
+    // A retiled trace has other queries than the scan would see, and the rtl level models
+    // everything: build every model then.
+    let effects = match (args.retile, level) {
+        (Some(_), _) | (_, Fidelity::Rtl) => Effects::ALL,
+        _ => effects_of_trace(args.level.effects, &arch, &args.trace)?,
+    };
+    let (waveform, vcd) = match waveform(&args.waveform, level)? {
+        Some((options, thread)) => (Some(options), Some(thread)),
+        None => (None, None),
     };
     let options = ReplayOptions {
-        level: args.level.fidelity,
+        level,
         effects,
         retile: args.retile,
+        waveform,
     };
-    let mut result = replay_reader(
-        super::trace::open_trace(&args.trace)?,
-        &path,
-        &arch,
-        options,
-    )?;
+    let outcome = super::trace::open_trace(&args.trace)
+        .and_then(|reader| replay_reader(reader, &path, &arch, options));
+    let mut result = close_vcd(vcd, outcome)?;
     let queries = result.queries.len() as u64;
     if result.checked_queries < queries {
         eprintln!(
@@ -144,8 +164,15 @@ pub fn replay_reader<R: std::io::Read>(
     options: ReplayOptions,
 ) -> anyhow::Result<LevelResult> {
     let (width, height) = (reader.header().width, reader.header().height);
-    let model = LevelModel::new(options.level, arch, width, height, options.effects)
-        .with_context(|| format!("{name}: cannot replay"))?;
+    let model = LevelModel::with_waveform(
+        options.level,
+        arch,
+        width,
+        height,
+        options.effects,
+        options.waveform,
+    )
+    .with_context(|| format!("{name}: cannot replay"))?;
     let sink = LevelSink { model, error: None };
     let on = || format!("{name}: replay on {}", arch.machine().name());
     let sink = match options.retile {
@@ -179,4 +206,131 @@ fn feed<R: std::io::Read, S: EventSink>(
         return Err(error).with_context(&on);
     }
     Ok(sink)
+}
+
+// ---- waveforms (rtl level) ----
+
+/// Parse `START..END` (cycles, END exclusive, END > START).
+pub fn parse_window(text: &str) -> anyhow::Result<std::ops::Range<u64>> {
+    let usage = "expected START..END in cycles, END exclusive, e.g. 1000..2000";
+    let (start, end) = text
+        .split_once("..")
+        .with_context(|| format!("--window {text:?}: {usage}"))?;
+    let number = |part: &str, name: &str| {
+        part.trim().parse::<u64>().with_context(|| {
+            format!("--window {text:?}: {name} {part:?} is not a cycle number; {usage}")
+        })
+    };
+    let (start, end) = (number(start, "START")?, number(end, "END")?);
+    anyhow::ensure!(
+        end > start,
+        "--window {text:?}: END must be greater than START"
+    );
+    Ok(start..end)
+}
+
+/// Check the flags' combination; the waveform window if a VCD is asked for.
+fn waveform_window(
+    args: &WaveformArgs,
+    level: Fidelity,
+) -> anyhow::Result<Option<std::ops::Range<u64>>> {
+    if level != Fidelity::Rtl && (args.vcd.is_some() || args.window.is_some()) {
+        anyhow::bail!("--vcd and --window need --fidelity rtl");
+    }
+    match (&args.vcd, &args.window) {
+        (None, Some(_)) => anyhow::bail!("--window needs --vcd FILE"),
+        (None, None) => Ok(None),
+        (Some(_), None) => Ok(Some(0..u64::MAX)),
+        (Some(_), Some(window)) => parse_window(window).map(Some),
+    }
+}
+
+enum VcdChunk {
+    Data(Vec<u8>),
+    /// The replay succeeded: keep the file.
+    Done,
+}
+
+/// The waveform's destination: 1 MiB chunks handed to a thread that writes the file
+/// atomically ([`crate::output::write_atomically_with`]); if the replay fails, the file is
+/// never made.
+struct VcdSender {
+    chunks: std::sync::mpsc::SyncSender<VcdChunk>,
+    buffer: Vec<u8>,
+}
+
+impl VcdSender {
+    fn send(&mut self) -> std::io::Result<()> {
+        let data = std::mem::take(&mut self.buffer);
+        self.chunks
+            .send(VcdChunk::Data(data))
+            .map_err(|_| std::io::Error::new(std::io::ErrorKind::BrokenPipe, "VCD writer stopped"))
+    }
+}
+
+impl std::io::Write for VcdSender {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        self.buffer.extend_from_slice(bytes);
+        if self.buffer.len() >= 1 << 20 {
+            self.send()?;
+        }
+        Ok(bytes.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.send()
+    }
+}
+
+/// The channel to the thread writing a waveform, and the thread.
+type VcdThread = (
+    std::sync::mpsc::SyncSender<VcdChunk>,
+    std::thread::JoinHandle<anyhow::Result<()>>,
+);
+
+/// The waveform the flags ask for (rtl level only), and the thread writing it.
+fn waveform(
+    args: &WaveformArgs,
+    level: Fidelity,
+) -> anyhow::Result<Option<(WaveformOptions, VcdThread)>> {
+    let (Some(window), Some(path)) = (waveform_window(args, level)?, &args.vcd) else {
+        return Ok(None);
+    };
+    let (sender, receiver) = std::sync::mpsc::sync_channel::<VcdChunk>(4);
+    let path = path.clone();
+    let thread = std::thread::spawn(move || {
+        crate::output::write_atomically_with(&path, |file| {
+            use std::io::Write;
+            loop {
+                match receiver.recv() {
+                    Ok(VcdChunk::Data(data)) => file.write_all(&data)?,
+                    Ok(VcdChunk::Done) => return Ok(()),
+                    Err(_) => anyhow::bail!("the replay failed; no waveform written"),
+                }
+            }
+        })
+        .with_context(|| format!("cannot write the waveform {}", path.display()))
+    });
+    let out = Box::new(VcdSender {
+        chunks: sender.clone(),
+        buffer: Vec::with_capacity(1 << 20),
+    });
+    Ok(Some((WaveformOptions { out, window }, (sender, thread))))
+}
+
+/// Keep or drop the waveform file after the replay's `outcome`.
+fn close_vcd<T>(vcd: Option<VcdThread>, outcome: anyhow::Result<T>) -> anyhow::Result<T> {
+    let Some((sender, thread)) = vcd else {
+        return outcome;
+    };
+    if outcome.is_ok() {
+        // The receiver only stops early after a write error, which the join reports.
+        let _ = sender.send(VcdChunk::Done);
+    }
+    drop(sender);
+    let written = thread
+        .join()
+        .map_err(|_| anyhow::anyhow!("the waveform writer panicked"))?;
+    let value = outcome?;
+    written?;
+    Ok(value)
 }

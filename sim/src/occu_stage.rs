@@ -1,0 +1,139 @@
+//! The seam where the O2 machine computes its Occlusion Unit and OccU Control: either the
+//! event-timestamp model ([`crate::occlusion_unit`], [`crate::occu_control`]) or the
+//! clocked register-transfer model of `occsim-rtl` ([`crate::rtl_occu`]). Both follow the
+//! timing rules of [`crate::o2`] and produce the same cycles and results.
+
+use crate::arch::O2Arch;
+use crate::memory_port::MemoryPort;
+use crate::occlusion_unit::OcclusionUnit;
+use crate::occu_control::OccuControl;
+use crate::rtl_occu::RtlOccu;
+use crate::waveform::WaveformOptions;
+use occsim_traces::{Fragment, QuerySpec, TileResult};
+
+/// How the Occlusion Unit and OccU Control are modelled.
+#[derive(Default)]
+pub enum OccuModel {
+    /// Event timestamps per fragment (the `cycle` fidelity).
+    #[default]
+    Cycle,
+    /// The `occsim-rtl` register-transfer model, clocked cycle by cycle (the `rtl`
+    /// fidelity), optionally dumping a waveform.
+    Rtl { waveform: Option<WaveformOptions> },
+}
+
+/// Statistics the report needs from the stage.
+pub struct OccuStats {
+    pub busy_cycles: u64,
+    pub stall_cycles: u64,
+    /// Per engine: (busy cycles, stall cycles).
+    pub engines: Vec<(u64, u64)>,
+    pub words_written: u64,
+    pub port_cycles: u64,
+}
+
+// The cycle variant is the hot path and stays inline; the rtl one is boxed.
+#[allow(clippy::large_enum_variant)]
+pub enum OccuStage {
+    Cycle {
+        occu: OcclusionUnit,
+        control: OccuControl,
+    },
+    Rtl(Box<RtlOccu>),
+}
+
+impl OccuStage {
+    pub fn new(arch: &O2Arch, model: OccuModel) -> OccuStage {
+        match model {
+            OccuModel::Cycle => OccuStage::Cycle {
+                occu: OcclusionUnit::new(arch),
+                control: OccuControl::new(arch.occu_write_buffer_words),
+            },
+            OccuModel::Rtl { waveform } => OccuStage::Rtl(Box::new(RtlOccu::new(arch, waveform))),
+        }
+    }
+
+    pub fn begin(&mut self, spec: &QuerySpec) {
+        match self {
+            OccuStage::Cycle { occu, .. } => occu.begin(spec),
+            OccuStage::Rtl(rtl) => rtl.begin(spec),
+        }
+    }
+
+    /// One fragment, readable from `ready` (depth test cycle + 1): returns the cycle it
+    /// starts in the unit (`o_i`, when it leaves the FIFO). `verbose_hit_writes` is the
+    /// effect hook ([`crate::effects`]): without verbose queries no fragment sends hit words,
+    /// and the cycle model skips OccU Control's hit path.
+    #[inline]
+    pub fn fragment(
+        &mut self,
+        fragment: Fragment,
+        passed: bool,
+        ready: u64,
+        query_open: bool,
+        port: &mut MemoryPort,
+        verbose_hit_writes: bool,
+    ) -> u64 {
+        match self {
+            OccuStage::Cycle { occu, control } => {
+                let (start, hit_words) = occu.fragment(fragment, passed, ready, query_open);
+                let counted = start + occu.service_cycles() - 1;
+                let leave = if verbose_hit_writes {
+                    control.hits(hit_words, counted, port)
+                } else {
+                    debug_assert_eq!(hit_words, 0, "verbose_hit_writes off, yet hits");
+                    counted
+                };
+                occu.complete(start, leave, query_open);
+                start
+            }
+            OccuStage::Rtl(rtl) => rtl.fragment(fragment, passed, ready, port),
+        }
+    }
+
+    /// First cycle the unit is free.
+    pub fn free_cycle(&self) -> u64 {
+        match self {
+            OccuStage::Cycle { occu, .. } => occu.free_cycle(),
+            OccuStage::Rtl(rtl) => rtl.free_cycle(),
+        }
+    }
+
+    /// The query's end token, through the depth pipeline in `through_depth`: returns the
+    /// tiles' results, the cycle the result is available and the overflowed buffers.
+    pub fn end(
+        &mut self,
+        spec: &QuerySpec,
+        through_depth: u64,
+        port: &mut MemoryPort,
+    ) -> (Vec<TileResult>, u64, u32) {
+        match self {
+            OccuStage::Cycle { occu, control } => {
+                let through_occu = (through_depth + 1).max(occu.free_cycle());
+                let mut tiles = occu.end(spec.tiles.len());
+                let (available, overflowed) =
+                    control.records(spec, &mut tiles, through_occu + 1, port);
+                (tiles, available, overflowed)
+            }
+            OccuStage::Rtl(rtl) => rtl.end(spec, through_depth, port),
+        }
+    }
+
+    /// End of the stream: the statistics (the RTL drains and closes its waveform).
+    pub fn finish(&mut self) -> Result<OccuStats, crate::SimError> {
+        Ok(match self {
+            OccuStage::Cycle { occu, control } => OccuStats {
+                busy_cycles: occu.busy_cycles,
+                stall_cycles: occu.stall_cycles,
+                engines: occu
+                    .engines
+                    .iter()
+                    .map(|e| (e.busy_cycles, e.stall_cycles))
+                    .collect(),
+                words_written: control.words_written(),
+                port_cycles: control.port_cycles(),
+            },
+            OccuStage::Rtl(rtl) => rtl.finish()?,
+        })
+    }
+}

@@ -1,0 +1,329 @@
+//! The `rtl` fidelity of the O2 machine's Occlusion Unit and OccU Control: the
+//! `occsim-rtl` model clocked cycle by cycle, bridged to the event-timestamp rest of the
+//! machine.
+//!
+//! Bridge rules:
+//! - a fragment ready in `ready` is offered on the RTL's fragment port from cycle `ready`
+//!   on; the RTL's clock runs until it takes the fragment (`o_i`) and until the fragment
+//!   leaves (`c_i`), so the next fragment finds the clock at `c_i + 1`;
+//! - every word entering the RTL's write buffer in cycle `t` asks the in-order memory port
+//!   from `t + 1` (after the previous OccU word's grant); its grant cycle is fed back as the
+//!   RTL's `grants` input in that cycle;
+//! - the port's request order puts a query's records before the next fragment's depth
+//!   write, but the RTL emits them while it already counts later fragments. So at the end
+//!   token a copy of OccU Control is clocked ahead over the record phase (records have
+//!   priority over hits, so nothing the engines do changes when record words enter): its
+//!   words are claimed on the port then, and the real RTL, entering the same words later
+//!   cycle by cycle, is checked against those entry cycles;
+//! - cycles are skipped in bulk only while the RTL is quiescent (sequencer idle, no record
+//!   bank) and no grant falls in them: then no register changes. With a waveform, the
+//!   window's first cycle and one idle cycle after any activity are always ticked, so the
+//!   dump sees every change;
+//! - the memory image: hit words are stored per tile as they enter, record words are
+//!   decoded into the tile's result, the terminator cuts the hit list at its entry.
+
+use crate::arch::{O2Arch, OCCU_WORD_BITS};
+use crate::memory_port::{MemoryPort, PortClient};
+use crate::occu_stage::OccuStats;
+use crate::waveform::{Waveform, WaveformOptions};
+use crate::SimError;
+use occsim_rtl::occlusion_unit::Wires;
+use occsim_rtl::occu_control::{ControlWires, WordKind};
+use occsim_rtl::{
+    CycleInputs, CycleOutputs, FragmentPort, OccuParams, OccuRtl, QueryConfig, TileRect,
+};
+use occsim_traces::query::BRIEF_RECORD_ENTRIES;
+use occsim_traces::{Fragment, QueryMode, QuerySpec, TileResult};
+use std::collections::VecDeque;
+
+pub struct RtlOccu {
+    rtl: OccuRtl,
+    outputs: CycleOutputs,
+    wires: Wires,
+    /// Grant cycles of the words in the RTL's write buffer, head first.
+    grants: VecDeque<u64>,
+    /// Record words claimed ahead: (entry cycle, grant cycle), in order.
+    claimed_ahead: VecDeque<(u64, u64)>,
+    /// Port side: the last OccU grant, words written, distinct grant cycles.
+    last_grant: u64,
+    words_written: u64,
+    grant_cycles: u64,
+    /// The open query's hit entries per tile, as written to memory.
+    hits: Vec<Vec<(u16, u16)>>,
+    /// First cycle the unit is free (`c_last + 1`).
+    free: u64,
+    /// The last tick changed nothing and left only idle wires.
+    last_tick_idle: bool,
+    waveform: Option<Waveform>,
+}
+
+impl RtlOccu {
+    pub fn new(arch: &O2Arch, waveform: Option<WaveformOptions>) -> RtlOccu {
+        let rtl = OccuRtl::new(OccuParams {
+            engines: arch.engines as u32,
+            counter_bits: arch.counter_bits,
+            write_buffer_words: arch.occu_write_buffer_words as u32,
+            all_tiles_one_cycle: arch.all_tiles_one_cycle,
+        });
+        let waveform = waveform.map(|options| Waveform::new(options, &rtl, arch.clock_mhz));
+        RtlOccu {
+            rtl,
+            outputs: CycleOutputs::default(),
+            wires: Wires::default(),
+            grants: VecDeque::new(),
+            claimed_ahead: VecDeque::new(),
+            last_grant: 0,
+            words_written: 0,
+            grant_cycles: 0,
+            hits: Vec::new(),
+            free: 0,
+            last_tick_idle: false,
+            waveform,
+        }
+    }
+
+    /// Ask the port for one OccU word that entered the buffer in `enter`.
+    fn claim(&mut self, enter: u64, port: &mut MemoryPort) -> u64 {
+        let grant = port.claim(
+            (enter + 1).max(self.last_grant),
+            OCCU_WORD_BITS,
+            PortClient::OccuControl,
+        );
+        if grant != self.last_grant || self.words_written == 0 {
+            self.grant_cycles += 1;
+        }
+        self.last_grant = grant;
+        self.words_written += 1;
+        grant
+    }
+
+    /// Clock the RTL one cycle with `fragment` on its port.
+    #[inline]
+    fn tick(&mut self, fragment: FragmentPort, port: &mut MemoryPort) {
+        let t = self.rtl.cycle;
+        let mut grants = 0;
+        while self.grants.front() == Some(&t) {
+            self.grants.pop_front();
+            grants += 1;
+        }
+        let quiescent = self.rtl.quiescent();
+        let inputs = CycleInputs { fragment, grants };
+        match &mut self.waveform {
+            Some(waveform) if waveform.covers(t) => {
+                self.rtl.eval(&inputs, &mut self.wires);
+                waveform.dump(t, &self.rtl, &self.wires);
+                self.rtl.latch(&self.wires, &mut self.outputs);
+            }
+            _ => self.rtl.step(&inputs, &mut self.outputs),
+        }
+        self.last_tick_idle = quiescent && !fragment.valid && grants == 0;
+        for i in 0..self.outputs.entered.len() {
+            let word = self.outputs.entered[i];
+            let grant = match word.kind {
+                WordKind::Hit => {
+                    let hits = &mut self.hits[word.tile as usize];
+                    debug_assert_eq!(word.offset, BRIEF_RECORD_ENTRIES + hits.len() as u32);
+                    hits.push((word.data as u16, (word.data >> 16) as u16));
+                    self.claim(t, port)
+                }
+                WordKind::Record | WordKind::Terminator => {
+                    let (enter, grant) = self
+                        .claimed_ahead
+                        .pop_front()
+                        .expect("every record word was claimed at its end token");
+                    assert_eq!(enter, t, "record word entered off its look-ahead cycle");
+                    grant
+                }
+            };
+            self.grants.push_back(grant);
+        }
+    }
+
+    /// Run the clock with an empty fragment port up to cycle `target`.
+    fn advance_to(&mut self, target: u64, port: &mut MemoryPort) {
+        while self.rtl.cycle < target {
+            if self.rtl.quiescent() {
+                let mut until = target.min(self.grants.front().copied().unwrap_or(u64::MAX));
+                if let Some(waveform) = &self.waveform {
+                    if waveform.covers(self.rtl.cycle) && !self.last_tick_idle {
+                        until = self.rtl.cycle;
+                    } else if self.rtl.cycle < waveform.start() {
+                        until = until.min(waveform.start());
+                    }
+                }
+                if until > self.rtl.cycle {
+                    self.rtl.skip_to(until);
+                    continue;
+                }
+            }
+            self.tick(FragmentPort::default(), port);
+        }
+    }
+
+    pub fn begin(&mut self, spec: &QuerySpec) {
+        let tiles = spec
+            .tiles
+            .iter()
+            .map(|t| TileRect {
+                x: t.x,
+                y: t.y,
+                width: t.width,
+                height: t.height,
+            })
+            .collect();
+        self.rtl.load_query(&QueryConfig {
+            tiles,
+            verbose: spec.mode == QueryMode::Verbose,
+            hit_room: spec.buffer_entries.saturating_sub(BRIEF_RECORD_ENTRIES),
+        });
+        self.hits.clear();
+        self.hits.resize(spec.tiles.len(), Vec::new());
+    }
+
+    #[inline]
+    pub fn fragment(
+        &mut self,
+        fragment: Fragment,
+        passed: bool,
+        ready: u64,
+        port: &mut MemoryPort,
+    ) -> u64 {
+        self.advance_to(ready, port);
+        let offered = FragmentPort {
+            valid: true,
+            x: fragment.x,
+            y: fragment.y,
+            z: fragment.z,
+            pass: passed,
+        };
+        let start = self.rtl.cycle;
+        self.tick(offered, port);
+        assert!(self.outputs.accepted, "the unit is idle between fragments");
+        while !self.outputs.left {
+            self.tick(FragmentPort::default(), port);
+        }
+        self.free = self.rtl.cycle;
+        start
+    }
+
+    pub fn free_cycle(&self) -> u64 {
+        self.free
+    }
+
+    pub fn end(
+        &mut self,
+        spec: &QuerySpec,
+        through_depth: u64,
+        port: &mut MemoryPort,
+    ) -> (Vec<TileResult>, u64, u32) {
+        let verbose = spec.mode == QueryMode::Verbose;
+        let room = spec.buffer_entries.saturating_sub(BRIEF_RECORD_ENTRIES);
+        self.advance_to(through_depth + 1, port);
+        while !self.rtl.end_token(verbose, room) {
+            self.tick(FragmentPort::default(), port);
+        }
+        let bank = self.rtl.control.banks.back().expect("the bank just loaded");
+        let mut tiles: Vec<TileResult> = (0..spec.tiles.len())
+            .map(|t| TileResult {
+                overflowed: bank.overflowed(t),
+                ..TileResult::default()
+            })
+            .collect();
+        let (words, overflowed) = self.look_ahead_records(port);
+        for word in words {
+            let tile = &mut tiles[word.tile as usize];
+            match word.offset {
+                0 => tile.nohc = word.data,
+                1 => tile.phc = word.data,
+                2 => tile.xmin = word.data as u32,
+                3 => tile.xmax = word.data as u32,
+                4 => tile.ymin = word.data as u32,
+                5 => tile.ymax = word.data as u32,
+                6 => tile.zmin = word.data as u32,
+                7 => tile.zmax = word.data as u32,
+                entry => {
+                    self.hits[word.tile as usize].truncate((entry - BRIEF_RECORD_ENTRIES) as usize)
+                }
+            }
+        }
+        for (tile, hits) in tiles.iter_mut().zip(&mut self.hits) {
+            tile.hits = std::mem::take(hits);
+        }
+        (tiles, self.last_grant + 1, overflowed)
+    }
+
+    /// Clock a copy of OccU Control (engines offering nothing) until every record bank has
+    /// entered the write buffer; claim the new words on the port. Returns the last bank's
+    /// words and its overflow count.
+    fn look_ahead_records(&mut self, port: &mut MemoryPort) -> (Vec<occsim_rtl::Word>, u32) {
+        let mut control = self.rtl.control.clone();
+        let mut grants = self.grants.clone();
+        let nothing = vec![0; self.rtl.engines.len()];
+        let mut wires = ControlWires::default();
+        let mut entered = Vec::new();
+        let mut words = Vec::new();
+        // Words of earlier banks not yet entered in the real RTL were claimed before.
+        let earlier = self.claimed_ahead.len();
+        let mut already = 0;
+        let mut t = self.rtl.cycle;
+        while !control.banks.is_empty() {
+            let mut granted = 0;
+            while grants.front() == Some(&t) {
+                grants.pop_front();
+                granted += 1;
+            }
+            control.eval(granted, &nothing, &mut wires);
+            entered.clear();
+            control.latch(&wires, &mut [], &mut entered);
+            for &word in &entered {
+                let grant = if already < earlier {
+                    already += 1;
+                    self.claimed_ahead[already - 1].1
+                } else {
+                    let grant = self.claim(t, port);
+                    self.claimed_ahead.push_back((t, grant));
+                    words.push(word);
+                    grant
+                };
+                grants.push_back(grant);
+            }
+            t += 1;
+        }
+        (words, control.last_bank_overflows)
+    }
+
+    /// Drain the RTL (so its waveform shows the last records leave) and report.
+    pub fn finish(&mut self) -> Result<OccuStats, SimError> {
+        let mut scratch = MemoryPort::new(OCCU_WORD_BITS);
+        while !(self.rtl.quiescent() && self.grants.is_empty()) {
+            // No word is claimed here: records were claimed ahead and no query is open.
+            self.tick(FragmentPort::default(), &mut scratch);
+        }
+        // One idle cycle more, so that the waveform shows the state the run ends in.
+        if self
+            .waveform
+            .as_ref()
+            .is_some_and(|w| w.covers(self.rtl.cycle))
+            && !self.last_tick_idle
+        {
+            self.tick(FragmentPort::default(), &mut scratch);
+        }
+        if let Some(waveform) = self.waveform.take() {
+            waveform
+                .finish(self.rtl.cycle)
+                .map_err(|e| SimError::Waveform(e.to_string()))?;
+        }
+        Ok(OccuStats {
+            busy_cycles: self.rtl.busy_cycles,
+            stall_cycles: self.rtl.stall_cycles,
+            engines: self
+                .rtl
+                .engines
+                .iter()
+                .map(|e| (e.busy_cycles, e.stall_cycles))
+                .collect(),
+            words_written: self.words_written,
+            port_cycles: self.grant_cycles,
+        })
+    }
+}

@@ -1,0 +1,375 @@
+//! The `rtl` fidelity (the occsim-rtl model clocked every cycle) against the `cycle`
+//! fidelity (event timestamps): the whole report, every count, cycle and latency, must be
+//! identical, on built-in scenes and on random streams; and the VCD waveform is well formed.
+
+use occsim_sim::{Arch, MachineModel, OccuModel, Report, WaveformOptions};
+use occsim_traces::builtin::{demo_scene, DemoOptions, HARDCASES};
+use occsim_traces::golden::{FunctionalModel, GoldenModel};
+use occsim_traces::scene::{parse_scene, Command};
+use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QuerySpec, Rect};
+use proptest::prelude::*;
+use std::io::Write;
+use std::sync::{Arc, Mutex};
+
+fn arch(sets: &[String]) -> Arch {
+    let mut arch = Arch::builtin("o2").unwrap();
+    for set in sets {
+        arch.set(set).unwrap();
+    }
+    arch
+}
+
+fn replay(arch: &Arch, width: u32, height: u32, events: &[Event], occu: OccuModel) -> Report {
+    let mut machine = MachineModel::with_occu_model(arch, width, height, occu).unwrap();
+    for event in events {
+        machine.event(event).unwrap();
+    }
+    machine.finish().unwrap()
+}
+
+/// Replay on both fidelities and insist on identical reports.
+fn check_equivalent(arch: &Arch, width: u32, height: u32, events: &[Event]) -> Report {
+    let cycle = replay(arch, width, height, events, OccuModel::Cycle);
+    let rtl = replay(
+        arch,
+        width,
+        height,
+        events,
+        OccuModel::Rtl { waveform: None },
+    );
+    assert_eq!(cycle, rtl);
+    assert_eq!(cycle.summary.checked_queries, cycle.summary.queries);
+    cycle
+}
+
+/// A scene's events with the golden results, as `occsim trace gen` makes them.
+fn scene_events(text: &str) -> (u32, u32, Vec<Event>) {
+    let lines = parse_scene(text, "scene").unwrap();
+    let (width, height) = lines
+        .iter()
+        .find_map(|l| match l.command {
+            Command::Viewport { width, height } => Some((width, height)),
+            _ => None,
+        })
+        .unwrap();
+    let mut golden = GoldenModel::new(width, height);
+    let mut events = Vec::new();
+    for line in &lines {
+        golden.execute(&line.command, &mut events);
+    }
+    (width, height, events)
+}
+
+#[test]
+fn hardcases_scene_is_identical() {
+    let (width, height, events) = scene_events(HARDCASES);
+    for sets in [
+        vec![],
+        vec!["engines=1".to_string()],
+        vec!["engines=3".into(), "occu_write_buffer_words=1".into()],
+        vec!["all_tiles_one_cycle=true".into(), "counter_bits=4".into()],
+    ] {
+        check_equivalent(&arch(&sets), width, height, &events);
+    }
+}
+
+#[test]
+fn small_demo_is_identical() {
+    let text = demo_scene(&DemoOptions {
+        width: 160,
+        height: 120,
+        frames: 2,
+        lots_per_side: 6,
+        ..DemoOptions::default()
+    });
+    let (width, height, events) = scene_events(&text);
+    let report = check_equivalent(&arch(&[]), width, height, &events);
+    assert!(report.summary.fragments > 1000);
+    check_equivalent(
+        &arch(&["engines=2".into(), "occu_write_buffer_words=2".into()]),
+        width,
+        height,
+        &events,
+    );
+}
+
+const WIDTH: u32 = 40;
+const HEIGHT: u32 = 32;
+
+/// A small deterministic generator (xorshift64*), so each seed names one stream.
+struct Rng(u64);
+
+impl Rng {
+    fn below(&mut self, n: u64) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) % n
+    }
+}
+
+/// Random state changes, queries of every mode over random tiles and buffer sizes, spans
+/// of fragments with many depth ties and fragments outside queries; golden results after
+/// every query end.
+fn random_stream(seed: u64) -> Vec<Event> {
+    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut golden = FunctionalModel::new(WIDTH, HEIGHT);
+    let mut events = Vec::new();
+    let mut push = |event: Event, events: &mut Vec<Event>| {
+        let result = golden.event(&event);
+        events.push(event);
+        if let Some(result) = result {
+            events.push(Event::QueryResult(result));
+        }
+    };
+    for query in 0..(1 + rng.below(8)) {
+        match rng.below(5) {
+            0 => push(Event::Clear, &mut events),
+            1 => push(
+                Event::DepthFunc(DepthFunc::ALL[rng.below(8) as usize]),
+                &mut events,
+            ),
+            2 => push(Event::DepthMask(rng.below(4) != 0), &mut events),
+            3 => push(Event::DepthTest(rng.below(5) != 0), &mut events),
+            _ => {}
+        }
+        let mode = QueryMode::ALL[rng.below(4) as usize];
+        let (tiles, buffer_entries) = match mode {
+            QueryMode::Samples | QueryMode::Any => (vec![Rect::new(0, 0, WIDTH, HEIGHT)], 8),
+            _ => {
+                let count = 1 + rng.below(40);
+                let tiles = (0..count)
+                    .map(|_| {
+                        let x = rng.below(WIDTH as u64) as u32;
+                        let y = rng.below(HEIGHT as u64) as u32;
+                        let w = 1 + rng.below((WIDTH - x) as u64) as u32;
+                        let h = 1 + rng.below((HEIGHT - y) as u64) as u32;
+                        Rect::new(x, y, w, h)
+                    })
+                    .collect();
+                (tiles, 8 + rng.below(10) as u32)
+            }
+        };
+        push(
+            Event::QueryBegin(QuerySpec {
+                id: query as u32,
+                mode,
+                buffer_entries,
+                tiles,
+            }),
+            &mut events,
+        );
+        for _ in 0..rng.below(6) {
+            push(Event::Primitive, &mut events);
+            let (x0, y) = (
+                rng.below(WIDTH as u64) as u16,
+                rng.below(HEIGHT as u64) as u16,
+            );
+            let z = rng.below(6) as u32 * 1000;
+            for x in x0..(x0 + 1 + rng.below(30) as u16).min(WIDTH as u16) {
+                push(Event::Fragment(Fragment { x, y, z }), &mut events);
+            }
+        }
+        push(Event::QueryEnd, &mut events);
+        for _ in 0..rng.below(4) {
+            let (x, y) = (
+                rng.below(WIDTH as u64) as u16,
+                rng.below(HEIGHT as u64) as u16,
+            );
+            push(Event::Fragment(Fragment { x, y, z: 7 }), &mut events);
+        }
+    }
+    events
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+    #[test]
+    fn random_streams_are_identical(
+        seed in 0u64..1_000_000,
+        engines in 1u32..=16,
+        counter_bits in 1u32..=6,
+        buffer_words in 1u32..=12,
+        one_cycle in any::<bool>(),
+        port_bits in prop::sample::select(vec![32u32, 64, 256]),
+        prefetch in 1u32..=4,
+    ) {
+        let arch = arch(&[
+            format!("engines={engines}"),
+            format!("counter_bits={counter_bits}"),
+            format!("occu_write_buffer_words={buffer_words}"),
+            format!("all_tiles_one_cycle={one_cycle}"),
+            format!("memory_port_bits_per_cycle={port_bits}"),
+            format!("prefetch_depth_fragments={prefetch}"),
+        ]);
+        check_equivalent(&arch, WIDTH, HEIGHT, &random_stream(seed));
+    }
+}
+
+/// A `Write` the test can read back after the machine has dropped its copy.
+#[derive(Clone, Default)]
+struct Shared(Arc<Mutex<Vec<u8>>>);
+
+impl Write for Shared {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        self.0.lock().unwrap().extend_from_slice(bytes);
+        Ok(bytes.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+fn waveform(arch: &Arch, events: &[Event], window: std::ops::Range<u64>) -> (Report, String) {
+    let shared = Shared::default();
+    let report = replay(
+        arch,
+        WIDTH,
+        HEIGHT,
+        events,
+        OccuModel::Rtl {
+            waveform: Some(WaveformOptions {
+                out: Box::new(shared.clone()),
+                window,
+            }),
+        },
+    );
+    let text = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
+    (report, text)
+}
+
+/// Structural check: header, declarations, increasing timestamps, values of declared
+/// widths, no value written twice in a row. Returns per signal name its (time, value)s.
+fn parse_vcd(text: &str) -> std::collections::HashMap<String, Vec<(u64, u64)>> {
+    let (header, body) = text
+        .split_once("$enddefinitions $end\n")
+        .expect("definitions end");
+    assert!(header.starts_with("$version occsim-rtl $end\n$timescale 1ps $end\n"));
+    let mut widths = std::collections::HashMap::new();
+    let mut names = std::collections::HashMap::new();
+    let mut scope = Vec::new();
+    for line in header.lines().skip(2) {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words[0] {
+            "$scope" => scope.push(words[2].to_string()),
+            "$upscope" => {
+                scope.pop();
+            }
+            "$var" => {
+                assert!(words[1] == "wire" || words[1] == "reg");
+                let width: u32 = words[2].parse().unwrap();
+                assert!(widths.insert(words[3].to_string(), width).is_none());
+                names.insert(
+                    words[3].to_string(),
+                    format!("{}.{}", scope.join("."), words[4]),
+                );
+                assert_eq!(words[5], "$end");
+            }
+            other => panic!("unexpected header line {other}"),
+        }
+    }
+    assert!(scope.is_empty());
+    let mut time = None;
+    let mut last = std::collections::HashMap::new();
+    let mut changes: std::collections::HashMap<String, Vec<(u64, u64)>> = Default::default();
+    for line in body.lines() {
+        if let Some(t) = line.strip_prefix('#') {
+            let t: u64 = t.parse().unwrap();
+            assert!(time.map_or(true, |p| t > p), "timestamps increase");
+            time = Some(t);
+            continue;
+        }
+        let (value, code) = if let Some(rest) = line.strip_prefix('b') {
+            let (bits, code) = rest.split_once(' ').unwrap();
+            assert!(
+                bits.len() as u32 <= widths[code],
+                "value wider than declared"
+            );
+            (u64::from_str_radix(bits, 2).unwrap(), code)
+        } else {
+            assert_eq!(widths[&line[1..]], 1);
+            ((line.as_bytes()[0] - b'0') as u64, &line[1..])
+        };
+        assert_ne!(
+            last.insert(code.to_string(), value),
+            Some(value),
+            "only changes"
+        );
+        changes
+            .entry(names[code].clone())
+            .or_default()
+            .push((time.expect("a timestamp first"), value));
+    }
+    changes
+}
+
+#[test]
+fn waveform_is_well_formed_and_does_not_change_the_report() {
+    for seed in 0..20 {
+        let events = random_stream(seed);
+        let arch = arch(&["engines=3".into(), "occu_write_buffer_words=4".into()]);
+        let (report, text) = waveform(&arch, &events, 0..u64::MAX);
+        assert_eq!(
+            report,
+            replay(&arch, WIDTH, HEIGHT, &events, OccuModel::Cycle)
+        );
+        parse_vcd(&text);
+        let (_, windowed) = waveform(&arch, &events, 5..40);
+        let changes = parse_vcd(&windowed);
+        let period = 14999;
+        for (_, list) in changes {
+            assert!(list
+                .iter()
+                .all(|&(t, _)| (5 * period..40 * period).contains(&t)));
+        }
+    }
+}
+
+#[test]
+fn hand_worked_waveform() {
+    // One brief query, one tile on one engine, two fragments inside it, no primitive
+    // setup. Both fragments read the same depth word, so they pass the depth test in
+    // consecutive cycles and the unit takes them back to back: `accept` rises in o0 and
+    // falls in o0 + 2 (only changes are written). PHC latches at the end of each accept
+    // cycle: 1 from o0 + 1 (by o0 + 2 the slot has moved into OccU Control's record bank,
+    // so the engine's PHC shows no further change; the report has 2). The end token passes the idle unit at the start
+    // of o0 + 2; the 8 record words enter the write buffer in o0 + 3 (eligible the cycle
+    // after the token), so its level reads 8 from o0 + 4; they ask the port from o0 + 4,
+    // are granted together (8 x 32 bits = one 256-bit port cycle) in o0 + 4, and the result
+    // is available in o0 + 5. The level returns to 0 in o0 + 5.
+    let events = vec![
+        Event::QueryBegin(QuerySpec {
+            id: 1,
+            mode: QueryMode::Brief,
+            buffer_entries: 8,
+            tiles: vec![Rect::new(0, 0, 4, 4)],
+        }),
+        Event::Fragment(Fragment { x: 1, y: 1, z: 0 }),
+        Event::Fragment(Fragment { x: 2, y: 1, z: 0 }),
+        Event::QueryEnd,
+    ];
+    let arch = arch(&["engines=1".into(), "occu_write_buffer_words=32".into()]);
+    let (report, text) = waveform(&arch, &events, 0..1000);
+    let changes = parse_vcd(&text);
+    let p = 14999;
+    let accept = &changes["occu.accept"];
+    assert_eq!(accept.len(), 3);
+    let o0 = accept[1].0 / p;
+    assert_eq!(accept, &[(0, 0), (o0 * p, 1), ((o0 + 2) * p, 0)]);
+    assert_eq!(changes["occu.engine_0.phc"], [(0, 0), ((o0 + 1) * p, 1)]);
+    assert_eq!(
+        changes["occu.control.buffer_level"],
+        [(0, 0), ((o0 + 4) * p, 8), ((o0 + 5) * p, 0)]
+    );
+    assert_eq!(
+        changes["occu.control.record_words_in"],
+        [(0, 0), ((o0 + 3) * p, 8), ((o0 + 4) * p, 0)]
+    );
+    assert_eq!(
+        changes["occu.control.grants"],
+        [(0, 0), ((o0 + 4) * p, 8), ((o0 + 5) * p, 0)]
+    );
+    let query = &report.queries[0];
+    assert_eq!(query.available_cycle, o0 + 5);
+    assert_eq!(report.queries[0].tiles[0].phc, 2);
+}
