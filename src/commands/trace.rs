@@ -93,7 +93,7 @@ fn generate_scene(scene_file: &str, output: &Path) -> anyhow::Result<TraceSummar
             golden.execute(&line?.command, &mut writer);
         }
         writer
-            .finish()
+            .finish_seekable()
             .with_context(|| format!("{}: cannot write trace", output.display()))
     })
 }
@@ -140,7 +140,14 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
         outln!("{}", serde_json::to_string_pretty(&value)?);
         return Ok(());
     }
-    let f = &summary.features;
+    // The features used: the header has them when the trace was written to a file; the
+    // summary always does (and a --scan checks it against the blocks).
+    let f = header.features.as_ref().unwrap_or(&summary.features);
+    anyhow::ensure!(
+        header.features.is_none() || header.features.as_ref() == Some(&summary.features),
+        "{}: the header's features differ from the summary's",
+        args.trace.display()
+    );
     let modes: Vec<&str> = f.query_modes.iter().map(|m| m.name()).collect();
     let funcs: Vec<&str> = f.depth_funcs.iter().map(|m| m.name()).collect();
     let flags: Vec<&str> = [

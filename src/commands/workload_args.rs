@@ -236,7 +236,7 @@ pub fn write_workload_trace(
         let mut writer = TraceWriter::new(file, &header)?;
         let stats = generate(&scene, &driver, &walk, &mut writer)?;
         let summary = writer
-            .finish()
+            .finish_seekable()
             .with_context(|| format!("{}: cannot write trace", output.display()))?;
         Ok((summary, stats))
     })

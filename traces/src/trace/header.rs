@@ -24,6 +24,11 @@ pub struct TraceHeader {
     pub generator: String,
     /// The scene the trace was made from (a built-in name or a file name).
     pub scene: String,
+    /// The pipeline features the trace exercises. A streaming writer learns them as the
+    /// events pass, so a seekable output gets them written back into its header at the end
+    /// ([`crate::trace::TraceWriter::finish_seekable`]); otherwise only the summary has them.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub features: Option<TraceFeatures>,
 }
 
 impl TraceHeader {
@@ -37,6 +42,7 @@ impl TraceHeader {
             depth_format: "unorm24".to_owned(),
             generator: crate::GENERATOR_VERSION.to_owned(),
             scene: String::new(),
+            features: None,
         }
     }
 

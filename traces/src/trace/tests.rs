@@ -499,3 +499,35 @@ proptest! {
         read_anything(&bytes);
     }
 }
+
+#[test]
+fn a_seekable_trace_records_its_features_in_the_header() {
+    let events = every_kind();
+    let header = TraceHeader::new(SIDE, SIDE).with_scene("kinds");
+    let mut file = Cursor::new(Vec::new());
+    let mut writer = TraceWriter::new(&mut file, &header).unwrap();
+    for event in &events {
+        writer.write_event(event).unwrap();
+    }
+    let summary = writer.finish_seekable().unwrap();
+    let bytes = file.into_inner();
+    let reader = TraceReader::new(&bytes[..]).unwrap();
+    let features = reader
+        .header()
+        .features
+        .clone()
+        .expect("features in the header");
+    assert_eq!(features, summary.features);
+    // every_kind() begins a verbose query and sets a scissor: the header says so.
+    assert!(features.verbose && features.scissor, "{features:?}");
+    // The rest of the file is what a plain finish writes: the events read back the same.
+    let (read, _) = read_bulk(&bytes).unwrap();
+    assert_eq!(read, events);
+    // Without seeking, the header keeps no features (the summary has them).
+    let plain = write_default(&events);
+    assert!(TraceReader::new(&plain[..])
+        .unwrap()
+        .header()
+        .features
+        .is_none());
+}

@@ -38,6 +38,10 @@ const PART_OVERHEAD: usize = 11;
 /// kept and reported by [`TraceWriter::finish`]) or through [`TraceWriter::write_event`].
 pub struct TraceWriter<W: Write> {
     out: W,
+    /// The header as written, and its JSON's length padded with spaces so that a finished
+    /// header with the features used fits in place.
+    header: TraceHeader,
+    header_json_bytes: usize,
     /// Bytes written so far.
     offset: u64,
     options: WriterOptions,
@@ -64,6 +68,24 @@ pub struct TraceWriter<W: Write> {
     /// The first error met through the `EventSink` interface.
     error: Option<TraceError>,
     failed: bool,
+}
+
+/// Room kept in the header JSON (as trailing spaces, which JSON ignores) for the features
+/// used, written back by [`TraceWriter::finish_seekable`]: every query mode and depth function
+/// and every flag set take under 300 bytes.
+const FEATURES_RESERVE_BYTES: usize = 512;
+
+/// The file header's bytes: magic, version, flags, JSON length, JSON, CRC of all but magic.
+fn header_bytes(json: &[u8]) -> Vec<u8> {
+    let mut bytes = Vec::with_capacity(json.len() + 24);
+    bytes.extend_from_slice(&MAGIC);
+    bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    bytes.extend_from_slice(&0u16.to_le_bytes());
+    bytes.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    bytes.extend_from_slice(json);
+    let crc = crc32fast::hash(&bytes[MAGIC.len()..]);
+    bytes.extend_from_slice(&crc.to_le_bytes());
+    bytes
 }
 
 fn write_at(out: &mut impl Write, offset: &mut u64, bytes: &[u8]) -> Result<(), TraceError> {
@@ -96,27 +118,23 @@ impl<W: Write> TraceWriter<W> {
                 options.block_bytes
             )));
         }
-        let json = serde_json::to_vec(header).map_err(|e| bad_header(e.to_string()))?;
+        let mut json = serde_json::to_vec(header).map_err(|e| bad_header(e.to_string()))?;
+        json.resize(json.len() + FEATURES_RESERVE_BYTES, b' ');
         if json.len() > MAX_HEADER_JSON_BYTES as usize {
             return Err(bad_header(format!(
                 "header JSON of {} bytes exceeds {MAX_HEADER_JSON_BYTES}",
                 json.len()
             )));
         }
-        let mut bytes = Vec::with_capacity(json.len() + 24);
-        bytes.extend_from_slice(&MAGIC);
-        bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-        bytes.extend_from_slice(&0u16.to_le_bytes());
-        bytes.extend_from_slice(&(json.len() as u32).to_le_bytes());
-        bytes.extend_from_slice(&json);
-        let crc = crc32fast::hash(&bytes[MAGIC.len()..]);
-        bytes.extend_from_slice(&crc.to_le_bytes());
+        let bytes = header_bytes(&json);
         let mut offset = 0;
         write_at(&mut out, &mut offset, &bytes)?;
         let compressor = zstd::bulk::Compressor::new(options.zstd_level)
             .map_err(|e| bad_header(format!("zstd level {}: {e}", options.zstd_level)))?;
         Ok(TraceWriter {
             out,
+            header: header.clone(),
+            header_json_bytes: json.len(),
             offset,
             options,
             compressor,
@@ -297,6 +315,11 @@ impl<W: Write> TraceWriter<W> {
 
     /// End the trace: write the last block, the summary and the trailer, and flush.
     pub fn finish(mut self) -> Result<TraceSummary, TraceError> {
+        self.finish_stream()
+    }
+
+    /// Write the last block, the summary and the trailer, and flush.
+    fn finish_stream(&mut self) -> Result<TraceSummary, TraceError> {
         if let Some(error) = self.error.take() {
             return Err(error);
         }
@@ -332,6 +355,38 @@ impl<W: Write> TraceWriter<W> {
         self.out
             .flush()
             .map_err(|source| TraceError::Io { offset, source })?;
+        Ok(summary)
+    }
+}
+
+impl<W: Write + std::io::Seek> TraceWriter<W> {
+    /// [`TraceWriter::finish`], then write the features used back into the file header, so
+    /// that the header alone says how the trace was made and what it exercises.
+    pub fn finish_seekable(mut self) -> Result<TraceSummary, TraceError> {
+        let summary = self.finish_stream()?;
+        let mut header = self.header.clone();
+        header.features = Some(summary.features.clone());
+        let io = |source| TraceError::Io { offset: 0, source };
+        let mut json = serde_json::to_vec(&header).map_err(|e| TraceError::BadHeader {
+            offset: 0,
+            reason: e.to_string(),
+        })?;
+        if json.len() > self.header_json_bytes {
+            return Err(TraceError::BadHeader {
+                offset: 0,
+                reason: format!(
+                    "the finished header needs {} bytes, {} were kept",
+                    json.len(),
+                    self.header_json_bytes
+                ),
+            });
+        }
+        json.resize(self.header_json_bytes, b' ');
+        let end = self.out.stream_position().map_err(io)?;
+        self.out.seek(std::io::SeekFrom::Start(0)).map_err(io)?;
+        self.out.write_all(&header_bytes(&json)).map_err(io)?;
+        self.out.seek(std::io::SeekFrom::Start(end)).map_err(io)?;
+        self.out.flush().map_err(io)?;
         Ok(summary)
     }
 }
