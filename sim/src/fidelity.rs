@@ -17,6 +17,7 @@ use crate::analytic::AnalyticModel;
 use crate::arch::{Arch, Machine};
 use crate::effects::{EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
+use crate::golden_check::GoldenCheck;
 use crate::machine::MachineModel;
 use crate::o2::{check_spec, first_difference};
 use crate::occu_stage::OccuModel;
@@ -238,11 +239,11 @@ pub struct FunctionalCore {
     events: u64,
     open: Option<u32>,
     open_fragments: u64,
-    awaiting_golden: Option<QueryResult>,
+    /// The result of the query that just ended, waiting for the stream's golden result.
+    golden: GoldenCheck,
     queries: Vec<QueryOutcome>,
     fragments: u64,
     primitives: u64,
-    checked_queries: u64,
 }
 
 impl FunctionalCore {
@@ -261,11 +262,10 @@ impl FunctionalCore {
             events: 0,
             open: None,
             open_fragments: 0,
-            awaiting_golden: None,
+            golden: GoldenCheck::default(),
             queries: Vec::new(),
             fragments: 0,
             primitives: 0,
-            checked_queries: 0,
         })
     }
 
@@ -315,25 +315,9 @@ impl FunctionalCore {
             }
             Event::QueryResult(golden) => {
                 self.events += 1;
-                let simulated =
-                    self.awaiting_golden
-                        .take()
-                        .ok_or(SimError::ResultWithoutQuery {
-                            event: index,
-                            id: golden.id,
-                        })?;
-                if let Some((field, simulated_value, golden_value)) =
-                    first_difference(&simulated, golden, u64::MAX)
-                {
-                    return Err(SimError::Mismatch {
-                        id: simulated.id,
-                        index: self.queries.len() - 1,
-                        field,
-                        simulated: simulated_value,
-                        golden: golden_value,
-                    });
-                }
-                self.checked_queries += 1;
+                self.golden.check(golden, index, |simulated, golden| {
+                    first_difference(simulated, golden, u64::MAX)
+                })?;
                 return Ok(None);
             }
             _ => {}
@@ -348,7 +332,7 @@ impl FunctionalCore {
                 value: result.value(),
                 latency_cycles: None,
             });
-            self.awaiting_golden = Some(result.clone());
+            self.golden.expect(self.queries.len() - 1, result.clone());
         }
         Ok(ended)
     }
@@ -368,7 +352,7 @@ impl FunctionalCore {
             machine: String::new(),
             fragments: self.fragments,
             primitives: self.primitives,
-            checked_queries: self.checked_queries,
+            checked_queries: self.golden.checked(),
             total_cycles: None,
             latency_mean_cycles: None,
             latency_p95_cycles: None,

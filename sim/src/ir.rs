@@ -50,6 +50,7 @@
 use crate::arch::{Arch, IrArch};
 use crate::error::SimError;
 use crate::fragment_generator::FragmentGenerator;
+use crate::golden_check::GoldenCheck;
 use crate::image_engine::ImageEngine;
 use crate::interleave::FramebufferInterleave;
 use crate::merge_network::{merge_partial, merged_ready};
@@ -88,11 +89,11 @@ pub struct IrMachine {
     generation: u64,
     /// The host's first free cycle (software merges).
     host: u64,
-    awaiting_golden: Option<(usize, QueryResult)>,
+    /// The result of the query that just ended, waiting for the stream's golden result.
+    golden: GoldenCheck,
     /// The merged result of the last query that ended (hit lists included).
     last_result: Option<QueryResult>,
     queries: Vec<QueryReport>,
-    checked_queries: u64,
     events: u64,
     primitives: u64,
     last_available: u64,
@@ -138,10 +139,9 @@ impl IrMachine {
             open: None,
             generation: 0,
             host: 0,
-            awaiting_golden: None,
+            golden: GoldenCheck::default(),
             last_result: None,
             queries: Vec::new(),
-            checked_queries: 0,
             events: 0,
             primitives: 0,
             last_available: 0,
@@ -280,7 +280,7 @@ impl IrMachine {
             overflowed_buffers,
         };
         self.last_result = Some(result.clone());
-        self.awaiting_golden = Some((self.queries.len() - 1, result));
+        self.golden.expect(self.queries.len() - 1, result);
         Ok(())
     }
 
@@ -290,26 +290,10 @@ impl IrMachine {
     }
 
     fn check(&mut self, golden: &QueryResult, event: u64) -> Result<(), SimError> {
-        let (index, simulated) =
-            self.awaiting_golden
-                .take()
-                .ok_or(SimError::ResultWithoutQuery {
-                    event,
-                    id: golden.id,
-                })?;
-        if let Some((field, simulated, golden)) =
-            merged_difference(&simulated, golden, self.arch.counter_max())
-        {
-            return Err(SimError::Mismatch {
-                id: self.queries[index].id,
-                index,
-                field,
-                simulated,
-                golden,
-            });
-        }
-        self.checked_queries += 1;
-        Ok(())
+        let counter_max = self.arch.counter_max();
+        self.golden.check(golden, event, |simulated, golden| {
+            merged_difference(simulated, golden, counter_max)
+        })
     }
 
     /// End of the stream: the report.
@@ -387,7 +371,7 @@ impl IrMachine {
                     fragments as f64 / cycles as f64
                 },
                 queries: self.queries.len() as u64,
-                checked_queries: self.checked_queries,
+                checked_queries: self.golden.checked(),
                 latency_p50_cycles: nearest_rank(&latencies, 50),
                 latency_p95_cycles: nearest_rank(&latencies, 95),
                 latency_max_cycles: latencies.last().copied().unwrap_or(0),

@@ -40,6 +40,7 @@ pub mod fidelity;
 pub mod fifo;
 pub mod fragment_generator;
 pub mod fragment_input;
+mod golden_check;
 pub mod image_engine;
 pub mod interleave;
 pub mod ir;

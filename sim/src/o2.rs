@@ -48,6 +48,7 @@ use crate::effects::Effects;
 use crate::error::SimError;
 use crate::fifo::Fifo;
 use crate::fragment_input::FragmentInput;
+use crate::golden_check::GoldenCheck;
 use crate::memory_port::MemoryPort;
 use crate::occu_stage::{OccuModel, OccuStage};
 use crate::report::{
@@ -110,9 +111,8 @@ pub struct O2Machine {
     front_open: Option<u32>,
     open: Option<OpenQuery>,
     /// The result of the query that just ended, waiting for the stream's golden result.
-    awaiting_golden: Option<(usize, QueryResult)>,
+    golden: GoldenCheck,
     queries: Vec<QueryReport>,
-    checked_queries: u64,
     events: u64,
     last_available: u64,
     /// The effect models built ([`crate::effects`]); all of them unless a scan proved some
@@ -189,9 +189,8 @@ impl O2Machine {
             front_depth_test: true,
             front_open: None,
             open: None,
-            awaiting_golden: None,
+            golden: GoldenCheck::default(),
             queries: Vec::new(),
-            checked_queries: 0,
             events: 0,
             last_available: 0,
             effects,
@@ -379,31 +378,15 @@ impl O2Machine {
             tiles,
             overflowed_buffers,
         };
-        self.awaiting_golden = Some((self.queries.len() - 1, result));
+        self.golden.expect(self.queries.len() - 1, result);
         Ok(())
     }
 
     fn check(&mut self, golden: &QueryResult, event: u64) -> Result<(), SimError> {
-        let (index, simulated) =
-            self.awaiting_golden
-                .take()
-                .ok_or(SimError::ResultWithoutQuery {
-                    event,
-                    id: golden.id,
-                })?;
-        if let Some((field, simulated, golden)) =
-            first_difference(&simulated, golden, self.arch.counter_max())
-        {
-            return Err(SimError::Mismatch {
-                id: self.queries[index].id,
-                index,
-                field,
-                simulated,
-                golden,
-            });
-        }
-        self.checked_queries += 1;
-        Ok(())
+        let counter_max = self.arch.counter_max();
+        self.golden.check(golden, event, |simulated, golden| {
+            first_difference(simulated, golden, counter_max)
+        })
     }
 
     /// Start from a functional model's render state and depth buffer instead of the reset
@@ -506,7 +489,7 @@ impl O2Machine {
                     fragments as f64 / cycles as f64
                 },
                 queries: self.queries.len() as u64,
-                checked_queries: self.checked_queries,
+                checked_queries: self.golden.checked(),
                 latency_p50_cycles: nearest_rank(&latencies, 50),
                 latency_p95_cycles: nearest_rank(&latencies, 95),
                 latency_max_cycles: latencies.last().copied().unwrap_or(0),
