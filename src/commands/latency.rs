@@ -8,6 +8,7 @@ use super::replay::replay_trace;
 use crate::plot::{LineChart, Scale, Series};
 use anyhow::{bail, Context};
 use occsim_sim::report::nearest_rank;
+use occsim_sim::Fidelity;
 use occsim_sim::Report;
 use occsim_traces::retile::TileGrid;
 use rayon::prelude::*;
@@ -33,6 +34,10 @@ pub struct LatencyArgs {
     /// results are recomputed), e.g. --retile 8x8.
     #[arg(long, value_name = "GxH")]
     pub retile: Option<TileGrid>,
+    /// Level of detail: cycle or rtl (the levels whose reports split latency into drain
+    /// and merges).
+    #[arg(long, value_name = "LEVEL", default_value = "cycle")]
+    pub fidelity: occsim_sim::Fidelity,
     /// Print the rows as JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -98,6 +103,11 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
         bail!("--engines: give at least one engine count");
     }
     let base = args.arch.resolve()?;
+    anyhow::ensure!(
+        matches!(args.fidelity, Fidelity::Cycle | Fidelity::Rtl),
+        "latency needs a level that splits latency into drain and merges: cycle or rtl, not {}",
+        args.fidelity
+    );
     let clock_mhz = match base.get("clock_mhz") {
         Some(occsim_sim::arch::Value::Float(mhz)) => mhz,
         _ => bail!("the architecture has no clock_mhz"),
@@ -109,7 +119,9 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
             let mut arch = base.clone();
             arch.set_value("engines", &engines.to_string())
                 .with_context(|| format!("--engines {engines}"))?;
-            let report = replay_trace(&args.trace, &arch, args.retile)?;
+            let report = replay_trace(&args.trace, &arch, args.retile, args.fidelity)?
+                .report
+                .context("no cycle report")?;
             Ok(LatencyRow::of(engines, &report, clock_mhz))
         })
         .collect::<anyhow::Result<Vec<LatencyRow>>>()?;

@@ -7,7 +7,7 @@ use super::fidelity::{effects_of_trace, FidelityArg};
 use anyhow::Context;
 use occsim_sim::effects::Effects;
 use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult};
-use occsim_sim::{Arch, Report, SimError, WaveformOptions};
+use occsim_sim::{Arch, SimError, WaveformOptions};
 use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, TileGrid};
 use occsim_traces::trace::TraceReader;
@@ -144,16 +144,22 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Replay the trace at `trace` on `arch` at the cycle level (brief queries retiled to
-/// `retile` when given) and return the report. The one replay path `sweep`, `latency` and
-/// `culling compare` share.
-pub fn replay_trace(trace: &Path, arch: &Arch, retile: Option<TileGrid>) -> anyhow::Result<Report> {
+/// Replay the trace at `trace` on `arch` at `level`, every effect model built, its brief
+/// queries retiled to `retile` when given. The one replay path `sweep`, `latency` and the
+/// `fidelity` table share.
+pub fn replay_trace(
+    trace: &Path,
+    arch: &Arch,
+    retile: Option<TileGrid>,
+    level: Fidelity,
+) -> anyhow::Result<LevelResult> {
     let name = trace.display().to_string();
     let reader = super::trace::open_trace(trace)?;
-    let result = replay_reader(reader, &name, arch, ReplayOptions::cycle(retile))?;
-    result
-        .report
-        .with_context(|| format!("{name}: the cycle level gave no report"))
+    let options = ReplayOptions {
+        level,
+        ..ReplayOptions::cycle(retile)
+    };
+    replay_reader(reader, &name, arch, options)
 }
 
 /// Replay a trace from any reader; `name` names it in errors.

@@ -75,6 +75,9 @@ pub struct SweepRunArgs {
     /// results are recomputed), so tile counts can be swept too.
     #[arg(long, value_name = "GxH")]
     pub retile: Option<occsim_traces::retile::TileGrid>,
+    /// Level of detail of every point: functional, analytic, sampled:K, cycle or rtl.
+    #[arg(long, value_name = "LEVEL", default_value = "cycle")]
+    pub fidelity: occsim_sim::Fidelity,
     /// Results file (one JSON line per point); the CSV view is written beside it.
     #[arg(long, value_name = "FILE.jsonl", required = true)]
     pub out: Option<PathBuf>,
@@ -202,6 +205,11 @@ pub fn run(args: SweepArgs) -> Result<()> {
     if let Some(grid) = args.run.retile {
         digest += &format!(":retile={grid}");
     }
+    // So do other levels: a resumed sweep must not mix their figures.
+    let level = args.run.fidelity;
+    if level != occsim_sim::Fidelity::Cycle {
+        digest += &format!(":fidelity={level}");
+    }
     let validate = |key: &str, value: &str| {
         base.clone()
             .set_value(key, value)
@@ -213,46 +221,66 @@ pub fn run(args: SweepArgs) -> Result<()> {
             arch.set_value(key, value)
                 .with_context(|| format!("{key}={value}"))?;
         }
-        let report = super::replay::replay_trace(&trace, &arch, args.run.retile)?;
+        let result = super::replay::replay_trace(&trace, &arch, args.run.retile, level)?;
         Ok(crate::sweep::PointRecord {
-            resolved_arch: serde_json::to_value(&report.arch)?,
-            metrics: point_metrics(&report),
+            resolved_arch: resolved_arch(&arch),
+            metrics: point_metrics(&result),
         })
     };
     run_with(&args, &evaluate, &digest, &validate)
 }
 
+/// Every parameter of the point's architecture, with its unit.
+fn resolved_arch(arch: &occsim_sim::Arch) -> serde_json::Value {
+    arch.entries()
+        .map(|(param, value)| {
+            serde_json::json!({"key": param.key, "value": value.to_string(), "unit": param.unit})
+        })
+        .collect()
+}
+
 /// The metrics a sweep records for one point (no wall times: results must not depend on the
-/// machine the sweep ran on).
+/// machine the sweep ran on). Levels below cycle predict fewer of them.
 fn point_metrics(
-    report: &occsim_sim::Report,
+    result: &occsim_sim::LevelResult,
 ) -> std::collections::BTreeMap<String, serde_json::Value> {
-    let s = &report.summary;
-    [
-        ("total_cycles", serde_json::json!(s.cycles)),
-        ("simulated_seconds", serde_json::json!(s.simulated_seconds)),
-        ("fragments", serde_json::json!(s.fragments)),
+    let mut metrics: std::collections::BTreeMap<String, serde_json::Value> = [
+        ("fragments", serde_json::json!(result.fragments)),
+        ("queries", serde_json::json!(result.queries.len())),
+        ("total_cycles", serde_json::json!(result.total_cycles)),
         (
-            "fragments_per_cycle",
-            serde_json::json!(s.fragments_per_cycle),
-        ),
-        ("queries", serde_json::json!(s.queries)),
-        (
-            "latency_p50_cycles",
-            serde_json::json!(s.latency_p50_cycles),
+            "latency_mean_cycles",
+            serde_json::json!(result.latency_mean_cycles),
         ),
         (
             "latency_p95_cycles",
-            serde_json::json!(s.latency_p95_cycles),
-        ),
-        (
-            "latency_max_cycles",
-            serde_json::json!(s.latency_max_cycles),
+            serde_json::json!(result.latency_p95_cycles),
         ),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_owned(), v))
-    .collect()
+    .collect();
+    if let Some(report) = &result.report {
+        let s = &report.summary;
+        for (key, value) in [
+            ("simulated_seconds", serde_json::json!(s.simulated_seconds)),
+            (
+                "fragments_per_cycle",
+                serde_json::json!(s.fragments_per_cycle),
+            ),
+            (
+                "latency_p50_cycles",
+                serde_json::json!(s.latency_p50_cycles),
+            ),
+            (
+                "latency_max_cycles",
+                serde_json::json!(s.latency_max_cycles),
+            ),
+        ] {
+            metrics.insert(key.to_owned(), value);
+        }
+    }
+    metrics
 }
 
 fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine]) -> Result<()> {
