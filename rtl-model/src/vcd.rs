@@ -125,7 +125,7 @@ impl<W: Write> VcdWriter<W> {
     /// Following changes happen at `time` (ps), which must not go back.
     pub fn set_time(&mut self, time: u64) {
         debug_assert!(!self.defining);
-        debug_assert!(self.time_written.map_or(true, |t| time >= t));
+        debug_assert!(self.time_written.is_none_or(|t| time >= t));
         self.time = time;
     }
 
@@ -184,7 +184,7 @@ impl<W: Write> VcdWriter<W> {
     /// Write a last timestamp `time` (if later than every change) so that viewers show the
     /// dump up to it.
     pub fn end_at(&mut self, time: u64) {
-        if self.time_written.map_or(true, |t| time > t) {
+        if self.time_written.is_none_or(|t| time > t) {
             self.put(&format!("#{time}\n"));
             self.time_written = Some(time);
         }

@@ -640,18 +640,21 @@ impl O2Arch {
     /// Cross-parameter rules the per-key ranges cannot express.
     fn check(&self) -> Result<(), ArchError> {
         let port = self.memory_port_bits_per_cycle;
-        if port % self.depth_bits_per_pixel != 0 {
+        if !port.is_multiple_of(self.depth_bits_per_pixel) {
             return Err(ArchError::Impossible(format!(
                 "memory_port_bits_per_cycle ({port}) must be a multiple of depth_bits_per_pixel ({})",
                 self.depth_bits_per_pixel
             )));
         }
-        if port % OCCU_WORD_BITS != 0 {
+        if !port.is_multiple_of(OCCU_WORD_BITS) {
             return Err(ArchError::Impossible(format!(
                 "memory_port_bits_per_cycle ({port}) must be a multiple of the {OCCU_WORD_BITS}-bit OccU word"
             )));
         }
-        if self.framebuffer_tile_width_pixels % self.pixels_per_word() != 0 {
+        if !self
+            .framebuffer_tile_width_pixels
+            .is_multiple_of(self.pixels_per_word())
+        {
             return Err(ArchError::Impossible(format!(
                 "framebuffer_tile_width_pixels ({}) must be a multiple of the {} pixels in one memory word",
                 self.framebuffer_tile_width_pixels,

@@ -157,7 +157,7 @@ impl SampledModel {
     }
 
     fn is_sampled(&self, window: u64) -> bool {
-        window % self.every as u64 == 0
+        window.is_multiple_of(self.every as u64)
     }
 
     /// The current window needs the cycle model: sampled, or the warm-up of a sampled one.
@@ -328,7 +328,7 @@ impl SampledModel {
                 .latencies
                 .iter()
                 .zip(&modes)
-                .filter(|(_, m)| mode.map_or(true, |mode| **m == mode))
+                .filter(|(_, m)| mode.is_none_or(|mode| **m == mode))
                 .filter_map(|(l, _)| *l)
                 .collect();
             (!pick.is_empty()).then(|| pick.iter().sum::<u64>() as f64 / pick.len() as f64)

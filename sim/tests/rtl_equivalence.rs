@@ -275,7 +275,7 @@ fn parse_vcd(text: &str) -> std::collections::HashMap<String, Vec<(u64, u64)>> {
     for line in body.lines() {
         if let Some(t) = line.strip_prefix('#') {
             let t: u64 = t.parse().unwrap();
-            assert!(time.map_or(true, |p| t > p), "timestamps increase");
+            assert!(time.is_none_or(|p| t > p), "timestamps increase");
             time = Some(t);
             continue;
         }

@@ -230,7 +230,7 @@ impl Grid {
     /// The indices a shard runs (all points when `shard` is None), ascending.
     pub fn selected_indices(&self, shard: Option<Shard>) -> Vec<usize> {
         (0..self.point_count)
-            .filter(|&i| shard.map_or(true, |s| s.contains(i)))
+            .filter(|&i| shard.is_none_or(|s| s.contains(i)))
             .collect()
     }
 }
