@@ -1,35 +1,8 @@
 //! End-to-end tests of the `occsim` command line.
 
-use std::process::{Command, Output};
+mod support;
 
-fn occsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_occsim"))
-        .args(args)
-        .output()
-        .expect("occsim runs")
-}
-
-fn stdout_of(args: &[&str]) -> String {
-    let output = occsim(args);
-    assert!(
-        output.status.success(),
-        "occsim {args:?} failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout).expect("utf-8 output")
-}
-
-fn stderr_of_failure(args: &[&str]) -> String {
-    let output = occsim(args);
-    assert!(!output.status.success(), "occsim {args:?} should fail");
-    String::from_utf8(output.stderr).expect("utf-8 output")
-}
-
-fn scratch_dir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("occsim-cli-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use support::cli::{scratch_dir, stderr_of_failure, stdout_of};
 
 /// The hand-worked counts of tests/../traces/src/builtin/hardcases.scene (see its comments).
 #[test]

@@ -1,33 +1,9 @@
 //! End-to-end tests of `occsim fidelity` and `occsim replay --fidelity/--effects` on the
 //! hard-cases trace.
 
-use std::process::{Command, Output};
+mod support;
 
-fn occsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_occsim"))
-        .args(args)
-        .output()
-        .expect("occsim runs")
-}
-
-fn stdout_of(args: &[&str]) -> String {
-    let output = occsim(args);
-    assert!(
-        output.status.success(),
-        "occsim {args:?} failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout).expect("utf-8 output")
-}
-
-fn hardcases_trace(name: &str) -> (std::path::PathBuf, String) {
-    let dir = std::env::temp_dir().join(format!("occsim-fidelity-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let trace = dir.join("hard.occt");
-    stdout_of(&["trace", "gen", "hardcases", "-o", trace.to_str().unwrap()]);
-    let path = trace.to_str().unwrap().to_string();
-    (dir, path)
-}
+use support::cli::{hardcases_trace, occsim, stdout_of};
 
 #[test]
 fn fidelity_prints_every_level_against_cycle_and_plots() {

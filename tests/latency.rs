@@ -1,34 +1,8 @@
 //! End-to-end tests of `occsim latency` and of `--retile`, on the built-in hardcases trace.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+mod support;
 
-fn occsim(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_occsim"))
-        .args(args)
-        .output()
-        .expect("occsim runs")
-}
-
-fn stdout_of(args: &[&str]) -> String {
-    let output = occsim(args);
-    assert!(
-        output.status.success(),
-        "occsim {args:?} failed: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout).expect("utf-8 output")
-}
-
-/// A hardcases trace in a fresh scratch directory.
-fn hardcases_trace(name: &str) -> (PathBuf, String) {
-    let dir = std::env::temp_dir().join(format!("occsim-latency-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let trace = dir.join("hardcases.occt");
-    let trace_text = trace.to_str().unwrap().to_string();
-    stdout_of(&["trace", "gen", "hardcases", "-o", &trace_text]);
-    (dir, trace_text)
-}
+use support::cli::{hardcases_trace, occsim, stdout_of};
 
 #[test]
 fn latency_prints_one_row_per_engine_count_and_plots() {

@@ -1,30 +1,14 @@
 //! `occsim sweep` end to end on a real trace: results do not depend on --jobs or sharding, and
 //! bad axes are rejected by name.
 
+mod support;
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use support::cli::{occsim, scratch_dir as scratch, stdout_of};
 
-fn occsim(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_occsim"))
-        .args(args)
-        .output()
-        .expect("occsim runs")
-}
-
+/// Run `occsim` and require success.
 fn ok(args: &[&str]) {
-    let output = occsim(args);
-    assert!(
-        output.status.success(),
-        "occsim {args:?}: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("occsim-sweep-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    stdout_of(args);
 }
 
 fn s(p: &Path) -> &str {

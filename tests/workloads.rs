@@ -1,20 +1,9 @@
 //! Walkthrough traces end to end: made by a culling driver, replayed with their golden
 //! answers checked; `culling compare` prints every driver with cycles on the machines.
 
-use std::process::Command;
+mod support;
 
-fn occsim(args: &[&str]) -> String {
-    let output = Command::new(env!("CARGO_BIN_EXE_occsim"))
-        .args(args)
-        .output()
-        .expect("occsim runs");
-    assert!(
-        output.status.success(),
-        "occsim {args:?}: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    String::from_utf8(output.stdout).unwrap()
-}
+use support::cli::stdout_of as occsim;
 
 #[test]
 fn every_driver_makes_a_trace_that_replays_against_its_golden_answers() {

@@ -1,0 +1,47 @@
+//! Running the `occsim` binary from end-to-end tests.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+/// Run `occsim` with `args`.
+pub fn occsim(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_occsim"))
+        .args(args)
+        .output()
+        .expect("occsim runs")
+}
+
+/// Run `occsim`, require success, return its standard output.
+pub fn stdout_of(args: &[&str]) -> String {
+    let output = occsim(args);
+    assert!(
+        output.status.success(),
+        "occsim {args:?} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8(output.stdout).expect("utf-8 output")
+}
+
+/// Run `occsim`, require failure, return its standard error.
+pub fn stderr_of_failure(args: &[&str]) -> String {
+    let output = occsim(args);
+    assert!(!output.status.success(), "occsim {args:?} should fail");
+    String::from_utf8(output.stderr).expect("utf-8 output")
+}
+
+/// A fresh, empty scratch directory for one test (tests run in parallel, processes too).
+pub fn scratch_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("occsim-test-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch directory");
+    dir
+}
+
+/// A hardcases trace in a fresh scratch directory: (directory, trace path).
+pub fn hardcases_trace(name: &str) -> (PathBuf, String) {
+    let dir = scratch_dir(name);
+    let trace = dir.join("hardcases.occt");
+    let trace = trace.to_str().expect("utf-8 path").to_string();
+    stdout_of(&["trace", "gen", "hardcases", "-o", &trace]);
+    (dir, trace)
+}
