@@ -379,6 +379,17 @@ impl Arch {
     }
 
     /// `(key, value)` for every parameter, in table order.
+    /// Every parameter with its value and unit, as reports and sweep records carry them.
+    pub fn report_entries(&self) -> Vec<crate::report::ArchEntry> {
+        self.entries()
+            .map(|(param, value)| crate::report::ArchEntry {
+                key: param.key.to_string(),
+                value: value.to_string(),
+                unit: param.unit.to_string(),
+            })
+            .collect()
+    }
+
     pub fn entries(&self) -> impl Iterator<Item = (&'static Param, Value)> + '_ {
         self.machine
             .params()

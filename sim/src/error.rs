@@ -57,3 +57,18 @@ pub enum SimError {
     #[error("cannot write the waveform: {0}")]
     Waveform(String),
 }
+
+/// A machine's viewport must fit the rasterizer's proven range: one check for every model.
+pub(crate) fn check_viewport(width: u32, height: u32) -> Result<(), SimError> {
+    use occsim_traces::state::MAX_VIEWPORT_SIDE;
+    let side = 1..=MAX_VIEWPORT_SIDE;
+    if side.contains(&width) && side.contains(&height) {
+        Ok(())
+    } else {
+        Err(SimError::Viewport {
+            width,
+            height,
+            max: MAX_VIEWPORT_SIDE,
+        })
+    }
+}

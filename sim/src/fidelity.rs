@@ -25,7 +25,6 @@ use crate::report::{nearest_rank, Report};
 use crate::sampled::SampledModel;
 use crate::waveform::WaveformOptions;
 use occsim_traces::golden::FunctionalModel;
-use occsim_traces::state::MAX_VIEWPORT_SIDE;
 use occsim_traces::{Event, Fragment, QueryMode, QueryResult};
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -248,13 +247,7 @@ pub struct FunctionalCore {
 
 impl FunctionalCore {
     pub fn new(width: u32, height: u32) -> Result<FunctionalCore, SimError> {
-        if !(1..=MAX_VIEWPORT_SIDE).contains(&width) || !(1..=MAX_VIEWPORT_SIDE).contains(&height) {
-            return Err(SimError::Viewport {
-                width,
-                height,
-                max: MAX_VIEWPORT_SIDE,
-            });
-        }
+        crate::error::check_viewport(width, height)?;
         Ok(FunctionalCore {
             functional: FunctionalModel::new(width, height),
             width,

@@ -61,7 +61,7 @@ use crate::report::{
     Summary, UnitSummary,
 };
 use occsim_traces::golden::DepthBuffer;
-use occsim_traces::state::{RenderState, MAX_VIEWPORT_SIDE};
+use occsim_traces::state::RenderState;
 use occsim_traces::{Event, Fragment, QueryMode, QueryResult, QuerySpec, TileResult};
 
 /// Most tile registers (tiles x Image Engines) one query may load: bounds memory.
@@ -102,21 +102,8 @@ pub struct IrMachine {
 impl IrMachine {
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<IrMachine, SimError> {
         let ir = arch.ir()?;
-        if !(1..=MAX_VIEWPORT_SIDE).contains(&width) || !(1..=MAX_VIEWPORT_SIDE).contains(&height) {
-            return Err(SimError::Viewport {
-                width,
-                height,
-                max: MAX_VIEWPORT_SIDE,
-            });
-        }
-        let arch_entries = arch
-            .entries()
-            .map(|(param, value)| ArchEntry {
-                key: param.key.to_string(),
-                value: value.to_string(),
-                unit: param.unit.to_string(),
-            })
-            .collect();
+        crate::error::check_viewport(width, height)?;
+        let arch_entries = arch.report_entries();
         Ok(IrMachine {
             interleave: FramebufferInterleave::new(&ir),
             generators: (0..ir.boards)
@@ -162,11 +149,13 @@ impl IrMachine {
                     .for_each(FragmentGenerator::primitive);
             }
             Event::Clear => self.depth.clear(),
-            Event::DepthFunc(f) => self.state.depth_func = *f,
-            Event::DepthMask(b) => self.state.depth_mask = *b,
-            Event::DepthTest(b) => self.state.depth_test = *b,
-            Event::Cull(b) => self.state.cull_back = *b,
-            Event::Scissor(s) => self.state.scissor = *s,
+            Event::DepthFunc(_)
+            | Event::DepthMask(_)
+            | Event::DepthTest(_)
+            | Event::Cull(_)
+            | Event::Scissor(_) => {
+                self.state.apply(event);
+            }
             Event::QueryBegin(spec) => self.begin(spec, index)?,
             Event::QueryEnd => self.end(index)?,
             Event::QueryResult(golden) => self.check(golden, index)?,

@@ -56,7 +56,6 @@ use crate::report::{
     Summary, TileReport,
 };
 use occsim_traces::query::{BRIEF_RECORD_ENTRIES, MAX_TILES};
-use occsim_traces::state::MAX_VIEWPORT_SIDE;
 use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, TileResult};
 use std::collections::VecDeque;
 
@@ -155,21 +154,8 @@ impl O2Machine {
         model: OccuModel,
     ) -> Result<O2Machine, SimError> {
         let o2 = arch.o2()?;
-        if !(1..=MAX_VIEWPORT_SIDE).contains(&width) || !(1..=MAX_VIEWPORT_SIDE).contains(&height) {
-            return Err(SimError::Viewport {
-                width,
-                height,
-                max: MAX_VIEWPORT_SIDE,
-            });
-        }
-        let arch_entries = arch
-            .entries()
-            .map(|(param, value)| ArchEntry {
-                key: param.key.to_string(),
-                value: value.to_string(),
-                unit: param.unit.to_string(),
-            })
-            .collect();
+        crate::error::check_viewport(width, height)?;
+        let arch_entries = arch.report_entries();
         Ok(O2Machine {
             arch: o2.clone(),
             input: FragmentInput::new(o2.primitive_setup_cycles),
@@ -296,16 +282,14 @@ impl O2Machine {
     }
 
     fn back_event(&mut self, event: &Event, index: u64) -> Result<(), SimError> {
+        if self.depth.state.apply(event) {
+            return Ok(());
+        }
         match event {
             Event::Clear => self.depth.clear(),
-            Event::DepthFunc(f) => self.depth.state.depth_func = *f,
-            Event::DepthMask(b) => self.depth.state.depth_mask = *b,
-            Event::DepthTest(b) => self.depth.state.depth_test = *b,
-            Event::Cull(b) => self.depth.state.cull_back = *b,
-            Event::Scissor(s) => self.depth.state.scissor = *s,
             Event::QueryBegin(spec) => self.begin(spec),
             Event::QueryResult(golden) => return self.check(golden, index),
-            Event::Fragment(_) | Event::Primitive | Event::QueryEnd => {}
+            _ => {}
         }
         Ok(())
     }

@@ -223,20 +223,11 @@ pub fn run(args: SweepArgs) -> Result<()> {
         }
         let result = super::replay::replay_trace(&trace, &arch, args.run.retile, level)?;
         Ok(crate::sweep::PointRecord {
-            resolved_arch: resolved_arch(&arch),
+            resolved_arch: serde_json::to_value(arch.report_entries())?,
             metrics: point_metrics(&result),
         })
     };
     run_with(&args, &evaluate, &digest, &validate)
-}
-
-/// Every parameter of the point's architecture, with its unit.
-fn resolved_arch(arch: &occsim_sim::Arch) -> serde_json::Value {
-    arch.entries()
-        .map(|(param, value)| {
-            serde_json::json!({"key": param.key, "value": value.to_string(), "unit": param.unit})
-        })
-        .collect()
 }
 
 /// The metrics a sweep records for one point (no wall times: results must not depend on the

@@ -262,19 +262,17 @@ impl FunctionalModel {
     /// Apply one event; a `QueryEnd` returns the query's result. `QueryResult` events (the
     /// answers stored in a trace) are ignored: this model computes its own.
     pub fn event(&mut self, event: &Event) -> Option<QueryResult> {
+        if self.state.apply(event) {
+            return None;
+        }
         match event {
             Event::Clear => self.depth.clear(),
-            Event::DepthFunc(f) => self.state.depth_func = *f,
-            Event::DepthMask(b) => self.state.depth_mask = *b,
-            Event::DepthTest(b) => self.state.depth_test = *b,
-            Event::Cull(b) => self.state.cull_back = *b,
-            Event::Scissor(s) => self.state.scissor = *s,
             Event::QueryBegin(spec) => {
                 self.query = Some(OpenQuery::new(spec.clone(), &self.state));
             }
             Event::QueryEnd => return self.query.take().map(OpenQuery::finish),
             Event::Fragment(f) => self.fragment(*f),
-            Event::Primitive | Event::QueryResult(_) => {}
+            _ => {}
         }
         None
     }

@@ -153,6 +153,21 @@ impl RenderState {
         }
     }
 
+    /// Apply a state-change event (depth function, mask, test, culling, scissor); false when
+    /// the event changes no state here. The one place every replayer follows the state.
+    pub fn apply(&mut self, event: &crate::event::Event) -> bool {
+        use crate::event::Event;
+        match *event {
+            Event::DepthFunc(f) => self.depth_func = f,
+            Event::DepthMask(b) => self.depth_mask = b,
+            Event::DepthTest(b) => self.depth_test = b,
+            Event::Cull(b) => self.cull_back = b,
+            Event::Scissor(s) => self.scissor = s,
+            _ => return false,
+        }
+        true
+    }
+
     pub fn viewport(&self) -> Rect {
         Rect::new(0, 0, self.width, self.height)
     }
