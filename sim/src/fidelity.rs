@@ -6,7 +6,7 @@
 //! | `analytic` | functional + the closed-form bottleneck model ([`crate::analytic`]) | predicted |
 //! | `sampled:K` | functional on everything, the cycle model on every K-th window ([`crate::sampled`]) | measured on 1/K, extrapolated |
 //! | `cycle` | the cycle-level machine model ([`crate::MachineModel`]) | exact |
-//! | `rtl` | the bit-accurate RTL model (not in this build) | exact |
+//! | `rtl` | the cycle model with the Occlusion Unit and OccU Control of `occsim-rtl` | exact |
 //!
 //! A *window* is the run of events from just after one query's end (and its golden result)
 //! up to and including the next query's end and its golden result; the events after the
@@ -388,7 +388,6 @@ impl LevelModel {
         effects: Effects,
         waveform: Option<WaveformOptions>,
     ) -> Result<LevelModel, SimError> {
-        let machine = arch.machine();
         if waveform.is_some() && level != Fidelity::Rtl {
             return Err(SimError::Waveform(format!(
                 "the {level} level has no registers to dump: use the rtl level"
@@ -398,18 +397,12 @@ impl LevelModel {
             Fidelity::Functional => {
                 LevelModel::Functional(Box::new(FunctionalCore::new(width, height)?))
             }
-            Fidelity::Analytic => match machine {
-                Machine::O2 => {
-                    LevelModel::Analytic(Box::new(AnalyticModel::new(&arch.o2()?, width, height)?))
-                }
-                Machine::Ir => return Err(level_not_built(level, machine)),
-            },
-            Fidelity::Sampled { every } => match machine {
-                Machine::O2 => LevelModel::Sampled(Box::new(SampledModel::new(
-                    arch, width, height, effects, every,
-                )?)),
-                Machine::Ir => return Err(level_not_built(level, machine)),
-            },
+            Fidelity::Analytic => {
+                LevelModel::Analytic(Box::new(AnalyticModel::new(arch, width, height)?))
+            }
+            Fidelity::Sampled { every } => LevelModel::Sampled(Box::new(SampledModel::new(
+                arch, width, height, effects, every,
+            )?)),
             Fidelity::Cycle => LevelModel::Cycle(
                 Box::new(MachineModel::with_effects(arch, width, height, effects)?),
                 effects,
@@ -452,13 +445,6 @@ impl LevelModel {
         };
         result.machine = name;
         Ok(result)
-    }
-}
-
-fn level_not_built(level: Fidelity, machine: Machine) -> SimError {
-    SimError::LevelNotBuilt {
-        level: level.to_string(),
-        machine: machine.name().to_string(),
     }
 }
 

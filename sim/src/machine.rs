@@ -8,6 +8,8 @@ use crate::ir::IrMachine;
 use crate::o2::O2Machine;
 use crate::occu_stage::OccuModel;
 use crate::report::Report;
+use occsim_traces::golden::DepthBuffer;
+use occsim_traces::state::RenderState;
 use occsim_traces::Event;
 
 /// A machine being replayed.
@@ -59,6 +61,15 @@ impl MachineModel {
                 }
             },
         })
+    }
+
+    /// Start from the functional model's render state and depth buffer instead of a reset
+    /// (the sampled level's machines, started mid-stream), before the first event.
+    pub fn load_functional_state(&mut self, state: &RenderState, depth: &DepthBuffer) {
+        match self {
+            MachineModel::O2(machine) => machine.load_functional_state(state, depth),
+            MachineModel::Ir(machine) => machine.load_functional_state(state, depth),
+        }
     }
 
     /// Replay one event.

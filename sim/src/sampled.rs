@@ -1,5 +1,5 @@
 //! The sampled level (`sampled:K`): the cycle model on every K-th window, the rest
-//! extrapolated.
+//! extrapolated, on either machine.
 //!
 //! Windows are the runs of events between query ends ([`crate::fidelity`]): a query is the
 //! unit whose latency the user asks about, and a frame of the demo holds hundreds of them, so
@@ -8,10 +8,11 @@
 //!
 //! - Results: the functional model runs on every event, so every query's result is exact
 //!   (and checked against the golden results in the stream).
-//! - Cool-down: after a sampled window the machine runs on for `L + 1` fragments
+//! - Cool-down: on the O2, after a sampled window the machine runs on for `L + 1` fragments
 //!   (`L = min(prefetch_depth_fragments, fifo_raster_to_depth_entries)`): the prefetch
 //!   issues those fragments' depth reads before the query's records reach the in-order port,
-//!   so the query's latency is final only then.
+//!   so the query's latency is final only then. The InfiniteReality-like machine's latency
+//!   is final at the query's end: no cool-down.
 //! - Warm-up: the cycle model also runs the window before each sampled one. A machine starts
 //!   (when none is running) with the functional model's render state and depth buffer at
 //!   that window's start, so its depth tests, writes, hits and counts are right, but with
@@ -21,32 +22,30 @@
 //! - A sampled window's cost is the cycle its query's `end` entered the pipe minus that of
 //!   the window before it in the same machine (the final window: the machine's total cycles
 //!   minus that); its query's latency is the machine's.
-//! - Every other window (warm-up ones included) costs `r_c · work`, with
-//!   `work = max(F + setup · P, Σ s)` (the rasterizer's and the OccU's cycles: `s` = OccU
-//!   cycles per fragment of the open query) and `r_c` the ratio of measured cycles to work
-//!   over the sampled (non-final) windows of its class `c` = (its query's mode, `s`), or over
-//!   all sampled windows when none is of its class. Its query's latency is the mean over
+//! - Every other window (warm-up ones included) costs `r_c · work`, with `work` the
+//!   analytic level's `T_w` for the window ([`crate::analytic`]: the slowest block's cycles,
+//!   counted on every event) and `r_c` the ratio of measured cycles to work over the sampled
+//!   (non-final) windows of its class `c` = (its query's mode, `s` = OccU cycles per fragment
+//!   of its query), or over all sampled windows when none is of its class: the cycle model
+//!   calibrates the formulas where they are off. Its query's latency is the mean over
 //!   sampled queries of its class, else of its mode, else of all.
 //! - Bias: a machine started at a warm-up window misses whatever backlog the pipe carried
 //!   into that window; one window of warm-up absorbs it unless the warm-up window is shorter
 //!   than the FIFOs. `sampled:1` runs one machine over the whole stream, so it equals `cycle`
 //!   exactly (tested); `sampled:2` too, except that half its costs are extrapolated.
 
-use crate::arch::Arch;
+use crate::analytic::{service_cycles, Formulas};
+use crate::arch::{Arch, Machine};
 use crate::effects::Effects;
 use crate::error::SimError;
 use crate::fidelity::{FunctionalCore, LevelResult, SampledWindows};
-use crate::o2::O2Machine;
-use occsim_traces::{Event, QueryMode};
+use crate::machine::MachineModel;
+use occsim_traces::{Event, QueryMode, QuerySpec};
 use std::collections::BTreeMap;
 
 struct Window {
-    fragments: u64,
-    primitives: u64,
-    /// OccU cycles: Σ over fragments of the open query's cycles per fragment (1 outside).
-    occu_cycles: u64,
-    /// OccU cycles per fragment of the open query (None: no query open).
-    service: Option<u64>,
+    /// The analytic `T_w`, rounded up (set when the window's query ends, or at the end).
+    work: u64,
     /// The window's class: its query's mode code and OccU cycles per fragment.
     class: Class,
     /// The window's query ended; it closes before the next event that is not its result.
@@ -56,10 +55,7 @@ struct Window {
 impl Window {
     fn empty() -> Window {
         Window {
-            fragments: 0,
-            primitives: 0,
-            occu_cycles: 0,
-            service: None,
+            work: 0,
             class: None,
             query_ended: false,
         }
@@ -81,7 +77,7 @@ struct Closed {
 
 /// One cycle-model machine over consecutive simulated windows.
 struct Run {
-    machine: O2Machine,
+    machine: MachineModel,
     windows: Vec<Closed>,
     /// Cooling down: fragments still to feed before the machine is finished.
     cooldown: Option<usize>,
@@ -95,13 +91,18 @@ pub struct SampledModel {
     height: u32,
     effects: Effects,
     every: u32,
-    setup_cycles: u64,
-    engines: u64,
+    engines: usize,
     all_tiles_one_cycle: bool,
     /// Fragments after a query's end that the machine must see before that query's
-    /// latency is final: the prefetch lookahead + 1.
+    /// latency is final (O2: the prefetch lookahead + 1; IR: none).
     cooldown_fragments: usize,
     core: FunctionalCore,
+    /// The analytic formulas: every window's work.
+    formulas: Formulas,
+    /// The open query.
+    open: Option<QuerySpec>,
+    /// `Σ T_w` of the windows closed so far (the formulas' timeline).
+    predicted_cycles: f64,
     window: Window,
     /// Windows closed so far (the index of the current one).
     windows: u64,
@@ -117,6 +118,8 @@ pub struct SampledModel {
     extrapolated: Vec<Closed>,
     /// Per query (in order): its latency if sampled.
     latencies: Vec<Option<u64>>,
+    /// Per query (in order): the formulas' latency, the last resort of extrapolation.
+    predicted_latencies: Vec<u64>,
 }
 
 impl SampledModel {
@@ -127,21 +130,32 @@ impl SampledModel {
         effects: Effects,
         every: u32,
     ) -> Result<SampledModel, SimError> {
-        let o2 = arch.o2()?;
+        let (engines, all_tiles_one_cycle, cooldown_fragments) = match arch.machine() {
+            Machine::O2 => {
+                let o2 = arch.o2()?;
+                let lookahead = o2
+                    .prefetch_depth_fragments
+                    .min(o2.fifo_raster_to_depth_entries);
+                (o2.engines, o2.all_tiles_one_cycle, lookahead + 1)
+            }
+            Machine::Ir => {
+                let ir = arch.ir()?;
+                (ir.engines, ir.all_tiles_one_cycle, 0)
+            }
+        };
         let mut model = SampledModel {
             arch: arch.clone(),
             width,
             height,
             effects,
             every: every.max(1),
-            setup_cycles: o2.primitive_setup_cycles,
-            engines: o2.engines as u64,
-            all_tiles_one_cycle: o2.all_tiles_one_cycle,
-            cooldown_fragments: o2
-                .prefetch_depth_fragments
-                .min(o2.fifo_raster_to_depth_entries)
-                + 1,
+            engines,
+            all_tiles_one_cycle,
+            cooldown_fragments,
             core: FunctionalCore::new(width, height)?,
+            formulas: Formulas::new(arch, width)?,
+            open: None,
+            predicted_cycles: 0.0,
             window: Window::empty(),
             windows: 0,
             run: None,
@@ -151,6 +165,7 @@ impl SampledModel {
             sampled_cycles: 0,
             extrapolated: Vec::new(),
             latencies: Vec::new(),
+            predicted_latencies: Vec::new(),
         };
         model.start_window()?;
         Ok(model)
@@ -165,6 +180,9 @@ impl SampledModel {
         let w = self.windows;
         let simulate = self.is_sampled(w) || self.is_sampled(w + 1);
         if !simulate {
+            if self.cooldown_fragments == 0 {
+                return self.flush_run();
+            }
             if let Some(run) = &mut self.run {
                 run.cooldown.get_or_insert(self.cooldown_fragments);
             }
@@ -174,7 +192,7 @@ impl SampledModel {
             run.cooldown = None;
         } else {
             let mut machine =
-                O2Machine::with_effects(&self.arch, self.width, self.height, self.effects)?;
+                MachineModel::with_effects(&self.arch, self.width, self.height, self.effects)?;
             machine.load_functional_state(
                 self.core.functional.state(),
                 self.core.functional.depth_buffer(),
@@ -196,28 +214,22 @@ impl SampledModel {
             self.window = Window::empty();
             self.start_window()?;
         }
-        let window = &mut self.window;
         match event {
-            Event::Fragment(_) => {
-                window.fragments += 1;
-                window.occu_cycles += window.service.unwrap_or(1);
+            Event::Fragment(fragment) => {
+                // In the viewport before the formulas read its depth.
+                self.core.check_fragment(fragment)?;
+                self.formulas.fragment(*fragment, &self.core.functional);
             }
-            Event::Primitive => window.primitives += 1,
             Event::QueryBegin(spec) => {
-                let service = if self.all_tiles_one_cycle {
-                    1
-                } else {
-                    (spec.tiles.len() as u64).div_ceil(self.engines).max(1)
-                };
-                window.service = Some(service);
-                window.class = Some((spec.mode.code(), service));
+                let service =
+                    service_cycles(spec.tiles.len(), self.engines, self.all_tiles_one_cycle);
+                self.window.class = Some((spec.mode.code(), service));
+                self.open = Some(spec.clone());
             }
-            Event::QueryEnd => {
-                window.query_ended = true;
-                window.service = None;
-            }
+            Event::QueryEnd => self.window.query_ended = true,
             _ => {}
         }
+        self.formulas.event(event);
         if let Some(run) = &mut self.run {
             run.machine.event(event)?;
             match event {
@@ -232,22 +244,35 @@ impl SampledModel {
                 }
             }
         }
-        if self.core.event(event)?.is_some() {
+        if let Some(result) = self.core.event(event)? {
             self.latencies.push(None);
+            if let Some(spec) = self.open.take() {
+                let end = self
+                    .formulas
+                    .end_query(&spec, &result, self.predicted_cycles);
+                self.predicted_cycles += end.cycles;
+                self.window.work = end.cycles.ceil() as u64;
+                self.predicted_latencies.push(end.latency.ceil() as u64);
+            }
         }
         Ok(())
     }
 
     /// Close the current window: hand it to the running machine's run or to extrapolation.
     fn close_window(&mut self, last: bool) {
-        let raster = self.window.fragments + self.setup_cycles * self.window.primitives;
+        if last && !self.window.query_ended {
+            self.window.work = self
+                .formulas
+                .finish()
+                .map_or(0, |end| end.cycles.ceil() as u64);
+        }
         let query = self
             .window
             .query_ended
             .then(|| self.latencies.len() - 1)
             .map(|index| (index, self.core.query_mode(index)));
         let closed = Closed {
-            work: raster.max(self.window.occu_cycles),
+            work: self.window.work,
             class: self.window.class,
             query,
             sampled: self.is_sampled(self.windows),
@@ -344,7 +369,7 @@ impl SampledModel {
                 }
                 .or_else(|| mean_of_mode(Some(mode)))
                 .or_else(|| mean_of_mode(None))
-                .unwrap_or(crate::o2::MIN_QUERY_LATENCY_CYCLES as f64);
+                .unwrap_or(self.predicted_latencies[index] as f64);
                 filled[index] = Some(latency.round() as u64);
                 // The final window's drain: its query's latency.
                 if window.last {

@@ -82,15 +82,39 @@ fn archs() -> Vec<Arch> {
     vec![Arch::builtin("o2").unwrap(), few_engines, one_cycle]
 }
 
+/// The InfiniteReality-like machine, small enough for quick tests: 2 boards of 5 Image
+/// Engines, 3 engines per Occlusion Unit.
+fn small_ir() -> Arch {
+    let mut arch = Arch::builtin("ir2").unwrap();
+    arch.set("image_engines_per_board=5").unwrap();
+    arch.set("engines=3").unwrap();
+    arch
+}
+
+/// The shortest latency a query can have: O2's empty pipe; the IR's Image Engine path
+/// (depth stage, OccU, report) before any merge.
+fn minimum_latency(arch: &Arch) -> u64 {
+    match arch.machine() {
+        occsim_sim::arch::Machine::O2 => 5,
+        occsim_sim::arch::Machine::Ir => 3,
+    }
+}
+
 #[test]
 fn every_level_gives_the_golden_values_and_finite_predictions() {
-    let arch = Arch::builtin("o2").unwrap();
+    for arch in [Arch::builtin("o2").unwrap(), small_ir()] {
+        every_level_gives_the_golden_values_on(&arch);
+    }
+}
+
+fn every_level_gives_the_golden_values_on(arch: &Arch) {
+    let minimum = minimum_latency(arch);
     for (name, (events, width, height)) in builtin_traces() {
         let golden = golden_values(&events);
         assert!(!golden.is_empty(), "{name} has queries");
         for level in ["functional", "analytic", "sampled:1", "sampled:3", "cycle"] {
             let level: Fidelity = level.parse().unwrap();
-            let result = run_level(level, &arch, width, height, EffectsChoice::Auto, &events)
+            let result = run_level(level, arch, width, height, EffectsChoice::Auto, &events)
                 .unwrap_or_else(|e| panic!("{name} at {level}: {e}"));
             let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
             assert_eq!(values, golden, "{name} at {level}");
@@ -110,7 +134,7 @@ fn every_level_gives_the_golden_values_and_finite_predictions() {
                     assert!(result
                         .queries
                         .iter()
-                        .all(|q| q.latency_cycles.is_some_and(|l| l >= 5)));
+                        .all(|q| q.latency_cycles.is_some_and(|l| l >= minimum)));
                 }
             }
         }
@@ -120,24 +144,37 @@ fn every_level_gives_the_golden_values_and_finite_predictions() {
 #[test]
 fn sampled_every_window_equals_cycle_on_builtin_traces() {
     // sampled:1 runs one machine over the whole stream and measures every window.
-    let arch = Arch::builtin("o2").unwrap();
-    for (name, (events, width, height)) in builtin_traces() {
+    for arch in [Arch::builtin("o2").unwrap(), small_ir()] {
+        for (name, (events, width, height)) in builtin_traces() {
+            sampled_every_window_equals_cycle_on(&arch, name, &events, width, height);
+        }
+    }
+}
+
+fn sampled_every_window_equals_cycle_on(
+    arch: &Arch,
+    name: &str,
+    events: &[Event],
+    width: u32,
+    height: u32,
+) {
+    {
         let cycle = run_level(
             Fidelity::Cycle,
-            &arch,
+            arch,
             width,
             height,
             EffectsChoice::Auto,
-            &events,
+            events,
         )
         .unwrap();
         let sampled = run_level(
             Fidelity::Sampled { every: 1 },
-            &arch,
+            arch,
             width,
             height,
             EffectsChoice::Auto,
-            &events,
+            events,
         )
         .unwrap();
         assert_eq!(sampled.total_cycles, cycle.total_cycles, "{name}");
@@ -249,6 +286,57 @@ fn analytic_reaches_the_minimum_latency_on_an_idle_pipe() {
     let cycle = run_level(Fidelity::Cycle, &arch, 16, 16, EffectsChoice::Auto, &events).unwrap();
     assert_eq!(analytic.queries[0].latency_cycles, Some(5));
     assert_eq!(cycle.queries[0].latency_cycles, Some(5));
+}
+
+#[test]
+fn analytic_reaches_the_minimum_latency_on_an_idle_ir() {
+    // ir4: a query over no fragments. Every Image Engine's report is ready 3 cycles after
+    // the end token; the local tree over 80 Image Engines is ceil(log2 80) = 7 hops of 2
+    // cycles, the global tree over 4 boards 2 hops of 8: 3 + 14 + 16 = 33.
+    let arch = Arch::builtin("ir4").unwrap();
+    let spec = QuerySpec {
+        id: 1,
+        mode: QueryMode::Samples,
+        buffer_entries: 8,
+        tiles: vec![Rect::new(0, 0, 16, 16)],
+    };
+    let events = [Event::QueryBegin(spec), Event::QueryEnd];
+    for level in [Fidelity::Analytic, Fidelity::Cycle] {
+        let result = run_level(level, &arch, 16, 16, EffectsChoice::Auto, &events).unwrap();
+        assert_eq!(result.queries[0].latency_cycles, Some(33), "{level}");
+    }
+}
+
+#[test]
+fn analytic_ir_sees_the_busiest_image_engine() {
+    // ir1 with 2 Image Engines (columns: even x to 0, odd x to 1), 45 cycles a fragment,
+    // FIFOs of 8: one primitive of 20 fragments, all in column 0. The busiest engine does
+    // 20 · 45 = 900 cycles, 8 · 45 = 360 of them hidden behind its FIFO while the generator
+    // goes on: the window costs 900 - 360 = 540 (the generator alone: setup 4 + 10).
+    // The query's latency: that engine's FIFO and the fragment in it, 9 · 45 = 405, + 3,
+    // + one hop of 2 in the local tree: 410.
+    let mut arch = Arch::builtin("ir1").unwrap();
+    arch.set("image_engines_per_board=2").unwrap();
+    let spec = QuerySpec {
+        id: 1,
+        mode: QueryMode::Samples,
+        buffer_entries: 8,
+        tiles: vec![Rect::new(0, 0, 16, 32)],
+    };
+    let mut events = vec![Event::QueryBegin(spec), Event::Primitive];
+    events.extend((0..20).map(|y| Event::Fragment(Fragment { x: 0, y, z: 7 })));
+    events.push(Event::QueryEnd);
+    let analytic = run_level(
+        Fidelity::Analytic,
+        &arch,
+        16,
+        32,
+        EffectsChoice::Auto,
+        &events,
+    )
+    .unwrap();
+    assert_eq!(analytic.queries[0].latency_cycles, Some(410));
+    assert_eq!(analytic.total_cycles, Some(540 + 410));
 }
 
 #[test]
@@ -383,10 +471,12 @@ proptest! {
         let events = random_stream(seed, 64, 64);
         let arch = Arch::builtin("o2").unwrap();
         let golden = golden_values(&events);
-        for level in [Fidelity::Functional, Fidelity::Analytic, Fidelity::Sampled { every: 2 }, Fidelity::Cycle] {
-            let result = run_level(level, &arch, 64, 64, EffectsChoice::Auto, &events).unwrap();
-            let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
-            prop_assert_eq!(&values, &golden);
+        for arch in [arch.clone(), small_ir()] {
+            for level in [Fidelity::Functional, Fidelity::Analytic, Fidelity::Sampled { every: 2 }, Fidelity::Sampled { every: 3 }, Fidelity::Cycle] {
+                let result = run_level(level, &arch, 64, 64, EffectsChoice::Auto, &events).unwrap();
+                let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
+                prop_assert_eq!(&values, &golden);
+            }
         }
         let cycle = run_level(Fidelity::Cycle, &arch, 64, 64, EffectsChoice::Auto, &events).unwrap();
         let every_window =

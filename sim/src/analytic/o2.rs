@@ -1,9 +1,6 @@
-//! The analytic level: a closed-form bottleneck model of the O2-like machine that predicts
-//! cycles and query latency from counts alone.
-//!
-//! The functional model runs on every event (results stay exact); beside it a cheap scan
-//! counts, per *window* (the events from just after one query's end to the next query's end,
-//! see [`crate::fidelity`]), what each block must do:
+//! The O2-like machine's closed-form bottleneck model: per *window* (the events from just
+//! after one query's end to the next query's end, see [`crate::fidelity`]) a cheap scan
+//! counts what each block must do:
 //!
 //! | count | meaning |
 //! |---|---|
@@ -47,12 +44,12 @@
 //! minimum, [`crate::o2::MIN_QUERY_LATENCY_CYCLES`]. Costs: the functional model plus a
 //! few integer operations per fragment.
 
+use super::{service_cycles, WindowEnd};
 use crate::arch::O2Arch;
 use crate::depth_prefetch::Divider;
-use crate::error::SimError;
-use crate::fidelity::{FunctionalCore, LevelResult};
+use occsim_traces::golden::FunctionalModel;
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
-use occsim_traces::{Event, Fragment, QueryMode, QueryResult, QuerySpec};
+use occsim_traces::{Fragment, QueryMode, QueryResult, QuerySpec};
 
 /// Counts of one window (see the module table).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -133,11 +130,7 @@ impl O2Formulas {
 
     /// OccU cycles per fragment under a query of `tiles` tiles.
     pub fn service_cycles(&self, tiles: usize) -> u64 {
-        if self.arch.all_tiles_one_cycle {
-            1
-        } else {
-            (tiles.div_ceil(self.arch.engines) as u64).max(1)
-        }
+        service_cycles(tiles, self.arch.engines, self.arch.all_tiles_one_cycle)
     }
 
     /// `T_w` and the drain of a window.
@@ -202,68 +195,45 @@ pub fn query_words(spec: &QuerySpec, result: &QueryResult) -> (u64, u64) {
     (records, hits)
 }
 
-/// The analytic level's model for an O2 machine.
-pub struct AnalyticModel {
-    core: FunctionalCore,
+/// The O2 model's per-window counting state.
+pub(crate) struct O2Bottleneck {
     formulas: O2Formulas,
     address: DepthAddress,
     last_word: Option<u64>,
     last_page: Option<u64>,
     window: WindowCounts,
     /// OccU cycles per fragment and "occlusion render mode" of the open query.
-    open: Option<(u64, bool, QuerySpec)>,
-    total_cycles: f64,
-    /// The drain of the last window, and whether it closed with a query end.
-    tail: f64,
-    latencies: Vec<u64>,
+    open: Option<(u64, bool)>,
 }
 
-impl AnalyticModel {
-    pub fn new(arch: &O2Arch, width: u32, height: u32) -> Result<AnalyticModel, SimError> {
-        Ok(AnalyticModel {
-            core: FunctionalCore::new(width, height)?,
+impl O2Bottleneck {
+    pub(super) fn new(arch: &O2Arch, width: u32) -> O2Bottleneck {
+        O2Bottleneck {
             formulas: O2Formulas::new(arch),
             address: DepthAddress::new(arch, width),
             last_word: None,
             last_page: None,
             window: WindowCounts::default(),
             open: None,
-            total_cycles: 0.0,
-            tail: 0.0,
-            latencies: Vec::new(),
-        })
+        }
     }
 
-    /// Feed one event.
-    pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
-        match event {
-            Event::Fragment(fragment) => {
-                // Check the fragment lies in the viewport before reading its depth.
-                self.core.check_fragment(fragment)?;
-                self.fragment(*fragment);
-                self.core.apply_fragment(*fragment);
-                return Ok(());
-            }
-            Event::Primitive => self.window.primitives += 1,
-            Event::QueryBegin(spec) => {
-                let service = self.formulas.service_cycles(spec.tiles.len());
-                self.open = Some((service, spec.mode.is_occlusion_render_mode(), spec.clone()));
-            }
-            _ => {}
-        }
-        if let Some(result) = self.core.event(event)? {
-            self.end_query(&result);
-        }
-        Ok(())
+    pub(super) fn primitive(&mut self) {
+        self.window.primitives += 1;
     }
 
-    /// Count one fragment's work (before the functional model applies it).
+    pub(super) fn begin(&mut self, spec: &QuerySpec) {
+        let service = self.formulas.service_cycles(spec.tiles.len());
+        self.open = Some((service, spec.mode.is_occlusion_render_mode()));
+    }
+
+    /// Count one fragment's work (before `functional` applies it).
     #[inline]
-    fn fragment(&mut self, fragment: Fragment) {
-        let state = self.core.functional.state();
+    pub(super) fn fragment(&mut self, fragment: Fragment, functional: &FunctionalModel) {
+        let state = functional.state();
         let w = &mut self.window;
         w.fragments += 1;
-        w.occu_cycles += self.open.as_ref().map_or(1, |(service, _, _)| *service);
+        w.occu_cycles += self.open.map_or(1, |(service, _)| service);
         w.last_read_latency = 0;
         if !state.depth_test {
             return;
@@ -281,47 +251,38 @@ impl AnalyticModel {
             self.last_word = Some(word);
             self.last_page = Some(page);
         }
-        let occlusion_mode = self.open.as_ref().is_some_and(|(_, mode, _)| *mode);
+        let occlusion_mode = self.open.is_some_and(|(_, mode)| mode);
         if state.depth_mask && !occlusion_mode {
-            let stored = self
-                .core
-                .functional
-                .depth_buffer()
-                .get(fragment.x, fragment.y);
+            let stored = functional.depth_buffer().get(fragment.x, fragment.y);
             if state.depth_func.passes(fragment.z, stored) {
                 w.depth_writes += 1;
             }
         }
     }
 
-    fn end_query(&mut self, result: &QueryResult) {
-        let Some((_, _, spec)) = self.open.take() else {
-            return;
-        };
-        let (records, hits) = query_words(&spec, result);
+    /// The query `spec` ended with `result`: the window's cycles and the query's latency.
+    pub(super) fn end_query(&mut self, spec: &QuerySpec, result: &QueryResult) -> WindowEnd {
+        self.open = None;
+        let (records, hits) = query_words(spec, result);
         self.window.occu_words += records + hits;
         let prediction = self.formulas.window(&self.window);
-        let latency = self.formulas.latency(records, prediction.drain);
-        self.total_cycles += prediction.cycles;
-        self.tail = latency;
-        self.latencies.push(latency.ceil() as u64);
         self.window = WindowCounts::default();
+        WindowEnd {
+            cycles: prediction.cycles,
+            latency: self.formulas.latency(records, prediction.drain),
+        }
     }
 
-    pub fn finish(mut self) -> Result<LevelResult, SimError> {
-        if self.window.fragments > 0 || self.window.primitives > 0 {
-            let prediction = self.formulas.window(&self.window);
-            self.total_cycles += prediction.cycles;
-            self.tail = prediction.drain + 3.0;
-        }
-        let total = self.total_cycles + self.tail;
-        let latencies = std::mem::take(&mut self.latencies);
-        let mut result = self.core.finish()?;
-        for (query, latency) in result.queries.iter_mut().zip(&latencies) {
-            query.latency_cycles = Some(*latency);
-        }
-        result.level = crate::fidelity::Fidelity::Analytic;
-        result.set_timing(total.round() as u64);
-        Ok(result)
+    /// The stream ended after a window without a query end: its cycles and the pipe's drain
+    /// (+ 3: through the depth pipeline, the OccU and the last write).
+    pub(super) fn finish(&self) -> Option<WindowEnd> {
+        let w = &self.window;
+        (w.fragments > 0 || w.primitives > 0).then(|| {
+            let prediction = self.formulas.window(w);
+            WindowEnd {
+                cycles: prediction.cycles,
+                latency: prediction.drain + 3.0,
+            }
+        })
     }
 }

@@ -1,0 +1,173 @@
+//! The analytic level: a closed-form bottleneck model of each machine that predicts cycles
+//! and query latency from counts alone.
+//!
+//! The functional model runs on every event, so results stay exact; beside it the machine's
+//! formulas count, per *window* (the events from just after one query's end up to the next
+//! query's end, see [`crate::fidelity`]), what each block must do, and at the window's end
+//! predict its cycles `T_w` (the slowest block's) and its query's latency:
+//! - [`o2`]: rasterizer, depth pipeline, OccU, the in-order memory port and the prefetch;
+//! - [`ir`]: every board's Fragment Generator and every Image Engine (depth test, OccU, hit
+//!   words), then the two merge stages.
+//!
+//! Total cycles = `Σ_w T_w` + the last window's tail (the last query's latency, or the pipe's
+//! drain when the stream ends without a query end). Costs: the functional model plus a few
+//! integer operations per fragment.
+
+pub mod ir;
+pub mod o2;
+
+use crate::arch::{Arch, Machine};
+use crate::error::SimError;
+use crate::fidelity::{Fidelity, FunctionalCore, LevelResult};
+use occsim_traces::golden::FunctionalModel;
+use occsim_traces::{Event, Fragment, QueryResult, QuerySpec};
+
+/// What the formulas predict when a window closes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WindowEnd {
+    /// `T_w`: the window's cycles.
+    pub cycles: f64,
+    /// The latency of the query that closed it (or, for the final window without a query
+    /// end, the pipe's drain), in cycles.
+    pub latency: f64,
+}
+
+/// Cycles one fragment occupies an Occlusion Unit of `engines` engines under a query of
+/// `tiles` tiles: the tiles are dealt round-robin and each engine tests one a cycle.
+pub(crate) fn service_cycles(tiles: usize, engines: usize, all_tiles_one_cycle: bool) -> u64 {
+    if all_tiles_one_cycle {
+        1
+    } else {
+        (tiles.div_ceil(engines) as u64).max(1)
+    }
+}
+
+/// The formulas of the machine being modelled: they count each window's work as events
+/// arrive and predict at its end (shared with the sampled level's extrapolation).
+pub(crate) enum Formulas {
+    O2(Box<o2::O2Bottleneck>),
+    Ir(Box<ir::IrBottleneck>),
+}
+
+impl Formulas {
+    pub(crate) fn new(arch: &Arch, width: u32) -> Result<Formulas, SimError> {
+        Ok(match arch.machine() {
+            Machine::O2 => Formulas::O2(Box::new(o2::O2Bottleneck::new(&arch.o2()?, width))),
+            Machine::Ir => Formulas::Ir(Box::new(ir::IrBottleneck::new(&arch.ir()?))),
+        })
+    }
+
+    /// Count one fragment, already checked to lie in the viewport, before `functional`
+    /// applies it.
+    #[inline]
+    pub(crate) fn fragment(&mut self, fragment: Fragment, functional: &FunctionalModel) {
+        match self {
+            Formulas::O2(o2) => o2.fragment(fragment, functional),
+            Formulas::Ir(ir) => ir.fragment(fragment, functional),
+        }
+    }
+
+    /// Count the other events that matter to the formulas (primitives, query begins).
+    pub(crate) fn event(&mut self, event: &Event) {
+        match (self, event) {
+            (Formulas::O2(o2), Event::Primitive) => o2.primitive(),
+            (Formulas::Ir(ir), Event::Primitive) => ir.primitive(),
+            (Formulas::O2(o2), Event::QueryBegin(spec)) => o2.begin(spec),
+            (Formulas::Ir(ir), Event::QueryBegin(spec)) => ir.begin(spec),
+            _ => {}
+        }
+    }
+
+    /// The query `spec` ended with `result`, closing the window that began in the predicted
+    /// cycle `start`.
+    pub(crate) fn end_query(
+        &mut self,
+        spec: &QuerySpec,
+        result: &QueryResult,
+        start: f64,
+    ) -> WindowEnd {
+        match self {
+            Formulas::O2(o2) => o2.end_query(spec, result),
+            Formulas::Ir(ir) => ir.end_query(spec, start),
+        }
+    }
+
+    /// The stream ended: the last window's prediction, if it holds any work.
+    pub(crate) fn finish(&self) -> Option<WindowEnd> {
+        match self {
+            Formulas::O2(o2) => o2.finish(),
+            Formulas::Ir(ir) => ir.finish(),
+        }
+    }
+}
+
+/// The analytic level's model.
+pub struct AnalyticModel {
+    core: FunctionalCore,
+    formulas: Formulas,
+    open: Option<QuerySpec>,
+    /// `Σ T_w` of the windows closed so far: the predicted cycle the current window began.
+    total_cycles: f64,
+    /// The last window's tail (see the module docs).
+    tail: f64,
+    latencies: Vec<u64>,
+}
+
+impl AnalyticModel {
+    pub fn new(arch: &Arch, width: u32, height: u32) -> Result<AnalyticModel, SimError> {
+        Ok(AnalyticModel {
+            core: FunctionalCore::new(width, height)?,
+            formulas: Formulas::new(arch, width)?,
+            open: None,
+            total_cycles: 0.0,
+            tail: 0.0,
+            latencies: Vec::new(),
+        })
+    }
+
+    /// Feed one event.
+    pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        match event {
+            Event::Fragment(fragment) => {
+                // Check the fragment lies in the viewport before reading its depth.
+                self.core.check_fragment(fragment)?;
+                self.formulas.fragment(*fragment, &self.core.functional);
+                self.core.apply_fragment(*fragment);
+                return Ok(());
+            }
+            // A malformed begin is refused by the core below, before any end.
+            Event::QueryBegin(spec) => self.open = Some(spec.clone()),
+            _ => {}
+        }
+        self.formulas.event(event);
+        if let Some(result) = self.core.event(event)? {
+            let Some(spec) = self.open.take() else {
+                return Ok(());
+            };
+            let end = self.formulas.end_query(&spec, &result, self.total_cycles);
+            self.close_window(end);
+            self.latencies.push(end.latency.ceil() as u64);
+        }
+        Ok(())
+    }
+
+    fn close_window(&mut self, end: WindowEnd) {
+        self.total_cycles += end.cycles;
+        self.tail = end.latency;
+    }
+
+    pub fn finish(mut self) -> Result<LevelResult, SimError> {
+        if let Some(end) = self.formulas.finish() {
+            self.close_window(end);
+        }
+        let total = self.total_cycles + self.tail;
+        let latencies = std::mem::take(&mut self.latencies);
+        let mut result = self.core.finish()?;
+        for (query, latency) in result.queries.iter_mut().zip(&latencies) {
+            query.latency_cycles = Some(*latency);
+        }
+        result.level = Fidelity::Analytic;
+        result.set_timing(total.round() as u64);
+        Ok(result)
+    }
+}
