@@ -138,7 +138,7 @@ impl IrMachine {
     /// Start from `state` and `depth` instead of a reset, before the first event.
     pub fn load_functional_state(&mut self, state: &RenderState, depth: &DepthBuffer) {
         debug_assert_eq!(self.events, 0, "load the state before the first event");
-        self.state = state.clone();
+        self.state = *state;
         self.depth = depth.clone();
     }
 
