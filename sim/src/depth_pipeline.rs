@@ -49,10 +49,17 @@ pub struct DepthOutcome {
 }
 
 impl DepthPipeline {
-    pub fn new(arch: &O2Arch, width: u32, height: u32, effects: Effects) -> DepthPipeline {
+    /// The pipeline on a `width` x `height` viewport whose depths are `depth`.
+    pub fn new(
+        arch: &O2Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+        depth: DepthBuffer,
+    ) -> DepthPipeline {
         DepthPipeline {
             state: RenderState::new(width, height),
-            depth: DepthBuffer::new(width, height),
+            depth,
             prefetch: DepthPrefetch::new(arch, width, effects.page_model),
             write_buffer: WriteBuffer::new(
                 arch.depth_write_buffer_entries,
@@ -67,11 +74,15 @@ impl DepthPipeline {
         }
     }
 
-    /// Start from a functional model's render state and depth buffer (a sampled window's
-    /// warm start) instead of the reset state. Only before the first fragment.
-    pub fn load(&mut self, state: &RenderState, depth: &DepthBuffer) {
+    /// Start from a functional model's render state (a sampled window's warm start)
+    /// instead of the reset state. Only before the first fragment.
+    pub fn load_state(&mut self, state: &RenderState) {
         self.state = *state;
-        self.depth.clone_from(depth);
+    }
+
+    /// Hand the depth buffer's memory back (for reuse), leaving an empty one.
+    pub fn take_depth_buffer(&mut self) -> DepthBuffer {
+        std::mem::replace(&mut self.depth, DepthBuffer::new(0, 0))
     }
 
     /// Depth := 1.0 everywhere. Modelled as free (a fast clear); its traffic is not simulated.

@@ -101,8 +101,39 @@ pub struct IrMachine {
 
 impl IrMachine {
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<IrMachine, SimError> {
-        let ir = arch.ir()?;
+        arch.ir()?;
         crate::error::check_viewport(width, height)?;
+        IrMachine::assemble(arch, width, height, DepthBuffer::new(width, height))
+    }
+
+    /// A machine that starts from a functional model's render state and depths (`depth`, a
+    /// copy of them) instead of the reset state: the sampled level's warm start of a window.
+    pub fn resume(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        state: &RenderState,
+        depth: DepthBuffer,
+    ) -> Result<IrMachine, SimError> {
+        crate::error::check_viewport(width, height)?;
+        let mut machine = IrMachine::assemble(arch, width, height, depth)?;
+        machine.state = *state;
+        Ok(machine)
+    }
+
+    /// [`Self::finish`], handing the depth buffer's memory back for reuse.
+    pub fn finish_recycling(mut self) -> Result<(Report, DepthBuffer), SimError> {
+        let depth = std::mem::replace(&mut self.depth, DepthBuffer::new(0, 0));
+        Ok((self.finish()?, depth))
+    }
+
+    fn assemble(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        depth: DepthBuffer,
+    ) -> Result<IrMachine, SimError> {
+        let ir = arch.ir()?;
         let arch_entries = arch.report_entries();
         Ok(IrMachine {
             interleave: FramebufferInterleave::new(&ir),
@@ -122,7 +153,7 @@ impl IrMachine {
             width,
             height,
             state: RenderState::new(width, height),
-            depth: DepthBuffer::new(width, height),
+            depth,
             open: None,
             generation: 0,
             host: 0,
@@ -133,13 +164,6 @@ impl IrMachine {
             primitives: 0,
             last_available: 0,
         })
-    }
-
-    /// Start from `state` and `depth` instead of a reset, before the first event.
-    pub fn load_functional_state(&mut self, state: &RenderState, depth: &DepthBuffer) {
-        debug_assert_eq!(self.events, 0, "load the state before the first event");
-        self.state = *state;
-        self.depth = depth.clone();
     }
 
     /// Feed one event of the stream.

@@ -63,12 +63,38 @@ impl MachineModel {
         })
     }
 
-    /// Start from the functional model's render state and depth buffer instead of a reset
-    /// (the sampled level's machines, started mid-stream), before the first event.
-    pub fn load_functional_state(&mut self, state: &RenderState, depth: &DepthBuffer) {
+    /// The machine building only `effects` that starts from a functional model's render
+    /// state and depths (the sampled level's machines, started mid-stream). `storage`, a
+    /// buffer a finished machine handed back ([`Self::finish_recycling`]), is reused for the
+    /// copy of `depth` when given.
+    pub fn resume(
+        arch: &Arch,
+        effects: Effects,
+        state: &RenderState,
+        depth: &DepthBuffer,
+        storage: Option<DepthBuffer>,
+    ) -> Result<MachineModel, SimError> {
+        let (width, height) = (state.width, state.height);
+        let copy = match storage {
+            Some(mut storage) => {
+                storage.copy_from(depth);
+                storage
+            }
+            None => depth.clone(),
+        };
+        Ok(match arch.machine() {
+            Machine::O2 => MachineModel::O2(O2Machine::resume(
+                arch, width, height, effects, state, copy,
+            )?),
+            Machine::Ir => MachineModel::Ir(IrMachine::resume(arch, width, height, state, copy)?),
+        })
+    }
+
+    /// [`Self::finish`], handing the depth buffer's memory back for reuse.
+    pub fn finish_recycling(self) -> Result<(Report, DepthBuffer), SimError> {
         match self {
-            MachineModel::O2(machine) => machine.load_functional_state(state, depth),
-            MachineModel::Ir(machine) => machine.load_functional_state(state, depth),
+            MachineModel::O2(machine) => machine.finish_recycling(),
+            MachineModel::Ir(machine) => machine.finish_recycling(),
         }
     }
 

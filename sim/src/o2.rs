@@ -55,7 +55,9 @@ use crate::report::{
     nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
     Summary, TileReport,
 };
+use occsim_traces::golden::DepthBuffer;
 use occsim_traces::query::{BRIEF_RECORD_ENTRIES, MAX_TILES};
+use occsim_traces::state::RenderState;
 use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, TileResult};
 use std::collections::VecDeque;
 
@@ -153,14 +155,55 @@ impl O2Machine {
         effects: Effects,
         model: OccuModel,
     ) -> Result<O2Machine, SimError> {
-        let o2 = arch.o2()?;
         crate::error::check_viewport(width, height)?;
+        let depth = DepthBuffer::new(width, height);
+        O2Machine::assemble(arch, width, height, effects, model, depth)
+    }
+
+    /// A machine building only `effects` that starts from a functional model's render state
+    /// and depths (`depth`, a copy of them) instead of the reset state: the sampled level's
+    /// warm start of a window.
+    pub fn resume(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+        state: &RenderState,
+        depth: DepthBuffer,
+    ) -> Result<O2Machine, SimError> {
+        crate::error::check_viewport(width, height)?;
+        let mut machine =
+            O2Machine::assemble(arch, width, height, effects, OccuModel::Cycle, depth)?;
+        machine.depth.load_state(state);
+        machine.front_depth_test = state.depth_test;
+        Ok(machine)
+    }
+
+    /// [`Self::finish`], handing the depth buffer's memory back for reuse.
+    pub fn finish_recycling(mut self) -> Result<(Report, DepthBuffer), SimError> {
+        // The fragments still pending are tested first: they need the buffer.
+        while self.front_open.is_none() && !self.pending.is_empty() {
+            self.back_one()?;
+        }
+        let depth = self.depth.take_depth_buffer();
+        Ok((self.finish()?, depth))
+    }
+
+    fn assemble(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+        model: OccuModel,
+        depth: DepthBuffer,
+    ) -> Result<O2Machine, SimError> {
+        let o2 = arch.o2()?;
         let arch_entries = arch.report_entries();
         Ok(O2Machine {
             arch: o2.clone(),
             input: FragmentInput::new(o2.primitive_setup_cycles),
             raster_to_depth: Fifo::new(o2.fifo_raster_to_depth_entries),
-            depth: DepthPipeline::new(&o2, width, height, effects),
+            depth: DepthPipeline::new(&o2, width, height, effects, depth),
             depth_to_occu: Fifo::new(o2.fifo_depth_to_occu_entries),
             occu: OccuStage::new(&o2, model),
             port: MemoryPort::new(o2.memory_port_bits_per_cycle),
@@ -371,18 +414,6 @@ impl O2Machine {
         self.golden.check(golden, event, |simulated, golden| {
             first_difference(simulated, golden, counter_max)
         })
-    }
-
-    /// Start from a functional model's render state and depth buffer instead of the reset
-    /// state (the sampled level's warm start of a window). Call before the first event.
-    pub fn load_functional_state(
-        &mut self,
-        state: &occsim_traces::state::RenderState,
-        depth: &occsim_traces::golden::DepthBuffer,
-    ) {
-        debug_assert_eq!(self.events, 0, "load the state before the first event");
-        self.depth.load(state, depth);
-        self.front_depth_test = state.depth_test;
     }
 
     /// The effect models this machine builds.

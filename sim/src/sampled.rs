@@ -40,6 +40,7 @@ use crate::effects::Effects;
 use crate::error::SimError;
 use crate::fidelity::{FunctionalCore, LevelResult, SampledWindows};
 use crate::machine::MachineModel;
+use occsim_traces::golden::DepthBuffer;
 use occsim_traces::{Event, QueryMode, QuerySpec};
 use std::collections::BTreeMap;
 
@@ -87,8 +88,6 @@ struct Run {
 
 pub struct SampledModel {
     arch: Arch,
-    width: u32,
-    height: u32,
     effects: Effects,
     every: u32,
     engines: usize,
@@ -107,6 +106,8 @@ pub struct SampledModel {
     /// Windows closed so far (the index of the current one).
     windows: u64,
     run: Option<Run>,
+    /// The depth buffer of the last machine that finished, reused by the next.
+    spare_depth: Option<DepthBuffer>,
     sampled: u64,
     /// Σ measured cycles and Σ work of the sampled, non-final windows, per class.
     measured_by_class: BTreeMap<Class, (u64, u64)>,
@@ -145,8 +146,6 @@ impl SampledModel {
         };
         let mut model = SampledModel {
             arch: arch.clone(),
-            width,
-            height,
             effects,
             every: every.max(1),
             engines,
@@ -159,6 +158,7 @@ impl SampledModel {
             window: Window::empty(),
             windows: 0,
             run: None,
+            spare_depth: None,
             sampled: 0,
             measured_by_class: BTreeMap::new(),
             latency_by_class: BTreeMap::new(),
@@ -191,12 +191,13 @@ impl SampledModel {
         if let Some(run) = &mut self.run {
             run.cooldown = None;
         } else {
-            let mut machine =
-                MachineModel::with_effects(&self.arch, self.width, self.height, self.effects)?;
-            machine.load_functional_state(
+            let machine = MachineModel::resume(
+                &self.arch,
+                self.effects,
                 self.core.functional.state(),
                 self.core.functional.depth_buffer(),
-            );
+                self.spare_depth.take(),
+            )?;
             self.run = Some(Run {
                 machine,
                 windows: Vec::new(),
@@ -297,7 +298,8 @@ impl SampledModel {
             // A cool-down stopped inside a query: end it (its report is not used).
             run.machine.event(&Event::QueryEnd)?;
         }
-        let report = run.machine.finish()?;
+        let (report, depth) = run.machine.finish_recycling()?;
+        self.spare_depth = Some(depth);
         let mut queries = report.queries.iter();
         let mut previous_end: Option<u64> = None;
         for window in run.windows {

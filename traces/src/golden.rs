@@ -27,6 +27,13 @@ impl DepthBuffer {
         self.depths.fill(DEPTH_ONE);
     }
 
+    /// Become a copy of `other`, reusing this buffer's memory when it is large enough (a
+    /// fresh multi-megabyte buffer costs a page fault per page; a reused one does not).
+    pub fn copy_from(&mut self, other: &DepthBuffer) {
+        self.width = other.width;
+        self.depths.clone_from(&other.depths);
+    }
+
     pub fn get(&self, x: u16, y: u16) -> u32 {
         self.depths[y as usize * self.width as usize + x as usize]
     }
