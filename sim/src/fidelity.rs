@@ -42,6 +42,15 @@ pub enum Fidelity {
     Rtl,
 }
 
+impl Fidelity {
+    /// Whether the level builds effect models ([`crate::effects`]): the cycle model and the
+    /// sampled level's machines do, from the scan's choice; `rtl` builds every model (it has
+    /// no shortcuts); functional and analytic have none. Only the first two need the scan.
+    pub fn builds_effects(self) -> bool {
+        matches!(self, Fidelity::Sampled { .. } | Fidelity::Cycle)
+    }
+}
+
 impl std::fmt::Display for Fidelity {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -479,7 +488,11 @@ pub fn run_level(
     choice: EffectsChoice,
     events: &[Event],
 ) -> Result<LevelResult, SimError> {
-    let effects = choose_effects(choice, arch, width, height, events)?;
+    let effects = if level.builds_effects() {
+        choose_effects(choice, arch, width, height, events)?
+    } else {
+        Effects::ALL
+    };
     let mut model = LevelModel::new(level, arch, width, height, effects)?;
     for event in events {
         model.event(event)?;

@@ -73,12 +73,17 @@ impl EventSink for ScanSink {
 }
 
 /// The effects to build for the trace at `path` (a first pass over it when `auto`).
+/// The effects `level` builds for the trace at `path`: the scan's choice at the levels that
+/// build effects ([`Fidelity::builds_effects`]), every model otherwise and on a retiled trace
+/// (its queries are not those the scan would see).
 pub fn effects_of_trace(
+    level: Fidelity,
     choice: EffectsChoice,
     arch: &Arch,
     path: &Path,
+    retiled: bool,
 ) -> anyhow::Result<Effects> {
-    if choice == EffectsChoice::All {
+    if choice == EffectsChoice::All || retiled || !level.builds_effects() {
         return Ok(Effects::ALL);
     }
     let mut reader = open_trace(path)?;
@@ -122,13 +127,7 @@ pub fn replay_level(
     effects: EffectsChoice,
 ) -> anyhow::Result<LevelResult> {
     let name = path.display();
-    // Only the cycle-level models build effects; the others need no scan.
-    let effects = match level {
-        Fidelity::Sampled { .. } | Fidelity::Cycle | Fidelity::Rtl => {
-            effects_of_trace(effects, arch, path)?
-        }
-        Fidelity::Functional | Fidelity::Analytic => Effects::ALL,
-    };
+    let effects = effects_of_trace(level, effects, arch, path, false)?;
     let options = super::replay::ReplayOptions {
         level,
         effects,

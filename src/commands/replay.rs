@@ -96,12 +96,13 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     }
     let path = args.trace.display().to_string();
     let level = args.level.fidelity;
-    // A retiled trace has other queries than the scan would see, and the rtl level models
-    // everything: build every model then.
-    let effects = match (args.retile, level) {
-        (Some(_), _) | (_, Fidelity::Rtl) => Effects::ALL,
-        _ => effects_of_trace(args.level.effects, &arch, &args.trace)?,
-    };
+    let effects = effects_of_trace(
+        level,
+        args.level.effects,
+        &arch,
+        &args.trace,
+        args.retile.is_some(),
+    )?;
     let (waveform, vcd) = match waveform(&args.waveform, level)? {
         Some((options, thread)) => (Some(options), Some(thread)),
         None => (None, None),
