@@ -51,7 +51,7 @@ pub enum SimError {
     #[error("the stream ended with query {id} still open")]
     OpenAtEnd { id: u32 },
     #[error(
-        "the {level} level has no model of the {machine} machine yet (use functional or cycle)"
+        "the {level} level has no model of the {machine} machine yet (use functional, cycle or rtl)"
     )]
     LevelNotBuilt { level: String, machine: String },
     #[error("cannot write the waveform: {0}")]

@@ -1,6 +1,7 @@
 //! `occsim fidelity TRACE`: what accuracy costs. Runs every level of the fidelity ladder on
 //! the same trace and prints, per level, wall time, fragments per second, predicted cycles,
-//! query latency and the error against the reference level (`cycle`; `rtl` is not built).
+//! query latency and the error against the reference level (the most detailed level that
+//! ran: `rtl`, else `cycle`).
 //! Also [`FidelityArg`], the `--fidelity`/`--effects` options replay shares (and sweep and
 //! latency may add).
 
