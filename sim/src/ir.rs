@@ -46,6 +46,14 @@
 //!
 //! The functional depth test uses one depth buffer for the whole screen, partitioned by
 //! ownership: each pixel is only ever tested by the Image Engine that owns it.
+//!
+//! # Fidelity
+//! Every Image Engine's Occlusion Unit and OccU Control is the event-timestamp model
+//! (`cycle`) or the `occsim-rtl` model clocked cycle by cycle (`rtl`,
+//! [`IrMachine::with_occu_model`], [`crate::rtl_occu`]), with identical reports. An rtl
+//! unit is clocked only when its Image Engine has a fragment for it (quiescent cycles are
+//! skipped in bulk), so idle Image Engines cost nothing; a waveform (`--vcd`) dumps Image
+//! Engine 0 of board 0.
 
 use crate::arch::{Arch, IrArch};
 use crate::error::SimError;
