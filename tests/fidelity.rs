@@ -106,7 +106,7 @@ fn replay_reports_its_level_and_the_active_effects() {
 }
 
 #[test]
-fn bad_levels_and_the_rtl_level_fail_clearly() {
+fn bad_levels_fail_clearly() {
     let (_dir, trace) = hardcases_trace("errors");
     let output = occsim(&["replay", &trace, "--fidelity", "sampled:0"]);
     assert!(!output.status.success());
@@ -115,13 +115,26 @@ fn bad_levels_and_the_rtl_level_fail_clearly() {
         error.contains("K in sampled:K must be a whole number from 1"),
         "{error}"
     );
-    let output = occsim(&["replay", &trace, "--fidelity", "rtl", "--arch", "ir4"]);
-    assert!(!output.status.success());
-    let error = String::from_utf8_lossy(&output.stderr);
-    assert!(
-        error.contains("the rtl level has no model of the ir machine yet"),
-        "{error}"
-    );
     let output = occsim(&["replay", &trace, "--effects", "some"]);
     assert!(!output.status.success());
+}
+
+#[test]
+fn the_rtl_level_of_the_ir_machine_reports_as_its_cycle_level() {
+    let (_dir, trace) = hardcases_trace("irrtl");
+    let run = |level: &str| {
+        stdout_of(&[
+            "replay",
+            &trace,
+            "--arch",
+            "ir2",
+            "--fidelity",
+            level,
+            "--effects",
+            "all",
+        ])
+    };
+    let rtl = run("rtl");
+    assert!(rtl.contains("machine ir"), "{rtl}");
+    assert_eq!(rtl, run("cycle"));
 }

@@ -25,6 +25,6 @@ pub mod occu_control;
 pub mod vcd;
 
 pub use occlusion_unit::{
-    CycleInputs, CycleOutputs, FragmentPort, OccuParams, OccuRtl, QueryConfig, TileRect,
+    CycleInputs, CycleOutputs, FragmentPort, OccuParams, OccuRtl, QueryConfig, ResultPath, TileRect,
 };
 pub use occu_control::Word;

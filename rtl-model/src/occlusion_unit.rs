@@ -11,11 +11,15 @@
 //! engines' hit words (the done cycle's own words through a bypass). The fragment leaves
 //! (`left`) in the first cycle from done on in which its last hit word enters the write
 //! buffer; the cycles after done are stall cycles. The query's end token passes between
-//! cycles ([`OccuRtl::end_token`], only when idle) and its records are eligible from the
-//! next cycle on.
+//! cycles ([`OccuRtl::end_token`], only when idle); where the tile registers go then is
+//! the unit's [`ResultPath`]: into a record bank whose words (records, terminators) are
+//! eligible from the next cycle on and go to memory, or out of the partial-report port
+//! ([`OccuRtl::take_partial_report`]) to a merge network, writing no word at all.
 
 use crate::bits::{bits_for, mask};
-use crate::occlusion_engine::{EngineWires, FragmentWires, OcclusionEngine, HIT_COUNT_BITS};
+use crate::occlusion_engine::{
+    EngineWires, FragmentWires, OcclusionEngine, TileSlot, HIT_COUNT_BITS,
+};
 use crate::occu_control::{ControlWires, OccuControl, RecordBank, Word};
 
 /// Largest engine count and tile count the registers are sized for.
@@ -33,6 +37,20 @@ pub struct OccuParams {
     pub write_buffer_words: u32,
     /// Every engine tests all its tiles in one cycle (k comparators per engine).
     pub all_tiles_one_cycle: bool,
+    /// Where a query's tile registers go at its end token.
+    pub results: ResultPath,
+}
+
+/// Where the tile registers go at a query's end token.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ResultPath {
+    /// OccU Control writes each tile's brief record (and a verbose overflow's terminator)
+    /// to the occlusion buffers in memory (the O2: one unit per machine).
+    #[default]
+    Records,
+    /// The tile registers leave through the partial-report port to a merge network; OccU
+    /// Control writes only hit words (the InfiniteReality: one unit per Image Engine).
+    PartialReport,
 }
 
 /// A tile as the query gives it (pixels).
@@ -122,6 +140,9 @@ pub struct OccuRtl {
     pub fragment: FragmentWires,
     pub query_open: bool,
     pub service: u32,
+    /// The partial-report port: the tile slots (query order) of the last end token, with
+    /// [`ResultPath::PartialReport`], until the merge network takes them.
+    partial_report: Vec<TileSlot>,
     wires: Wires,
     /// Statistics (not hardware): cycles testing, cycles held in drain.
     pub busy_cycles: u64,
@@ -152,6 +173,7 @@ impl OccuRtl {
             fragment: FragmentWires::default(),
             query_open: false,
             service: 1,
+            partial_report: Vec::new(),
             wires: Wires::default(),
             busy_cycles: 0,
             stall_cycles: 0,
@@ -192,8 +214,9 @@ impl OccuRtl {
     }
 
     /// The query's end token passes the unit at the start of the current cycle if the unit
-    /// is idle: the tile slots move into a record bank, eligible from the next cycle.
-    /// Returns whether it passed.
+    /// is idle: the tile slots move into a record bank, eligible from the next cycle, or
+    /// (with [`ResultPath::PartialReport`]) onto the partial-report port. Returns whether it
+    /// passed.
     pub fn end_token(&mut self, verbose: bool, hit_room: u32) -> bool {
         if self.state != IDLE {
             return false;
@@ -209,14 +232,23 @@ impl OccuRtl {
         for t in 0..total {
             slots.push(unloaded[t % n].next().expect("round-robin dealing"));
         }
-        self.control.banks.push_back(RecordBank::new(
-            slots,
-            verbose,
-            hit_room & mask(HIT_COUNT_BITS) as u32,
-        ));
+        match self.params.results {
+            ResultPath::Records => self.control.banks.push_back(RecordBank::new(
+                slots,
+                verbose,
+                hit_room & mask(HIT_COUNT_BITS) as u32,
+            )),
+            ResultPath::PartialReport => self.partial_report = slots,
+        }
         self.query_open = false;
         self.service = 1;
         true
+    }
+
+    /// Take the tile slots (query order) the last end token put on the partial-report port
+    /// (empty with [`ResultPath::Records`] or when taken already).
+    pub fn take_partial_report(&mut self) -> Vec<TileSlot> {
+        std::mem::take(&mut self.partial_report)
     }
 
     /// Nothing can change until a fragment arrives or a grant comes: idle sequencer, no
@@ -347,6 +379,7 @@ mod tests {
             counter_bits: 32,
             write_buffer_words: buffer,
             all_tiles_one_cycle: false,
+            results: ResultPath::Records,
         })
     }
 
@@ -405,5 +438,44 @@ mod tests {
         assert_eq!(rtl.stall_cycles, 1);
         assert!(rtl.end_token(true, 4));
         assert!(!rtl.quiescent());
+    }
+
+    #[test]
+    fn a_partial_report_unit_hands_its_tiles_out_and_writes_no_record() {
+        let mut rtl = OccuRtl::new(OccuParams {
+            results: ResultPath::PartialReport,
+            ..unit(2, 8).params()
+        });
+        let tile = TileRect {
+            x: 0,
+            y: 0,
+            width: 4,
+            height: 4,
+        };
+        let far = TileRect { x: 8, ..tile };
+        rtl.load_query(&QueryConfig {
+            tiles: vec![tile, far, tile],
+            verbose: true,
+            hit_room: 1,
+        });
+        let mut out = CycleOutputs::default();
+        for (x, y) in [(1, 1), (2, 3)] {
+            rtl.step(&fragment(x, y), &mut out);
+            while !out.left {
+                rtl.step(&CycleInputs::default(), &mut out);
+            }
+        }
+        assert!(rtl.end_token(true, 1));
+        assert!(rtl.quiescent(), "no record bank");
+        let slots = rtl.take_partial_report();
+        let counts: Vec<_> = slots.iter().map(|s| (s.x0, s.phc, s.nohc)).collect();
+        assert_eq!(counts, [(0, 2, 2), (8, 0, 0), (0, 2, 2)]);
+        assert_eq!((slots[0].xmin, slots[0].xmax, slots[0].ymax), (1, 2, 3));
+        assert!(slots[0].overflowed && slots[2].overflowed && !slots[1].overflowed);
+        assert!(rtl.take_partial_report().is_empty());
+        // Only the two hit words (one per tile, room 1) ever entered the write buffer.
+        rtl.step(&CycleInputs::default(), &mut out);
+        assert!(out.entered.is_empty());
+        assert_eq!((rtl.control.hit_words, rtl.control.record_words), (2, 0));
     }
 }

@@ -167,7 +167,9 @@ impl OccuControl {
         OccuControl {
             capacity,
             engines,
-            fifo: VecDeque::with_capacity(capacity.min(1 << 16) as usize),
+            // A small start: the IR holds one unit per Image Engine (thousands); the FIFO
+            // grows to its capacity only if the run fills it.
+            fifo: VecDeque::with_capacity(capacity.min(64) as usize),
             banks: VecDeque::new(),
             pointer: 0,
             last_bank_overflows: 0,

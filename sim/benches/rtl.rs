@@ -1,8 +1,9 @@
 //! The `rtl` fidelity's cost: the O2-like machine with its OccU at `cycle` fidelity, at
 //! `rtl` fidelity, and at `rtl` dumping a VCD of the whole run (into a buffered sink that
 //! discards it, so disk speed is not measured; the bytes are counted), on a synthetic
-//! stream of about 1.5 M fragments (the replay benchmark's frame, three times). Prints
-//! fragments per second (on-CPU where Linux tells) and the ratios.
+//! stream of about 1.5 M fragments (the replay benchmark's frame, three times); then the
+//! InfiniteReality-like `ir4` (320 Image Engines, each unit the RTL) at `cycle` and `rtl`.
+//! Prints fragments per second (on-CPU where Linux tells) and the ratios.
 //!
 //! Run: `cargo bench -p occsim-sim --bench rtl`
 
@@ -95,4 +96,15 @@ fn main() {
             cycle_report.summary.cycles
         );
     }
+    let arch = Arch::builtin("ir4").expect("built-in ir4");
+    let (cycle, cycle_report) = run(&arch, &frame, OccuModel::Cycle);
+    let (rtl, rtl_report) = run(&arch, &frame, OccuModel::Rtl { waveform: None });
+    assert_eq!(cycle_report, rtl_report, "ir4 rtl and cycle reports differ");
+    println!(
+        "ir4 (320 Image Engines): cycle {:.2} M fragments/s, rtl {:.2} M/s ({:.1}x slower) over {} cycles",
+        cycle / 1e6,
+        rtl / 1e6,
+        cycle / rtl,
+        cycle_report.summary.cycles
+    );
 }

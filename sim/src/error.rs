@@ -50,10 +50,6 @@ pub enum SimError {
     },
     #[error("the stream ended with query {id} still open")]
     OpenAtEnd { id: u32 },
-    #[error(
-        "the {level} level has no model of the {machine} machine yet (use functional or cycle)"
-    )]
-    LevelNotBuilt { level: String, machine: String },
     #[error("cannot write the waveform: {0}")]
     Waveform(String),
 }

@@ -6,7 +6,7 @@
 //! | `analytic` | functional + the closed-form bottleneck model ([`crate::analytic`]) | predicted |
 //! | `sampled:K` | functional on everything, the cycle model on every K-th window ([`crate::sampled`]) | measured on 1/K, extrapolated |
 //! | `cycle` | the cycle-level machine model ([`crate::MachineModel`]) | exact |
-//! | `rtl` | the cycle model with the Occlusion Unit and OccU Control of `occsim-rtl` | exact |
+//! | `rtl` | the cycle-level machine with every Occlusion Unit and OccU Control the bit-accurate RTL ([`crate::rtl_occu`]) | exact |
 //!
 //! A *window* is the run of events from just after one query's end (and its golden result)
 //! up to and including the next query's end and its golden result; the events after the
@@ -544,14 +544,26 @@ mod tests {
     }
 
     #[test]
-    fn the_rtl_level_is_refused_clearly_where_it_has_no_model() {
-        let arch = Arch::builtin("ir4").unwrap();
-        let error = LevelModel::new(Fidelity::Rtl, &arch, 8, 8, Effects::ALL)
-            .err()
-            .unwrap();
-        assert_eq!(
-            error.to_string(),
-            "the rtl level has no model of the ir machine yet (use functional or cycle)"
-        );
+    fn every_level_runs_on_every_machine() {
+        let levels = ["functional", "analytic", "sampled:3", "cycle", "rtl"];
+        for (name, level) in ["o2", "ir1", "ir4"]
+            .into_iter()
+            .flat_map(|name| levels.map(|level| (name, level)))
+        {
+            let arch = Arch::builtin(name).unwrap();
+            let level: Fidelity = level.parse().unwrap();
+            let mut model = LevelModel::new(level, &arch, 8, 8, Effects::ALL).unwrap();
+            model
+                .event(&Event::Fragment(Fragment { x: 3, y: 5, z: 9 }))
+                .unwrap();
+            let result = model.finish(&arch).unwrap();
+            assert_eq!(result.machine, arch.machine().name(), "{name} {level}");
+            assert_eq!(result.fragments, 1, "{name} {level}");
+            assert_eq!(
+                result.total_cycles.is_some_and(|c| c > 0),
+                level != Fidelity::Functional,
+                "{name} {level}"
+            );
+        }
     }
 }

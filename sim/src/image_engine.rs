@@ -1,6 +1,7 @@
 //! One Image Engine: the FIFO in front of it, its depth test over the pixels it owns, and its
-//! own Occlusion Unit ([`crate::occlusion_unit`]) with an OccU Control write buffer
-//! ([`crate::occu_control`]) that drains hit words into the Image Engine's memory.
+//! own Occlusion Unit with an OccU Control write buffer that drains hit words into the Image
+//! Engine's memory, at `cycle` fidelity ([`crate::occlusion_unit`], [`crate::occu_control`])
+//! or as the clocked RTL ([`crate::rtl_occu`]), through the [`crate::occu_stage`] seam.
 //!
 //! Rules, for the Image Engine's `k`-th fragment, emitted by its board's Fragment Generator
 //! in `a_k` (`C = image_engine_cycles_per_fragment`, `F = image_engine_fifo_entries`):
@@ -18,17 +19,17 @@
 //!   with `g` the grant of its last hit word (0 without hits).
 
 use crate::arch::{IrArch, OCCU_WORD_BITS};
+use crate::error::SimError;
 use crate::fifo::Fifo;
 use crate::memory_port::MemoryPort;
-use crate::occlusion_unit::OcclusionUnit;
-use crate::occu_control::OccuControl;
+use crate::occu_stage::{OccuModel, OccuStage, OccuStats};
 use occsim_traces::{Fragment, QuerySpec, TileResult};
 
 pub struct ImageEngine {
     cycles_per_fragment: u64,
     fifo: Fifo,
-    pub occu: OcclusionUnit,
-    control: OccuControl,
+    /// The Occlusion Unit and OccU Control, modelled as the fidelity level says.
+    occu: OccuStage,
     /// The Image Engine's memory port for hit words: one 32-bit word per cycle.
     port: MemoryPort,
     /// First cycle the depth stage may start a fragment: `max(s_last + C, o_last)`.
@@ -41,16 +42,12 @@ pub struct ImageEngine {
 }
 
 impl ImageEngine {
-    pub fn new(arch: &IrArch) -> ImageEngine {
+    /// An Image Engine whose Occlusion Unit is modelled as `occu` says.
+    pub fn new(arch: &IrArch, occu: OccuModel) -> ImageEngine {
         ImageEngine {
             cycles_per_fragment: arch.image_engine_cycles_per_fragment,
             fifo: Fifo::new(arch.image_engine_fifo_entries),
-            occu: OcclusionUnit::with_engines(
-                arch.engines,
-                arch.all_tiles_one_cycle,
-                arch.counter_max(),
-            ),
-            control: OccuControl::new(arch.occu_write_buffer_words),
+            occu: OccuStage::for_image_engine(arch, occu),
             port: MemoryPort::new(OCCU_WORD_BITS),
             depth_free: 0,
             loaded_query: 0,
@@ -82,10 +79,14 @@ impl ImageEngine {
         self.fifo.depart(start);
         self.fragments += 1;
         self.busy_cycles += c;
-        let (accepted, hit_words) = self.occu.fragment(fragment, passed, start + c, query_open);
-        let counted = accepted + self.occu.service_cycles() - 1;
-        let leave = self.control.hits(hit_words, counted, &mut self.port);
-        self.occu.complete(accepted, leave, query_open);
+        let accepted = self.occu.fragment(
+            fragment,
+            passed,
+            start + c,
+            query_open,
+            &mut self.port,
+            true,
+        );
         self.depth_free = (start + c).max(accepted);
     }
 
@@ -99,27 +100,25 @@ impl ImageEngine {
     ) -> (u64, Option<Vec<TileResult>>) {
         let through_depth = (end_cycle + 1).max(self.depth_free);
         let through_occu = (through_depth + 1).max(self.occu.free_cycle());
-        let hits_drained = if self.control.words_written() > 0 {
-            self.control.last_grant() + 1
-        } else {
-            0
-        };
-        let ready = (through_occu + 1).max(hits_drained);
-        let results = (self.loaded_query == generation).then(|| self.occu.end(tiles));
+        let ready = (through_occu + 1).max(self.hits_drained());
+        let results = (self.loaded_query == generation).then(|| self.occu.partial_report(tiles));
         (ready, results)
+    }
+
+    /// The cycle after the last hit word's grant (0 without hits).
+    fn hits_drained(&self) -> u64 {
+        self.occu.last_grant().map_or(0, |grant| grant + 1)
     }
 
     /// The first cycle every part of the Image Engine is idle.
     pub fn free_cycle(&self) -> u64 {
-        let drained = if self.control.words_written() > 0 {
-            self.control.last_grant() + 1
-        } else {
-            0
-        };
-        self.depth_free.max(self.occu.free_cycle()).max(drained)
+        self.depth_free
+            .max(self.occu.free_cycle())
+            .max(self.hits_drained())
     }
 
-    pub fn hit_words(&self) -> u64 {
-        self.control.hit_words
+    /// End of the stream: the Occlusion Unit's statistics (its words are all hit words).
+    pub fn finish(&mut self) -> Result<OccuStats, SimError> {
+        self.occu.finish()
     }
 }

@@ -46,6 +46,14 @@
 //!
 //! The functional depth test uses one depth buffer for the whole screen, partitioned by
 //! ownership: each pixel is only ever tested by the Image Engine that owns it.
+//!
+//! # Fidelity
+//! Every Image Engine's Occlusion Unit and OccU Control is the event-timestamp model
+//! (`cycle`) or the `occsim-rtl` model clocked cycle by cycle (`rtl`,
+//! [`IrMachine::with_occu_model`], [`crate::rtl_occu`]), with identical reports. An rtl
+//! unit is clocked only when its Image Engine has a fragment for it (quiescent cycles are
+//! skipped in bulk), so idle Image Engines cost nothing; a waveform (`--vcd`) dumps Image
+//! Engine 0 of board 0.
 
 use crate::arch::{Arch, IrArch};
 use crate::error::SimError;
@@ -56,6 +64,7 @@ use crate::interleave::FramebufferInterleave;
 use crate::merge_network::{merge_partial, merged_ready};
 use crate::o2::{check_spec, first_difference, tile_report};
 use crate::occlusion_engine::hit_room;
+use crate::occu_stage::{OccuModel, OccuStats};
 use crate::report::{
     nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
     Summary, UnitSummary,
@@ -101,9 +110,20 @@ pub struct IrMachine {
 
 impl IrMachine {
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<IrMachine, SimError> {
+        IrMachine::with_occu_model(arch, width, height, OccuModel::Cycle)
+    }
+
+    /// The machine with every Image Engine's Occlusion Unit modelled as `occu` says (the
+    /// `cycle` and `rtl` fidelity levels). A waveform dumps Image Engine 0 of board 0 only.
+    pub fn with_occu_model(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        occu: OccuModel,
+    ) -> Result<IrMachine, SimError> {
         arch.ir()?;
         crate::error::check_viewport(width, height)?;
-        IrMachine::assemble(arch, width, height, DepthBuffer::new(width, height))
+        IrMachine::assemble(arch, width, height, occu, DepthBuffer::new(width, height))
     }
 
     /// A machine that starts from a functional model's render state and depths (`depth`, a
@@ -116,7 +136,7 @@ impl IrMachine {
         depth: DepthBuffer,
     ) -> Result<IrMachine, SimError> {
         crate::error::check_viewport(width, height)?;
-        let mut machine = IrMachine::assemble(arch, width, height, depth)?;
+        let mut machine = IrMachine::assemble(arch, width, height, OccuModel::Cycle, depth)?;
         machine.state = *state;
         Ok(machine)
     }
@@ -131,6 +151,7 @@ impl IrMachine {
         arch: &Arch,
         width: u32,
         height: u32,
+        occu: OccuModel,
         depth: DepthBuffer,
     ) -> Result<IrMachine, SimError> {
         let ir = arch.ir()?;
@@ -145,9 +166,7 @@ impl IrMachine {
                     )
                 })
                 .collect(),
-            image_engines: (0..ir.image_engines())
-                .map(|_| ImageEngine::new(&ir))
-                .collect(),
+            image_engines: image_engines(&ir, occu),
             arch: ir,
             arch_entries,
             width,
@@ -317,7 +336,7 @@ impl IrMachine {
     }
 
     /// End of the stream: the report.
-    pub fn finish(self) -> Result<Report, SimError> {
+    pub fn finish(mut self) -> Result<Report, SimError> {
         if let Some(query) = &self.open {
             return Err(SimError::OpenAtEnd { id: query.spec.id });
         }
@@ -330,8 +349,13 @@ impl IrMachine {
             .max()
             .unwrap_or(0);
         let fragments: u64 = self.generators.iter().map(|g| g.fragments).sum();
-        let engines = self.engine_reports(cycles);
-        let sum = |f: &dyn Fn(&ImageEngine) -> u64| self.image_engines.iter().map(f).sum::<u64>();
+        let occu = self
+            .image_engines
+            .iter_mut()
+            .map(ImageEngine::finish)
+            .collect::<Result<Vec<OccuStats>, SimError>>()?;
+        let engines = self.engine_reports(&occu, cycles);
+        let sum_occu = |f: &dyn Fn(&OccuStats) -> u64| occu.iter().map(f).sum::<u64>();
         let stage = |name: &str, busy: u64, stall: u64, units: usize| StageReport {
             name: name.to_string(),
             busy_cycles: busy,
@@ -348,11 +372,16 @@ impl IrMachine {
                 self.generators.iter().map(|g| g.stall_cycles).sum(),
                 self.generators.len(),
             ),
-            stage("image_engines", sum(&|e| e.busy_cycles), 0, ies),
+            stage(
+                "image_engines",
+                self.image_engines.iter().map(|e| e.busy_cycles).sum(),
+                0,
+                ies,
+            ),
             stage(
                 "occlusion_units",
-                sum(&|e| e.occu.busy_cycles),
-                sum(&|e| e.occu.stall_cycles),
+                sum_occu(&|o| o.busy_cycles),
+                sum_occu(&|o| o.stall_cycles),
                 ies,
             ),
         ];
@@ -367,11 +396,7 @@ impl IrMachine {
                 self.image_engines.iter().map(|e| e.busy_cycles),
                 cycles,
             ),
-            UnitSummary::of(
-                "occlusion_unit",
-                self.image_engines.iter().map(|e| e.occu.busy_cycles),
-                cycles,
-            ),
+            UnitSummary::of("occlusion_unit", occu.iter().map(|o| o.busy_cycles), cycles),
         ];
         let mut latencies: Vec<u64> = self.queries.iter().map(|q| q.latency_cycles).collect();
         latencies.sort_unstable();
@@ -398,7 +423,7 @@ impl IrMachine {
             },
             stages,
             memory_port: PortReport {
-                occu_words: sum(&|e| e.hit_words()),
+                occu_words: sum_occu(&|o| o.words_written),
                 ..PortReport::default()
             },
             engines,
@@ -409,31 +434,41 @@ impl IrMachine {
 
     /// Engine `e`'s statistics summed over every Image Engine's Occlusion Unit; busy percent
     /// of all those engines' cycles.
-    fn engine_reports(&self, cycles: u64) -> Vec<EngineReport> {
+    fn engine_reports(&self, occu: &[OccuStats], cycles: u64) -> Vec<EngineReport> {
         (0..self.arch.engines)
             .map(|e| {
-                let busy = self
-                    .image_engines
-                    .iter()
-                    .map(|ie| ie.occu.engines[e].busy_cycles)
-                    .sum();
-                let stall = self
-                    .image_engines
-                    .iter()
-                    .map(|ie| ie.occu.engines[e].stall_cycles)
-                    .sum();
+                let busy = occu.iter().map(|o| o.engines[e].0).sum();
+                let stall = occu.iter().map(|o| o.engines[e].1).sum();
                 EngineReport {
                     engine: e,
                     busy_cycles: busy,
                     stall_cycles: stall,
-                    busy_percent: percent(
-                        busy,
-                        cycles.saturating_mul(self.image_engines.len() as u64),
-                    ),
+                    busy_percent: percent(busy, cycles.saturating_mul(occu.len() as u64)),
                 }
             })
             .collect()
     }
+}
+
+/// Every Image Engine, board-major, its Occlusion Unit modelled as `occu` says; a
+/// waveform goes to the first one (Image Engine 0 of board 0).
+fn image_engines(arch: &IrArch, occu: OccuModel) -> Vec<ImageEngine> {
+    let (rtl, mut waveform) = match occu {
+        OccuModel::Cycle => (false, None),
+        OccuModel::Rtl { waveform } => (true, waveform),
+    };
+    (0..arch.image_engines())
+        .map(|_| {
+            let model = if rtl {
+                OccuModel::Rtl {
+                    waveform: waveform.take(),
+                }
+            } else {
+                OccuModel::Cycle
+            };
+            ImageEngine::new(arch, model)
+        })
+        .collect()
 }
 
 /// Verbose buffers that overflowed end with the -1 terminator over their last hit (when they

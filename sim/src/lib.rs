@@ -8,12 +8,14 @@
 //!   [`occu_control`], all sharing one [`memory_port`].
 //! - [`ir`]: the InfiniteReality-like machine: [`IrMachine`]. Its blocks: [`interleave`],
 //!   [`fragment_generator`] (one per board), [`image_engine`] (each with its own
-//!   [`occlusion_unit`] and [`occu_control`]), [`merge_network`] (the two merge stages).
-//! - [`occu_stage`]: the seam choosing the OccU's fidelity: `cycle` (event timestamps) or
-//!   `rtl` ([`rtl_occu`]: the `occsim-rtl` register-transfer model clocked every cycle,
-//!   with [`waveform`] VCD dumps).
+//!   [`occlusion_unit`] and [`occu_control`] through [`occu_stage`]), [`merge_network`]
+//!   (the two merge stages).
+//! - [`occu_stage`]: the seam choosing the OccU's fidelity on either machine: `cycle`
+//!   (event timestamps) or `rtl` ([`rtl_occu`]: the `occsim-rtl` register-transfer model
+//!   clocked every cycle, with [`waveform`] VCD dumps; at the IR, of Image Engine 0 of
+//!   board 0).
 //! - [`machine`]: [`MachineModel`], the machine an architecture names (the entry point).
-//! - [`fidelity`]: the fidelity ladder (functional, [`analytic`], [`sampled`], cycle) and its
+//! - [`fidelity`]: the fidelity ladder (functional, [`analytic`], [`sampled`], cycle, rtl) and its
 //!   common [`LevelResult`]; [`effects`]: only the effect models a trace can observe.
 //! - [`report`]: the replay report (serde) and its text form.
 //!

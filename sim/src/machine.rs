@@ -51,15 +51,7 @@ impl MachineModel {
     ) -> Result<MachineModel, SimError> {
         Ok(match arch.machine() {
             Machine::O2 => MachineModel::O2(O2Machine::with_occu_model(arch, width, height, occu)?),
-            Machine::Ir => match occu {
-                OccuModel::Cycle => MachineModel::Ir(IrMachine::new(arch, width, height)?),
-                OccuModel::Rtl { .. } => {
-                    return Err(SimError::LevelNotBuilt {
-                        level: "rtl".into(),
-                        machine: "ir".into(),
-                    })
-                }
-            },
+            Machine::Ir => MachineModel::Ir(IrMachine::with_occu_model(arch, width, height, occu)?),
         })
     }
 

@@ -1,9 +1,12 @@
-//! The seam where the O2 machine computes its Occlusion Unit and OccU Control: either the
-//! event-timestamp model ([`crate::occlusion_unit`], [`crate::occu_control`]) or the
-//! clocked register-transfer model of `occsim-rtl` ([`crate::rtl_occu`]). Both follow the
-//! timing rules of [`crate::o2`] and produce the same cycles and results.
+//! The seam where a machine computes an Occlusion Unit and its OccU Control (the O2's one,
+//! every InfiniteReality Image Engine's own): either the event-timestamp model
+//! ([`crate::occlusion_unit`], [`crate::occu_control`]) or the clocked register-transfer
+//! model of `occsim-rtl` ([`crate::rtl_occu`]). Both follow the timing rules of
+//! [`crate::o2`] (records to memory at the end, [`OccuStage::end`]) or of
+//! [`crate::image_engine`] (hit words only; the partial report to the merge network,
+//! [`OccuStage::partial_report`]) and produce the same cycles and results.
 
-use crate::arch::O2Arch;
+use crate::arch::{IrArch, O2Arch};
 use crate::memory_port::MemoryPort;
 use crate::occlusion_unit::OcclusionUnit;
 use crate::occu_control::OccuControl;
@@ -50,6 +53,23 @@ impl OccuStage {
                 control: OccuControl::new(arch.occu_write_buffer_words),
             },
             OccuModel::Rtl { waveform } => OccuStage::Rtl(Box::new(RtlOccu::new(arch, waveform))),
+        }
+    }
+
+    /// The unit of one InfiniteReality Image Engine.
+    pub fn for_image_engine(arch: &IrArch, model: OccuModel) -> OccuStage {
+        match model {
+            OccuModel::Cycle => OccuStage::Cycle {
+                occu: OcclusionUnit::with_engines(
+                    arch.engines,
+                    arch.all_tiles_one_cycle,
+                    arch.counter_max(),
+                ),
+                control: OccuControl::new(arch.occu_write_buffer_words),
+            },
+            OccuModel::Rtl { waveform } => {
+                OccuStage::Rtl(Box::new(RtlOccu::for_image_engine(arch, waveform)))
+            }
         }
     }
 
@@ -116,6 +136,25 @@ impl OccuStage {
                 (tiles, available, overflowed)
             }
             OccuStage::Rtl(rtl) => rtl.end(spec, through_depth, port),
+        }
+    }
+
+    /// The loaded query's end token at an Image Engine, once its last fragment has left:
+    /// the tiles' partial results for the merge network (no record is written).
+    pub fn partial_report(&mut self, tiles: usize) -> Vec<TileResult> {
+        match self {
+            OccuStage::Cycle { occu, .. } => occu.end(tiles),
+            OccuStage::Rtl(rtl) => rtl.partial_report(),
+        }
+    }
+
+    /// The port grant of the last word OccU Control wrote (`None` before any).
+    pub fn last_grant(&self) -> Option<u64> {
+        match self {
+            OccuStage::Cycle { control, .. } => {
+                (control.words_written() > 0).then(|| control.last_grant())
+            }
+            OccuStage::Rtl(rtl) => rtl.last_grant(),
         }
     }
 

@@ -1,6 +1,6 @@
-//! The `rtl` fidelity of the O2 machine's Occlusion Unit and OccU Control: the
-//! `occsim-rtl` model clocked cycle by cycle, bridged to the event-timestamp rest of the
-//! machine.
+//! The `rtl` fidelity of an Occlusion Unit and its OccU Control (the O2's one, or one
+//! InfiniteReality Image Engine's): the `occsim-rtl` model clocked cycle by cycle, bridged
+//! to the event-timestamp rest of the machine.
 //!
 //! Bridge rules:
 //! - a fragment ready in `ready` is offered on the RTL's fragment port from cycle `ready`
@@ -21,8 +21,14 @@
 //!   dump sees every change;
 //! - the memory image: hit words are stored per tile as they enter, record words are
 //!   decoded into the tile's result, the terminator cuts the hit list at its entry.
+//!
+//! At an Image Engine of the InfiniteReality ([`ResultPath::PartialReport`]) OccU Control
+//! writes hit words only: the end token passes the idle unit between cycles when the
+//! bridge handles it ([`RtlOccu::partial_report`]; nothing in the unit depends on the
+//! token's cycle, which the Image Engine's rule computes) and the tile registers, read off
+//! the partial-report port, go to the merge network with the hit words stored so far.
 
-use crate::arch::{O2Arch, OCCU_WORD_BITS};
+use crate::arch::{IrArch, O2Arch, OCCU_WORD_BITS};
 use crate::memory_port::{MemoryPort, PortClient};
 use crate::occu_stage::OccuStats;
 use crate::waveform::{Waveform, WaveformOptions};
@@ -30,7 +36,7 @@ use crate::SimError;
 use occsim_rtl::occlusion_unit::Wires;
 use occsim_rtl::occu_control::{ControlWires, WordKind};
 use occsim_rtl::{
-    CycleInputs, CycleOutputs, FragmentPort, OccuParams, OccuRtl, QueryConfig, TileRect,
+    CycleInputs, CycleOutputs, FragmentPort, OccuParams, OccuRtl, QueryConfig, ResultPath, TileRect,
 };
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::{Fragment, QueryMode, QuerySpec, TileResult};
@@ -58,14 +64,38 @@ pub struct RtlOccu {
 }
 
 impl RtlOccu {
+    /// The O2's unit: records go to memory.
     pub fn new(arch: &O2Arch, waveform: Option<WaveformOptions>) -> RtlOccu {
-        let rtl = OccuRtl::new(OccuParams {
+        let params = OccuParams {
             engines: arch.engines as u32,
             counter_bits: arch.counter_bits,
             write_buffer_words: arch.occu_write_buffer_words as u32,
             all_tiles_one_cycle: arch.all_tiles_one_cycle,
-        });
-        let waveform = waveform.map(|options| Waveform::new(options, &rtl, arch.clock_mhz));
+            results: ResultPath::Records,
+        };
+        RtlOccu::with_params(params, arch.clock_mhz, waveform)
+    }
+
+    /// One InfiniteReality Image Engine's unit: partial reports go to the merge network.
+    pub fn for_image_engine(arch: &IrArch, waveform: Option<WaveformOptions>) -> RtlOccu {
+        let params = OccuParams {
+            engines: arch.engines as u32,
+            counter_bits: arch.counter_bits,
+            write_buffer_words: arch.occu_write_buffer_words as u32,
+            all_tiles_one_cycle: arch.all_tiles_one_cycle,
+            results: ResultPath::PartialReport,
+        };
+        RtlOccu::with_params(params, arch.clock_mhz, waveform)
+    }
+
+    /// A unit of `params`, clocked at `clock_mhz` MHz (the waveform's time scale).
+    fn with_params(
+        params: OccuParams,
+        clock_mhz: f64,
+        waveform: Option<WaveformOptions>,
+    ) -> RtlOccu {
+        let rtl = OccuRtl::new(params);
+        let waveform = waveform.map(|options| Waveform::new(options, &rtl, clock_mhz));
         RtlOccu {
             rtl,
             outputs: CycleOutputs::default(),
@@ -250,6 +280,38 @@ impl RtlOccu {
             tile.hits = std::mem::take(hits);
         }
         (tiles, self.last_grant + 1, overflowed)
+    }
+
+    /// The end token of the loaded query (the unit is idle: its last fragment left), at an
+    /// Image Engine ([`ResultPath::PartialReport`]): the tiles' partial results, in query
+    /// order, with the hit words written so far.
+    pub fn partial_report(&mut self) -> Vec<TileResult> {
+        // With the partial-report path the token's mode and room feed no record bank.
+        let passed = self.rtl.end_token(false, 0);
+        assert!(passed, "the unit is idle between fragments");
+        let slots = self.rtl.take_partial_report();
+        debug_assert_eq!(slots.len(), self.hits.len());
+        slots
+            .into_iter()
+            .zip(self.hits.iter_mut())
+            .map(|(slot, hits)| TileResult {
+                nohc: slot.nohc,
+                phc: slot.phc,
+                xmin: slot.xmin,
+                xmax: slot.xmax,
+                ymin: slot.ymin,
+                ymax: slot.ymax,
+                zmin: slot.zmin,
+                zmax: slot.zmax,
+                hits: std::mem::take(hits),
+                overflowed: slot.overflowed,
+            })
+            .collect()
+    }
+
+    /// The port grant of the last word written (`None` before any).
+    pub fn last_grant(&self) -> Option<u64> {
+        (self.words_written > 0).then_some(self.last_grant)
     }
 
     /// Clock a copy of OccU Control (engines offering nothing) until every record bank has

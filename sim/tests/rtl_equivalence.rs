@@ -1,12 +1,14 @@
 //! The `rtl` fidelity (the occsim-rtl model clocked every cycle) against the `cycle`
 //! fidelity (event timestamps): the whole report, every count, cycle and latency, must be
-//! identical, on built-in scenes and on random streams; and the VCD waveform is well formed.
+//! identical, on built-in scenes and on random streams, on the O2 and on the
+//! InfiniteReality (every Image Engine's unit the RTL, whose merged results, hit lists in
+//! order, must be identical too); and the VCD waveform is well formed.
 
-use occsim_sim::{Arch, MachineModel, OccuModel, Report, WaveformOptions};
+use occsim_sim::{Arch, IrMachine, MachineModel, OccuModel, Report, WaveformOptions};
 use occsim_traces::builtin::{demo_scene, DemoOptions, HARDCASES};
 use occsim_traces::golden::{FunctionalModel, GoldenModel};
 use occsim_traces::scene::{parse_scene, Command};
-use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QuerySpec, Rect};
+use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QueryResult, QuerySpec, Rect};
 use proptest::prelude::*;
 use std::io::Write;
 use std::sync::{Arc, Mutex};
@@ -372,4 +374,238 @@ fn hand_worked_waveform() {
     let query = &report.queries[0];
     assert_eq!(query.available_cycle, o0 + 5);
     assert_eq!(report.queries[0].tiles[0].phc, 2);
+}
+
+// ---- the InfiniteReality-like machine ----
+
+/// A built-in IR machine (`ir1`, `ir2`, `ir4`) with `sets` applied.
+fn ir_arch(name: &str, sets: &[String]) -> Arch {
+    let mut arch = Arch::builtin(name).unwrap();
+    for set in sets {
+        arch.set(set).unwrap_or_else(|e| panic!("--set {set}: {e}"));
+    }
+    arch
+}
+
+/// Replays `events` on the IR machine: the report and every query's merged result.
+fn ir_replay(
+    arch: &Arch,
+    width: u32,
+    height: u32,
+    events: &[Event],
+    occu: OccuModel,
+) -> (Report, Vec<QueryResult>) {
+    let mut machine = IrMachine::with_occu_model(arch, width, height, occu).unwrap();
+    let mut results = Vec::new();
+    for event in events {
+        machine.event(event).unwrap();
+        if matches!(event, Event::QueryEnd) {
+            results.push(machine.last_result().unwrap().clone());
+        }
+    }
+    (machine.finish().unwrap(), results)
+}
+
+/// Replay on both fidelities of the IR machine and insist on identical reports and merged
+/// results (hit lists in the same order); through [`MachineModel`] too.
+fn ir_check_equivalent(arch: &Arch, width: u32, height: u32, events: &[Event]) -> Report {
+    let (cycle, cycle_results) = ir_replay(arch, width, height, events, OccuModel::Cycle);
+    let (rtl, rtl_results) = ir_replay(
+        arch,
+        width,
+        height,
+        events,
+        OccuModel::Rtl { waveform: None },
+    );
+    assert_eq!(cycle.machine, "ir");
+    assert_eq!(cycle, rtl);
+    assert_eq!(cycle_results, rtl_results);
+    assert_eq!(cycle.summary.checked_queries, cycle.summary.queries);
+    assert_eq!(
+        replay(
+            arch,
+            width,
+            height,
+            events,
+            OccuModel::Rtl { waveform: None }
+        ),
+        cycle
+    );
+    cycle
+}
+
+/// IR variants: every built-in board count, few Image Engines per board (so each holds
+/// many pixels), fast depth tests (so the OccU and its write buffer are the bottleneck and
+/// stall), and `extra`.
+fn ir_variants(extra: &[&str]) -> Vec<Arch> {
+    let mut archs = Vec::new();
+    for name in ["ir1", "ir2", "ir4"] {
+        archs.push(ir_arch(name, &[]));
+        let mut sets: Vec<String> = vec![
+            "image_engines_per_board=3".into(),
+            "image_engine_cycles_per_fragment=1".into(),
+            "occu_write_buffer_words=2".into(),
+        ];
+        sets.extend(extra.iter().map(|s| s.to_string()));
+        archs.push(ir_arch(name, &sets));
+    }
+    archs
+}
+
+#[test]
+fn ir_hardcases_scene_is_identical() {
+    let (width, height, events) = scene_events(HARDCASES);
+    for extra in [
+        vec![],
+        vec!["engines=1"],
+        vec!["engines=2", "interleave=blocks", "block_width_pixels=3"],
+        vec!["engines=5", "interleave=morton", "counter_bits=4"],
+        vec!["all_tiles_one_cycle=true", "occu_write_buffer_words=1"],
+    ] {
+        for arch in ir_variants(&extra) {
+            ir_check_equivalent(&arch, width, height, &events);
+        }
+    }
+}
+
+#[test]
+fn ir_small_demo_is_identical() {
+    let text = demo_scene(&DemoOptions {
+        width: 160,
+        height: 120,
+        frames: 2,
+        lots_per_side: 6,
+        ..DemoOptions::default()
+    });
+    let (width, height, events) = scene_events(&text);
+    for arch in ir_variants(&["engines=2"]) {
+        let report = ir_check_equivalent(&arch, width, height, &events);
+        assert!(report.summary.fragments > 1000);
+    }
+}
+
+/// A verbose query whose tiles overflow at every Image Engine, then one that fits, on fast
+/// Image Engines with a one-word write buffer: hits stall the engines.
+#[test]
+fn ir_verbose_overflow_is_identical() {
+    let mut golden = FunctionalModel::new(WIDTH, HEIGHT);
+    let mut events = Vec::new();
+    for (id, buffer_entries) in [(1, 10), (2, 8 + 200)] {
+        let raw = [Event::QueryBegin(QuerySpec {
+            id,
+            mode: QueryMode::Verbose,
+            buffer_entries,
+            tiles: vec![
+                Rect::new(0, 0, WIDTH, HEIGHT),
+                Rect::new(2, 2, 9, 5),
+                Rect::new(0, 0, 1, 1),
+            ],
+        })];
+        let fragments = (0..6u16).flat_map(|y| (0..12u16).map(move |x| (x, y)));
+        for event in raw.into_iter().chain(
+            fragments
+                .map(|(x, y)| Event::Fragment(Fragment { x, y, z: 100 }))
+                .chain([Event::QueryEnd]),
+        ) {
+            let result = golden.event(&event);
+            events.push(event);
+            events.extend(result.map(Event::QueryResult));
+        }
+    }
+    for extra in [vec!["engines=1"], vec!["engines=2"], vec!["engines=5"]] {
+        for arch in ir_variants(&extra) {
+            let mut arch = arch;
+            arch.set("occu_write_buffer_words=1").unwrap();
+            let report = ir_check_equivalent(&arch, WIDTH, HEIGHT, &events);
+            assert!(report.queries[0].overflowed_buffers > 0);
+            assert_eq!(report.queries[1].overflowed_buffers, 0);
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(150))]
+    #[test]
+    fn ir_random_streams_are_identical(
+        seed in 0u64..1_000_000,
+        name in prop::sample::select(vec!["ir1", "ir2", "ir4"]),
+        image_engines in 1u32..=5,
+        engines in prop::sample::select(vec![1u32, 2, 5, 16]),
+        counter_bits in 1u32..=6,
+        buffer_words in 1u32..=12,
+        one_cycle in any::<bool>(),
+        interleave in prop::sample::select(vec!["columns", "blocks", "morton"]),
+        cycles_per_fragment in prop::sample::select(vec![1u32, 2, 3, 45]),
+        fifo in 1u32..=4,
+        per_cycle in 1u32..=3,
+        setup in 0u32..=4,
+    ) {
+        let arch = ir_arch(name, &[
+            format!("image_engines_per_board={image_engines}"),
+            format!("engines={engines}"),
+            format!("counter_bits={counter_bits}"),
+            format!("occu_write_buffer_words={buffer_words}"),
+            format!("all_tiles_one_cycle={one_cycle}"),
+            format!("interleave={interleave}"),
+            "block_width_pixels=3".to_string(),
+            "block_height_pixels=2".to_string(),
+            format!("image_engine_cycles_per_fragment={cycles_per_fragment}"),
+            format!("image_engine_fifo_entries={fifo}"),
+            format!("fragment_generator_fragments_per_cycle={per_cycle}"),
+            format!("fragment_generator_setup_cycles={setup}"),
+        ]);
+        ir_check_equivalent(&arch, WIDTH, HEIGHT, &random_stream(seed));
+    }
+}
+
+/// At the IR the waveform is Image Engine 0's of board 0: well formed, its unit seen
+/// taking fragments, and the report unchanged.
+#[test]
+fn ir_waveform_dumps_the_first_image_engine() {
+    let arch = ir_arch(
+        "ir2",
+        &[
+            "image_engines_per_board=2".into(),
+            "image_engine_cycles_per_fragment=1".into(),
+            "engines=3".into(),
+        ],
+    );
+    // Image Engine 0 of board 0 owns columns 0, 4, 8, ... (columns interleave over 2 x 2
+    // Image Engines); x = 1 goes to board 1.
+    let events = vec![
+        Event::QueryBegin(QuerySpec {
+            id: 1,
+            mode: QueryMode::Verbose,
+            buffer_entries: 20,
+            tiles: vec![Rect::new(0, 0, 8, 4); 4],
+        }),
+        Event::Fragment(Fragment { x: 0, y: 1, z: 0 }),
+        Event::Fragment(Fragment { x: 1, y: 1, z: 0 }),
+        Event::Fragment(Fragment { x: 4, y: 1, z: 0 }),
+        Event::QueryEnd,
+    ];
+    let shared = Shared::default();
+    let (report, _) = ir_replay(
+        &arch,
+        WIDTH,
+        HEIGHT,
+        &events,
+        OccuModel::Rtl {
+            waveform: Some(WaveformOptions {
+                out: Box::new(shared.clone()),
+                window: 0..u64::MAX,
+            }),
+        },
+    );
+    assert_eq!(
+        report,
+        ir_replay(&arch, WIDTH, HEIGHT, &events, OccuModel::Cycle).0
+    );
+    let text = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
+    let changes = parse_vcd(&text);
+    // Two fragments reach Image Engine 0 (x = 0 and x = 4): two acceptances; every
+    // fragment passes in all 4 tiles: 3 x 4 hit words over the machine.
+    let rises = changes["occu.accept"].iter().filter(|c| c.1 == 1).count();
+    assert_eq!(rises, 2);
+    assert_eq!(report.memory_port.occu_words, 4 * 3);
 }

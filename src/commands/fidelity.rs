@@ -1,6 +1,7 @@
 //! `occsim fidelity TRACE`: what accuracy costs. Runs every level of the fidelity ladder on
 //! the same trace and prints, per level, wall time, fragments per second, predicted cycles,
-//! query latency and the error against the reference level (`cycle`; `rtl` is not built).
+//! query latency and the error against the reference level (the most detailed level that
+//! ran: `rtl`, else `cycle`).
 //! Also [`FidelityArg`], the `--fidelity`/`--effects` options replay shares (and sweep and
 //! latency may add).
 
@@ -10,7 +11,7 @@ use anyhow::Context;
 use occsim_sim::arch::Machine;
 use occsim_sim::effects::{EffectScan, Effects, EffectsChoice};
 use occsim_sim::fidelity::{Fidelity, LevelResult};
-use occsim_sim::{Arch, SimError};
+use occsim_sim::Arch;
 use occsim_traces::golden::EventSink;
 use occsim_traces::trace::TraceReader;
 use occsim_traces::Event;
@@ -163,34 +164,6 @@ fn timed(
     Ok((result.expect("at least one run"), best))
 }
 
-/// Is this the refusal of a level the machine has no model of?
-fn is_not_built(error: &anyhow::Error) -> bool {
-    error.chain().any(|cause| {
-        matches!(
-            cause.downcast_ref::<SimError>(),
-            Some(SimError::LevelNotBuilt { .. })
-        )
-    })
-}
-
-impl LevelRow {
-    /// A row for a level that did not run, saying why.
-    fn note(level: Fidelity, note: &str) -> LevelRow {
-        LevelRow {
-            level: level.to_string(),
-            wall_seconds: None,
-            fragments_per_second: None,
-            total_cycles: None,
-            latency_mean_cycles: None,
-            latency_p95_cycles: None,
-            cycles_error: None,
-            latency_error: None,
-            results_exact: None,
-            note: Some(note.to_string()),
-        }
-    }
-}
-
 fn relative_error(value: Option<f64>, reference: Option<f64>) -> Option<f64> {
     match (value, reference) {
         (Some(v), Some(r)) if r > 0.0 => Some((v - r).abs() / r),
@@ -217,47 +190,35 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
     if !args.no_rtl {
         levels.push(Fidelity::Rtl);
     }
-    // A level the machine has no model of yet is a row saying so, not a failure.
     let mut runs = Vec::new();
     for level in levels {
-        let run = match timed(level, &arch, &args.trace, args.effects) {
-            Ok(run) => Ok(run),
-            Err(error) if is_not_built(&error) => Err(format!("{:#}", error.root_cause())),
-            Err(error) => return Err(error),
-        };
-        runs.push((level, run));
+        runs.push((level, timed(level, &arch, &args.trace, args.effects)?));
     }
     // The reference is the most detailed level that ran: rtl, else cycle.
-    let (reference_level, reference) = runs
-        .iter()
-        .rev()
-        .find_map(|(level, run)| run.as_ref().ok().map(|(result, _)| (*level, result)))
-        .context("no level ran")?;
+    let (reference_level, (reference, _)) = runs.last().context("no level ran")?;
+    let reference_level = *reference_level;
     let reference_values: Vec<u64> = reference.queries.iter().map(|q| q.value).collect();
     let rows: Vec<LevelRow> = runs
         .iter()
-        .map(|(level, run)| match run {
-            Err(note) => LevelRow::note(*level, note),
-            Ok((result, seconds)) => {
-                let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
-                LevelRow {
-                    level: level.to_string(),
-                    wall_seconds: Some(*seconds),
-                    fragments_per_second: Some(fragments / seconds.max(1e-9)),
-                    total_cycles: result.total_cycles,
-                    latency_mean_cycles: result.latency_mean_cycles,
-                    latency_p95_cycles: result.latency_p95_cycles,
-                    cycles_error: relative_error(
-                        result.total_cycles.map(|c| c as f64),
-                        reference.total_cycles.map(|c| c as f64),
-                    ),
-                    latency_error: relative_error(
-                        result.latency_mean_cycles,
-                        reference.latency_mean_cycles,
-                    ),
-                    results_exact: Some(values == reference_values),
-                    note: (*level == reference_level).then(|| "reference".to_string()),
-                }
+        .map(|(level, (result, seconds))| {
+            let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
+            LevelRow {
+                level: level.to_string(),
+                wall_seconds: Some(*seconds),
+                fragments_per_second: Some(fragments / seconds.max(1e-9)),
+                total_cycles: result.total_cycles,
+                latency_mean_cycles: result.latency_mean_cycles,
+                latency_p95_cycles: result.latency_p95_cycles,
+                cycles_error: relative_error(
+                    result.total_cycles.map(|c| c as f64),
+                    reference.total_cycles.map(|c| c as f64),
+                ),
+                latency_error: relative_error(
+                    result.latency_mean_cycles,
+                    reference.latency_mean_cycles,
+                ),
+                results_exact: Some(values == reference_values),
+                note: (*level == reference_level).then(|| "reference".to_string()),
             }
         })
         .collect();
@@ -309,10 +270,6 @@ fn table(
     let int = |v: Option<u64>| v.map_or("-".to_string(), |v| v.to_string());
     let percent = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.2}%", 100.0 * v));
     for row in rows {
-        if let Some(note) = row.note.as_ref().filter(|_| row.wall_seconds.is_none()) {
-            let _ = writeln!(out, "{:<12} {note}", row.level);
-            continue;
-        }
         let _ = writeln!(
             out,
             "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>8}",

@@ -1,6 +1,7 @@
 //! `occsim replay TRACE`: replay a fragment trace on a machine model at a fidelity level,
 //! check every query's counts against the golden results in the trace, and report; at the
-//! rtl level, optionally dump a window of the Occlusion Unit's waveform as VCD.
+//! rtl level, optionally dump a window of the Occlusion Unit's waveform as VCD (on the
+//! InfiniteReality-like machine, Image Engine 0 of board 0's unit).
 
 use super::arch::ArchSelection;
 use super::fidelity::{effects_of_trace, FidelityArg};
@@ -42,7 +43,7 @@ pub struct ReplayArgs {
 #[derive(clap::Args)]
 pub struct WaveformArgs {
     /// Write the rtl model's registers and wires as a VCD waveform to FILE (needs
-    /// --fidelity rtl).
+    /// --fidelity rtl; on an ir machine, Image Engine 0 of board 0's Occlusion Unit).
     #[arg(long, value_name = "FILE")]
     pub vcd: Option<PathBuf>,
     /// Cycles the waveform covers, START..END (END exclusive; default: the whole run).
