@@ -1,7 +1,8 @@
 //! What each fidelity level costs on one stream of about 1.5 million fragments, built in
 //! memory (three frames of the replay benchmark's scene, each with a clear and 120 queries
-//! of every mode): fragments per second per level, as ratios to `cycle`; and what the
-//! automatic effects choice saves over `--effects all` at the cycle level.
+//! of every mode), on the O2 and on ir4: fragments per second per level, as ratios to
+//! `cycle`; and what the automatic effects choice saves over `--effects all` at the cycle
+//! level.
 //!
 //! Run: `cargo bench -p occsim-sim --bench fidelity`
 
@@ -46,38 +47,48 @@ fn main() {
         .filter(|e| matches!(e, Event::Fragment(_)))
         .count() as f64;
     println!("stream: {fragments} fragments, {WIDTH}x{HEIGHT}, {FRAMES} frames");
-    let arch = Arch::builtin("o2").expect("built-in o2");
+    let plain = samples_only_without_depth_writes(&events);
+    for name in ["o2", "ir4"] {
+        let arch = Arch::builtin(name).expect("built-in arch");
+        println!("{name}:");
+        levels(&arch, &events, fragments);
+        compare_effects(&arch, &events, fragments, "the stream above");
+        compare_effects(
+            &arch,
+            &plain,
+            fragments,
+            "the stream as samples queries, depth mask off",
+        );
+    }
+}
+
+/// Every level's rate on `events`, as a ratio to `cycle`.
+fn levels(arch: &Arch, events: &[Event], fragments: f64) {
     let levels = [
         Fidelity::Functional,
         Fidelity::Analytic,
         Fidelity::Sampled { every: 10 },
         Fidelity::Sampled { every: 100 },
         Fidelity::Cycle,
+        Fidelity::Rtl,
     ];
     let timings: Vec<(Fidelity, f64, Option<u64>)> = levels
         .iter()
         .map(|&level| {
-            let (seconds, cycles) = time_level(level, EffectsChoice::Auto, &arch, &events);
+            let (seconds, cycles) = time_level(level, EffectsChoice::Auto, arch, events);
             (level, seconds, cycles)
         })
         .collect();
-    let cycle_seconds = timings.last().expect("cycle timed").1;
+    let cycle_seconds = timings[4].1;
     for (level, seconds, cycles) in &timings {
         println!(
-            "{:<12} {:>8.1} M fragments/s  {:>6.2}x cycle  cycles {}",
+            "  {:<12} {:>8.1} M fragments/s  {:>6.2}x cycle  cycles {}",
             level.to_string(),
             fragments / seconds / 1e6,
             cycle_seconds / seconds,
             cycles.map_or("-".to_string(), |c| c.to_string())
         );
     }
-    compare_effects(&arch, &events, fragments, "the stream above");
-    compare_effects(
-        &arch,
-        &samples_only_without_depth_writes(&events),
-        fragments,
-        "the stream as samples queries, depth mask off",
-    );
 }
 
 /// The stream with every query a one-tile samples query and depth writes off: the effects
@@ -110,9 +121,8 @@ fn samples_only_without_depth_writes(events: &[Event]) -> Vec<Event> {
 fn compare_effects(arch: &Arch, events: &[Event], fragments: f64, name: &str) {
     // Effects: the replay with every model against the replay with the scanned choice,
     // interleaved so both see the same machine load, and the scan's own cost.
-    let o2 = arch.o2().expect("o2");
     let scan_start = Instant::now();
-    let chosen = observe(&o2, WIDTH, HEIGHT, events);
+    let chosen = observe(arch, WIDTH, HEIGHT, events).expect("scan");
     let scan = scan_start.elapsed().as_secs_f64();
     let (mut all, mut auto) = (f64::INFINITY, f64::INFINITY);
     for _ in 0..REPEATS {
@@ -128,7 +138,7 @@ fn compare_effects(arch: &Arch, events: &[Event], fragments: f64, name: &str) {
         }
     }
     println!(
-        "{name}: effects chosen: {}; cycle with all: {:.1} M fragments/s, with the choice: {:.1} M fragments/s ({:+.1}%), the scan: {:.1} ms ({:.1}% of a replay)",
+        "  {name}: effects chosen: {}; cycle with all: {:.1} M fragments/s, with the choice: {:.1} M fragments/s ({:+.1}%), the scan: {:.1} ms ({:.1}% of a replay)",
         chosen.active_names(),
         fragments / all / 1e6,
         fragments / auto / 1e6,

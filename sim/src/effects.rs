@@ -20,10 +20,13 @@
 //! - `page_model`: on unless the viewport lies inside one framebuffer tile (page). Then every
 //!   depth read is in page 0: the first read is a page miss and every later one a page hit,
 //!   which the prefetch knows without computing pages.
-//! - InfiniteReality's tile merges (across boards and Image Engines) belong to that machine;
-//!   this O2 scan reports them as not applicable.
+//! - On the InfiniteReality-like machine the same scan decides `verbose_hit_writes` (every
+//!   Image Engine's OccU Control skips its hit path) and `multi_tile_serialisation`; that
+//!   machine has no depth-write traffic or page model, so they are never active there. Its
+//!   tile merges are always observable: every query's latency runs through them.
 
-use crate::arch::O2Arch;
+use crate::arch::{Arch, IrArch, Machine, O2Arch};
+use crate::error::SimError;
 use occsim_traces::{Event, QueryMode};
 use serde::Serialize;
 
@@ -48,6 +51,30 @@ impl Effects {
         depth_write_traffic: true,
         page_model: true,
     };
+
+    /// Every effect model `machine` has (`--effects all`): the InfiniteReality-like machine
+    /// models no depth-write traffic and no pages.
+    pub fn every_model_of(machine: Machine) -> Effects {
+        match machine {
+            Machine::O2 => Effects::ALL,
+            Machine::Ir => Effects {
+                depth_write_traffic: false,
+                page_model: false,
+                ..Effects::ALL
+            },
+        }
+    }
+
+    /// The effects on in both.
+    fn and(self, other: Effects) -> Effects {
+        Effects {
+            verbose_hit_writes: self.verbose_hit_writes && other.verbose_hit_writes,
+            multi_tile_serialisation: self.multi_tile_serialisation
+                && other.multi_tile_serialisation,
+            depth_write_traffic: self.depth_write_traffic && other.depth_write_traffic,
+            page_model: self.page_model && other.page_model,
+        }
+    }
 
     /// `(name, active)` pairs in a fixed order, for reports.
     pub fn list(&self) -> [(&'static str, bool); 4] {
@@ -107,14 +134,38 @@ pub struct EffectScan {
     occlusion_mode_open: bool,
     found: Effects,
     one_page: bool,
+    /// The models the machine has at all.
+    models: Effects,
 }
 
 impl EffectScan {
     /// A scan for the O2 machine `arch` on a `width` x `height` viewport.
     pub fn new(arch: &O2Arch, width: u32, height: u32) -> EffectScan {
+        let one_page = width <= arch.framebuffer_tile_width_pixels
+            && height <= arch.framebuffer_tile_height_pixels;
+        EffectScan::with(
+            arch.engines,
+            arch.all_tiles_one_cycle,
+            one_page,
+            Effects::ALL,
+        )
+    }
+
+    /// A scan for the InfiniteReality-like machine `arch`.
+    pub fn for_ir(arch: &IrArch) -> EffectScan {
+        let models = Effects::every_model_of(Machine::Ir);
+        EffectScan::with(arch.engines, arch.all_tiles_one_cycle, false, models)
+    }
+
+    fn with(
+        engines: usize,
+        all_tiles_one_cycle: bool,
+        one_page: bool,
+        models: Effects,
+    ) -> EffectScan {
         EffectScan {
-            engines: arch.engines,
-            all_tiles_one_cycle: arch.all_tiles_one_cycle,
+            engines,
+            all_tiles_one_cycle,
             depth_test: true,
             depth_mask: true,
             occlusion_mode_open: false,
@@ -124,9 +175,17 @@ impl EffectScan {
                 depth_write_traffic: false,
                 page_model: false,
             },
-            one_page: width <= arch.framebuffer_tile_width_pixels
-                && height <= arch.framebuffer_tile_height_pixels,
+            one_page,
+            models,
         }
+    }
+
+    /// A scan for whichever machine `arch` describes, on a `width` x `height` viewport.
+    pub fn for_arch(arch: &Arch, width: u32, height: u32) -> Result<EffectScan, SimError> {
+        Ok(match arch.machine() {
+            Machine::O2 => EffectScan::new(&arch.o2()?, width, height),
+            Machine::Ir => EffectScan::for_ir(&arch.ir()?),
+        })
     }
 
     /// Scan one event.
@@ -159,16 +218,22 @@ impl EffectScan {
             page_model: !self.one_page,
             ..self.found
         }
+        .and(self.models)
     }
 }
 
-/// The effects of `events` on the O2 machine `arch` (a scan of the whole stream).
-pub fn observe(arch: &O2Arch, width: u32, height: u32, events: &[Event]) -> Effects {
-    let mut scan = EffectScan::new(arch, width, height);
+/// The effects of `events` on the machine `arch` describes (a scan of the whole stream).
+pub fn observe(
+    arch: &Arch,
+    width: u32,
+    height: u32,
+    events: &[Event],
+) -> Result<Effects, SimError> {
+    let mut scan = EffectScan::for_arch(arch, width, height)?;
     for event in events {
         scan.event(event);
     }
-    scan.finish()
+    Ok(scan.finish())
 }
 
 #[cfg(test)]
@@ -177,14 +242,10 @@ mod tests {
     use crate::arch::Arch;
     use occsim_traces::{Fragment, QuerySpec, Rect};
 
-    fn o2() -> O2Arch {
-        Arch::builtin("o2").unwrap().o2().unwrap()
-    }
-
     #[test]
     fn plain_fragments_write_depth_and_nothing_else_is_observed() {
         let events = [Event::Fragment(Fragment { x: 0, y: 0, z: 1 })];
-        let effects = observe(&o2(), 1024, 1024, &events);
+        let effects = observe(&Arch::builtin("o2").unwrap(), 1024, 1024, &events).unwrap();
         assert_eq!(
             effects,
             Effects {
@@ -211,15 +272,49 @@ mod tests {
             Event::DepthMask(false),
             Event::Fragment(Fragment { x: 0, y: 0, z: 1 }),
         ];
-        let mut arch = o2();
-        arch.engines = 4;
-        let effects = observe(&arch, 16, 16, &events);
+        let mut arch = Arch::builtin("o2").unwrap();
+        arch.set("engines=4").unwrap();
+        let effects = observe(&arch, 16, 16, &events).unwrap();
         assert!(effects.multi_tile_serialisation);
         assert!(!effects.depth_write_traffic);
         assert!(!effects.verbose_hit_writes);
         assert!(!effects.page_model, "16x16 fits one framebuffer tile");
-        arch.all_tiles_one_cycle = true;
-        assert!(!observe(&arch, 16, 16, &events).multi_tile_serialisation);
+        arch.set("all_tiles_one_cycle=true").unwrap();
+        assert!(
+            !observe(&arch, 16, 16, &events)
+                .unwrap()
+                .multi_tile_serialisation
+        );
+    }
+
+    #[test]
+    fn the_ir_never_has_depth_traffic_or_pages_and_scans_the_rest() {
+        let verbose = QuerySpec {
+            id: 1,
+            mode: QueryMode::Verbose,
+            buffer_entries: 16,
+            tiles: (0..3).map(|i| Rect::new(i, 0, 1, 1)).collect(),
+        };
+        let events = [
+            Event::Fragment(Fragment { x: 0, y: 0, z: 1 }),
+            Event::QueryBegin(verbose),
+            Event::QueryEnd,
+        ];
+        let mut arch = Arch::builtin("ir4").unwrap();
+        arch.set("engines=2").unwrap();
+        let effects = observe(&arch, 2048, 2048, &events).unwrap();
+        assert_eq!(
+            effects,
+            Effects {
+                verbose_hit_writes: true,
+                multi_tile_serialisation: true,
+                depth_write_traffic: false,
+                page_model: false,
+            }
+        );
+        assert_eq!(effects, Effects::every_model_of(Machine::Ir));
+        let plain = observe(&arch, 2048, 2048, &events[..1]).unwrap();
+        assert_eq!(plain.active_names(), "none");
     }
 
     #[test]

@@ -14,8 +14,8 @@
 //! ([`LevelModel::event`]) and ends in a common [`LevelResult`].
 
 use crate::analytic::AnalyticModel;
-use crate::arch::{Arch, Machine};
-use crate::effects::{EffectScan, Effects, EffectsChoice};
+use crate::arch::Arch;
+use crate::effects::{Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::golden_check::GoldenCheck;
 use crate::machine::MachineModel;
@@ -425,7 +425,7 @@ impl LevelModel {
                     height,
                     OccuModel::Rtl { waveform },
                 )?),
-                Effects::ALL,
+                Effects::every_model_of(arch.machine()),
             ),
         })
     }
@@ -466,16 +466,8 @@ pub fn choose_effects(
     events: &[Event],
 ) -> Result<Effects, SimError> {
     Ok(match choice {
-        EffectsChoice::All => Effects::ALL,
-        EffectsChoice::Auto => match arch.machine() {
-            Machine::O2 => {
-                let mut scan = EffectScan::new(&arch.o2()?, width, height);
-                events.iter().for_each(|event| scan.event(event));
-                scan.finish()
-            }
-            // The InfiniteReality-like machine always builds every model it has.
-            Machine::Ir => Effects::ALL,
-        },
+        EffectsChoice::All => Effects::every_model_of(arch.machine()),
+        EffectsChoice::Auto => crate::effects::observe(arch, width, height, events)?,
     })
 }
 

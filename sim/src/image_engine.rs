@@ -26,6 +26,8 @@ use crate::occu_stage::{OccuModel, OccuStage, OccuStats};
 use occsim_traces::{Fragment, QuerySpec, TileResult};
 
 pub struct ImageEngine {
+    /// Verbose hit words can occur (the effect model is built).
+    verbose_hit_writes: bool,
     cycles_per_fragment: u64,
     fifo: Fifo,
     /// The Occlusion Unit and OccU Control, modelled as the fidelity level says.
@@ -43,8 +45,12 @@ pub struct ImageEngine {
 
 impl ImageEngine {
     /// An Image Engine whose Occlusion Unit is modelled as `occu` says.
-    pub fn new(arch: &IrArch, occu: OccuModel) -> ImageEngine {
+    /// An Image Engine whose OccU is modelled as `occu` says; `verbose_hit_writes` is the
+    /// effect hook ([`crate::effects`]): off, no query is verbose and OccU Control's hit path
+    /// is skipped.
+    pub fn new(arch: &IrArch, occu: OccuModel, verbose_hit_writes: bool) -> ImageEngine {
         ImageEngine {
+            verbose_hit_writes,
             cycles_per_fragment: arch.image_engine_cycles_per_fragment,
             fifo: Fifo::new(arch.image_engine_fifo_entries),
             occu: OccuStage::for_image_engine(arch, occu),
@@ -85,7 +91,7 @@ impl ImageEngine {
             start + c,
             query_open,
             &mut self.port,
-            true,
+            self.verbose_hit_writes,
         );
         self.depth_free = (start + c).max(accepted);
     }

@@ -56,6 +56,7 @@
 //! Engine 0 of board 0.
 
 use crate::arch::{Arch, IrArch};
+use crate::effects::Effects;
 use crate::error::SimError;
 use crate::fragment_generator::FragmentGenerator;
 use crate::golden_check::GoldenCheck;
@@ -113,6 +114,20 @@ impl IrMachine {
         IrMachine::with_occu_model(arch, width, height, OccuModel::Cycle)
     }
 
+    /// A machine that builds only `effects`: the caller guarantees (by
+    /// [`crate::effects::EffectScan`]) that the others cannot be observed on its stream.
+    pub fn with_effects(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+    ) -> Result<IrMachine, SimError> {
+        arch.ir()?;
+        crate::error::check_viewport(width, height)?;
+        let depth = DepthBuffer::new(width, height);
+        IrMachine::assemble(arch, width, height, OccuModel::Cycle, effects, depth)
+    }
+
     /// The machine with every Image Engine's Occlusion Unit modelled as `occu` says (the
     /// `cycle` and `rtl` fidelity levels). A waveform dumps Image Engine 0 of board 0 only.
     pub fn with_occu_model(
@@ -123,7 +138,8 @@ impl IrMachine {
     ) -> Result<IrMachine, SimError> {
         arch.ir()?;
         crate::error::check_viewport(width, height)?;
-        IrMachine::assemble(arch, width, height, occu, DepthBuffer::new(width, height))
+        let depth = DepthBuffer::new(width, height);
+        IrMachine::assemble(arch, width, height, occu, Effects::ALL, depth)
     }
 
     /// A machine that starts from a functional model's render state and depths (`depth`, a
@@ -132,11 +148,13 @@ impl IrMachine {
         arch: &Arch,
         width: u32,
         height: u32,
+        effects: Effects,
         state: &RenderState,
         depth: DepthBuffer,
     ) -> Result<IrMachine, SimError> {
         crate::error::check_viewport(width, height)?;
-        let mut machine = IrMachine::assemble(arch, width, height, OccuModel::Cycle, depth)?;
+        let mut machine =
+            IrMachine::assemble(arch, width, height, OccuModel::Cycle, effects, depth)?;
         machine.state = *state;
         Ok(machine)
     }
@@ -152,6 +170,7 @@ impl IrMachine {
         width: u32,
         height: u32,
         occu: OccuModel,
+        effects: Effects,
         depth: DepthBuffer,
     ) -> Result<IrMachine, SimError> {
         let ir = arch.ir()?;
@@ -166,7 +185,7 @@ impl IrMachine {
                     )
                 })
                 .collect(),
-            image_engines: image_engines(&ir, occu),
+            image_engines: image_engines(&ir, occu, effects),
             arch: ir,
             arch_entries,
             width,
@@ -452,7 +471,7 @@ impl IrMachine {
 
 /// Every Image Engine, board-major, its Occlusion Unit modelled as `occu` says; a
 /// waveform goes to the first one (Image Engine 0 of board 0).
-fn image_engines(arch: &IrArch, occu: OccuModel) -> Vec<ImageEngine> {
+fn image_engines(arch: &IrArch, occu: OccuModel, effects: Effects) -> Vec<ImageEngine> {
     let (rtl, mut waveform) = match occu {
         OccuModel::Cycle => (false, None),
         OccuModel::Rtl { waveform } => (true, waveform),
@@ -466,7 +485,7 @@ fn image_engines(arch: &IrArch, occu: OccuModel) -> Vec<ImageEngine> {
             } else {
                 OccuModel::Cycle
             };
-            ImageEngine::new(arch, model)
+            ImageEngine::new(arch, model, effects.verbose_hit_writes)
         })
         .collect()
 }

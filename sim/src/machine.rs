@@ -36,8 +36,7 @@ impl MachineModel {
     ) -> Result<MachineModel, SimError> {
         Ok(match arch.machine() {
             Machine::O2 => MachineModel::O2(O2Machine::with_effects(arch, width, height, effects)?),
-            // The InfiniteReality-like machine always builds every model it has.
-            Machine::Ir => MachineModel::Ir(IrMachine::new(arch, width, height)?),
+            Machine::Ir => MachineModel::Ir(IrMachine::with_effects(arch, width, height, effects)?),
         })
     }
 
@@ -78,7 +77,9 @@ impl MachineModel {
             Machine::O2 => MachineModel::O2(O2Machine::resume(
                 arch, width, height, effects, state, copy,
             )?),
-            Machine::Ir => MachineModel::Ir(IrMachine::resume(arch, width, height, state, copy)?),
+            Machine::Ir => MachineModel::Ir(IrMachine::resume(
+                arch, width, height, effects, state, copy,
+            )?),
         })
     }
 

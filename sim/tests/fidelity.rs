@@ -79,7 +79,15 @@ fn archs() -> Vec<Arch> {
     few_engines.set("engines=1").unwrap();
     let mut one_cycle = Arch::builtin("o2").unwrap();
     one_cycle.set("all_tiles_one_cycle=true").unwrap();
-    vec![Arch::builtin("o2").unwrap(), few_engines, one_cycle]
+    let mut ir_one_engine = small_ir();
+    ir_one_engine.set("engines=1").unwrap();
+    vec![
+        Arch::builtin("o2").unwrap(),
+        few_engines,
+        one_cycle,
+        small_ir(),
+        ir_one_engine,
+    ]
 }
 
 /// The InfiniteReality-like machine, small enough for quick tests: 2 boards of 5 Image
@@ -343,7 +351,7 @@ fn analytic_ir_sees_the_busiest_image_engine() {
 fn effects_forced_and_automatic_give_the_same_report_on_builtin_traces() {
     for (name, (events, width, height)) in builtin_traces() {
         for arch in archs() {
-            let automatic = observe(&arch.o2().unwrap(), width, height, &events);
+            let automatic = observe(&arch, width, height, &events).unwrap();
             let forced = replay(&arch, width, height, Effects::ALL, &events);
             let chosen = replay(&arch, width, height, automatic, &events);
             assert_eq!(chosen, forced, "{name}: effects {automatic:?}");
@@ -354,13 +362,13 @@ fn effects_forced_and_automatic_give_the_same_report_on_builtin_traces() {
 #[test]
 fn the_scan_switches_effects_off_on_the_builtin_traces() {
     // Hard cases: a 64x64 viewport inside one 128x128 page; no verbose query.
-    let arch = Arch::builtin("o2").unwrap().o2().unwrap();
+    let arch = Arch::builtin("o2").unwrap();
     let (events, width, height) = scene_events(HARDCASES);
-    let effects = observe(&arch, width, height, &events);
+    let effects = observe(&arch, width, height, &events).unwrap();
     assert!(!effects.page_model);
     assert!(effects.depth_write_traffic);
     let (events, width, height) = small_random();
-    let effects = observe(&arch, width, height, &events);
+    let effects = observe(&arch, width, height, &events).unwrap();
     assert!(
         !effects.verbose_hit_writes,
         "the random scene has samples queries only"
@@ -458,9 +466,9 @@ proptest! {
     ) {
         let (width, height) = if small_viewport { (100, 90) } else { (300, 140) };
         let events = random_stream(seed, width, height);
-        let mut arch = Arch::builtin("o2").unwrap();
+        let mut arch = if small_viewport { small_ir() } else { Arch::builtin("o2").unwrap() };
         arch.set(&format!("engines={engines}")).unwrap();
-        let automatic = observe(&arch.o2().unwrap(), width, height, &events);
+        let automatic = observe(&arch, width, height, &events).unwrap();
         let forced = replay(&arch, width, height, Effects::ALL, &events);
         let chosen = replay(&arch, width, height, automatic, &events);
         prop_assert_eq!(chosen, forced);

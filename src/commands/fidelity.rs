@@ -8,7 +8,6 @@
 use super::arch::ArchSelection;
 use crate::plot::{LineChart, Scale, Series};
 use anyhow::Context;
-use occsim_sim::arch::Machine;
 use occsim_sim::effects::{EffectScan, Effects, EffectsChoice};
 use occsim_sim::fidelity::{Fidelity, LevelResult};
 use occsim_sim::Arch;
@@ -85,17 +84,11 @@ pub fn effects_of_trace(
     retiled: bool,
 ) -> anyhow::Result<Effects> {
     if choice == EffectsChoice::All || retiled || !level.builds_effects() {
-        return Ok(Effects::ALL);
+        return Ok(Effects::every_model_of(arch.machine()));
     }
     let mut reader = open_trace(path)?;
     let (width, height) = (reader.header().width, reader.header().height);
-    // One scan per machine kind: a new machine adds its arm here.
-    let scan = match arch.machine() {
-        Machine::O2 => EffectScan::new(&arch.o2()?, width, height),
-        // The InfiniteReality-like machine always builds every model it has.
-        Machine::Ir => return Ok(Effects::ALL),
-    };
-    let mut scan = ScanSink(scan);
+    let mut scan = ScanSink(EffectScan::for_arch(arch, width, height)?);
     reader
         .read_into(&mut scan)
         .with_context(|| format!("{}: cannot read trace", path.display()))?;
