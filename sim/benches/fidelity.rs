@@ -1,15 +1,16 @@
-//! What each fidelity level costs on one stream of about 1.5 million fragments, built in
-//! memory (three frames of the replay benchmark's scene, each with a clear and 120 queries
-//! of every mode), on the O2 and on ir4: fragments per second per level, as ratios to
-//! `cycle`; and what the automatic effects choice saves over `--effects all` at the cycle
-//! level.
+//! What each fidelity level costs on one trace of about 1.5 million fragments (three frames
+//! of the replay benchmark's scene, each with a clear and 120 queries of every mode, encoded
+//! as a trace in memory and decoded by every run, as `occsim replay` does from a file), on
+//! the O2 and on ir4: fragments per second per level, as ratios to `cycle`; and what the
+//! automatic effects choice saves over `--effects all` at the cycle level.
 //!
 //! Run: `cargo bench -p occsim-sim --bench fidelity`
 
 use occsim_sim::effects::{observe, Effects, EffectsChoice};
-use occsim_sim::fidelity::{run_level, Fidelity};
+use occsim_sim::fidelity::{choose_effects, Fidelity, LevelModel, LevelResult, LevelSink};
 use occsim_sim::{Arch, MachineModel};
-use occsim_traces::golden::FunctionalModel;
+use occsim_traces::golden::{EventSink, FunctionalModel};
+use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
 use occsim_traces::{Event, QueryMode, QuerySpec, Rect};
 use std::time::Instant;
 
@@ -22,18 +23,45 @@ const FRAMES: u64 = 3;
 /// Timed repetitions of each level; the fastest counts.
 const REPEATS: usize = 5;
 
-/// The fastest of `REPEATS` runs, in seconds, and the predicted cycles.
+/// The stream encoded as a trace, as `occsim trace gen` writes one.
+fn encode(events: &[Event]) -> Vec<u8> {
+    let mut bytes = Vec::new();
+    let mut writer =
+        TraceWriter::new(&mut bytes, &TraceHeader::new(WIDTH, HEIGHT)).expect("header");
+    events.iter().for_each(|event| writer.event(event));
+    writer.finish().expect("trace");
+    bytes
+}
+
+/// Decode `trace` into the model of `level`, as `occsim replay` does.
+fn replay(level: Fidelity, arch: &Arch, trace: &[u8], effects: Effects) -> LevelResult {
+    let mut reader = TraceReader::new(trace).expect("header");
+    let model = LevelModel::new(level, arch, WIDTH, HEIGHT, effects).expect("model");
+    let mut sink = LevelSink::new(model);
+    reader.read_into(&mut sink).expect("decodes");
+    assert!(sink.error.is_none(), "{:?}", sink.error);
+    sink.model.finish(arch).expect("replays")
+}
+
+/// The fastest of `REPEATS` runs, in seconds (the effects scan included where the level
+/// builds effects), and the predicted cycles.
 fn time_level(
     level: Fidelity,
-    effects: EffectsChoice,
+    choice: EffectsChoice,
     arch: &Arch,
     events: &[Event],
+    trace: &[u8],
 ) -> (f64, Option<u64>) {
     let mut best = f64::INFINITY;
     let mut cycles = None;
     for _ in 0..REPEATS {
         let start = Instant::now();
-        let result = run_level(level, arch, WIDTH, HEIGHT, effects, events).expect("replays");
+        let effects = if level.builds_effects() {
+            choose_effects(choice, arch, WIDTH, HEIGHT, events).expect("scan")
+        } else {
+            Effects::every_model_of(arch.machine())
+        };
+        let result = replay(level, arch, trace, effects);
         best = best.min(start.elapsed().as_secs_f64());
         cycles = result.total_cycles;
     }
@@ -47,11 +75,13 @@ fn main() {
         .filter(|e| matches!(e, Event::Fragment(_)))
         .count() as f64;
     println!("stream: {fragments} fragments, {WIDTH}x{HEIGHT}, {FRAMES} frames");
+    let trace = encode(&events);
+    println!("trace: {} bytes", trace.len());
     let plain = samples_only_without_depth_writes(&events);
     for name in ["o2", "ir4"] {
         let arch = Arch::builtin(name).expect("built-in arch");
         println!("{name}:");
-        levels(&arch, &events, fragments);
+        levels(&arch, &events, &trace, fragments);
         compare_effects(&arch, &events, fragments, "the stream above");
         compare_effects(
             &arch,
@@ -62,8 +92,8 @@ fn main() {
     }
 }
 
-/// Every level's rate on `events`, as a ratio to `cycle`.
-fn levels(arch: &Arch, events: &[Event], fragments: f64) {
+/// Every level's rate on `trace` (the encoded `events`), as a ratio to `cycle`.
+fn levels(arch: &Arch, events: &[Event], trace: &[u8], fragments: f64) {
     let levels = [
         Fidelity::Functional,
         Fidelity::Analytic,
@@ -75,7 +105,7 @@ fn levels(arch: &Arch, events: &[Event], fragments: f64) {
     let timings: Vec<(Fidelity, f64, Option<u64>)> = levels
         .iter()
         .map(|&level| {
-            let (seconds, cycles) = time_level(level, EffectsChoice::Auto, arch, events);
+            let (seconds, cycles) = time_level(level, EffectsChoice::Auto, arch, events, trace);
             (level, seconds, cycles)
         })
         .collect();

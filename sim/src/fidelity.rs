@@ -24,8 +24,9 @@ use crate::occu_stage::OccuModel;
 use crate::report::{nearest_rank, Report};
 use crate::sampled::SampledModel;
 use crate::waveform::WaveformOptions;
+use occsim_traces::golden::EventSink;
 use occsim_traces::golden::FunctionalModel;
-use occsim_traces::{Event, Fragment, QueryMode, QueryResult};
+use occsim_traces::{Event, Fragment, QueryMode, QueryResult, Span};
 use serde::Serialize;
 use std::fmt::Write as _;
 
@@ -274,9 +275,15 @@ impl FunctionalCore {
     /// Reject a fragment outside the viewport (the next event's index).
     #[inline]
     pub(crate) fn check_fragment(&self, fragment: &Fragment) -> Result<(), SimError> {
+        self.check_fragment_at(fragment, self.events)
+    }
+
+    /// Reject a fragment outside the viewport, `event` its index in the stream.
+    #[inline]
+    fn check_fragment_at(&self, fragment: &Fragment, event: u64) -> Result<(), SimError> {
         if fragment.x as u32 >= self.width || fragment.y as u32 >= self.height {
             return Err(SimError::FragmentOutside {
-                event: self.events,
+                event,
                 x: fragment.x,
                 y: fragment.y,
                 width: self.width,
@@ -293,6 +300,36 @@ impl FunctionalCore {
         self.fragments += 1;
         self.open_fragments += 1;
         self.functional.fragment(fragment);
+    }
+
+    /// Reject a span with a fragment outside the viewport (naming the first such).
+    #[inline]
+    pub(crate) fn check_span(&self, span: Span) -> Result<(), SimError> {
+        let end = span.x as u32 + span.depths.len() as u32;
+        if (span.y as u32) < self.height && end <= self.width {
+            return Ok(());
+        }
+        span.fragments()
+            .zip(self.events..)
+            .try_for_each(|(fragment, event)| self.check_fragment_at(&fragment, event))
+    }
+
+    /// Apply a span already checked by [`Self::check_span`].
+    #[inline]
+    pub(crate) fn apply_span(&mut self, span: Span) {
+        let len = span.depths.len() as u64;
+        self.events += len;
+        self.fragments += len;
+        self.open_fragments += len;
+        self.functional.span(span);
+    }
+
+    /// A span of fragments at once: the same as its fragments one by one.
+    #[inline]
+    pub fn span(&mut self, span: Span) -> Result<(), SimError> {
+        self.check_span(span)?;
+        self.apply_span(span);
+        Ok(())
     }
 
     /// Apply one event; returns the result of a query that ended with it.
@@ -441,6 +478,20 @@ impl LevelModel {
         }
     }
 
+    /// Replay a span of fragments: the same as its fragments one by one, but the levels
+    /// without time take the row at once.
+    #[inline]
+    pub fn span(&mut self, span: Span) -> Result<(), SimError> {
+        match self {
+            LevelModel::Functional(core) => core.span(span),
+            LevelModel::Analytic(model) => model.span(span),
+            LevelModel::Sampled(model) => model.span(span),
+            LevelModel::Cycle(machine, _) => span
+                .fragments()
+                .try_for_each(|fragment| machine.event(&Event::Fragment(fragment))),
+        }
+    }
+
     /// End the replay.
     pub fn finish(self, arch: &Arch) -> Result<LevelResult, SimError> {
         let name = arch.machine().name().to_string();
@@ -454,6 +505,43 @@ impl LevelModel {
         };
         result.machine = name;
         Ok(result)
+    }
+}
+
+/// Feeds a stream's events and spans to a [`LevelModel`] and keeps its first error: how a
+/// decoded trace reaches a model.
+pub struct LevelSink {
+    pub model: LevelModel,
+    pub error: Option<SimError>,
+}
+
+impl LevelSink {
+    pub fn new(model: LevelModel) -> LevelSink {
+        LevelSink { model, error: None }
+    }
+
+    fn keep(&mut self, result: Result<(), SimError>) {
+        if let Err(error) = result {
+            self.error = Some(error);
+        }
+    }
+}
+
+impl EventSink for LevelSink {
+    #[inline]
+    fn event(&mut self, event: &Event) {
+        if self.error.is_none() {
+            let result = self.model.event(event);
+            self.keep(result);
+        }
+    }
+
+    #[inline]
+    fn span(&mut self, span: Span) {
+        if self.error.is_none() {
+            let result = self.model.span(span);
+            self.keep(result);
+        }
     }
 }
 

@@ -41,7 +41,7 @@ use crate::error::SimError;
 use crate::fidelity::{FunctionalCore, LevelResult, SampledWindows};
 use crate::machine::MachineModel;
 use occsim_traces::golden::DepthBuffer;
-use occsim_traces::{Event, QueryMode, QuerySpec};
+use occsim_traces::{Event, QueryMode, QuerySpec, Span};
 use std::collections::BTreeMap;
 
 struct Window {
@@ -210,10 +210,8 @@ impl SampledModel {
 
     /// Feed one event.
     pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
-        if self.window.query_ended && !matches!(event, Event::QueryResult(_)) {
-            self.close_window(false);
-            self.window = Window::empty();
-            self.start_window()?;
+        if !matches!(event, Event::QueryResult(_)) {
+            self.close_ended_window()?;
         }
         match event {
             Event::Fragment(fragment) => {
@@ -255,6 +253,40 @@ impl SampledModel {
                 self.window.work = end.cycles.ceil() as u64;
                 self.predicted_latencies.push(end.latency.ceil() as u64);
             }
+        }
+        Ok(())
+    }
+
+    /// A span of fragments: the formulas and the functional model take it whole, a running
+    /// machine fragment by fragment.
+    pub fn span(&mut self, span: Span) -> Result<(), SimError> {
+        self.close_ended_window()?;
+        self.core.check_span(span)?;
+        for fragment in span.fragments() {
+            self.formulas.fragment(fragment, &self.core.functional);
+        }
+        for fragment in span.fragments() {
+            let Some(run) = &mut self.run else {
+                break;
+            };
+            run.machine.event(&Event::Fragment(fragment))?;
+            if let Some(left) = &mut run.cooldown {
+                *left -= 1;
+                if *left == 0 {
+                    self.flush_run()?;
+                }
+            }
+        }
+        self.core.apply_span(span);
+        Ok(())
+    }
+
+    /// After a query's end and its golden result, the next event opens a new window.
+    fn close_ended_window(&mut self) -> Result<(), SimError> {
+        if self.window.query_ended {
+            self.close_window(false);
+            self.window = Window::empty();
+            self.start_window()?;
         }
         Ok(())
     }

@@ -7,12 +7,11 @@ use super::arch::ArchSelection;
 use super::fidelity::{effects_of_trace, FidelityArg};
 use anyhow::Context;
 use occsim_sim::effects::Effects;
-use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult};
-use occsim_sim::{Arch, SimError, WaveformOptions};
+use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult, LevelSink};
+use occsim_sim::{Arch, WaveformOptions};
 use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, TileGrid};
 use occsim_traces::trace::TraceReader;
-use occsim_traces::Event;
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
@@ -49,23 +48,6 @@ pub struct WaveformArgs {
     /// Cycles the waveform covers, START..END (END exclusive; default: the whole run).
     #[arg(long, value_name = "START..END")]
     pub window: Option<String>,
-}
-
-/// Feeds decoded events to the model (at its level) and keeps the first error.
-struct LevelSink {
-    model: LevelModel,
-    error: Option<SimError>,
-}
-
-impl EventSink for LevelSink {
-    #[inline]
-    fn event(&mut self, event: &Event) {
-        if self.error.is_none() {
-            if let Err(error) = self.model.event(event) {
-                self.error = Some(error);
-            }
-        }
-    }
 }
 
 /// How to replay: the level, the effect models to build, an optional retiling and, at the
@@ -181,7 +163,7 @@ pub fn replay_reader<R: std::io::Read>(
         options.waveform,
     )
     .with_context(|| format!("{name}: cannot replay"))?;
-    let sink = LevelSink { model, error: None };
+    let sink = LevelSink::new(model);
     let on = || format!("{name}: replay on {}", arch.machine().name());
     let sink = match options.retile {
         None => feed(&mut reader, sink, |s| s, name, on)?,

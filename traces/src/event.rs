@@ -16,6 +16,28 @@ pub struct Fragment {
     pub z: u32,
 }
 
+/// A run of fragments on one row, as the rasterizer emits them and traces store them: pixel
+/// `(x + i, y)` has depth `depths[i]`. Same as the fragments one by one, in order; no pixel
+/// appears twice in a span, which lets a consumer test all its depths before it writes any.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Span<'a> {
+    pub x: u16,
+    pub y: u16,
+    pub depths: &'a [u32],
+}
+
+impl Span<'_> {
+    /// The span's fragments, in order.
+    pub fn fragments(&self) -> impl Iterator<Item = Fragment> + '_ {
+        let (x, y) = (self.x, self.y);
+        self.depths.iter().enumerate().map(move |(i, &z)| Fragment {
+            x: x.wrapping_add(i as u16),
+            y,
+            z,
+        })
+    }
+}
+
 /// Largest depth value: 1.0 in 24-bit unsigned normalised form.
 pub const DEPTH_ONE: u32 = (1 << 24) - 1;
 

@@ -1,11 +1,11 @@
 //! The functional golden model: a depth buffer and the query semantics, giving every query's
 //! exact result. Every timing model must reproduce its counts.
 
-use crate::event::{Event, Fragment, DEPTH_ONE};
+use crate::event::{Event, Fragment, Span, DEPTH_ONE};
 use crate::query::{verbose_hits_kept, QueryMode, QueryResult, QuerySpec, TileResult};
 use crate::raster::{rasterize_triangle, RasterSink};
 use crate::scene::Command;
-use crate::state::RenderState;
+use crate::state::{DepthFunc, RenderState};
 
 /// The depth buffer: 24-bit depths, one per pixel, row by row from the bottom.
 #[derive(Clone)]
@@ -67,6 +67,58 @@ impl DepthBuffer {
         }
         passed
     }
+}
+
+impl DepthBuffer {
+    /// The depth test and write of a span inside the buffer under `state`: `passed[i]` says
+    /// whether fragment `i` passed. Its pixels are distinct, so testing them all before
+    /// writing any gives what testing them one by one gives.
+    #[inline]
+    pub fn test_span(
+        &mut self,
+        state: &RenderState,
+        span: Span,
+        writes_allowed: bool,
+        passed: &mut Vec<bool>,
+    ) {
+        passed.clear();
+        if !state.depth_test {
+            passed.resize(span.depths.len(), true);
+            return;
+        }
+        let start = span.y as usize * self.width as usize + span.x as usize;
+        let row = &mut self.depths[start..start + span.depths.len()];
+        // One loop per function, so the comparison is not a jump per fragment.
+        let (depths, row_now) = (span.depths, &*row);
+        match state.depth_func {
+            DepthFunc::Never => compare(depths, row_now, passed, |_, _| false),
+            DepthFunc::Less => compare(depths, row_now, passed, |z, s| z < s),
+            DepthFunc::Equal => compare(depths, row_now, passed, |z, s| z == s),
+            DepthFunc::Lequal => compare(depths, row_now, passed, |z, s| z <= s),
+            DepthFunc::Greater => compare(depths, row_now, passed, |z, s| z > s),
+            DepthFunc::Notequal => compare(depths, row_now, passed, |z, s| z != s),
+            DepthFunc::Gequal => compare(depths, row_now, passed, |z, s| z >= s),
+            DepthFunc::Always => compare(depths, row_now, passed, |_, _| true),
+        }
+        if state.depth_mask && writes_allowed {
+            for ((stored, &z), &pass) in row.iter_mut().zip(span.depths).zip(passed.iter()) {
+                if pass {
+                    *stored = z;
+                }
+            }
+        }
+    }
+}
+
+/// `passed[i] = passes(depths[i], stored[i])`, for one depth function known at compile time.
+#[inline(always)]
+fn compare(
+    depths: &[u32],
+    stored: &[u32],
+    passed: &mut Vec<bool>,
+    passes: impl Fn(u32, u32) -> bool,
+) {
+    passed.extend(depths.iter().zip(stored).map(|(&z, &s)| passes(z, s)));
 }
 
 /// A hint to the cache that the line at `address` will be read soon; no effect on results.
@@ -153,6 +205,43 @@ fn record_in_tile(result: &mut TileResult, fragment: Fragment, passed: bool, hit
     }
 }
 
+/// Account a run of fragments, all inside this tile, as [`record_in_tile`] does one by one:
+/// the counters and bounds once, the hits in order.
+#[inline]
+fn record_run(result: &mut TileResult, run: Span, passed: &[bool], hit_room: usize) {
+    result.phc += run.depths.len() as u64;
+    let (mut count, mut first, mut last) = (0u64, usize::MAX, 0);
+    let (mut zmin, mut zmax) = (u32::MAX, 0);
+    for (i, (&z, &pass)) in run.depths.iter().zip(passed).enumerate() {
+        if pass {
+            count += 1;
+            first = first.min(i);
+            last = i;
+            zmin = zmin.min(z);
+            zmax = zmax.max(z);
+        }
+    }
+    if count == 0 {
+        return;
+    }
+    result.nohc += count;
+    let (x, y) = (run.x as u32, run.y as u32);
+    result.xmin = result.xmin.min(x + first as u32);
+    result.xmax = result.xmax.max(x + last as u32);
+    result.ymin = result.ymin.min(y);
+    result.ymax = result.ymax.max(y);
+    result.zmin = result.zmin.min(zmin);
+    result.zmax = result.zmax.max(zmax);
+    if result.hits.len() < hit_room {
+        let room = hit_room - result.hits.len();
+        let hits = (first..=last)
+            .filter(|&i| passed[i])
+            .map(|i| (run.x + i as u16, run.y))
+            .take(room);
+        result.hits.extend(hits);
+    }
+}
+
 /// The open query's running results.
 struct OpenQuery {
     spec: QuerySpec,
@@ -175,6 +264,36 @@ impl OpenQuery {
             tiles,
             index,
             hit_room,
+        }
+    }
+
+    /// Account a span (its depth tests' outcomes in `passed`) in every tile that holds its
+    /// fragments.
+    fn record_span(&mut self, span: Span, passed: &[bool]) {
+        if self.index.is_some() {
+            // Many tiles: fragment by fragment through the index.
+            for (fragment, &pass) in span.fragments().zip(passed) {
+                self.record(fragment, pass);
+            }
+            return;
+        }
+        let (x0, y, len) = (span.x as u32, span.y as u32, span.depths.len() as u32);
+        for (tile, result) in self.spec.tiles.iter().zip(&mut self.tiles) {
+            if !(tile.y..tile.y + tile.height).contains(&y) {
+                continue;
+            }
+            // The part of the span inside the tile: fragments first..end.
+            let first = tile.x.max(x0);
+            let end = (tile.x + tile.width).min(x0 + len);
+            if first < end {
+                let inside = (first - x0) as usize..(end - x0) as usize;
+                let run = Span {
+                    x: first as u16,
+                    y: span.y,
+                    depths: &span.depths[inside.clone()],
+                };
+                record_run(result, run, &passed[inside], self.hit_room);
+            }
         }
     }
 
@@ -234,6 +353,8 @@ pub struct FunctionalModel {
     state: RenderState,
     depth: DepthBuffer,
     query: Option<OpenQuery>,
+    /// The last span's depth-test outcomes (reused, so spans allocate nothing).
+    passed: Vec<bool>,
 }
 
 impl FunctionalModel {
@@ -242,6 +363,7 @@ impl FunctionalModel {
             state: RenderState::new(width, height),
             depth: DepthBuffer::new(width, height),
             query: None,
+            passed: Vec::new(),
         }
     }
 
@@ -263,6 +385,21 @@ impl FunctionalModel {
         let passed = self.depth.test(&self.state, fragment, writes_allowed);
         if let Some(query) = &mut self.query {
             query.record(fragment, passed);
+        }
+    }
+
+    /// Test a span inside the viewport and account it in the open query: the same as its
+    /// fragments one by one.
+    #[inline]
+    pub fn span(&mut self, span: Span) {
+        let writes_allowed = !self
+            .query
+            .as_ref()
+            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
+        self.depth
+            .test_span(&self.state, span, writes_allowed, &mut self.passed);
+        if let Some(query) = &mut self.query {
+            query.record_span(span, &self.passed);
         }
     }
 
@@ -288,6 +425,14 @@ impl FunctionalModel {
 /// Receives the golden model's event stream (a trace writer, say).
 pub trait EventSink {
     fn event(&mut self, event: &Event);
+
+    /// A span of fragments: by default its fragments one by one. Sinks that can take a whole
+    /// row at once (the functional model) override this.
+    #[inline]
+    fn span(&mut self, span: Span) {
+        span.fragments()
+            .for_each(|fragment| self.event(&Event::Fragment(fragment)));
+    }
 }
 
 /// A sink that keeps nothing.

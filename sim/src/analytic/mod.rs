@@ -20,7 +20,7 @@ use crate::arch::{Arch, Machine};
 use crate::error::SimError;
 use crate::fidelity::{Fidelity, FunctionalCore, LevelResult};
 use occsim_traces::golden::FunctionalModel;
-use occsim_traces::{Event, Fragment, QueryResult, QuerySpec};
+use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, Span};
 
 /// What the formulas predict when a window closes.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -148,6 +148,17 @@ impl AnalyticModel {
             self.close_window(end);
             self.latencies.push(end.latency.ceil() as u64);
         }
+        Ok(())
+    }
+
+    /// A span of fragments: the formulas count each (its pixels are distinct, so the depths
+    /// they read are those before the span), then the functional model takes it whole.
+    pub fn span(&mut self, span: Span) -> Result<(), SimError> {
+        self.core.check_span(span)?;
+        for fragment in span.fragments() {
+            self.formulas.fragment(fragment, &self.core.functional);
+        }
+        self.core.apply_span(span);
         Ok(())
     }
 

@@ -4,7 +4,7 @@
 //! block start, so each block decodes on its own.
 
 use super::header::StreamTally;
-use crate::event::{Event, Fragment, DEPTH_ONE};
+use crate::event::{Event, Fragment, Span, DEPTH_ONE};
 use crate::golden::EventSink;
 use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult, MAX_BUFFER_ENTRIES, MAX_TILES};
 use crate::state::{DepthFunc, Rect};
@@ -61,6 +61,89 @@ pub(crate) fn put_zz(out: &mut Vec<u8>, value: i64) {
 #[inline(always)]
 fn unzigzag(value: u64) -> i64 {
     (value >> 1) as i64 ^ -((value & 1) as i64)
+}
+
+/// Decode the depths of a span of `len` fragments whose first depth is `first` into `depths`
+/// (cleared first): each next one is the last + `slope` + a zigzag residual read from
+/// `payload` at `pos`. Returns the position after the residuals and the last depth.
+#[inline(always)]
+fn span_depths(
+    payload: &[u8],
+    mut pos: usize,
+    len: usize,
+    first: i64,
+    slope: i64,
+    depths: &mut Vec<u32>,
+) -> Result<(usize, i64), PayloadError> {
+    depths.clear();
+    depths.reserve(len);
+    depths.push(first as u32);
+    let start = pos;
+    let mut depth = first;
+    // Most spans' residuals are all one byte each: decode those without per-byte branches.
+    if let Some(bytes) = payload.get(pos..pos + len - 1) {
+        if bytes.iter().all(|&b| b < 0x80) {
+            let mut outside = false;
+            depths.extend(bytes.iter().map(|&b| {
+                depth = depth.wrapping_add(slope).wrapping_add(unzigzag(b as u64));
+                outside |= depth as u64 > DEPTH_ONE as u64;
+                depth as u32
+            }));
+            if outside {
+                return Err(first_depth_outside(payload, start, len, first, slope));
+            }
+            return Ok((pos + len - 1, depth));
+        }
+    }
+    // Range checked once at the end (a depth outside 0..=2^24-1 is rare: corruption), so the
+    // loop carries only the running depth.
+    let mut outside = false;
+    for _ in 1..len {
+        let residual = match payload.get(pos) {
+            Some(&b) if b < 0x80 => {
+                pos += 1;
+                unzigzag(b as u64)
+            }
+            _ => {
+                let mut c = Cursor::new(payload, pos);
+                let value = c.zz()?;
+                pos = c.pos;
+                value
+            }
+        };
+        depth = depth.wrapping_add(slope).wrapping_add(residual);
+        outside |= depth as u64 > DEPTH_ONE as u64;
+        depths.push(depth as u32);
+    }
+    if outside {
+        return Err(first_depth_outside(payload, start, len, first, slope));
+    }
+    Ok((pos, depth))
+}
+
+/// The error for the first depth of a span outside 0..=2^24-1 (the span is known to hold
+/// one and its residuals to decode).
+#[cold]
+fn first_depth_outside(
+    payload: &[u8],
+    mut pos: usize,
+    len: usize,
+    first: i64,
+    slope: i64,
+) -> PayloadError {
+    let mut depth = first;
+    for _ in 1..len {
+        let mut c = Cursor::new(payload, pos);
+        let Ok(residual) = c.zz() else {
+            break;
+        };
+        pos = c.pos;
+        depth = depth.wrapping_add(slope).wrapping_add(residual);
+        if !(0..=DEPTH_ONE as i64).contains(&depth) {
+            return bad(pos - 1, format!("depth {depth} outside 0..=2^24-1"));
+        }
+    }
+    bad(pos, "depth outside 0..=2^24-1")
 }
 
 /// A malformed payload: where (in the decoded payload) and what.
@@ -436,6 +519,8 @@ pub(crate) struct BlockDecoder {
     span: SpanProgress,
     /// Events completed in this block so far.
     pub events: u64,
+    /// The depths of the span being handed out whole (at most `MAX_SPAN_FRAGMENTS`).
+    span_depths: Vec<u32>,
 }
 
 /// What the decoder needs beyond the payload: the viewport, the stream checks, and the bytes
@@ -672,39 +757,63 @@ impl BlockDecoder {
             slope,
             ..
         } = self.span;
-        sink.event(&Event::Fragment(Fragment {
+        let mut depths = std::mem::take(&mut self.span_depths);
+        let (pos, depth) = span_depths(payload, self.pos, len, first, slope, &mut depths)?;
+        sink.span(Span {
             x,
             y,
-            z: first as u32,
-        }));
-        let mut pos = self.pos;
-        let mut depth = first;
-        for step in 1..len {
-            let b = match payload.get(pos) {
-                Some(&b) if b < 0x80 => {
-                    pos += 1;
-                    unzigzag(b as u64)
-                }
-                _ => {
-                    let mut c = Cursor::new(payload, pos);
-                    let value = c.zz()?;
-                    pos = c.pos;
-                    value
-                }
-            };
-            depth = depth.wrapping_add(slope).wrapping_add(b);
-            if !(0..=DEPTH_ONE as i64).contains(&depth) {
-                return Err(bad(pos - 1, format!("depth {depth} outside 0..=2^24-1")));
-            }
-            sink.event(&Event::Fragment(Fragment {
-                x: x + step as u16,
-                y,
-                z: depth as u32,
-            }));
-        }
+            depths: &depths,
+        });
+        self.span_depths = depths;
         self.pos = pos;
         self.span.remaining = 0;
         self.predictor.end(first, depth, len);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn span_depths_follow_slope_and_residuals() {
+        // Residuals +1, -2 (zigzag 2, 3), then +64 as two bytes (zigzag 128: 0x80 0x01).
+        let payload = [2, 3, 0x80, 0x01];
+        let mut depths = Vec::new();
+        let (pos, last) = span_depths(&payload, 0, 4, 100, 10, &mut depths).unwrap();
+        assert_eq!(depths, [100, 111, 119, 193]);
+        assert_eq!((pos, last), (4, 193));
+        // All one-byte residuals (the fast path).
+        let (pos, last) = span_depths(&payload, 0, 3, 100, 10, &mut depths).unwrap();
+        assert_eq!(depths, [100, 111, 119]);
+        assert_eq!((pos, last), (2, 119));
+    }
+
+    #[test]
+    fn a_depth_outside_the_range_names_its_residual() {
+        let top = DEPTH_ONE as i64 - 1;
+        // Residuals +1, +1, 0: the second leaves the range, its byte at offset 1.
+        let fast = [2, 2, 0];
+        let mut depths = Vec::new();
+        let error = span_depths(&fast, 0, 4, top, 0, &mut depths).unwrap_err();
+        assert_eq!(error.pos, 1);
+        assert!(
+            error.reason.contains("depth 16777216 outside"),
+            "{}",
+            error.reason
+        );
+        // The same with a two-byte residual first (the general path): offset 2.
+        let slow = [0x80, 0x00, 2, 2];
+        let error = span_depths(&slow, 0, 4, top, 0, &mut depths).unwrap_err();
+        assert_eq!(error.pos, 3);
+        // Below zero.
+        let error = span_depths(&[3], 0, 2, 0, 0, &mut depths).unwrap_err();
+        assert_eq!(error.pos, 0);
+        assert!(
+            error.reason.contains("depth -2 outside"),
+            "{}",
+            error.reason
+        );
     }
 }
