@@ -270,21 +270,21 @@ impl OpenQuery {
     /// Account a span (its depth tests' outcomes in `passed`) in every tile that holds its
     /// fragments.
     fn record_span(&mut self, span: Span, passed: &[bool]) {
-        if self.index.is_some() {
-            // Many tiles: fragment by fragment through the index.
-            for (fragment, &pass) in span.fragments().zip(passed) {
-                self.record(fragment, pass);
+        let OpenQuery {
+            spec,
+            tiles,
+            index,
+            hit_room,
+        } = self;
+        let (x0, len) = (span.x as u32, span.depths.len() as u32);
+        let mut record_part = |tile: usize, from: u32, to: u32| {
+            let rect = &spec.tiles[tile];
+            if !(rect.y..rect.y + rect.height).contains(&(span.y as u32)) {
+                return;
             }
-            return;
-        }
-        let (x0, y, len) = (span.x as u32, span.y as u32, span.depths.len() as u32);
-        for (tile, result) in self.spec.tiles.iter().zip(&mut self.tiles) {
-            if !(tile.y..tile.y + tile.height).contains(&y) {
-                continue;
-            }
-            // The part of the span inside the tile: fragments first..end.
-            let first = tile.x.max(x0);
-            let end = (tile.x + tile.width).min(x0 + len);
+            // The part of [from, to) inside the tile.
+            let first = rect.x.max(from);
+            let end = (rect.x + rect.width).min(to);
             if first < end {
                 let inside = (first - x0) as usize..(end - x0) as usize;
                 let run = Span {
@@ -292,8 +292,22 @@ impl OpenQuery {
                     y: span.y,
                     depths: &span.depths[inside.clone()],
                 };
-                record_run(result, run, &passed[inside], self.hit_room);
+                record_run(&mut tiles[tile], run, &passed[inside], *hit_room);
             }
+        };
+        let Some(index) = index else {
+            (0..spec.tiles.len()).for_each(|tile| record_part(tile, x0, x0 + len));
+            return;
+        };
+        // Many tiles: the span cut at the index's buckets; in each piece, the tiles of its
+        // bucket (each once per bucket, so each fragment once per tile, pieces in order).
+        let mut from = x0;
+        while from < x0 + len {
+            let to = (((from >> index.shift) + 1) << index.shift).min(x0 + len);
+            for &tile in index.candidates(from as u16, span.y) {
+                record_part(tile as usize, from, to);
+            }
+            from = to;
         }
     }
 
