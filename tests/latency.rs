@@ -128,3 +128,55 @@ fn bad_options_are_rejected_with_a_clear_message() {
         "{stderr}"
     );
 }
+
+#[test]
+fn the_analytic_and_sampled_levels_give_latency_without_a_split() {
+    let (_dir, trace) = hardcases_trace("levels");
+    let cycle = stdout_of(&[
+        "latency",
+        &trace,
+        "--arch",
+        "o2",
+        "--engines",
+        "2",
+        "--json",
+    ]);
+    let cycle: serde_json::Value = serde_json::from_str(&cycle).unwrap();
+    for level in ["analytic", "sampled:3"] {
+        let json = stdout_of(&[
+            "latency",
+            &trace,
+            "--arch",
+            "o2",
+            "--engines",
+            "2",
+            "--fidelity",
+            level,
+            "--json",
+        ]);
+        let rows: serde_json::Value = serde_json::from_str(&json).unwrap();
+        let row = &rows[0];
+        assert_eq!(row["queries"], 28, "{level}");
+        // The O2's empty pipe costs 5 cycles: no level predicts less.
+        assert!(
+            row["latency_p50_cycles"].as_u64().unwrap() >= 5,
+            "{level}: {row}"
+        );
+        assert!(row["drain_mean_cycles"].is_null(), "{level}: {row}");
+        assert!(row["global_merge_mean_cycles"].is_null(), "{level}: {row}");
+        let cycles = row["total_cycles"].as_f64().unwrap();
+        let reference = cycle[0]["total_cycles"].as_f64().unwrap();
+        assert!(
+            (cycles - reference).abs() <= 0.25 * reference,
+            "{level}: {cycles} cycles against {reference}"
+        );
+    }
+    assert!(cycle[0]["drain_mean_cycles"].as_f64().is_some());
+    let output = occsim(&["latency", &trace, "--fidelity", "functional"]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("latency needs a level with time"),
+        "{stderr}"
+    );
+}

@@ -1,12 +1,14 @@
 //! `occsim latency TRACE --arch ... --engines 1,2,4,8,16`: replay a trace once per engine
 //! count and tabulate what its queries' latency costs: p50/p95/max in cycles and
 //! microseconds, split into drain, local merge and global merge (means, which add up to the
-//! mean latency), total cycles and fragments per cycle. `--plot FILE.svg` draws the table.
+//! mean latency; at the cycle and rtl levels, whose reports split it), total cycles and
+//! fragments per cycle. `--plot FILE.svg` draws the table.
 
 use super::arch::ArchSelection;
 use super::replay::replay_trace;
 use crate::plot::{LineChart, Scale, Series};
 use anyhow::{bail, Context};
+use occsim_sim::fidelity::LevelResult;
 use occsim_sim::report::nearest_rank;
 use occsim_sim::Fidelity;
 use occsim_sim::Report;
@@ -34,8 +36,8 @@ pub struct LatencyArgs {
     /// results are recomputed), e.g. --retile 8x8.
     #[arg(long, value_name = "GxH")]
     pub retile: Option<TileGrid>,
-    /// Level of detail: cycle or rtl (the levels whose reports split latency into drain
-    /// and merges).
+    /// Level of detail: analytic, sampled:K, cycle or rtl (a level with time; only cycle
+    /// and rtl split latency into drain and merges).
     #[arg(long, value_name = "LEVEL", default_value = "cycle")]
     pub fidelity: occsim_sim::Fidelity,
     /// Print the rows as JSON instead of a table.
@@ -57,32 +59,40 @@ pub struct LatencyRow {
     pub latency_p50_us: f64,
     pub latency_p95_us: f64,
     pub latency_max_us: f64,
-    /// Means over the queries; they add up to the mean latency.
-    pub drain_mean_cycles: f64,
-    pub local_merge_mean_cycles: f64,
-    pub global_merge_mean_cycles: f64,
+    /// Means over the queries; they add up to the mean latency (None below the cycle level,
+    /// which predicts latency whole).
+    pub drain_mean_cycles: Option<f64>,
+    pub local_merge_mean_cycles: Option<f64>,
+    pub global_merge_mean_cycles: Option<f64>,
     pub total_cycles: u64,
     pub fragments_per_cycle: f64,
 }
 
 impl LatencyRow {
-    fn of(engines: u64, report: &Report, clock_mhz: f64) -> LatencyRow {
-        let queries = &report.queries;
-        let mut latencies: Vec<u64> = queries.iter().map(|q| q.latency_cycles).collect();
+    fn of(engines: u64, result: &LevelResult, clock_mhz: f64) -> LatencyRow {
+        let mut latencies: Vec<u64> = result
+            .queries
+            .iter()
+            .filter_map(|q| q.latency_cycles)
+            .collect();
         latencies.sort_unstable();
         let mean = |part: &dyn Fn(&occsim_sim::report::QueryReport) -> u64| {
-            if queries.is_empty() {
-                0.0
-            } else {
-                queries.iter().map(part).sum::<u64>() as f64 / queries.len() as f64
-            }
+            result.report.as_ref().map(|report: &Report| {
+                let queries = &report.queries;
+                if queries.is_empty() {
+                    0.0
+                } else {
+                    queries.iter().map(part).sum::<u64>() as f64 / queries.len() as f64
+                }
+            })
         };
+        let total_cycles = result.total_cycles.unwrap_or(0);
         let us = |cycles: u64| cycles as f64 / clock_mhz;
         let (p50, p95) = (nearest_rank(&latencies, 50), nearest_rank(&latencies, 95));
         let max = latencies.last().copied().unwrap_or(0);
         LatencyRow {
             engines,
-            queries: queries.len() as u64,
+            queries: result.queries.len() as u64,
             latency_p50_cycles: p50,
             latency_p95_cycles: p95,
             latency_max_cycles: max,
@@ -92,8 +102,12 @@ impl LatencyRow {
             drain_mean_cycles: mean(&|q| q.drain_cycles),
             local_merge_mean_cycles: mean(&|q| q.local_merge_cycles),
             global_merge_mean_cycles: mean(&|q| q.global_merge_cycles),
-            total_cycles: report.summary.cycles,
-            fragments_per_cycle: report.summary.fragments_per_cycle,
+            total_cycles,
+            fragments_per_cycle: if total_cycles == 0 {
+                0.0
+            } else {
+                result.fragments as f64 / total_cycles as f64
+            },
         }
     }
 }
@@ -104,9 +118,8 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
     }
     let base = args.arch.resolve()?;
     anyhow::ensure!(
-        matches!(args.fidelity, Fidelity::Cycle | Fidelity::Rtl),
-        "latency needs a level that splits latency into drain and merges: cycle or rtl, not {}",
-        args.fidelity
+        args.fidelity != Fidelity::Functional,
+        "latency needs a level with time: analytic, sampled:K, cycle or rtl, not functional"
     );
     let clock_mhz = match base.get("clock_mhz") {
         Some(occsim_sim::arch::Value::Float(mhz)) => mhz,
@@ -119,10 +132,8 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
             let mut arch = base.clone();
             arch.set_value("engines", &engines.to_string())
                 .with_context(|| format!("--engines {engines}"))?;
-            let report = replay_trace(&args.trace, &arch, args.retile, args.fidelity)?
-                .report
-                .context("no cycle report")?;
-            Ok(LatencyRow::of(engines, &report, clock_mhz))
+            let result = replay_trace(&args.trace, &arch, args.retile, args.fidelity)?;
+            Ok(LatencyRow::of(engines, &result, clock_mhz))
         })
         .collect::<anyhow::Result<Vec<LatencyRow>>>()?;
     if args.json {
@@ -139,6 +150,7 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
 }
 
 fn table(rows: &[LatencyRow]) -> String {
+    let split = |mean: Option<f64>| mean.map_or("-".to_string(), |m| format!("{m:.1}"));
     let mut out = String::new();
     let _ = writeln!(
         out,
@@ -160,7 +172,7 @@ fn table(rows: &[LatencyRow]) -> String {
     for r in rows {
         let _ = writeln!(
             out,
-            "{:>7} {:>7} {:>9} {:>9} {:>9} {:>9.3} {:>9.3} {:>9.3} {:>9.1} {:>9.1} {:>9.1} {:>12} {:>8.3}",
+            "{:>7} {:>7} {:>9} {:>9} {:>9} {:>9.3} {:>9.3} {:>9.3} {:>9} {:>9} {:>9} {:>12} {:>8.3}",
             r.engines,
             r.queries,
             r.latency_p50_cycles,
@@ -169,16 +181,16 @@ fn table(rows: &[LatencyRow]) -> String {
             r.latency_p50_us,
             r.latency_p95_us,
             r.latency_max_us,
-            r.drain_mean_cycles,
-            r.local_merge_mean_cycles,
-            r.global_merge_mean_cycles,
+            split(r.drain_mean_cycles),
+            split(r.local_merge_mean_cycles),
+            split(r.global_merge_mean_cycles),
             r.total_cycles,
             r.fragments_per_cycle
         );
     }
     let _ = writeln!(
         out,
-        "latency in cycles; drain, local and global are mean cycles per query (they add up to the mean latency)"
+        "latency in cycles; drain, local and global are mean cycles per query (they add up to the mean latency; - where the level predicts latency whole)"
     );
     out
 }
@@ -199,13 +211,29 @@ fn chart(args: &LatencyArgs, rows: &[LatencyRow]) -> LineChart {
         x_scale: Scale::Log10,
         y_scale: Scale::Linear,
         x_ticks: Some(rows.iter().map(|r| r.engines as f64).collect()),
-        series: vec![
+        series: [
             series("latency p50", &|r| r.latency_p50_cycles as f64),
             series("latency p95", &|r| r.latency_p95_cycles as f64),
             series("latency max", &|r| r.latency_max_cycles as f64),
-            series("drain (mean)", &|r| r.drain_mean_cycles),
-            series("local merge (mean)", &|r| r.local_merge_mean_cycles),
-            series("global merge (mean)", &|r| r.global_merge_mean_cycles),
-        ],
+        ]
+        .into_iter()
+        .chain(
+            rows.iter()
+                .all(|r| r.drain_mean_cycles.is_some())
+                .then(|| {
+                    [
+                        series("drain (mean)", &|r| r.drain_mean_cycles.unwrap_or(0.0)),
+                        series("local merge (mean)", &|r| {
+                            r.local_merge_mean_cycles.unwrap_or(0.0)
+                        }),
+                        series("global merge (mean)", &|r| {
+                            r.global_merge_mean_cycles.unwrap_or(0.0)
+                        }),
+                    ]
+                })
+                .into_iter()
+                .flatten(),
+        )
+        .collect(),
     }
 }
