@@ -122,8 +122,8 @@ fn sweeps_run_at_any_fidelity_and_rtl_agrees_with_cycle() {
             "at most one fragment a cycle: {row}"
         );
     }
-    // The latency table needs a level that splits latency; others are refused by name.
-    let output = occsim(&["latency", s(&trace), "--fidelity", "analytic"]);
+    // The latency table needs a level with time; functional is refused by name.
+    let output = occsim(&["latency", s(&trace), "--fidelity", "functional"]);
     assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("cycle or rtl, not analytic"));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("not functional"));
 }
