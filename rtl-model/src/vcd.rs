@@ -62,13 +62,8 @@ const DECIMAL_PAIRS: [[u8; 2]; 100] = {
     table
 };
 
-struct Signal {
-    /// The value last written, or anything while `unwritten` is 1.
-    last: u64,
-    /// 1 until the signal's first value is written (so a 64-bit signal needs no sentinel).
-    unwritten: u64,
-    /// All ones in the signal's width.
-    mask: u64,
+/// How a signal's value lines end.
+struct LineFormat {
     /// Groups of 8 binary digits a value takes at most; 0 for a 1-bit signal.
     digit_groups: u32,
     /// What follows the value: ` CODE\n` (`CODE\n` for a 1-bit signal), zero padded.
@@ -78,7 +73,15 @@ struct Signal {
 
 pub struct VcdWriter<W: Write> {
     out: W,
-    signals: Vec<Signal>,
+    /// Per signal, by id: the value last written (masked), its width's mask, whether no
+    /// value was written yet (a 64-bit signal has no spare value for a sentinel), how its
+    /// lines end. Separate arrays so that the compare loops touch only `last` and `masks`.
+    last: Vec<u64>,
+    masks: Vec<u64>,
+    unwritten: Vec<bool>,
+    formats: Vec<LineFormat>,
+    /// Signals with no value written yet.
+    unwritten_count: usize,
     defining: bool,
     time: u64,
     /// `time` is not yet written: the next change writes it first.
@@ -89,6 +92,34 @@ pub struct VcdWriter<W: Write> {
     /// scratch (`BUFFER_BYTES + SLACK_BYTES` long).
     buffer: Vec<u8>,
     filled: usize,
+}
+
+/// Decimal digits of `value` (at least 1): one more than a guess of log10 from the bit
+/// length (log10(2) ~ 1233 / 4096, never too low), corrected by one comparison.
+#[inline(always)]
+fn decimal_digits(value: u64) -> usize {
+    const POWERS: [u64; 20] = {
+        let mut powers = [1u64; 20];
+        let mut i = 1;
+        while i < 20 {
+            powers[i] = powers[i - 1] * 10;
+            i += 1;
+        }
+        powers
+    };
+    let value = value | 1; // same digit count, and 0 has one digit
+    let guess = ((64 - value.leading_zeros()) * 1233 >> 12) as usize;
+    guess + 1 - (value < POWERS[guess]) as usize
+}
+
+/// `value` (< 10^8) as exactly 8 decimal digits.
+#[inline(always)]
+fn write_eight_digits(out: &mut [u8], value: u64) {
+    let (high, low) = ((value / 10_000) as usize, (value % 10_000) as usize);
+    out[0..2].copy_from_slice(&DECIMAL_PAIRS[high / 100]);
+    out[2..4].copy_from_slice(&DECIMAL_PAIRS[high % 100]);
+    out[4..6].copy_from_slice(&DECIMAL_PAIRS[low / 100]);
+    out[6..8].copy_from_slice(&DECIMAL_PAIRS[low % 100]);
 }
 
 fn identifier(mut n: usize) -> String {
@@ -108,7 +139,11 @@ impl<W: Write> VcdWriter<W> {
     pub fn new(out: W, version: &str) -> VcdWriter<W> {
         let mut vcd = VcdWriter {
             out,
-            signals: Vec::new(),
+            last: Vec::new(),
+            masks: Vec::new(),
+            unwritten: Vec::new(),
+            formats: Vec::new(),
+            unwritten_count: 0,
             defining: true,
             time: 0,
             time_pending: true,
@@ -164,7 +199,7 @@ impl<W: Write> VcdWriter<W> {
     /// Declare a signal `width` bits wide (1..=64).
     pub fn var(&mut self, kind: VarKind, name: &str, width: u32) -> SignalId {
         assert!(self.defining && (1..=64).contains(&width));
-        let code = identifier(self.signals.len());
+        let code = identifier(self.last.len());
         let kind = match kind {
             VarKind::Wire => "wire",
             VarKind::Reg => "reg",
@@ -178,15 +213,16 @@ impl<W: Write> VcdWriter<W> {
         };
         let mut tail = [0u8; 16];
         tail[..tail_text.len()].copy_from_slice(tail_text.as_bytes());
-        self.signals.push(Signal {
-            last: 0,
-            unwritten: 1,
-            mask: mask(width),
+        self.last.push(0);
+        self.masks.push(mask(width));
+        self.unwritten.push(true);
+        self.unwritten_count += 1;
+        self.formats.push(LineFormat {
             digit_groups: if width == 1 { 0 } else { width.div_ceil(8) },
             tail,
             tail_len: tail_text.len(),
         });
-        SignalId(self.signals.len() - 1)
+        SignalId(self.last.len() - 1)
     }
 
     pub fn end_definitions(&mut self) {
@@ -204,27 +240,70 @@ impl<W: Write> VcdWriter<W> {
     }
 
     /// The signal holds `value` (masked to its width) from the current time on.
-    #[inline(always)]
+    #[inline]
     pub fn change(&mut self, id: SignalId, value: u64) {
-        let signal = &self.signals[id.0];
-        let value = value & signal.mask;
-        if (value ^ signal.last) | signal.unwritten != 0 {
-            self.write_change(id.0, value);
+        self.change_block(id, &[value]);
+    }
+
+    /// Signals `first`, `first + 1`, ... hold `values` (each masked to its width) from the
+    /// current time on. Lines are written in signal order.
+    #[inline]
+    pub fn change_block(&mut self, first: SignalId, values: &[u64]) {
+        for (chunk, values) in values.chunks(64).enumerate() {
+            self.change_chunk(first.0 + 64 * chunk, values);
+        }
+    }
+
+    /// Up to 64 signals from `first`: one branch-free compare loop gathers a bit per changed
+    /// signal; the writer visits the set bits only (no mispredicted branch per signal).
+    #[inline(always)]
+    fn change_chunk(&mut self, first: usize, values: &[u64]) {
+        let signals = first..first + values.len();
+        let mut changed = 0u64;
+        for (bit, ((&value, &mask), &last)) in values
+            .iter()
+            .zip(&self.masks[signals.clone()])
+            .zip(&self.last[signals.clone()])
+            .enumerate()
+        {
+            changed |= (((value & mask) != last) as u64) << bit;
+        }
+        if self.unwritten_count != 0 {
+            for (bit, &unwritten) in self.unwritten[signals].iter().enumerate() {
+                changed |= (unwritten as u64) << bit;
+            }
+        }
+        if changed != 0 {
+            self.write_changed(first, values, changed);
+        }
+    }
+
+    /// Write the lines of signals `first + i` for the bits `i` set in `changed`.
+    #[inline(never)]
+    fn write_changed(&mut self, first: usize, values: &[u64], mut changed: u64) {
+        while changed != 0 {
+            let offset = changed.trailing_zeros() as usize;
+            changed &= changed - 1;
+            let index = first + offset;
+            self.write_change(index, values[offset] & self.masks[index]);
         }
     }
 
     /// Write a changed value (masked), after the pending timestamp if any.
-    #[inline(never)]
+    #[inline(always)]
     fn write_change(&mut self, index: usize, value: u64) {
         if self.time_pending {
             self.write_time();
         }
-        let signal = &mut self.signals[index];
-        signal.last = value;
-        signal.unwritten = 0;
+        self.last[index] = value;
+        if self.unwritten[index] {
+            self.unwritten[index] = false;
+            self.unwritten_count -= 1;
+        }
+        let format = &self.formats[index];
         let buffer = &mut self.buffer[self.filled..self.filled + LINE_SCRATCH];
         let mut at;
-        if signal.digit_groups == 0 {
+        if format.digit_groups == 0 {
             buffer[0] = b'0' + value as u8;
             at = 1;
         } else {
@@ -233,41 +312,45 @@ impl<W: Write> VcdWriter<W> {
             // The most significant digit at bit 63; whole groups from the top, the bytes
             // past the last digit overwritten by the tail or left as scratch.
             let aligned = value << (64 - digits);
-            for group in 0..signal.digit_groups as usize {
+            for group in 0..format.digit_groups as usize {
                 let byte = (aligned >> (56 - 8 * group)) as u8;
                 buffer[1 + 8 * group..9 + 8 * group].copy_from_slice(&BINARY_DIGITS[byte as usize]);
             }
             at = 1 + digits;
         }
-        buffer[at..at + 16].copy_from_slice(&signal.tail);
-        at += signal.tail_len;
+        buffer[at..at + 16].copy_from_slice(&format.tail);
+        at += format.tail_len;
         self.filled += at;
         if self.filled >= BUFFER_BYTES {
             self.spill();
         }
     }
 
-    /// `#TIME\n` for the current time, its decimal digits written two at a time from the
-    /// last one back.
+    /// `#TIME\n` for the current time. The digits are written in groups of 8 (two
+    /// independent chains of pairs each) from the last group back.
+    #[inline(never)]
     fn write_time(&mut self) {
-        let mut t = self.time;
-        let mut length = 1;
-        while length < 20 && t >= 10u64.pow(length as u32) {
-            length += 1;
-        }
+        let t = self.time;
+        let length = decimal_digits(t);
         let buffer = &mut self.buffer[self.filled..self.filled + LINE_SCRATCH];
         buffer[0] = b'#';
-        let mut end = 1 + length;
-        buffer[end] = b'\n';
-        while t >= 100 {
-            buffer[end - 2..end].copy_from_slice(&DECIMAL_PAIRS[(t % 100) as usize]);
-            end -= 2;
-            t /= 100;
+        buffer[1 + length] = b'\n';
+        let digits = &mut buffer[1..1 + length];
+        let mut rest = t;
+        let mut end = length;
+        while end > 8 {
+            write_eight_digits(&mut digits[end - 8..end], rest % 100_000_000);
+            rest /= 100_000_000;
+            end -= 8;
         }
-        if t >= 10 {
-            buffer[end - 2..end].copy_from_slice(&DECIMAL_PAIRS[t as usize]);
-        } else {
-            buffer[end - 1] = b'0' + t as u8;
+        let mut rest = rest as u32;
+        while end >= 2 {
+            digits[end - 2..end].copy_from_slice(&DECIMAL_PAIRS[(rest % 100) as usize]);
+            rest /= 100;
+            end -= 2;
+        }
+        if end == 1 {
+            digits[0] = b'0' + rest as u8;
         }
         self.filled += 2 + length;
         self.time_written = Some(self.time);
@@ -325,6 +408,21 @@ mod tests {
     }
 
     #[test]
+    fn decimal_digit_counts() {
+        for (value, digits) in [(0, 1), (9, 1), (10, 2), (99, 2), (100, 3), (999_999, 6)] {
+            assert_eq!(decimal_digits(value), digits);
+        }
+        let mut power = 1u64;
+        for digits in 1..20 {
+            assert_eq!(decimal_digits(power), digits);
+            assert_eq!(decimal_digits(power * 10 - 1), digits);
+            power *= 10;
+        }
+        assert_eq!(decimal_digits(power), 20);
+        assert_eq!(decimal_digits(u64::MAX), 20);
+    }
+
+    #[test]
     fn identifiers_are_distinct() {
         let codes: std::collections::HashSet<_> = (0..20000).map(identifier).collect();
         assert_eq!(codes.len(), 20000);
@@ -375,8 +473,11 @@ mod tests {
         let mut expected = String::new();
         let mut state = 0x9E37_79B9_7F4A_7C15u64;
         let mut last = vec![None; 64];
-        for time in 0..400u64 {
-            vcd.set_time(time * 14999);
+        let mut time = 0;
+        for step in 0..400u64 {
+            // Timestamps of 1 to 15 digits, some just below powers of ten.
+            time += step * step * step * 14_999 + (step % 3) * 99_999_999;
+            vcd.set_time(time);
             let mut stamped = false;
             for (w, &id) in ids.iter().enumerate() {
                 state ^= state << 13;
@@ -386,7 +487,7 @@ mod tests {
                 vcd.change(id, value);
                 if last[w] != Some(value) {
                     if !stamped {
-                        expected += &format!("#{}\n", time * 14999);
+                        expected += &format!("#{time}\n");
                         stamped = true;
                     }
                     let code = identifier(w);
