@@ -62,10 +62,19 @@ const DECIMAL_PAIRS: [[u8; 2]; 100] = {
     table
 };
 
-/// How a signal's value lines end.
-struct LineFormat {
-    /// Groups of 8 binary digits a value takes at most; 0 for a 1-bit signal.
-    digit_groups: u32,
+/// What the writer keeps per signal besides the compare's last given value: one cache
+/// line's worth, read only when a value was given that differs.
+struct Line {
+    /// The value last written (masked).
+    last: u64,
+    /// All ones in the signal's width.
+    mask: u64,
+    /// No value written yet (a 64-bit signal has no spare value for a sentinel).
+    unwritten: bool,
+    /// Bytes before the digits: 1 (`b`) for a wide signal, 0 for a 1-bit one.
+    prefix: usize,
+    /// Wider than 32 bits: up to 8 groups of 8 digits instead of 4.
+    wide: bool,
     /// What follows the value: ` CODE\n` (`CODE\n` for a 1-bit signal), zero padded.
     tail: [u8; 16],
     tail_len: usize,
@@ -73,13 +82,10 @@ struct LineFormat {
 
 pub struct VcdWriter<W: Write> {
     out: W,
-    /// Per signal, by id: the value last written (masked), its width's mask, whether no
-    /// value was written yet (a 64-bit signal has no spare value for a sentinel), how its
-    /// lines end. Separate arrays so that the compare loops touch only `last` and `masks`.
-    last: Vec<u64>,
-    masks: Vec<u64>,
-    unwritten: Vec<bool>,
-    formats: Vec<LineFormat>,
+    /// Per signal, by id: the value last given (unmasked, so the compare needs no mask).
+    given: Vec<u64>,
+    /// Per signal, by id: what writing a line needs.
+    lines: Vec<Line>,
     /// Signals with no value written yet.
     unwritten_count: usize,
     defining: bool,
@@ -139,10 +145,8 @@ impl<W: Write> VcdWriter<W> {
     pub fn new(out: W, version: &str) -> VcdWriter<W> {
         let mut vcd = VcdWriter {
             out,
-            last: Vec::new(),
-            masks: Vec::new(),
-            unwritten: Vec::new(),
-            formats: Vec::new(),
+            given: Vec::new(),
+            lines: Vec::new(),
             unwritten_count: 0,
             defining: true,
             time: 0,
@@ -199,7 +203,7 @@ impl<W: Write> VcdWriter<W> {
     /// Declare a signal `width` bits wide (1..=64).
     pub fn var(&mut self, kind: VarKind, name: &str, width: u32) -> SignalId {
         assert!(self.defining && (1..=64).contains(&width));
-        let code = identifier(self.last.len());
+        let code = identifier(self.given.len());
         let kind = match kind {
             VarKind::Wire => "wire",
             VarKind::Reg => "reg",
@@ -213,16 +217,18 @@ impl<W: Write> VcdWriter<W> {
         };
         let mut tail = [0u8; 16];
         tail[..tail_text.len()].copy_from_slice(tail_text.as_bytes());
-        self.last.push(0);
-        self.masks.push(mask(width));
-        self.unwritten.push(true);
-        self.unwritten_count += 1;
-        self.formats.push(LineFormat {
-            digit_groups: if width == 1 { 0 } else { width.div_ceil(8) },
+        self.given.push(0);
+        self.lines.push(Line {
+            last: 0,
+            mask: mask(width),
+            unwritten: true,
+            prefix: (width > 1) as usize,
+            wide: width > 32,
             tail,
             tail_len: tail_text.len(),
         });
-        SignalId(self.last.len() - 1)
+        self.unwritten_count += 1;
+        SignalId(self.given.len() - 1)
     }
 
     pub fn end_definitions(&mut self) {
@@ -245,47 +251,46 @@ impl<W: Write> VcdWriter<W> {
         self.change_block(id, &[value]);
     }
 
-    /// Signals `first`, `first + 1`, ... hold `values` (each masked to its width) from the
-    /// current time on. Lines are written in signal order.
-    #[inline]
-    pub fn change_block(&mut self, first: SignalId, values: &[u64]) {
-        for (chunk, values) in values.chunks(64).enumerate() {
-            self.change_chunk(first.0 + 64 * chunk, values);
-        }
-    }
-
-    /// Up to 64 signals from `first`: one branch-free compare loop gathers a bit per changed
-    /// signal; the writer visits the set bits only (no mispredicted branch per signal).
+    /// Signals `first .. first + N` (N <= 64) hold `values` (each masked to its width) from
+    /// the current time on; lines are written in signal order. Inlined into the caller, a
+    /// block is one unrolled, branch-free compare of the values (still in registers) with
+    /// those last given, gathering a bit per difference; only a block with a difference
+    /// calls the writer, which visits the set bits.
     #[inline(always)]
-    fn change_chunk(&mut self, first: usize, values: &[u64]) {
-        let signals = first..first + values.len();
+    pub fn change_block<const N: usize>(&mut self, first: SignalId, values: &[u64; N]) {
+        const { assert!(N <= 64, "a block has at most 64 signals") };
+        let given: &mut [u64; N] = (&mut self.given[first.0..first.0 + N])
+            .try_into()
+            .expect("a slice of N");
         let mut changed = 0u64;
-        for (bit, ((&value, &mask), &last)) in values
-            .iter()
-            .zip(&self.masks[signals.clone()])
-            .zip(&self.last[signals.clone()])
-            .enumerate()
-        {
-            changed |= (((value & mask) != last) as u64) << bit;
+        for bit in 0..N {
+            changed |= ((values[bit] != given[bit]) as u64) << bit;
         }
         if self.unwritten_count != 0 {
-            for (bit, &unwritten) in self.unwritten[signals].iter().enumerate() {
-                changed |= (unwritten as u64) << bit;
+            for (bit, line) in self.lines[first.0..first.0 + N].iter().enumerate() {
+                changed |= (line.unwritten as u64) << bit;
             }
         }
         if changed != 0 {
-            self.write_changed(first, values, changed);
+            self.write_changed(first.0, values, changed);
         }
     }
 
-    /// Write the lines of signals `first + i` for the bits `i` set in `changed`.
+    /// Take the values of signals `first + i` for the bits `i` set in `changed`, writing
+    /// those whose masked value changed.
     #[inline(never)]
     fn write_changed(&mut self, first: usize, values: &[u64], mut changed: u64) {
         while changed != 0 {
             let offset = changed.trailing_zeros() as usize;
             changed &= changed - 1;
             let index = first + offset;
-            self.write_change(index, values[offset] & self.masks[index]);
+            let value = values[offset];
+            self.given[index] = value;
+            let line = &self.lines[index];
+            let value = value & line.mask;
+            if value != line.last || line.unwritten {
+                self.write_change(index, value);
+            }
         }
     }
 
@@ -295,32 +300,30 @@ impl<W: Write> VcdWriter<W> {
         if self.time_pending {
             self.write_time();
         }
-        self.last[index] = value;
-        if self.unwritten[index] {
-            self.unwritten[index] = false;
+        let line = &mut self.lines[index];
+        line.last = value;
+        if line.unwritten {
+            line.unwritten = false;
             self.unwritten_count -= 1;
         }
-        let format = &self.formats[index];
         let buffer = &mut self.buffer[self.filled..self.filled + LINE_SCRATCH];
-        let mut at;
-        if format.digit_groups == 0 {
-            buffer[0] = b'0' + value as u8;
-            at = 1;
-        } else {
-            buffer[0] = b'b';
-            let digits = 64 - (value | 1).leading_zeros() as usize;
-            // The most significant digit at bit 63; whole groups from the top, the bytes
-            // past the last digit overwritten by the tail or left as scratch.
-            let aligned = value << (64 - digits);
-            for group in 0..format.digit_groups as usize {
-                let byte = (aligned >> (56 - 8 * group)) as u8;
-                buffer[1 + 8 * group..9 + 8 * group].copy_from_slice(&BINARY_DIGITS[byte as usize]);
-            }
-            at = 1 + digits;
+        // `b`, overwritten by the digits of a 1-bit signal (no prefix).
+        buffer[0] = b'b';
+        let digits = 64 - (value | 1).leading_zeros() as usize;
+        // The most significant digit at bit 63, then whole groups of 8 from the top (4 of
+        // them unless the signal is wider than 32 bits): the bytes past the last digit are
+        // overwritten by the tail or left as scratch.
+        let aligned = value << (64 - digits);
+        let at = line.prefix;
+        let groups = if line.wide { 8 } else { 4 };
+        for group in 0..groups {
+            let byte = (aligned >> (56 - 8 * group)) as u8;
+            buffer[at + 8 * group..at + 8 * group + 8]
+                .copy_from_slice(&BINARY_DIGITS[byte as usize]);
         }
-        buffer[at..at + 16].copy_from_slice(&format.tail);
-        at += format.tail_len;
-        self.filled += at;
+        let at = at + digits;
+        buffer[at..at + 16].copy_from_slice(&line.tail);
+        self.filled += at + line.tail_len;
         if self.filled >= BUFFER_BYTES {
             self.spill();
         }
