@@ -306,20 +306,29 @@ impl<W: Write> VcdWriter<W> {
             line.unwritten = false;
             self.unwritten_count -= 1;
         }
-        let buffer = &mut self.buffer[self.filled..self.filled + LINE_SCRATCH];
+        // A fixed-size window (with the offsets below bounded by construction, no bounds
+        // checks are left in the formatting).
+        let buffer: &mut [u8; LINE_SCRATCH] = (&mut self.buffer
+            [self.filled..self.filled + LINE_SCRATCH])
+            .try_into()
+            .expect("a window of LINE_SCRATCH bytes");
         // `b`, overwritten by the digits of a 1-bit signal (no prefix).
         buffer[0] = b'b';
         let digits = 64 - (value | 1).leading_zeros() as usize;
         // The most significant digit at bit 63, then whole groups of 8 from the top (4 of
         // them unless the signal is wider than 32 bits): the bytes past the last digit are
         // overwritten by the tail or left as scratch.
-        let aligned = value << (64 - digits);
-        let at = line.prefix;
-        let groups = if line.wide { 8 } else { 4 };
-        for group in 0..groups {
-            let byte = (aligned >> (56 - 8 * group)) as u8;
+        let groups = (value << (64 - digits)).to_be_bytes();
+        let at = line.prefix & 1;
+        for (group, &byte) in groups[..4].iter().enumerate() {
             buffer[at + 8 * group..at + 8 * group + 8]
                 .copy_from_slice(&BINARY_DIGITS[byte as usize]);
+        }
+        if line.wide {
+            for (group, &byte) in groups.iter().enumerate().skip(4) {
+                buffer[at + 8 * group..at + 8 * group + 8]
+                    .copy_from_slice(&BINARY_DIGITS[byte as usize]);
+            }
         }
         let at = at + digits;
         buffer[at..at + 16].copy_from_slice(&line.tail);

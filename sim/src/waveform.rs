@@ -206,8 +206,8 @@ fn declare<W: Write, const N: usize>(
 }
 
 struct EngineProbe {
+    /// The engine's first signal; its slot's signals follow.
     signals: SignalId,
-    slot_signals: SignalId,
     /// The slot shown in the last dumped cycle and the engine's `slots_version` then.
     dumped_slot: Option<(u32, u64)>,
 }
@@ -244,10 +244,10 @@ impl Waveform {
                 vcd.scope(&format!("engine_{e}"));
                 let signals = declare(&mut vcd, engine_declarations(&widths));
                 let slot_signals = declare(&mut vcd, slot_declarations(&widths));
+                assert_eq!(slot_signals.0, signals.0 + ENGINE_SIGNALS);
                 vcd.upscope();
                 EngineProbe {
                     signals,
-                    slot_signals,
                     dumped_slot: None,
                 }
             })
@@ -282,15 +282,23 @@ impl Waveform {
         vcd.set_time(cycle * self.period_ps);
         vcd.change_block(self.unit, &unit_values(rtl, wires));
         for ((probe, engine), w) in self.engines.iter_mut().zip(&rtl.engines).zip(&wires.engines) {
-            vcd.change_block(probe.signals, &engine_values(engine, w));
+            let head = engine_values(engine, w);
             // An engine without tiles shows no slot: its slot signals keep their values.
-            let Some(slot) = engine.slots.get(w.slot as usize) else {
-                continue;
-            };
-            let shown = (w.slot, engine.slots_version);
-            if probe.dumped_slot != Some(shown) {
-                vcd.change_block(probe.slot_signals, &slot_values(slot));
-                probe.dumped_slot = Some(shown);
+            // A slot shown in the last dumped cycle, unchanged since, needs no compare.
+            let slot = engine
+                .slots
+                .get(w.slot as usize)
+                .filter(|_| probe.dumped_slot != Some((w.slot, engine.slots_version)));
+            match slot {
+                None => vcd.change_block(probe.signals, &head),
+                Some(slot) => {
+                    // The slot's signals follow the engine's: one block of both.
+                    let mut values = [0; ENGINE_SIGNALS + SLOT_SIGNALS];
+                    values[..ENGINE_SIGNALS].copy_from_slice(&head);
+                    values[ENGINE_SIGNALS..].copy_from_slice(&slot_values(slot));
+                    vcd.change_block(probe.signals, &values);
+                    probe.dumped_slot = Some((w.slot, engine.slots_version));
+                }
             }
         }
         vcd.change_block(self.control, &control_values(rtl, wires));
