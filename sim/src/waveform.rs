@@ -48,7 +48,7 @@ struct Widths {
     pointer: u32,
 }
 
-const UNIT_SIGNALS: usize = 12;
+const UNIT_SIGNALS: usize = 8;
 
 fn unit_declarations(w: &Widths) -> Declarations<UNIT_SIGNALS> {
     [
@@ -60,10 +60,6 @@ fn unit_declarations(w: &Widths) -> Declarations<UNIT_SIGNALS> {
         (Wire, "testing", 1),
         (Wire, "done", 1),
         (Wire, "leave", 1),
-        (Wire, "fragment_x", 16),
-        (Wire, "fragment_y", 16),
-        (Wire, "fragment_z", 24),
-        (Wire, "fragment_pass", 1),
     ]
 }
 
@@ -78,11 +74,24 @@ fn unit_values(rtl: &OccuRtl, wires: &Wires) -> [u64; UNIT_SIGNALS] {
         w.testing as u64,
         w.done as u64,
         w.leave as u64,
-        w.fragment.x as u64,
-        w.fragment.y as u64,
-        w.fragment.z as u64,
-        w.fragment.pass as u64,
     ]
+}
+
+/// The fragment the sequencer shows (declared right after the unit's other signals).
+const FRAGMENT_SIGNALS: usize = 4;
+
+fn fragment_declarations() -> Declarations<FRAGMENT_SIGNALS> {
+    [
+        (Wire, "fragment_x", 16),
+        (Wire, "fragment_y", 16),
+        (Wire, "fragment_z", 24),
+        (Wire, "fragment_pass", 1),
+    ]
+}
+
+fn fragment_values(wires: &Wires) -> [u64; FRAGMENT_SIGNALS] {
+    let f = &wires.unit.fragment;
+    [f.x as u64, f.y as u64, f.z as u64, f.pass as u64]
 }
 
 const ENGINE_SIGNALS: usize = 7;
@@ -217,8 +226,14 @@ pub struct Waveform {
     window: Range<u64>,
     period_ps: u64,
     unit: SignalId,
+    fragment: SignalId,
     engines: Vec<EngineProbe>,
     control: SignalId,
+    /// A cycle was dumped (the skips below compare with the last dumped cycle, which is
+    /// the previous evaluated one: inside the window every evaluated cycle is dumped).
+    dumped: bool,
+    /// OccU Control was quiet in the last dumped cycle.
+    control_was_quiet: bool,
 }
 
 /// The clock period in whole picoseconds.
@@ -239,6 +254,7 @@ impl Waveform {
         };
         vcd.scope("occu");
         let unit = declare(&mut vcd, unit_declarations(&widths));
+        let fragment = declare(&mut vcd, fragment_declarations());
         let engines = (0..params.engines)
             .map(|e| {
                 vcd.scope(&format!("engine_{e}"));
@@ -262,8 +278,11 @@ impl Waveform {
             window: options.window,
             period_ps: period_ps(clock_mhz),
             unit,
+            fragment,
             engines,
             control,
+            dumped: false,
+            control_was_quiet: false,
         }
     }
 
@@ -281,6 +300,11 @@ impl Waveform {
         let vcd = &mut self.vcd;
         vcd.set_time(cycle * self.period_ps);
         vcd.change_block(self.unit, &unit_values(rtl, wires));
+        // The fragment wires show the port in an accept cycle and the fragment register
+        // (latched from the port then) otherwise: they change only in accept cycles.
+        if wires.unit.accepting || !self.dumped {
+            vcd.change_block(self.fragment, &fragment_values(wires));
+        }
         for ((probe, engine), w) in self.engines.iter_mut().zip(&rtl.engines).zip(&wires.engines) {
             let head = engine_values(engine, w);
             // An engine without tiles shows no slot: its slot signals keep their values.
@@ -301,7 +325,21 @@ impl Waveform {
                 }
             }
         }
-        vcd.change_block(self.control, &control_values(rtl, wires));
+        // Quiet OccU Control: empty write buffer, no record bank, no grant, no pick. Then
+        // every one of its signals has its idle value (level 0, empty, room = capacity, no
+        // words in, no bank counters), and the arbiter pointer and the overflow count,
+        // which change only with a pick or a finishing bank, are those of the last dumped
+        // cycle if that was quiet too: nothing to compare.
+        let control = &rtl.control;
+        let quiet = control.fifo.is_empty()
+            && control.banks.is_empty()
+            && wires.control.grants == 0
+            && wires.control.picks.is_empty();
+        if !(quiet && self.control_was_quiet) {
+            vcd.change_block(self.control, &control_values(rtl, wires));
+        }
+        self.control_was_quiet = quiet;
+        self.dumped = true;
     }
 
     /// Close the dump at the window's end or `last_cycle`, whichever is first.
