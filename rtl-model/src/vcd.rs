@@ -278,7 +278,7 @@ impl<W: Write> VcdWriter<W> {
 
     /// Take the values of signals `first + i` for the bits `i` set in `changed`, writing
     /// those whose masked value changed.
-    #[inline(never)]
+    #[inline(always)]
     fn write_changed(&mut self, first: usize, values: &[u64], mut changed: u64) {
         while changed != 0 {
             let offset = changed.trailing_zeros() as usize;
