@@ -108,8 +108,9 @@ fn engine_declarations(w: &Widths) -> Declarations<ENGINE_SIGNALS> {
     ]
 }
 
-fn engine_values(engine: &OcclusionEngine, w: &EngineWires) -> [u64; ENGINE_SIGNALS] {
-    [
+/// The engine's values into `out` (in place: a block is built where it is compared).
+fn engine_values(engine: &OcclusionEngine, w: &EngineWires, out: &mut [u64; ENGINE_SIGNALS]) {
+    *out = [
         w.testing as u64,
         w.slot as u64,
         w.inside as u64,
@@ -117,7 +118,7 @@ fn engine_values(engine: &OcclusionEngine, w: &EngineWires) -> [u64; ENGINE_SIGN
         w.words as u64,
         engine.queue.len() as u64,
         engine.tile_count() as u64,
-    ]
+    ];
 }
 
 const SLOT_SIGNALS: usize = 14;
@@ -141,8 +142,8 @@ fn slot_declarations(w: &Widths) -> Declarations<SLOT_SIGNALS> {
     ]
 }
 
-fn slot_values(slot: &TileSlot) -> [u64; SLOT_SIGNALS] {
-    [
+fn slot_values(slot: &TileSlot, out: &mut [u64; SLOT_SIGNALS]) {
+    *out = [
         slot.x0 as u64,
         slot.y0 as u64,
         slot.width as u64,
@@ -157,7 +158,7 @@ fn slot_values(slot: &TileSlot) -> [u64; SLOT_SIGNALS] {
         slot.zmax as u64,
         slot.hits_sent as u64,
         slot.overflowed as u64,
-    ]
+    ];
 }
 
 const CONTROL_SIGNALS: usize = 12;
@@ -306,7 +307,6 @@ impl Waveform {
             vcd.change_block(self.fragment, &fragment_values(wires));
         }
         for ((probe, engine), w) in self.engines.iter_mut().zip(&rtl.engines).zip(&wires.engines) {
-            let head = engine_values(engine, w);
             // An engine without tiles shows no slot: its slot signals keep their values.
             // A slot shown in the last dumped cycle, unchanged since, needs no compare.
             let slot = engine
@@ -314,12 +314,17 @@ impl Waveform {
                 .get(w.slot as usize)
                 .filter(|_| probe.dumped_slot != Some((w.slot, engine.slots_version)));
             match slot {
-                None => vcd.change_block(probe.signals, &head),
+                None => {
+                    let mut values = [0; ENGINE_SIGNALS];
+                    engine_values(engine, w, &mut values);
+                    vcd.change_block(probe.signals, &values);
+                }
                 Some(slot) => {
                     // The slot's signals follow the engine's: one block of both.
                     let mut values = [0; ENGINE_SIGNALS + SLOT_SIGNALS];
-                    values[..ENGINE_SIGNALS].copy_from_slice(&head);
-                    values[ENGINE_SIGNALS..].copy_from_slice(&slot_values(slot));
+                    let (head, rest) = values.split_at_mut(ENGINE_SIGNALS);
+                    engine_values(engine, w, head.try_into().expect("the engine's part"));
+                    slot_values(slot, rest.try_into().expect("the slot's part"));
                     vcd.change_block(probe.signals, &values);
                     probe.dumped_slot = Some((w.slot, engine.slots_version));
                 }
