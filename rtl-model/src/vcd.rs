@@ -8,11 +8,16 @@
 //! ones. The first timestamp carries every signal's value. Identifier codes are printable
 //! ASCII 33..=126 in base 94.
 //!
-//! Speed: [`VcdWriter::change`] is an inlined compare with the last value written; only a
-//! change goes to the (out-of-line) formatter. That formats into a fixed buffer with slack
-//! past its spill mark, so it writes whole 8- and 16-byte groups (8 binary digits from a
-//! 256-entry table, the pre-encoded ` CODE\n` tail) and advances by the bytes that count:
-//! no per-bit loop, no variable-length copy.
+//! Speed (a whole-run dump is dominated by this writer): signals are given in blocks
+//! ([`VcdWriter::change_block`], `N` consecutive signals, `N <= 64`). Inlined into the caller,
+//! a block is one unrolled, branch-free compare of the values (still in registers, unmasked)
+//! with those last given, gathering a bit per difference; the set bits alone are visited
+//! (no mispredicted branch per unchanged signal). A changed value is formatted into a fixed
+//! buffer with slack past its spill mark, so the formatter writes whole groups (8 binary
+//! digits per table entry, 4 groups for signals up to 32 bits and 8 above, then the
+//! pre-encoded 16-byte ` CODE\n` tail; a 1-bit line is the same with no `b`) and advances
+//! by the bytes that count: no per-bit loop, no variable-length copy, no bounds checks.
+//! Timestamps are written 8 digits at a time from a 100-entry pair table.
 
 use crate::bits::mask;
 use std::io::{self, Write};
@@ -114,7 +119,7 @@ fn decimal_digits(value: u64) -> usize {
         powers
     };
     let value = value | 1; // same digit count, and 0 has one digit
-    let guess = ((64 - value.leading_zeros()) * 1233 >> 12) as usize;
+    let guess = (((64 - value.leading_zeros()) * 1233) >> 12) as usize;
     guess + 1 - (value < POWERS[guess]) as usize
 }
 

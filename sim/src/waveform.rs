@@ -9,13 +9,19 @@
 //! slot tested in the cycle (the slot multiplexer's output). Scopes: `occu` (sequencer),
 //! `occu.engine_E`, `occu.control`.
 //!
-//! Cost: the signals are declared in blocks (the sequencer, each engine's wires and
-//! counters, each engine's shown slot, OccU Control) whose values the probe hands to the
-//! writer as arrays, compared in one branch-free loop per block; an engine's slot block is
-//! not even gathered when the slot shown and the engine's `slots_version` are those of the
-//! last dumped cycle. What remains is the writing of the changes themselves (on the `rtl`
-//! benchmark about 60-110 bytes, one timestamp and five lines per cycle): a whole-run dump
-//! costs about 2x the `rtl` run without it (`cargo bench -p occsim-sim --bench rtl`).
+//! Cost: the signals are declared in blocks (the sequencer; the fragment it shows; each
+//! engine's wires and counters followed by its shown slot's registers; OccU Control) whose
+//! values are handed to the writer as arrays, each compared in one branch-free loop
+//! ([`VcdWriter::change_block`]). Whole blocks are skipped where the model says nothing
+//! changed since the last dumped cycle (inside the window that is the previous cycle): an
+//! engine's slot registers while the slot shown and the engine's `slots_version` (bumped
+//! by every latch that touched a slot, every load and unload) are those of the last dump;
+//! the fragment wires outside accept cycles; OccU Control while it stays quiet (empty
+//! buffer, no record bank, grant or pick). What remains is formatting the changes: on the
+//! `rtl` benchmark's whole-run dumps 38-109 bytes per cycle (a timestamp and 3-9 lines), and
+//! comparing the signals that may have changed (the sequencer's 8 and, when its shown slot
+//! moves, an engine's 21, every cycle). `cargo bench -p occsim-sim --bench rtl` prints the
+//! dump's cost against the `rtl` run without it (about 2x; see the README).
 
 use occsim_rtl::bits::bits_for;
 use occsim_rtl::occlusion_engine::{EngineWires, OcclusionEngine, TileSlot};
@@ -306,7 +312,12 @@ impl Waveform {
         if wires.unit.accepting || !self.dumped {
             vcd.change_block(self.fragment, &fragment_values(wires));
         }
-        for ((probe, engine), w) in self.engines.iter_mut().zip(&rtl.engines).zip(&wires.engines) {
+        for ((probe, engine), w) in self
+            .engines
+            .iter_mut()
+            .zip(&rtl.engines)
+            .zip(&wires.engines)
+        {
             // An engine without tiles shows no slot: its slot signals keep their values.
             // A slot shown in the last dumped cycle, unchanged since, needs no compare.
             let slot = engine
