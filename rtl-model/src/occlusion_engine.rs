@@ -106,6 +106,11 @@ pub struct OcclusionEngine {
     hit_room: u32,
     /// Hit words produced and not yet taken by OccU Control's arbiter.
     pub queue: VecDeque<Word>,
+    /// Change tracking (not hardware): bumped whenever a slot register may have changed (a
+    /// latch that updated a slot, a load, an unload), so that a waveform probe which saw
+    /// the same count knows the slots are unchanged without comparing them. Code that
+    /// changes `slots` directly must bump it too.
+    pub slots_version: u64,
     /// Statistics (not hardware): cycles testing tiles, cycles held by OccU Control.
     pub busy_cycles: u64,
     pub stall_cycles: u64,
@@ -135,6 +140,7 @@ impl OcclusionEngine {
                 .map(|t| TileSlot::reset(t[0], t[1], t[2], t[3])),
         );
         self.queue.clear();
+        self.slots_version += 1;
     }
 
     /// Tiles held (the tile-sequencing counter's range).
@@ -144,6 +150,7 @@ impl OcclusionEngine {
 
     /// Hand the slots over to OccU Control's record bank and return to no tiles.
     pub fn unload(&mut self) -> Vec<TileSlot> {
+        self.slots_version += 1;
         std::mem::take(&mut self.slots)
     }
 
@@ -198,6 +205,7 @@ impl OcclusionEngine {
             if !slot.contains(f.x, f.y) {
                 continue;
             }
+            self.slots_version += 1;
             slot.phc = saturating_increment(slot.phc, counter_bits);
             if !f.pass {
                 continue;
