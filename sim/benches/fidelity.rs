@@ -6,8 +6,8 @@
 //!
 //! Run: `cargo bench -p occsim-sim --bench fidelity`
 
-use occsim_sim::effects::{observe, Effects, EffectsChoice};
-use occsim_sim::fidelity::{choose_effects, Fidelity, LevelModel, LevelResult, LevelSink};
+use occsim_sim::effects::{effects_of_features, observe, Effects};
+use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult, LevelSink};
 use occsim_sim::{Arch, MachineModel};
 use occsim_traces::golden::{EventSink, FunctionalModel};
 use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
@@ -23,14 +23,23 @@ const FRAMES: u64 = 3;
 /// Timed repetitions of each level; the fastest counts.
 const REPEATS: usize = 5;
 
-/// The stream encoded as a trace, as `occsim trace gen` writes one.
+/// The stream encoded as a trace, as `occsim trace gen` writes a file (the header's
+/// features written back).
 fn encode(events: &[Event]) -> Vec<u8> {
-    let mut bytes = Vec::new();
-    let mut writer =
-        TraceWriter::new(&mut bytes, &TraceHeader::new(WIDTH, HEIGHT)).expect("header");
+    let mut file = std::io::Cursor::new(Vec::new());
+    let mut writer = TraceWriter::new(&mut file, &TraceHeader::new(WIDTH, HEIGHT)).expect("header");
     events.iter().for_each(|event| writer.event(event));
-    writer.finish().expect("trace");
-    bytes
+    writer.finish_seekable().expect("trace");
+    file.into_inner()
+}
+
+/// The effects the automatic choice builds for `trace` on `arch`: from its header, as
+/// `occsim replay` decides for a trace file.
+fn effects_from_header(arch: &Arch, trace: &[u8]) -> Effects {
+    let reader = TraceReader::new(trace).expect("header");
+    effects_of_features(arch, WIDTH, HEIGHT, reader.header().features.as_ref())
+        .expect("arch")
+        .expect("the header has the facts")
 }
 
 /// Decode `trace` into the model of `level`, as `occsim replay` does.
@@ -43,21 +52,15 @@ fn replay(level: Fidelity, arch: &Arch, trace: &[u8], effects: Effects) -> Level
     sink.model.finish(arch).expect("replays")
 }
 
-/// The fastest of `REPEATS` runs, in seconds (the effects scan included where the level
+/// The fastest of `REPEATS` runs, in seconds (the effects choice included where the level
 /// builds effects), and the predicted cycles.
-fn time_level(
-    level: Fidelity,
-    choice: EffectsChoice,
-    arch: &Arch,
-    events: &[Event],
-    trace: &[u8],
-) -> (f64, Option<u64>) {
+fn time_level(level: Fidelity, arch: &Arch, trace: &[u8]) -> (f64, Option<u64>) {
     let mut best = f64::INFINITY;
     let mut cycles = None;
     for _ in 0..REPEATS {
         let start = Instant::now();
         let effects = if level.builds_effects() {
-            choose_effects(choice, arch, WIDTH, HEIGHT, events).expect("scan")
+            effects_from_header(arch, trace)
         } else {
             Effects::every_model_of(arch.machine())
         };
@@ -81,7 +84,7 @@ fn main() {
     for name in ["o2", "ir4"] {
         let arch = Arch::builtin(name).expect("built-in arch");
         println!("{name}:");
-        levels(&arch, &events, &trace, fragments);
+        levels(&arch, &trace, fragments);
         compare_effects(&arch, &events, fragments, "the stream above");
         compare_effects(
             &arch,
@@ -93,7 +96,7 @@ fn main() {
 }
 
 /// Every level's rate on `trace` (the encoded `events`), as a ratio to `cycle`.
-fn levels(arch: &Arch, events: &[Event], trace: &[u8], fragments: f64) {
+fn levels(arch: &Arch, trace: &[u8], fragments: f64) {
     let levels = [
         Fidelity::Functional,
         Fidelity::Analytic,
@@ -105,7 +108,7 @@ fn levels(arch: &Arch, events: &[Event], trace: &[u8], fragments: f64) {
     let timings: Vec<(Fidelity, f64, Option<u64>)> = levels
         .iter()
         .map(|&level| {
-            let (seconds, cycles) = time_level(level, EffectsChoice::Auto, arch, events, trace);
+            let (seconds, cycles) = time_level(level, arch, trace);
             (level, seconds, cycles)
         })
         .collect();
@@ -149,11 +152,16 @@ fn samples_only_without_depth_writes(events: &[Event]) -> Vec<Event> {
 }
 
 fn compare_effects(arch: &Arch, events: &[Event], fragments: f64, name: &str) {
-    // Effects: the replay with every model against the replay with the scanned choice,
-    // interleaved so both see the same machine load, and the scan's own cost.
+    // Effects: the replay with every model against the replay with the automatic choice,
+    // interleaved so both see the same machine load; and what deciding costs: reading a
+    // trace file's header, or scanning the events of a trace without the facts in it.
     let scan_start = Instant::now();
     let chosen = observe(arch, WIDTH, HEIGHT, events).expect("scan");
     let scan = scan_start.elapsed().as_secs_f64();
+    let trace = encode(events);
+    let header_start = Instant::now();
+    assert_eq!(effects_from_header(arch, &trace), chosen, "header = scan");
+    let header = header_start.elapsed().as_secs_f64();
     let (mut all, mut auto) = (f64::INFINITY, f64::INFINITY);
     for _ in 0..REPEATS {
         for (effects, best) in [(Effects::ALL, &mut all), (chosen, &mut auto)] {
@@ -168,11 +176,12 @@ fn compare_effects(arch: &Arch, events: &[Event], fragments: f64, name: &str) {
         }
     }
     println!(
-        "  {name}: effects chosen: {}; cycle with all: {:.1} M fragments/s, with the choice: {:.1} M fragments/s ({:+.1}%), the scan: {:.1} ms ({:.1}% of a replay)",
+        "  {name}: effects chosen: {}; cycle with all: {:.1} M fragments/s, with the choice: {:.1} M fragments/s ({:+.1}%); deciding from the header: {:.0} us, by a scan: {:.1} ms ({:.1}% of a replay)",
         chosen.active_names(),
         fragments / all / 1e6,
         fragments / auto / 1e6,
         100.0 * (all - auto) / all,
+        header * 1e6,
         scan * 1e3,
         100.0 * scan / all
     );

@@ -1,5 +1,9 @@
 //! Only the effects a scene calls for: which of the cycle model's effect models a trace can
-//! observe, decided from a scan of its events before the replay.
+//! observe, decided before the replay from three facts about the trace ([`TraceFacts`]):
+//! whether a query is verbose, the most tiles a query has, and whether a fragment can write
+//! depth. A trace file's header records them (`occsim trace gen` writes them back when it
+//! finishes), so deciding costs nothing; a trace without them (streamed to a pipe, or
+//! written by an older version) is scanned first.
 //!
 //! An effect is switched off only when a rule proves that its model cannot change any
 //! result, any cycle, or any statistic of the report on this trace; everything else stays on.
@@ -27,6 +31,7 @@
 
 use crate::arch::{Arch, IrArch, Machine, O2Arch};
 use crate::error::SimError;
+use occsim_traces::trace::TraceFeatures;
 use occsim_traces::{Event, QueryMode};
 use serde::Serialize;
 
@@ -123,69 +128,122 @@ impl std::str::FromStr for EffectsChoice {
     }
 }
 
-/// Scans an event stream for the effects it can observe. Cheap: a few flag tests per
-/// fragment, no depth buffer.
-pub struct EffectScan {
+/// What the rules need to know of a trace: from a scan of its events ([`EffectScan`]) or,
+/// without reading them, from its header ([`TraceFacts::from_features`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TraceFacts {
+    /// Some query is verbose.
+    pub verbose: bool,
+    /// The most tiles any query has.
+    pub max_query_tiles: u64,
+    /// Some fragment arrives with the depth test and depth writes on and no brief or verbose
+    /// query open.
+    pub depth_writes: bool,
+}
+
+impl TraceFacts {
+    /// The facts a trace header's features record (None for traces written before they
+    /// recorded all of them: scan those).
+    pub fn from_features(features: &TraceFeatures) -> Option<TraceFacts> {
+        Some(TraceFacts {
+            verbose: features.verbose,
+            max_query_tiles: features.max_query_tiles?,
+            depth_writes: features.depth_writes?,
+        })
+    }
+}
+
+/// The rules of the module docs for one machine on one viewport.
+#[derive(Clone, Copy, Debug)]
+pub struct EffectRules {
     engines: usize,
     all_tiles_one_cycle: bool,
-    depth_test: bool,
-    depth_mask: bool,
-    /// An occlusion-render-mode query (no depth writes) is open.
-    occlusion_mode_open: bool,
-    found: Effects,
+    /// The viewport lies inside one framebuffer tile (page).
     one_page: bool,
     /// The models the machine has at all.
     models: Effects,
 }
 
+impl EffectRules {
+    /// The rules for the O2 machine `arch` on a `width` x `height` viewport.
+    pub fn o2(arch: &O2Arch, width: u32, height: u32) -> EffectRules {
+        EffectRules {
+            engines: arch.engines,
+            all_tiles_one_cycle: arch.all_tiles_one_cycle,
+            one_page: width <= arch.framebuffer_tile_width_pixels
+                && height <= arch.framebuffer_tile_height_pixels,
+            models: Effects::ALL,
+        }
+    }
+
+    /// The rules for the InfiniteReality-like machine `arch`.
+    pub fn ir(arch: &IrArch) -> EffectRules {
+        EffectRules {
+            engines: arch.engines,
+            all_tiles_one_cycle: arch.all_tiles_one_cycle,
+            one_page: false,
+            models: Effects::every_model_of(Machine::Ir),
+        }
+    }
+
+    /// The rules for whichever machine `arch` describes, on a `width` x `height` viewport.
+    pub fn for_arch(arch: &Arch, width: u32, height: u32) -> Result<EffectRules, SimError> {
+        Ok(match arch.machine() {
+            Machine::O2 => EffectRules::o2(&arch.o2()?, width, height),
+            Machine::Ir => EffectRules::ir(&arch.ir()?),
+        })
+    }
+
+    /// The effects a trace with these facts can observe.
+    pub fn effects(&self, facts: TraceFacts) -> Effects {
+        Effects {
+            verbose_hit_writes: facts.verbose,
+            multi_tile_serialisation: !self.all_tiles_one_cycle
+                && facts.max_query_tiles > self.engines as u64,
+            depth_write_traffic: facts.depth_writes,
+            page_model: !self.one_page,
+        }
+        .and(self.models)
+    }
+}
+
+/// Scans an event stream for the facts the rules need. Cheap: a few flag tests per
+/// fragment, no depth buffer.
+pub struct EffectScan {
+    rules: EffectRules,
+    depth_test: bool,
+    depth_mask: bool,
+    /// An occlusion-render-mode query (no depth writes) is open.
+    occlusion_mode_open: bool,
+    facts: TraceFacts,
+}
+
 impl EffectScan {
     /// A scan for the O2 machine `arch` on a `width` x `height` viewport.
     pub fn new(arch: &O2Arch, width: u32, height: u32) -> EffectScan {
-        let one_page = width <= arch.framebuffer_tile_width_pixels
-            && height <= arch.framebuffer_tile_height_pixels;
-        EffectScan::with(
-            arch.engines,
-            arch.all_tiles_one_cycle,
-            one_page,
-            Effects::ALL,
-        )
+        EffectScan::with(EffectRules::o2(arch, width, height))
     }
 
     /// A scan for the InfiniteReality-like machine `arch`.
     pub fn for_ir(arch: &IrArch) -> EffectScan {
-        let models = Effects::every_model_of(Machine::Ir);
-        EffectScan::with(arch.engines, arch.all_tiles_one_cycle, false, models)
-    }
-
-    fn with(
-        engines: usize,
-        all_tiles_one_cycle: bool,
-        one_page: bool,
-        models: Effects,
-    ) -> EffectScan {
-        EffectScan {
-            engines,
-            all_tiles_one_cycle,
-            depth_test: true,
-            depth_mask: true,
-            occlusion_mode_open: false,
-            found: Effects {
-                verbose_hit_writes: false,
-                multi_tile_serialisation: false,
-                depth_write_traffic: false,
-                page_model: false,
-            },
-            one_page,
-            models,
-        }
+        EffectScan::with(EffectRules::ir(arch))
     }
 
     /// A scan for whichever machine `arch` describes, on a `width` x `height` viewport.
     pub fn for_arch(arch: &Arch, width: u32, height: u32) -> Result<EffectScan, SimError> {
-        Ok(match arch.machine() {
-            Machine::O2 => EffectScan::new(&arch.o2()?, width, height),
-            Machine::Ir => EffectScan::for_ir(&arch.ir()?),
-        })
+        Ok(EffectScan::with(EffectRules::for_arch(
+            arch, width, height,
+        )?))
+    }
+
+    fn with(rules: EffectRules) -> EffectScan {
+        EffectScan {
+            rules,
+            depth_test: true,
+            depth_mask: true,
+            occlusion_mode_open: false,
+            facts: TraceFacts::default(),
+        }
     }
 
     /// Scan one event.
@@ -193,33 +251,47 @@ impl EffectScan {
     pub fn event(&mut self, event: &Event) {
         match event {
             Event::Fragment(_) => {
-                self.found.depth_write_traffic |=
+                self.facts.depth_writes |=
                     self.depth_test && self.depth_mask && !self.occlusion_mode_open;
             }
             Event::DepthTest(on) => self.depth_test = *on,
             Event::DepthMask(on) => self.depth_mask = *on,
             Event::QueryBegin(spec) => {
                 self.occlusion_mode_open = spec.mode.is_occlusion_render_mode();
-                if spec.mode == QueryMode::Verbose {
-                    self.found.verbose_hit_writes = true;
-                }
-                if spec.tiles.len() > self.engines && !self.all_tiles_one_cycle {
-                    self.found.multi_tile_serialisation = true;
-                }
+                self.facts.verbose |= spec.mode == QueryMode::Verbose;
+                self.facts.max_query_tiles =
+                    self.facts.max_query_tiles.max(spec.tiles.len() as u64);
             }
             Event::QueryEnd => self.occlusion_mode_open = false,
             _ => {}
         }
     }
 
+    /// The facts found so far.
+    pub fn facts(&self) -> TraceFacts {
+        self.facts
+    }
+
     /// The effects the scanned stream can observe.
     pub fn finish(&self) -> Effects {
-        Effects {
-            page_model: !self.one_page,
-            ..self.found
-        }
-        .and(self.models)
+        self.rules.effects(self.facts)
     }
+}
+
+/// The effects a trace can observe on `arch`, from its header's features alone (None when
+/// the header lacks them: a trace streamed to a pipe, or written by an older version).
+pub fn effects_of_features(
+    arch: &Arch,
+    width: u32,
+    height: u32,
+    features: Option<&TraceFeatures>,
+) -> Result<Option<Effects>, SimError> {
+    let Some(facts) = features.and_then(TraceFacts::from_features) else {
+        return Ok(None);
+    };
+    Ok(Some(
+        EffectRules::for_arch(arch, width, height)?.effects(facts),
+    ))
 }
 
 /// The effects of `events` on the machine `arch` describes (a scan of the whole stream).

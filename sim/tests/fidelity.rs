@@ -1,12 +1,15 @@
 //! The fidelity ladder and the effects choice on built-in scenes and random streams:
 //! exact results at every level, finite predictions, and `--effects all` = automatic.
 
-use occsim_sim::effects::{observe, Effects, EffectsChoice};
+use occsim_sim::effects::{
+    effects_of_features, observe, EffectScan, Effects, EffectsChoice, TraceFacts,
+};
 use occsim_sim::fidelity::{run_level, Fidelity};
 use occsim_sim::{Arch, MachineModel, Report};
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
-use occsim_traces::golden::{FunctionalModel, GoldenModel};
+use occsim_traces::golden::{EventSink, FunctionalModel, GoldenModel};
 use occsim_traces::scene::{parse_scene, Command};
+use occsim_traces::trace::{TraceFeatures, TraceHeader, TraceReader, TraceWriter};
 use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QuerySpec, Rect};
 use proptest::prelude::*;
 
@@ -492,5 +495,52 @@ proptest! {
                 .unwrap();
         prop_assert_eq!(every_window.total_cycles, cycle.total_cycles);
         prop_assert_eq!(every_window.queries, cycle.queries);
+    }
+}
+
+/// `events` written as a trace file would be (the header's features written back), and the
+/// header's features read back.
+fn header_features(events: &[Event], width: u32, height: u32) -> TraceFeatures {
+    let mut file = std::io::Cursor::new(Vec::new());
+    let mut writer = TraceWriter::new(&mut file, &TraceHeader::new(width, height)).unwrap();
+    events.iter().for_each(|event| writer.event(event));
+    writer.finish_seekable().unwrap();
+    let reader = TraceReader::new(&file.get_ref()[..]).unwrap();
+    reader.header().features.clone().expect("written back")
+}
+
+#[test]
+fn the_header_decides_the_effects_as_the_scan_does() {
+    for (name, (events, width, height)) in builtin_traces() {
+        let features = header_features(&events, width, height);
+        for arch in archs() {
+            let scanned = observe(&arch, width, height, &events).unwrap();
+            let from_header = effects_of_features(&arch, width, height, Some(&features))
+                .unwrap()
+                .expect("the header has the facts");
+            assert_eq!(from_header, scanned, "{name} on {}", arch.machine().name());
+        }
+    }
+    // Without the facts (an older trace), the header decides nothing: scan.
+    let older = TraceFeatures::default();
+    let arch = Arch::builtin("o2").unwrap();
+    assert_eq!(
+        effects_of_features(&arch, 64, 64, Some(&older)).unwrap(),
+        None
+    );
+    assert_eq!(effects_of_features(&arch, 64, 64, None).unwrap(), None);
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    #[test]
+    fn header_facts_equal_scanned_facts_on_random_streams(seed in any::<u64>()) {
+        let events = random_stream(seed, 100, 90);
+        let features = header_features(&events, 100, 90);
+        let arch = Arch::builtin("o2").unwrap();
+        let mut scan = EffectScan::for_arch(&arch, 100, 90).unwrap();
+        events.iter().for_each(|event| scan.event(event));
+        prop_assert_eq!(TraceFacts::from_features(&features), Some(scan.facts()));
     }
 }

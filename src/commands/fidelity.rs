@@ -8,7 +8,7 @@
 use super::arch::ArchSelection;
 use crate::plot::{LineChart, Scale, Series};
 use anyhow::Context;
-use occsim_sim::effects::{EffectScan, Effects, EffectsChoice};
+use occsim_sim::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
 use occsim_sim::fidelity::{Fidelity, LevelResult};
 use occsim_sim::Arch;
 use occsim_traces::golden::EventSink;
@@ -73,9 +73,10 @@ impl EventSink for ScanSink {
 }
 
 /// The effects to build for the trace at `path` (a first pass over it when `auto`).
-/// The effects `level` builds for the trace at `path`: the scan's choice at the levels that
-/// build effects ([`Fidelity::builds_effects`]), every model otherwise and on a retiled trace
-/// (its queries are not those the scan would see).
+/// The effects `level` builds for the trace at `path`: at the levels that build effects
+/// ([`Fidelity::builds_effects`]) those its header's features show it can observe (or, when
+/// the header lacks them, a scan of its events); every model otherwise and on a retiled trace
+/// (its queries are not those the trace holds).
 pub fn effects_of_trace(
     level: Fidelity,
     choice: EffectsChoice,
@@ -87,7 +88,11 @@ pub fn effects_of_trace(
         return Ok(Effects::every_model_of(arch.machine()));
     }
     let mut reader = open_trace(path)?;
-    let (width, height) = (reader.header().width, reader.header().height);
+    let header = reader.header();
+    let (width, height) = (header.width, header.height);
+    if let Some(effects) = effects_of_features(arch, width, height, header.features.as_ref())? {
+        return Ok(effects);
+    }
     let mut scan = ScanSink(EffectScan::for_arch(arch, width, height)?);
     reader
         .read_into(&mut scan)

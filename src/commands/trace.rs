@@ -156,6 +156,7 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
         (f.clears, "clears"),
         (f.depth_writes_off, "depth-writes-off"),
         (f.depth_test_off, "depth-test-off"),
+        (f.depth_writes == Some(true), "depth-writes"),
         (f.verbose, "verbose"),
         (f.query_results, "golden-results"),
     ]
@@ -187,6 +188,9 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
     outln!("modes       {}", modes.join(", "));
     outln!("depth funcs {}", funcs.join(", "));
     outln!("features    {}", flags.join(", "));
+    if let Some(tiles) = f.max_query_tiles {
+        outln!("max tiles   {tiles} in one query");
+    }
     outln!(
         "bytes       {bytes} in {} blocks ({} before compression), {bytes_per_fragment:.3} bytes/fragment",
         summary.blocks, summary.payload_bytes

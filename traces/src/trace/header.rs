@@ -90,6 +90,14 @@ pub struct TraceFeatures {
     pub verbose: bool,
     /// The trace stores the golden model's query results.
     pub query_results: bool,
+    /// The most tiles any query has (None in traces written before it was recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_query_tiles: Option<u64>,
+    /// Some fragment arrives with the depth test and depth writes on and no brief or verbose
+    /// query open, so the trace can write depth (None in traces written before it was
+    /// recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_writes: Option<bool>,
 }
 
 /// Queries begun, per mode.
@@ -154,6 +162,13 @@ pub(crate) struct StreamTally {
     /// Bit `code` set when that query mode / depth function was seen.
     mode_bits: u8,
     func_bits: u8,
+    /// The render state fragments arrive in, for `depth_writes`: depth test and depth
+    /// writes on, and a brief or verbose query (which never writes depth) open.
+    depth_test: bool,
+    depth_mask: bool,
+    occlusion_mode_open: bool,
+    depth_writes: bool,
+    max_query_tiles: u64,
 }
 
 impl StreamTally {
@@ -166,7 +181,18 @@ impl StreamTally {
             summary: TraceSummary::default(),
             mode_bits: 0,
             func_bits: 0,
+            depth_test: true,
+            depth_mask: true,
+            occlusion_mode_open: false,
+            depth_writes: false,
+            max_query_tiles: 0,
         }
+    }
+
+    /// Fragments arrive (`count` > 0) in the current render state.
+    #[inline(always)]
+    fn fragments_arrive(&mut self) {
+        self.depth_writes |= self.depth_test && self.depth_mask && !self.occlusion_mode_open;
     }
 
     /// Account `count` fragments already checked to lie inside the viewport.
@@ -174,6 +200,9 @@ impl StreamTally {
     pub(crate) fn checked_fragments(&mut self, count: u64) {
         self.summary.fragments += count;
         self.summary.events += count;
+        if count > 0 {
+            self.fragments_arrive();
+        }
     }
 
     /// Check and account one event. The error says what is wrong with it.
@@ -191,12 +220,19 @@ impl StreamTally {
                     ));
                 }
                 self.summary.fragments += 1;
+                self.fragments_arrive();
             }
             Event::Primitive => self.summary.primitives += 1,
             Event::Clear => features.clears = true,
             Event::DepthFunc(f) => self.func_bits |= 1 << f.code(),
-            Event::DepthMask(on) => features.depth_writes_off |= !on,
-            Event::DepthTest(on) => features.depth_test_off |= !on,
+            Event::DepthMask(on) => {
+                features.depth_writes_off |= !on;
+                self.depth_mask = *on;
+            }
+            Event::DepthTest(on) => {
+                features.depth_test_off |= !on;
+                self.depth_test = *on;
+            }
             Event::Cull(on) => features.culling |= on,
             Event::Scissor(rect) => features.scissor |= rect.is_some(),
             Event::QueryBegin(spec) => {
@@ -231,9 +267,14 @@ impl StreamTally {
                 self.summary.queries += 1;
                 self.summary.queries_by_mode.count(spec.mode);
                 self.mode_bits |= 1 << spec.mode.code();
+                self.occlusion_mode_open = spec.mode.is_occlusion_render_mode();
+                self.max_query_tiles = self.max_query_tiles.max(spec.tiles.len() as u64);
             }
             Event::QueryEnd => match self.open.take() {
-                Some(open) => self.awaiting_result = Some(open),
+                Some(open) => {
+                    self.awaiting_result = Some(open);
+                    self.occlusion_mode_open = false;
+                }
                 None => return Err("query end without begin".to_owned()),
             },
             Event::QueryResult(result) => {
@@ -299,6 +340,8 @@ impl StreamTally {
             .collect();
         summary.features.verbose = self.mode_bits & (1 << QueryMode::Verbose.code()) != 0;
         summary.features.query_results = summary.query_results > 0;
+        summary.features.max_query_tiles = Some(self.max_query_tiles);
+        summary.features.depth_writes = Some(self.depth_writes);
         summary
     }
 }

@@ -299,6 +299,13 @@ impl<R: Read> TraceReader<R> {
             }
             self.tally.summary()
         };
+        // Traces written before these features were recorded do not have them.
+        if stored.features.max_query_tiles.is_none() {
+            found.features.max_query_tiles = None;
+        }
+        if stored.features.depth_writes.is_none() {
+            found.features.depth_writes = None;
+        }
         found.blocks = self.blocks;
         found.payload_bytes = self.payload_bytes;
         found.stored_bytes = self.stored_bytes;
