@@ -5,7 +5,7 @@ use crate::event::{Event, Fragment, Span, DEPTH_ONE};
 use crate::query::{verbose_hits_kept, QueryMode, QueryResult, QuerySpec, TileResult};
 use crate::raster::{rasterize_triangle, RasterSink};
 use crate::scene::Command;
-use crate::state::{DepthFunc, RenderState};
+use crate::state::{DepthFunc, Rect, RenderState};
 
 /// The depth buffer: 24-bit depths, one per pixel, row by row from the bottom.
 #[derive(Clone)]
@@ -158,27 +158,37 @@ impl TileIndex {
         let shift = 5;
         let columns = (state.width as usize).div_ceil(1 << shift);
         let rows = (state.height as usize).div_ceil(1 << shift);
-        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); columns * rows];
-        let mut total = 0u64;
-        for (index, tile) in spec.tiles.iter().enumerate() {
+        // The buckets each tile overlaps (clamped to the grid), in tile order.
+        let cells = |tile: &Rect| {
             let (c0, c1) = (tile.x >> shift, (tile.x + tile.width - 1) >> shift);
             let (r0, r1) = (tile.y >> shift, (tile.y + tile.height - 1) >> shift);
-            total += (c1 - c0 + 1) as u64 * (r1 - r0 + 1) as u64;
+            let (c1, r1) = (c1.min(columns as u32 - 1), r1.min(rows as u32 - 1));
+            (r0..=r1).flat_map(move |r| (c0..=c1).map(move |c| r as usize * columns + c as usize))
+        };
+        // Counting sort: count each bucket's tiles, then place them, so building costs two
+        // allocations however many buckets and tiles there are.
+        let mut total = 0u64;
+        let mut counts = vec![0u32; columns * rows + 1];
+        for tile in &spec.tiles {
+            for cell in cells(tile) {
+                counts[cell + 1] += 1;
+                total += 1;
+            }
             if total > MAX_INDEX_ENTRIES {
                 return None;
             }
-            for r in r0..=r1 {
-                for c in c0..=c1 {
-                    lists[r as usize * columns + c as usize].push(index as u32);
-                }
-            }
         }
-        let mut buckets = Vec::with_capacity(lists.len());
-        let mut entries = Vec::with_capacity(total as usize);
-        for list in lists {
-            let start = entries.len() as u32;
-            entries.extend(list);
-            buckets.push((start, entries.len() as u32));
+        for cell in 1..counts.len() {
+            counts[cell] += counts[cell - 1];
+        }
+        let buckets: Vec<(u32, u32)> = counts.windows(2).map(|w| (w[0], w[1])).collect();
+        let mut entries = vec![0u32; total as usize];
+        let mut next = counts;
+        for (index, tile) in spec.tiles.iter().enumerate() {
+            for cell in cells(tile) {
+                entries[next[cell] as usize] = index as u32;
+                next[cell] += 1;
+            }
         }
         Some(TileIndex {
             shift,
