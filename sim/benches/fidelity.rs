@@ -20,8 +20,11 @@ mod stream;
 use stream::{frame, HEIGHT, WIDTH};
 
 const FRAMES: u64 = 3;
-/// Timed repetitions of each level; the fastest counts.
+/// Timed repetitions of each level (at least); the fastest counts.
 const REPEATS: usize = 5;
+/// A level is repeated until its runs add up to this many seconds, so the fast levels'
+/// few-millisecond runs are timed as often as the slow levels' long ones are long.
+const MIN_SECONDS: f64 = 1.0;
 
 /// The stream encoded as a trace, as `occsim trace gen` writes a file (the header's
 /// features written back).
@@ -52,12 +55,14 @@ fn replay(level: Fidelity, arch: &Arch, trace: &[u8], effects: Effects) -> Level
     sink.model.finish(arch).expect("replays")
 }
 
-/// The fastest of `REPEATS` runs, in seconds (the effects choice included where the level
+/// The fastest of at least `REPEATS` runs and `MIN_SECONDS`, in seconds (the effects choice included where the level
 /// builds effects), and the predicted cycles.
 fn time_level(level: Fidelity, arch: &Arch, trace: &[u8]) -> (f64, Option<u64>) {
     let mut best = f64::INFINITY;
     let mut cycles = None;
-    for _ in 0..REPEATS {
+    let (mut runs, mut spent) = (0, 0.0);
+    while runs < REPEATS || spent < MIN_SECONDS {
+        runs += 1;
         let start = Instant::now();
         let effects = if level.builds_effects() {
             effects_from_header(arch, trace)
@@ -65,7 +70,9 @@ fn time_level(level: Fidelity, arch: &Arch, trace: &[u8]) -> (f64, Option<u64>) 
             Effects::every_model_of(arch.machine())
         };
         let result = replay(level, arch, trace, effects);
-        best = best.min(start.elapsed().as_secs_f64());
+        let seconds = start.elapsed().as_secs_f64();
+        best = best.min(seconds);
+        spent += seconds;
         cycles = result.total_cycles;
     }
     (best, cycles)

@@ -220,20 +220,22 @@ fn record_in_tile(result: &mut TileResult, fragment: Fragment, passed: bool, hit
 #[inline]
 fn record_run(result: &mut TileResult, run: Span, passed: &[bool], hit_room: usize) {
     result.phc += run.depths.len() as u64;
-    let (mut count, mut first, mut last) = (0u64, usize::MAX, 0);
-    let (mut zmin, mut zmax) = (u32::MAX, 0);
-    for (i, (&z, &pass)) in run.depths.iter().zip(passed).enumerate() {
-        if pass {
-            count += 1;
-            first = first.min(i);
-            last = i;
-            zmin = zmin.min(z);
-            zmax = zmax.max(z);
-        }
-    }
+    // Whole-run reductions without branches per fragment (they vectorise).
+    let count = passed.iter().map(|&pass| pass as u64).sum::<u64>();
     if count == 0 {
         return;
     }
+    let first = passed.iter().position(|&pass| pass).unwrap_or(0);
+    let last = passed.iter().rposition(|&pass| pass).unwrap_or(0);
+    let passing = || run.depths.iter().zip(passed);
+    let zmin = passing()
+        .map(|(&z, &pass)| if pass { z } else { u32::MAX })
+        .min()
+        .unwrap_or(u32::MAX);
+    let zmax = passing()
+        .map(|(&z, &pass)| if pass { z } else { 0 })
+        .max()
+        .unwrap_or(0);
     result.nohc += count;
     let (x, y) = (run.x as u32, run.y as u32);
     result.xmin = result.xmin.min(x + first as u32);
