@@ -274,17 +274,22 @@ fn one_window_sampled_at_every_level_of_k_equals_cycle() {
     }
 }
 
-#[test]
-fn analytic_reaches_the_minimum_latency_on_an_idle_pipe() {
-    // One samples query over no fragments: the records (8 words) fit one port cycle.
-    let arch = Arch::builtin("o2").unwrap();
+/// One samples query over no fragments, on a 16x16 viewport.
+fn one_empty_query() -> [Event; 2] {
     let spec = QuerySpec {
         id: 1,
         mode: QueryMode::Samples,
         buffer_entries: 8,
         tiles: vec![Rect::new(0, 0, 16, 16)],
     };
-    let events = [Event::QueryBegin(spec), Event::QueryEnd];
+    [Event::QueryBegin(spec), Event::QueryEnd]
+}
+
+#[test]
+fn analytic_reaches_the_minimum_latency_on_an_idle_pipe() {
+    // One samples query over no fragments: the records (8 words) fit one port cycle.
+    let arch = Arch::builtin("o2").unwrap();
+    let events = one_empty_query();
     let analytic = run_level(
         Fidelity::Analytic,
         &arch,
@@ -305,13 +310,7 @@ fn analytic_reaches_the_minimum_latency_on_an_idle_ir() {
     // the end token; the local tree over 80 Image Engines is ceil(log2 80) = 7 hops of 2
     // cycles, the global tree over 4 boards 2 hops of 8: 3 + 14 + 16 = 33.
     let arch = Arch::builtin("ir4").unwrap();
-    let spec = QuerySpec {
-        id: 1,
-        mode: QueryMode::Samples,
-        buffer_entries: 8,
-        tiles: vec![Rect::new(0, 0, 16, 16)],
-    };
-    let events = [Event::QueryBegin(spec), Event::QueryEnd];
+    let events = one_empty_query();
     for level in [Fidelity::Analytic, Fidelity::Cycle] {
         let result = run_level(level, &arch, 16, 16, EffectsChoice::Auto, &events).unwrap();
         assert_eq!(result.queries[0].latency_cycles, Some(33), "{level}");

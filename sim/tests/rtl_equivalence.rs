@@ -75,8 +75,8 @@ fn hardcases_scene_is_identical() {
     }
 }
 
-#[test]
-fn small_demo_is_identical() {
+/// Two frames of the demo at 160x120: its viewport and events.
+fn small_demo() -> (u32, u32, Vec<Event>) {
     let text = demo_scene(&DemoOptions {
         width: 160,
         height: 120,
@@ -84,7 +84,12 @@ fn small_demo_is_identical() {
         lots_per_side: 6,
         ..DemoOptions::default()
     });
-    let (width, height, events) = scene_events(&text);
+    scene_events(&text)
+}
+
+#[test]
+fn small_demo_is_identical() {
+    let (width, height, events) = small_demo();
     let report = check_equivalent(&arch(&[]), width, height, &events);
     assert!(report.summary.fragments > 1000);
     check_equivalent(
@@ -470,14 +475,7 @@ fn ir_hardcases_scene_is_identical() {
 
 #[test]
 fn ir_small_demo_is_identical() {
-    let text = demo_scene(&DemoOptions {
-        width: 160,
-        height: 120,
-        frames: 2,
-        lots_per_side: 6,
-        ..DemoOptions::default()
-    });
-    let (width, height, events) = scene_events(&text);
+    let (width, height, events) = small_demo();
     for arch in ir_variants(&["engines=2"]) {
         let report = ir_check_equivalent(&arch, width, height, &events);
         assert!(report.summary.fragments > 1000);
