@@ -45,8 +45,9 @@ pub enum Fidelity {
 
 impl Fidelity {
     /// Whether the level builds effect models ([`crate::effects`]): the cycle model and the
-    /// sampled level's machines do, from the scan's choice; `rtl` builds every model (it has
-    /// no shortcuts); functional and analytic have none. Only the first two need the scan.
+    /// sampled level's machines build those the trace's facts (header or scan) call for;
+    /// `rtl` builds every model (it has no shortcuts); functional and analytic have none.
+    /// Only the first two need the facts.
     pub fn builds_effects(self) -> bool {
         matches!(self, Fidelity::Sampled { .. } | Fidelity::Cycle)
     }
@@ -571,7 +572,7 @@ pub fn run_level(
     let effects = if level.builds_effects() {
         choose_effects(choice, arch, width, height, events)?
     } else {
-        Effects::ALL
+        Effects::every_model_of(arch.machine())
     };
     let mut model = LevelModel::new(level, arch, width, height, effects)?;
     for event in events {

@@ -245,14 +245,16 @@ impl SampledModel {
         }
         if let Some(result) = self.core.event(event)? {
             self.latencies.push(None);
-            if let Some(spec) = self.open.take() {
+            // The core ended a query, so it began here: `open` holds it.
+            let predicted = self.open.take().map_or(0, |spec| {
                 let end = self
                     .formulas
                     .end_query(&spec, &result, self.predicted_cycles);
                 self.predicted_cycles += end.cycles;
                 self.window.work = end.cycles.ceil() as u64;
-                self.predicted_latencies.push(end.latency.ceil() as u64);
-            }
+                end.latency.ceil() as u64
+            });
+            self.predicted_latencies.push(predicted);
         }
         Ok(())
     }

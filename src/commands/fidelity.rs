@@ -72,7 +72,6 @@ impl EventSink for ScanSink {
     }
 }
 
-/// The effects to build for the trace at `path` (a first pass over it when `auto`).
 /// The effects `level` builds for the trace at `path`: at the levels that build effects
 /// ([`Fidelity::builds_effects`]) those its header's features show it can observe (or, when
 /// the header lacks them, a scan of its events); every model otherwise and on a retiled trace

@@ -67,9 +67,7 @@ impl DepthBuffer {
         }
         passed
     }
-}
 
-impl DepthBuffer {
     /// The depth test and write of a span inside the buffer under `state`: `passed[i]` says
     /// whether fragment `i` passed. Its pixels are distinct, so testing them all before
     /// writing any gives what testing them one by one gives.
@@ -88,18 +86,19 @@ impl DepthBuffer {
         }
         let start = span.y as usize * self.width as usize + span.x as usize;
         let row = &mut self.depths[start..start + span.depths.len()];
-        // One loop per function, so the comparison is not a jump per fragment.
+        // One loop per function (each a constant in its arm), so the comparison is not a
+        // jump per fragment.
         let (depths, row_now) = (span.depths, &*row);
-        match state.depth_func {
-            DepthFunc::Never => compare(depths, row_now, passed, |_, _| false),
-            DepthFunc::Less => compare(depths, row_now, passed, |z, s| z < s),
-            DepthFunc::Equal => compare(depths, row_now, passed, |z, s| z == s),
-            DepthFunc::Lequal => compare(depths, row_now, passed, |z, s| z <= s),
-            DepthFunc::Greater => compare(depths, row_now, passed, |z, s| z > s),
-            DepthFunc::Notequal => compare(depths, row_now, passed, |z, s| z != s),
-            DepthFunc::Gequal => compare(depths, row_now, passed, |z, s| z >= s),
-            DepthFunc::Always => compare(depths, row_now, passed, |_, _| true),
+        macro_rules! compare_with {
+            ($($func:ident),*) => {
+                match state.depth_func {
+                    $(DepthFunc::$func => {
+                        compare(depths, row_now, passed, |z, s| DepthFunc::$func.passes(z, s))
+                    })*
+                }
+            };
         }
+        compare_with!(Never, Less, Equal, Lequal, Greater, Notequal, Gequal, Always);
         if state.depth_mask && writes_allowed {
             for ((stored, &z), &pass) in row.iter_mut().zip(span.depths).zip(passed.iter()) {
                 if pass {
