@@ -44,7 +44,6 @@ pub struct ImageEngine {
 }
 
 impl ImageEngine {
-    /// An Image Engine whose Occlusion Unit is modelled as `occu` says.
     /// An Image Engine whose OccU is modelled as `occu` says; `verbose_hit_writes` is the
     /// effect hook ([`crate::effects`]): off, no query is verbose and OccU Control's hit path
     /// is skipped.
