@@ -3,7 +3,8 @@
 //! discards it, so disk speed is not measured; the bytes are counted), on a synthetic
 //! stream of about 1.5 M fragments (the replay benchmark's frame, three times); then the
 //! InfiniteReality-like `ir4` (320 Image Engines, each unit the RTL) at `cycle` and `rtl`.
-//! Prints fragments per second (on-CPU where Linux tells) and the ratios.
+//! Prints fragments per second (on-CPU where Linux tells; the fastest of three runs) and the
+//! ratios.
 //!
 //! Run: `cargo bench -p occsim-sim --bench rtl`
 
@@ -20,6 +21,9 @@ mod stream;
 use stream::{frame, thread_cpu_ns, HEIGHT, WIDTH};
 
 const FRAMES: usize = 3;
+/// Runs of each configuration; the fastest counts (single runs on a shared machine vary by
+/// a third).
+const REPEATS: usize = 3;
 
 /// A sink that counts the bytes it is given.
 struct Counting(Arc<AtomicU64>);
@@ -34,7 +38,24 @@ impl Write for Counting {
     }
 }
 
-/// Replay the stream; returns (fragments per on-CPU second, cycles, report).
+/// The fastest of `REPEATS` replays, each with the OccU model `occu()` makes: (fragments
+/// per on-CPU second, report).
+fn fastest(
+    arch: &Arch,
+    frame: &[Event],
+    occu: impl Fn() -> OccuModel,
+) -> (f64, occsim_sim::Report) {
+    let mut best = run(arch, frame, occu());
+    for _ in 1..REPEATS {
+        let next = run(arch, frame, occu());
+        if next.0 > best.0 {
+            best = next;
+        }
+    }
+    best
+}
+
+/// Replay the stream; returns (fragments per on-CPU second, report).
 fn run(arch: &Arch, frame: &[Event], occu: OccuModel) -> (f64, occsim_sim::Report) {
     let mut machine = MachineModel::with_occu_model(arch, WIDTH, HEIGHT, occu).expect("machine");
     let start = Instant::now();
@@ -72,19 +93,23 @@ fn main() {
     for engines in [1, 4, 16] {
         let mut arch = Arch::builtin("o2").expect("built-in o2");
         arch.set(&format!("engines={engines}")).expect("engines");
-        let (cycle, cycle_report) = run(&arch, &frame, OccuModel::Cycle);
-        let (rtl, rtl_report) = run(&arch, &frame, OccuModel::Rtl { waveform: None });
+        let (cycle, cycle_report) = fastest(&arch, &frame, || OccuModel::Cycle);
+        let (rtl, rtl_report) = fastest(&arch, &frame, || OccuModel::Rtl { waveform: None });
         assert_eq!(cycle_report, rtl_report, "rtl and cycle reports differ");
         let bytes = Arc::new(AtomicU64::new(0));
-        let out = Box::new(std::io::BufWriter::with_capacity(
-            1 << 20,
-            Counting(bytes.clone()),
-        ));
-        let waveform = Some(WaveformOptions {
-            out,
-            window: 0..u64::MAX,
+        let (vcd, _) = fastest(&arch, &frame, || {
+            bytes.store(0, Ordering::Relaxed);
+            let out = Box::new(std::io::BufWriter::with_capacity(
+                1 << 20,
+                Counting(bytes.clone()),
+            ));
+            OccuModel::Rtl {
+                waveform: Some(WaveformOptions {
+                    out,
+                    window: 0..u64::MAX,
+                }),
+            }
         });
-        let (vcd, _) = run(&arch, &frame, OccuModel::Rtl { waveform });
         println!(
             "engines {engines:>2}: cycle {:.2} M fragments/s, rtl {:.2} M/s ({:.1}x slower), rtl+vcd {:.2} M/s ({:.1}x slower than rtl; {} MB of VCD over {} cycles)",
             cycle / 1e6,
@@ -97,8 +122,8 @@ fn main() {
         );
     }
     let arch = Arch::builtin("ir4").expect("built-in ir4");
-    let (cycle, cycle_report) = run(&arch, &frame, OccuModel::Cycle);
-    let (rtl, rtl_report) = run(&arch, &frame, OccuModel::Rtl { waveform: None });
+    let (cycle, cycle_report) = fastest(&arch, &frame, || OccuModel::Cycle);
+    let (rtl, rtl_report) = fastest(&arch, &frame, || OccuModel::Rtl { waveform: None });
     assert_eq!(cycle_report, rtl_report, "ir4 rtl and cycle reports differ");
     println!(
         "ir4 (320 Image Engines): cycle {:.2} M fragments/s, rtl {:.2} M/s ({:.1}x slower) over {} cycles",
