@@ -315,6 +315,18 @@ impl<R: Read> TraceReader<R> {
                 differing_fields(&stored, &found)
             )));
         }
+        // The header's copy of the features (a replay may have trusted it, say to choose its
+        // effect models) must be the trace's too.
+        if self
+            .header
+            .features
+            .as_ref()
+            .is_some_and(|features| *features != stored.features)
+        {
+            return Err(bad(
+                "the header's features disagree with the trace's summary".to_owned(),
+            ));
+        }
         self.summary = Some(stored);
         Ok(())
     }

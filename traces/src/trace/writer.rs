@@ -399,3 +399,44 @@ impl<W: Write> EventSink for TraceWriter<W> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::event::Fragment;
+    use crate::trace::TraceReader;
+
+    #[test]
+    fn a_header_whose_features_lie_is_refused_at_the_end() {
+        let header = TraceHeader::new(8, 8);
+        let mut file = std::io::Cursor::new(Vec::new());
+        let mut writer = TraceWriter::new(&mut file, &header).unwrap();
+        writer.event(&Event::Fragment(Fragment { x: 1, y: 1, z: 5 }));
+        writer.finish_seekable().unwrap();
+        let mut bytes = file.into_inner();
+        let honest = TraceReader::new(&bytes[..]).unwrap().header().clone();
+        assert_eq!(
+            honest.features.as_ref().and_then(|f| f.depth_writes),
+            Some(true),
+            "a fragment with the depth test and writes on"
+        );
+        // The same header saying no fragment can write depth, in the same room, checksummed.
+        let mut lying = honest.clone();
+        lying.features.as_mut().unwrap().depth_writes = Some(false);
+        let json_bytes = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        let mut json = serde_json::to_vec(&lying).unwrap();
+        json.resize(json_bytes, b' ');
+        let patched = header_bytes(&json);
+        bytes[..patched.len()].copy_from_slice(&patched);
+        let mut reader = TraceReader::new(&bytes[..]).unwrap();
+        assert_eq!(
+            reader.header().features.as_ref().unwrap().depth_writes,
+            Some(false)
+        );
+        let error = reader.read_into(&mut crate::golden::Discard).unwrap_err();
+        assert!(
+            error.to_string().contains("header's features disagree"),
+            "{error}"
+        );
+    }
+}
