@@ -23,21 +23,101 @@ use crate::arch::O2Arch;
 use crate::fifo::Fifo;
 use crate::memory_port::{MemoryPort, PortClient};
 
+/// The word and page of a depth pixel in the layout above.
+#[derive(Clone, Debug)]
+pub(crate) struct DepthAddress {
+    tile_width: Divider,
+    tile_height: Divider,
+    tiles_per_row: u64,
+    pixels_per_word: Divider,
+    words_per_tile_row: u64,
+    words_per_tile: u64,
+}
+
+impl DepthAddress {
+    pub(crate) fn new(arch: &O2Arch, viewport_width: u32) -> DepthAddress {
+        let tile_width = arch.framebuffer_tile_width_pixels;
+        let words_per_tile_row = (tile_width / arch.pixels_per_word()) as u64;
+        DepthAddress {
+            tile_width: Divider::new(tile_width),
+            tile_height: Divider::new(arch.framebuffer_tile_height_pixels),
+            tiles_per_row: viewport_width.div_ceil(tile_width) as u64,
+            pixels_per_word: Divider::new(arch.pixels_per_word()),
+            words_per_tile_row,
+            words_per_tile: words_per_tile_row * arch.framebuffer_tile_height_pixels as u64,
+        }
+    }
+
+    /// `(word, page)` of pixel (x, y).
+    #[inline(always)]
+    pub(crate) fn locate(&self, x: u16, y: u16) -> (u64, u64) {
+        let (tile_x, in_tile_x) = self.tile_width.divide(x as u32);
+        let (tile_y, in_tile_y) = self.tile_height.divide(y as u32);
+        let page = tile_y as u64 * self.tiles_per_row + tile_x as u64;
+        (self.word(page, in_tile_x, in_tile_y), page)
+    }
+
+    /// `(word, 0)` of pixel (x, y) of a viewport inside one page (page 0): no tile division.
+    #[inline(always)]
+    pub(crate) fn locate_in_first_page(&self, x: u16, y: u16) -> (u64, u64) {
+        debug_assert_eq!(self.tile_width.divide(x as u32).0, 0);
+        debug_assert_eq!(self.tile_height.divide(y as u32).0, 0);
+        (self.word(0, x as u32, y as u32), 0)
+    }
+
+    #[inline(always)]
+    fn word(&self, page: u64, in_tile_x: u32, in_tile_y: u32) -> u64 {
+        page * self.words_per_tile
+            + in_tile_y as u64 * self.words_per_tile_row
+            + self.pixels_per_word.divide(in_tile_x).0 as u64
+    }
+}
+
+/// What a depth read of a word costs, by the prefetch's rule.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum DepthRead {
+    /// The word of the last read: no new read.
+    SameWord,
+    /// A new word in the page of the last read.
+    PageHit,
+    /// A new word in another page (or the first read).
+    PageMiss,
+}
+
+/// The word and page of the last depth read: decides [`DepthRead`].
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct LastRead {
+    word: Option<u64>,
+    page: Option<u64>,
+}
+
+impl LastRead {
+    /// Read `word` of `page`: what it costs (a new read becomes the last one).
+    #[inline(always)]
+    pub(crate) fn read(&mut self, word: u64, page: u64) -> DepthRead {
+        if self.word == Some(word) {
+            return DepthRead::SameWord;
+        }
+        let same_page = self.page == Some(page);
+        self.word = Some(word);
+        self.page = Some(page);
+        if same_page {
+            DepthRead::PageHit
+        } else {
+            DepthRead::PageMiss
+        }
+    }
+}
+
 pub struct DepthPrefetch {
     slots: Fifo,
     last_request: Option<u64>,
-    last_word: Option<u64>,
-    last_page: Option<u64>,
+    last_read: LastRead,
     last_data_ready: u64,
     page_hit_latency: u64,
     page_miss_latency: u64,
     word_bits: u32,
-    tile_width: Divider,
-    tile_height: Divider,
-    tiles_per_row: u64,
-    words_per_tile_row: u64,
-    words_per_tile: u64,
-    pixels_per_word: Divider,
+    address: DepthAddress,
     pub word_hits: u64,
     pub page_hits: u64,
     pub page_misses: u64,
@@ -48,23 +128,15 @@ pub struct DepthPrefetch {
 impl DepthPrefetch {
     /// `page_model` false promises that the viewport lies inside one framebuffer tile.
     pub fn new(arch: &O2Arch, viewport_width: u32, page_model: bool) -> DepthPrefetch {
-        let tile_width = arch.framebuffer_tile_width_pixels;
-        let words_per_tile_row = (tile_width / arch.pixels_per_word()) as u64;
         DepthPrefetch {
             slots: Fifo::new(arch.prefetch_depth_fragments),
             last_request: None,
-            last_word: None,
-            last_page: None,
+            last_read: LastRead::default(),
             last_data_ready: 0,
             page_hit_latency: arch.page_hit_latency_cycles,
             page_miss_latency: arch.page_miss_latency_cycles,
             word_bits: arch.memory_port_bits_per_cycle,
-            tile_width: Divider::new(tile_width),
-            tile_height: Divider::new(arch.framebuffer_tile_height_pixels),
-            tiles_per_row: viewport_width.div_ceil(tile_width) as u64,
-            words_per_tile_row,
-            words_per_tile: words_per_tile_row * arch.framebuffer_tile_height_pixels as u64,
-            pixels_per_word: Divider::new(arch.pixels_per_word()),
+            address: DepthAddress::new(arch, viewport_width),
             word_hits: 0,
             page_hits: 0,
             page_misses: 0,
@@ -92,37 +164,27 @@ impl DepthPrefetch {
         if !read {
             return 0;
         }
-        let (page, in_tile_x, in_tile_y) = if self.page_model {
-            let (tile_x, in_tile_x) = self.tile_width.divide(x as u32);
-            let (tile_y, in_tile_y) = self.tile_height.divide(y as u32);
-            (
-                tile_y as u64 * self.tiles_per_row + tile_x as u64,
-                in_tile_x,
-                in_tile_y,
-            )
+        let (word, page) = if self.page_model {
+            self.address.locate(x, y)
         } else {
             // Effect hook: the whole viewport is page 0.
-            debug_assert_eq!(self.tile_width.divide(x as u32).0, 0);
-            debug_assert_eq!(self.tile_height.divide(y as u32).0, 0);
-            (0, x as u32, y as u32)
+            self.address.locate_in_first_page(x, y)
         };
-        let word = page * self.words_per_tile
-            + in_tile_y as u64 * self.words_per_tile_row
-            + self.pixels_per_word.divide(in_tile_x).0 as u64;
-        if self.last_word == Some(word) {
-            self.word_hits += 1;
-            return self.last_data_ready;
-        }
+        let latency = match self.last_read.read(word, page) {
+            DepthRead::SameWord => {
+                self.word_hits += 1;
+                return self.last_data_ready;
+            }
+            DepthRead::PageHit => {
+                self.page_hits += 1;
+                self.page_hit_latency
+            }
+            DepthRead::PageMiss => {
+                self.page_misses += 1;
+                self.page_miss_latency
+            }
+        };
         let grant = port.claim(request, self.word_bits, PortClient::DepthRead);
-        let latency = if self.last_page == Some(page) {
-            self.page_hits += 1;
-            self.page_hit_latency
-        } else {
-            self.page_misses += 1;
-            self.page_miss_latency
-        };
-        self.last_word = Some(word);
-        self.last_page = Some(page);
         self.last_data_ready = grant + latency;
         self.last_data_ready
     }

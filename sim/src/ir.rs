@@ -122,10 +122,7 @@ impl IrMachine {
         height: u32,
         effects: Effects,
     ) -> Result<IrMachine, SimError> {
-        arch.ir()?;
-        crate::error::check_viewport(width, height)?;
-        let depth = DepthBuffer::new(width, height);
-        IrMachine::assemble(arch, width, height, OccuModel::Cycle, effects, depth)
+        IrMachine::build(arch, width, height, effects, OccuModel::Cycle)
     }
 
     /// The machine with every Image Engine's Occlusion Unit modelled as `occu` says (the
@@ -136,10 +133,21 @@ impl IrMachine {
         height: u32,
         occu: OccuModel,
     ) -> Result<IrMachine, SimError> {
+        IrMachine::build(arch, width, height, Effects::ALL, occu)
+    }
+
+    /// A machine building only `effects`, its Occlusion Units modelled as `occu` says.
+    fn build(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+        occu: OccuModel,
+    ) -> Result<IrMachine, SimError> {
         arch.ir()?;
         crate::error::check_viewport(width, height)?;
         let depth = DepthBuffer::new(width, height);
-        IrMachine::assemble(arch, width, height, occu, Effects::ALL, depth)
+        IrMachine::assemble(arch, width, height, occu, effects, depth)
     }
 
     /// A machine that starts from a functional model's render state and depths (`depth`, a

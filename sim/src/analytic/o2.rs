@@ -46,7 +46,7 @@
 
 use super::{service_cycles, WindowEnd};
 use crate::arch::O2Arch;
-use crate::depth_prefetch::Divider;
+use crate::depth_prefetch::{DepthAddress, DepthRead, LastRead};
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::{Fragment, QueryMode, QueryResult, QuerySpec};
@@ -72,43 +72,6 @@ pub struct WindowPrediction {
     pub cycles: f64,
     /// The pipe's drain after the window's last fragment, in cycles.
     pub drain: f64,
-}
-
-/// The word and page of a depth pixel, as [`crate::depth_prefetch`] lays the buffer out.
-struct DepthAddress {
-    tile_width: Divider,
-    tile_height: Divider,
-    tiles_per_row: u64,
-    pixels_per_word: Divider,
-    words_per_tile_row: u64,
-    words_per_tile: u64,
-}
-
-impl DepthAddress {
-    fn new(arch: &O2Arch, width: u32) -> DepthAddress {
-        let tile_width = arch.framebuffer_tile_width_pixels;
-        let words_per_tile_row = (tile_width / arch.pixels_per_word()) as u64;
-        DepthAddress {
-            tile_width: Divider::new(tile_width),
-            tile_height: Divider::new(arch.framebuffer_tile_height_pixels),
-            tiles_per_row: width.div_ceil(tile_width) as u64,
-            pixels_per_word: Divider::new(arch.pixels_per_word()),
-            words_per_tile_row,
-            words_per_tile: words_per_tile_row * arch.framebuffer_tile_height_pixels as u64,
-        }
-    }
-
-    /// `(word, page)` of pixel (x, y).
-    #[inline]
-    fn locate(&self, x: u16, y: u16) -> (u64, u64) {
-        let (tile_x, in_tile_x) = self.tile_width.divide(x as u32);
-        let (tile_y, in_tile_y) = self.tile_height.divide(y as u32);
-        let page = tile_y as u64 * self.tiles_per_row + tile_x as u64;
-        let word = page * self.words_per_tile
-            + in_tile_y as u64 * self.words_per_tile_row
-            + self.pixels_per_word.divide(in_tile_x).0 as u64;
-        (word, page)
-    }
 }
 
 /// The O2 formulas over window counts.
@@ -199,8 +162,7 @@ pub fn query_words(spec: &QuerySpec, result: &QueryResult) -> (u64, u64) {
 pub(crate) struct O2Bottleneck {
     formulas: O2Formulas,
     address: DepthAddress,
-    last_word: Option<u64>,
-    last_page: Option<u64>,
+    last_read: LastRead,
     window: WindowCounts,
     /// OccU cycles per fragment and "occlusion render mode" of the open query.
     open: Option<(u64, bool)>,
@@ -211,8 +173,7 @@ impl O2Bottleneck {
         O2Bottleneck {
             formulas: O2Formulas::new(arch),
             address: DepthAddress::new(arch, width),
-            last_word: None,
-            last_page: None,
+            last_read: LastRead::default(),
             window: WindowCounts::default(),
             open: None,
         }
@@ -239,17 +200,18 @@ impl O2Bottleneck {
             return;
         }
         let (word, page) = self.address.locate(fragment.x, fragment.y);
-        if self.last_word != Some(word) {
-            w.depth_reads += 1;
-            let arch = &self.formulas.arch;
-            w.last_read_latency = if self.last_page == Some(page) {
-                arch.page_hit_latency_cycles
-            } else {
+        let arch = &self.formulas.arch;
+        match self.last_read.read(word, page) {
+            DepthRead::SameWord => {}
+            DepthRead::PageHit => {
+                w.depth_reads += 1;
+                w.last_read_latency = arch.page_hit_latency_cycles;
+            }
+            DepthRead::PageMiss => {
+                w.depth_reads += 1;
                 w.page_misses += 1;
-                arch.page_miss_latency_cycles
-            };
-            self.last_word = Some(word);
-            self.last_page = Some(page);
+                w.last_read_latency = arch.page_miss_latency_cycles;
+            }
         }
         let occlusion_mode = self.open.is_some_and(|(_, mode)| mode);
         if state.depth_mask && !occlusion_mode {
