@@ -27,8 +27,13 @@ const BUFFER_BYTES: usize = 1 << 16;
 /// Bytes one line's writes may touch: a value line's whole groups (`b`, 64 digits, a
 /// 16-byte tail: 81) or a timestamp line (`#`, 20 digits, newline: 22).
 const LINE_SCRATCH: usize = 128;
-/// Room past the spill mark: a timestamp line and then a value line's scratch fit in it.
-const SLACK_BYTES: usize = 2 * LINE_SCRATCH;
+/// Most signals in a block.
+const BLOCK_SIGNALS: usize = 64;
+/// Room past the spill mark: a timestamp line and then a whole block's lines fit in it, so
+/// the buffer is checked once per block, not once per line.
+const SLACK_BYTES: usize = (BLOCK_SIGNALS + 1) * LINE_SCRATCH;
+/// A timestamp's last 8 digits are formatted every time; those above them are kept.
+const LOW_DIGITS_RANGE: u64 = 100_000_000;
 
 /// Declared kind of a signal.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -67,42 +72,88 @@ const DECIMAL_PAIRS: [[u8; 2]; 100] = {
     table
 };
 
-/// What the writer keeps per signal besides the compare's last given value: one cache
-/// line's worth, read only when a value was given that differs.
-struct Line {
-    /// The value last written (masked).
-    last: u64,
+/// What the writer keeps of one signal besides the value last given, read when a compare
+/// found it changed.
+struct Signal {
     /// All ones in the signal's width.
     mask: u64,
-    /// No value written yet (a 64-bit signal has no spare value for a sentinel).
-    unwritten: bool,
-    /// Bytes before the digits: 1 (`b`) for a wide signal, 0 for a 1-bit one.
-    prefix: usize,
-    /// Wider than 32 bits: up to 8 groups of 8 digits instead of 4.
-    wide: bool,
     /// What follows the value: ` CODE\n` (`CODE\n` for a 1-bit signal), zero padded.
     tail: [u8; 16],
-    tail_len: usize,
+    tail_len: u8,
+    /// Bytes before the digits: 1 (`b`) for a wide signal, 0 for a 1-bit one.
+    prefix: u8,
+    /// Wider than 32 bits: up to 8 groups of 8 digits instead of 4.
+    wide: bool,
+    /// No value written yet (a 64-bit signal has no spare value for a sentinel).
+    unwritten: bool,
+}
+
+/// The text of a timestamp above its last 8 digits, `#` and those digits, kept from one
+/// timestamp to the next: at a clock period of ~15 ns it changes once every 6,667 cycles.
+struct TimePrefix {
+    /// The time divided by 10^8.
+    high: u64,
+    /// `#` and the decimal digits of `high` (at most 12), zero padded.
+    text: [u8; 16],
+    len: usize,
+}
+
+impl TimePrefix {
+    fn of(high: u64) -> TimePrefix {
+        let digits = format!("#{high}");
+        let mut text = [0u8; 16];
+        text[..digits.len()].copy_from_slice(digits.as_bytes());
+        TimePrefix {
+            high,
+            text,
+            len: digits.len(),
+        }
+    }
 }
 
 pub struct VcdWriter<W: Write> {
     out: W,
-    /// Per signal, by id: the value last given (unmasked, so the compare needs no mask).
+    /// Per signal, by id: the value last given (unmasked, so the compare needs no mask;
+    /// its masked bits are those last written, once written).
     given: Vec<u64>,
-    /// Per signal, by id: what writing a line needs.
-    lines: Vec<Line>,
+    /// Per signal, by id.
+    signals: Vec<Signal>,
+    /// A bit per signal with no value written yet.
+    unwritten: Vec<u64>,
     /// Signals with no value written yet.
     unwritten_count: usize,
     defining: bool,
-    time: u64,
-    /// `time` is not yet written: the next change writes it first.
-    time_pending: bool,
-    time_written: Option<u64>,
+    clock: Clock,
     error: Option<io::Error>,
-    /// Lines gathered before they go to `out` in large writes: `buffer[..filled]`, the rest
-    /// scratch (`BUFFER_BYTES + SLACK_BYTES` long).
+    lines: Lines,
+}
+
+/// Lines gathered before they go to the destination in large writes: `buffer[..filled]`,
+/// the rest scratch (`BUFFER_BYTES + SLACK_BYTES` long).
+struct Lines {
     buffer: Vec<u8>,
     filled: usize,
+}
+
+impl Lines {
+    /// The `LINE_SCRATCH` bytes from the fill mark on, as a fixed-size window (offsets
+    /// bounded by construction leave no bounds checks in the formatting).
+    #[inline(always)]
+    fn window(&mut self) -> &mut [u8; LINE_SCRATCH] {
+        (&mut self.buffer[self.filled..self.filled + LINE_SCRATCH])
+            .try_into()
+            .expect("a window of LINE_SCRATCH bytes")
+    }
+}
+
+/// The dump's current time and what of it is written.
+struct Clock {
+    time: u64,
+    /// `time` is not yet written: the next change writes it first.
+    pending: bool,
+    written: Option<u64>,
+    /// The text above the last 8 digits of the last timestamp at or above 10^8.
+    prefix: TimePrefix,
 }
 
 /// Decimal digits of `value` (at least 1): one more than a guess of log10 from the bit
@@ -125,7 +176,7 @@ fn decimal_digits(value: u64) -> usize {
 
 /// `value` (< 10^8) as exactly 8 decimal digits.
 #[inline(always)]
-fn write_eight_digits(out: &mut [u8], value: u64) {
+fn write_eight_digits(out: &mut [u8; 8], value: u64) {
     let (high, low) = ((value / 10_000) as usize, (value % 10_000) as usize);
     out[0..2].copy_from_slice(&DECIMAL_PAIRS[high / 100]);
     out[2..4].copy_from_slice(&DECIMAL_PAIRS[high % 100]);
@@ -151,15 +202,21 @@ impl<W: Write> VcdWriter<W> {
         let mut vcd = VcdWriter {
             out,
             given: Vec::new(),
-            lines: Vec::new(),
+            signals: Vec::new(),
+            unwritten: Vec::new(),
             unwritten_count: 0,
             defining: true,
-            time: 0,
-            time_pending: true,
-            time_written: None,
+            clock: Clock {
+                time: 0,
+                pending: true,
+                written: None,
+                prefix: TimePrefix::of(0),
+            },
             error: None,
-            buffer: vec![0; BUFFER_BYTES + SLACK_BYTES],
-            filled: 0,
+            lines: Lines {
+                buffer: vec![0; BUFFER_BYTES + SLACK_BYTES],
+                filled: 0,
+            },
         };
         vcd.put(&format!("$version {version} $end\n$timescale 1ps $end\n"));
         vcd
@@ -168,14 +225,15 @@ impl<W: Write> VcdWriter<W> {
     /// Append header text of any length.
     fn put(&mut self, text: &str) {
         let bytes = text.as_bytes();
-        if self.filled + bytes.len() > BUFFER_BYTES {
+        if self.lines.filled + bytes.len() > BUFFER_BYTES {
             self.spill();
         }
         if bytes.len() > BUFFER_BYTES {
             self.write_out(bytes);
         } else {
-            self.buffer[self.filled..self.filled + bytes.len()].copy_from_slice(bytes);
-            self.filled += bytes.len();
+            let Lines { buffer, filled } = &mut self.lines;
+            buffer[*filled..*filled + bytes.len()].copy_from_slice(bytes);
+            *filled += bytes.len();
         }
     }
 
@@ -187,13 +245,14 @@ impl<W: Write> VcdWriter<W> {
         }
     }
 
+    #[inline(never)]
     fn spill(&mut self) {
         if self.error.is_none() {
-            if let Err(e) = self.out.write_all(&self.buffer[..self.filled]) {
+            if let Err(e) = self.out.write_all(&self.lines.buffer[..self.lines.filled]) {
                 self.error = Some(e);
             }
         }
-        self.filled = 0;
+        self.lines.filled = 0;
     }
 
     pub fn scope(&mut self, name: &str) {
@@ -208,7 +267,8 @@ impl<W: Write> VcdWriter<W> {
     /// Declare a signal `width` bits wide (1..=64).
     pub fn var(&mut self, kind: VarKind, name: &str, width: u32) -> SignalId {
         assert!(self.defining && (1..=64).contains(&width));
-        let code = identifier(self.given.len());
+        let id = self.given.len();
+        let code = identifier(id);
         let kind = match kind {
             VarKind::Wire => "wire",
             VarKind::Reg => "reg",
@@ -223,17 +283,19 @@ impl<W: Write> VcdWriter<W> {
         let mut tail = [0u8; 16];
         tail[..tail_text.len()].copy_from_slice(tail_text.as_bytes());
         self.given.push(0);
-        self.lines.push(Line {
-            last: 0,
+        self.signals.push(Signal {
             mask: mask(width),
-            unwritten: true,
-            prefix: (width > 1) as usize,
-            wide: width > 32,
             tail,
-            tail_len: tail_text.len(),
+            tail_len: tail_text.len() as u8,
+            prefix: (width > 1) as u8,
+            wide: width > 32,
+            unwritten: true,
         });
+        // Room for a block's bits to be read as two words from any signal on.
+        self.unwritten.resize(id / 64 + 2, 0);
+        self.unwritten[id / 64] |= 1 << (id % 64);
         self.unwritten_count += 1;
-        SignalId(self.given.len() - 1)
+        SignalId(id)
     }
 
     pub fn end_definitions(&mut self) {
@@ -245,9 +307,9 @@ impl<W: Write> VcdWriter<W> {
     #[inline]
     pub fn set_time(&mut self, time: u64) {
         debug_assert!(!self.defining);
-        debug_assert!(self.time_written.is_none_or(|t| time >= t));
-        self.time = time;
-        self.time_pending = self.time_written != Some(time);
+        debug_assert!(self.clock.written.is_none_or(|t| time >= t));
+        self.clock.time = time;
+        self.clock.pending = self.clock.written != Some(time);
     }
 
     /// The signal holds `value` (masked to its width) from the current time on.
@@ -260,11 +322,11 @@ impl<W: Write> VcdWriter<W> {
     /// the current time on; lines are written in signal order. Inlined into the caller, a
     /// block is one unrolled, branch-free compare of the values (still in registers) with
     /// those last given, gathering a bit per difference; only a block with a difference
-    /// calls the writer, which visits the set bits.
+    /// writes, visiting the set bits.
     #[inline(always)]
     pub fn change_block<const N: usize>(&mut self, first: SignalId, values: &[u64; N]) {
-        const { assert!(N <= 64, "a block has at most 64 signals") };
-        let given: &mut [u64; N] = (&mut self.given[first.0..first.0 + N])
+        const { assert!(N <= BLOCK_SIGNALS, "a block has at most 64 signals") };
+        let given: &[u64; N] = (&self.given[first.0..first.0 + N])
             .try_into()
             .expect("a slice of N");
         let mut changed = 0u64;
@@ -272,115 +334,61 @@ impl<W: Write> VcdWriter<W> {
             changed |= ((values[bit] != given[bit]) as u64) << bit;
         }
         if self.unwritten_count != 0 {
-            for (bit, line) in self.lines[first.0..first.0 + N].iter().enumerate() {
-                changed |= (line.unwritten as u64) << bit;
-            }
+            changed |= self.unwritten_in(first.0, N);
         }
         if changed != 0 {
             self.write_changed(first.0, values, changed);
         }
     }
 
+    /// A bit per signal of `first .. first + count` (count <= 64) with no value written yet.
+    #[cold]
+    fn unwritten_in(&self, first: usize, count: usize) -> u64 {
+        let (word, shift) = (first / 64, first % 64);
+        let low = self.unwritten[word] >> shift;
+        let high = (self.unwritten[word + 1] << 1) << (63 - shift);
+        (low | high) & mask(count as u32)
+    }
+
     /// Take the values of signals `first + i` for the bits `i` set in `changed`, writing
-    /// those whose masked value changed.
+    /// those whose masked value changed (after the pending timestamp, if any). The slack
+    /// past the spill mark holds a timestamp and a whole block of lines, so the buffer is
+    /// checked once, after the block.
     #[inline(always)]
     fn write_changed(&mut self, first: usize, values: &[u64], mut changed: u64) {
+        let given = &mut self.given[first..first + values.len()];
+        let signals = &mut self.signals[first..first + values.len()];
         while changed != 0 {
             let offset = changed.trailing_zeros() as usize;
             changed &= changed - 1;
-            let index = first + offset;
             let value = values[offset];
-            self.given[index] = value;
-            let line = &self.lines[index];
-            let value = value & line.mask;
-            if value != line.last || line.unwritten {
-                self.write_change(index, value);
+            let old = std::mem::replace(&mut given[offset], value);
+            let signal = &mut signals[offset];
+            if (old ^ value) & signal.mask != 0 || signal.unwritten {
+                if signal.unwritten {
+                    signal.unwritten = false;
+                    let id = first + offset;
+                    self.unwritten[id / 64] &= !(1 << (id % 64));
+                    self.unwritten_count -= 1;
+                }
+                if self.clock.pending {
+                    self.clock.write(&mut self.lines);
+                }
+                self.lines.filled += write_line(self.lines.window(), signal, value);
             }
         }
-    }
-
-    /// Write a changed value (masked), after the pending timestamp if any.
-    #[inline(always)]
-    fn write_change(&mut self, index: usize, value: u64) {
-        if self.time_pending {
-            self.write_time();
-        }
-        let line = &mut self.lines[index];
-        line.last = value;
-        if line.unwritten {
-            line.unwritten = false;
-            self.unwritten_count -= 1;
-        }
-        // A fixed-size window (with the offsets below bounded by construction, no bounds
-        // checks are left in the formatting).
-        let buffer: &mut [u8; LINE_SCRATCH] = (&mut self.buffer
-            [self.filled..self.filled + LINE_SCRATCH])
-            .try_into()
-            .expect("a window of LINE_SCRATCH bytes");
-        // `b`, overwritten by the digits of a 1-bit signal (no prefix).
-        buffer[0] = b'b';
-        let digits = 64 - (value | 1).leading_zeros() as usize;
-        // The most significant digit at bit 63, then whole groups of 8 from the top (4 of
-        // them unless the signal is wider than 32 bits): the bytes past the last digit are
-        // overwritten by the tail or left as scratch.
-        let groups = (value << (64 - digits)).to_be_bytes();
-        let at = line.prefix & 1;
-        for (group, &byte) in groups[..4].iter().enumerate() {
-            buffer[at + 8 * group..at + 8 * group + 8]
-                .copy_from_slice(&BINARY_DIGITS[byte as usize]);
-        }
-        if line.wide {
-            for (group, &byte) in groups.iter().enumerate().skip(4) {
-                buffer[at + 8 * group..at + 8 * group + 8]
-                    .copy_from_slice(&BINARY_DIGITS[byte as usize]);
-            }
-        }
-        let at = at + digits;
-        buffer[at..at + 16].copy_from_slice(&line.tail);
-        self.filled += at + line.tail_len;
-        if self.filled >= BUFFER_BYTES {
+        if self.lines.filled >= BUFFER_BYTES {
             self.spill();
         }
-    }
-
-    /// `#TIME\n` for the current time. The digits are written in groups of 8 (two
-    /// independent chains of pairs each) from the last group back.
-    #[inline(never)]
-    fn write_time(&mut self) {
-        let t = self.time;
-        let length = decimal_digits(t);
-        let buffer = &mut self.buffer[self.filled..self.filled + LINE_SCRATCH];
-        buffer[0] = b'#';
-        buffer[1 + length] = b'\n';
-        let digits = &mut buffer[1..1 + length];
-        let mut rest = t;
-        let mut end = length;
-        while end > 8 {
-            write_eight_digits(&mut digits[end - 8..end], rest % 100_000_000);
-            rest /= 100_000_000;
-            end -= 8;
-        }
-        let mut rest = rest as u32;
-        while end >= 2 {
-            digits[end - 2..end].copy_from_slice(&DECIMAL_PAIRS[(rest % 100) as usize]);
-            rest /= 100;
-            end -= 2;
-        }
-        if end == 1 {
-            digits[0] = b'0' + rest as u8;
-        }
-        self.filled += 2 + length;
-        self.time_written = Some(self.time);
-        self.time_pending = false;
     }
 
     /// Write a last timestamp `time` (if later than every change) so that viewers show the
     /// dump up to it.
     pub fn end_at(&mut self, time: u64) {
-        if self.time_written.is_none_or(|t| time > t) {
+        if self.clock.written.is_none_or(|t| time > t) {
             self.put(&format!("#{time}\n"));
-            self.time_written = Some(time);
-            self.time_pending = false;
+            self.clock.written = Some(time);
+            self.clock.pending = false;
         }
     }
 
@@ -393,6 +401,83 @@ impl<W: Write> VcdWriter<W> {
         self.out.flush()?;
         Ok(self.out)
     }
+}
+
+impl Clock {
+    /// `#TIME\n` for the current time, before the first change at it.
+    #[inline(never)]
+    fn write(&mut self, lines: &mut Lines) {
+        let high = self.time / LOW_DIGITS_RANGE;
+        if high == 0 {
+            self.write_short(lines);
+        } else {
+            if high != self.prefix.high {
+                self.prefix = TimePrefix::of(high);
+            }
+            // The kept `#` and high digits, then 8 digits and the newline.
+            let prefix = &self.prefix;
+            let buffer = lines.window();
+            buffer[..16].copy_from_slice(&prefix.text);
+            let at = prefix.len & 15;
+            let low: &mut [u8; 8] = (&mut buffer[at..at + 8]).try_into().expect("8 bytes");
+            write_eight_digits(low, self.time % LOW_DIGITS_RANGE);
+            buffer[at + 8] = b'\n';
+            lines.filled += at + 9;
+        }
+        self.written = Some(self.time);
+        self.pending = false;
+    }
+
+    /// `#TIME\n` for a time below 10^8 (the first 100 µs), digit pair by pair.
+    #[cold]
+    fn write_short(&self, lines: &mut Lines) {
+        let t = self.time;
+        let length = decimal_digits(t);
+        let buffer = lines.window();
+        buffer[0] = b'#';
+        buffer[1 + length] = b'\n';
+        let digits = &mut buffer[1..1 + length];
+        let mut rest = t as u32;
+        let mut end = length;
+        while end >= 2 {
+            digits[end - 2..end].copy_from_slice(&DECIMAL_PAIRS[(rest % 100) as usize]);
+            rest /= 100;
+            end -= 2;
+        }
+        if end == 1 {
+            digits[0] = b'0' + rest as u8;
+        }
+        lines.filled += 2 + length;
+    }
+}
+
+/// Write `signal`'s line for `value` (masked) at the start of `buffer`; returns the
+/// line's length.
+///
+/// The formatter writes whole groups (a fixed-size window: with the offsets below bounded
+/// by construction, no bounds checks are left): the most significant digit at bit 63, then
+/// groups of 8 from the top (4 of them unless the signal is wider than 32 bits), so the bytes
+/// past the last digit are overwritten by the tail or left as scratch.
+#[inline(always)]
+fn write_line(buffer: &mut [u8; LINE_SCRATCH], signal: &Signal, value: u64) -> usize {
+    let value = value & signal.mask;
+    // `b`, overwritten by the digits of a 1-bit signal (no prefix).
+    buffer[0] = b'b';
+    let digits = 64 - (value | 1).leading_zeros() as usize;
+    let groups = (value << (64 - digits)).to_be_bytes();
+    let at = (signal.prefix & 1) as usize;
+    for (group, &byte) in groups[..4].iter().enumerate() {
+        buffer[at + 8 * group..at + 8 * group + 8].copy_from_slice(&BINARY_DIGITS[byte as usize]);
+    }
+    if signal.wide {
+        for (group, &byte) in groups.iter().enumerate().skip(4) {
+            buffer[at + 8 * group..at + 8 * group + 8]
+                .copy_from_slice(&BINARY_DIGITS[byte as usize]);
+        }
+    }
+    let at = at + digits;
+    buffer[at..at + 16].copy_from_slice(&signal.tail);
+    at + (signal.tail_len & 15) as usize
 }
 
 #[cfg(test)]
