@@ -226,6 +226,24 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
         text.contains("$enddefinitions $end\n#149990\n"),
         "the dump starts at cycle 10"
     );
+    // Each engine shows its tile slots one by one, as many as the largest query fills: a
+    // replay retiled to 8x8 has 64-tile queries, 16 slots on each of the 4 engines.
+    stdout_of(&[
+        "replay",
+        trace_arg,
+        "--fidelity",
+        "rtl",
+        "--vcd",
+        vcd_arg,
+        "--window",
+        "0..10",
+        "--retile",
+        "8x8",
+    ]);
+    let text = std::fs::read_to_string(&vcd).unwrap();
+    assert_eq!(text.matches("$scope module slot_").count(), 64);
+    assert!(text.contains("$scope module slot_15 $end"));
+    assert!(!text.contains("$scope module slot_16 $end"));
     // Flags only the rtl fidelity takes, and windows that cannot be read, fail clearly.
     let without_rtl = stderr_of_failure(&["replay", trace_arg, "--vcd", vcd_arg]);
     assert!(without_rtl.contains("--vcd and --window need --fidelity rtl"));

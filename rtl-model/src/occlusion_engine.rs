@@ -106,11 +106,11 @@ pub struct OcclusionEngine {
     hit_room: u32,
     /// Hit words produced and not yet taken by OccU Control's arbiter.
     pub queue: VecDeque<Word>,
-    /// Change tracking (not hardware): bumped whenever a slot register may have changed (a
-    /// latch that updated a slot, a load, an unload), so that a waveform probe which saw
-    /// the same count knows the slots are unchanged without comparing them. Code that
-    /// changes `slots` directly must bump it too.
-    pub slots_version: u64,
+    /// Change tracking (not hardware): bumped by every load and unload, the changes to the
+    /// slots that no wire shows, so that a waveform probe which saw the same count knows
+    /// only the slots its last cycle's wires latched can have changed. Code that changes
+    /// `slots` other than by a latch must bump it too.
+    pub loads: u64,
     /// Statistics (not hardware): cycles testing tiles, cycles held by OccU Control.
     pub busy_cycles: u64,
     pub stall_cycles: u64,
@@ -140,7 +140,7 @@ impl OcclusionEngine {
                 .map(|t| TileSlot::reset(t[0], t[1], t[2], t[3])),
         );
         self.queue.clear();
-        self.slots_version += 1;
+        self.loads += 1;
     }
 
     /// Tiles held (the tile-sequencing counter's range).
@@ -150,13 +150,13 @@ impl OcclusionEngine {
 
     /// Hand the slots over to OccU Control's record bank and return to no tiles.
     pub fn unload(&mut self) -> Vec<TileSlot> {
-        self.slots_version += 1;
+        self.loads += 1;
         std::mem::take(&mut self.slots)
     }
 
-    /// Slots tested at sequencer step `step`.
+    /// Slots tested at sequencer step `step` (those a latch at that step may change).
     #[inline(always)]
-    fn tested(&self, step: u32, all_tiles_one_cycle: bool) -> std::ops::Range<usize> {
+    pub fn tested(&self, step: u32, all_tiles_one_cycle: bool) -> std::ops::Range<usize> {
         let k = self.slots.len();
         if all_tiles_one_cycle {
             if step == 0 {
@@ -205,7 +205,6 @@ impl OcclusionEngine {
             if !slot.contains(f.x, f.y) {
                 continue;
             }
-            self.slots_version += 1;
             slot.phc = saturating_increment(slot.phc, counter_bits);
             if !f.pass {
                 continue;

@@ -59,6 +59,14 @@ fn fastest(
 /// (fragments per on-CPU second, bytes of VCD).
 fn dumped(arch: &Arch, frame: &[Event], window: std::ops::Range<u64>) -> (f64, u64) {
     let bytes = Arc::new(AtomicU64::new(0));
+    let max_query_tiles = frame
+        .iter()
+        .map(|event| match event {
+            Event::QueryBegin(spec) => spec.tiles.len() as u64,
+            _ => 0,
+        })
+        .max()
+        .unwrap_or(0);
     let (rate, _) = fastest(arch, frame, || {
         bytes.store(0, Ordering::Relaxed);
         let out = Box::new(std::io::BufWriter::with_capacity(
@@ -69,6 +77,7 @@ fn dumped(arch: &Arch, frame: &[Event], window: std::ops::Range<u64>) -> (f64, u
             waveform: Some(WaveformOptions {
                 out,
                 window: window.clone(),
+                max_query_tiles,
             }),
         }
     });

@@ -5,23 +5,28 @@
 //! time `cycle * period` with `period` the clock period rounded to whole picoseconds
 //! (66.67 MHz: 14999 ps); the file ends with a timestamp at the window's end (or the run's
 //! last cycle). Values are those during the cycle: registers before the clock edge that
-//! ends it, wires as evaluated in it. Per engine, the tile registers shown are those of the
-//! slot tested in the cycle (the slot multiplexer's output). Scopes: `occu` (sequencer),
-//! `occu.engine_E`, `occu.control`.
+//! ends it, wires as evaluated in it. Scopes: `occu` (sequencer; its `step` wire is the
+//! slot every engine whose `testing` is high tests), `occu.engine_E` (its wires),
+//! `occu.engine_E.slot_J` (the registers of tile slot `J`, which holds the query's tile
+//! `J * engines + E`), `occu.control`.
+//!
+//! Tile slots: each engine's register file is shown slot by slot, as many slots as the
+//! query with the most tiles fills ([`WaveformOptions::max_query_tiles`]); a slot's signals
+//! change when a load writes its tile and when a latch updates its counters, and hold
+//! their values while the engine has no query (its registers went to OccU Control at the
+//! end token). Slots past the declared ones are not shown.
 //!
 //! Cost: the signals are declared in blocks (the sequencer; the fragment it shows; each
-//! engine's wires and counters followed by its shown slot's registers; OccU Control) whose
-//! values are handed to the writer as arrays, each compared in one branch-free loop
-//! ([`VcdWriter::change_block`]). Whole blocks are skipped where the model says nothing
-//! changed since the last dumped cycle (inside the window that is the previous cycle): an
-//! engine's slot registers while the slot shown and the engine's `slots_version` (bumped
-//! by every latch that touched a slot, every load and unload) are those of the last dump;
-//! the fragment wires outside accept cycles; OccU Control while it stays quiet (empty
-//! buffer, no record bank, grant or pick). What remains is formatting the changes: on the
-//! `rtl` benchmark's whole-run dumps 38-109 bytes per cycle (a timestamp and 3-9 lines), and
-//! comparing the signals that may have changed (the sequencer's 8 and, when its shown slot
-//! moves, an engine's 21, every cycle). `cargo bench -p occsim-sim --bench rtl` prints the
-//! dump's cost against the `rtl` run without it (about 2x; see the README).
+//! engine's wires; each tile slot; OccU Control) whose values are handed to the writer as
+//! arrays, each compared in one branch-free loop ([`VcdWriter::change_block`]). Blocks are
+//! compared only where the model can have changed them since the last dumped cycle (inside
+//! the window every evaluated cycle is dumped, and cycles skipped between change nothing):
+//! a tile slot only if the last dumped cycle's wires latched it (a tested slot holding the
+//! fragment) or the engine loaded or unloaded since (its `loads` count); the fragment wires
+//! in accept cycles; OccU Control unless it stays quiet (empty buffer, no record bank,
+//! grant or pick). What remains is formatting the changes and comparing the sequencer's
+//! and the engines' wires every cycle. `cargo bench -p occsim-sim --bench rtl` prints the
+//! dump's cost against the `rtl` run without it (see the README).
 
 use occsim_rtl::bits::bits_for;
 use occsim_rtl::occlusion_engine::{EngineWires, OcclusionEngine, TileSlot};
@@ -35,10 +40,13 @@ use VarKind::{Reg, Wire};
 
 /// Where and what to dump.
 pub struct WaveformOptions {
-    /// The VCD's destination (buffer it: every change is one small write).
+    /// The VCD's destination (the writer gathers its lines into large writes).
     pub out: Box<dyn Write + Send>,
     /// Cycles to dump, half-open.
     pub window: Range<u64>,
+    /// The most tiles one query of the run has (a trace's `max_query_tiles`): each engine
+    /// shows `ceil(max_query_tiles / engines)` tile slots (at most `MAX_TILES` in all).
+    pub max_query_tiles: u64,
 }
 
 /// A block's signals: kind, name, width in bits; in declaration order, which is the order
@@ -54,7 +62,7 @@ struct Widths {
     pointer: u32,
 }
 
-const UNIT_SIGNALS: usize = 8;
+const UNIT_SIGNALS: usize = 9;
 
 fn unit_declarations(w: &Widths) -> Declarations<UNIT_SIGNALS> {
     [
@@ -64,6 +72,9 @@ fn unit_declarations(w: &Widths) -> Declarations<UNIT_SIGNALS> {
         (Reg, "query_open", 1),
         (Wire, "accept", 1),
         (Wire, "testing", 1),
+        // The step every engine tests (its slot `step`, or all slots with
+        // `all_tiles_one_cycle`): 0 in an accept cycle, else `tile_step`.
+        (Wire, "step", w.step),
         (Wire, "done", 1),
         (Wire, "leave", 1),
     ]
@@ -78,6 +89,7 @@ fn unit_values(rtl: &OccuRtl, wires: &Wires) -> [u64; UNIT_SIGNALS] {
         rtl.query_open as u64,
         w.accepting as u64,
         w.testing as u64,
+        w.step as u64,
         w.done as u64,
         w.leave as u64,
     ]
@@ -100,12 +112,11 @@ fn fragment_values(wires: &Wires) -> [u64; FRAGMENT_SIGNALS] {
     [f.x as u64, f.y as u64, f.z as u64, f.pass as u64]
 }
 
-const ENGINE_SIGNALS: usize = 7;
+const ENGINE_SIGNALS: usize = 6;
 
 fn engine_declarations(w: &Widths) -> Declarations<ENGINE_SIGNALS> {
     [
         (Wire, "testing", 1),
-        (Wire, "slot", w.step),
         (Wire, "inside", w.tiles),
         (Wire, "hits", w.tiles),
         (Wire, "hit_words", w.tiles),
@@ -114,11 +125,20 @@ fn engine_declarations(w: &Widths) -> Declarations<ENGINE_SIGNALS> {
     ]
 }
 
+/// The engine's signals packed into 128 bits (each wire counts at most `MAX_TILES` slots,
+/// 17 bits): equal keys, equal values.
+#[inline(always)]
+fn engine_key(engine: &OcclusionEngine, w: &EngineWires) -> (u64, u64) {
+    const { assert!(MAX_TILES < 1 << 21) };
+    let wires = w.testing as u64 | (w.inside as u64) << 1 | (w.hits as u64) << 22;
+    let counts = engine.queue.len() as u64 | (engine.tile_count() as u64) << 32;
+    (wires | (w.words as u64) << 43, counts)
+}
+
 /// The engine's values into `out` (in place: a block is built where it is compared).
 fn engine_values(engine: &OcclusionEngine, w: &EngineWires, out: &mut [u64; ENGINE_SIGNALS]) {
     *out = [
         w.testing as u64,
-        w.slot as u64,
         w.inside as u64,
         w.hits as u64,
         w.words as u64,
@@ -208,6 +228,16 @@ fn control_values(rtl: &OccuRtl, wires: &Wires) -> [u64; CONTROL_SIGNALS] {
     ]
 }
 
+/// Compare slot `j`'s registers (if shown) with those last dumped.
+#[inline]
+fn dump_slot<W: Write>(vcd: &mut VcdWriter<W>, probe: &EngineProbe, j: usize, slot: &TileSlot) {
+    if j < probe.shown_slots {
+        let mut values = [0; SLOT_SIGNALS];
+        slot_values(slot, &mut values);
+        vcd.change_block(probe.slot(j), &values);
+    }
+}
+
 /// Declare a block's signals; returns the first one's id (the others follow it).
 fn declare<W: Write, const N: usize>(
     vcd: &mut VcdWriter<W>,
@@ -222,10 +252,25 @@ fn declare<W: Write, const N: usize>(
 }
 
 struct EngineProbe {
-    /// The engine's first signal; its slot's signals follow.
-    signals: SignalId,
-    /// The slot shown in the last dumped cycle and the engine's `slots_version` then.
-    dumped_slot: Option<(u32, u64)>,
+    /// The engine's wires.
+    wires: SignalId,
+    /// Slot 0's first signal; slot `j`'s are `SLOT_SIGNALS * j` further.
+    slots: SignalId,
+    /// Slots declared.
+    shown_slots: usize,
+    /// The engine's signals in the last dumped cycle ([`engine_key`]).
+    dumped_key: Option<(u64, u64)>,
+    /// The engine's `loads` count in the last dumped cycle (`None`: nothing dumped yet).
+    dumped_loads: Option<u64>,
+    /// The slots the last dumped cycle latched (tested, holding its fragment).
+    latched: Range<usize>,
+}
+
+impl EngineProbe {
+    /// Slot `j`'s first signal.
+    fn slot(&self, j: usize) -> SignalId {
+        SignalId(self.slots.0 + SLOT_SIGNALS * j)
+    }
 }
 
 pub struct Waveform {
@@ -235,6 +280,8 @@ pub struct Waveform {
     unit: SignalId,
     fragment: SignalId,
     engines: Vec<EngineProbe>,
+    /// Engines test every slot in one cycle (`all_tiles_one_cycle`).
+    all_tiles_one_cycle: bool,
     control: SignalId,
     /// A cycle was dumped (the skips below compare with the last dumped cycle, which is
     /// the previous evaluated one: inside the window every evaluated cycle is dumped).
@@ -259,20 +306,36 @@ impl Waveform {
             occupancy: rtl.control.occupancy_bits(),
             pointer: rtl.control.pointer_bits(),
         };
+        let tiles = options.max_query_tiles.min(MAX_TILES as u64) as usize;
+        let engines = params.engines as usize;
         vcd.scope("occu");
         let unit = declare(&mut vcd, unit_declarations(&widths));
         let fragment = declare(&mut vcd, fragment_declarations());
-        let engines = (0..params.engines)
+        let engines = (0..engines)
             .map(|e| {
                 vcd.scope(&format!("engine_{e}"));
-                let signals = declare(&mut vcd, engine_declarations(&widths));
-                let slot_signals = declare(&mut vcd, slot_declarations(&widths));
-                assert_eq!(slot_signals.0, signals.0 + ENGINE_SIGNALS);
+                let wires = declare(&mut vcd, engine_declarations(&widths));
+                // Engine `e` holds tiles e, e + engines, ...
+                let shown_slots = tiles.saturating_sub(e).div_ceil(engines);
+                let slots: Vec<SignalId> = (0..shown_slots)
+                    .map(|j| {
+                        vcd.scope(&format!("slot_{j}"));
+                        let first = declare(&mut vcd, slot_declarations(&widths));
+                        vcd.upscope();
+                        first
+                    })
+                    .collect();
                 vcd.upscope();
-                EngineProbe {
-                    signals,
-                    dumped_slot: None,
-                }
+                let probe = EngineProbe {
+                    wires,
+                    slots: slots.first().copied().unwrap_or(SignalId(0)),
+                    shown_slots,
+                    dumped_key: None,
+                    dumped_loads: None,
+                    latched: 0..0,
+                };
+                debug_assert!((0..shown_slots).all(|j| probe.slot(j) == slots[j]));
+                probe
             })
             .collect();
         vcd.scope("control");
@@ -287,6 +350,7 @@ impl Waveform {
             unit,
             fragment,
             engines,
+            all_tiles_one_cycle: params.all_tiles_one_cycle,
             control,
             dumped: false,
             control_was_quiet: false,
@@ -318,28 +382,47 @@ impl Waveform {
             .zip(&rtl.engines)
             .zip(&wires.engines)
         {
-            // An engine without tiles shows no slot: its slot signals keep their values.
-            // A slot shown in the last dumped cycle, unchanged since, needs no compare.
-            let slot = engine
-                .slots
-                .get(w.slot as usize)
-                .filter(|_| probe.dumped_slot != Some((w.slot, engine.slots_version)));
-            match slot {
-                None => {
-                    let mut values = [0; ENGINE_SIGNALS];
-                    engine_values(engine, w, &mut values);
-                    vcd.change_block(probe.signals, &values);
+            // Most engines' wires and counters stay as they were: one packed compare skips
+            // the block.
+            let key = engine_key(engine, w);
+            if probe.dumped_key != Some(key) {
+                let mut values = [0; ENGINE_SIGNALS];
+                engine_values(engine, w, &mut values);
+                vcd.change_block(probe.wires, &values);
+                probe.dumped_key = Some(key);
+            }
+            // Slots that may have changed since the last dumped cycle: those it latched,
+            // or all of them after a load or an unload; at the first dump, every slot shown
+            // (one not loaded yet shows its reset value, 0).
+            match probe.dumped_loads {
+                Some(loads) if loads == engine.loads => {
+                    let end = probe.latched.end.min(engine.slots.len());
+                    for j in probe.latched.start.min(end)..end {
+                        dump_slot(vcd, probe, j, &engine.slots[j]);
+                    }
                 }
-                Some(slot) => {
-                    // The slot's signals follow the engine's: one block of both.
-                    let mut values = [0; ENGINE_SIGNALS + SLOT_SIGNALS];
-                    let (head, rest) = values.split_at_mut(ENGINE_SIGNALS);
-                    engine_values(engine, w, head.try_into().expect("the engine's part"));
-                    slot_values(slot, rest.try_into().expect("the slot's part"));
-                    vcd.change_block(probe.signals, &values);
-                    probe.dumped_slot = Some((w.slot, engine.slots_version));
+                Some(_) => {
+                    for (j, slot) in engine.slots.iter().enumerate().take(probe.shown_slots) {
+                        dump_slot(vcd, probe, j, slot);
+                    }
+                    probe.dumped_loads = Some(engine.loads);
+                }
+                None => {
+                    for j in 0..probe.shown_slots {
+                        match engine.slots.get(j) {
+                            Some(slot) => dump_slot(vcd, probe, j, slot),
+                            None => vcd.change_block(probe.slot(j), &[0; SLOT_SIGNALS]),
+                        }
+                    }
+                    probe.dumped_loads = Some(engine.loads);
                 }
             }
+            probe.latched = if w.inside > 0 {
+                let tested = engine.tested(wires.unit.step, self.all_tiles_one_cycle);
+                tested.start..tested.end.min(probe.shown_slots)
+            } else {
+                0..0
+            };
         }
         // Quiet OccU Control: empty write buffer, no record bank, no grant, no pick. Then
         // every one of its signals has its idle value (level 0, empty, room = capacity, no
@@ -363,5 +446,244 @@ impl Waveform {
         let end = self.window.end.min(last_cycle.max(self.window.start));
         self.vcd.end_at(end * self.period_ps);
         self.vcd.finish().map(|_| ())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The probe against the model itself: the unit is clocked cycle by cycle here and, at
+    //! every dumped cycle, each engine's wires and every loaded slot's registers read off
+    //! the model must be the values the VCD holds at that time, whatever the probe's skips.
+    use super::*;
+    use occsim_rtl::{CycleInputs, CycleOutputs, FragmentPort, OccuParams, QueryConfig};
+    use occsim_rtl::{ResultPath, TileRect};
+    use std::collections::HashMap;
+    use std::sync::{Arc, Mutex};
+
+    #[derive(Clone, Default)]
+    struct Shared(Arc<Mutex<Vec<u8>>>);
+
+    impl Write for Shared {
+        fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().unwrap().extend_from_slice(bytes);
+            Ok(bytes.len())
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    struct Rng(u64);
+
+    impl Rng {
+        fn below(&mut self, n: u64) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0 % n
+        }
+    }
+
+    /// Full signal name (scopes joined by `.`) -> its (time, value) changes.
+    fn changes(vcd: &str) -> HashMap<String, Vec<(u64, u64)>> {
+        let (mut scopes, mut names) = (Vec::new(), HashMap::new());
+        let mut changes: HashMap<String, Vec<(u64, u64)>> = HashMap::new();
+        let mut time = 0;
+        for line in vcd.lines() {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            match words.as_slice() {
+                ["$scope", "module", name, "$end"] => scopes.push(name.to_string()),
+                ["$upscope", "$end"] => drop(scopes.pop()),
+                ["$var", _, _, code, name, "$end"] => {
+                    names.insert(code.to_string(), format!("{}.{name}", scopes.join(".")));
+                }
+                [stamp] if stamp.starts_with('#') => time = stamp[1..].parse().unwrap(),
+                [value, code] if value.starts_with('b') => {
+                    let value = u64::from_str_radix(&value[1..], 2).unwrap();
+                    changes
+                        .entry(names[*code].clone())
+                        .or_default()
+                        .push((time, value));
+                }
+                [bit] if bit.starts_with(['0', '1']) => {
+                    let value = (bit.as_bytes()[0] - b'0') as u64;
+                    changes
+                        .entry(names[&bit[1..]].clone())
+                        .or_default()
+                        .push((time, value));
+                }
+                _ => {}
+            }
+        }
+        changes
+    }
+
+    /// Per dumped cycle, the model's value of every checked signal (full name, value).
+    type Expected = Vec<(u64, Vec<(String, u64)>)>;
+
+    /// The model's value of every checked signal in one cycle.
+    fn expected(rtl: &OccuRtl, wires: &Wires, shown_slots: usize) -> Vec<(String, u64)> {
+        let mut out = Vec::new();
+        for (e, (engine, w)) in rtl.engines.iter().zip(&wires.engines).enumerate() {
+            let mut values = [0; ENGINE_SIGNALS];
+            engine_values(engine, w, &mut values);
+            let names = engine_declarations(&widths(rtl)).map(|d| d.1);
+            for (name, value) in names.iter().zip(values) {
+                out.push((format!("occu.engine_{e}.{name}"), value));
+            }
+            for (j, slot) in engine.slots.iter().enumerate().take(shown_slots) {
+                let mut values = [0; SLOT_SIGNALS];
+                slot_values(slot, &mut values);
+                let names = slot_declarations(&widths(rtl)).map(|d| d.1);
+                for (name, value) in names.iter().zip(values) {
+                    let mask = occsim_rtl::bits::mask(if *name == "phc" || *name == "nohc" {
+                        rtl.params().counter_bits
+                    } else {
+                        64
+                    });
+                    out.push((format!("occu.engine_{e}.slot_{j}.{name}"), value & mask));
+                }
+            }
+        }
+        out
+    }
+
+    fn widths(rtl: &OccuRtl) -> Widths {
+        Widths {
+            tiles: bits_for(MAX_TILES as u64),
+            step: rtl.step_bits(),
+            counter: rtl.params().counter_bits,
+            occupancy: rtl.control.occupancy_bits(),
+            pointer: rtl.control.pointer_bits(),
+        }
+    }
+
+    /// Random queries (1 to `max_tiles` tiles of a 16 x 16 area, brief or verbose) of
+    /// random fragments on a unit of `params`, clocked cycle by cycle with every word
+    /// granted the cycle after it enters; the VCD of `window` and, per dumped cycle, the
+    /// expected values.
+    fn run(
+        params: OccuParams,
+        max_tiles: u64,
+        window: Range<u64>,
+        seed: u64,
+    ) -> (String, Expected) {
+        let mut rng = Rng(seed | 1);
+        let mut rtl = OccuRtl::new(params);
+        let shared = Shared::default();
+        let options = WaveformOptions {
+            out: Box::new(shared.clone()),
+            window,
+            max_query_tiles: max_tiles,
+        };
+        let mut waveform = Waveform::new(options, &rtl, 66.67);
+        let shown_slots = max_tiles.div_ceil(params.engines as u64) as usize;
+        let (mut wires, mut outputs) = (Wires::default(), CycleOutputs::default());
+        let mut expected_by_cycle = Vec::new();
+        let mut entered_last = 0;
+        let mut clock = |rtl: &mut OccuRtl, fragment: FragmentPort| {
+            let inputs = CycleInputs {
+                fragment,
+                grants: std::mem::take(&mut entered_last),
+            };
+            rtl.eval(&inputs, &mut wires);
+            let cycle = rtl.cycle;
+            if waveform.covers(cycle) {
+                waveform.dump(cycle, rtl, &wires);
+                expected_by_cycle.push((cycle, expected(rtl, &wires, shown_slots)));
+            }
+            rtl.latch(&wires, &mut outputs);
+            entered_last = outputs.entered.len() as u32;
+            outputs.accepted
+        };
+        for _ in 0..6 {
+            let tiles = (0..1 + rng.below(max_tiles))
+                .map(|_| TileRect {
+                    x: rng.below(12) as u32,
+                    y: rng.below(12) as u32,
+                    width: 1 + rng.below(6) as u32,
+                    height: 1 + rng.below(6) as u32,
+                })
+                .collect();
+            let verbose = rng.below(2) == 0;
+            let hit_room = rng.below(4) as u32;
+            rtl.load_query(&QueryConfig {
+                tiles,
+                verbose,
+                hit_room,
+            });
+            for _ in 0..rng.below(40) {
+                let fragment = FragmentPort {
+                    valid: true,
+                    x: rng.below(16) as u16,
+                    y: rng.below(16) as u16,
+                    z: rng.below(1 << 24) as u32,
+                    pass: rng.below(3) != 0,
+                };
+                while !clock(&mut rtl, fragment) {}
+                for _ in 0..rng.below(3) {
+                    clock(&mut rtl, FragmentPort::default());
+                }
+            }
+            while !rtl.end_token(verbose, hit_room) {
+                clock(&mut rtl, FragmentPort::default());
+            }
+            while !rtl.quiescent() {
+                clock(&mut rtl, FragmentPort::default());
+            }
+        }
+        let last = rtl.cycle;
+        waveform.finish(last).unwrap();
+        let text = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
+        (text, expected_by_cycle)
+    }
+
+    fn check(params: OccuParams, max_tiles: u64, window: Range<u64>) {
+        let period = period_ps(66.67);
+        for seed in 0..30 {
+            let (vcd, expected) = run(params, max_tiles, window.clone(), seed);
+            let changes = changes(&vcd);
+            assert!(!expected.is_empty());
+            for (cycle, values) in expected {
+                for (name, value) in values {
+                    let list = &changes[&name];
+                    let at = list.partition_point(|&(t, _)| t <= cycle * period);
+                    assert!(at > 0, "{name} has no value at cycle {cycle}");
+                    assert_eq!(
+                        list[at - 1].1,
+                        value,
+                        "{name} at cycle {cycle}, seed {seed}"
+                    );
+                }
+            }
+        }
+    }
+
+    fn params(engines: u32) -> OccuParams {
+        OccuParams {
+            engines,
+            counter_bits: 32,
+            write_buffer_words: 6,
+            all_tiles_one_cycle: false,
+            results: ResultPath::Records,
+        }
+    }
+
+    #[test]
+    fn every_slot_and_engine_signal_equals_the_model_in_every_dumped_cycle() {
+        check(params(1), 5, 0..u64::MAX);
+        check(params(3), 9, 0..u64::MAX);
+        check(params(4), 4, 0..u64::MAX);
+        check(params(3), 9, 40..90);
+        let saturating = OccuParams {
+            counter_bits: 3,
+            ..params(2)
+        };
+        check(saturating, 6, 0..u64::MAX);
+        let all_at_once = OccuParams {
+            all_tiles_one_cycle: true,
+            ..params(2)
+        };
+        check(all_at_once, 7, 0..u64::MAX);
     }
 }

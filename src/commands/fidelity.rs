@@ -99,6 +99,22 @@ pub fn effects_of_trace(
     Ok(scan.0.finish())
 }
 
+/// The most tiles one query of the trace at `path` has: from its header's features, or
+/// (when the header lacks them) a scan of its events.
+pub fn max_query_tiles_of_trace(arch: &Arch, path: &Path) -> anyhow::Result<u64> {
+    let mut reader = open_trace(path)?;
+    let header = reader.header();
+    if let Some(tiles) = header.features.as_ref().and_then(|f| f.max_query_tiles) {
+        return Ok(tiles);
+    }
+    let (width, height) = (header.width, header.height);
+    let mut scan = ScanSink(EffectScan::for_arch(arch, width, height)?);
+    reader
+        .read_into(&mut scan)
+        .with_context(|| format!("{}: cannot read trace", path.display()))?;
+    Ok(scan.0.facts().max_query_tiles)
+}
+
 /// One row of the table.
 #[derive(Serialize)]
 struct LevelRow {

@@ -4,7 +4,7 @@
 //! InfiniteReality-like machine, Image Engine 0 of board 0's unit).
 
 use super::arch::ArchSelection;
-use super::fidelity::{effects_of_trace, FidelityArg};
+use super::fidelity::{effects_of_trace, max_query_tiles_of_trace, FidelityArg};
 use anyhow::Context;
 use occsim_sim::effects::Effects;
 use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult, LevelSink};
@@ -86,7 +86,11 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         &args.trace,
         args.retile.is_some(),
     )?;
-    let (waveform, vcd) = match waveform(&args.waveform, level)? {
+    let (waveform, vcd) = match waveform(&args.waveform, level, || {
+        // Every slot a query fills is shown: a retiled brief query has the grid's tiles.
+        let grid = args.retile.map_or(0, |g| g.columns as u64 * g.rows as u64);
+        Ok(max_query_tiles_of_trace(&arch, &args.trace)?.max(grid))
+    })? {
         Some((options, thread)) => (Some(options), Some(thread)),
         None => (None, None),
     };
@@ -277,14 +281,17 @@ type VcdThread = (
     std::thread::JoinHandle<anyhow::Result<()>>,
 );
 
-/// The waveform the flags ask for (rtl level only), and the thread writing it.
+/// The waveform the flags ask for (rtl level only), and the thread writing it;
+/// `max_query_tiles` finds how many tile slots to show.
 fn waveform(
     args: &WaveformArgs,
     level: Fidelity,
+    max_query_tiles: impl FnOnce() -> anyhow::Result<u64>,
 ) -> anyhow::Result<Option<(WaveformOptions, VcdThread)>> {
     let (Some(window), Some(path)) = (waveform_window(args, level)?, &args.vcd) else {
         return Ok(None);
     };
+    let max_query_tiles = max_query_tiles()?;
     let (sender, receiver) = std::sync::mpsc::sync_channel::<VcdChunk>(4);
     let path = path.clone();
     let thread = std::thread::spawn(move || {
@@ -304,7 +311,12 @@ fn waveform(
         chunks: sender.clone(),
         buffer: Vec::with_capacity(1 << 20),
     });
-    Ok(Some((WaveformOptions { out, window }, (sender, thread))))
+    let options = WaveformOptions {
+        out,
+        window,
+        max_query_tiles,
+    };
+    Ok(Some((options, (sender, thread))))
 }
 
 /// Keep or drop the waveform file after the replay's `outcome`.
