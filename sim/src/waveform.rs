@@ -125,6 +125,11 @@ fn engine_declarations(w: &Widths) -> Declarations<ENGINE_SIGNALS> {
     ]
 }
 
+/// No engine's signals pack to this key (it would need 2^21 - 1 slots).
+const NO_KEY: (u64, u64) = (u64::MAX, u64::MAX);
+/// No engine loads this many queries.
+const NOTHING_DUMPED: u64 = u64::MAX;
+
 /// The engine's signals packed into 128 bits (each wire counts at most `MAX_TILES` slots,
 /// 17 bits): equal keys, equal values.
 #[inline(always)]
@@ -228,16 +233,6 @@ fn control_values(rtl: &OccuRtl, wires: &Wires) -> [u64; CONTROL_SIGNALS] {
     ]
 }
 
-/// Compare slot `j`'s registers (if shown) with those last dumped.
-#[inline]
-fn dump_slot<W: Write>(vcd: &mut VcdWriter<W>, probe: &EngineProbe, j: usize, slot: &TileSlot) {
-    if j < probe.shown_slots {
-        let mut values = [0; SLOT_SIGNALS];
-        slot_values(slot, &mut values);
-        vcd.change_block(probe.slot(j), &values);
-    }
-}
-
 /// Declare a block's signals; returns the first one's id (the others follow it).
 fn declare<W: Write, const N: usize>(
     vcd: &mut VcdWriter<W>,
@@ -258,10 +253,10 @@ struct EngineProbe {
     slots: SignalId,
     /// Slots declared.
     shown_slots: usize,
-    /// The engine's signals in the last dumped cycle ([`engine_key`]).
-    dumped_key: Option<(u64, u64)>,
-    /// The engine's `loads` count in the last dumped cycle (`None`: nothing dumped yet).
-    dumped_loads: Option<u64>,
+    /// The engine's signals in the last dumped cycle ([`engine_key`]; `NO_KEY` before).
+    dumped_key: (u64, u64),
+    /// The engine's `loads` count in the last dumped cycle (`NOTHING_DUMPED` before).
+    dumped_loads: u64,
     /// The slots the last dumped cycle latched (tested, holding its fragment).
     latched: Range<usize>,
 }
@@ -270,6 +265,31 @@ impl EngineProbe {
     /// Slot `j`'s first signal.
     fn slot(&self, j: usize) -> SignalId {
         SignalId(self.slots.0 + SLOT_SIGNALS * j)
+    }
+
+    /// Compare the slots that may have changed since the last dumped cycle: those it
+    /// latched, or all of them after a load or an unload; at the first dump, every slot
+    /// shown (one not loaded yet shows its reset value, 0).
+    fn dump_slots<W: Write>(&mut self, vcd: &mut VcdWriter<W>, engine: &OcclusionEngine) {
+        let slots = if self.dumped_loads == engine.loads {
+            self.latched.clone()
+        } else {
+            0..self.shown_slots
+        };
+        for j in slots {
+            match engine.slots.get(j) {
+                Some(slot) => {
+                    let mut values = [0; SLOT_SIGNALS];
+                    slot_values(slot, &mut values);
+                    vcd.change_block(self.slot(j), &values);
+                }
+                None if self.dumped_loads == NOTHING_DUMPED => {
+                    vcd.change_block(self.slot(j), &[0; SLOT_SIGNALS]);
+                }
+                None => break,
+            }
+        }
+        self.dumped_loads = engine.loads;
     }
 }
 
@@ -330,8 +350,8 @@ impl Waveform {
                     wires,
                     slots: slots.first().copied().unwrap_or(SignalId(0)),
                     shown_slots,
-                    dumped_key: None,
-                    dumped_loads: None,
+                    dumped_key: NO_KEY,
+                    dumped_loads: NOTHING_DUMPED,
                     latched: 0..0,
                 };
                 debug_assert!((0..shown_slots).all(|j| probe.slot(j) == slots[j]));
@@ -385,44 +405,21 @@ impl Waveform {
             // Most engines' wires and counters stay as they were: one packed compare skips
             // the block.
             let key = engine_key(engine, w);
-            if probe.dumped_key != Some(key) {
+            if probe.dumped_key != key {
                 let mut values = [0; ENGINE_SIGNALS];
                 engine_values(engine, w, &mut values);
                 vcd.change_block(probe.wires, &values);
-                probe.dumped_key = Some(key);
+                probe.dumped_key = key;
             }
-            // Slots that may have changed since the last dumped cycle: those it latched,
-            // or all of them after a load or an unload; at the first dump, every slot shown
-            // (one not loaded yet shows its reset value, 0).
-            match probe.dumped_loads {
-                Some(loads) if loads == engine.loads => {
-                    let end = probe.latched.end.min(engine.slots.len());
-                    for j in probe.latched.start.min(end)..end {
-                        dump_slot(vcd, probe, j, &engine.slots[j]);
-                    }
-                }
-                Some(_) => {
-                    for (j, slot) in engine.slots.iter().enumerate().take(probe.shown_slots) {
-                        dump_slot(vcd, probe, j, slot);
-                    }
-                    probe.dumped_loads = Some(engine.loads);
-                }
-                None => {
-                    for j in 0..probe.shown_slots {
-                        match engine.slots.get(j) {
-                            Some(slot) => dump_slot(vcd, probe, j, slot),
-                            None => vcd.change_block(probe.slot(j), &[0; SLOT_SIGNALS]),
-                        }
-                    }
-                    probe.dumped_loads = Some(engine.loads);
-                }
+            if probe.dumped_loads != engine.loads || !probe.latched.is_empty() {
+                probe.dump_slots(vcd, engine);
             }
-            probe.latched = if w.inside > 0 {
+            if w.inside > 0 {
                 let tested = engine.tested(wires.unit.step, self.all_tiles_one_cycle);
-                tested.start..tested.end.min(probe.shown_slots)
-            } else {
-                0..0
-            };
+                probe.latched = tested.start..tested.end.min(probe.shown_slots);
+            } else if !probe.latched.is_empty() {
+                probe.latched = 0..0;
+            }
         }
         // Quiet OccU Control: empty write buffer, no record bank, no grant, no pick. Then
         // every one of its signals has its idle value (level 0, empty, room = capacity, no
