@@ -86,8 +86,6 @@ struct Signal {
     prefix: u8,
     /// Wider than 32 bits: up to 8 groups of 8 digits instead of 4.
     wide: bool,
-    /// No value written yet (a 64-bit signal has no spare value for a sentinel).
-    unwritten: bool,
 }
 
 /// The text of a timestamp above its last 8 digits, `#` and those digits, kept from one
@@ -120,7 +118,8 @@ pub struct VcdWriter<W: Write> {
     given: Vec<u64>,
     /// Per signal, by id.
     signals: Vec<Signal>,
-    /// A bit per signal with no value written yet.
+    /// A bit per signal with no value written yet (a 64-bit signal has no spare value for
+    /// a sentinel).
     unwritten: Vec<u64>,
     /// Signals with no value written yet.
     unwritten_count: usize,
@@ -291,7 +290,6 @@ impl<W: Write> VcdWriter<W> {
             tail_len: tail_text.len() as u8,
             prefix: (width > 1) as u8,
             wide: width > 32,
-            unwritten: true,
         });
         // Room for a block's bits to be read as two words from any signal on.
         self.unwritten.resize(id / 64 + 2, 0);
@@ -335,11 +333,14 @@ impl<W: Write> VcdWriter<W> {
         for bit in 0..N {
             changed |= ((values[bit] != given[bit]) as u64) << bit;
         }
-        if self.unwritten_count != 0 {
-            changed |= self.unwritten_in(first.0, N);
-        }
+        let unwritten = if self.unwritten_count != 0 {
+            self.unwritten_in(first.0, N)
+        } else {
+            0
+        };
+        changed |= unwritten;
         if changed != 0 {
-            self.write_changed(first.0, values, changed);
+            self.write_changed(first.0, values, changed, unwritten);
         }
     }
 
@@ -353,22 +354,23 @@ impl<W: Write> VcdWriter<W> {
     }
 
     /// Take the values of signals `first + i` for the bits `i` set in `changed`, writing
-    /// those whose masked value changed (after the pending timestamp, if any). The slack
+    /// those whose masked value changed or, for the bits set in `unwritten`, their first
+    /// value (after the pending timestamp, if any). The slack
     /// past the spill mark holds a timestamp and a whole block of lines, so the buffer is
     /// checked once, after the block.
     #[inline(always)]
-    fn write_changed(&mut self, first: usize, values: &[u64], mut changed: u64) {
+    fn write_changed(&mut self, first: usize, values: &[u64], mut changed: u64, unwritten: u64) {
         let given = &mut self.given[first..first + values.len()];
-        let signals = &mut self.signals[first..first + values.len()];
+        let signals = &self.signals[first..first + values.len()];
         while changed != 0 {
             let offset = changed.trailing_zeros() as usize;
             changed &= changed - 1;
             let value = values[offset];
             let old = std::mem::replace(&mut given[offset], value);
-            let signal = &mut signals[offset];
-            if (old ^ value) & signal.mask != 0 || signal.unwritten {
-                if signal.unwritten {
-                    signal.unwritten = false;
+            let signal = &signals[offset];
+            let first_value = (unwritten >> offset) & 1 != 0;
+            if (old ^ value) & signal.mask != 0 || first_value {
+                if first_value {
                     let id = first + offset;
                     self.unwritten[id / 64] &= !(1 << (id % 64));
                     self.unwritten_count -= 1;

@@ -62,6 +62,18 @@ struct Widths {
     pointer: u32,
 }
 
+impl Widths {
+    fn of(rtl: &OccuRtl) -> Widths {
+        Widths {
+            tiles: bits_for(MAX_TILES as u64),
+            step: rtl.step_bits(),
+            counter: rtl.params().counter_bits,
+            occupancy: rtl.control.occupancy_bits(),
+            pointer: rtl.control.pointer_bits(),
+        }
+    }
+}
+
 const UNIT_SIGNALS: usize = 9;
 
 fn unit_declarations(w: &Widths) -> Declarations<UNIT_SIGNALS> {
@@ -319,13 +331,7 @@ impl Waveform {
     pub fn new(options: WaveformOptions, rtl: &OccuRtl, clock_mhz: f64) -> Waveform {
         let mut vcd = VcdWriter::new(options.out, "occsim-rtl");
         let params = rtl.params();
-        let widths = Widths {
-            tiles: bits_for(MAX_TILES as u64),
-            step: rtl.step_bits(),
-            counter: params.counter_bits,
-            occupancy: rtl.control.occupancy_bits(),
-            pointer: rtl.control.pointer_bits(),
-        };
+        let widths = Widths::of(rtl);
         let tiles = options.max_query_tiles.min(MAX_TILES as u64) as usize;
         let engines = params.engines as usize;
         vcd.scope("occu");
@@ -524,35 +530,20 @@ mod tests {
         for (e, (engine, w)) in rtl.engines.iter().zip(&wires.engines).enumerate() {
             let mut values = [0; ENGINE_SIGNALS];
             engine_values(engine, w, &mut values);
-            let names = engine_declarations(&widths(rtl)).map(|d| d.1);
+            let names = engine_declarations(&Widths::of(rtl)).map(|d| d.1);
             for (name, value) in names.iter().zip(values) {
                 out.push((format!("occu.engine_{e}.{name}"), value));
             }
             for (j, slot) in engine.slots.iter().enumerate().take(shown_slots) {
                 let mut values = [0; SLOT_SIGNALS];
                 slot_values(slot, &mut values);
-                let names = slot_declarations(&widths(rtl)).map(|d| d.1);
+                let names = slot_declarations(&Widths::of(rtl)).map(|d| d.1);
                 for (name, value) in names.iter().zip(values) {
-                    let mask = occsim_rtl::bits::mask(if *name == "phc" || *name == "nohc" {
-                        rtl.params().counter_bits
-                    } else {
-                        64
-                    });
-                    out.push((format!("occu.engine_{e}.slot_{j}.{name}"), value & mask));
+                    out.push((format!("occu.engine_{e}.slot_{j}.{name}"), value));
                 }
             }
         }
         out
-    }
-
-    fn widths(rtl: &OccuRtl) -> Widths {
-        Widths {
-            tiles: bits_for(MAX_TILES as u64),
-            step: rtl.step_bits(),
-            counter: rtl.params().counter_bits,
-            occupancy: rtl.control.occupancy_bits(),
-            pointer: rtl.control.pointer_bits(),
-        }
     }
 
     /// Random queries (1 to `max_tiles` tiles of a 16 x 16 area, brief or verbose) of
