@@ -20,11 +20,13 @@ mod stream;
 use stream::{frame, HEIGHT, WIDTH};
 
 const FRAMES: u64 = 3;
-/// Timed repetitions of each level (at least); the fastest counts.
+/// Rounds in which every level takes its turn; a level's fastest run counts, so a slow
+/// spell of the shared machine falls on all levels alike.
 const REPEATS: usize = 5;
-/// A level is repeated until its runs add up to this many seconds, so the fast levels'
-/// few-millisecond runs are timed as often as the slow levels' long ones are long.
-const MIN_SECONDS: f64 = 1.0;
+/// In each round a level is repeated until its runs add up to this many seconds, so the
+/// fast levels' few-millisecond runs are timed as often as the slow levels' long ones are
+/// long.
+const MIN_SECONDS: f64 = 0.2;
 
 /// The stream encoded as a trace, as `occsim trace gen` writes a file (the header's
 /// features written back).
@@ -55,14 +57,14 @@ fn replay(level: Fidelity, arch: &Arch, trace: &[u8], effects: Effects) -> Level
     sink.model.finish(arch).expect("replays")
 }
 
-/// The fastest of at least `REPEATS` runs and `MIN_SECONDS`, in seconds (the effects choice included where the level
-/// builds effects), and the predicted cycles.
+/// One turn of `level`: runs adding up to at least `MIN_SECONDS` (the effects choice
+/// included where the level builds effects); the fastest in seconds, and the predicted
+/// cycles.
 fn time_level(level: Fidelity, arch: &Arch, trace: &[u8]) -> (f64, Option<u64>) {
     let mut best = f64::INFINITY;
     let mut cycles = None;
-    let (mut runs, mut spent) = (0, 0.0);
-    while runs < REPEATS || spent < MIN_SECONDS {
-        runs += 1;
+    let mut spent = 0.0;
+    while spent < MIN_SECONDS {
         let start = Instant::now();
         let effects = if level.builds_effects() {
             effects_from_header(arch, trace)
@@ -112,13 +114,17 @@ fn levels(arch: &Arch, trace: &[u8], fragments: f64) {
         Fidelity::Cycle,
         Fidelity::Rtl,
     ];
-    let timings: Vec<(Fidelity, f64, Option<u64>)> = levels
+    let mut timings: Vec<(Fidelity, f64, Option<u64>)> = levels
         .iter()
-        .map(|&level| {
-            let (seconds, cycles) = time_level(level, arch, trace);
-            (level, seconds, cycles)
-        })
+        .map(|&level| (level, f64::INFINITY, None))
         .collect();
+    for _ in 0..REPEATS {
+        for (level, best, cycles) in &mut timings {
+            let (seconds, predicted) = time_level(*level, arch, trace);
+            *best = best.min(seconds);
+            *cycles = predicted;
+        }
+    }
     let cycle_seconds = timings[4].1;
     for (level, seconds, cycles) in &timings {
         println!(
