@@ -86,38 +86,44 @@ impl DepthBuffer {
         }
         let start = span.y as usize * self.width as usize + span.x as usize;
         let row = &mut self.depths[start..start + span.depths.len()];
-        // One loop per function (each a constant in its arm), so the comparison is not a
-        // jump per fragment.
-        let (depths, row_now) = (span.depths, &*row);
-        macro_rules! compare_with {
+        // One loop per function and write enable (each a constant in its arm), so neither
+        // the comparison nor the write is a jump per fragment.
+        let (depths, write) = (span.depths, state.depth_mask && writes_allowed);
+        macro_rules! test_with {
             ($($func:ident),*) => {
-                match state.depth_func {
-                    $(DepthFunc::$func => {
-                        compare(depths, row_now, passed, |z, s| DepthFunc::$func.passes(z, s))
-                    })*
+                match (state.depth_func, write) {
+                    $(
+                        (DepthFunc::$func, false) => {
+                            test_row::<false>(depths, row, passed, |z, s| DepthFunc::$func.passes(z, s))
+                        }
+                        (DepthFunc::$func, true) => {
+                            test_row::<true>(depths, row, passed, |z, s| DepthFunc::$func.passes(z, s))
+                        }
+                    )*
                 }
             };
         }
-        compare_with!(Never, Less, Equal, Lequal, Greater, Notequal, Gequal, Always);
-        if state.depth_mask && writes_allowed {
-            for ((stored, &z), &pass) in row.iter_mut().zip(span.depths).zip(passed.iter()) {
-                if pass {
-                    *stored = z;
-                }
-            }
-        }
+        test_with!(Never, Less, Equal, Lequal, Greater, Notequal, Gequal, Always);
     }
 }
 
-/// `passed[i] = passes(depths[i], stored[i])`, for one depth function known at compile time.
+/// `passed[i] = passes(depths[i], stored[i])` and, with `WRITE`, `stored[i] = depths[i]`
+/// where it passed, in one pass for one depth function known at compile time (a select,
+/// not a branch: the loop vectorises).
 #[inline(always)]
-fn compare(
+fn test_row<const WRITE: bool>(
     depths: &[u32],
-    stored: &[u32],
+    stored: &mut [u32],
     passed: &mut Vec<bool>,
     passes: impl Fn(u32, u32) -> bool,
 ) {
-    passed.extend(depths.iter().zip(stored).map(|(&z, &s)| passes(z, s)));
+    passed.extend(depths.iter().zip(stored).map(|(&z, s)| {
+        let pass = passes(z, *s);
+        if WRITE {
+            *s = if pass { z } else { *s };
+        }
+        pass
+    }));
 }
 
 /// A hint to the cache that the line at `address` will be read soon; no effect on results.
@@ -219,22 +225,18 @@ fn record_in_tile(result: &mut TileResult, fragment: Fragment, passed: bool, hit
 #[inline]
 fn record_run(result: &mut TileResult, run: Span, passed: &[bool], hit_room: usize) {
     result.phc += run.depths.len() as u64;
-    // Whole-run reductions without branches per fragment (they vectorise).
-    let count = passed.iter().map(|&pass| pass as u64).sum::<u64>();
+    // One whole-run reduction without branches per fragment (it vectorises).
+    let (mut count, mut zmin, mut zmax) = (0u64, u32::MAX, 0u32);
+    for (&z, &pass) in run.depths.iter().zip(passed) {
+        count += pass as u64;
+        zmin = zmin.min(if pass { z } else { u32::MAX });
+        zmax = zmax.max(if pass { z } else { 0 });
+    }
     if count == 0 {
         return;
     }
     let first = passed.iter().position(|&pass| pass).unwrap_or(0);
     let last = passed.iter().rposition(|&pass| pass).unwrap_or(0);
-    let passing = || run.depths.iter().zip(passed);
-    let zmin = passing()
-        .map(|(&z, &pass)| if pass { z } else { u32::MAX })
-        .min()
-        .unwrap_or(u32::MAX);
-    let zmax = passing()
-        .map(|(&z, &pass)| if pass { z } else { 0 })
-        .max()
-        .unwrap_or(0);
     result.nohc += count;
     let (x, y) = (run.x as u32, run.y as u32);
     result.xmin = result.xmin.min(x + first as u32);

@@ -82,14 +82,16 @@ fn span_depths(
     let mut depth = first;
     // Most spans' residuals are all one byte each: decode those without per-byte branches.
     if let Some(bytes) = payload.get(pos..pos + len - 1) {
-        if bytes.iter().all(|&b| b < 0x80) {
-            let mut outside = false;
+        // (An OR of every byte, not a search that stops at the first long one: it vectorises.)
+        if bytes.iter().fold(0, |any, &b| any | b) < 0x80 {
+            // The largest depth as unsigned (a negative one is huge), checked once.
+            let mut highest = 0u64;
             depths.extend(bytes.iter().map(|&b| {
                 depth = depth.wrapping_add(slope).wrapping_add(unzigzag(b as u64));
-                outside |= depth as u64 > DEPTH_ONE as u64;
+                highest = highest.max(depth as u64);
                 depth as u32
             }));
-            if outside {
+            if highest > DEPTH_ONE as u64 {
                 return Err(first_depth_outside(payload, start, len, first, slope));
             }
             return Ok((pos + len - 1, depth));
