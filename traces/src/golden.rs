@@ -226,12 +226,16 @@ fn record_in_tile(result: &mut TileResult, fragment: Fragment, passed: bool, hit
 fn record_run(result: &mut TileResult, run: Span, passed: &[bool], hit_room: usize) {
     result.phc += run.depths.len() as u64;
     // One whole-run reduction without branches per fragment (it vectorises).
-    let (mut count, mut zmin, mut zmax) = (0u64, u32::MAX, 0u32);
+    // (A passing fragment's mask is all ones, a failing one's zero; a run is at most
+    // 65,536 fragments, so the count fits 32 bits.)
+    let (mut count, mut zmin, mut zmax) = (0u32, u32::MAX, 0u32);
     for (&z, &pass) in run.depths.iter().zip(passed) {
-        count += pass as u64;
-        zmin = zmin.min(if pass { z } else { u32::MAX });
-        zmax = zmax.max(if pass { z } else { 0 });
+        let mask = (pass as u32).wrapping_neg();
+        count += pass as u32;
+        zmin = zmin.min(z | !mask);
+        zmax = zmax.max(z & mask);
     }
+    let count = count as u64;
     if count == 0 {
         return;
     }

@@ -63,6 +63,17 @@ fn unzigzag(value: u64) -> i64 {
     (value >> 1) as i64 ^ -((value & 1) as i64)
 }
 
+/// [`unzigzag`] of every one-byte residual (0..0x80), as one load.
+const UNZIGZAG_BYTE: [i8; 128] = {
+    let mut table = [0i8; 128];
+    let mut b = 0;
+    while b < 128 {
+        table[b] = ((b >> 1) as i8) ^ -((b & 1) as i8);
+        b += 1;
+    }
+    table
+};
+
 /// Decode the depths of a span of `len` fragments whose first depth is `first` into `depths`
 /// (cleared first): each next one is the last + `slope` + a zigzag residual read from
 /// `payload` at `pos`. Returns the position after the residuals and the last depth.
@@ -87,7 +98,8 @@ fn span_depths(
             // The largest depth as unsigned (a negative one is huge), checked once.
             let mut highest = 0u64;
             depths.extend(bytes.iter().map(|&b| {
-                depth = depth.wrapping_add(slope).wrapping_add(unzigzag(b as u64));
+                let residual = UNZIGZAG_BYTE[(b & 0x7F) as usize] as i64;
+                depth = depth.wrapping_add(slope).wrapping_add(residual);
                 highest = highest.max(depth as u64);
                 depth as u32
             }));
@@ -777,6 +789,13 @@ impl BlockDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_byte_table_is_unzigzag() {
+        for b in 0..0x80u8 {
+            assert_eq!(UNZIGZAG_BYTE[b as usize] as i64, unzigzag(b as u64), "{b}");
+        }
+    }
 
     #[test]
     fn span_depths_follow_slope_and_residuals() {
