@@ -95,15 +95,17 @@ fn span_depths(
     if let Some(bytes) = payload.get(pos..pos + len - 1) {
         // (An OR of every byte, not a search that stops at the first long one: it vectorises.)
         if bytes.iter().fold(0, |any, &b| any | b) < 0x80 {
-            // The largest depth as unsigned (a negative one is huge), checked once.
-            let mut highest = 0u64;
+            // Every depth's bits ORed, checked once: a depth in 0..2^24 sets none above bit
+            // 23, one outside (negative, or too large) does. The running depth and the OR
+            // are each one dependent operation per fragment.
+            let mut bits = 0u64;
             depths.extend(bytes.iter().map(|&b| {
-                let residual = UNZIGZAG_BYTE[(b & 0x7F) as usize] as i64;
-                depth = depth.wrapping_add(slope).wrapping_add(residual);
-                highest = highest.max(depth as u64);
+                let step = slope.wrapping_add(UNZIGZAG_BYTE[(b & 0x7F) as usize] as i64);
+                depth = depth.wrapping_add(step);
+                bits |= depth as u64;
                 depth as u32
             }));
-            if highest > DEPTH_ONE as u64 {
+            if bits > DEPTH_ONE as u64 {
                 return Err(first_depth_outside(payload, start, len, first, slope));
             }
             return Ok((pos + len - 1, depth));
