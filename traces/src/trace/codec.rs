@@ -613,14 +613,14 @@ impl BlockDecoder {
             // Spans are most records: skip the general dispatch for them.
             if t == tag::SPAN && ctx.assembly.is_empty() {
                 let mut c = Cursor::new(payload, self.pos + 1);
-                self.span_header(&mut c, ctx)?;
+                let span = self.span_header(&mut c, ctx)?;
                 self.pos = c.pos;
-                self.drain_span(payload, sink)?;
+                self.drain_span(payload, sink, span)?;
                 continue;
             }
             match self.record(payload, ctx)? {
                 Record::Event(event) => sink.event(&event),
-                Record::Span => self.drain_span(payload, sink)?,
+                Record::Span => self.drain_span(payload, sink, self.span)?,
                 Record::Part => {}
             }
         }
@@ -694,7 +694,13 @@ impl BlockDecoder {
 
     /// Read a span header, check the span lies in the viewport, and set up `self.span`.
     #[inline(always)]
-    fn span_header(&mut self, c: &mut Cursor, ctx: &mut DecodeContext) -> Result<(), PayloadError> {
+    /// Read a span's header into `self.span`; returns it too (a copy in registers: read
+    /// back from memory at once, its narrow fields would wait for the stores).
+    fn span_header(
+        &mut self,
+        c: &mut Cursor,
+        ctx: &mut DecodeContext,
+    ) -> Result<SpanProgress, PayloadError> {
         let start = c.pos - 1;
         let dy = c.zz()?;
         let dx = c.zz()?;
@@ -720,7 +726,7 @@ impl BlockDecoder {
         }
         let slope = p.slope_x;
         p.begin(x, y, first, dx, dy);
-        self.span = SpanProgress {
+        let span = SpanProgress {
             remaining: len,
             len,
             x: x as u16,
@@ -729,9 +735,10 @@ impl BlockDecoder {
             depth: first,
             slope,
         };
+        self.span = span;
         ctx.tally.checked_fragments(len as u64);
         self.events += len as u64;
-        Ok(())
+        Ok(span)
     }
 
     /// One fragment of the current span (slow path, state kept in `self.span`).
@@ -758,12 +765,13 @@ impl BlockDecoder {
         })
     }
 
-    /// All fragments of a span whose header was just read (fast path).
+    /// All fragments of `span`, whose header was just read (fast path).
     #[inline(always)]
     fn drain_span(
         &mut self,
         payload: &[u8],
         sink: &mut impl EventSink,
+        span: SpanProgress,
     ) -> Result<(), PayloadError> {
         let SpanProgress {
             len,
@@ -772,7 +780,7 @@ impl BlockDecoder {
             first,
             slope,
             ..
-        } = self.span;
+        } = span;
         let mut depths = std::mem::take(&mut self.span_depths);
         let (pos, depth) = span_depths(payload, self.pos, len, first, slope, &mut depths)?;
         sink.span(Span {
