@@ -692,10 +692,10 @@ impl BlockDecoder {
         Ok(Record::Event(event))
     }
 
-    /// Read a span header, check the span lies in the viewport, and set up `self.span`.
+    /// Read a span header, check the span lies in the viewport, and set up `self.span`;
+    /// returns it too (a copy in registers: read back from memory at once, its narrow
+    /// fields would wait for their stores).
     #[inline(always)]
-    /// Read a span's header into `self.span`; returns it too (a copy in registers: read
-    /// back from memory at once, its narrow fields would wait for the stores).
     fn span_header(
         &mut self,
         c: &mut Cursor,
