@@ -68,3 +68,24 @@ pub(crate) fn check_viewport(width: u32, height: u32) -> Result<(), SimError> {
         })
     }
 }
+
+/// A fragment must lie in the `width` x `height` viewport (`event`: its index in the
+/// stream): one check for every model.
+#[inline(always)]
+pub(crate) fn check_fragment_inside(
+    fragment: &occsim_traces::Fragment,
+    event: u64,
+    width: u32,
+    height: u32,
+) -> Result<(), SimError> {
+    if (fragment.x as u32) < width && (fragment.y as u32) < height {
+        return Ok(());
+    }
+    Err(SimError::FragmentOutside {
+        event,
+        x: fragment.x,
+        y: fragment.y,
+        width,
+        height,
+    })
+}

@@ -282,16 +282,7 @@ impl FunctionalCore {
     /// Reject a fragment outside the viewport, `event` its index in the stream.
     #[inline]
     fn check_fragment_at(&self, fragment: &Fragment, event: u64) -> Result<(), SimError> {
-        if fragment.x as u32 >= self.width || fragment.y as u32 >= self.height {
-            return Err(SimError::FragmentOutside {
-                event,
-                x: fragment.x,
-                y: fragment.y,
-                width: self.width,
-                height: self.height,
-            });
-        }
-        Ok(())
+        crate::error::check_fragment_inside(fragment, event, self.width, self.height)
     }
 
     /// Apply a fragment already checked by [`Self::check_fragment`].

@@ -242,15 +242,7 @@ impl IrMachine {
 
     #[inline]
     fn fragment(&mut self, fragment: Fragment, event: u64) -> Result<(), SimError> {
-        if fragment.x as u32 >= self.width || fragment.y as u32 >= self.height {
-            return Err(SimError::FragmentOutside {
-                event,
-                x: fragment.x,
-                y: fragment.y,
-                width: self.width,
-                height: self.height,
-            });
-        }
+        crate::error::check_fragment_inside(&fragment, event, self.width, self.height)?;
         let owner = self.interleave.owner(fragment.x, fragment.y);
         let engine = &mut self.image_engines
             [owner.board * self.arch.image_engines_per_board + owner.image_engine];

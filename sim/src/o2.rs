@@ -271,15 +271,7 @@ impl O2Machine {
     /// the fragment `lookahead` places earlier (which frees its FIFO and prefetch slots).
     #[inline]
     fn front_fragment(&mut self, fragment: Fragment, event: u64) -> Result<(), SimError> {
-        if fragment.x as u32 >= self.width || fragment.y as u32 >= self.height {
-            return Err(SimError::FragmentOutside {
-                event,
-                x: fragment.x,
-                y: fragment.y,
-                width: self.width,
-                height: self.height,
-            });
-        }
+        crate::error::check_fragment_inside(&fragment, event, self.width, self.height)?;
         while self.pending_fragments >= self.lookahead {
             self.back_one()?;
         }
