@@ -17,18 +17,7 @@ const FRAMES: usize = 22;
 
 fn main() {
     let frame = frame(42);
-    let per_frame = frame
-        .iter()
-        .filter(|e| matches!(e, Event::Fragment(_)))
-        .count();
-    println!(
-        "stream: {} fragments ({} frames of {}), {}x{}",
-        per_frame * FRAMES,
-        FRAMES,
-        per_frame,
-        WIDTH,
-        HEIGHT
-    );
+    stream::announce(&frame, FRAMES);
     for (name, engines) in [("o2", 1), ("o2", 4), ("o2", 16), ("ir4", 4), ("ir4", 16)] {
         measure(name, engines, &frame);
     }

@@ -92,18 +92,7 @@ fn run(arch: &Arch, frame: &[Event], occu: OccuModel) -> (f64, occsim_sim::Repor
 
 fn main() {
     let frame = frame(42);
-    let per_frame = frame
-        .iter()
-        .filter(|e| matches!(e, Event::Fragment(_)))
-        .count();
-    println!(
-        "stream: {} fragments ({} frames of {}), {}x{}",
-        per_frame * FRAMES,
-        FRAMES,
-        per_frame,
-        WIDTH,
-        HEIGHT
-    );
+    stream::announce(&frame, FRAMES);
     let max_query_tiles = frame
         .iter()
         .map(|event| match event {

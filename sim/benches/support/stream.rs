@@ -92,3 +92,15 @@ pub fn thread_cpu_ns() -> Option<u64> {
     let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
     text.split_whitespace().next()?.parse().ok()
 }
+
+/// Print what a benchmark replays: `frames` copies of `frame`.
+pub fn announce(frame: &[Event], frames: usize) {
+    let per_frame = frame
+        .iter()
+        .filter(|e| matches!(e, Event::Fragment(_)))
+        .count();
+    println!(
+        "stream: {} fragments ({frames} frames of {per_frame}), {WIDTH}x{HEIGHT}",
+        per_frame * frames
+    );
+}
