@@ -378,17 +378,9 @@ fn the_scan_switches_effects_off_on_the_builtin_traces() {
     assert!(effects.page_model);
 }
 
-/// A small deterministic generator (xorshift64*).
-struct Rng(u64);
-
-impl Rng {
-    fn below(&mut self, n: u64) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) % n
-    }
-}
+#[path = "support/rng.rs"]
+mod rng;
+use rng::Rng;
 
 /// A random stream over a `width` x `height` viewport with state changes and every mode.
 fn random_stream(seed: u64, width: u32, height: u32) -> Vec<Event> {

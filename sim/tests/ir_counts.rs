@@ -8,17 +8,9 @@ use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QueryResult, QuerySpe
 const WIDTH: u32 = 40;
 const HEIGHT: u32 = 24;
 
-/// A small deterministic generator (xorshift64*), so each seed names one stream.
-struct Rng(u64);
-
-impl Rng {
-    fn below(&mut self, n: u64) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) % n
-    }
-}
+#[path = "support/rng.rs"]
+mod rng;
+use rng::Rng;
 
 fn random_tile(rng: &mut Rng) -> Rect {
     let x = rng.below(WIDTH as u64) as u32;

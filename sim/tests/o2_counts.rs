@@ -10,20 +10,9 @@ use proptest::prelude::*;
 const WIDTH: u32 = 48;
 const HEIGHT: u32 = 40;
 
-/// A small deterministic generator (xorshift64*), so each seed names one stream.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
-    }
-}
+#[path = "support/rng.rs"]
+mod rng;
+use rng::Rng;
 
 fn random_tile(rng: &mut Rng) -> Rect {
     let x = rng.below(WIDTH as u64) as u32;

@@ -103,17 +103,9 @@ fn small_demo_is_identical() {
 const WIDTH: u32 = 40;
 const HEIGHT: u32 = 32;
 
-/// A small deterministic generator (xorshift64*), so each seed names one stream.
-struct Rng(u64);
-
-impl Rng {
-    fn below(&mut self, n: u64) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) % n
-    }
-}
+#[path = "support/rng.rs"]
+mod rng;
+use rng::Rng;
 
 /// Random state changes, queries of every mode over random tiles and buffer sizes, spans
 /// of fragments with many depth ties and fragments outside queries; golden results after
