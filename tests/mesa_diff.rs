@@ -1,37 +1,37 @@
-//! Differential check: every query's count from the golden model (our exact rasterizer and
-//! depth semantics) must equal Mesa llvmpipe's, on structured and seeded random scenes.
+//! Differential check: every query's count from the golden model must equal Mesa llvmpipe's,
+//! bit for bit, with no tolerance and no exclusions: the `llvmpipe` profile against a
+//! framebuffer object, the `llvmpipe-window` profile against a pbuffer (a window-system
+//! framebuffer, y mirrored). On the fill-rule cases, the structured scenes, the built-in
+//! scenes and thousands of seeded random scenes that cross the viewport's edges and the near
+//! and far planes, with steep and constant depth, surfaces 1-6 depth units apart, slivers,
+//! huge and denormal coordinates, every depth function, scissor, back-face culling on and off,
+//! draws of exactly three triangles (llvmpipe's nine-vertex path), and viewports of odd sizes
+//! up to 4096.
 //!
 //! Without libEGL the check prints `mesa_diff: SKIPPED: ...` and passes, except when
 //! `CI=true`, where a missing Mesa fails it (CI installs Mesa). `OCCSIM_LIBEGL=/nonexistent`
-//! shows the skip path.
-//!
-//! What is kept out of the exact-equality scenes, and why:
-//! - Geometry that Mesa clips (a vertex outside -w <= x, y, z <= w): llvmpipe's draw module
-//!   clips x/y against the viewport planes (no guard band) and z against near/far with its
-//!   own interpolation; the new vertices' float rounding differs from ours (we clip x/y only
-//!   beyond a large guard band). Such geometry is tested for our own invariants in
-//!   traces/tests/raster_hardcases.rs.
-//! - Depth comparisons between different primitives whose vertices snapping moved:
-//!   llvmpipe builds its depth plane from the *unsnapped* f32 window positions and
-//!   evaluates it in f32; ours is the exact plane through the *snapped* vertices. Near a
-//!   crossing of two surfaces the two can order a pixel differently (a seen case: 423 units
-//!   of 2^-24 on a steep triangle). So depth-sensitive random scenes put vertices on the
-//!   1/256 snapping grid (then only llvmpipe's f32 rounding differs, a few units), and the
-//!   scenes with snapping ties (1/512 grid) or arbitrary floats measure coverage only
-//!   (depth function `always`).
-//! - The window transform: llvmpipe computes `fma(x·(1/w), s, t)` (LLVM fuses
-//!   `llvm.fmuladd` on hosts with FMA); we do the same. The float scenes check it.
+//! shows the skip path. `OCCSIM_MESA_SCENES=N` sets the random scenes per target (default
+//! 2,000).
 
 mod support;
 
 use occsim_traces::golden::{Discard, GoldenModel};
+use occsim_traces::raster::RasterProfile;
 use occsim_traces::scene::{format_command, parse_scene};
 use occsim_traces::{Command, QueryMode, SceneLine};
-use support::gl_replay::{GlQueryCounts, GlReplay};
+use support::gl_replay::{GlQueryCounts, GlReplay, Target};
+
+/// The profile that models `target`.
+fn profile_of(target: Target) -> RasterProfile {
+    match target {
+        Target::Fbo => RasterProfile::Llvmpipe,
+        Target::Pbuffer => RasterProfile::LlvmpipeWindow,
+    }
+}
 
 /// A live llvmpipe, or None after printing why the check is skipped (failing under CI).
-fn mesa_or_skip(width: u32, height: u32) -> Option<GlReplay> {
-    match GlReplay::new(width, height) {
+fn mesa_or_skip(target: Target, width: u32, height: u32) -> Option<GlReplay> {
+    match GlReplay::with_target(target, width, height) {
         Ok(gl) => Some(gl),
         Err(why) => {
             if std::env::var("CI").is_ok_and(|v| v == "true") {
@@ -43,13 +43,13 @@ fn mesa_or_skip(width: u32, height: u32) -> Option<GlReplay> {
     }
 }
 
-/// The golden model's counts, in the same shape as [`GlQueryCounts`].
-fn golden_counts(lines: &[SceneLine]) -> Vec<GlQueryCounts> {
+/// The golden model's counts under `profile`, in the same shape as [`GlQueryCounts`].
+fn golden_counts(lines: &[SceneLine], profile: RasterProfile) -> Vec<GlQueryCounts> {
     let (width, height) = match lines.first().map(|l| &l.command) {
         Some(Command::Viewport { width, height }) => (*width, *height),
         _ => panic!("scene must start with viewport"),
     };
-    let mut model = GoldenModel::new(width, height);
+    let mut model = GoldenModel::with_profile(width, height, profile);
     let mut counts = Vec::new();
     for line in lines {
         if let Some(result) = model.execute(&line.command, &mut Discard) {
@@ -77,14 +77,15 @@ fn scene_text(lines: &[SceneLine]) -> String {
 }
 
 /// Require equal counts query by query; on failure show the first difference and the scene.
-fn assert_same_counts(name: &str, lines: &[SceneLine], gl: &mut GlReplay) {
-    let ours = golden_counts(lines);
+fn assert_same_counts(name: &str, lines: &[SceneLine], gl: &mut GlReplay, target: Target) {
+    let profile = profile_of(target);
+    let ours = golden_counts(lines, profile);
     let mesa = gl.run(lines);
     assert_eq!(ours.len(), mesa.len(), "{name}: query count differs");
     for (index, (o, m)) in ours.iter().zip(&mesa).enumerate() {
         assert!(
             o == m,
-            "{name}: query #{index} (id {}) differs: golden {:?}, Mesa {:?}\nscene to reproduce:\n{}",
+            "{name} ({profile} against {target:?}): query #{index} (id {}) differs: golden {:?}, Mesa {:?}\nscene to reproduce:\n{}",
             o.id,
             o.counts,
             m.counts,
@@ -114,7 +115,7 @@ fn scene(text: &str) -> Vec<SceneLine> {
 /// The fill and snapping rules, measured on llvmpipe with hand-derived expectations, and
 /// the golden model required to agree: a one-pixel-wide scissored column or row, and a
 /// rectangle whose edge passes exactly through the centres in it (8 of them).
-fn fill_rule_and_snapping_of_llvmpipe(gl: &mut GlReplay) {
+fn fill_rule_and_snapping_of_llvmpipe(gl: &mut GlReplay, target: Target) {
     let s = (8, 8);
     let column = "scissor 2 0 1 8";
     let row = "scissor 0 2 8 1";
@@ -194,9 +195,9 @@ fn fill_rule_and_snapping_of_llvmpipe(gl: &mut GlReplay) {
     for (name, scissor, tris, expected) in cases {
         let lines = scene(&format!("viewport 8 8\n{scissor}\nbegin 1\n{tris}end\n"));
         let mesa = gl.run(&lines)[0].counts[0];
-        let ours = golden_counts(&lines)[0].counts[0];
-        assert_eq!(mesa, expected, "Mesa, {name}");
-        assert_eq!(ours, expected, "golden model, {name}");
+        let ours = golden_counts(&lines, profile_of(target))[0].counts[0];
+        assert_eq!(mesa, expected, "Mesa ({target:?}), {name}");
+        assert_eq!(ours, expected, "golden model ({target:?}), {name}");
     }
 }
 
@@ -327,6 +328,73 @@ fn structured_scenes() -> Vec<(String, String)> {
         rect(1.5, 29.5, 2.5, 30.5, -0.75, s)
     );
     scenes.push(("masks, scissor, culling, brief tiles".into(), text));
+
+    // Huge triangles clipped to the viewport in f32 (llvmpipe loses pixels at the edges).
+    let mut text = String::from("viewport 32 32\n");
+    for (id, tri) in [
+        "-1e6 -1e6 0.0 1.0 3e6 -1e6 0.0 1.0 -1e6 3e6 0.0 1.0",
+        "-3e30 -3e30 0.0 1.0  3e30 -3e30 0.0 1.0  0.0 3e30 0.0 1.0",
+        "-1e4 -1e4 0.0 1e-3  1e4 -1e4 0.0 1e-3  0.0 1e4 0.0 1e-3",
+        "-1 -1 -1e7 1  1 -1 1e7 1  0 1 0 1",
+    ]
+    .iter()
+    .enumerate()
+    {
+        text += &format!("clear\nbegin {id}\ntri {tri}\nend\n");
+    }
+    scenes.push(("huge triangles".into(), text));
+
+    // Draws of three triangles whose last is flat in y (llvmpipe's nine-vertex path): no
+    // rectangle in the first two, a rectangle in its expected vertex order (drawn in one
+    // orientation of y, culled in the other), and a fourth triangle that makes it ordinary.
+    let c = |x: f64, y: f64| format!("{} {} 0 1", x / 4.0 - 1.0, y / 4.0 - 1.0);
+    let t1 = format!("tri {}  {}  {}\n", c(1.0, 1.0), c(6.0, 1.0), c(1.0, 6.0));
+    let t2 = format!("tri {}  {}  {}\n", c(6.0, 1.0), c(6.0, 6.0), c(1.0, 6.0));
+    let flat = format!("tri {}  {}  {}\n", c(0.0, 7.0), c(4.0, 7.0), c(7.0, 7.0));
+    let rect = |x0: f64, x1: f64, y0: f64, y1: f64| {
+        format!(
+            "tri {}  {}  {}\ntri {}  {}  {}\n",
+            c(x0, y0),
+            c(x0, y1),
+            c(x1, y1),
+            c(x1, y0),
+            c(x1, y1),
+            c(x0, y0)
+        )
+    };
+    let mut text = String::from("viewport 8 8\n");
+    for (id, draw) in [
+        format!("{t1}{t2}{flat}"),
+        format!("{t1}{t2}{flat}{flat}"),
+        format!("{}{flat}", rect(5.0, 1.0, 2.0, 6.0)),
+        format!("{}{flat}", rect(1.0, 5.0, 2.0, 6.0)),
+        format!("{}{flat}", rect(1.5, 6.25, 0.5, 7.0)),
+    ]
+    .iter()
+    .enumerate()
+    {
+        text += &format!(
+            "clear\nbegin {id}\n{draw}end\ncull 1\nclear\nbegin {}\n{draw}end\ncull 0\n",
+            id + 10
+        );
+    }
+    scenes.push(("nine-vertex draws".into(), text));
+
+    // The reproducers of issue 11: an edge-clipped triangle, and interpenetrating planes.
+    scenes.push((
+        "issue reproducers".into(),
+        "viewport 200 150\nclear\nbegin 0\n\
+         tri 1.195604 0.4832446 0.5 1  0.8642694 0.4082995 0.5 1  0.7934409 0.3295854 0.5 1\nend\n"
+            .into(),
+    ));
+    scenes.push((
+        "issue depth pair".into(),
+        "viewport 64 64\nclear\nbegin 0\n\
+         tri 0.1763297 0.7665053 -0.09756832 1  -0.3205084 -0.7066074 -0.3674104 1  0.7707483 -0.0533057 -0.1754436 1\nend\n\
+         begin 1\n\
+         tri -0.8223223 0.3768852 -0.3658611 1  -0.001898742 0.4581878 0.3025198 1  0.6457618 -0.4365953 -0.343951 1\nend\n"
+            .into(),
+    ));
     scenes
 }
 
@@ -343,40 +411,169 @@ impl Random {
     }
 
     fn below(&mut self, n: u64) -> u64 {
-        self.next() % n
+        self.next() % n.max(1)
     }
 
     fn chance(&mut self, percent: u64) -> bool {
         self.below(100) < percent
     }
-}
 
-/// A random scene inside the viewport (no clipping by Mesa), coordinates on the exact grid.
-/// What a random scene exercises.
-#[derive(Clone, Copy, PartialEq, Debug)]
-enum SceneKind {
-    /// Vertices on the 1/256 snapping grid (snapped = unsnapped, so llvmpipe's depth plane,
-    /// built from unsnapped positions, is ours up to its f32 rounding): every depth function.
-    DepthOnSnapGrid,
-    /// Vertices on the 1/512 grid, half of them on snapping ties; depth function `always`,
-    /// so counts measure coverage (the depth planes differ by the snapping).
-    CoverageOnTies,
-    /// Arbitrary f32 clip coordinates and w inside the view volume; coverage only.
-    CoverageFloat,
-}
-
-fn random_scene(seed: u64, width: u32, height: u32, kind: SceneKind) -> String {
-    let mut rng = Random(seed);
-    let mut text = format!("viewport {width} {height}\n");
-    if kind != SceneKind::DepthOnSnapGrid {
-        text += "depth_func always\n";
+    /// Uniform in [lo, hi).
+    fn uniform(&mut self, lo: f32, hi: f32) -> f32 {
+        lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
     }
-    for query in 0..12 {
+
+    fn pick<T: Copy>(&mut self, items: &[T]) -> T {
+        items[self.below(items.len() as u64) as usize]
+    }
+}
+
+/// What a random triangle's vertices look like.
+#[derive(Clone, Copy, Debug)]
+enum Shape {
+    /// Inside the view volume.
+    Inside,
+    /// Across the viewport's edges (|x|, |y| up to 3w).
+    AcrossEdges,
+    /// Across the near and far planes (|z| up to 3w), sometimes a vertex behind the eye.
+    AcrossDepth,
+    /// Coordinates up to 10^7 w.
+    Huge,
+    /// Two vertices within a few sub-pixels.
+    Sliver,
+    /// A large steep slope in depth across a small triangle.
+    Steep,
+}
+
+const SHAPES: [Shape; 6] = [
+    Shape::Inside,
+    Shape::AcrossEdges,
+    Shape::AcrossDepth,
+    Shape::Huge,
+    Shape::Sliver,
+    Shape::Steep,
+];
+
+/// Write `v` as scene text (every f32 round-trips through `{:?}`).
+fn tri_text(v: &[[f32; 4]; 3]) -> String {
+    let mut text = String::from("tri");
+    for vertex in v {
+        for c in vertex {
+            text += &format!(" {c:?}");
+        }
+        text += " ";
+    }
+    text + "\n"
+}
+
+fn random_vertex(rng: &mut Random, shape: Shape, near: Option<[f32; 4]>) -> [f32; 4] {
+    let w = if rng.chance(30) {
+        1.0
+    } else {
+        rng.uniform(0.25, 4.0)
+    };
+    let (xy, z) = match shape {
+        Shape::Inside | Shape::Sliver | Shape::Steep => (1.0, 1.0),
+        Shape::AcrossEdges => (3.0, 1.0),
+        Shape::AcrossDepth => (1.2, 3.0),
+        Shape::Huge => (rng.pick(&[1e3, 1e5, 1e7]), 1.0),
+    };
+    let mut v = [
+        rng.uniform(-xy, xy) * w,
+        rng.uniform(-xy, xy) * w,
+        rng.uniform(-z, z) * w,
+        w,
+    ];
+    if matches!(shape, Shape::AcrossDepth) && rng.chance(15) {
+        v[3] = -v[3];
+    }
+    if let Some(base) = near {
+        // A few sub-pixels (the viewport's side is at most 4096: 2/4096 is half a pixel).
+        let step = |rng: &mut Random| rng.uniform(-1.0, 1.0) * 2e-3 * base[3];
+        v = [base[0] + step(rng), base[1] + step(rng), v[2], base[3]];
+    }
+    if rng.chance(3) {
+        // A denormal component.
+        let k = rng.below(3) as usize;
+        v[k] = f32::from_bits(1 + rng.below(0x7f_fffe) as u32)
+            * if rng.chance(50) { 1.0 } else { -1.0 };
+    }
+    v
+}
+
+fn random_triangle(rng: &mut Random, shape: Shape) -> [[f32; 4]; 3] {
+    let a = random_vertex(rng, shape, None);
+    let b = match shape {
+        Shape::Sliver | Shape::Steep => random_vertex(rng, shape, Some(a)),
+        _ => random_vertex(rng, shape, None),
+    };
+    let c = random_vertex(rng, shape, None);
+    let mut t = [a, b, c];
+    if matches!(shape, Shape::Steep) {
+        // The near pair's depths far apart: a slope of many units a pixel.
+        t[0][2] = -0.9 * t[0][3];
+        t[1][2] = 0.9 * t[1][3];
+    } else if rng.chance(15) {
+        // Constant window depth.
+        let depth = rng.uniform(-1.0, 1.0);
+        for v in &mut t {
+            v[2] = depth * v[3];
+        }
+    }
+    t
+}
+
+/// `t` moved `units` 24-bit depth units towards the far plane (window depth = z/w / 2 + 1/2).
+fn offset_in_depth(t: &[[f32; 4]; 3], units: i32) -> [[f32; 4]; 3] {
+    t.map(|v| {
+        [
+            v[0],
+            v[1],
+            v[2] + 2.0 * units as f32 / 16_777_215.0 * v[3],
+            v[3],
+        ]
+    })
+}
+
+/// One draw: a few random triangles, sometimes a surface and its copy a few depth units
+/// behind, sometimes exactly three triangles ending flat in y (the nine-vertex path).
+fn random_draw(rng: &mut Random, text: &mut String) {
+    match rng.below(10) {
+        0 => {
+            let t = random_triangle(rng, Shape::Inside);
+            *text += &tri_text(&t);
+            *text += &tri_text(&offset_in_depth(&t, 1 + rng.below(6) as i32));
+        }
+        1 => {
+            for _ in 0..2 {
+                let shape = rng.pick(&SHAPES);
+                *text += &tri_text(&random_triangle(rng, shape));
+            }
+            let mut flat = random_triangle(rng, Shape::Inside);
+            let y = flat[0][1] / flat[0][3];
+            for v in &mut flat {
+                v[1] = y * v[3];
+            }
+            *text += &tri_text(&flat);
+        }
+        _ => {
+            for _ in 0..1 + rng.below(6) {
+                let shape = rng.pick(&SHAPES);
+                *text += &tri_text(&random_triangle(rng, shape));
+            }
+        }
+    }
+}
+
+fn random_scene(seed: u64, width: u32, height: u32) -> String {
+    let mut rng = Random(seed ^ (width as u64) << 40 ^ (height as u64) << 20);
+    let mut text = format!("viewport {width} {height}\n");
+    for query in 0..10 {
         if rng.chance(20) {
             text += "clear\n";
         }
-        if rng.chance(50) && kind == SceneKind::DepthOnSnapGrid {
-            let f = occsim_traces::DepthFunc::ALL[rng.below(8) as usize];
+        if rng.chance(50) {
+            let f = rng.pick(&occsim_traces::DepthFunc::ALL);
             text += &format!("depth_func {}\n", f.name());
         }
         if rng.chance(30) {
@@ -385,7 +582,7 @@ fn random_scene(seed: u64, width: u32, height: u32, kind: SceneKind) -> String {
         if rng.chance(10) {
             text += &format!("depth_test {}\n", (rng.below(4) != 0) as u8);
         }
-        if rng.chance(30) {
+        if rng.chance(40) {
             text += &format!("cull {}\n", rng.below(2));
         }
         if rng.chance(30) {
@@ -409,120 +606,108 @@ fn random_scene(seed: u64, width: u32, height: u32, kind: SceneKind) -> String {
             }
         }
         text += "\n";
-        for _ in 0..1 + rng.below(6) {
-            text += "tri";
-            for _ in 0..3 {
-                if kind != SceneKind::CoverageFloat {
-                    // w a power of two keeps x·(1/w) exact.
-                    let w = [0.5, 1.0, 2.0, 4.0][rng.below(4) as usize];
-                    let grid = if kind == SceneKind::DepthOnSnapGrid {
-                        256
-                    } else {
-                        512
-                    };
-                    let xw = rng.below(width as u64 * grid + 1) as f64 / grid as f64;
-                    let yw = rng.below(height as u64 * grid + 1) as f64 / grid as f64;
-                    let z = (rng.below(2049) as f64 - 1024.0) / 1024.0;
-                    text += &format!(
-                        "  {} {} {} {w}",
-                        clip(xw, width) * w,
-                        clip(yw, height) * w,
-                        z * w
-                    );
-                } else {
-                    // Arbitrary f32 clip coordinates inside the view volume.
-                    let unit =
-                        |rng: &mut Random| (rng.below(1 << 24) as f32 / (1 << 23) as f32) - 1.0;
-                    let w = 0.25 + rng.below(1 << 20) as f32 / (1 << 18) as f32;
-                    let (x, y, z) = (unit(&mut rng) * w, unit(&mut rng) * w, unit(&mut rng) * w);
-                    text += &format!("  {x:?} {y:?} {z:?} {w:?}");
-                }
-            }
-            text += "\n";
+        random_draw(&mut rng, &mut text);
+        if rng.chance(30) {
+            // A second draw in the same query.
+            text += "depth_mask 1\n";
+            random_draw(&mut rng, &mut text);
         }
         text += "end\n";
     }
     text
 }
 
-#[test]
-fn golden_model_matches_mesa_llvmpipe() {
-    let Some(mut gl8) = mesa_or_skip(8, 8) else {
+/// Viewports and their share of the random scenes: odd sizes, slivers of viewports, up to
+/// 4096 on a side.
+const VIEWPORTS: [((u32, u32), u64); 10] = [
+    ((64, 32), 20),
+    ((1, 1), 4),
+    ((7, 5), 10),
+    ((31, 17), 14),
+    ((97, 61), 14),
+    ((333, 250), 10),
+    ((640, 480), 6),
+    ((4096, 3), 8),
+    ((5, 4096), 8),
+    ((1023, 769), 6),
+];
+
+fn random_scenes_per_target() -> u64 {
+    std::env::var("OCCSIM_MESA_SCENES")
+        .ok()
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(2000)
+}
+
+/// Every random scene through Mesa and the golden model, per viewport.
+fn random_scenes_match(target: Target) {
+    let total = random_scenes_per_target();
+    let shares: u64 = VIEWPORTS.iter().map(|(_, share)| share).sum();
+    let mut done = 0;
+    for ((width, height), share) in VIEWPORTS {
+        let Some(mut gl) = mesa_or_skip(target, width, height) else {
+            return;
+        };
+        let count = (total * share).div_ceil(shares);
+        for seed in 0..count {
+            let text = random_scene(seed, width, height);
+            let name = format!("random scene {width}x{height}, seed {seed}");
+            assert_same_counts(&name, &scene(&text), &mut gl, target);
+        }
+        done += count;
+    }
+    println!("mesa_diff: {done} random scenes equal on {target:?}");
+    assert!(done >= total);
+}
+
+/// The fill rule, the structured scenes and the built-in scenes on `target`.
+fn fixed_scenes_match(target: Target) {
+    use occsim_traces::builtin::{demo_scene, DemoOptions, HARDCASES};
+    let Some(mut gl8) = mesa_or_skip(target, 8, 8) else {
         return;
     };
     let renderer = gl8.renderer();
     assert!(renderer.contains("llvmpipe"), "not llvmpipe: {renderer}");
-    fill_rule_and_snapping_of_llvmpipe(&mut gl8);
+    fill_rule_and_snapping_of_llvmpipe(&mut gl8, target);
     drop(gl8);
-
-    let mut gl = GlReplay::new(32, 32).expect("second context");
     for (name, text) in structured_scenes() {
-        assert_same_counts(&name, &scene(&text), &mut gl);
+        let lines = scene(&text);
+        let Some(Command::Viewport { width, height }) = lines.first().map(|l| l.command.clone())
+        else {
+            panic!("{name}: no viewport");
+        };
+        let mut gl = GlReplay::with_target(target, width, height).expect("a context");
+        assert_same_counts(&name, &lines, &mut gl, target);
     }
+    let mut gl = GlReplay::with_target(target, 64, 64).expect("a context");
+    assert_same_counts("hardcases", &scene(HARDCASES), &mut gl, target);
     drop(gl);
-
-    let (width, height) = (64, 32);
-    let mut gl = GlReplay::new(width, height).expect("third context");
-    for kind in [
-        SceneKind::DepthOnSnapGrid,
-        SceneKind::CoverageOnTies,
-        SceneKind::CoverageFloat,
-    ] {
-        for seed in 0..150 {
-            let text = random_scene(seed, width, height, kind);
-            let name = format!("random scene {kind:?}, seed {seed}");
-            assert_same_counts(&name, &scene(&text), &mut gl);
-        }
-    }
-}
-
-/// The built-in scenes through Mesa: the hard cases (clipping included) agree exactly; the
-/// demo agrees but for depth ties between coplanar parts (llvmpipe evaluates depth in f32
-/// from unsnapped vertices, we exactly from snapped ones), which must stay a handful of pixels.
-#[test]
-fn builtin_scenes_match_mesa_llvmpipe() {
-    use occsim_traces::builtin::{demo_scene, DemoOptions, HARDCASES};
-    let Some(mut gl) = mesa_or_skip(64, 64) else {
-        return;
-    };
-    assert_same_counts("hardcases", &scene(HARDCASES), &mut gl);
-    drop(gl);
-
     let options = DemoOptions {
         width: 320,
         height: 256,
         frames: 2,
         ..DemoOptions::default()
     };
-    let lines = scene(&demo_scene(&options));
-    let mut gl = GlReplay::new(options.width, options.height).expect("a context");
-    let ours = golden_counts(&lines);
-    let theirs = gl.run(&lines);
-    assert_eq!(ours.len(), theirs.len());
-    let mut differing_queries = 0;
-    let (mut differing_pixels, mut total_pixels) = (0u64, 0u64);
-    for (a, b) in ours.iter().zip(&theirs) {
-        assert_eq!(
-            (a.id, a.mode, a.counts.len()),
-            (b.id, b.mode, b.counts.len())
-        );
-        total_pixels += a.counts.iter().sum::<u64>();
-        let differ: u64 = a
-            .counts
-            .iter()
-            .zip(&b.counts)
-            .map(|(x, y)| x.abs_diff(*y))
-            .sum();
-        differing_pixels += differ;
-        differing_queries += (differ > 0) as usize;
-    }
-    println!(
-        "demo: {differing_queries} of {} queries differ, by {differing_pixels} of {total_pixels} pixels",
-        ours.len()
-    );
-    assert!(
-        differing_queries * 20 <= ours.len() && differing_pixels * 10_000 <= total_pixels,
-        "demo: {differing_queries} of {} queries differ, by {differing_pixels} of {total_pixels} pixels",
-        ours.len()
-    );
+    let mut gl = GlReplay::with_target(target, options.width, options.height).expect("a context");
+    assert_same_counts("demo", &scene(&demo_scene(&options)), &mut gl, target);
+}
+
+#[test]
+fn llvmpipe_profile_matches_mesa_into_a_framebuffer_object() {
+    fixed_scenes_match(Target::Fbo);
+}
+
+#[test]
+fn llvmpipe_window_profile_matches_mesa_into_a_pbuffer() {
+    fixed_scenes_match(Target::Pbuffer);
+}
+
+#[test]
+fn random_scenes_match_mesa_into_a_framebuffer_object() {
+    random_scenes_match(Target::Fbo);
+}
+
+#[test]
+fn random_scenes_match_mesa_into_a_pbuffer() {
+    random_scenes_match(Target::Pbuffer);
 }

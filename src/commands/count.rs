@@ -12,13 +12,15 @@ pub struct CountArgs {
     /// Print every query's full result (all modes, every tile) as JSON instead.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub raster: super::raster_args::RasterArgs,
 }
 
 /// Prints `query ID N` for every samples query, in order, exactly as a GL program printing
 /// GL_SAMPLES_PASSED would.
 pub fn run(args: CountArgs) -> anyhow::Result<()> {
     let mut scene = open_scene(&args.scene)?;
-    let mut golden = GoldenModel::new(scene.width, scene.height);
+    let mut golden = GoldenModel::with_profile(scene.width, scene.height, args.raster.profile);
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     let mut results = Vec::new();

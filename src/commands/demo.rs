@@ -16,6 +16,8 @@ pub struct DemoArgs {
     /// Add a table of every query.
     #[arg(long)]
     pub queries: bool,
+    #[command(flatten)]
+    pub raster: super::raster_args::RasterArgs,
 }
 
 pub fn run(args: DemoArgs) -> anyhow::Result<()> {
@@ -24,12 +26,16 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let (width, height) = (options.width, options.height);
     let text = demo_scene(&options);
     let mut trace = Vec::new();
-    let header = TraceHeader::new(width, height).with_scene("demo");
+    let raster = args.raster.profile;
+    let header = TraceHeader::new(width, height)
+        .with_scene("demo")
+        .with_raster(raster);
     let mut writer = TraceWriter::new(&mut trace, &header)?;
-    let mut golden = GoldenModel::new(width, height);
+    let mut golden = GoldenModel::with_profile(width, height, raster);
     for line in SceneReader::new(text.as_bytes(), "demo") {
         golden.execute(&line?.command, &mut writer);
     }
+    golden.finish(&mut writer);
     let summary = writer.finish()?;
     outln!(
         "demo: a city block, {} frames at {width}x{height}: {} fragments, {} primitives, {} queries ({} brief, {} verbose, {} samples); trace {} bytes",

@@ -6,6 +6,7 @@ pub mod culling;
 pub mod demo;
 pub mod fidelity;
 pub mod latency;
+pub mod raster_args;
 pub mod replay;
 pub mod sweep;
 pub mod trace;

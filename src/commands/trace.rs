@@ -4,6 +4,7 @@ use crate::output::write_atomically_with;
 use crate::scene_input::open_scene;
 use anyhow::Context;
 use occsim_traces::golden::{EventSink, GoldenModel};
+use occsim_traces::raster::RasterProfile;
 use occsim_traces::trace::{TraceHeader, TraceReader, TraceSummary, TraceWriter};
 use occsim_traces::{Event, QueryResult, QuerySpec};
 use std::io::Write;
@@ -62,7 +63,10 @@ pub fn run(command: TraceCommand) -> anyhow::Result<()> {
 
 fn generate(args: GenArgs) -> anyhow::Result<()> {
     let (summary, frames) = match &args.scene_file {
-        Some(scene_file) => (generate_scene(scene_file, &args.output)?, String::new()),
+        Some(scene_file) => (
+            generate_scene(scene_file, args.workload.scene.raster.profile, &args.output)?,
+            String::new(),
+        ),
         None => {
             let (summary, stats) =
                 super::workload_args::write_workload_trace(&args.workload, &args.output)?;
@@ -83,15 +87,22 @@ fn generate(args: GenArgs) -> anyhow::Result<()> {
 }
 
 /// A scene file or built-in scene through the rasterizer and golden model into a trace.
-fn generate_scene(scene_file: &str, output: &Path) -> anyhow::Result<TraceSummary> {
+fn generate_scene(
+    scene_file: &str,
+    raster: RasterProfile,
+    output: &Path,
+) -> anyhow::Result<TraceSummary> {
     let mut scene = open_scene(scene_file)?;
-    let header = TraceHeader::new(scene.width, scene.height).with_scene(scene.name.clone());
+    let header = TraceHeader::new(scene.width, scene.height)
+        .with_scene(scene.name.clone())
+        .with_raster(raster);
     write_atomically_with(output, |file| {
         let mut writer = TraceWriter::new(file, &header)?;
-        let mut golden = GoldenModel::new(scene.width, scene.height);
+        let mut golden = GoldenModel::with_profile(scene.width, scene.height, raster);
         for line in &mut scene.reader {
             golden.execute(&line?.command, &mut writer);
         }
+        golden.finish(&mut writer);
         writer
             .finish_seekable()
             .with_context(|| format!("{}: cannot write trace", output.display()))
@@ -170,7 +181,8 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
     outln!("generator   {}", header.generator);
     outln!("viewport    {}x{}", header.width, header.height);
     outln!(
-        "raster      {} sub-pixel bits, {} depth, fill rule {}",
+        "raster      {} profile, {} sub-pixel bits, {} depth, fill rule {}",
+        header.raster,
         header.subpixel_bits,
         header.depth_format,
         header.fill_rule

@@ -54,6 +54,8 @@ pub struct SceneArgs {
     /// frames, or walked at `metres_per_frame`.
     #[arg(long)]
     pub camera_file: Option<std::path::PathBuf>,
+    #[command(flatten)]
+    pub raster: super::raster_args::RasterArgs,
 }
 
 /// The culling driver and its options.
@@ -107,6 +109,7 @@ impl SceneArgs {
             frames: self.frames,
             width: self.width,
             height: self.height,
+            raster: self.raster.profile,
         }
     }
 
@@ -230,8 +233,9 @@ pub fn write_workload_trace(
     output: &Path,
 ) -> anyhow::Result<(TraceSummary, WorkloadStats)> {
     let (scene, driver, walk) = args.resolve()?;
-    let header =
-        TraceHeader::new(walk.width, walk.height).with_scene(args.describe(&scene, &driver));
+    let header = TraceHeader::new(walk.width, walk.height)
+        .with_scene(args.describe(&scene, &driver))
+        .with_raster(walk.raster);
     write_atomically_with(output, |file| {
         let mut writer = TraceWriter::new(file, &header)?;
         let stats = generate(&scene, &driver, &walk, &mut writer)?;
@@ -304,7 +308,8 @@ mod tests {
             Walk {
                 frames: 3,
                 width: 64,
-                height: 48
+                height: 48,
+                raster: occsim_traces::raster::RasterProfile::Llvmpipe,
             }
         );
         assert_eq!(scene.camera().keyframes()[1].eye, [0.0, 2.0, -10.0]);

@@ -1,9 +1,14 @@
 //! Replays a scene through Mesa's llvmpipe (OpenGL over a surfaceless EGL context) and reads
 //! back every query's counts, for the differential check against the golden model.
 //!
-//! Setup: EGL_PLATFORM_SURFACELESS_MESA display, desktop GL context, a framebuffer object
-//! with a 24-bit depth renderbuffer and an RGBA8 colour one (colour writes off), viewport
-//! 0,0,W,H, depth range 0..1, a pass-through vertex shader fed clip coordinates.
+//! Setup: EGL_PLATFORM_SURFACELESS_MESA display, desktop GL context, and either a framebuffer
+//! object with a 24-bit depth renderbuffer and an RGBA8 colour one ([`Target::Fbo`]) or a
+//! pbuffer surface with a 24-bit depth buffer ([`Target::Pbuffer`], a window-system
+//! framebuffer: Mesa mirrors its y); colour writes off, viewport 0,0,W,H, depth range 0..1, a
+//! pass-through vertex shader fed clip coordinates.
+//!
+//! Every run of consecutive `tri` commands is one `glDrawArrays` (a draw, as the golden
+//! model's rasterizer takes it): any other command flushes the pending triangles first.
 //!
 //! Mapping of the scene commands:
 //! - `samples` / `any`: one `GL_SAMPLES_PASSED` / `GL_ANY_SAMPLES_PASSED` query.
@@ -35,11 +40,21 @@ pub struct GlQueryCounts {
     pub counts: Vec<u64>,
 }
 
-/// A live llvmpipe context rendering into a `width` x `height` framebuffer object.
+/// What llvmpipe renders into.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Target {
+    /// A framebuffer object (y up): the `llvmpipe` profile.
+    Fbo,
+    /// A pbuffer, a window-system framebuffer (y mirrored): the `llvmpipe-window` profile.
+    Pbuffer,
+}
+
+/// A live llvmpipe context rendering into a `width` x `height` framebuffer.
 pub struct GlReplay {
     egl: egl::DynamicInstance<egl::EGL1_5>,
     display: egl::Display,
     context: egl::Context,
+    surface: Option<egl::Surface>,
     gl: glow::Context,
     width: u32,
     height: u32,
@@ -78,8 +93,13 @@ struct GlState {
 
 impl GlReplay {
     /// Load libEGL, make a surfaceless llvmpipe context current on this thread and set up
-    /// the framebuffer. `Err` says why when EGL or the context is unavailable.
+    /// a framebuffer object. `Err` says why when EGL or the context is unavailable.
     pub fn new(width: u32, height: u32) -> Result<GlReplay, String> {
+        GlReplay::with_target(Target::Fbo, width, height)
+    }
+
+    /// As [`GlReplay::new`], rendering into `target`.
+    pub fn with_target(target: Target, width: u32, height: u32) -> Result<GlReplay, String> {
         std::env::set_var("LIBGL_ALWAYS_SOFTWARE", "1");
         std::env::set_var("GALLIUM_DRIVER", "llvmpipe");
         // `OCCSIM_LIBEGL` names another libEGL (a missing one exercises the skip path).
@@ -109,11 +129,25 @@ impl GlReplay {
                     egl::PBUFFER_BIT,
                     egl::RENDERABLE_TYPE,
                     egl::OPENGL_BIT,
+                    egl::DEPTH_SIZE,
+                    if target == Target::Pbuffer { 24 } else { 0 },
+                    egl::RED_SIZE,
+                    8,
                     egl::NONE,
                 ],
             )
             .map_err(|e| format!("eglChooseConfig failed ({e})"))?
             .ok_or("no EGL config on the surfaceless display")?;
+        if target == Target::Pbuffer {
+            let depth = egl
+                .get_config_attrib(display, config, egl::DEPTH_SIZE)
+                .map_err(|e| format!("eglGetConfigAttrib failed ({e})"))?;
+            if depth != 24 {
+                return Err(format!(
+                    "the pbuffer config has a {depth}-bit depth buffer, not 24"
+                ));
+            }
+        }
         let context = egl
             .create_context(
                 display,
@@ -128,7 +162,24 @@ impl GlReplay {
                 ],
             )
             .map_err(|e| format!("eglCreateContext failed ({e})"))?;
-        egl.make_current(display, None, None, Some(context))
+        let surface = match target {
+            Target::Fbo => None,
+            Target::Pbuffer => Some(
+                egl.create_pbuffer_surface(
+                    display,
+                    config,
+                    &[
+                        egl::WIDTH,
+                        width as i32,
+                        egl::HEIGHT,
+                        height as i32,
+                        egl::NONE,
+                    ],
+                )
+                .map_err(|e| format!("eglCreatePbufferSurface failed ({e})"))?,
+            ),
+        };
+        egl.make_current(display, surface, surface, Some(context))
             .map_err(|e| format!("eglMakeCurrent failed ({e})"))?;
         // SAFETY: the context is current on this thread; the loader returns GL entry points.
         let gl = unsafe {
@@ -138,11 +189,12 @@ impl GlReplay {
             })
         };
         // SAFETY: plain GL calls on the current context.
-        let vertex_buffer = unsafe { set_up_pipeline(&gl, width, height)? };
+        let vertex_buffer = unsafe { set_up_pipeline(&gl, target, width, height)? };
         Ok(GlReplay {
             egl,
             display,
             context,
+            surface,
             gl,
             width,
             height,
@@ -358,6 +410,9 @@ impl GlReplay {
 impl Drop for GlReplay {
     fn drop(&mut self) {
         let _ = self.egl.make_current(self.display, None, None, None);
+        if let Some(surface) = self.surface {
+            let _ = self.egl.destroy_surface(self.display, surface);
+        }
         let _ = self.egl.destroy_context(self.display, self.context);
     }
 }
@@ -396,12 +451,26 @@ unsafe fn set_enabled(gl: &glow::Context, capability: u32, on: bool) {
     }
 }
 
-/// Framebuffer, shaders, vertex layout and fixed state; returns the vertex buffer.
+/// The framebuffer (for an FBO), shaders, vertex layout and fixed state; returns the vertex
+/// buffer.
 unsafe fn set_up_pipeline(
     gl: &glow::Context,
+    target: Target,
     width: u32,
     height: u32,
 ) -> Result<glow::Buffer, String> {
+    if target == Target::Fbo {
+        set_up_framebuffer_object(gl, width, height)?;
+    }
+    set_up_shaders_and_state(gl, width, height)
+}
+
+/// A framebuffer object with a 24-bit depth renderbuffer and an RGBA8 colour one, bound.
+unsafe fn set_up_framebuffer_object(
+    gl: &glow::Context,
+    width: u32,
+    height: u32,
+) -> Result<(), String> {
     let framebuffer = gl.create_framebuffer()?;
     gl.bind_framebuffer(glow::FRAMEBUFFER, Some(framebuffer));
     let colour = gl.create_renderbuffer()?;
@@ -431,7 +500,15 @@ unsafe fn set_up_pipeline(
     if status != glow::FRAMEBUFFER_COMPLETE {
         return Err(format!("framebuffer incomplete (0x{status:x})"));
     }
+    Ok(())
+}
 
+/// Shaders, vertex layout and fixed state; returns the vertex buffer.
+unsafe fn set_up_shaders_and_state(
+    gl: &glow::Context,
+    width: u32,
+    height: u32,
+) -> Result<glow::Buffer, String> {
     let program = gl.create_program()?;
     for (kind, source) in [
         (

@@ -1,8 +1,9 @@
-//! Rasterizer throughput: fragments per second into a sink that does nothing but count,
-//! on large triangles (the span walk) and on small ones (setup cost). Run with
-//! `cargo bench -p occsim-traces --bench raster`.
+//! Rasterizer throughput of every profile: fragments per second into a sink that does nothing
+//! but count, on large triangles (the span walk) and on small ones (setup cost), each
+//! profile's rate also as a ratio to the `exact` profile's in the same run. Each triangle set
+//! is one draw a repeat. Run with `cargo bench -p occsim-traces --bench raster`.
 
-use occsim_traces::raster::{rasterize_triangle, RasterSink};
+use occsim_traces::raster::{RasterProfile, RasterSink, Rasterizer};
 use occsim_traces::state::RenderState;
 use occsim_traces::Fragment;
 use std::hint::black_box;
@@ -25,26 +26,48 @@ impl RasterSink for Count {
     }
 }
 
-fn measure(name: &str, state: &RenderState, triangles: &[[[f32; 4]; 3]], repeats: u32) {
+/// Fragments per second of `profile` on `triangles`, and the fragments.
+fn rate(
+    profile: RasterProfile,
+    state: &RenderState,
+    triangles: &[[[f32; 4]; 3]],
+    repeats: u32,
+) -> (f64, f64, u64) {
     let mut sink = Count {
         fragments: 0,
         checksum: 0,
     };
+    let mut rasterizer = Rasterizer::new(profile);
     let start = Instant::now();
     for _ in 0..repeats {
         for triangle in triangles {
-            rasterize_triangle(state, black_box(triangle), &mut sink);
+            rasterizer.triangle(state, black_box(triangle), &mut sink);
         }
+        rasterizer.end_draw(state, &mut sink);
     }
     let seconds = start.elapsed().as_secs_f64();
     black_box(sink.checksum);
     let triangles_done = triangles.len() as f64 * repeats as f64;
-    println!(
-        "{name}: {:.1} M fragments/s, {:.2} M triangles/s ({} fragments in {seconds:.3} s)",
-        sink.fragments as f64 / seconds / 1e6,
-        triangles_done / seconds / 1e6,
-        sink.fragments
-    );
+    (
+        sink.fragments as f64 / seconds,
+        triangles_done / seconds,
+        sink.fragments / repeats as u64,
+    )
+}
+
+fn measure(name: &str, state: &RenderState, triangles: &[[[f32; 4]; 3]], repeats: u32) {
+    println!("{name}:");
+    let (exact, _, _) = rate(RasterProfile::Exact, state, triangles, repeats);
+    for profile in RasterProfile::ALL {
+        let (fragments, primitives, per_repeat) = rate(profile, state, triangles, repeats);
+        println!(
+            "  {:<16} {:>8.1} M fragments/s {:>6.2} M triangles/s {:>6.2}x exact ({per_repeat} fragments a repeat)",
+            profile.name(),
+            fragments / 1e6,
+            primitives / 1e6,
+            fragments / exact
+        );
+    }
 }
 
 fn main() {
@@ -74,7 +97,7 @@ fn main() {
         [3e6, -1e6, 0.2, 1.0],
         [-1e6, 3e6, 0.7, 1.0],
     ]];
-    measure("huge guard-band-clipped triangle", &state, &huge, 200);
+    measure("huge triangle, clipped", &state, &huge, 200);
     // Small triangles: about 8 pixels each, setup-dominated.
     let mut small = Vec::new();
     for i in 0..1000 {

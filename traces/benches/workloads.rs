@@ -6,6 +6,7 @@
 //! and OCCSIM_BENCH_HEIGHT change the walk; defaults 8 frames at 1280x1024).
 
 use occsim_traces::golden::{Discard, EventSink, GoldenModel};
+use occsim_traces::raster::RasterProfile;
 use occsim_traces::workloads::{
     city, generate, generate_observed, CityOptions, DriverKind, DriverOptions, Walk,
 };
@@ -37,6 +38,7 @@ fn main() {
         frames: setting("OCCSIM_BENCH_FRAMES", 8),
         width: setting("OCCSIM_BENCH_WIDTH", 1280),
         height: setting("OCCSIM_BENCH_HEIGHT", 1024),
+        raster: RasterProfile::default(),
     };
     let started = Instant::now();
     let scene = city(&CityOptions::default());

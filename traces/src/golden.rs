@@ -3,7 +3,7 @@
 
 use crate::event::{Event, Fragment, Span, DEPTH_ONE};
 use crate::query::{verbose_hits_kept, QueryMode, QueryResult, QuerySpec, TileResult};
-use crate::raster::{rasterize_triangle, RasterSink};
+use crate::raster::{RasterProfile, RasterSink, Rasterizer};
 use crate::scene::Command;
 use crate::state::{DepthFunc, Rect, RenderState};
 
@@ -483,6 +483,7 @@ impl EventSink for Vec<Event> {
 /// Scene commands in, events and query results out.
 pub struct GoldenModel {
     functional: FunctionalModel,
+    rasterizer: Rasterizer,
 }
 
 struct Forward<'a, S: EventSink> {
@@ -509,10 +510,20 @@ impl<S: EventSink> RasterSink for Forward<'_, S> {
 }
 
 impl GoldenModel {
+    /// A model rasterizing with the default profile ([`RasterProfile::Llvmpipe`]).
     pub fn new(width: u32, height: u32) -> GoldenModel {
+        GoldenModel::with_profile(width, height, RasterProfile::default())
+    }
+
+    pub fn with_profile(width: u32, height: u32, profile: RasterProfile) -> GoldenModel {
         GoldenModel {
             functional: FunctionalModel::new(width, height),
+            rasterizer: Rasterizer::new(profile),
         }
+    }
+
+    pub fn profile(&self) -> RasterProfile {
+        self.rasterizer.profile()
     }
 
     pub fn state(&self) -> &RenderState {
@@ -521,18 +532,23 @@ impl GoldenModel {
 
     /// Execute one command (the scene's `viewport` is the constructor's business and is
     /// ignored here), sending its events to `sink`. Returns the result of a query it ends.
+    ///
+    /// Consecutive `tri` commands form one draw, and the rasterizer may hold a draw's
+    /// triangles back until it ends (see [`Rasterizer`]): any other command ends it first,
+    /// and [`GoldenModel::finish`] ends the last one.
     pub fn execute(&mut self, command: &Command, sink: &mut impl EventSink) -> Option<QueryResult> {
+        if let Command::Tri(vertices) = command {
+            let state = *self.functional.state();
+            let mut forward = Forward {
+                functional: &mut self.functional,
+                sink,
+            };
+            self.rasterizer.triangle(&state, vertices, &mut forward);
+            return None;
+        }
+        self.finish(sink);
         let event = match command {
-            Command::Viewport { .. } => return None,
-            Command::Tri(vertices) => {
-                let state = *self.functional.state();
-                let mut forward = Forward {
-                    functional: &mut self.functional,
-                    sink,
-                };
-                rasterize_triangle(&state, vertices, &mut forward);
-                return None;
-            }
+            Command::Viewport { .. } | Command::Tri(_) | Command::EndDraw => return None,
             Command::Clear => Event::Clear,
             Command::DepthFunc(f) => Event::DepthFunc(*f),
             Command::DepthMask(b) => Event::DepthMask(*b),
@@ -548,5 +564,16 @@ impl GoldenModel {
             sink.event(&Event::QueryResult(result.clone()));
         }
         result
+    }
+
+    /// End the current draw: every triangle given so far reaches `sink` (call it at the end
+    /// of a scene, or before looking at the depth buffer).
+    pub fn finish(&mut self, sink: &mut impl EventSink) {
+        let state = *self.functional.state();
+        let mut forward = Forward {
+            functional: &mut self.functional,
+            sink,
+        };
+        self.rasterizer.end_draw(&state, &mut forward);
     }
 }

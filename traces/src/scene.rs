@@ -11,9 +11,14 @@
 //! begin ID [samples|any|brief|verbose] [buffer=N] [tile=X,Y,W,H]...
 //! end
 //! tri x y z w  x y z w  x y z w
+//! end_draw
 //! ```
 //! `viewport` comes first and once. Queries do not nest. Coordinates are clip coordinates,
 //! parsed as 32-bit floats; NaN and infinities are rejected.
+//!
+//! Consecutive `tri` lines are one draw (one `glDrawArrays`); any other command ends it.
+//! `end_draw` ends it and does nothing else: two objects drawn one after the other with no
+//! state change between are two draws, as an application's two draw calls.
 
 use crate::query::{
     QueryMode, QuerySpec, Tile, BRIEF_RECORD_ENTRIES, DEFAULT_BRIEF_BUFFER, DEFAULT_VERBOSE_BUFFER,
@@ -39,6 +44,8 @@ pub enum Command {
     End,
     /// A triangle's three vertices in clip coordinates (x, y, z, w).
     Tri([[f32; 4]; 3]),
+    /// The end of a draw, and nothing else.
+    EndDraw,
 }
 
 /// A command and the line it came from (1-based).
@@ -156,6 +163,10 @@ impl<R: BufRead> SceneReader<R> {
         }
         let command = match keyword {
             "viewport" => self.parse_viewport(&args)?,
+            "end_draw" => {
+                self.expect_args(keyword, &args, 0, "end_draw")?;
+                Command::EndDraw
+            }
             "clear" => {
                 self.expect_args(keyword, &args, 0, "clear")?;
                 Command::Clear
@@ -396,6 +407,7 @@ pub fn format_command(command: &Command) -> String {
     match command {
         Command::Viewport { width, height } => format!("viewport {width} {height}"),
         Command::Clear => "clear".into(),
+        Command::EndDraw => "end_draw".into(),
         Command::DepthFunc(f) => format!("depth_func {}", f.name()),
         Command::DepthMask(b) => format!("depth_mask {}", flag(*b)),
         Command::DepthTest(b) => format!("depth_test {}", flag(*b)),
@@ -436,9 +448,10 @@ mod tests {
 
     #[test]
     fn parses_every_command() {
-        let text = "viewport 64 32 # size\n\nclear\ndepth_func lequal\ndepth_mask 0\ndepth_test 1\ncull 1\nscissor 1 2 3 4\nscissor off\nbegin 7 verbose buffer=9 tile=0,0,8,8 tile=8,0,8,8\ntri 0 0 0 1  1 0 0 1  0 1 0.5 1\nend\n";
+        let text = "viewport 64 32 # size\n\nclear\ndepth_func lequal\ndepth_mask 0\ndepth_test 1\ncull 1\nscissor 1 2 3 4\nscissor off\nbegin 7 verbose buffer=9 tile=0,0,8,8 tile=8,0,8,8\ntri 0 0 0 1  1 0 0 1  0 1 0.5 1\nend_draw\nend\n";
         let lines = parse_scene(text, "s.scene").unwrap();
-        assert_eq!(lines.len(), 11);
+        assert_eq!(lines.len(), 12);
+        assert_eq!(lines[10].command, Command::EndDraw);
         assert_eq!(
             lines[0].command,
             Command::Viewport {
@@ -527,7 +540,7 @@ mod tests {
 
     #[test]
     fn format_round_trips() {
-        let text = "viewport 64 32\nclear\ndepth_func gequal\nscissor 1 2 3 4\nbegin 7 verbose buffer=9 tile=0,0,8,8\ntri 0.1 0 0 1  1 0 0 1  0 1 0.5 1\nend\nbegin 8 any\nend\n";
+        let text = "viewport 64 32\nclear\ndepth_func gequal\nscissor 1 2 3 4\nbegin 7 verbose buffer=9 tile=0,0,8,8\ntri 0.1 0 0 1  1 0 0 1  0 1 0.5 1\nend_draw\nend\nbegin 8 any\nend\n";
         let lines = parse_scene(text, "s").unwrap();
         let again: String = lines
             .iter()

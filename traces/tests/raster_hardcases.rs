@@ -1,10 +1,11 @@
-//! Hard cases for the exact rasterizer. Expected values come from hand reasoning or from the
-//! independent oracle below (exact rational point-in-triangle on vertices snapped by its own
-//! integer arithmetic), never from the rasterizer.
+//! Hard cases for every rasterizer profile. Expected values come from hand reasoning, from
+//! the independent oracle below (exact rational point-in-triangle on vertices snapped by its
+//! own integer arithmetic), or from Mesa llvmpipe itself (counts measured with Mesa 22.3,
+//! named where used), never from the rasterizer.
 
 use occsim_traces::event::DEPTH_ONE;
 use occsim_traces::golden::{Discard, GoldenModel};
-use occsim_traces::raster::{rasterize_triangle, RasterSink};
+use occsim_traces::raster::{rasterize_triangle, RasterProfile, RasterSink};
 use occsim_traces::state::RenderState;
 use occsim_traces::{Command, DepthFunc, Fragment, QuerySpec, Rect};
 use proptest::prelude::*;
@@ -25,9 +26,14 @@ impl RasterSink for Recorder {
     }
 }
 
+/// The exact profile, whose depths the oracle predicts.
 fn raster(state: &RenderState, tri: &[[f32; 4]; 3]) -> Recorder {
+    raster_with(RasterProfile::Exact, state, tri)
+}
+
+fn raster_with(profile: RasterProfile, state: &RenderState, tri: &[[f32; 4]; 3]) -> Recorder {
     let mut recorder = Recorder::default();
-    rasterize_triangle(state, tri, &mut recorder);
+    rasterize_triangle(profile, state, tri, &mut recorder);
     recorder
 }
 
@@ -274,23 +280,27 @@ fn square_split_on_a_diagonal_through_centres() {
     // Owned: left and bottom, so columns and rows 0..=3 (16 pixels). The lower-right half has
     // the diagonal as a left edge (interior to its right): it owns x >= y, 4+3+2+1 = 10.
     let state = RenderState::new(8, 8);
-    let lower = raster(
-        &state,
-        &window_tri(&state, [(0.5, 0.5, 0.0), (4.5, 0.5, 0.0), (4.5, 4.5, 0.0)]),
-    );
-    let upper = raster(
-        &state,
-        &window_tri(&state, [(0.5, 0.5, 0.0), (4.5, 4.5, 0.0), (0.5, 4.5, 0.0)]),
-    );
-    assert_eq!(lower.fragments.len(), 10);
-    assert_eq!(upper.fragments.len(), 6);
-    assert!(lower.fragments.iter().all(|f| f.x >= f.y && f.x <= 3));
-    assert!(upper.fragments.iter().all(|f| f.x < f.y && f.y <= 3));
-    // Bottom to top, left to right.
-    let order: Vec<(u16, u16)> = lower.fragments.iter().map(|f| (f.y, f.x)).collect();
-    let mut sorted = order.clone();
-    sorted.sort();
-    assert_eq!(order, sorted);
+    for profile in RasterProfile::ALL {
+        let lower = raster_with(
+            profile,
+            &state,
+            &window_tri(&state, [(0.5, 0.5, 0.0), (4.5, 0.5, 0.0), (4.5, 4.5, 0.0)]),
+        );
+        let upper = raster_with(
+            profile,
+            &state,
+            &window_tri(&state, [(0.5, 0.5, 0.0), (4.5, 4.5, 0.0), (0.5, 4.5, 0.0)]),
+        );
+        assert_eq!(lower.fragments.len(), 10, "{profile}");
+        assert_eq!(upper.fragments.len(), 6);
+        assert!(lower.fragments.iter().all(|f| f.x >= f.y && f.x <= 3));
+        assert!(upper.fragments.iter().all(|f| f.x < f.y && f.y <= 3));
+        // Bottom to top, left to right.
+        let order: Vec<(u16, u16)> = lower.fragments.iter().map(|f| (f.y, f.x)).collect();
+        let mut sorted = order.clone();
+        sorted.sort();
+        assert_eq!(order, sorted);
+    }
 }
 
 #[test]
@@ -305,8 +315,14 @@ fn zero_area_triangles_produce_nothing() {
             (1.0, 1.0 + 1.0 / 1024.0, 0.5),
         ], // snaps flat
     ] {
-        let got = raster(&state, &window_tri(&state, tri));
-        assert_eq!((got.primitives, got.fragments.len()), (0, 0), "{tri:?}");
+        for profile in RasterProfile::ALL {
+            let got = raster_with(profile, &state, &window_tri(&state, tri));
+            assert_eq!(
+                (got.primitives, got.fragments.len()),
+                (0, 0),
+                "{profile} {tri:?}"
+            );
+        }
     }
 }
 
@@ -317,17 +333,31 @@ fn back_faces_are_culled_only_when_asked() {
     // Centres (px + 1/2, py + 1/2) with px + py < 7 are strictly inside: 7+6+...+1 = 28.
     // Those with px + py = 7 lie on the hypotenuse, a right/top edge: not owned.
     let expected = 28;
-    assert_eq!(raster(&state, &clockwise).fragments.len(), expected);
-    state.cull_back = true;
-    let got = raster(&state, &clockwise);
-    assert_eq!((got.primitives, got.fragments.len()), (0, 0));
+    for profile in RasterProfile::ALL {
+        state.cull_back = false;
+        assert_eq!(
+            raster_with(profile, &state, &clockwise).fragments.len(),
+            expected
+        );
+        state.cull_back = true;
+        let got = raster_with(profile, &state, &clockwise);
+        assert_eq!((got.primitives, got.fragments.len()), (0, 0), "{profile}");
+    }
 }
 
 #[test]
 fn huge_triangles_far_outside_cover_the_viewport_exactly() {
-    for (width, height) in [(64, 48), (16384, 1), (1, 16384)] {
+    // What llvmpipe covers of each: it clips to the viewport in f32 and leaves each new
+    // vertex where its interpolation rounds, up to pixels inside the edge for coordinates of
+    // 10^6 and more. Measured with Mesa 22.3.6 llvmpipe into an FBO, one triangle a query.
+    let llvmpipe = [
+        ((64, 48), [2976, 1152, 3008]),
+        ((16384, 1), [15872, 0, 16288]),
+        ((1, 16384), [16384, 8192, 16192]),
+    ];
+    for ((width, height), mesa) in llvmpipe {
         let state = RenderState::new(width, height);
-        for tri in [
+        for (k, tri) in [
             [
                 [-1e6f32, -1e6, 0.0, 1.0],
                 [3e6, -1e6, 0.0, 1.0],
@@ -343,15 +373,34 @@ fn huge_triangles_far_outside_cover_the_viewport_exactly() {
                 [1e4, -1e4, 0.0, 1e-3],
                 [0.0, 1e4, 0.0, 1e-3],
             ],
-        ] {
-            let got = raster(&state, &tri);
-            assert_eq!(
-                got.fragments.len() as u64,
-                width as u64 * height as u64,
-                "{width}x{height} {tri:?}"
-            );
-            // z = 0 in clip space: window depth 1/2, round((2^24 - 1) / 2) = 2^23 (tie up).
-            assert!(got.fragments.iter().all(|f| f.z == 1 << 23));
+        ]
+        .iter()
+        .enumerate()
+        {
+            for profile in RasterProfile::ALL {
+                let got = raster_with(profile, &state, tri);
+                let pixels = width as u64 * height as u64;
+                let mut seen = vec![false; pixels as usize];
+                for f in &got.fragments {
+                    let slot = &mut seen[f.y as usize * width as usize + f.x as usize];
+                    assert!(!*slot, "{profile}: pixel drawn twice");
+                    *slot = true;
+                }
+                let count = got.fragments.len() as u64;
+                match profile {
+                    // The guard band keeps such vertices exact enough to cover every pixel.
+                    RasterProfile::Exact => assert_eq!(count, pixels, "{width}x{height} {tri:?}"),
+                    RasterProfile::Llvmpipe => {
+                        assert_eq!(count, mesa[k], "{width}x{height} {tri:?}")
+                    }
+                    // Mirrored, the same clipped vertices land on other rows' rounding:
+                    // tests/mesa_diff.rs compares it with a pbuffer.
+                    RasterProfile::LlvmpipeWindow => assert!(count <= pixels),
+                }
+                // z = 0 in clip space: window depth 1/2; (2^24 - 1) / 2 = 2^23 - 1/2 rounds to
+                // 2^23 both by the exact profile's ties-up and llvmpipe's ties-to-even.
+                assert!(got.fragments.iter().all(|f| f.z == 1 << 23), "{profile}");
+            }
         }
     }
 }
@@ -377,8 +426,14 @@ fn near_and_far_planes_clip_and_nothing_comes_from_behind_the_eye() {
             [0.0, 1.0, 1.5, 1.0],
         ],
     ] {
-        let got = raster(&state, &tri);
-        assert_eq!((got.primitives, got.fragments.len()), (0, 0), "{tri:?}");
+        for profile in RasterProfile::ALL {
+            let got = raster_with(profile, &state, &tri);
+            assert_eq!(
+                (got.primitives, got.fragments.len()),
+                (0, 0),
+                "{profile} {tri:?}"
+            );
+        }
     }
     // A full-screen quad whose z runs from -4 to 4 across x: only -1 <= z <= 1 survives,
     // x in [-1/4, 1/4], window columns 24..40: 16 · 32 pixels. Depth rises left to right
@@ -435,22 +490,31 @@ fn shared_edges_crossing_the_near_plane_stay_disjoint() {
     let b = [1.0f32, -0.7, 0.5, 1.0];
     let c = [0.9f32, 1.0, 0.3, 1.0];
     let d = [-0.8f32, 0.9, -2.5, 1.0];
-    let mut counts = vec![0u32; 64 * 32];
-    for tri in [[a, b, c], [a, c, d]] {
-        for f in raster(&state, &tri).fragments {
-            counts[f.y as usize * 64 + f.x as usize] += 1;
+    for profile in RasterProfile::ALL {
+        let mut counts = vec![0u32; 64 * 32];
+        for tri in [[a, b, c], [a, c, d]] {
+            for f in raster_with(profile, &state, &tri).fragments {
+                counts[f.y as usize * 64 + f.x as usize] += 1;
+            }
         }
+        assert!(
+            counts.iter().all(|&c| c <= 1),
+            "{profile}: a pixel drawn twice"
+        );
+        assert!(counts.contains(&1), "{profile}");
     }
-    assert!(counts.iter().all(|&c| c <= 1), "a pixel drawn twice");
-    assert!(counts.contains(&1));
 }
 
 #[test]
 fn depths_exactly_zero_and_one() {
     let state = RenderState::new(8, 8);
-    for (z, expected) in [(0.0, 0), (1.0, DEPTH_ONE)] {
+    for (profile, (z, expected)) in RasterProfile::ALL
+        .into_iter()
+        .flat_map(|p| [(p, (0.0, 0)), (p, (1.0, DEPTH_ONE))])
+    {
         // The vertex (0.5, 0.5) sits on pixel (0, 0)'s centre (a bottom-left corner: owned).
-        let got = raster(
+        let got = raster_with(
+            profile,
             &state,
             &window_tri(&state, [(0.5, 0.5, z), (8.0, 0.5, z), (0.5, 8.0, z)]),
         );
@@ -460,9 +524,10 @@ fn depths_exactly_zero_and_one() {
                 x: 0,
                 y: 0,
                 z: expected
-            }
+            },
+            "{profile}"
         );
-        assert!(got.fragments.iter().all(|f| f.z == expected));
+        assert!(got.fragments.iter().all(|f| f.z == expected), "{profile}");
     }
     // A slope from depth 0 to 1: the vertex pixels get exactly 0 and 2^24 - 1.
     let got = raster(
@@ -551,4 +616,227 @@ fn the_same_geometry_twice_passes_lequal_and_equal_and_fails_less() {
             assert_eq!(tested, if expect_all { all } else { 0 }, "{func:?}");
         }
     }
+}
+
+fn profile_strategy() -> impl Strategy<Value = RasterProfile> {
+    prop::sample::select(RasterProfile::ALL.to_vec())
+}
+
+/// Vertices inside the viewport: llvmpipe clips nothing, so its coverage is the oracle's.
+fn inside_vertex_strategy(width: u32, height: u32) -> impl Strategy<Value = OracleVertex> {
+    (0..=width as i64 * 512, 0..=height as i64 * 512, 0i64..=1024)
+        .prop_map(|(x512, y512, z1024)| OracleVertex { x512, y512, z1024 })
+}
+
+fn positions(fragments: &[Fragment]) -> Vec<(u16, u16)> {
+    fragments.iter().map(|f| (f.x, f.y)).collect()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// The llvmpipe profiles snap as the oracle does (ties to even, in either framebuffer's
+    /// orientation) and cover by the same rule; their depths are llvmpipe's f32 plane, so
+    /// only positions and order are compared.
+    #[test]
+    fn llvmpipe_coverage_agrees_with_the_oracle(
+        state in state_strategy(),
+        profile in prop::sample::select(vec![RasterProfile::Llvmpipe, RasterProfile::LlvmpipeWindow]),
+        a in inside_vertex_strategy(64, 32),
+        b in inside_vertex_strategy(64, 32),
+        c in inside_vertex_strategy(64, 32),
+    ) {
+        let v = [a, b, c];
+        let (primitives, expected) = oracle(&state, &v);
+        let got = raster_with(profile, &state, &oracle_clip(&state, &v));
+        prop_assert_eq!(got.primitives, primitives);
+        prop_assert_eq!(positions(&got.fragments), positions(&expected));
+        prop_assert!(got.fragments.iter().all(|f| f.z <= DEPTH_ONE));
+    }
+
+    /// A planar mesh over a jittered grid reaching past the viewport's edges, with a random w
+    /// per vertex and a depth slope that the near (and often the far) plane cuts: where a
+    /// pixel centre is clearly in front of near and behind far it is covered exactly once,
+    /// and nowhere twice, in every profile.
+    #[test]
+    fn meshes_across_the_viewport_edges_and_the_near_plane_are_watertight(
+        profile in profile_strategy(),
+        columns in 1usize..7,
+        rows in 1usize..7,
+        reach in 1.0f32..1.8,
+        jitter in prop::collection::vec((-0.24f32..0.24, -0.24f32..0.24), 64),
+        ws in prop::collection::vec(0.5f32..3.0, 64),
+        diagonals in prop::collection::vec(any::<bool>(), 49),
+        flips in prop::collection::vec(any::<bool>(), 98),
+        slope in (-0.8f32..0.8, -0.8f32..0.8, -0.9f32..0.3),
+    ) {
+        let (width, height) = (48u32, 40u32);
+        let state = RenderState::new(width, height);
+        let (a, b, c) = slope;
+        // z/w = a·x/w + b·y/w + c: the mesh is a plane in clip space; near is z/w = -1.
+        let point = |i: usize, j: usize| -> [f32; 4] {
+            let (jx, jy) = jitter[(i * 8 + j) % 64];
+            let jx = if i == 0 || i == columns { 0.0 } else { jx };
+            let jy = if j == 0 || j == rows { 0.0 } else { jy };
+            let nx = reach * (-1.0 + 2.0 * (i as f32 + jx) / columns as f32);
+            let ny = reach * (-1.0 + 2.0 * (j as f32 + jy) / rows as f32);
+            let w = ws[(i * 8 + j) % 64];
+            [nx * w, ny * w, (a * nx + b * ny + c) * w, w]
+        };
+        let mut counts = vec![0u32; (width * height) as usize];
+        let mut triangle = 0;
+        for i in 0..columns {
+            for j in 0..rows {
+                let (p00, p10, p11, p01) = (point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1));
+                let halves = if diagonals[i * 7 + j] {
+                    [[p00, p10, p11], [p00, p11, p01]]
+                } else {
+                    [[p00, p10, p01], [p10, p11, p01]]
+                };
+                for mut tri in halves {
+                    if flips[triangle % 98] {
+                        tri.swap(1, 2);
+                    }
+                    triangle += 1;
+                    for f in raster_with(profile, &state, &tri).fragments {
+                        counts[f.y as usize * width as usize + f.x as usize] += 1;
+                    }
+                }
+            }
+        }
+        let margin = 0.02;
+        for py in 0..height {
+            for px in 0..width {
+                let count = counts[(py * width + px) as usize];
+                prop_assert!(count <= 1, "pixel ({px}, {py}) drawn {count} times");
+                let (cx, cy) = (
+                    (px as f32 + 0.5) / width as f32 * 2.0 - 1.0,
+                    (py as f32 + 0.5) / height as f32 * 2.0 - 1.0,
+                );
+                // The grid's outer vertices are not jittered and lie on or beyond the
+                // viewport's edges (reach >= 1): every centre is inside its projection.
+                let depth = a * cx + b * cy + c;
+                if depth > -1.0 + margin && depth < 1.0 - margin {
+                    prop_assert_eq!(count, 1, "{}: pixel ({}, {}) at depth {} not covered", profile, px, py, depth);
+                }
+            }
+        }
+    }
+
+    /// Denormal inputs act as zeros (llvmpipe reads them so, DAZ; in the exact profile they
+    /// vanish in the first rounding).
+    #[test]
+    fn denormal_coordinates_act_as_zeros(
+        profile in profile_strategy(),
+        which in prop::collection::vec(any::<bool>(), 12),
+        bits in prop::collection::vec(1u32..0x7f_ffff, 12),
+    ) {
+        let state = RenderState::new(16, 16);
+        let base = [[-0.9f32, -0.8, 0.0, 1.0], [0.7, -0.9, 0.0, 1.0], [0.0, 0.0, 0.0, 1.0]];
+        let mut noisy = base;
+        let mut k = 0;
+        for vertex in &mut noisy {
+            for coordinate in vertex.iter_mut().take(3) {
+                if which[k] && *coordinate == 0.0 {
+                    let tiny = f32::from_bits(bits[k]);
+                    *coordinate = if k % 2 == 0 { tiny } else { -tiny };
+                }
+                k += 1;
+            }
+        }
+        let expected = raster_with(profile, &state, &base);
+        let got = raster_with(profile, &state, &noisy);
+        prop_assert_eq!(got.primitives, expected.primitives);
+        prop_assert_eq!(got.fragments, expected.fragments);
+    }
+}
+
+/// Counts of the samples queries of `scene` under `profile`.
+fn samples_counts(profile: RasterProfile, scene: &str) -> Vec<u64> {
+    let lines = occsim_traces::scene::parse_scene(scene, "test").expect("a valid scene");
+    let Some(Command::Viewport { width, height }) = lines.first().map(|l| l.command.clone()) else {
+        panic!("no viewport");
+    };
+    let mut model = GoldenModel::with_profile(width, height, profile);
+    let commands: Vec<Command> = lines.into_iter().map(|l| l.command).collect();
+    run_queries(&mut model, &commands)
+}
+
+#[test]
+fn the_issue_reproducers_count_what_llvmpipe_counts() {
+    // Measured with Mesa 22.3.6 llvmpipe (FBO) and quoted in issue 11: a triangle crossing
+    // the right edge, which llvmpipe clips (58; the guard band's exact profile gives 57).
+    let edge = "viewport 200 150\nclear\nbegin 0\n\
+        tri 1.195604 0.4832446 0.5 1  0.8642694 0.4082995 0.5 1  0.7934409 0.3295854 0.5 1\nend\n";
+    assert_eq!(samples_counts(RasterProfile::Llvmpipe, edge), vec![58]);
+    assert_eq!(samples_counts(RasterProfile::Exact, edge), vec![57]);
+    // Two interpenetrating triangles whose f32 depth plane orders one pixel differently from
+    // the exact one (llvmpipe 656 then 285; exact 656 then 284).
+    let depth = "viewport 64 64\nclear\nbegin 0\n\
+        tri 0.1763297 0.7665053 -0.09756832 1  -0.3205084 -0.7066074 -0.3674104 1  0.7707483 -0.0533057 -0.1754436 1\nend\n\
+        begin 1\n\
+        tri -0.8223223 0.3768852 -0.3658611 1  -0.001898742 0.4581878 0.3025198 1  0.6457618 -0.4365953 -0.343951 1\nend\n";
+    assert_eq!(
+        samples_counts(RasterProfile::Llvmpipe, depth),
+        vec![656, 285]
+    );
+    assert_eq!(samples_counts(RasterProfile::Exact, depth), vec![656, 284]);
+}
+
+#[test]
+fn a_draw_of_three_triangles_ending_flat_in_y_takes_llvmpipes_rectangle_path() {
+    // Window coordinates on an 8x8 viewport (clip = window / 4 - 1). T1 (1,1) (6,1) (1,6) and
+    // T2 (6,1) (6,6) (1,6) cover the 5x5 centres 1.5..5.5 (T1 owns its left and bottom
+    // edges, T2 the diagonal: 15 + 10 = 25). T3 (0,7) (4,7) (7,7) is flat in y.
+    let t1 = "tri -0.75 -0.75 0 1  0.5 -0.75 0 1  -0.75 0.5 0 1\n";
+    let t2 = "tri 0.5 -0.75 0 1  0.5 0.5 0 1  -0.75 0.5 0 1\n";
+    let flat = "tri -1 0.75 0 1  0 0.75 0 1  0.75 0.75 0 1\n";
+    let query = |tris: &str| format!("viewport 8 8\nbegin 0\n{tris}end\n");
+    for profile in RasterProfile::ALL {
+        assert_eq!(
+            samples_counts(profile, &query(&format!("{t1}{t2}"))),
+            vec![25]
+        );
+        // Three triangles, the last flat: llvmpipe's nine-vertex path finds no rectangle in
+        // T1 T2's vertex order and draws nothing at all.
+        let nine = samples_counts(profile, &query(&format!("{t1}{t2}{flat}")));
+        let expected = if profile == RasterProfile::Exact {
+            25
+        } else {
+            0
+        };
+        assert_eq!(nine, vec![expected], "{profile}");
+        // A fourth triangle makes it an ordinary draw again.
+        assert_eq!(
+            samples_counts(profile, &query(&format!("{t1}{t2}{flat}{flat}"))),
+            vec![25]
+        );
+        // Split into two draws by a state command, neither has nine vertices.
+        let split = format!("viewport 8 8\nbegin 0\n{t1}depth_func less\n{t2}{flat}end\n");
+        assert_eq!(samples_counts(profile, &split), vec![25], "{profile}");
+    }
+    // In the rectangle's own order, (X0,Y0) (X0,Y1) (X1,Y1) and (X1,Y0) (X1,Y1) (X0,Y0) with
+    // X0 = 5, X1 = 1, Y0 = 2, Y1 = 6, the path draws the rectangle if its snapped corners are
+    // not "clockwise": (x2 < x1) ^ (y0 < y2), with x1 = X0, x2 = X1, y0 = Y0, y2 = Y1 in the
+    // framebuffer's own y. In an FBO (y up): (1 < 5) ^ (2 < 6) = false, drawn: its box is
+    // columns ((128 + 255) >> 8) = 1 ..= ((1152 + 255) >> 8) - 1 = 4 and rows 2 ..= 5: 16
+    // pixels. In a window (y mirrored: Y0 = 6, Y1 = 2) (1 < 5) ^ (6 < 2) = true: nothing.
+    let c = |x: f32, y: f32| format!("{} {} 0 1", x / 4.0 - 1.0, y / 4.0 - 1.0);
+    let rect = format!(
+        "tri {}  {}  {}\ntri {}  {}  {}\n{flat}",
+        c(5.0, 2.0),
+        c(5.0, 6.0),
+        c(1.0, 6.0),
+        c(1.0, 2.0),
+        c(1.0, 6.0),
+        c(5.0, 2.0)
+    );
+    assert_eq!(
+        samples_counts(RasterProfile::Llvmpipe, &query(&rect)),
+        vec![16]
+    );
+    assert_eq!(
+        samples_counts(RasterProfile::LlvmpipeWindow, &query(&rect)),
+        vec![0]
+    );
 }

@@ -2,6 +2,7 @@
 //! render, culling that pays, and clear errors for bad options.
 
 use occsim_traces::golden::Discard;
+use occsim_traces::raster::RasterProfile;
 use occsim_traces::workloads::{
     city, forest, full_render_visible_pixels, generate, load_obj, CameraPath, CityOptions,
     DriverKind, DriverOptions, ForestOptions, ObjOptions, Walk, WorkloadScene,
@@ -28,6 +29,7 @@ const WALK: Walk = Walk {
     frames: 5,
     width: 160,
     height: 120,
+    raster: RasterProfile::Llvmpipe,
 };
 
 /// Every driver configuration that must never cull a visible object.
@@ -167,6 +169,7 @@ fn conservative_drivers_draw_every_visible_object_at_odd_sizes() {
         frames: 3,
         width: 97,
         height: 61,
+        ..WALK
     };
     check_conservative(&scene, &walk);
 }
@@ -341,6 +344,7 @@ fn an_obj_model_walks_with_every_driver() {
         frames: 2,
         width: 64,
         height: 64,
+        ..WALK
     };
     check_conservative(&scene, &walk);
     let full = full_render_visible_pixels(&scene, 0, &walk).unwrap();

@@ -4,6 +4,7 @@
 
 use crate::event::Event;
 use crate::query::{QueryMode, QueryResult, MAX_BUFFER_ENTRIES, MAX_TILES};
+use crate::raster::RasterProfile;
 use crate::state::{DepthFunc, MAX_VIEWPORT_SIDE};
 use serde::{Deserialize, Serialize};
 
@@ -18,6 +19,10 @@ pub struct TraceHeader {
     pub subpixel_bits: u32,
     /// Which pixels on a shared edge belong to a triangle.
     pub fill_rule: String,
+    /// The rasterizer profile whose arithmetic made the fragments (traces written before it
+    /// was recorded were made by the `exact` profile).
+    #[serde(default = "profile_of_unmarked_traces")]
+    pub raster: RasterProfile,
     /// Encoding of fragment depth.
     pub depth_format: String,
     /// The program that produced the trace, with its version.
@@ -39,6 +44,7 @@ impl TraceHeader {
             height,
             subpixel_bits: crate::raster::SUBPIXEL_BITS,
             fill_rule: crate::raster::FILL_RULE.to_owned(),
+            raster: RasterProfile::default(),
             depth_format: "unorm24".to_owned(),
             generator: crate::GENERATOR_VERSION.to_owned(),
             scene: String::new(),
@@ -48,6 +54,11 @@ impl TraceHeader {
 
     pub fn with_scene(mut self, scene: impl Into<String>) -> TraceHeader {
         self.scene = scene.into();
+        self
+    }
+
+    pub fn with_raster(mut self, raster: RasterProfile) -> TraceHeader {
+        self.raster = raster;
         self
     }
 
@@ -67,6 +78,11 @@ impl TraceHeader {
         }
         None
     }
+}
+
+/// Traces from before the header named its profile were rasterized exactly.
+fn profile_of_unmarked_traces() -> RasterProfile {
+    RasterProfile::Exact
 }
 
 /// Which pipeline features a trace exercises (computed from its events).

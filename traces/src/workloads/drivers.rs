@@ -53,7 +53,7 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     sink: &mut S,
     observer: &mut O,
 ) -> WorkloadStats {
-    let mut renderer = Renderer::new(walk.width, walk.height, sink, observer);
+    let mut renderer = Renderer::new(walk.width, walk.height, walk.raster, sink, observer);
     let mut hierarchical = HierarchicalDriver::new(options, scene.bvh.nodes.len());
     let mut grid = GridDriver::new(options, walk.width, walk.height);
     let mut stats = WorkloadStats {

@@ -39,6 +39,7 @@ pub use scenes::{city, forest, CityOptions, ForestOptions};
 use crate::geometry::{look_at, perspective_gl, Aabb};
 use crate::golden::EventSink;
 use crate::query::MAX_TILES;
+use crate::raster::RasterProfile;
 use crate::state::MAX_VIEWPORT_SIDE;
 use bvh::Bvh;
 use glam::{Mat4, Vec3};
@@ -205,6 +206,8 @@ pub struct Walk {
     pub width: u32,
     /// Viewport height in pixels.
     pub height: u32,
+    /// The rasterizer's arithmetic.
+    pub raster: RasterProfile,
 }
 
 impl Walk {

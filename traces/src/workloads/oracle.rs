@@ -19,8 +19,7 @@ pub fn full_render_visible_pixels(
 ) -> Result<Vec<u64>, WorkloadError> {
     walk.validate()?;
     let view = scene.frame_view(frame, walk);
-    let mut golden = GoldenModel::new(walk.width, walk.height);
-    let mut run = |command: Command| golden.execute(&command, &mut Discard);
+    let mut golden = GoldenModel::with_profile(walk.width, walk.height, walk.raster);
     for command in [
         Command::Clear,
         Command::Cull(true),
@@ -28,30 +27,34 @@ pub fn full_render_visible_pixels(
         Command::DepthFunc(DepthFunc::Lequal),
         Command::DepthMask(true),
     ] {
-        run(command);
+        golden.execute(&command, &mut Discard);
     }
-    let draw = |run: &mut dyn FnMut(Command) -> Option<crate::query::QueryResult>,
-                object: usize| {
+    // Each object a draw of its own, as the drivers draw them.
+    let draw = |golden: &mut GoldenModel, object: usize| {
         for triangle in &scene.objects[object].triangles {
-            run(Command::Tri(
-                triangle.map(|p| to_clip(&view.view_projection, p)),
-            ));
+            let clip = triangle.map(|p| to_clip(&view.view_projection, p));
+            golden.execute(&Command::Tri(clip), &mut Discard);
         }
+        golden.execute(&Command::EndDraw, &mut Discard);
     };
     for object in 0..scene.objects.len() {
-        draw(&mut run, object);
+        draw(&mut golden, object);
     }
-    run(Command::DepthMask(false));
+    golden.execute(&Command::DepthMask(false), &mut Discard);
     let mut visible = Vec::with_capacity(scene.objects.len());
     for object in 0..scene.objects.len() {
-        run(Command::Begin(QuerySpec {
-            id: object as u32,
-            mode: QueryMode::Samples,
-            buffer_entries: BRIEF_RECORD_ENTRIES,
-            tiles: vec![Rect::new(0, 0, walk.width, walk.height)],
-        }));
-        draw(&mut run, object);
-        visible.push(run(Command::End).map_or(0, |result| result.value()));
+        golden.execute(
+            &Command::Begin(QuerySpec {
+                id: object as u32,
+                mode: QueryMode::Samples,
+                buffer_entries: BRIEF_RECORD_ENTRIES,
+                tiles: vec![Rect::new(0, 0, walk.width, walk.height)],
+            }),
+            &mut Discard,
+        );
+        draw(&mut golden, object);
+        let result = golden.execute(&Command::End, &mut Discard);
+        visible.push(result.map_or(0, |result| result.value()));
     }
     Ok(visible)
 }

@@ -6,6 +6,7 @@ use crate::event::{Event, DEPTH_ONE};
 use crate::geometry::to_clip;
 use crate::golden::{EventSink, GoldenModel};
 use crate::query::{QueryMode, QueryResult, QuerySpec, BRIEF_RECORD_ENTRIES};
+use crate::raster::RasterProfile;
 use crate::scene::Command;
 use crate::state::{DepthFunc, Rect};
 use glam::Mat4;
@@ -57,9 +58,15 @@ pub(crate) struct Renderer<'s, S, O> {
 }
 
 impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
-    pub(crate) fn new(width: u32, height: u32, sink: &'s mut S, observer: &'s mut O) -> Self {
+    pub(crate) fn new(
+        width: u32,
+        height: u32,
+        raster: RasterProfile,
+        sink: &'s mut S,
+        observer: &'s mut O,
+    ) -> Self {
         Renderer {
-            golden: GoldenModel::new(width, height),
+            golden: GoldenModel::with_profile(width, height, raster),
             sink: CountingSink {
                 inner: sink,
                 fragments: 0,
@@ -112,6 +119,8 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
             let clip = triangle.map(|p| to_clip(view_projection, p));
             self.execute(&Command::Tri(clip));
         }
+        // An object is a draw of its own, as an application's glDrawArrays per object.
+        self.execute(&Command::EndDraw);
         self.stats.draw_fragments += self.sink.fragments - fragments_before;
         self.stats.triangles_drawn += object.triangles.len() as u64;
         self.stats.objects_drawn.push(index);
@@ -187,7 +196,8 @@ mod tests {
         for filled in [9u32, 1000, 1 << 20, 12_345_678, DEPTH_ONE - 9] {
             let mut sink = Discard;
             let mut observer = ();
-            let mut renderer = Renderer::new(37, 23, &mut sink, &mut observer);
+            let mut renderer =
+                Renderer::new(37, 23, RasterProfile::default(), &mut sink, &mut observer);
             renderer.start_frame();
             for triangle in screen_quad(tile, filled, 37, 23) {
                 renderer.execute(&Command::Tri(triangle));
