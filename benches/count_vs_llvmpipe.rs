@@ -36,12 +36,14 @@ fn golden_counts(
     sink: &mut impl EventSink,
 ) -> Vec<u64> {
     let mut golden = GoldenModel::new(width, height);
-    lines
+    let counts = lines
         .iter()
         .filter_map(|line| golden.execute(&line.command, sink))
         .filter(|r| r.mode == QueryMode::Samples)
         .map(|r| r.value())
-        .collect()
+        .collect();
+    golden.finish(sink);
+    counts
 }
 
 fn best_of(mut run: impl FnMut()) -> Duration {

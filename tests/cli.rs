@@ -265,3 +265,42 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
         assert!(error.contains(message), "{window}: {error}");
     }
 }
+
+#[test]
+fn the_rasterizer_profile_is_chosen_by_name_and_recorded_in_the_trace() {
+    let error = stderr_of_failure(&["count", "hardcases", "--raster", "softpipe"]);
+    assert!(
+        error.contains("unknown rasterizer profile `softpipe`")
+            && error.contains("llvmpipe, llvmpipe-window, exact"),
+        "{error}"
+    );
+    // The edge-clipped triangle of issue 11: llvmpipe (and the default) counts 58, the
+    // exact profile 57 (Mesa 22.3 measured the 58).
+    let dir = scratch_dir("raster-profile");
+    let scene = dir.join("edge.scene");
+    std::fs::write(
+        &scene,
+        "viewport 200 150\nclear\nbegin 0\n\
+         tri 1.195604 0.4832446 0.5 1  0.8642694 0.4082995 0.5 1  0.7934409 0.3295854 0.5 1\nend\n",
+    )
+    .unwrap();
+    let scene = scene.to_str().unwrap();
+    assert_eq!(stdout_of(&["count", scene]), "query 0 58\n");
+    assert_eq!(
+        stdout_of(&["count", scene, "--raster", "llvmpipe"]),
+        "query 0 58\n"
+    );
+    assert_eq!(
+        stdout_of(&["count", scene, "--raster", "exact"]),
+        "query 0 57\n"
+    );
+    for profile in ["llvmpipe", "llvmpipe-window", "exact"] {
+        let trace = dir.join(format!("{profile}.occt"));
+        let trace = trace.to_str().unwrap();
+        stdout_of(&["trace", "gen", scene, "-o", trace, "--raster", profile]);
+        let info: serde_json::Value =
+            serde_json::from_str(&stdout_of(&["trace", "info", trace, "--json"])).unwrap();
+        assert_eq!(info["header"]["raster"], profile, "{info}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

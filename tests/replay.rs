@@ -26,6 +26,7 @@ fn builtin_trace(name: &str) -> Vec<u8> {
     for line in lines {
         golden.execute(&line.expect("parses").command, &mut writer);
     }
+    golden.finish(&mut writer);
     writer.finish().expect("written");
     bytes
 }

@@ -24,6 +24,7 @@ fn scene_events(text: &str) -> (Vec<Event>, u32, u32) {
     for line in &lines {
         golden.execute(&line.command, &mut events);
     }
+    golden.finish(&mut events);
     (events, width, height)
 }
 

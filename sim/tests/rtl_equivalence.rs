@@ -59,6 +59,7 @@ fn scene_events(text: &str) -> (u32, u32, Vec<Event>) {
     for line in &lines {
         golden.execute(&line.command, &mut events);
     }
+    golden.finish(&mut events);
     (width, height, events)
 }
 

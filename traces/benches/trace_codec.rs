@@ -105,6 +105,7 @@ fn bench_builtin(name: &str) {
     for line in &lines {
         golden.execute(&line.command, &mut writer);
     }
+    golden.finish(&mut writer);
     let summary = writer.finish().expect("encode");
     let (bulk_s, sum) = best_of(3, || {
         let mut sum = Checksum::default();

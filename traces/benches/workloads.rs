@@ -78,6 +78,7 @@ fn main() {
         for command in &commands {
             black_box(golden.execute(command, &mut replay));
         }
+        golden.finish(&mut replay);
         let replay_seconds = started.elapsed().as_secs_f64();
         assert_eq!(replay.0, sink.0, "the replay must see the same fragments");
         println!(

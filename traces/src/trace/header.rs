@@ -361,3 +361,22 @@ impl StreamTally {
         summary
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn headers_name_their_profile_and_old_ones_read_as_exact() {
+        let header = TraceHeader::new(8, 4).with_raster(RasterProfile::LlvmpipeWindow);
+        let json = serde_json::to_string(&header).unwrap();
+        assert!(json.contains(r#""raster":"llvmpipe-window""#), "{json}");
+        assert_eq!(serde_json::from_str::<TraceHeader>(&json).unwrap(), header);
+        // A header from before the field: made by the exact rasterizer.
+        let old = json.replace(r#""raster":"llvmpipe-window","#, "");
+        assert!(!old.contains("raster"), "{old}");
+        let read: TraceHeader = serde_json::from_str(&old).unwrap();
+        assert_eq!(read.raster, RasterProfile::Exact);
+        assert_eq!(TraceHeader::new(8, 4).raster, RasterProfile::Llvmpipe);
+    }
+}
