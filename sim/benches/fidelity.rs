@@ -7,7 +7,7 @@
 //! Run: `cargo bench -p occsim-sim --bench fidelity`
 
 use occsim_sim::effects::{effects_of_features, observe, Effects};
-use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult, LevelSink};
+use occsim_sim::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use occsim_sim::{Arch, MachineModel};
 use occsim_traces::golden::{EventSink, FunctionalModel};
 use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};

@@ -155,7 +155,7 @@ pub const INTERLEAVES: &[&str] = &["columns", "blocks", "morton"];
 pub const MERGE_KINDS: &[&str] = &["tree", "chain", "software"];
 
 /// The InfiniteReality-like machine's parameters. Marks: (V) primary source, (V2) secondary
-/// source, (I) inferred; see `shared/reference/occlusion-unit.md`. Timing rules: [`crate::ir`].
+/// source, (I) inferred; see `shared/reference/occlusion-unit.md`. Timing rules: [`crate::machines::ir`].
 pub const IR_PARAMS: &[Param] = &[
     Param {
         key: "clock_mhz",

@@ -1,6 +1,8 @@
 //! What can go wrong while replaying a fragment stream.
 
 use crate::arch::ArchError;
+use occsim_traces::query::{BRIEF_RECORD_ENTRIES, MAX_TILES};
+use occsim_traces::QuerySpec;
 use thiserror::Error;
 
 #[derive(Debug, Error, PartialEq)]
@@ -88,4 +90,31 @@ pub(crate) fn check_fragment_inside(
         width,
         height,
     })
+}
+
+/// Reject a query the hardware cannot take.
+pub(crate) fn check_spec(spec: &QuerySpec, event: u64, open: Option<u32>) -> Result<(), SimError> {
+    if let Some(open_id) = open {
+        return Err(SimError::NestedQuery {
+            event,
+            id: spec.id,
+            open_id,
+        });
+    }
+    if spec.buffer_entries < BRIEF_RECORD_ENTRIES {
+        return Err(SimError::BufferTooSmall {
+            event,
+            id: spec.id,
+            entries: spec.buffer_entries,
+        });
+    }
+    if spec.tiles.is_empty() || spec.tiles.len() > MAX_TILES {
+        return Err(SimError::TileCount {
+            event,
+            id: spec.id,
+            count: spec.tiles.len(),
+            max: MAX_TILES,
+        });
+    }
+    Ok(())
 }

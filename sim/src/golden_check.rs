@@ -52,3 +52,66 @@ impl GoldenCheck {
         self.checked
     }
 }
+
+/// The first field where the simulated result differs from the golden one, whose counters
+/// are first saturated to the hardware's width: `(field, simulated, golden)`.
+pub fn first_difference(
+    simulated: &QueryResult,
+    golden: &QueryResult,
+    counter_max: u64,
+) -> Option<(String, String, String)> {
+    let differ = |field: String, s: &dyn std::fmt::Debug, g: &dyn std::fmt::Debug| {
+        Some((field, format!("{s:?}"), format!("{g:?}")))
+    };
+    if simulated.id != golden.id {
+        return differ("id".into(), &simulated.id, &golden.id);
+    }
+    if simulated.mode != golden.mode {
+        return differ("mode".into(), &simulated.mode, &golden.mode);
+    }
+    if simulated.tiles.len() != golden.tiles.len() {
+        return differ(
+            "tile count".into(),
+            &simulated.tiles.len(),
+            &golden.tiles.len(),
+        );
+    }
+    for (t, (s, g)) in simulated.tiles.iter().zip(&golden.tiles).enumerate() {
+        let fields: [(&str, u64, u64); 8] = [
+            ("nohc", s.nohc, g.nohc.min(counter_max)),
+            ("phc", s.phc, g.phc.min(counter_max)),
+            ("xmin", s.xmin as u64, g.xmin as u64),
+            ("xmax", s.xmax as u64, g.xmax as u64),
+            ("ymin", s.ymin as u64, g.ymin as u64),
+            ("ymax", s.ymax as u64, g.ymax as u64),
+            ("zmin", s.zmin as u64, g.zmin as u64),
+            ("zmax", s.zmax as u64, g.zmax as u64),
+        ];
+        for (name, sv, gv) in fields {
+            if sv != gv {
+                return differ(format!("tile {t} {name}"), &sv, &gv);
+            }
+        }
+        if s.hits.len() != g.hits.len() {
+            return differ(
+                format!("tile {t} hits_written"),
+                &s.hits.len(),
+                &g.hits.len(),
+            );
+        }
+        if let Some(h) = (0..s.hits.len()).find(|&h| s.hits[h] != g.hits[h]) {
+            return differ(format!("tile {t} hit {h}"), &s.hits[h], &g.hits[h]);
+        }
+        if s.overflowed != g.overflowed {
+            return differ(format!("tile {t} overflowed"), &s.overflowed, &g.overflowed);
+        }
+    }
+    if simulated.overflowed_buffers != golden.overflowed_buffers {
+        return differ(
+            "overflowed_buffers".into(),
+            &simulated.overflowed_buffers,
+            &golden.overflowed_buffers,
+        );
+    }
+    None
+}

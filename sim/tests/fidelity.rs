@@ -4,7 +4,7 @@
 use occsim_sim::effects::{
     effects_of_features, observe, EffectScan, Effects, EffectsChoice, TraceFacts,
 };
-use occsim_sim::fidelity::{run_level, Fidelity};
+use occsim_sim::levels::{run_level, Fidelity};
 use occsim_sim::{Arch, MachineModel, Report};
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
 use occsim_traces::golden::{EventSink, FunctionalModel, GoldenModel};

@@ -1,7 +1,7 @@
 //! The O2-like machine's counts against the functional golden model, on generated event
 //! streams, and the properties of its timing that must hold on any stream.
 
-use occsim_sim::o2::MIN_QUERY_LATENCY_CYCLES;
+use occsim_sim::machines::o2::MIN_QUERY_LATENCY_CYCLES;
 use occsim_sim::{Arch, O2Machine, Report, SimError};
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QuerySpec, Rect};

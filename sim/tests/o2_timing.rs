@@ -1,7 +1,7 @@
 //! Hand-worked timings of tiny traces on the O2-like machine. Every expected cycle count is
 //! derived in the comments from the rules in `sim/src/o2.rs`, not computed by the model.
 
-use occsim_sim::o2::MIN_QUERY_LATENCY_CYCLES;
+use occsim_sim::machines::o2::MIN_QUERY_LATENCY_CYCLES;
 use occsim_sim::{Arch, O2Machine, Report};
 use occsim_traces::{Event, Fragment, QueryMode, QuerySpec, Rect};
 

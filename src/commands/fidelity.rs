@@ -9,7 +9,7 @@ use super::arch::ArchSelection;
 use crate::plot::{LineChart, Scale, Series};
 use anyhow::Context;
 use occsim_sim::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
-use occsim_sim::fidelity::{Fidelity, LevelResult};
+use occsim_sim::levels::{Fidelity, LevelResult};
 use occsim_sim::Arch;
 use occsim_traces::golden::EventSink;
 use occsim_traces::trace::TraceReader;

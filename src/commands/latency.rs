@@ -8,7 +8,7 @@ use super::arch::ArchSelection;
 use super::replay::replay_trace;
 use crate::plot::{LineChart, Scale, Series};
 use anyhow::{bail, Context};
-use occsim_sim::fidelity::LevelResult;
+use occsim_sim::levels::LevelResult;
 use occsim_sim::report::nearest_rank;
 use occsim_sim::Fidelity;
 use occsim_sim::Report;

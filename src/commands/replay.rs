@@ -7,7 +7,7 @@ use super::arch::ArchSelection;
 use super::fidelity::{effects_of_trace, max_query_tiles_of_trace, FidelityArg};
 use anyhow::Context;
 use occsim_sim::effects::Effects;
-use occsim_sim::fidelity::{Fidelity, LevelModel, LevelResult, LevelSink};
+use occsim_sim::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use occsim_sim::{Arch, WaveformOptions};
 use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, TileGrid};

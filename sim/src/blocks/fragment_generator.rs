@@ -7,7 +7,7 @@
 //! emitted in `a_i = max(earliest, slot)`, where `earliest` is the cycle of the previous
 //! emission while it has emitted fewer than `fragments_per_cycle` fragments, else the next
 //! cycle (and never before the primitive's setup ends), and `slot` is the cycle the target
-//! Image Engine's FIFO has room ([`crate::image_engine`]): the generator blocks, in order,
+//! Image Engine's FIFO has room ([`crate::blocks::image_engine`]): the generator blocks, in order,
 //! while that FIFO is full.
 
 pub struct FragmentGenerator {

@@ -1,7 +1,7 @@
 //! The sampled level (`sampled:K`): the cycle model on every K-th window, the rest
 //! extrapolated, on either machine.
 //!
-//! Windows are the runs of events between query ends ([`crate::fidelity`]): a query is the
+//! Windows are the runs of events between query ends ([`crate::levels`]): a query is the
 //! unit whose latency the user asks about, and a frame of the demo holds hundreds of them, so
 //! windows sample far more finely than frames would. Window `w` (from 0) is simulated when
 //! `w % K == 0`.
@@ -23,7 +23,7 @@
 //!   the window before it in the same machine (the final window: the machine's total cycles
 //!   minus that); its query's latency is the machine's.
 //! - Every other window (warm-up ones included) costs `r_c · work`, with `work` the
-//!   analytic level's `T_w` for the window ([`crate::analytic`]: the slowest block's cycles,
+//!   analytic level's `T_w` for the window ([`crate::levels::analytic`]: the slowest block's cycles,
 //!   counted on every event) and `r_c` the ratio of measured cycles to work over the sampled
 //!   (non-final) windows of its class `c` = (its query's mode, `s` = OccU cycles per fragment
 //!   of its query), or over all sampled windows when none is of its class: the cycle model
@@ -34,12 +34,13 @@
 //!   than the FIFOs. `sampled:1` runs one machine over the whole stream, so it equals `cycle`
 //!   exactly (tested); `sampled:2` too, except that half its costs are extrapolated.
 
-use crate::analytic::{service_cycles, Formulas};
 use crate::arch::{Arch, Machine};
 use crate::effects::Effects;
 use crate::error::SimError;
-use crate::fidelity::{FunctionalCore, LevelResult, SampledWindows};
-use crate::machine::MachineModel;
+use crate::levels::analytic::{service_cycles, Formulas};
+use crate::levels::functional::FunctionalCore;
+use crate::levels::level::{LevelResult, SampledWindows};
+use crate::machines::MachineModel;
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::{Event, QueryMode, QuerySpec, Span};
 use std::collections::BTreeMap;
@@ -421,7 +422,7 @@ impl SampledModel {
         for (query, latency) in result.queries.iter_mut().zip(filled) {
             query.latency_cycles = latency;
         }
-        result.level = crate::fidelity::Fidelity::Sampled { every: self.every };
+        result.level = crate::levels::level::Fidelity::Sampled { every: self.every };
         result.effects = Some(self.effects);
         result.sampled_windows = Some(windows);
         result.set_timing(total.round() as u64);

@@ -1,12 +1,15 @@
 //! A machine model of whichever kind the architecture names: the one entry point the command
 //! line, sweeps and latency reports replay traces through.
 
+pub mod ir;
+pub mod o2;
+
 use crate::arch::{Arch, Machine};
+use crate::blocks::occu_stage::OccuModel;
 use crate::effects::Effects;
 use crate::error::SimError;
-use crate::ir::IrMachine;
-use crate::o2::O2Machine;
-use crate::occu_stage::OccuModel;
+use crate::machines::ir::IrMachine;
+use crate::machines::o2::O2Machine;
 use crate::report::Report;
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;

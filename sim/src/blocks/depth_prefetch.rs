@@ -20,8 +20,8 @@
 //!   the first read).
 
 use crate::arch::O2Arch;
-use crate::fifo::Fifo;
-use crate::memory_port::{MemoryPort, PortClient};
+use crate::blocks::fifo::Fifo;
+use crate::blocks::memory_port::{MemoryPort, PortClient};
 
 /// The word and page of a depth pixel in the layout above.
 #[derive(Clone, Debug)]

@@ -29,9 +29,9 @@
 //! the partial-report port, go to the merge network with the hit words stored so far.
 
 use crate::arch::{IrArch, O2Arch, OCCU_WORD_BITS};
-use crate::memory_port::{MemoryPort, PortClient};
-use crate::occu_stage::OccuStats;
-use crate::waveform::{Waveform, WaveformOptions};
+use crate::blocks::memory_port::{MemoryPort, PortClient};
+use crate::blocks::occlusion_unit::OccuStats;
+use crate::blocks::waveform::{Waveform, WaveformOptions};
 use crate::SimError;
 use occsim_rtl::occlusion_unit::Wires;
 use occsim_rtl::occu_control::{ControlWires, WordKind};

@@ -1,5 +1,5 @@
 //! The O2-like machine's closed-form bottleneck model: per *window* (the events from just
-//! after one query's end to the next query's end, see [`crate::fidelity`]) a cheap scan
+//! after one query's end to the next query's end, see [`crate::levels`]) a cheap scan
 //! counts what each block must do:
 //!
 //! | count | meaning |
@@ -41,12 +41,12 @@
 //!
 //! The 4 is the empty pipe's path (depth pipeline, OccU, OccU Control, the grant after the
 //! last word): with one record group that fits one port cycle, latency is the machine's
-//! minimum, [`crate::o2::MIN_QUERY_LATENCY_CYCLES`]. Costs: the functional model plus a
+//! minimum, [`crate::machines::o2::MIN_QUERY_LATENCY_CYCLES`]. Costs: the functional model plus a
 //! few integer operations per fragment.
 
 use super::{service_cycles, WindowEnd};
 use crate::arch::O2Arch;
-use crate::depth_prefetch::{DepthAddress, DepthRead, LastRead};
+use crate::blocks::depth_prefetch::{DepthAddress, DepthRead, LastRead};
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::{Fragment, QueryMode, QueryResult, QuerySpec};

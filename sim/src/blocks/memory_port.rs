@@ -2,7 +2,7 @@
 //! writes and OccU Control writes.
 //!
 //! Rule (what the RTL model must implement): the port is in-order. It grants requests one
-//! after another in the machine's request order ([`crate::o2`] defines it), each in the
+//! after another in the machine's request order ([`crate::machines::o2`] defines it), each in the
 //! first cycle that is at or after its ready cycle and at or after the previous grant's
 //! cycle and in which its bits fit next to the bits already granted in that cycle. A request
 //! never splits across cycles.

@@ -17,10 +17,10 @@
 //! stall while waiting for `r_i`, the rest as back-pressure stall.
 
 use crate::arch::O2Arch;
-use crate::depth_prefetch::DepthPrefetch;
+use crate::blocks::depth_prefetch::DepthPrefetch;
+use crate::blocks::memory_port::{MemoryPort, PortClient};
+use crate::blocks::write_buffer::WriteBuffer;
 use crate::effects::Effects;
-use crate::memory_port::{MemoryPort, PortClient};
-use crate::write_buffer::WriteBuffer;
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;
 use occsim_traces::Fragment;

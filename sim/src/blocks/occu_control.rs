@@ -3,7 +3,7 @@
 //!
 //! Rules:
 //! - words are 32 bits; they enter the `occu_write_buffer_words` buffer in order, any number
-//!   per cycle while there is room ([`crate::write_buffer`]): word `m` enters in
+//!   per cycle while there is room ([`crate::blocks::write_buffer`]): word `m` enters in
 //!   `e_m = max(ready, e_{m-1}, slot_m)`;
 //! - a fragment's hit words are ready when the engines finish it (`o_i + s - 1`); the
 //!   fragment leaves the OccU when its last hit word has entered (the engines stall
@@ -15,9 +15,9 @@
 //!   word's port grant.
 
 use crate::arch::OCCU_WORD_BITS;
-use crate::memory_port::{MemoryPort, PortClient};
-use crate::occlusion_engine::hit_room;
-use crate::write_buffer::WriteBuffer;
+use crate::blocks::memory_port::{MemoryPort, PortClient};
+use crate::blocks::occlusion_engine::hit_room;
+use crate::blocks::write_buffer::WriteBuffer;
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::{QueryMode, QuerySpec, TileResult};
 

@@ -8,23 +8,23 @@
 //!
 //! # Timing rules (the RTL model must match them cycle for cycle)
 //! Cycles count from 0. `X_{i-n}` for a fragment before the first reads as 0.
-//! 1. Rasterizer ([`crate::fragment_input`]): a primitive costs `primitive_setup_cycles`;
+//! 1. Rasterizer ([`crate::blocks::fragment_input`]): a primitive costs `primitive_setup_cycles`;
 //!    fragment `i` is emitted in `a_i = max(free, slot)`, one per cycle, where the
 //!    raster-to-depth FIFO slot frees when fragment `i - fifo_raster_to_depth_entries`
 //!    entered the depth test (same-cycle reuse).
-//! 2. Prefetch ([`crate::depth_prefetch`]): request cycle
+//! 2. Prefetch ([`crate::blocks::depth_prefetch`]): request cycle
 //!    `q_i = max(a_i + 1, d_{i-P}, q_{i-1} + 1)`; a fragment whose word is the last word read
 //!    reuses that read's data; otherwise one port word is granted in `g >= q_i` and the data
 //!    is ready in `g + page_hit_latency_cycles` (same 64 KB tile as the last read) or
 //!    `g + page_miss_latency_cycles`. Nothing is read when the depth test is off.
-//! 3. Depth test ([`crate::depth_pipeline`]): `d_i = max(a_i + 1, d_{i-1} + 1, r_i,
+//! 3. Depth test ([`crate::blocks::depth_pipeline`]): `d_i = max(a_i + 1, d_{i-1} + 1, r_i,
 //!    o_{i-C2}, w)` with `C2 = fifo_depth_to_occu_entries` and `w` the depth write buffer's
 //!    slot when the fragment writes; the write asks the port from `d_i + 1`, in order.
-//! 4. Occlusion Unit ([`crate::occlusion_unit`]): `o_i = max(d_i + 1, c_{i-1} + 1)`, busy
+//! 4. Occlusion Unit ([`crate::blocks::occlusion_unit`]): `o_i = max(d_i + 1, c_{i-1} + 1)`, busy
 //!    `s = max_e k_e` cycles (1 with `all_tiles_one_cycle` or no open query); its hit words
 //!    enter OccU Control's buffer from `o_i + s - 1`; it leaves in `c_i`, the cycle its last
 //!    hit word entered (or `o_i + s - 1`).
-//! 5. Memory port ([`crate::memory_port`]): in-order, in this request order. With
+//! 5. Memory port ([`crate::blocks::memory_port`]): in-order, in this request order. With
 //!    `L = min(prefetch_depth_fragments, fifo_raster_to_depth_entries)` (the prefetcher
 //!    only sees fragments in the FIFO): first the depth reads of fragments `0..L`; then for
 //!    each fragment `j` in trace order: (a) the records of the queries that ended just before
@@ -36,27 +36,26 @@
 //! 6. Query end: the `end` token enters in `t_end` = the rasterizer's first free cycle and
 //!    takes no slot; it passes the depth pipeline in `td = max(t_end + 1, d_last + 1)` and
 //!    the OccU in `to = max(td + 1, c_last + 1)`; OccU Control's records are ready in
-//!    `to + 1` ([`crate::occu_control`]); the result is available in the cycle after the
+//!    `to + 1` ([`crate::blocks::occu_control`]); the result is available in the cycle after the
 //!    last record word's grant. Latency = available - `t_end`, at least
 //!    [`MIN_QUERY_LATENCY_CYCLES`].
 //! 7. State changes, `begin`, and `clear` take no cycles (clear is a fast clear; colour and
 //!    stencil traffic and blending are not modelled).
 
 use crate::arch::{Arch, O2Arch};
-use crate::depth_pipeline::DepthPipeline;
+use crate::blocks::depth_pipeline::DepthPipeline;
+use crate::blocks::fifo::Fifo;
+use crate::blocks::fragment_input::FragmentInput;
+use crate::blocks::memory_port::MemoryPort;
+use crate::blocks::occu_stage::{OccuModel, OccuStage};
 use crate::effects::Effects;
-use crate::error::SimError;
-use crate::fifo::Fifo;
-use crate::fragment_input::FragmentInput;
-use crate::golden_check::GoldenCheck;
-use crate::memory_port::MemoryPort;
-use crate::occu_stage::{OccuModel, OccuStage};
+use crate::error::{check_spec, SimError};
+use crate::golden_check::{first_difference, GoldenCheck};
 use crate::report::{
     nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
     Summary, TileReport,
 };
 use occsim_traces::golden::DepthBuffer;
-use occsim_traces::query::{BRIEF_RECORD_ENTRIES, MAX_TILES};
 use occsim_traces::state::RenderState;
 use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, TileResult};
 use std::collections::VecDeque;
@@ -539,94 +538,4 @@ pub(crate) fn tile_report(tile: &TileResult) -> TileReport {
         hits_written: tile.hits.len() as u64,
         overflowed: tile.overflowed,
     }
-}
-
-/// Reject a query the hardware cannot take.
-pub(crate) fn check_spec(spec: &QuerySpec, event: u64, open: Option<u32>) -> Result<(), SimError> {
-    if let Some(open_id) = open {
-        return Err(SimError::NestedQuery {
-            event,
-            id: spec.id,
-            open_id,
-        });
-    }
-    if spec.buffer_entries < BRIEF_RECORD_ENTRIES {
-        return Err(SimError::BufferTooSmall {
-            event,
-            id: spec.id,
-            entries: spec.buffer_entries,
-        });
-    }
-    if spec.tiles.is_empty() || spec.tiles.len() > MAX_TILES {
-        return Err(SimError::TileCount {
-            event,
-            id: spec.id,
-            count: spec.tiles.len(),
-            max: MAX_TILES,
-        });
-    }
-    Ok(())
-}
-
-/// The first field where the simulated result differs from the golden one, whose counters
-/// are first saturated to the hardware's width: `(field, simulated, golden)`.
-pub fn first_difference(
-    simulated: &QueryResult,
-    golden: &QueryResult,
-    counter_max: u64,
-) -> Option<(String, String, String)> {
-    let differ = |field: String, s: &dyn std::fmt::Debug, g: &dyn std::fmt::Debug| {
-        Some((field, format!("{s:?}"), format!("{g:?}")))
-    };
-    if simulated.id != golden.id {
-        return differ("id".into(), &simulated.id, &golden.id);
-    }
-    if simulated.mode != golden.mode {
-        return differ("mode".into(), &simulated.mode, &golden.mode);
-    }
-    if simulated.tiles.len() != golden.tiles.len() {
-        return differ(
-            "tile count".into(),
-            &simulated.tiles.len(),
-            &golden.tiles.len(),
-        );
-    }
-    for (t, (s, g)) in simulated.tiles.iter().zip(&golden.tiles).enumerate() {
-        let fields: [(&str, u64, u64); 8] = [
-            ("nohc", s.nohc, g.nohc.min(counter_max)),
-            ("phc", s.phc, g.phc.min(counter_max)),
-            ("xmin", s.xmin as u64, g.xmin as u64),
-            ("xmax", s.xmax as u64, g.xmax as u64),
-            ("ymin", s.ymin as u64, g.ymin as u64),
-            ("ymax", s.ymax as u64, g.ymax as u64),
-            ("zmin", s.zmin as u64, g.zmin as u64),
-            ("zmax", s.zmax as u64, g.zmax as u64),
-        ];
-        for (name, sv, gv) in fields {
-            if sv != gv {
-                return differ(format!("tile {t} {name}"), &sv, &gv);
-            }
-        }
-        if s.hits.len() != g.hits.len() {
-            return differ(
-                format!("tile {t} hits_written"),
-                &s.hits.len(),
-                &g.hits.len(),
-            );
-        }
-        if let Some(h) = (0..s.hits.len()).find(|&h| s.hits[h] != g.hits[h]) {
-            return differ(format!("tile {t} hit {h}"), &s.hits[h], &g.hits[h]);
-        }
-        if s.overflowed != g.overflowed {
-            return differ(format!("tile {t} overflowed"), &s.overflowed, &g.overflowed);
-        }
-    }
-    if simulated.overflowed_buffers != golden.overflowed_buffers {
-        return differ(
-            "overflowed_buffers".into(),
-            &simulated.overflowed_buffers,
-            &golden.overflowed_buffers,
-        );
-    }
-    None
 }

@@ -7,8 +7,8 @@
 //! budget, so an entry is never granted before the one ahead of it. An entry leaves the
 //! buffer in its grant cycle.
 
-use crate::fifo::Fifo;
-use crate::memory_port::{MemoryPort, PortClient};
+use crate::blocks::fifo::Fifo;
+use crate::blocks::memory_port::{MemoryPort, PortClient};
 
 pub struct WriteBuffer {
     slots: Fifo,

@@ -5,7 +5,7 @@
 //! previous fragment was emitted (setup of the next triangle does not overlap the emission
 //! of the last one). Fragment `i` is emitted in cycle
 //! `a_i = max(free, slot)`, where `free` is the first cycle after the previous emission or
-//! setup and `slot` the cycle the FIFO has room ([`crate::fifo`]); then `free = a_i + 1`.
+//! setup and `slot` the cycle the FIFO has room ([`crate::blocks::fifo`]); then `free = a_i + 1`.
 //! Waiting for `slot` counts as stall.
 
 pub struct FragmentInput {

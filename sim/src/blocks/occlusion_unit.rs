@@ -7,11 +7,11 @@
 //! query is open: the fragment just passes). Fragment `i`, readable from `ready_i`
 //! (= depth test cycle + 1), starts in `o_i = max(ready_i, c_{i-1} + 1)` and is done counting
 //! in `o_i + s - 1`; it leaves the unit in `c_i`, which is later only when OccU Control's
-//! write buffer has no room for its hit words ([`crate::occu_control`]). The unit reads the
+//! write buffer has no room for its hit words ([`crate::blocks::occu_control`]). The unit reads the
 //! FIFO entry (frees its slot) in `o_i`.
 
 use crate::arch::O2Arch;
-use crate::occlusion_engine::{hit_room, OcclusionEngine};
+use crate::blocks::occlusion_engine::{hit_room, OcclusionEngine};
 use occsim_traces::{Fragment, QueryMode, QuerySpec, TileResult};
 
 pub struct OcclusionUnit {
@@ -157,4 +157,14 @@ impl OcclusionUnit {
         self.active = 0;
         results
     }
+}
+
+/// Statistics the report needs from an Occlusion Unit stage (either fidelity).
+pub struct OccuStats {
+    pub busy_cycles: u64,
+    pub stall_cycles: u64,
+    /// Per engine: (busy cycles, stall cycles).
+    pub engines: Vec<(u64, u64)>,
+    pub words_written: u64,
+    pub port_cycles: u64,
 }

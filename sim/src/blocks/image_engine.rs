@@ -1,7 +1,7 @@
 //! One Image Engine: the FIFO in front of it, its depth test over the pixels it owns, and its
 //! own Occlusion Unit with an OccU Control write buffer that drains hit words into the Image
-//! Engine's memory, at `cycle` fidelity ([`crate::occlusion_unit`], [`crate::occu_control`])
-//! or as the clocked RTL ([`crate::rtl_occu`]), through the [`crate::occu_stage`] seam.
+//! Engine's memory, at `cycle` fidelity ([`crate::blocks::occlusion_unit`], [`crate::blocks::occu_control`])
+//! or as the clocked RTL ([`crate::blocks::rtl_occu`]), through the [`crate::blocks::occu_stage`] seam.
 //!
 //! Rules, for the Image Engine's `k`-th fragment, emitted by its board's Fragment Generator
 //! in `a_k` (`C = image_engine_cycles_per_fragment`, `F = image_engine_fifo_entries`):
@@ -19,10 +19,11 @@
 //!   with `g` the grant of its last hit word (0 without hits).
 
 use crate::arch::{IrArch, OCCU_WORD_BITS};
+use crate::blocks::fifo::Fifo;
+use crate::blocks::memory_port::MemoryPort;
+use crate::blocks::occlusion_unit::OccuStats;
+use crate::blocks::occu_stage::{OccuModel, OccuStage};
 use crate::error::SimError;
-use crate::fifo::Fifo;
-use crate::memory_port::MemoryPort;
-use crate::occu_stage::{OccuModel, OccuStage, OccuStats};
 use occsim_traces::{Fragment, QuerySpec, TileResult};
 
 pub struct ImageEngine {

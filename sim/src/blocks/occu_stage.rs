@@ -1,17 +1,18 @@
 //! The seam where a machine computes an Occlusion Unit and its OccU Control (the O2's one,
 //! every InfiniteReality Image Engine's own): either the event-timestamp model
-//! ([`crate::occlusion_unit`], [`crate::occu_control`]) or the clocked register-transfer
-//! model of `occsim-rtl` ([`crate::rtl_occu`]). Both follow the timing rules of
-//! [`crate::o2`] (records to memory at the end, [`OccuStage::end`]) or of
-//! [`crate::image_engine`] (hit words only; the partial report to the merge network,
+//! ([`crate::blocks::occlusion_unit`], [`crate::blocks::occu_control`]) or the clocked register-transfer
+//! model of `occsim-rtl` ([`crate::blocks::rtl_occu`]). Both follow the timing rules of
+//! [`crate::machines::o2`] (records to memory at the end, [`OccuStage::end`]) or of
+//! [`crate::blocks::image_engine`] (hit words only; the partial report to the merge network,
 //! [`OccuStage::partial_report`]) and produce the same cycles and results.
 
 use crate::arch::{IrArch, O2Arch};
-use crate::memory_port::MemoryPort;
-use crate::occlusion_unit::OcclusionUnit;
-use crate::occu_control::OccuControl;
-use crate::rtl_occu::RtlOccu;
-use crate::waveform::WaveformOptions;
+use crate::blocks::memory_port::MemoryPort;
+use crate::blocks::occlusion_unit::OcclusionUnit;
+use crate::blocks::occlusion_unit::OccuStats;
+use crate::blocks::occu_control::OccuControl;
+use crate::blocks::rtl_occu::RtlOccu;
+use crate::blocks::waveform::WaveformOptions;
 use occsim_traces::{Fragment, QuerySpec, TileResult};
 
 /// How the Occlusion Unit and OccU Control are modelled.
@@ -23,16 +24,6 @@ pub enum OccuModel {
     /// The `occsim-rtl` register-transfer model, clocked cycle by cycle (the `rtl`
     /// fidelity), optionally dumping a waveform.
     Rtl { waveform: Option<WaveformOptions> },
-}
-
-/// Statistics the report needs from the stage.
-pub struct OccuStats {
-    pub busy_cycles: u64,
-    pub stall_cycles: u64,
-    /// Per engine: (busy cycles, stall cycles).
-    pub engines: Vec<(u64, u64)>,
-    pub words_written: u64,
-    pub port_cycles: u64,
 }
 
 // The cycle variant is the hot path and stays inline; the rtl one is boxed.
@@ -159,7 +150,7 @@ impl OccuStage {
     }
 
     /// End of the stream: the statistics (the RTL drains and closes its waveform).
-    pub fn finish(&mut self) -> Result<OccuStats, crate::SimError> {
+    pub fn finish(&mut self) -> Result<OccuStats, crate::error::SimError> {
         Ok(match self {
             OccuStage::Cycle { occu, control } => OccuStats {
                 busy_cycles: occu.busy_cycles,

@@ -3,7 +3,7 @@
 //!
 //! The functional model runs on every event, so results stay exact; beside it the machine's
 //! formulas count, per *window* (the events from just after one query's end up to the next
-//! query's end, see [`crate::fidelity`]), what each block must do, and at the window's end
+//! query's end, see [`crate::levels`]), what each block must do, and at the window's end
 //! predict its cycles `T_w` (the slowest block's) and its query's latency:
 //! - [`o2`]: rasterizer, depth pipeline, OccU, the in-order memory port and the prefetch;
 //! - [`ir`]: every board's Fragment Generator and every Image Engine (depth test, OccU, hit
@@ -18,7 +18,8 @@ pub mod o2;
 
 use crate::arch::{Arch, Machine};
 use crate::error::SimError;
-use crate::fidelity::{Fidelity, FunctionalCore, LevelResult};
+use crate::levels::functional::FunctionalCore;
+use crate::levels::level::{Fidelity, LevelResult};
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, Span};
 

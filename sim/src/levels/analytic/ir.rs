@@ -1,4 +1,4 @@
-//! The InfiniteReality-like machine's closed-form bottleneck model ([`crate::ir`] states the
+//! The InfiniteReality-like machine's closed-form bottleneck model ([`crate::machines::ir`] states the
 //! machine's rules).
 //!
 //! Counts per window (`B` boards of `N` Image Engines; Image Engine `i = b · N + n`):
@@ -36,14 +36,14 @@
 //! when the engine had that much to do in the window (the demo's Image Engines are its
 //! bottleneck, so their FIFOs are full at every query end). The two
 //! merge stages then run on the `r_i` exactly as the machine runs them
-//! ([`crate::merge_network::merged_ready`]; the host of software merges is carried from query
+//! ([`crate::blocks::merge_network::merged_ready`]; the host of software merges is carried from query
 //! to query), and latency = available − `t_end`. Hit words per Image Engine are not capped by
 //! the verbose buffers' room: a query whose buffers overflow is predicted slower than it is.
 
 use super::{service_cycles, WindowEnd};
 use crate::arch::IrArch;
-use crate::interleave::FramebufferInterleave;
-use crate::merge_network::merged_ready;
+use crate::blocks::interleave::FramebufferInterleave;
+use crate::blocks::merge_network::merged_ready;
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect};
 

@@ -13,21 +13,21 @@
 //! # Timing rules
 //! Cycles count from 0; everything is processed in trace order, each cycle a monotone
 //! function of earlier ones.
-//! 1. Interleave ([`crate::interleave`]): each pixel belongs to exactly one board and one
+//! 1. Interleave ([`crate::blocks::interleave`]): each pixel belongs to exactly one board and one
 //!    Image Engine on it.
-//! 2. Fragment Generators ([`crate::fragment_generator`]): every board sets up every
+//! 2. Fragment Generators ([`crate::blocks::fragment_generator`]): every board sets up every
 //!    primitive (`fragment_generator_setup_cycles`) and emits only its own pixels'
 //!    fragments, at most `fragment_generator_fragments_per_cycle` a cycle, in order, blocking
 //!    while the target Image Engine's FIFO is full.
-//! 3. Image Engines ([`crate::image_engine`]): each tests one fragment every
+//! 3. Image Engines ([`crate::blocks::image_engine`]): each tests one fragment every
 //!    `image_engine_cycles_per_fragment` cycles, then its own Occlusion Unit (`engines`
 //!    engines, the query's tiles dealt round-robin, one tile per engine per cycle) counts it;
 //!    hit words drain through a per-engine write buffer, one word per cycle.
 //! 4. Query end: the end token enters every board in `t_end`, the first cycle after every
 //!    Fragment Generator has emitted and set up everything before it; each Image Engine's
-//!    partial report is ready in `r` (rule in [`crate::image_engine`]).
+//!    partial report is ready in `r` (rule in [`crate::blocks::image_engine`]).
 //! 5. Stage one merges each board's Image Engines' reports in Image Engine order, stage two
-//!    the boards' merged reports in board order ([`crate::merge_network`]: tree, chain or
+//!    the boards' merged reports in board order ([`crate::blocks::merge_network`]: tree, chain or
 //!    software, with the per-hop or per-read latency). The result is available in the
 //!    cycle stage two outputs it. Latency = available - `t_end` = drain + local + global,
 //!    with drain = `max r - t_end`, local = `max_b board_b - max r`, global = available -
@@ -50,22 +50,25 @@
 //! # Fidelity
 //! Every Image Engine's Occlusion Unit and OccU Control is the event-timestamp model
 //! (`cycle`) or the `occsim-rtl` model clocked cycle by cycle (`rtl`,
-//! [`IrMachine::with_occu_model`], [`crate::rtl_occu`]), with identical reports. An rtl
+//! [`IrMachine::with_occu_model`], [`crate::blocks::rtl_occu`]), with identical reports. An rtl
 //! unit is clocked only when its Image Engine has a fragment for it (quiescent cycles are
 //! skipped in bulk), so idle Image Engines cost nothing; a waveform (`--vcd`) dumps Image
 //! Engine 0 of board 0.
 
 use crate::arch::{Arch, IrArch};
+use crate::blocks::fragment_generator::FragmentGenerator;
+use crate::blocks::image_engine::ImageEngine;
+use crate::blocks::interleave::FramebufferInterleave;
+use crate::blocks::merge_network::{merge_partial, merged_ready};
+use crate::blocks::occlusion_engine::hit_room;
+use crate::blocks::occlusion_unit::OccuStats;
+use crate::blocks::occu_stage::OccuModel;
 use crate::effects::Effects;
+use crate::error::check_spec;
 use crate::error::SimError;
-use crate::fragment_generator::FragmentGenerator;
+use crate::golden_check::first_difference;
 use crate::golden_check::GoldenCheck;
-use crate::image_engine::ImageEngine;
-use crate::interleave::FramebufferInterleave;
-use crate::merge_network::{merge_partial, merged_ready};
-use crate::o2::{check_spec, first_difference, tile_report};
-use crate::occlusion_engine::hit_room;
-use crate::occu_stage::{OccuModel, OccuStats};
+use crate::machines::o2::tile_report;
 use crate::report::{
     nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
     Summary, UnitSummary,

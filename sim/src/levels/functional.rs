@@ -1,0 +1,163 @@
+//! The functional level: the golden functional model with the stream checks every level
+//! shares. The other levels run it beside their timing.
+
+use crate::error::{check_spec, SimError};
+use crate::golden_check::{first_difference, GoldenCheck};
+use crate::levels::level::{Fidelity, LevelResult, QueryOutcome};
+use occsim_traces::golden::FunctionalModel;
+use occsim_traces::{Event, Fragment, QueryMode, QueryResult, Span};
+
+/// The functional model with the stream checks every level shares: fragments inside the
+/// viewport, well-formed queries, results equal to the golden results stored in the stream.
+pub struct FunctionalCore {
+    pub(crate) functional: FunctionalModel,
+    width: u32,
+    height: u32,
+    events: u64,
+    open: Option<u32>,
+    open_fragments: u64,
+    /// The result of the query that just ended, waiting for the stream's golden result.
+    golden: GoldenCheck,
+    queries: Vec<QueryOutcome>,
+    fragments: u64,
+    primitives: u64,
+}
+
+impl FunctionalCore {
+    pub fn new(width: u32, height: u32) -> Result<FunctionalCore, SimError> {
+        crate::error::check_viewport(width, height)?;
+        Ok(FunctionalCore {
+            functional: FunctionalModel::new(width, height),
+            width,
+            height,
+            events: 0,
+            open: None,
+            open_fragments: 0,
+            golden: GoldenCheck::default(),
+            queries: Vec::new(),
+            fragments: 0,
+            primitives: 0,
+        })
+    }
+
+    /// Reject a fragment outside the viewport (the next event's index).
+    #[inline]
+    pub(crate) fn check_fragment(&self, fragment: &Fragment) -> Result<(), SimError> {
+        self.check_fragment_at(fragment, self.events)
+    }
+
+    /// Reject a fragment outside the viewport, `event` its index in the stream.
+    #[inline]
+    fn check_fragment_at(&self, fragment: &Fragment, event: u64) -> Result<(), SimError> {
+        crate::error::check_fragment_inside(fragment, event, self.width, self.height)
+    }
+
+    /// Apply a fragment already checked by [`Self::check_fragment`].
+    #[inline]
+    pub(crate) fn apply_fragment(&mut self, fragment: Fragment) {
+        self.events += 1;
+        self.fragments += 1;
+        self.open_fragments += 1;
+        self.functional.fragment(fragment);
+    }
+
+    /// Reject a span with a fragment outside the viewport (naming the first such).
+    #[inline]
+    pub(crate) fn check_span(&self, span: Span) -> Result<(), SimError> {
+        let end = span.x as u32 + span.depths.len() as u32;
+        if (span.y as u32) < self.height && end <= self.width {
+            return Ok(());
+        }
+        span.fragments()
+            .zip(self.events..)
+            .try_for_each(|(fragment, event)| self.check_fragment_at(&fragment, event))
+    }
+
+    /// Apply a span already checked by [`Self::check_span`].
+    #[inline]
+    pub(crate) fn apply_span(&mut self, span: Span) {
+        let len = span.depths.len() as u64;
+        self.events += len;
+        self.fragments += len;
+        self.open_fragments += len;
+        self.functional.span(span);
+    }
+
+    /// A span of fragments at once: the same as its fragments one by one.
+    #[inline]
+    pub fn span(&mut self, span: Span) -> Result<(), SimError> {
+        self.check_span(span)?;
+        self.apply_span(span);
+        Ok(())
+    }
+
+    /// Apply one event; returns the result of a query that ended with it.
+    pub fn event(&mut self, event: &Event) -> Result<Option<QueryResult>, SimError> {
+        let index = self.events;
+        match event {
+            Event::Fragment(fragment) => {
+                self.check_fragment(fragment)?;
+                self.apply_fragment(*fragment);
+                return Ok(None);
+            }
+            Event::Primitive => self.primitives += 1,
+            Event::QueryBegin(spec) => {
+                check_spec(spec, index, self.open)?;
+                self.open = Some(spec.id);
+                self.open_fragments = 0;
+            }
+            Event::QueryEnd => {
+                self.open
+                    .take()
+                    .ok_or(SimError::EndWithoutBegin { event: index })?;
+            }
+            Event::QueryResult(golden) => {
+                self.events += 1;
+                self.golden.check(golden, index, |simulated, golden| {
+                    first_difference(simulated, golden, u64::MAX)
+                })?;
+                return Ok(None);
+            }
+            _ => {}
+        }
+        self.events += 1;
+        let ended = self.functional.event(event);
+        if let Some(result) = &ended {
+            self.queries.push(QueryOutcome {
+                id: result.id,
+                mode: result.mode,
+                fragments: self.open_fragments,
+                value: result.value(),
+                latency_cycles: None,
+            });
+            self.golden.expect(self.queries.len() - 1, result.clone());
+        }
+        Ok(ended)
+    }
+
+    /// The mode of the `index`-th query that ended.
+    pub(crate) fn query_mode(&self, index: usize) -> QueryMode {
+        self.queries[index].mode
+    }
+
+    /// The result without timing (the functional level's answer).
+    pub fn finish(self) -> Result<LevelResult, SimError> {
+        if let Some(id) = self.open {
+            return Err(SimError::OpenAtEnd { id });
+        }
+        Ok(LevelResult {
+            level: Fidelity::Functional,
+            machine: String::new(),
+            fragments: self.fragments,
+            primitives: self.primitives,
+            checked_queries: self.golden.checked(),
+            total_cycles: None,
+            latency_mean_cycles: None,
+            latency_p95_cycles: None,
+            effects: None,
+            sampled_windows: None,
+            queries: self.queries,
+            report: None,
+        })
+    }
+}
