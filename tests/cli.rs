@@ -304,3 +304,44 @@ fn the_rasterizer_profile_is_chosen_by_name_and_recorded_in_the_trace() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn workload_option_errors_name_their_flags() {
+    let dir = scratch_dir("workload-flags");
+    let out = dir.join("w.occt");
+    let out = out.to_str().unwrap();
+    let base = [
+        "trace", "gen", "--scene", "city", "--blocks", "1", "-o", out,
+    ];
+    let with = |extra: &[&str]| {
+        let mut args = base.to_vec();
+        args.extend_from_slice(extra);
+        stderr_of_failure(&args)
+    };
+    let error = with(&["--frames", "0"]);
+    assert!(
+        error.contains("--frames 0: a walkthrough needs at least 1 frame"),
+        "{error}"
+    );
+    let error = with(&["--driver", "lazy-grid", "--query-delay", "1"]);
+    assert!(
+        error.contains("--query-delay applies to the frustum"),
+        "{error}"
+    );
+    let error = with(&["--driver", "hierarchical", "--quadtree-levels", "9"]);
+    assert!(
+        error.contains("--quadtree-levels 9 out of range"),
+        "{error}"
+    );
+    let error = with(&[
+        "--camera-from",
+        "0,0,0",
+        "--camera-to",
+        "0,0,1",
+        "--camera-target",
+        "0,0,0",
+    ]);
+    assert!(error.contains("--camera-from/--camera-to"), "{error}");
+    assert!(!std::path::Path::new(out).exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -245,7 +245,7 @@ pub enum ArchError {
         value: String,
         expected: String,
     },
-    #[error("--set expects key=value, got '{0}'")]
+    #[error("expected key=value, got '{0}'")]
     BadAssignment(String),
     #[error("impossible configuration: {0}")]
     Impossible(String),

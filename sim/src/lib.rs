@@ -1,29 +1,29 @@
 //! Timing models of the occlusion-query hardware. This crate does no file IO.
 //!
-//! - [`arch`]: architecture parameters (one documented table per machine), TOML and `--set`.
-//! - [`o2`]: the O2-like machine: [`O2Machine`] consumes [`occsim_traces::Event`]s and
-//!   produces a [`Report`]. Its blocks, one module each, in pipeline order:
-//!   [`fragment_input`] -> [`fifo`] -> [`depth_pipeline`] ([`depth_prefetch`],
-//!   [`write_buffer`]) -> [`fifo`] -> [`occlusion_unit`] ([`occlusion_engine`]) ->
-//!   [`occu_control`], all sharing one [`memory_port`].
-//! - [`ir`]: the InfiniteReality-like machine: [`IrMachine`]. Its blocks: [`interleave`],
-//!   [`fragment_generator`] (one per board), [`image_engine`] (each with its own
-//!   [`occlusion_unit`] and [`occu_control`] through [`occu_stage`]), [`merge_network`]
-//!   (the two merge stages).
-//! - [`occu_stage`]: the seam choosing the OccU's fidelity on either machine: `cycle`
-//!   (event timestamps) or `rtl` ([`rtl_occu`]: the `occsim-rtl` register-transfer model
-//!   clocked every cycle, with [`waveform`] VCD dumps; at the IR, of Image Engine 0 of
-//!   board 0).
-//! - [`machine`]: [`MachineModel`], the machine an architecture names (the entry point).
-//! - [`fidelity`]: the fidelity ladder (functional, [`analytic`], [`sampled`], cycle, rtl) and its
-//!   common [`LevelResult`]; [`effects`]: only the effect models a trace can observe.
-//! - [`report`]: the replay report (serde) and its text form.
+//! Grouped by what each part is, every import pointing down this list:
+//! - [`arch`]: architecture parameters (one documented table per machine), TOML and `--set`;
+//!   [`report`]: the replay report (serde) and its text form; [`effects`]: only the effect
+//!   models a trace can observe; [`error`]: what can go wrong.
+//! - [`blocks`]: the hardware blocks, one a module. The O2's, in pipeline order:
+//!   [`blocks::fragment_input`] -> [`blocks::fifo`] -> [`blocks::depth_pipeline`]
+//!   ([`blocks::depth_prefetch`], [`blocks::write_buffer`]) -> [`blocks::fifo`] ->
+//!   [`blocks::occlusion_unit`] ([`blocks::occlusion_engine`]) -> [`blocks::occu_control`],
+//!   all sharing one [`blocks::memory_port`]. The InfiniteReality's: [`blocks::interleave`],
+//!   [`blocks::fragment_generator`] (one per board), [`blocks::image_engine`] (each with its
+//!   own Occlusion Unit and OccU Control), [`blocks::merge_network`] (the two merge stages).
+//!   [`blocks::occu_stage`] is the seam choosing the OccU's fidelity on either machine:
+//!   `cycle` (event timestamps) or `rtl` ([`blocks::rtl_occu`]: the `occsim-rtl`
+//!   register-transfer model clocked every cycle, with [`blocks::waveform`] VCD dumps).
+//! - [`machines`]: [`machines::o2`] ([`O2Machine`]) and [`machines::ir`] ([`IrMachine`])
+//!   assemble the blocks; [`MachineModel`] is the machine an architecture names.
+//! - [`levels`]: the fidelity ladder (functional, analytic, sampled, cycle, rtl), each ending
+//!   in the common [`LevelResult`]; [`LevelModel`] is the entry point at any level.
 //!
 //! The model is an exact event-timestamp formulation of an in-order pipeline: each block
 //! computes the cycle a fragment leaves from the cycle it arrives and the cycle the block is
 //! free; FIFO back-pressure comes from the departure cycle of the entry `capacity` places
 //! earlier; the memory port grants requests in a fixed order. The timing rules are stated
-//! in each block's module documentation and summarised in [`o2`].
+//! in each block's module documentation and summarised in [`machines::o2`].
 //!
 //! Invariants:
 //! - this crate does no file IO (architectures are parsed from `&str`);

@@ -246,12 +246,13 @@ pub fn compare(
     let walk = args.scene.walk();
     let full: Vec<Vec<u64>> = (0..walk.frames)
         .map(|frame| full_render_visible_pixels(&scene, frame, &walk))
-        .collect::<Result<_, _>>()?;
+        .collect::<Result<_, _>>()
+        .map_err(super::workload_args::flagged)?;
     let frames = walk.frames as f64;
     let visible: u64 = full.iter().flatten().sum();
     let mut drivers = Vec::new();
     for options in drivers_to_compare(args) {
-        options.validate()?;
+        options.validate().map_err(super::workload_args::flagged)?;
         let mut splitter = FrameSplitter {
             cycles: vec![Vec::new(); models.len()],
             models: &mut *models,
@@ -260,7 +261,8 @@ pub fn compare(
             in_frame: false,
             error: None,
         };
-        let stats = generate(&scene, &options, &walk, &mut splitter)?;
+        let stats = generate(&scene, &options, &walk, &mut splitter)
+            .map_err(super::workload_args::flagged)?;
         splitter.end_frame();
         if let Some(error) = splitter.error.take() {
             return Err(error.context(format!("timing model on the {} driver", options.label())));

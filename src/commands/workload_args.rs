@@ -7,7 +7,7 @@ use anyhow::Context;
 use occsim_traces::trace::{TraceHeader, TraceSummary, TraceWriter};
 use occsim_traces::workloads::{
     city, forest, generate, load_obj, CameraPath, CityOptions, DriverKind, DriverOptions,
-    ForestOptions, ObjOptions, Walk, WorkloadScene, WorkloadStats,
+    ForestOptions, ObjOptions, Walk, WorkloadError, WorkloadOption, WorkloadScene, WorkloadStats,
 };
 use std::io::Read;
 use std::path::Path;
@@ -156,7 +156,8 @@ impl SceneArgs {
     fn camera_path(&self, scene: &WorkloadScene) -> anyhow::Result<Option<CameraPath>> {
         if let (Some(from), Some(to)) = (self.camera_from, self.camera_to) {
             let target = self.camera_target.unwrap_or(scene.centre());
-            return Ok(Some(CameraPath::line(from, to, target)?));
+            let path = CameraPath::line(from, to, target).context("--camera-from/--camera-to")?;
+            return Ok(Some(path));
         }
         let Some(file) = &self.camera_file else {
             return Ok(None);
@@ -207,8 +208,27 @@ impl DriverArgs {
             adaptive_threshold: self.adaptive_threshold,
             grid_cell_pixels: self.grid_cell_pixels,
         };
-        options.validate()?;
+        options.validate().map_err(flagged)?;
         Ok(options)
+    }
+}
+
+/// A workload error in the command line's words: an option named by its flag.
+pub fn flagged(error: WorkloadError) -> anyhow::Error {
+    match error {
+        WorkloadError::Option { option, detail } => {
+            let flag = match option {
+                WorkloadOption::Frames => "--frames",
+                WorkloadOption::Width => "--width",
+                WorkloadOption::Height => "--height",
+                WorkloadOption::QueryDelay => "--query-delay",
+                WorkloadOption::QuadtreeLevels => "--quadtree-levels",
+                WorkloadOption::AdaptiveThreshold => "--adaptive-threshold",
+                WorkloadOption::GridCellPixels => "--grid-cell-pixels",
+            };
+            anyhow::anyhow!("{flag} {detail}")
+        }
+        other => other.into(),
     }
 }
 
@@ -238,7 +258,7 @@ pub fn write_workload_trace(
         .with_raster(walk.raster);
     write_atomically_with(output, |file| {
         let mut writer = TraceWriter::new(file, &header)?;
-        let stats = generate(&scene, &driver, &walk, &mut writer)?;
+        let stats = generate(&scene, &driver, &walk, &mut writer).map_err(flagged)?;
         let summary = writer
             .finish_seekable()
             .with_context(|| format!("{}: cannot write trace", output.display()))?;

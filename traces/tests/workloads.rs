@@ -270,19 +270,20 @@ fn bad_options_are_refused_clearly() {
     let lazy = DriverOptions::new(DriverKind::LazyGrid);
     assert_eq!(
         error(&lazy, &Walk { frames: 0, ..WALK }),
-        "--frames 0: a walkthrough needs at least 1 frame"
+        "frames 0: a walkthrough needs at least 1 frame"
     );
-    assert!(error(&lazy, &Walk { width: 0, ..WALK }).contains("--width 0 out of range"));
+    assert!(error(&lazy, &Walk { width: 0, ..WALK }).contains("width 0 out of range"));
     let mut delayed_grid = lazy.clone();
     delayed_grid.query_delay_frames = 1;
-    assert!(error(&delayed_grid, &WALK)
-        .contains("--query-delay applies to the frustum and hierarchical"));
+    assert!(
+        error(&delayed_grid, &WALK).contains("query delay applies to the frustum and hierarchical")
+    );
     let mut deep = DriverOptions::new(DriverKind::Hierarchical);
     deep.quadtree_levels = 9;
-    assert!(error(&deep, &WALK).contains("--quadtree-levels 9 out of range"));
+    assert!(error(&deep, &WALK).contains("quadtree levels 9 out of range"));
     let mut threshold = DriverOptions::new(DriverKind::Hierarchical);
     threshold.adaptive_threshold = Some(1.5);
-    assert!(error(&threshold, &WALK).contains("--adaptive-threshold 1.5 out of range"));
+    assert!(error(&threshold, &WALK).contains("adaptive threshold 1.5 out of range"));
     let mut fine_grid = lazy.clone();
     fine_grid.grid_cell_pixels = 4;
     let huge = Walk {

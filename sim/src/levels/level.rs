@@ -82,7 +82,7 @@ pub struct QueryOutcome {
     pub id: u32,
     pub mode: QueryMode,
     pub fragments: u64,
-    /// The value a GL program reads ([`QueryResult::value`]).
+    /// The value a GL program reads ([`occsim_traces::QueryResult::value`]).
     pub value: u64,
     /// Predicted or simulated latency in cycles; None at the functional level.
     pub latency_cycles: Option<u64>,

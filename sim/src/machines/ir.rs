@@ -508,7 +508,7 @@ fn finish_verbose(spec: &QuerySpec, tiles: &mut [TileResult]) -> u32 {
     overflowed
 }
 
-/// The first difference between a merged result and the golden one, as [`first_difference`]
+/// The first difference between a merged result and the golden one, as `golden_check::first_difference`
 /// but with hit lists compared as multisets when no buffer overflowed, and on overflow only
 /// by their length and by every kept hit lying in the tile's box (see the module docs).
 pub fn merged_difference(

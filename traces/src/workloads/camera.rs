@@ -101,7 +101,7 @@ impl CameraPath {
             CameraKeyframe { eye: from, target },
             CameraKeyframe { eye: to, target },
         ];
-        CameraPath::new(keyframes, None, "--camera-from/--camera-to")
+        CameraPath::new(keyframes, None, "the camera line")
     }
 
     /// Read a TOML camera file:

@@ -48,8 +48,13 @@ use std::time::Duration;
 /// A workload that cannot be made, with what to change.
 #[derive(Debug, thiserror::Error)]
 pub enum WorkloadError {
-    #[error("{0}")]
-    Option(String),
+    /// An option out of range or not applicable: the option, then what is wrong with it
+    /// (the command line names the option by its flag, [`WorkloadOption::name`] otherwise).
+    #[error("{} {detail}", option.name())]
+    Option {
+        option: WorkloadOption,
+        detail: String,
+    },
     #[error("unknown driver `{0}`: expected frustum, hierarchical, lazy-grid or busy-grid")]
     UnknownDriver(String),
     #[error("{file}:{line}: {message}")]
@@ -60,6 +65,33 @@ pub enum WorkloadError {
     },
     #[error("{file}: {message}")]
     Camera { file: String, message: String },
+}
+
+/// The options of a walkthrough and its driver that can be out of range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum WorkloadOption {
+    Frames,
+    Width,
+    Height,
+    QueryDelay,
+    QuadtreeLevels,
+    AdaptiveThreshold,
+    GridCellPixels,
+}
+
+impl WorkloadOption {
+    /// The option's name in messages.
+    pub fn name(self) -> &'static str {
+        match self {
+            WorkloadOption::Frames => "frames",
+            WorkloadOption::Width => "width",
+            WorkloadOption::Height => "height",
+            WorkloadOption::QueryDelay => "query delay",
+            WorkloadOption::QuadtreeLevels => "quadtree levels",
+            WorkloadOption::AdaptiveThreshold => "adaptive threshold",
+            WorkloadOption::GridCellPixels => "grid cell pixels",
+        }
+    }
 }
 
 /// One object of a scene: its triangles (counter-clockwise seen from outside, world space,
@@ -213,15 +245,22 @@ pub struct Walk {
 impl Walk {
     fn validate(&self) -> Result<(), WorkloadError> {
         if self.frames == 0 {
-            return Err(WorkloadError::Option(
-                "--frames 0: a walkthrough needs at least 1 frame".into(),
-            ));
+            return Err(WorkloadError::Option {
+                option: WorkloadOption::Frames,
+                detail: "0: a walkthrough needs at least 1 frame".into(),
+            });
         }
-        for (name, side) in [("--width", self.width), ("--height", self.height)] {
+        for (option, side) in [
+            (WorkloadOption::Width, self.width),
+            (WorkloadOption::Height, self.height),
+        ] {
             if side == 0 || side > MAX_VIEWPORT_SIDE {
-                return Err(WorkloadError::Option(format!(
-                    "{name} {side} out of range: expected 1 to {MAX_VIEWPORT_SIDE} pixels"
-                )));
+                return Err(WorkloadError::Option {
+                    option,
+                    detail: format!(
+                        "{side} out of range: expected 1 to {MAX_VIEWPORT_SIDE} pixels"
+                    ),
+                });
             }
         }
         Ok(())
@@ -326,44 +365,60 @@ impl DriverOptions {
     }
 
     pub fn validate(&self) -> Result<(), WorkloadError> {
-        let fail = |message: String| Err(WorkloadError::Option(message));
+        let fail = |option, detail: String| Err(WorkloadError::Option { option, detail });
         let hierarchical = self.kind == DriverKind::Hierarchical;
         if self.query_delay_frames > 1 {
-            return fail(format!(
-                "--query-delay {}: expected 0 (read answers at once) or 1 (a frame later)",
-                self.query_delay_frames
-            ));
+            return fail(
+                WorkloadOption::QueryDelay,
+                format!(
+                    "{}: expected 0 (read answers at once) or 1 (a frame later)",
+                    self.query_delay_frames
+                ),
+            );
         }
         if self.query_delay_frames > 0 && self.is_grid() {
-            return fail(format!(
-                "--query-delay applies to the frustum and hierarchical drivers: the {} driver reads its cell refreshes at once",
-                self.kind.name()
-            ));
+            return fail(
+                WorkloadOption::QueryDelay,
+                format!(
+                    "applies to the frustum and hierarchical drivers: the {} driver reads its cell refreshes at once",
+                    self.kind.name()
+                ),
+            );
         }
         if self.quadtree_levels > MAX_QUADTREE_LEVELS {
-            return fail(format!(
-                "--quadtree-levels {} out of range: expected 0 to {MAX_QUADTREE_LEVELS}",
-                self.quadtree_levels
-            ));
+            return fail(
+                WorkloadOption::QuadtreeLevels,
+                format!(
+                    "{} out of range: expected 0 to {MAX_QUADTREE_LEVELS}",
+                    self.quadtree_levels
+                ),
+            );
         }
         if self.quadtree_levels > 0 && !hierarchical {
-            return fail("--quadtree-levels applies to the hierarchical driver only".into());
+            return fail(
+                WorkloadOption::QuadtreeLevels,
+                "applies to the hierarchical driver only".into(),
+            );
         }
         if let Some(t) = self.adaptive_threshold {
             if !(t > 0.0 && t <= 1.0) {
-                return fail(format!(
-                    "--adaptive-threshold {t} out of range: expected a share above 0 and at most 1"
-                ));
+                return fail(
+                    WorkloadOption::AdaptiveThreshold,
+                    format!("{t} out of range: expected a share above 0 and at most 1"),
+                );
             }
             if !hierarchical {
-                return fail("--adaptive-threshold applies to the hierarchical driver only".into());
+                return fail(
+                    WorkloadOption::AdaptiveThreshold,
+                    "applies to the hierarchical driver only".into(),
+                );
             }
         }
         if !(4..=1024).contains(&self.grid_cell_pixels) {
-            return fail(format!(
-                "--grid-cell-pixels {} out of range: expected 4 to 1024",
-                self.grid_cell_pixels
-            ));
+            return fail(
+                WorkloadOption::GridCellPixels,
+                format!("{} out of range: expected 4 to 1024", self.grid_cell_pixels),
+            );
         }
         Ok(())
     }
@@ -455,9 +510,12 @@ fn check_grid_size(driver: &DriverOptions, walk: &Walk) -> Result<(), WorkloadEr
         (walk.height as u64).div_ceil(side),
     );
     if columns * rows > MAX_TILES as u64 {
-        return Err(WorkloadError::Option(format!(
-            "--grid-cell-pixels {side} makes a {columns}x{rows} grid, more than {MAX_TILES} cells (the most tiles one query holds): use larger cells"
-        )));
+        return Err(WorkloadError::Option {
+            option: WorkloadOption::GridCellPixels,
+            detail: format!(
+                "{side} makes a {columns}x{rows} grid, more than {MAX_TILES} cells (the most tiles one query holds): use larger cells"
+            ),
+        });
     }
     Ok(())
 }
