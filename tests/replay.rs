@@ -1,17 +1,34 @@
 //! Replays of the built-in scenes on the O2-like machine: counts equal the golden model's at
 //! every engine count from 1 to 16, and a trace whose golden answer is wrong fails by name.
+//! The demo and `random` are made at 320x256 (a quarter of their side, `random` with a
+//! quarter of its triangles and queries): the same kinds of query and tile, a sixteenth of
+//! the fragments.
 
 use occsim_sim::{Arch, MachineModel};
-use occsim_traces::builtin::scene_text;
+use occsim_traces::builtin::{demo_scene, random_scene, scene_text, DemoOptions, RandomOptions};
 use occsim_traces::golden::{EventSink, GoldenModel};
 use occsim_traces::scene::{Command, SceneReader};
 use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
 use occsim_traces::Event;
 use std::process::Command as Process;
 
-/// A built-in scene's trace, in memory.
+/// A built-in scene's trace, in memory (the demo and `random` at 320x256).
 fn builtin_trace(name: &str) -> Vec<u8> {
-    let text = scene_text(name).expect("built-in");
+    let text = match name {
+        "demo" => demo_scene(&DemoOptions {
+            width: 320,
+            height: 256,
+            ..DemoOptions::default()
+        }),
+        "random" => random_scene(&RandomOptions {
+            width: 320,
+            height: 256,
+            triangles: 5000,
+            queries: 500,
+            ..RandomOptions::default()
+        }),
+        _ => scene_text(name).expect("built-in"),
+    };
     let mut lines = SceneReader::new(text.as_bytes(), name);
     let Some(Ok(first)) = lines.next() else {
         panic!("{name}: empty")

@@ -21,7 +21,8 @@
 //!   replay lifts both around `glClear`.
 //!
 //! Set `LIBGL_ALWAYS_SOFTWARE=1`, `GALLIUM_DRIVER=llvmpipe` (done by [`GlReplay::new`]) before
-//! the first EGL call, and `LP_NUM_THREADS=1` for benchmarks.
+//! the first EGL call; [`GlReplay::new`] sets `LP_NUM_THREADS=0` (no rasterizer threads)
+//! unless it is set, and benchmarks set it to 1.
 
 use glow::HasContext;
 use khronos_egl as egl;
@@ -102,6 +103,12 @@ impl GlReplay {
     pub fn with_target(target: Target, width: u32, height: u32) -> Result<GlReplay, String> {
         std::env::set_var("LIBGL_ALWAYS_SOFTWARE", "1");
         std::env::set_var("GALLIUM_DRIVER", "llvmpipe");
+        // Rasterize on the calling thread unless told otherwise: the small scenes of the
+        // differential test run twice as fast without handing each draw to a worker, and
+        // the arithmetic is the same code either way.
+        if std::env::var_os("LP_NUM_THREADS").is_none() {
+            std::env::set_var("LP_NUM_THREADS", "0");
+        }
         // `OCCSIM_LIBEGL` names another libEGL (a missing one exercises the skip path).
         let library = std::env::var("OCCSIM_LIBEGL").unwrap_or_else(|_| "libEGL.so.1".into());
         // SAFETY: loading libEGL; its symbols follow the EGL ABI.
