@@ -18,6 +18,8 @@
 //!   assemble the blocks; [`MachineModel`] is the machine an architecture names.
 //! - [`levels`]: the fidelity ladder (functional, analytic, sampled, cycle, rtl), each ending
 //!   in the common [`LevelResult`]; [`LevelModel`] is the entry point at any level.
+//! - [`replay`]: a trace and options in (level, effects choice, retiling, waveform), a
+//!   level's result out: replaying from Rust without the command line.
 //!
 //! The model is an exact event-timestamp formulation of an in-order pipeline: each block
 //! computes the cycle a fragment leaves from the cycle it arrives and the cycle the block is
@@ -39,6 +41,7 @@ pub mod error;
 mod golden_check;
 pub mod levels;
 pub mod machines;
+pub mod replay;
 pub mod report;
 
 pub use arch::{Arch, ArchError, IrArch, O2Arch};

@@ -4,6 +4,7 @@
 
 use super::arch::ArchSelection;
 use anyhow::Context;
+use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_traces::builtin::{demo_scene, DemoOptions};
 use occsim_traces::golden::GoldenModel;
 use occsim_traces::scene::SceneReader;
@@ -48,9 +49,9 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         summary.queries_by_mode.samples,
         trace.len()
     );
-    let reader = TraceReader::new(&trace[..])?;
-    let options = super::replay::ReplayOptions::cycle(None);
-    let result = super::replay::replay_reader(reader, "demo", &arch, options)?;
+    let open = || Ok(TraceReader::new(&trace[..])?);
+    let result = replay(open, &arch, ReplayOptions::cycle(None))
+        .map_err(|e| super::replay::in_cli_words("demo", e))?;
     let report = result
         .report
         .context("demo: the cycle level gave no report")?;

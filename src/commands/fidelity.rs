@@ -6,16 +6,15 @@
 //! latency may add).
 
 use super::arch::ArchSelection;
+use super::replay::{in_cli_words, opener};
+use super::trace::open_trace;
 use crate::plot::{LineChart, Scale, Series};
 use anyhow::Context;
-use occsim_sim::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
+use occsim_sim::effects::EffectsChoice;
 use occsim_sim::levels::{Fidelity, LevelResult};
+use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::Arch;
-use occsim_traces::golden::EventSink;
-use occsim_traces::trace::TraceReader;
-use occsim_traces::Event;
 use serde::Serialize;
-use std::io::BufReader;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -55,66 +54,6 @@ pub struct FidelityArgs {
     pub json: bool,
 }
 
-/// Open a trace for reading.
-pub fn open_trace(path: &Path) -> anyhow::Result<TraceReader<BufReader<std::fs::File>>> {
-    let name = path.display();
-    let file = std::fs::File::open(path).with_context(|| format!("cannot open trace {name}"))?;
-    TraceReader::new(BufReader::with_capacity(1 << 20, file))
-        .with_context(|| format!("{name}: not a readable occsim trace"))
-}
-
-struct ScanSink(EffectScan);
-
-impl EventSink for ScanSink {
-    #[inline]
-    fn event(&mut self, event: &Event) {
-        self.0.event(event);
-    }
-}
-
-/// The effects `level` builds for the trace at `path`: at the levels that build effects
-/// ([`Fidelity::builds_effects`]) those its header's features show it can observe (or, when
-/// the header lacks them, a scan of its events); every model otherwise and on a retiled trace
-/// (its queries are not those the trace holds).
-pub fn effects_of_trace(
-    level: Fidelity,
-    choice: EffectsChoice,
-    arch: &Arch,
-    path: &Path,
-    retiled: bool,
-) -> anyhow::Result<Effects> {
-    if choice == EffectsChoice::All || retiled || !level.builds_effects() {
-        return Ok(Effects::every_model_of(arch.machine()));
-    }
-    let mut reader = open_trace(path)?;
-    let header = reader.header();
-    let (width, height) = (header.width, header.height);
-    if let Some(effects) = effects_of_features(arch, width, height, header.features.as_ref())? {
-        return Ok(effects);
-    }
-    let mut scan = ScanSink(EffectScan::for_arch(arch, width, height)?);
-    reader
-        .read_into(&mut scan)
-        .with_context(|| format!("{}: cannot read trace", path.display()))?;
-    Ok(scan.0.finish())
-}
-
-/// The most tiles one query of the trace at `path` has: from its header's features, or
-/// (when the header lacks them) a scan of its events.
-pub fn max_query_tiles_of_trace(arch: &Arch, path: &Path) -> anyhow::Result<u64> {
-    let mut reader = open_trace(path)?;
-    let header = reader.header();
-    if let Some(tiles) = header.features.as_ref().and_then(|f| f.max_query_tiles) {
-        return Ok(tiles);
-    }
-    let (width, height) = (header.width, header.height);
-    let mut scan = ScanSink(EffectScan::for_arch(arch, width, height)?);
-    reader
-        .read_into(&mut scan)
-        .with_context(|| format!("{}: cannot read trace", path.display()))?;
-    Ok(scan.0.facts().max_query_tiles)
-}
-
 /// One row of the table.
 #[derive(Serialize)]
 struct LevelRow {
@@ -140,15 +79,13 @@ pub fn replay_level(
     path: &Path,
     effects: EffectsChoice,
 ) -> anyhow::Result<LevelResult> {
-    let name = path.display();
-    let effects = effects_of_trace(level, effects, arch, path, false)?;
-    let options = super::replay::ReplayOptions {
-        level,
+    let name = path.display().to_string();
+    let options = ReplayOptions {
         effects,
-        retile: None,
-        waveform: None,
+        ..ReplayOptions::at(level)
     };
-    super::replay::replay_reader(open_trace(path)?, &name.to_string(), arch, options)
+    replay(opener(path), arch, options)
+        .map_err(|e| in_cli_words(&name, e))
         .with_context(|| format!("{name}: {level}"))
 }
 

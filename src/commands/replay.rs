@@ -4,13 +4,12 @@
 //! InfiniteReality-like machine, Image Engine 0 of board 0's unit).
 
 use super::arch::ArchSelection;
-use super::fidelity::{effects_of_trace, max_query_tiles_of_trace, FidelityArg};
+use super::fidelity::FidelityArg;
 use anyhow::Context;
-use occsim_sim::effects::Effects;
-use occsim_sim::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
+use occsim_sim::levels::{Fidelity, LevelResult};
+use occsim_sim::replay::{max_query_tiles, replay, ReplayError, ReplayOptions};
 use occsim_sim::{Arch, WaveformOptions};
-use occsim_traces::golden::EventSink;
-use occsim_traces::retile::{Retile, TileGrid};
+use occsim_traces::retile::TileGrid;
 use occsim_traces::trace::TraceReader;
 use std::path::{Path, PathBuf};
 
@@ -50,27 +49,6 @@ pub struct WaveformArgs {
     pub window: Option<String>,
 }
 
-/// How to replay: the level, the effect models to build, an optional retiling and, at the
-/// rtl level, an optional waveform.
-pub struct ReplayOptions {
-    pub level: Fidelity,
-    pub effects: Effects,
-    pub retile: Option<TileGrid>,
-    pub waveform: Option<WaveformOptions>,
-}
-
-impl ReplayOptions {
-    /// The cycle level with every effect model: what sweeps and latency reports run.
-    pub fn cycle(retile: Option<TileGrid>) -> ReplayOptions {
-        ReplayOptions {
-            level: Fidelity::Cycle,
-            effects: Effects::ALL,
-            retile,
-            waveform: None,
-        }
-    }
-}
-
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let mut arch = args.arch.resolve()?;
     if let Some(engines) = args.engines {
@@ -79,29 +57,23 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     }
     let path = args.trace.display().to_string();
     let level = args.level.fidelity;
-    let effects = effects_of_trace(
-        level,
-        args.level.effects,
-        &arch,
-        &args.trace,
-        args.retile.is_some(),
-    )?;
+    let cli_words = |e| in_cli_words(&path, e);
     let (waveform, vcd) = match waveform(&args.waveform, level, || {
         // Every slot a query fills is shown: a retiled brief query has the grid's tiles.
         let grid = args.retile.map_or(0, |g| g.columns as u64 * g.rows as u64);
-        Ok(max_query_tiles_of_trace(&arch, &args.trace)?.max(grid))
+        let tiles = max_query_tiles(opener(&args.trace), &arch).map_err(cli_words)?;
+        Ok(tiles.max(grid))
     })? {
         Some((options, thread)) => (Some(options), Some(thread)),
         None => (None, None),
     };
     let options = ReplayOptions {
         level,
-        effects,
+        effects: args.level.effects,
         retile: args.retile,
         waveform,
     };
-    let outcome = super::trace::open_trace(&args.trace)
-        .and_then(|reader| replay_reader(reader, &path, &arch, options));
+    let outcome = replay(opener(&args.trace), &arch, options).map_err(cli_words);
     let mut result = close_vcd(vcd, outcome)?;
     let queries = result.queries.len() as u64;
     if result.checked_queries < queries {
@@ -120,6 +92,9 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     };
+    let effects = result
+        .effects
+        .context("a level with a report builds effect models")?;
     if args.json {
         // The cycle report with the effect models that were built.
         let mut json = serde_json::to_value(&report)?;
@@ -141,65 +116,30 @@ pub fn replay_trace(
     retile: Option<TileGrid>,
     level: Fidelity,
 ) -> anyhow::Result<LevelResult> {
-    let name = trace.display().to_string();
-    let reader = super::trace::open_trace(trace)?;
     let options = ReplayOptions {
         level,
         ..ReplayOptions::cycle(retile)
     };
-    replay_reader(reader, &name, arch, options)
+    replay(opener(trace), arch, options).map_err(|e| in_cli_words(&trace.display().to_string(), e))
 }
 
-/// Replay a trace from any reader; `name` names it in errors.
-pub fn replay_reader<R: std::io::Read>(
-    mut reader: TraceReader<R>,
-    name: &str,
-    arch: &Arch,
-    options: ReplayOptions,
-) -> anyhow::Result<LevelResult> {
-    let (width, height) = (reader.header().width, reader.header().height);
-    let model = LevelModel::with_waveform(
-        options.level,
-        arch,
-        width,
-        height,
-        options.effects,
-        options.waveform,
-    )
-    .with_context(|| format!("{name}: cannot replay"))?;
-    let sink = LevelSink::new(model);
-    let on = || format!("{name}: replay on {}", arch.machine().name());
-    let sink = match options.retile {
-        None => feed(&mut reader, sink, |s| s, name, on)?,
-        Some(grid) => {
-            let retile = Retile::new(grid, width, height, sink)
-                .with_context(|| format!("{name}: --retile {grid}"))?;
-            feed(&mut reader, retile, Retile::inner_mut, name, on)?.into_inner()
-        }
-    };
-    sink.model.finish(arch).with_context(on)
+/// The trace file at `path`, opened afresh for each pass the library makes over it.
+pub fn opener(
+    path: &Path,
+) -> impl FnMut() -> Result<TraceReader<std::io::BufReader<std::fs::File>>, ReplayError> + '_ {
+    move || super::trace::open_trace(path).map_err(|e| ReplayError::Open(e.into()))
 }
 
-/// Read every event of `reader` into `sink`, stopping at the model's first error.
-fn feed<R: std::io::Read, S: EventSink>(
-    reader: &mut TraceReader<R>,
-    mut sink: S,
-    model: impl Fn(&mut S) -> &mut LevelSink,
-    path: &str,
-    on: impl Fn() -> String,
-) -> anyhow::Result<S> {
-    while reader
-        .next_block(&mut sink)
-        .with_context(|| format!("{path}: cannot read trace"))?
-    {
-        if let Some(error) = model(&mut sink).error.take() {
-            return Err(error).with_context(&on);
+/// A replay error in the command line's words, naming the trace `name` and the flag a
+/// stage comes from.
+pub fn in_cli_words(name: &str, error: ReplayError) -> anyhow::Error {
+    match error {
+        ReplayError::Open(error) => anyhow::Error::from_boxed(error),
+        ReplayError::Retile { grid, source } => {
+            anyhow::Error::new(source).context(format!("{name}: --retile {grid}"))
         }
+        other => anyhow::Error::new(other).context(name.to_owned()),
     }
-    if let Some(error) = model(&mut sink).error.take() {
-        return Err(error).with_context(&on);
-    }
-    Ok(sink)
 }
 
 // ---- waveforms (rtl level) ----

@@ -1,0 +1,226 @@
+//! Replaying a trace from Rust: a trace and options in, a level's result out. The command
+//! line's `replay`, `fidelity`, `latency`, `sweep` and `demo` are this and their printing.
+//!
+//! A trace is given as a way to open it (`open`), since choosing the effect models of an old
+//! trace, whose header lacks the facts, takes a scan of its events before the replay, and
+//! so does sizing a waveform.
+//!
+//! ```no_run
+//! use occsim_sim::replay::{replay, ReplayOptions};
+//! use occsim_sim::{Arch, Fidelity};
+//! use occsim_traces::trace::TraceReader;
+//!
+//! let arch = Arch::builtin("ir4")?;
+//! let open = || Ok(TraceReader::new(std::io::BufReader::new(std::fs::File::open("demo.occt")?))?);
+//! let result = replay(open, &arch, ReplayOptions::at(Fidelity::Cycle))?;
+//! println!("{} cycles", result.total_cycles.unwrap_or(0));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use crate::arch::Arch;
+use crate::blocks::waveform::WaveformOptions;
+use crate::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
+use crate::error::SimError;
+use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
+use occsim_traces::golden::EventSink;
+use occsim_traces::retile::{Retile, RetileError, TileGrid};
+use occsim_traces::trace::{TraceError, TraceReader};
+use occsim_traces::Event;
+use std::io::Read;
+
+/// How to replay: the level, the effect models to build, an optional retiling and, at the
+/// rtl level, an optional waveform.
+pub struct ReplayOptions {
+    pub level: Fidelity,
+    /// `Auto`: only the effect models the trace can observe (at the levels that build
+    /// effects; same results and cycles); `All`: every model.
+    pub effects: EffectsChoice,
+    /// Replace every brief query's tiles by this grid (golden results recomputed).
+    pub retile: Option<TileGrid>,
+    pub waveform: Option<WaveformOptions>,
+}
+
+impl ReplayOptions {
+    /// `level` with the automatic effects choice, no retiling, no waveform.
+    pub fn at(level: Fidelity) -> ReplayOptions {
+        ReplayOptions {
+            level,
+            effects: EffectsChoice::Auto,
+            retile: None,
+            waveform: None,
+        }
+    }
+
+    /// The cycle level with every effect model: what sweeps and latency reports run.
+    pub fn cycle(retile: Option<TileGrid>) -> ReplayOptions {
+        ReplayOptions {
+            level: Fidelity::Cycle,
+            effects: EffectsChoice::All,
+            retile,
+            waveform: None,
+        }
+    }
+}
+
+/// Why a replay failed, by stage (the caller names the trace). Each variant's message names
+/// the stage; the cause follows as its source.
+#[derive(Debug, thiserror::Error)]
+pub enum ReplayError {
+    /// The trace could not be opened (the caller's `open` failed).
+    #[error(transparent)]
+    Open(Box<dyn std::error::Error + Send + Sync + 'static>),
+    /// The trace could not be read.
+    #[error("cannot read trace")]
+    Read(#[source] TraceError),
+    /// The level's model could not be built for this architecture and viewport.
+    #[error("cannot replay")]
+    Setup(#[source] SimError),
+    /// The requested retiling does not fit the trace's viewport.
+    #[error("retile {grid}")]
+    Retile {
+        grid: TileGrid,
+        #[source]
+        source: RetileError,
+    },
+    /// The model refused the stream (a count differs from the golden one, say).
+    #[error("replay on {machine}")]
+    Model {
+        machine: &'static str,
+        #[source]
+        source: SimError,
+    },
+}
+
+impl From<std::io::Error> for ReplayError {
+    fn from(error: std::io::Error) -> ReplayError {
+        ReplayError::Open(Box::new(error))
+    }
+}
+
+impl From<TraceError> for ReplayError {
+    fn from(error: TraceError) -> ReplayError {
+        ReplayError::Read(error)
+    }
+}
+
+/// A way to open the trace, once per pass over it.
+pub trait OpenTrace<R: Read>: FnMut() -> Result<TraceReader<R>, ReplayError> {}
+impl<R: Read, F: FnMut() -> Result<TraceReader<R>, ReplayError>> OpenTrace<R> for F {}
+
+/// Replay the trace `open` gives on `arch`. A model error stops the replay at once.
+pub fn replay<R: Read>(
+    mut open: impl OpenTrace<R>,
+    arch: &Arch,
+    options: ReplayOptions,
+) -> Result<LevelResult, ReplayError> {
+    let effects = effects_for(
+        &mut open,
+        options.level,
+        options.effects,
+        arch,
+        options.retile.is_some(),
+    )?;
+    let mut reader = open()?;
+    let (width, height) = (reader.header().width, reader.header().height);
+    let model = LevelModel::with_waveform(
+        options.level,
+        arch,
+        width,
+        height,
+        effects,
+        options.waveform,
+    )
+    .map_err(ReplayError::Setup)?;
+    let model_error = |source| ReplayError::Model {
+        machine: arch.machine().name(),
+        source,
+    };
+    let sink = LevelSink::new(model);
+    let sink = match options.retile {
+        None => feed(&mut reader, sink, |s| s, model_error)?,
+        Some(grid) => {
+            let retile = Retile::new(grid, width, height, sink)
+                .map_err(|source| ReplayError::Retile { grid, source })?;
+            feed(&mut reader, retile, Retile::inner_mut, model_error)?.into_inner()
+        }
+    };
+    sink.model.finish(arch).map_err(model_error)
+}
+
+/// Read every event of `reader` into `sink`, stopping at the model's first error.
+fn feed<R: Read, S: EventSink>(
+    reader: &mut TraceReader<R>,
+    mut sink: S,
+    model: impl Fn(&mut S) -> &mut LevelSink,
+    model_error: impl Fn(SimError) -> ReplayError,
+) -> Result<S, ReplayError> {
+    while reader.next_block(&mut sink).map_err(ReplayError::Read)? {
+        if let Some(error) = model(&mut sink).error.take() {
+            return Err(model_error(error));
+        }
+    }
+    match model(&mut sink).error.take() {
+        Some(error) => Err(model_error(error)),
+        None => Ok(sink),
+    }
+}
+
+/// The effect models `level` builds for the trace: at the levels that build effects
+/// ([`Fidelity::builds_effects`]) with `Auto`, those its header's features show it can
+/// observe (or, when the header lacks them, a scan of its events); every model otherwise and
+/// on a retiled trace (its queries are not those the trace holds).
+pub fn effects_for<R: Read>(
+    mut open: impl OpenTrace<R>,
+    level: Fidelity,
+    choice: EffectsChoice,
+    arch: &Arch,
+    retiled: bool,
+) -> Result<Effects, ReplayError> {
+    if choice == EffectsChoice::All || retiled || !level.builds_effects() {
+        return Ok(Effects::every_model_of(arch.machine()));
+    }
+    let mut reader = open()?;
+    let header = reader.header();
+    let (width, height) = (header.width, header.height);
+    if let Some(effects) = effects_of_features(arch, width, height, header.features.as_ref())
+        .map_err(ReplayError::Setup)?
+    {
+        return Ok(effects);
+    }
+    Ok(scan(&mut reader, arch)?.finish())
+}
+
+/// The most tiles one query of the trace has: from its header's features, or (when the
+/// header lacks them) a scan of its events. A waveform shows that many tile slots.
+pub fn max_query_tiles<R: Read>(
+    mut open: impl OpenTrace<R>,
+    arch: &Arch,
+) -> Result<u64, ReplayError> {
+    let mut reader = open()?;
+    if let Some(tiles) = reader
+        .header()
+        .features
+        .as_ref()
+        .and_then(|f| f.max_query_tiles)
+    {
+        return Ok(tiles);
+    }
+    Ok(scan(&mut reader, arch)?.facts().max_query_tiles)
+}
+
+struct ScanSink(EffectScan);
+
+impl EventSink for ScanSink {
+    #[inline]
+    fn event(&mut self, event: &Event) {
+        self.0.event(event);
+    }
+}
+
+/// Every event of `reader` through the effects scan.
+fn scan<R: Read>(reader: &mut TraceReader<R>, arch: &Arch) -> Result<EffectScan, ReplayError> {
+    let (width, height) = (reader.header().width, reader.header().height);
+    let mut scan = ScanSink(EffectScan::for_arch(arch, width, height).map_err(ReplayError::Setup)?);
+    reader.read_into(&mut scan).map_err(ReplayError::Read)?;
+    Ok(scan.0)
+}

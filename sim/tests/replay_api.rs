@@ -1,0 +1,76 @@
+//! The library replay API (`occsim_sim::replay`): a trace and options in, a level's result
+//! out, with retiling, the effects choice and errors by stage, and no command line.
+
+use occsim_sim::effects::EffectsChoice;
+use occsim_sim::replay::{max_query_tiles, replay, ReplayError, ReplayOptions};
+use occsim_sim::{Arch, Fidelity};
+use occsim_traces::builtin::HARDCASES;
+use occsim_traces::golden::GoldenModel;
+use occsim_traces::retile::TileGrid;
+use occsim_traces::scene::parse_scene;
+use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
+
+fn hardcases_trace() -> Vec<u8> {
+    let lines = parse_scene(HARDCASES, "hardcases").expect("parses");
+    let mut bytes = Vec::new();
+    let mut writer = TraceWriter::new(&mut bytes, &TraceHeader::new(64, 64)).expect("header");
+    let mut golden = GoldenModel::new(64, 64);
+    for line in &lines {
+        golden.execute(&line.command, &mut writer);
+    }
+    golden.finish(&mut writer);
+    writer.finish().expect("written");
+    bytes
+}
+
+#[test]
+fn every_level_replays_from_bytes_and_the_effects_choice_changes_no_count() {
+    let trace = hardcases_trace();
+    let open = || Ok(TraceReader::new(&trace[..])?);
+    for arch in ["o2", "ir4"] {
+        let arch = Arch::builtin(arch).unwrap();
+        let mut totals = Vec::new();
+        for effects in [EffectsChoice::Auto, EffectsChoice::All] {
+            let options = ReplayOptions {
+                effects,
+                ..ReplayOptions::at(Fidelity::Cycle)
+            };
+            let result = replay(open, &arch, options).expect("replays");
+            // hardcases holds 28 queries (its comments number them).
+            assert_eq!(result.queries.len(), 28);
+            assert_eq!(result.checked_queries, 28);
+            totals.push((result.total_cycles, result.queries.clone()));
+        }
+        assert_eq!(totals[0], totals[1], "auto and all effects differ");
+        for level in [Fidelity::Functional, Fidelity::Analytic] {
+            let result = replay(open, &arch, ReplayOptions::at(level)).expect("replays");
+            assert_eq!(result.queries.len(), 28);
+        }
+    }
+}
+
+#[test]
+fn errors_come_by_stage() {
+    let trace = hardcases_trace();
+    let arch = Arch::builtin("o2").unwrap();
+    // A grid finer than the viewport: the retile stage refuses it.
+    let options = ReplayOptions {
+        retile: Some("65x1".parse::<TileGrid>().unwrap()),
+        ..ReplayOptions::at(Fidelity::Cycle)
+    };
+    let error = replay(|| Ok(TraceReader::new(&trace[..])?), &arch, options).unwrap_err();
+    assert!(matches!(error, ReplayError::Retile { .. }), "{error:?}");
+    // A truncated trace: the read stage, with the byte offset.
+    let cut = &trace[..trace.len() / 2];
+    let error = replay(
+        || Ok(TraceReader::new(cut)?),
+        &arch,
+        ReplayOptions::cycle(None),
+    )
+    .unwrap_err();
+    assert!(matches!(error, ReplayError::Read(_)), "{error:?}");
+    // The waveform's slot count: a trace written to memory has no features in its header,
+    // so it comes from a scan (hardcases' largest query has 5 tiles).
+    let tiles = max_query_tiles(|| Ok(TraceReader::new(&trace[..])?), &arch).unwrap();
+    assert_eq!(tiles, 5);
+}
