@@ -168,8 +168,8 @@ impl EffectRules {
     /// The rules for the O2 machine `arch` on a `width` x `height` viewport.
     pub fn o2(arch: &O2Arch, width: u32, height: u32) -> EffectRules {
         EffectRules {
-            engines: arch.engines,
-            all_tiles_one_cycle: arch.all_tiles_one_cycle,
+            engines: arch.occu.engines,
+            all_tiles_one_cycle: arch.occu.all_tiles_one_cycle,
             one_page: width <= arch.framebuffer_tile_width_pixels
                 && height <= arch.framebuffer_tile_height_pixels,
             models: Effects::ALL,
@@ -179,8 +179,8 @@ impl EffectRules {
     /// The rules for the InfiniteReality-like machine `arch`.
     pub fn ir(arch: &IrArch) -> EffectRules {
         EffectRules {
-            engines: arch.engines,
-            all_tiles_one_cycle: arch.all_tiles_one_cycle,
+            engines: arch.occu.engines,
+            all_tiles_one_cycle: arch.occu.all_tiles_one_cycle,
             one_page: false,
             models: Effects::every_model_of(Machine::Ir),
         }

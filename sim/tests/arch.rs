@@ -15,7 +15,11 @@ fn the_builtin_o2_has_the_documented_defaults() {
         (128, 128)
     );
     assert_eq!(
-        (o2.engines, o2.counter_bits, o2.all_tiles_one_cycle),
+        (
+            o2.occu.engines,
+            o2.occu.counter_bits,
+            o2.occu.all_tiles_one_cycle
+        ),
         (4, 32, false)
     );
     assert_eq!(o2.counter_max(), 0xFFFF_FFFF);
@@ -24,7 +28,7 @@ fn the_builtin_o2_has_the_documented_defaults() {
 
 #[test]
 fn every_parameter_has_a_unit_and_a_meaning() {
-    for p in O2_PARAMS {
+    for p in O2_PARAMS.iter() {
         assert!(!p.unit.is_empty() && !p.meaning.is_empty(), "{}", p.key);
     }
 }
@@ -35,7 +39,7 @@ fn arch_show_prints_every_key_with_its_meaning_and_reads_back() {
     arch.set("engines=9").unwrap();
     arch.set("o2.all_tiles_one_cycle = true").unwrap();
     let text = arch.to_documented_toml();
-    for p in O2_PARAMS {
+    for p in O2_PARAMS.iter() {
         let line = text
             .lines()
             .find(|l| l.starts_with(p.key))

@@ -167,7 +167,7 @@ fn builtins_differ_only_in_boards() {
 
 #[test]
 fn every_parameter_has_a_unit_and_a_meaning_and_reads_back() {
-    for p in IR_PARAMS {
+    for p in IR_PARAMS.iter() {
         assert!(!p.unit.is_empty() && !p.meaning.is_empty(), "{}", p.key);
     }
     let mut arch = Arch::builtin("ir2").unwrap();

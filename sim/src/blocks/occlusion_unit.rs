@@ -35,7 +35,11 @@ pub struct OcclusionUnit {
 
 impl OcclusionUnit {
     pub fn new(arch: &O2Arch) -> OcclusionUnit {
-        OcclusionUnit::with_engines(arch.engines, arch.all_tiles_one_cycle, arch.counter_max())
+        OcclusionUnit::with_engines(
+            arch.occu.engines,
+            arch.occu.all_tiles_one_cycle,
+            arch.counter_max(),
+        )
     }
 
     /// A unit of `engines` engines with `counter_max`-saturating counters (any machine).

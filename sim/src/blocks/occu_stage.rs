@@ -41,7 +41,7 @@ impl OccuStage {
         match model {
             OccuModel::Cycle => OccuStage::Cycle {
                 occu: OcclusionUnit::new(arch),
-                control: OccuControl::new(arch.occu_write_buffer_words),
+                control: OccuControl::new(arch.occu.occu_write_buffer_words),
             },
             OccuModel::Rtl { waveform } => OccuStage::Rtl(Box::new(RtlOccu::new(arch, waveform))),
         }
@@ -52,11 +52,11 @@ impl OccuStage {
         match model {
             OccuModel::Cycle => OccuStage::Cycle {
                 occu: OcclusionUnit::with_engines(
-                    arch.engines,
-                    arch.all_tiles_one_cycle,
+                    arch.occu.engines,
+                    arch.occu.all_tiles_one_cycle,
                     arch.counter_max(),
                 ),
-                control: OccuControl::new(arch.occu_write_buffer_words),
+                control: OccuControl::new(arch.occu.occu_write_buffer_words),
             },
             OccuModel::Rtl { waveform } => {
                 OccuStage::Rtl(Box::new(RtlOccu::for_image_engine(arch, waveform)))

@@ -28,7 +28,7 @@
 //! token's cycle, which the Image Engine's rule computes) and the tile registers, read off
 //! the partial-report port, go to the merge network with the hit words stored so far.
 
-use crate::arch::{IrArch, O2Arch, OCCU_WORD_BITS};
+use crate::arch::{IrArch, O2Arch, OccuArch, OCCU_WORD_BITS};
 use crate::blocks::memory_port::{MemoryPort, PortClient};
 use crate::blocks::occlusion_unit::OccuStats;
 use crate::blocks::waveform::{Waveform, WaveformOptions};
@@ -63,28 +63,27 @@ pub struct RtlOccu {
     waveform: Option<Waveform>,
 }
 
+/// The rtl model's parameters from the Occlusion Unit's (the same group on both machines).
+fn rtl_params(occu: &OccuArch, results: ResultPath) -> OccuParams {
+    OccuParams {
+        engines: occu.engines as u32,
+        counter_bits: occu.counter_bits,
+        write_buffer_words: occu.occu_write_buffer_words as u32,
+        all_tiles_one_cycle: occu.all_tiles_one_cycle,
+        results,
+    }
+}
+
 impl RtlOccu {
     /// The O2's unit: records go to memory.
     pub fn new(arch: &O2Arch, waveform: Option<WaveformOptions>) -> RtlOccu {
-        let params = OccuParams {
-            engines: arch.engines as u32,
-            counter_bits: arch.counter_bits,
-            write_buffer_words: arch.occu_write_buffer_words as u32,
-            all_tiles_one_cycle: arch.all_tiles_one_cycle,
-            results: ResultPath::Records,
-        };
+        let params = rtl_params(&arch.occu, ResultPath::Records);
         RtlOccu::with_params(params, arch.clock_mhz, waveform)
     }
 
     /// One InfiniteReality Image Engine's unit: partial reports go to the merge network.
     pub fn for_image_engine(arch: &IrArch, waveform: Option<WaveformOptions>) -> RtlOccu {
-        let params = OccuParams {
-            engines: arch.engines as u32,
-            counter_bits: arch.counter_bits,
-            write_buffer_words: arch.occu_write_buffer_words as u32,
-            all_tiles_one_cycle: arch.all_tiles_one_cycle,
-            results: ResultPath::PartialReport,
-        };
+        let params = rtl_params(&arch.occu, ResultPath::PartialReport);
         RtlOccu::with_params(params, arch.clock_mhz, waveform)
     }
 

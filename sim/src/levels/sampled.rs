@@ -138,11 +138,11 @@ impl SampledModel {
                 let lookahead = o2
                     .prefetch_depth_fragments
                     .min(o2.fifo_raster_to_depth_entries);
-                (o2.engines, o2.all_tiles_one_cycle, lookahead + 1)
+                (o2.occu.engines, o2.occu.all_tiles_one_cycle, lookahead + 1)
             }
             Machine::Ir => {
                 let ir = arch.ir()?;
-                (ir.engines, ir.all_tiles_one_cycle, 0)
+                (ir.occu.engines, ir.occu.all_tiles_one_cycle, 0)
             }
         };
         let mut model = SampledModel {

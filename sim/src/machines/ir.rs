@@ -315,10 +315,18 @@ impl IrMachine {
                 }
             }
             last_drained = last_drained.max(ready.iter().copied().max().unwrap_or(0));
-            board_ready.push(merged_ready(&self.arch.local_merge, &ready, &mut self.host));
+            board_ready.push(merged_ready(
+                &self.arch.local_merge_network(),
+                &ready,
+                &mut self.host,
+            ));
         }
         let boards_merged = board_ready.iter().copied().max().unwrap_or(last_drained);
-        let available = merged_ready(&self.arch.global_merge, &board_ready, &mut self.host);
+        let available = merged_ready(
+            &self.arch.global_merge_network(),
+            &board_ready,
+            &mut self.host,
+        );
         let overflowed_buffers = finish_verbose(spec, &mut tiles);
         self.last_available = self.last_available.max(available);
         self.queries.push(QueryReport {
@@ -457,7 +465,7 @@ impl IrMachine {
     /// Engine `e`'s statistics summed over every Image Engine's Occlusion Unit; busy percent
     /// of all those engines' cycles.
     fn engine_reports(&self, occu: &[OccuStats], cycles: u64) -> Vec<EngineReport> {
-        (0..self.arch.engines)
+        (0..self.arch.occu.engines)
             .map(|e| {
                 let busy = occu.iter().map(|o| o.engines[e].0).sum();
                 let stall = occu.iter().map(|o| o.engines[e].1).sum();

@@ -230,8 +230,8 @@ impl IrBottleneck {
         self.open = Some(OpenQuery {
             service: service_cycles(
                 spec.tiles.len(),
-                self.arch.engines,
-                self.arch.all_tiles_one_cycle,
+                self.arch.occu.engines,
+                self.arch.occu.all_tiles_one_cycle,
             ),
             verbose_tiles: match spec.mode {
                 QueryMode::Verbose => spec.tiles.clone(),
@@ -279,9 +279,13 @@ impl IrBottleneck {
             .collect();
         let board_ready: Vec<u64> = ready
             .chunks(self.arch.image_engines_per_board)
-            .map(|board| merged_ready(&self.arch.local_merge, board, &mut self.host))
+            .map(|board| merged_ready(&self.arch.local_merge_network(), board, &mut self.host))
             .collect();
-        let available = merged_ready(&self.arch.global_merge, &board_ready, &mut self.host);
+        let available = merged_ready(
+            &self.arch.global_merge_network(),
+            &board_ready,
+            &mut self.host,
+        );
         self.window.clear();
         WindowEnd {
             cycles: bottleneck.cycles,

@@ -93,7 +93,11 @@ impl O2Formulas {
 
     /// OccU cycles per fragment under a query of `tiles` tiles.
     pub fn service_cycles(&self, tiles: usize) -> u64 {
-        service_cycles(tiles, self.arch.engines, self.arch.all_tiles_one_cycle)
+        service_cycles(
+            tiles,
+            self.arch.occu.engines,
+            self.arch.occu.all_tiles_one_cycle,
+        )
     }
 
     /// `T_w` and the drain of a window.

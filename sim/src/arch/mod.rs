@@ -1,8 +1,11 @@
 //! Architecture files: every timing parameter of a machine, with its unit and meaning.
 //!
-//! One table per machine ([`O2_PARAMS`], [`IR_PARAMS`]) is the single source of truth: the built-in
-//! defaults are built from it, `arch show` prints it, TOML files and `--set key=value` are
-//! validated against it. A file names its machine and holds one section per machine:
+//! Each parameter is declared once (`declare.rs`'s `parameters!`): its field in the typed
+//! struct the models read ([`O2Arch`], [`IrArch`], and [`OccuArch`], the Occlusion Unit's
+//! group composed into both), and from the same line its entry in the machine's documented
+//! table ([`O2_PARAMS`], [`IR_PARAMS`]), from which the built-in defaults are built, `arch
+//! show` prints, and TOML files and `--set key=value` are validated. A file names its machine
+//! and holds one section per machine:
 //!
 //! ```toml
 //! machine = "o2"
@@ -84,112 +87,78 @@ impl ParamKind {
     }
 }
 
-const fn int(
-    key: &'static str,
-    unit: &'static str,
-    default: u64,
-    min: u64,
-    max: u64,
-    meaning: &'static str,
-) -> Param {
-    Param {
-        key,
-        unit,
-        default: Value::Int(default),
-        kind: ParamKind::Int { min, max },
-        meaning,
+mod declare;
+
+use declare::{parameters, Cursor, Named};
+use std::sync::LazyLock;
+
+parameters! {
+    /// The Occlusion Unit's parameters: the same on both machines, declared once and
+    /// composed into each (the O2's one unit, every InfiniteReality Image Engine's own).
+    pub struct OccuArch {
+        engines: usize = 4, [1, 1024], "engines", "occlusion engines in the Occlusion Unit (at the IR, in every Image Engine's); tiles are dealt to them round-robin";
+        counter_bits: u32 = 32, [1, 64], "bits", "width of the NOHC and PHC counters; they saturate at 2^bits - 1 (V: >= 32)";
+        all_tiles_one_cycle: bool = false, "bool", "what-if: an engine tests all its tiles in one cycle instead of one tile per cycle";
+        occu_write_buffer_words: usize = 32, [1, 1 << 20], "words", "OccU Control's write buffer in 32-bit words (O2: records and hits; IR: hit words, drained one a cycle at each Image Engine); full stalls the engines";
     }
 }
 
-/// The O2-like machine's parameters. Marks in the meanings: (V) read in a primary source,
-/// (I) inferred; see `shared/reference/occlusion-unit.md`.
-pub const O2_PARAMS: &[Param] = &[
-    Param {
-        key: "clock_mhz",
-        unit: "MHz",
-        default: Value::Float(66.67),
-        kind: ParamKind::Float { min: 0.001, max: 100_000.0 },
-        meaning: "rendering engine clock; one pipeline cycle (V)",
-    },
-    int("primitive_setup_cycles", "cycles", 4, 0, 1 << 20, "rasterizer cycles spent setting up each primitive before its first fragment (I)"),
-    int("fifo_raster_to_depth_entries", "fragments", 16, 1, 1 << 16, "FIFO between rasterizer and depth/stencil pipeline"),
-    int("prefetch_depth_fragments", "fragments", 16, 1, 1 << 16, "how many fragments ahead of the depth test the prefetch buffer may issue depth reads"),
-    int("page_hit_latency_cycles", "cycles", 2, 1, 1 << 16, "depth read latency when the word lies in the same 64 KB tile as the previous read (V: CAS 2)"),
-    int("page_miss_latency_cycles", "cycles", 8, 1, 1 << 16, "depth read latency when the word lies in another 64 KB tile (I: 6-10)"),
-    int("framebuffer_tile_width_pixels", "pixels", 128, 1, 1 << 14, "width of one depth buffer tile (one memory page) (V)"),
-    int("framebuffer_tile_height_pixels", "pixels", 128, 1, 1 << 14, "height of one depth buffer tile (one memory page) (V)"),
-    int("depth_bits_per_pixel", "bits", 32, 8, 256, "depth+stencil bits stored per pixel (V: 24 + 8)"),
-    int("depth_write_buffer_entries", "writes", 16, 1, 1 << 16, "depth writes buffered between depth test and memory port"),
-    int("fifo_depth_to_occu_entries", "fragments", 8, 1, 1 << 16, "FIFO between depth test and Occlusion Unit"),
-    int("engines", "engines", 4, 1, 1024, "occlusion engines in the Occlusion Unit; tiles are dealt to them round-robin"),
-    int("counter_bits", "bits", 32, 1, 64, "width of the NOHC and PHC counters; they saturate at 2^bits - 1 (V: >= 32)"),
-    Param {
-        key: "all_tiles_one_cycle",
-        unit: "bool",
-        default: Value::Bool(false),
-        kind: ParamKind::Bool,
-        meaning: "what-if: an engine tests all its tiles in one cycle instead of one tile per cycle",
-    },
-    int("occu_write_buffer_words", "words", 32, 1, 1 << 20, "OccU Control write buffer (32-bit words) for records and hits; full stalls the engines"),
-    int("memory_port_bits_per_cycle", "bits", 256, 32, 1 << 14, "the one main-memory port shared by depth reads, depth writes and OccU Control (V)"),
-];
-
-const fn choice(
-    key: &'static str,
-    default: &'static str,
-    choices: &'static [&'static str],
-    meaning: &'static str,
-) -> Param {
-    Param {
-        key,
-        unit: "name",
-        default: Value::Choice(default),
-        kind: ParamKind::Choice { choices },
-        meaning,
+parameters! {
+    /// The O2-like machine's parameters, typed. Marks in the meanings: (V) read in a primary
+    /// source, (I) inferred; see `shared/reference/occlusion-unit.md`.
+    pub struct O2Arch {
+        clock_mhz: f64 = 66.67, [0.001, 100_000.0], "MHz", "rendering engine clock; one pipeline cycle (V)";
+        primitive_setup_cycles: u64 = 4, [0, 1 << 20], "cycles", "rasterizer cycles spent setting up each primitive before its first fragment (I)";
+        fifo_raster_to_depth_entries: usize = 16, [1, 1 << 16], "fragments", "FIFO between rasterizer and depth/stencil pipeline";
+        prefetch_depth_fragments: usize = 16, [1, 1 << 16], "fragments", "how many fragments ahead of the depth test the prefetch buffer may issue depth reads";
+        page_hit_latency_cycles: u64 = 2, [1, 1 << 16], "cycles", "depth read latency when the word lies in the same 64 KB tile as the previous read (V: CAS 2)";
+        page_miss_latency_cycles: u64 = 8, [1, 1 << 16], "cycles", "depth read latency when the word lies in another 64 KB tile (I: 6-10)";
+        framebuffer_tile_width_pixels: u32 = 128, [1, 1 << 14], "pixels", "width of one depth buffer tile (one memory page) (V)";
+        framebuffer_tile_height_pixels: u32 = 128, [1, 1 << 14], "pixels", "height of one depth buffer tile (one memory page) (V)";
+        depth_bits_per_pixel: u32 = 32, [8, 256], "bits", "depth+stencil bits stored per pixel (V: 24 + 8)";
+        depth_write_buffer_entries: usize = 16, [1, 1 << 16], "writes", "depth writes buffered between depth test and memory port";
+        fifo_depth_to_occu_entries: usize = 8, [1, 1 << 16], "fragments", "FIFO between depth test and Occlusion Unit";
+    }
+    group occu: OccuArch; {
+        memory_port_bits_per_cycle: u32 = 256, [32, 1 << 14], "bits", "the one main-memory port shared by depth reads, depth writes and OccU Control (V)";
     }
 }
+
+parameters! {
+    /// The InfiniteReality-like machine's parameters, typed. Marks: (V) primary source, (V2)
+    /// secondary source, (I) inferred; see `shared/reference/occlusion-unit.md`. Timing
+    /// rules: [`crate::machines::ir`].
+    pub struct IrArch {
+        clock_mhz: f64 = 100.0, [0.001, 100_000.0], "MHz", "Raster Memory clock: one Fragment Generator / Image Engine cycle (I)";
+        boards: usize = 4, [1, 4], "boards", "Raster Memory boards, each with one Fragment Generator (V2: 1, 2 or 4)";
+        image_engines_per_board: usize = 80, [1, 1024], "Image Engines", "Image Engines per board, each owning its interleaved pixels' depth (V2: 20 chips x 4)";
+        interleave: Interleave = Interleave::Columns, "name", "pixel -> Image Engine map: columns (x mod B*N, as SGI's VGX; I), blocks (skewed 2D blocks) or morton";
+        block_width_pixels: u32 = 4, [1, 1 << 12], "pixels", "block width of the blocks and morton interleaves";
+        block_height_pixels: u32 = 4, [1, 1 << 12], "pixels", "block height of the blocks and morton interleaves";
+        fragment_generator_fragments_per_cycle: u32 = 2, [1, 1024], "fragments", "fragments one board's Fragment Generator emits per cycle (I: 710 Mpixel/s over 4 boards at 100 MHz)";
+        fragment_generator_setup_cycles: u64 = 4, [0, 1 << 20], "cycles", "cycles every Fragment Generator spends setting up each primitive (I)";
+        image_engine_cycles_per_fragment: u64 = 45, [1, 1 << 16], "cycles", "cycles one Image Engine spends on a fragment's depth test (I: ~2.2 Mpixel/s at 100 MHz)";
+        image_engine_fifo_entries: usize = 8, [1, 1 << 16], "fragments", "FIFO in front of each Image Engine; the Fragment Generator blocks while it is full (I)";
+    }
+    group occu: OccuArch; {
+        local_merge: MergeKind = MergeKind::Tree, "name", "stage one, the Image Engines of a board: reduction tree, daisy chain, or host reads";
+        local_merge_hop_latency_cycles: u64 = 2, [0, 1 << 20], "cycles", "tree or chain: cycles for one report to cross one hop (I)";
+        local_merge_read_latency_cycles: u64 = 40, [0, 1 << 20], "cycles", "software: cycles for the host to read one Image Engine's report (I)";
+        global_merge: MergeKind = MergeKind::Tree, "name", "stage two, the boards: reduction tree, daisy chain, or host reads";
+        global_merge_hop_latency_cycles: u64 = 8, [0, 1 << 20], "cycles", "tree or chain: cycles for one report to cross one board-to-board hop (I)";
+        global_merge_read_latency_cycles: u64 = 100, [0, 1 << 20], "cycles", "software: cycles for the host to read one board's report over the bus (I)";
+    }
+}
+
+/// The O2-like machine's documented table ([`O2Arch`]'s declaration).
+pub static O2_PARAMS: LazyLock<Vec<Param>> = LazyLock::new(O2Arch::table);
+/// The InfiniteReality-like machine's documented table ([`IrArch`]'s declaration).
+pub static IR_PARAMS: LazyLock<Vec<Param>> = LazyLock::new(IrArch::table);
 
 /// Names of the interleaves (see [`Interleave`]).
 pub const INTERLEAVES: &[&str] = &["columns", "blocks", "morton"];
 /// Names of the merge networks (see [`MergeKind`]).
 pub const MERGE_KINDS: &[&str] = &["tree", "chain", "software"];
-
-/// The InfiniteReality-like machine's parameters. Marks: (V) primary source, (V2) secondary
-/// source, (I) inferred; see `shared/reference/occlusion-unit.md`. Timing rules: [`crate::machines::ir`].
-pub const IR_PARAMS: &[Param] = &[
-    Param {
-        key: "clock_mhz",
-        unit: "MHz",
-        default: Value::Float(100.0),
-        kind: ParamKind::Float { min: 0.001, max: 100_000.0 },
-        meaning: "Raster Memory clock: one Fragment Generator / Image Engine cycle (I)",
-    },
-    int("boards", "boards", 4, 1, 4, "Raster Memory boards, each with one Fragment Generator (V2: 1, 2 or 4)"),
-    int("image_engines_per_board", "Image Engines", 80, 1, 1024, "Image Engines per board, each owning its interleaved pixels' depth (V2: 20 chips x 4)"),
-    choice("interleave", "columns", INTERLEAVES, "pixel -> Image Engine map: columns (x mod B*N, as SGI's VGX; I), blocks (skewed 2D blocks) or morton"),
-    int("block_width_pixels", "pixels", 4, 1, 1 << 12, "block width of the blocks and morton interleaves"),
-    int("block_height_pixels", "pixels", 4, 1, 1 << 12, "block height of the blocks and morton interleaves"),
-    int("fragment_generator_fragments_per_cycle", "fragments", 2, 1, 1024, "fragments one board's Fragment Generator emits per cycle (I: 710 Mpixel/s over 4 boards at 100 MHz)"),
-    int("fragment_generator_setup_cycles", "cycles", 4, 0, 1 << 20, "cycles every Fragment Generator spends setting up each primitive (I)"),
-    int("image_engine_cycles_per_fragment", "cycles", 45, 1, 1 << 16, "cycles one Image Engine spends on a fragment's depth test (I: ~2.2 Mpixel/s at 100 MHz)"),
-    int("image_engine_fifo_entries", "fragments", 8, 1, 1 << 16, "FIFO in front of each Image Engine; the Fragment Generator blocks while it is full (I)"),
-    int("engines", "engines", 4, 1, 1024, "occlusion engines in the Occlusion Unit of every Image Engine; tiles dealt round-robin"),
-    int("counter_bits", "bits", 32, 1, 64, "width of the NOHC and PHC counters; they saturate at 2^bits - 1 (V: >= 32)"),
-    Param {
-        key: "all_tiles_one_cycle",
-        unit: "bool",
-        default: Value::Bool(false),
-        kind: ParamKind::Bool,
-        meaning: "what-if: an engine tests all its tiles in one cycle instead of one tile per cycle",
-    },
-    int("occu_write_buffer_words", "words", 32, 1, 1 << 20, "per Image Engine: OccU hit-word buffer, drained one 32-bit word per cycle; full stalls the engines"),
-    choice("local_merge", "tree", MERGE_KINDS, "stage one, the Image Engines of a board: reduction tree, daisy chain, or host reads"),
-    int("local_merge_hop_latency_cycles", "cycles", 2, 0, 1 << 20, "tree or chain: cycles for one report to cross one hop (I)"),
-    int("local_merge_read_latency_cycles", "cycles", 40, 0, 1 << 20, "software: cycles for the host to read one Image Engine's report (I)"),
-    choice("global_merge", "tree", MERGE_KINDS, "stage two, the boards: reduction tree, daisy chain, or host reads"),
-    int("global_merge_hop_latency_cycles", "cycles", 8, 0, 1 << 20, "tree or chain: cycles for one report to cross one board-to-board hop (I)"),
-    int("global_merge_read_latency_cycles", "cycles", 100, 0, 1 << 20, "software: cycles for the host to read one board's report over the bus (I)"),
-];
 
 /// Machines that have a parameter table.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -210,8 +179,8 @@ impl Machine {
 
     pub fn params(self) -> &'static [Param] {
         match self {
-            Machine::O2 => O2_PARAMS,
-            Machine::Ir => IR_PARAMS,
+            Machine::O2 => O2_PARAMS.as_slice(),
+            Machine::Ir => IR_PARAMS.as_slice(),
         }
     }
 
@@ -434,31 +403,7 @@ impl Arch {
                 self.machine.name()
             )));
         }
-        let int = |key: &str| match self.get(key) {
-            Some(Value::Int(v)) => v,
-            _ => unreachable!("O2_PARAMS declares {key} as an integer"),
-        };
-        let arch = O2Arch {
-            clock_mhz: match self.get("clock_mhz") {
-                Some(Value::Float(v)) => v,
-                _ => unreachable!("O2_PARAMS declares clock_mhz as a float"),
-            },
-            primitive_setup_cycles: int("primitive_setup_cycles"),
-            fifo_raster_to_depth_entries: int("fifo_raster_to_depth_entries") as usize,
-            prefetch_depth_fragments: int("prefetch_depth_fragments") as usize,
-            page_hit_latency_cycles: int("page_hit_latency_cycles"),
-            page_miss_latency_cycles: int("page_miss_latency_cycles"),
-            framebuffer_tile_width_pixels: int("framebuffer_tile_width_pixels") as u32,
-            framebuffer_tile_height_pixels: int("framebuffer_tile_height_pixels") as u32,
-            depth_bits_per_pixel: int("depth_bits_per_pixel") as u32,
-            depth_write_buffer_entries: int("depth_write_buffer_entries") as usize,
-            fifo_depth_to_occu_entries: int("fifo_depth_to_occu_entries") as usize,
-            engines: int("engines") as usize,
-            counter_bits: int("counter_bits") as u32,
-            all_tiles_one_cycle: matches!(self.get("all_tiles_one_cycle"), Some(Value::Bool(true))),
-            occu_write_buffer_words: int("occu_write_buffer_words") as usize,
-            memory_port_bits_per_cycle: int("memory_port_bits_per_cycle") as u32,
-        };
+        let arch = O2Arch::from_cursor(&mut Cursor::new(&self.values));
         arch.check()?;
         Ok(arch)
     }
@@ -471,49 +416,7 @@ impl Arch {
                 self.machine.name()
             )));
         }
-        let int = |key: &str| match self.get(key) {
-            Some(Value::Int(v)) => v,
-            _ => unreachable!("IR_PARAMS declares {key} as an integer"),
-        };
-        let name = |key: &str| match self.get(key) {
-            Some(Value::Choice(v)) => v,
-            _ => unreachable!("IR_PARAMS declares {key} as a choice"),
-        };
-        let merge = |kind: &str, hop: &str, read: &str| MergeNetwork {
-            kind: MergeKind::from_name(name(kind)),
-            hop_latency_cycles: int(hop),
-            read_latency_cycles: int(read),
-        };
-        let arch = IrArch {
-            clock_mhz: match self.get("clock_mhz") {
-                Some(Value::Float(v)) => v,
-                _ => unreachable!("IR_PARAMS declares clock_mhz as a float"),
-            },
-            boards: int("boards") as usize,
-            image_engines_per_board: int("image_engines_per_board") as usize,
-            interleave: Interleave::from_name(name("interleave")),
-            block_width_pixels: int("block_width_pixels") as u32,
-            block_height_pixels: int("block_height_pixels") as u32,
-            fragment_generator_fragments_per_cycle: int("fragment_generator_fragments_per_cycle")
-                as u32,
-            fragment_generator_setup_cycles: int("fragment_generator_setup_cycles"),
-            image_engine_cycles_per_fragment: int("image_engine_cycles_per_fragment"),
-            image_engine_fifo_entries: int("image_engine_fifo_entries") as usize,
-            engines: int("engines") as usize,
-            counter_bits: int("counter_bits") as u32,
-            all_tiles_one_cycle: matches!(self.get("all_tiles_one_cycle"), Some(Value::Bool(true))),
-            occu_write_buffer_words: int("occu_write_buffer_words") as usize,
-            local_merge: merge(
-                "local_merge",
-                "local_merge_hop_latency_cycles",
-                "local_merge_read_latency_cycles",
-            ),
-            global_merge: merge(
-                "global_merge",
-                "global_merge_hop_latency_cycles",
-                "global_merge_read_latency_cycles",
-            ),
-        };
+        let arch = IrArch::from_cursor(&mut Cursor::new(&self.values));
         arch.check()?;
         Ok(arch)
     }
@@ -623,27 +526,6 @@ fn edit_distance(a: &str, b: &str) -> usize {
     row[b.len()]
 }
 
-/// The O2-like machine's parameters, typed. See [`O2_PARAMS`] for units and meanings.
-#[derive(Clone, Debug, PartialEq)]
-pub struct O2Arch {
-    pub clock_mhz: f64,
-    pub primitive_setup_cycles: u64,
-    pub fifo_raster_to_depth_entries: usize,
-    pub prefetch_depth_fragments: usize,
-    pub page_hit_latency_cycles: u64,
-    pub page_miss_latency_cycles: u64,
-    pub framebuffer_tile_width_pixels: u32,
-    pub framebuffer_tile_height_pixels: u32,
-    pub depth_bits_per_pixel: u32,
-    pub depth_write_buffer_entries: usize,
-    pub fifo_depth_to_occu_entries: usize,
-    pub engines: usize,
-    pub counter_bits: u32,
-    pub all_tiles_one_cycle: bool,
-    pub occu_write_buffer_words: usize,
-    pub memory_port_bits_per_cycle: u32,
-}
-
 /// Bits of one OccU Control word (a record entry or a hit).
 pub const OCCU_WORD_BITS: u32 = 32;
 
@@ -682,6 +564,13 @@ impl O2Arch {
 
     /// Largest counter value: 2^counter_bits - 1.
     pub fn counter_max(&self) -> u64 {
+        self.occu.counter_max()
+    }
+}
+
+impl OccuArch {
+    /// Largest counter value: 2^counter_bits - 1.
+    pub fn counter_max(&self) -> u64 {
         u64::MAX >> (64 - self.counter_bits)
     }
 }
@@ -701,14 +590,10 @@ pub enum Interleave {
     Morton,
 }
 
-impl Interleave {
-    fn from_name(name: &str) -> Interleave {
-        match name {
-            "blocks" => Interleave::Blocks,
-            "morton" => Interleave::Morton,
-            _ => Interleave::Columns,
-        }
-    }
+impl Named for Interleave {
+    const ALL: &'static [Interleave] =
+        &[Interleave::Columns, Interleave::Blocks, Interleave::Morton];
+    const NAMES: &'static [&'static str] = INTERLEAVES;
 }
 
 /// How one merge stage combines its inputs' reports.
@@ -723,15 +608,12 @@ pub enum MergeKind {
     Software,
 }
 
-impl MergeKind {
-    fn from_name(name: &str) -> MergeKind {
-        match name {
-            "chain" => MergeKind::Chain,
-            "software" => MergeKind::Software,
-            _ => MergeKind::Tree,
-        }
-    }
+impl Named for MergeKind {
+    const ALL: &'static [MergeKind] = &[MergeKind::Tree, MergeKind::Chain, MergeKind::Software];
+    const NAMES: &'static [&'static str] = MERGE_KINDS;
+}
 
+impl MergeKind {
     pub fn name(self) -> &'static str {
         match self {
             MergeKind::Tree => "tree",
@@ -747,28 +629,6 @@ pub struct MergeNetwork {
     pub kind: MergeKind,
     pub hop_latency_cycles: u64,
     pub read_latency_cycles: u64,
-}
-
-/// The InfiniteReality-like machine's parameters, typed. See [`IR_PARAMS`] for units and
-/// meanings.
-#[derive(Clone, Debug, PartialEq)]
-pub struct IrArch {
-    pub clock_mhz: f64,
-    pub boards: usize,
-    pub image_engines_per_board: usize,
-    pub interleave: Interleave,
-    pub block_width_pixels: u32,
-    pub block_height_pixels: u32,
-    pub fragment_generator_fragments_per_cycle: u32,
-    pub fragment_generator_setup_cycles: u64,
-    pub image_engine_cycles_per_fragment: u64,
-    pub image_engine_fifo_entries: usize,
-    pub engines: usize,
-    pub counter_bits: u32,
-    pub all_tiles_one_cycle: bool,
-    pub occu_write_buffer_words: usize,
-    pub local_merge: MergeNetwork,
-    pub global_merge: MergeNetwork,
 }
 
 impl IrArch {
@@ -790,6 +650,24 @@ impl IrArch {
 
     /// Largest counter value: 2^counter_bits - 1.
     pub fn counter_max(&self) -> u64 {
-        u64::MAX >> (64 - self.counter_bits)
+        self.occu.counter_max()
+    }
+
+    /// Stage one's network: the Image Engines of a board.
+    pub fn local_merge_network(&self) -> MergeNetwork {
+        MergeNetwork {
+            kind: self.local_merge,
+            hop_latency_cycles: self.local_merge_hop_latency_cycles,
+            read_latency_cycles: self.local_merge_read_latency_cycles,
+        }
+    }
+
+    /// Stage two's network: the boards.
+    pub fn global_merge_network(&self) -> MergeNetwork {
+        MergeNetwork {
+            kind: self.global_merge,
+            hop_latency_cycles: self.global_merge_hop_latency_cycles,
+            read_latency_cycles: self.global_merge_read_latency_cycles,
+        }
     }
 }
