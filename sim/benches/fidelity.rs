@@ -8,7 +8,7 @@
 
 use occsim_sim::effects::{effects_of_features, observe, Effects};
 use occsim_sim::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
-use occsim_sim::{Arch, MachineModel};
+use occsim_sim::{Arch, MachineBuilder};
 use occsim_traces::golden::{EventSink, FunctionalModel};
 use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
 use occsim_traces::{Event, QueryMode, QuerySpec, Rect};
@@ -179,8 +179,10 @@ fn compare_effects(arch: &Arch, events: &[Event], fragments: f64, name: &str) {
     for _ in 0..REPEATS {
         for (effects, best) in [(Effects::ALL, &mut all), (chosen, &mut auto)] {
             let start = Instant::now();
-            let mut machine =
-                MachineModel::with_effects(arch, WIDTH, HEIGHT, effects).expect("machine");
+            let mut machine = MachineBuilder::new(arch)
+                .effects(effects)
+                .build(WIDTH, HEIGHT)
+                .expect("machine");
             for event in events {
                 machine.event(event).expect("replays");
             }

@@ -9,7 +9,7 @@
 //!
 //! Run: `cargo bench -p occsim-sim --bench rtl`
 
-use occsim_sim::{Arch, MachineModel, OccuModel, WaveformOptions};
+use occsim_sim::{Arch, MachineBuilder, OccuModel, WaveformOptions};
 use occsim_traces::Event;
 use std::io::Write;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -76,7 +76,10 @@ fn dumping(
 
 /// Replay the stream; returns (fragments per second, report).
 fn run(arch: &Arch, frame: &[Event], occu: OccuModel) -> (f64, occsim_sim::Report) {
-    let mut machine = MachineModel::with_occu_model(arch, WIDTH, HEIGHT, occu).expect("machine");
+    let mut machine = MachineBuilder::new(arch)
+        .occu(occu)
+        .build(WIDTH, HEIGHT)
+        .expect("machine");
     let start = Instant::now();
     for _ in 0..FRAMES {
         for event in frame {

@@ -52,5 +52,5 @@ pub use error::SimError;
 pub use levels::{Fidelity, LevelModel, LevelResult};
 pub use machines::ir::IrMachine;
 pub use machines::o2::O2Machine;
-pub use machines::MachineModel;
+pub use machines::{MachineBuilder, MachineModel};
 pub use report::Report;

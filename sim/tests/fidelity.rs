@@ -5,7 +5,7 @@ use occsim_sim::effects::{
     effects_of_features, observe, EffectScan, Effects, EffectsChoice, TraceFacts,
 };
 use occsim_sim::levels::{run_level, Fidelity};
-use occsim_sim::{Arch, MachineModel, Report};
+use occsim_sim::{Arch, MachineBuilder, Report};
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
 use occsim_traces::golden::{EventSink, FunctionalModel, GoldenModel};
 use occsim_traces::scene::{parse_scene, Command};
@@ -60,7 +60,10 @@ fn builtin_traces() -> Vec<(&'static str, Stream)> {
 }
 
 fn replay(arch: &Arch, width: u32, height: u32, effects: Effects, events: &[Event]) -> Report {
-    let mut machine = MachineModel::with_effects(arch, width, height, effects).unwrap();
+    let mut machine = MachineBuilder::new(arch)
+        .effects(effects)
+        .build(width, height)
+        .unwrap();
     for event in events {
         machine.event(event).unwrap();
     }

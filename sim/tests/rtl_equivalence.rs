@@ -4,7 +4,7 @@
 //! InfiniteReality (every Image Engine's unit the RTL, whose merged results, hit lists in
 //! order, must be identical too); and the VCD waveform is well formed.
 
-use occsim_sim::{Arch, IrMachine, MachineModel, OccuModel, Report, WaveformOptions};
+use occsim_sim::{Arch, MachineBuilder, OccuModel, Report, WaveformOptions};
 use occsim_traces::builtin::{demo_scene, DemoOptions, HARDCASES};
 use occsim_traces::golden::{FunctionalModel, GoldenModel};
 use occsim_traces::scene::{parse_scene, Command};
@@ -22,7 +22,10 @@ fn arch(sets: &[String]) -> Arch {
 }
 
 fn replay(arch: &Arch, width: u32, height: u32, events: &[Event], occu: OccuModel) -> Report {
-    let mut machine = MachineModel::with_occu_model(arch, width, height, occu).unwrap();
+    let mut machine = MachineBuilder::new(arch)
+        .occu(occu)
+        .build(width, height)
+        .unwrap();
     for event in events {
         machine.event(event).unwrap();
     }
@@ -406,7 +409,10 @@ fn ir_replay(
     events: &[Event],
     occu: OccuModel,
 ) -> (Report, Vec<QueryResult>) {
-    let mut machine = IrMachine::with_occu_model(arch, width, height, occu).unwrap();
+    let mut machine = MachineBuilder::new(arch)
+        .occu(occu)
+        .ir(width, height)
+        .unwrap();
     let mut results = Vec::new();
     for event in events {
         machine.event(event).unwrap();

@@ -28,7 +28,7 @@ use crate::effects::{Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::levels::analytic::AnalyticModel;
 use crate::levels::sampled::SampledModel;
-use crate::machines::MachineModel;
+use crate::machines::{MachineBuilder, MachineModel};
 use occsim_traces::golden::EventSink;
 use occsim_traces::{Event, Span};
 
@@ -79,18 +79,21 @@ impl LevelModel {
                 arch, width, height, effects, every,
             )?)),
             Fidelity::Cycle => LevelModel::Cycle(
-                Box::new(MachineModel::with_effects(arch, width, height, effects)?),
+                Box::new(
+                    MachineBuilder::new(arch)
+                        .effects(effects)
+                        .build(width, height)?,
+                ),
                 effects,
             ),
             // The Occlusion Unit and OccU Control from the rtl-model crate, clocked every
             // cycle; every effect model is built (the rtl model has no shortcuts).
             Fidelity::Rtl => LevelModel::Cycle(
-                Box::new(MachineModel::with_occu_model(
-                    arch,
-                    width,
-                    height,
-                    OccuModel::Rtl { waveform },
-                )?),
+                Box::new(
+                    MachineBuilder::new(arch)
+                        .occu(OccuModel::Rtl { waveform })
+                        .build(width, height)?,
+                ),
                 Effects::every_model_of(arch.machine()),
             ),
         })

@@ -40,7 +40,7 @@ use crate::error::SimError;
 use crate::levels::analytic::{service_cycles, Formulas};
 use crate::levels::functional::FunctionalCore;
 use crate::levels::level::{LevelResult, SampledWindows};
-use crate::machines::MachineModel;
+use crate::machines::{MachineBuilder, MachineModel};
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::{Event, QueryMode, QuerySpec, Span};
 use std::collections::BTreeMap;
@@ -192,13 +192,13 @@ impl SampledModel {
         if let Some(run) = &mut self.run {
             run.cooldown = None;
         } else {
-            let machine = MachineModel::resume(
-                &self.arch,
-                self.effects,
-                self.core.functional.state(),
-                self.core.functional.depth_buffer(),
-                self.spare_depth.take(),
-            )?;
+            let machine = MachineBuilder::new(&self.arch)
+                .effects(self.effects)
+                .resume(
+                    self.core.functional.state(),
+                    self.core.functional.depth_buffer(),
+                    self.spare_depth.take(),
+                )?;
             self.run = Some(Run {
                 machine,
                 windows: Vec::new(),

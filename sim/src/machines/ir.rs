@@ -68,6 +68,7 @@ use crate::error::check_spec;
 use crate::error::SimError;
 use crate::golden_check::first_difference;
 use crate::golden_check::GoldenCheck;
+use crate::machines::builder::MachineBuilder;
 use crate::machines::o2::tile_report;
 use crate::report::{
     nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
@@ -113,61 +114,10 @@ pub struct IrMachine {
 }
 
 impl IrMachine {
+    /// The machine `arch` describes at reset, every effect modelled, the OccUs at the cycle
+    /// level: shorthand for [`MachineBuilder::ir`].
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<IrMachine, SimError> {
-        IrMachine::with_occu_model(arch, width, height, OccuModel::Cycle)
-    }
-
-    /// A machine that builds only `effects`: the caller guarantees (by
-    /// [`crate::effects::EffectScan`]) that the others cannot be observed on its stream.
-    pub fn with_effects(
-        arch: &Arch,
-        width: u32,
-        height: u32,
-        effects: Effects,
-    ) -> Result<IrMachine, SimError> {
-        IrMachine::build(arch, width, height, effects, OccuModel::Cycle)
-    }
-
-    /// The machine with every Image Engine's Occlusion Unit modelled as `occu` says (the
-    /// `cycle` and `rtl` fidelity levels). A waveform dumps Image Engine 0 of board 0 only.
-    pub fn with_occu_model(
-        arch: &Arch,
-        width: u32,
-        height: u32,
-        occu: OccuModel,
-    ) -> Result<IrMachine, SimError> {
-        IrMachine::build(arch, width, height, Effects::ALL, occu)
-    }
-
-    /// A machine building only `effects`, its Occlusion Units modelled as `occu` says.
-    fn build(
-        arch: &Arch,
-        width: u32,
-        height: u32,
-        effects: Effects,
-        occu: OccuModel,
-    ) -> Result<IrMachine, SimError> {
-        arch.ir()?;
-        crate::error::check_viewport(width, height)?;
-        let depth = DepthBuffer::new(width, height);
-        IrMachine::assemble(arch, width, height, occu, effects, depth)
-    }
-
-    /// A machine that starts from a functional model's render state and depths (`depth`, a
-    /// copy of them) instead of the reset state: the sampled level's warm start of a window.
-    pub fn resume(
-        arch: &Arch,
-        width: u32,
-        height: u32,
-        effects: Effects,
-        state: &RenderState,
-        depth: DepthBuffer,
-    ) -> Result<IrMachine, SimError> {
-        crate::error::check_viewport(width, height)?;
-        let mut machine =
-            IrMachine::assemble(arch, width, height, OccuModel::Cycle, effects, depth)?;
-        machine.state = *state;
-        Ok(machine)
+        MachineBuilder::new(arch).ir(width, height)
     }
 
     /// [`Self::finish`], handing the depth buffer's memory back for reuse.
@@ -176,14 +126,18 @@ impl IrMachine {
         Ok((self.finish()?, depth))
     }
 
-    fn assemble(
-        arch: &Arch,
+    /// The one constructor: the blocks of `build`'s architecture, effects and OccU fidelity
+    /// for a `width` x `height` viewport, starting from `depth` and, when given, a
+    /// functional model's render state (a warm start) instead of the reset state. A
+    /// waveform dumps Image Engine 0 of board 0 only.
+    pub(crate) fn assemble(
+        build: MachineBuilder<'_>,
         width: u32,
         height: u32,
-        occu: OccuModel,
-        effects: Effects,
         depth: DepthBuffer,
+        state: Option<&RenderState>,
     ) -> Result<IrMachine, SimError> {
+        let (arch, effects, occu) = (build.arch, build.effects, build.occu);
         let ir = arch.ir()?;
         let arch_entries = arch.report_entries();
         Ok(IrMachine {
@@ -201,7 +155,7 @@ impl IrMachine {
             arch_entries,
             width,
             height,
-            state: RenderState::new(width, height),
+            state: state.copied().unwrap_or(RenderState::new(width, height)),
             depth,
             open: None,
             generation: 0,

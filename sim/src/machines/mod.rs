@@ -1,12 +1,13 @@
 //! A machine model of whichever kind the architecture names: the one entry point the command
 //! line, sweeps and latency reports replay traces through.
 
+pub mod builder;
 pub mod ir;
 pub mod o2;
 
+pub use builder::MachineBuilder;
+
 use crate::arch::{Arch, Machine};
-use crate::blocks::occu_stage::OccuModel;
-use crate::effects::Effects;
 use crate::error::SimError;
 use crate::machines::ir::IrMachine;
 use crate::machines::o2::O2Machine;
@@ -23,52 +24,27 @@ pub enum MachineModel {
     Ir(IrMachine),
 }
 
-impl MachineModel {
-    /// Build the machine `arch` describes for a `width` x `height` viewport.
-    pub fn new(arch: &Arch, width: u32, height: u32) -> Result<MachineModel, SimError> {
-        MachineModel::with_effects(arch, width, height, Effects::ALL)
-    }
-
-    /// The machine building only `effects` ([`crate::effects`]; a scan must have proved the
-    /// others unobservable on the stream it will replay).
-    pub fn with_effects(
-        arch: &Arch,
-        width: u32,
-        height: u32,
-        effects: Effects,
-    ) -> Result<MachineModel, SimError> {
-        Ok(match arch.machine() {
-            Machine::O2 => MachineModel::O2(O2Machine::with_effects(arch, width, height, effects)?),
-            Machine::Ir => MachineModel::Ir(IrMachine::with_effects(arch, width, height, effects)?),
+impl<'a> MachineBuilder<'a> {
+    /// The machine at reset for a `width` x `height` viewport.
+    pub fn build(self, width: u32, height: u32) -> Result<MachineModel, SimError> {
+        Ok(match self.arch.machine() {
+            Machine::O2 => MachineModel::O2(self.o2(width, height)?),
+            Machine::Ir => MachineModel::Ir(self.ir(width, height)?),
         })
     }
 
-    /// Build the machine with its Occlusion Unit modelled as `occu` says (the `cycle` and
-    /// `rtl` fidelity levels).
-    pub fn with_occu_model(
-        arch: &Arch,
-        width: u32,
-        height: u32,
-        occu: OccuModel,
-    ) -> Result<MachineModel, SimError> {
-        Ok(match arch.machine() {
-            Machine::O2 => MachineModel::O2(O2Machine::with_occu_model(arch, width, height, occu)?),
-            Machine::Ir => MachineModel::Ir(IrMachine::with_occu_model(arch, width, height, occu)?),
-        })
-    }
-
-    /// The machine building only `effects` that starts from a functional model's render
-    /// state and depths (the sampled level's machines, started mid-stream). `storage`, a
-    /// buffer a finished machine handed back ([`Self::finish_recycling`]), is reused for the
-    /// copy of `depth` when given.
+    /// The machine started from a functional model's render state and depths (the sampled
+    /// level's machines, started mid-stream). `storage`, a buffer a finished machine handed
+    /// back ([`MachineModel::finish_recycling`]), is reused for the copy of `depth` when
+    /// given.
     pub fn resume(
-        arch: &Arch,
-        effects: Effects,
+        self,
         state: &RenderState,
         depth: &DepthBuffer,
         storage: Option<DepthBuffer>,
     ) -> Result<MachineModel, SimError> {
         let (width, height) = (state.width, state.height);
+        crate::error::check_viewport(width, height)?;
         let copy = match storage {
             Some(mut storage) => {
                 storage.copy_from(depth);
@@ -76,14 +52,36 @@ impl MachineModel {
             }
             None => depth.clone(),
         };
-        Ok(match arch.machine() {
-            Machine::O2 => MachineModel::O2(O2Machine::resume(
-                arch, width, height, effects, state, copy,
-            )?),
-            Machine::Ir => MachineModel::Ir(IrMachine::resume(
-                arch, width, height, effects, state, copy,
-            )?),
+        Ok(match self.arch.machine() {
+            Machine::O2 => {
+                MachineModel::O2(O2Machine::assemble(self, width, height, copy, Some(state))?)
+            }
+            Machine::Ir => {
+                MachineModel::Ir(IrMachine::assemble(self, width, height, copy, Some(state))?)
+            }
         })
+    }
+
+    /// The O2-like machine at reset (an error when the architecture names another).
+    pub fn o2(self, width: u32, height: u32) -> Result<O2Machine, SimError> {
+        crate::error::check_viewport(width, height)?;
+        O2Machine::assemble(self, width, height, DepthBuffer::new(width, height), None)
+    }
+
+    /// The InfiniteReality-like machine at reset (an error when the architecture names
+    /// another).
+    pub fn ir(self, width: u32, height: u32) -> Result<IrMachine, SimError> {
+        self.arch.ir()?;
+        crate::error::check_viewport(width, height)?;
+        IrMachine::assemble(self, width, height, DepthBuffer::new(width, height), None)
+    }
+}
+
+impl MachineModel {
+    /// The machine `arch` describes at reset: shorthand for [`MachineBuilder::build`] with
+    /// every effect modelled and the OccU at the cycle level.
+    pub fn new(arch: &Arch, width: u32, height: u32) -> Result<MachineModel, SimError> {
+        MachineBuilder::new(arch).build(width, height)
     }
 
     /// [`Self::finish`], handing the depth buffer's memory back for reuse.

@@ -47,10 +47,11 @@ use crate::blocks::depth_pipeline::DepthPipeline;
 use crate::blocks::fifo::Fifo;
 use crate::blocks::fragment_input::FragmentInput;
 use crate::blocks::memory_port::MemoryPort;
-use crate::blocks::occu_stage::{OccuModel, OccuStage};
+use crate::blocks::occu_stage::OccuStage;
 use crate::effects::Effects;
 use crate::error::{check_spec, SimError};
 use crate::golden_check::{first_difference, GoldenCheck};
+use crate::machines::builder::MachineBuilder;
 use crate::report::{
     nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
     Summary, TileReport,
@@ -121,61 +122,10 @@ pub struct O2Machine {
 }
 
 impl O2Machine {
+    /// The machine `arch` describes at reset, every effect modelled, the OccU at the cycle
+    /// level: shorthand for [`MachineBuilder::o2`].
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<O2Machine, SimError> {
-        O2Machine::build(arch, width, height, Effects::ALL, OccuModel::Cycle)
-    }
-
-    /// A machine that builds only `effects`: the caller guarantees (by
-    /// [`crate::effects::EffectScan`]) that the others cannot be observed on its stream.
-    pub fn with_effects(
-        arch: &Arch,
-        width: u32,
-        height: u32,
-        effects: Effects,
-    ) -> Result<O2Machine, SimError> {
-        O2Machine::build(arch, width, height, effects, OccuModel::Cycle)
-    }
-
-    /// A machine whose Occlusion Unit and OccU Control are modelled as `model` says.
-    pub fn with_occu_model(
-        arch: &Arch,
-        width: u32,
-        height: u32,
-        model: OccuModel,
-    ) -> Result<O2Machine, SimError> {
-        O2Machine::build(arch, width, height, Effects::ALL, model)
-    }
-
-    /// A machine building only `effects`, its OccU modelled as `model` says.
-    pub fn build(
-        arch: &Arch,
-        width: u32,
-        height: u32,
-        effects: Effects,
-        model: OccuModel,
-    ) -> Result<O2Machine, SimError> {
-        crate::error::check_viewport(width, height)?;
-        let depth = DepthBuffer::new(width, height);
-        O2Machine::assemble(arch, width, height, effects, model, depth)
-    }
-
-    /// A machine building only `effects` that starts from a functional model's render state
-    /// and depths (`depth`, a copy of them) instead of the reset state: the sampled level's
-    /// warm start of a window.
-    pub fn resume(
-        arch: &Arch,
-        width: u32,
-        height: u32,
-        effects: Effects,
-        state: &RenderState,
-        depth: DepthBuffer,
-    ) -> Result<O2Machine, SimError> {
-        crate::error::check_viewport(width, height)?;
-        let mut machine =
-            O2Machine::assemble(arch, width, height, effects, OccuModel::Cycle, depth)?;
-        machine.depth.load_state(state);
-        machine.front_depth_test = state.depth_test;
-        Ok(machine)
+        MachineBuilder::new(arch).o2(width, height)
     }
 
     /// [`Self::finish`], handing the depth buffer's memory back for reuse.
@@ -188,17 +138,20 @@ impl O2Machine {
         Ok((self.finish()?, depth))
     }
 
-    fn assemble(
-        arch: &Arch,
+    /// The one constructor: the blocks of `build`'s architecture, effects and OccU fidelity
+    /// for a `width` x `height` viewport, starting from `depth` and, when given, a
+    /// functional model's render state (a warm start) instead of the reset state.
+    pub(crate) fn assemble(
+        build: MachineBuilder<'_>,
         width: u32,
         height: u32,
-        effects: Effects,
-        model: OccuModel,
         depth: DepthBuffer,
+        state: Option<&RenderState>,
     ) -> Result<O2Machine, SimError> {
+        let (arch, effects, model) = (build.arch, build.effects, build.occu);
         let o2 = arch.o2()?;
         let arch_entries = arch.report_entries();
-        Ok(O2Machine {
+        let mut machine = O2Machine {
             arch: o2.clone(),
             input: FragmentInput::new(o2.primitive_setup_cycles),
             raster_to_depth: Fifo::new(o2.fifo_raster_to_depth_entries),
@@ -222,7 +175,12 @@ impl O2Machine {
             events: 0,
             last_available: 0,
             effects,
-        })
+        };
+        if let Some(state) = state {
+            machine.depth.load_state(state);
+            machine.front_depth_test = state.depth_test;
+        }
+        Ok(machine)
     }
 
     /// Feed one event of the stream.
