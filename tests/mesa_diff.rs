@@ -380,6 +380,28 @@ fn structured_scenes() -> Vec<(String, String)> {
     }
     scenes.push(("nine-vertex draws".into(), text));
 
+    // Draw segments: a sliver the draw pipeline's cull stage culls (its f32 determinant is
+    // zero or of the other sign) but setup would draw, in a draw that ends with a clipped
+    // triangle. As the 1,365th triangle, the last of the first segment, it is drawn (that
+    // segment has no clipped vertex); as the 1,366th, the first of the second segment, which
+    // runs the pipeline, it is culled. A segment one triangle longer or shorter fails one.
+    let sliver =
+        "tri -0.29318398 -0.12187201 0 1  -0.015558988 0.20925298 0 1  0.2620842 0.5403598 0 1\n";
+    let filler = "tri 0.9 0.9 0.5 1  0.9001 0.9 0.5 1  0.9 0.9001 0.5 1\n";
+    let clipped = "tri -1.5 -0.95 0 1  -0.9 -0.95 0 1  -0.9 -0.85 0 1\n";
+    for (before, name) in [
+        (1364, "sliver last of a segment"),
+        (1365, "sliver first of a segment"),
+    ] {
+        let mut text = String::from("viewport 64 64\ndepth_func always\ncull 1\nbegin 0\n");
+        text += &filler.repeat(before);
+        text += sliver;
+        text += &filler.repeat(1366 - before);
+        text += clipped;
+        text += "end\n";
+        scenes.push((name.into(), text));
+    }
+
     // The reproducers of issue 11: an edge-clipped triangle, and interpenetrating planes.
     scenes.push((
         "issue reproducers".into(),
