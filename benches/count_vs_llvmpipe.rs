@@ -13,7 +13,7 @@
 mod support;
 
 use occsim_traces::builtin::{random_scene, RandomOptions};
-use occsim_traces::golden::{Discard, EventSink, GoldenModel};
+use occsim_traces::golden::{infallible, Discard, EventSink, GoldenModel};
 use occsim_traces::scene::{parse_scene, SceneLine};
 use occsim_traces::{Event, QueryMode};
 use std::time::{Duration, Instant};
@@ -23,8 +23,10 @@ const RUNS: usize = 3;
 struct FragmentCounter(u64);
 
 impl EventSink for FragmentCounter {
-    fn event(&mut self, event: &Event) {
+    type Error = std::convert::Infallible;
+    fn event(&mut self, event: &Event) -> Result<(), Self::Error> {
         self.0 += matches!(event, Event::Fragment(_)) as u64;
+        Ok(())
     }
 }
 
@@ -33,16 +35,16 @@ fn golden_counts(
     lines: &[SceneLine],
     width: u32,
     height: u32,
-    sink: &mut impl EventSink,
+    sink: &mut impl EventSink<Error = std::convert::Infallible>,
 ) -> Vec<u64> {
     let mut golden = GoldenModel::new(width, height);
     let counts = lines
         .iter()
-        .filter_map(|line| golden.execute(&line.command, sink))
+        .filter_map(|line| infallible(golden.execute(&line.command, sink)))
         .filter(|r| r.mode == QueryMode::Samples)
         .map(|r| r.value())
         .collect();
-    golden.finish(sink);
+    infallible(golden.finish(sink));
     counts
 }
 

@@ -15,7 +15,7 @@
 
 mod support;
 
-use occsim_traces::golden::{Discard, GoldenModel};
+use occsim_traces::golden::{infallible, Discard, GoldenModel};
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::scene::{format_command, parse_scene};
 use occsim_traces::{Command, QueryMode, SceneLine};
@@ -52,7 +52,7 @@ fn golden_counts(lines: &[SceneLine], profile: RasterProfile) -> Vec<GlQueryCoun
     let mut model = GoldenModel::with_profile(width, height, profile);
     let mut counts = Vec::new();
     for line in lines {
-        if let Some(result) = model.execute(&line.command, &mut Discard) {
+        if let Some(result) = infallible(model.execute(&line.command, &mut Discard)) {
             let per_query = match result.mode {
                 QueryMode::Samples | QueryMode::Any => vec![result.value()],
                 QueryMode::Brief | QueryMode::Verbose => {

@@ -41,25 +41,23 @@ fn builtin_trace(name: &str) -> Vec<u8> {
         TraceWriter::new(&mut bytes, &TraceHeader::new(width, height)).expect("header");
     let mut golden = GoldenModel::new(width, height);
     for line in lines {
-        golden.execute(&line.expect("parses").command, &mut writer);
+        golden
+            .execute(&line.expect("parses").command, &mut writer)
+            .expect("writes");
     }
-    golden.finish(&mut writer);
+    golden.finish(&mut writer).expect("writes");
     writer.finish().expect("written");
     bytes
 }
 
 struct Replay {
     machine: MachineModel,
-    error: Option<String>,
 }
 
 impl EventSink for Replay {
-    fn event(&mut self, event: &Event) {
-        if self.error.is_none() {
-            if let Err(e) = self.machine.event(event) {
-                self.error = Some(e.to_string());
-            }
-        }
+    type Error = occsim_sim::SimError;
+    fn event(&mut self, event: &Event) -> Result<(), Self::Error> {
+        self.machine.event(event)
     }
 }
 
@@ -71,10 +69,8 @@ fn replay(bytes: &[u8], engines: u32) -> (u64, u64) {
     let (w, h) = (reader.header().width, reader.header().height);
     let mut replay = Replay {
         machine: MachineModel::new(&arch, w, h).expect("machine"),
-        error: None,
     };
-    reader.read_into(&mut replay).expect("trace reads");
-    if let Some(e) = replay.error {
+    if let Err(e) = reader.read_into(&mut replay) {
         panic!("engines {engines}: {e}");
     }
     let report = replay.machine.finish().expect("finishes");

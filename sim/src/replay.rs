@@ -24,7 +24,7 @@ use crate::error::SimError;
 use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, RetileError, TileGrid};
-use occsim_traces::trace::{TraceError, TraceReader};
+use occsim_traces::trace::{ReadError, TraceError, TraceReader};
 use occsim_traces::Event;
 use std::io::Read;
 
@@ -137,32 +137,27 @@ pub fn replay<R: Read>(
     };
     let sink = LevelSink::new(model);
     let sink = match options.retile {
-        None => feed(&mut reader, sink, |s| s, model_error)?,
+        None => feed(&mut reader, sink, model_error)?,
         Some(grid) => {
             let retile = Retile::new(grid, width, height, sink)
                 .map_err(|source| ReplayError::Retile { grid, source })?;
-            feed(&mut reader, retile, Retile::inner_mut, model_error)?.into_inner()
+            feed(&mut reader, retile, model_error)?.into_inner()
         }
     };
     sink.model.finish(arch).map_err(model_error)
 }
 
-/// Read every event of `reader` into `sink`, stopping at the model's first error.
-fn feed<R: Read, S: EventSink>(
+/// Read every event of `reader` into `sink`, stopping at the first error of either.
+fn feed<R: Read, S: EventSink<Error = SimError>>(
     reader: &mut TraceReader<R>,
     mut sink: S,
-    model: impl Fn(&mut S) -> &mut LevelSink,
     model_error: impl Fn(SimError) -> ReplayError,
 ) -> Result<S, ReplayError> {
-    while reader.next_block(&mut sink).map_err(ReplayError::Read)? {
-        if let Some(error) = model(&mut sink).error.take() {
-            return Err(model_error(error));
-        }
-    }
-    match model(&mut sink).error.take() {
-        Some(error) => Err(model_error(error)),
-        None => Ok(sink),
-    }
+    while reader.next_block(&mut sink).map_err(|e| match e {
+        ReadError::Trace(e) => ReplayError::Read(e),
+        ReadError::Sink(e) => model_error(e),
+    })? {}
+    Ok(sink)
 }
 
 /// The effect models `level` builds for the trace: at the levels that build effects
@@ -211,9 +206,11 @@ pub fn max_query_tiles<R: Read>(
 struct ScanSink(EffectScan);
 
 impl EventSink for ScanSink {
+    type Error = std::convert::Infallible;
     #[inline]
-    fn event(&mut self, event: &Event) {
+    fn event(&mut self, event: &Event) -> Result<(), Self::Error> {
         self.0.event(event);
+        Ok(())
     }
 }
 
@@ -221,6 +218,8 @@ impl EventSink for ScanSink {
 fn scan<R: Read>(reader: &mut TraceReader<R>, arch: &Arch) -> Result<EffectScan, ReplayError> {
     let (width, height) = (reader.header().width, reader.header().height);
     let mut scan = ScanSink(EffectScan::for_arch(arch, width, height).map_err(ReplayError::Setup)?);
-    reader.read_into(&mut scan).map_err(ReplayError::Read)?;
+    reader
+        .read_into(&mut scan)
+        .map_err(|e| ReplayError::Read(e.into_trace()))?;
     Ok(scan.0)
 }

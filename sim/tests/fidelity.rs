@@ -22,7 +22,7 @@ fn scene_events(text: &str) -> (Vec<Event>, u32, u32) {
     let mut golden = GoldenModel::new(width, height);
     let mut events = Vec::new();
     for line in &lines {
-        golden.execute(&line.command, &mut events);
+        golden.execute(&line.command, &mut events).unwrap();
     }
     golden.finish(&mut events);
     (events, width, height)
@@ -498,7 +498,7 @@ proptest! {
 fn header_features(events: &[Event], width: u32, height: u32) -> TraceFeatures {
     let mut file = std::io::Cursor::new(Vec::new());
     let mut writer = TraceWriter::new(&mut file, &TraceHeader::new(width, height)).unwrap();
-    events.iter().for_each(|event| writer.event(event));
+    events.iter().for_each(|event| writer.event(event).unwrap());
     writer.finish_seekable().unwrap();
     let reader = TraceReader::new(&file.get_ref()[..]).unwrap();
     reader.header().features.clone().expect("written back")

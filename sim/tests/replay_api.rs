@@ -16,9 +16,9 @@ fn hardcases_trace() -> Vec<u8> {
     let mut writer = TraceWriter::new(&mut bytes, &TraceHeader::new(64, 64)).expect("header");
     let mut golden = GoldenModel::new(64, 64);
     for line in &lines {
-        golden.execute(&line.command, &mut writer);
+        golden.execute(&line.command, &mut writer).unwrap();
     }
-    golden.finish(&mut writer);
+    golden.finish(&mut writer).unwrap();
     writer.finish().expect("written");
     bytes
 }

@@ -60,7 +60,7 @@ fn scene_events(text: &str) -> (u32, u32, Vec<Event>) {
     let mut golden = GoldenModel::new(width, height);
     let mut events = Vec::new();
     for line in &lines {
-        golden.execute(&line.command, &mut events);
+        golden.execute(&line.command, &mut events).unwrap();
     }
     golden.finish(&mut events);
     (width, height, events)

@@ -1,7 +1,7 @@
 //! `occsim count SCENE`: the golden model's answer to every query.
 
 use crate::scene_input::open_scene;
-use occsim_traces::golden::{Discard, GoldenModel};
+use occsim_traces::golden::{infallible, Discard, GoldenModel};
 use occsim_traces::QueryMode;
 use std::io::Write;
 
@@ -26,7 +26,7 @@ pub fn run(args: CountArgs) -> anyhow::Result<()> {
     let mut results = Vec::new();
     for line in &mut scene.reader {
         let line = line?;
-        let Some(result) = golden.execute(&line.command, &mut Discard) else {
+        let Some(result) = infallible(golden.execute(&line.command, &mut Discard)) else {
             continue;
         };
         if args.json {

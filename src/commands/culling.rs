@@ -3,10 +3,11 @@
 //! simulated cycles per frame on each machine.
 
 use super::workload_args::SceneArgs;
+use anyhow::Context;
 use occsim_traces::golden::EventSink;
 use occsim_traces::workloads::{
-    full_render_visible_pixels, generate, DriverKind, DriverOptions, Walk, WorkloadScene,
-    WorkloadStats,
+    full_render_visible_pixels, generate, DriverKind, DriverOptions, GenerateError, Walk,
+    WorkloadScene, WorkloadStats,
 };
 use occsim_traces::Event;
 use serde::Serialize;
@@ -40,8 +41,8 @@ pub trait FrameCycleModel {
     /// The machine's name, a column of the report (e.g. `O2`, `ir4`).
     fn machine(&self) -> String;
     /// A new frame of `width` x `height` pixels begins; its events follow.
-    fn begin_frame(&mut self, width: u32, height: u32);
-    fn event(&mut self, event: &Event);
+    fn begin_frame(&mut self, width: u32, height: u32) -> anyhow::Result<()>;
+    fn event(&mut self, event: &Event) -> anyhow::Result<()>;
     /// Simulated cycles for the frame's events since `begin_frame`.
     fn end_frame(&mut self) -> anyhow::Result<u64>;
 }
@@ -54,41 +55,39 @@ struct FrameSplitter<'m> {
     in_frame: bool,
     /// Per model, per frame.
     cycles: Vec<Vec<u64>>,
-    error: Option<anyhow::Error>,
 }
 
 impl FrameSplitter<'_> {
-    fn end_frame(&mut self) {
+    fn end_frame(&mut self) -> anyhow::Result<()> {
         if !self.in_frame {
-            return;
+            return Ok(());
         }
         for (model, cycles) in self.models.iter_mut().zip(&mut self.cycles) {
-            match model.end_frame() {
-                Ok(c) => cycles.push(c),
-                Err(error) => {
-                    self.error.get_or_insert(error);
-                }
-            }
+            cycles.push(model.end_frame()?);
         }
         self.in_frame = false;
+        Ok(())
     }
 }
 
 impl EventSink for FrameSplitter<'_> {
-    fn event(&mut self, event: &Event) {
+    type Error = anyhow::Error;
+
+    fn event(&mut self, event: &Event) -> anyhow::Result<()> {
         if self.models.is_empty() {
-            return;
+            return Ok(());
         }
         if let Event::Clear = event {
-            self.end_frame();
+            self.end_frame()?;
             for model in self.models.iter_mut() {
-                model.begin_frame(self.width, self.height);
+                model.begin_frame(self.width, self.height)?;
             }
             self.in_frame = true;
         }
         for model in self.models.iter_mut() {
-            model.event(event);
+            model.event(event)?;
         }
+        Ok(())
     }
 }
 
@@ -174,7 +173,6 @@ struct MachineFrames {
     name: &'static str,
     arch: occsim_sim::Arch,
     machine: Option<occsim_sim::MachineModel>,
-    error: Option<occsim_sim::SimError>,
 }
 
 impl MachineFrames {
@@ -183,7 +181,6 @@ impl MachineFrames {
             name,
             arch,
             machine: None,
-            error: None,
         }
     }
 }
@@ -193,25 +190,23 @@ impl FrameCycleModel for MachineFrames {
         self.name.to_owned()
     }
 
-    fn begin_frame(&mut self, width: u32, height: u32) {
-        match occsim_sim::MachineModel::new(&self.arch, width, height) {
-            Ok(machine) => self.machine = Some(machine),
-            Err(error) => self.error = Some(error),
-        }
+    fn begin_frame(&mut self, width: u32, height: u32) -> anyhow::Result<()> {
+        let machine = occsim_sim::MachineModel::new(&self.arch, width, height)
+            .with_context(|| format!("frame on {}", self.name))?;
+        self.machine = Some(machine);
+        Ok(())
     }
 
-    fn event(&mut self, event: &Event) {
-        if let (Some(machine), None) = (&mut self.machine, &self.error) {
-            if let Err(error) = machine.event(event) {
-                self.error = Some(error);
-            }
+    fn event(&mut self, event: &Event) -> anyhow::Result<()> {
+        if let Some(machine) = &mut self.machine {
+            machine
+                .event(event)
+                .with_context(|| format!("frame on {}", self.name))?;
         }
+        Ok(())
     }
 
     fn end_frame(&mut self) -> anyhow::Result<u64> {
-        if let Some(error) = self.error.take() {
-            return Err(anyhow::Error::new(error).context(format!("frame on {}", self.name)));
-        }
         let machine = self
             .machine
             .take()
@@ -259,14 +254,13 @@ pub fn compare(
             width: walk.width,
             height: walk.height,
             in_frame: false,
-            error: None,
         };
-        let stats = generate(&scene, &options, &walk, &mut splitter)
-            .map_err(super::workload_args::flagged)?;
-        splitter.end_frame();
-        if let Some(error) = splitter.error.take() {
-            return Err(error.context(format!("timing model on the {} driver", options.label())));
-        }
+        let on_driver = || format!("timing model on the {} driver", options.label());
+        let stats = generate(&scene, &options, &walk, &mut splitter).map_err(|e| match e {
+            GenerateError::Workload(e) => super::workload_args::flagged(e),
+            GenerateError::Sink(e) => e.context(on_driver()),
+        })?;
+        splitter.end_frame().with_context(on_driver)?;
         let names: Vec<String> = splitter.models.iter().map(|m| m.machine()).collect();
         let cycles = names
             .into_iter()
@@ -471,14 +465,16 @@ mod tests {
         fn machine(&self) -> String {
             "frag".into()
         }
-        fn begin_frame(&mut self, _: u32, _: u32) {
+        fn begin_frame(&mut self, _: u32, _: u32) -> anyhow::Result<()> {
             self.fragments = 0;
             self.frames_begun += 1;
+            Ok(())
         }
-        fn event(&mut self, event: &Event) {
+        fn event(&mut self, event: &Event) -> anyhow::Result<()> {
             if let Event::Fragment(_) = event {
                 self.fragments += 1;
             }
+            Ok(())
         }
         fn end_frame(&mut self) -> anyhow::Result<u64> {
             Ok(self.fragments)

@@ -34,9 +34,9 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     let mut writer = TraceWriter::new(&mut trace, &header)?;
     let mut golden = GoldenModel::with_profile(width, height, raster);
     for line in SceneReader::new(text.as_bytes(), "demo") {
-        golden.execute(&line?.command, &mut writer);
+        golden.execute(&line?.command, &mut writer)?;
     }
-    golden.finish(&mut writer);
+    golden.finish(&mut writer)?;
     let summary = writer.finish()?;
     outln!(
         "demo: a city block, {} frames at {width}x{height}: {} fragments, {} primitives, {} queries ({} brief, {} verbose, {} samples); trace {} bytes",

@@ -5,7 +5,7 @@ use crate::scene_input::open_scene;
 use anyhow::Context;
 use occsim_traces::golden::{EventSink, GoldenModel};
 use occsim_traces::raster::RasterProfile;
-use occsim_traces::trace::{TraceHeader, TraceReader, TraceSummary, TraceWriter};
+use occsim_traces::trace::{ReadError, TraceHeader, TraceReader, TraceSummary, TraceWriter};
 use occsim_traces::{Event, QueryResult, QuerySpec};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -99,10 +99,13 @@ fn generate_scene(
     write_atomically_with(output, |file| {
         let mut writer = TraceWriter::new(file, &header)?;
         let mut golden = GoldenModel::with_profile(scene.width, scene.height, raster);
+        let cannot_write = || format!("{}: cannot write trace", output.display());
         for line in &mut scene.reader {
-            golden.execute(&line?.command, &mut writer);
+            golden
+                .execute(&line?.command, &mut writer)
+                .with_context(cannot_write)?;
         }
-        golden.finish(&mut writer);
+        golden.finish(&mut writer).with_context(cannot_write)?;
         writer
             .finish_seekable()
             .with_context(|| format!("{}: cannot write trace", output.display()))
@@ -264,22 +267,21 @@ fn describe(event: &Event) -> String {
     }
 }
 
-/// Prints events until the limit; the limit is reached by an early error-free stop.
+/// Prints events until the limit (the rest of the block then passes unprinted).
 struct Printer<W: Write> {
     out: W,
     remaining: u64,
-    error: Option<std::io::Error>,
 }
 
 impl<W: Write> EventSink for Printer<W> {
-    fn event(&mut self, event: &Event) {
-        if self.remaining == 0 || self.error.is_some() {
-            return;
+    type Error = std::io::Error;
+
+    fn event(&mut self, event: &Event) -> std::io::Result<()> {
+        if self.remaining == 0 {
+            return Ok(());
         }
         self.remaining -= 1;
-        if let Err(e) = writeln!(self.out, "{}", describe(event)) {
-            self.error = Some(e);
-        }
+        writeln!(self.out, "{}", describe(event))
     }
 }
 
@@ -289,7 +291,6 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
     let mut printer = Printer {
         out: std::io::BufWriter::new(stdout.lock()),
         remaining: args.limit.unwrap_or(u64::MAX),
-        error: None,
     };
     let header = reader.header().clone();
     writeln!(
@@ -298,12 +299,14 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
         header.generator, header.width, header.height, header.scene
     )?;
     while printer.remaining > 0 {
-        let more = reader
-            .next_block(&mut printer)
-            .with_context(|| format!("{}: cannot read trace", args.trace.display()))?;
-        if let Some(e) = printer.error.take() {
-            return Err(e.into());
-        }
+        let more = match reader.next_block(&mut printer) {
+            Ok(more) => more,
+            Err(ReadError::Sink(e)) => return Err(e.into()),
+            Err(ReadError::Trace(e)) => {
+                return Err(anyhow::Error::new(e)
+                    .context(format!("{}: cannot read trace", args.trace.display())))
+            }
+        };
         if !more {
             break;
         }

@@ -7,7 +7,8 @@ use anyhow::Context;
 use occsim_traces::trace::{TraceHeader, TraceSummary, TraceWriter};
 use occsim_traces::workloads::{
     city, forest, generate, load_obj, CameraPath, CityOptions, DriverKind, DriverOptions,
-    ForestOptions, ObjOptions, Walk, WorkloadError, WorkloadOption, WorkloadScene, WorkloadStats,
+    ForestOptions, GenerateError, ObjOptions, Walk, WorkloadError, WorkloadOption, WorkloadScene,
+    WorkloadStats,
 };
 use std::io::Read;
 use std::path::Path;
@@ -258,7 +259,12 @@ pub fn write_workload_trace(
         .with_raster(walk.raster);
     write_atomically_with(output, |file| {
         let mut writer = TraceWriter::new(file, &header)?;
-        let stats = generate(&scene, &driver, &walk, &mut writer).map_err(flagged)?;
+        let stats = generate(&scene, &driver, &walk, &mut writer).map_err(|e| match e {
+            GenerateError::Workload(e) => flagged(e),
+            GenerateError::Sink(e) => {
+                anyhow::Error::new(e).context(format!("{}: cannot write trace", output.display()))
+            }
+        })?;
         let summary = writer
             .finish_seekable()
             .with_context(|| format!("{}: cannot write trace", output.display()))?;

@@ -6,7 +6,7 @@
 //! Run: `cargo bench -p occsim-traces --bench trace_codec`
 
 use occsim_traces::builtin::scene_text;
-use occsim_traces::golden::{EventSink, GoldenModel};
+use occsim_traces::golden::{infallible, EventSink, GoldenModel};
 use occsim_traces::scene::{parse_scene, Command};
 use occsim_traces::trace::synthetic::{generate, SyntheticScene};
 use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter, WriterOptions};
@@ -25,12 +25,14 @@ struct Checksum {
 }
 
 impl EventSink for Checksum {
+    type Error = std::convert::Infallible;
     #[inline(always)]
-    fn event(&mut self, event: &Event) {
+    fn event(&mut self, event: &Event) -> Result<(), Self::Error> {
         if let Event::Fragment(f) = event {
             self.fragments += 1;
             self.depth_sum = self.depth_sum.wrapping_add(f.z as u64 ^ f.x as u64);
         }
+        Ok(())
     }
 }
 
@@ -48,7 +50,7 @@ fn best_of<T>(runs: usize, mut run: impl FnMut() -> T) -> (f64, T) {
 
 fn bench_scene(name: &str, scene: &SyntheticScene) {
     let mut events = Vec::new();
-    let fragments = generate(scene, &mut events);
+    let fragments = infallible(generate(scene, &mut events));
     let header = TraceHeader::new(scene.width, scene.height).with_scene(name);
     println!("{name}: {fragments} fragments, {} events", events.len());
     for level in LEVELS {
@@ -60,7 +62,9 @@ fn bench_scene(name: &str, scene: &SyntheticScene) {
             let mut bytes = Vec::new();
             let mut writer =
                 TraceWriter::with_options(&mut bytes, &header, options).expect("header");
-            events.iter().for_each(|e| writer.event(e));
+            for e in &events {
+                writer.event(e).expect("encode");
+            }
             writer.finish().expect("encode");
             bytes
         });
@@ -103,9 +107,9 @@ fn bench_builtin(name: &str) {
     let mut writer = TraceWriter::new(&mut bytes, &header).expect("header");
     let mut golden = GoldenModel::new(width, height);
     for line in &lines {
-        golden.execute(&line.command, &mut writer);
+        golden.execute(&line.command, &mut writer).unwrap();
     }
-    golden.finish(&mut writer);
+    golden.finish(&mut writer).unwrap();
     let summary = writer.finish().expect("encode");
     let (bulk_s, sum) = best_of(3, || {
         let mut sum = Checksum::default();

@@ -18,11 +18,13 @@ use std::time::Instant;
 struct CountFragments(u64);
 
 impl EventSink for CountFragments {
+    type Error = std::convert::Infallible;
     #[inline(always)]
-    fn event(&mut self, event: &Event) {
+    fn event(&mut self, event: &Event) -> Result<(), Self::Error> {
         if let Event::Fragment(_) = event {
             self.0 += 1;
         }
+        Ok(())
     }
 }
 
@@ -76,9 +78,9 @@ fn main() {
         let mut replay = CountFragments(0);
         let started = Instant::now();
         for command in &commands {
-            black_box(golden.execute(command, &mut replay));
+            black_box(golden.execute(command, &mut replay).unwrap());
         }
-        golden.finish(&mut replay);
+        golden.finish(&mut replay).unwrap();
         let replay_seconds = started.elapsed().as_secs_f64();
         assert_eq!(replay.0, sink.0, "the replay must see the same fragments");
         println!(

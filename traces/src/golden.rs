@@ -453,16 +453,33 @@ impl FunctionalModel {
     }
 }
 
-/// Receives the golden model's event stream (a trace writer, say).
+/// Receives an event stream (the golden model's, a trace reader's): a trace writer, a
+/// machine model. The first error stops the stream where it happened.
 pub trait EventSink {
-    fn event(&mut self, event: &Event);
+    /// What can go wrong taking an event ([`std::convert::Infallible`] for sinks that cannot
+    /// fail).
+    type Error;
+
+    fn event(&mut self, event: &Event) -> Result<(), Self::Error>;
 
     /// A span of fragments: by default its fragments one by one. Sinks that can take a whole
     /// row at once (the functional model) override this.
     #[inline]
-    fn span(&mut self, span: Span) {
-        span.fragments()
-            .for_each(|fragment| self.event(&Event::Fragment(fragment)));
+    fn span(&mut self, span: Span) -> Result<(), Self::Error> {
+        for fragment in span.fragments() {
+            self.event(&Event::Fragment(fragment))?;
+        }
+        Ok(())
+    }
+}
+
+/// The value of a result whose error cannot happen (a sink that cannot fail, as
+/// [`Discard`]).
+#[inline(always)]
+pub fn infallible<T>(result: Result<T, std::convert::Infallible>) -> T {
+    match result {
+        Ok(value) => value,
+        Err(never) => match never {},
     }
 }
 
@@ -470,13 +487,18 @@ pub trait EventSink {
 pub struct Discard;
 
 impl EventSink for Discard {
+    type Error = std::convert::Infallible;
     #[inline(always)]
-    fn event(&mut self, _: &Event) {}
+    fn event(&mut self, _: &Event) -> Result<(), Self::Error> {
+        Ok(())
+    }
 }
 
 impl EventSink for Vec<Event> {
-    fn event(&mut self, event: &Event) {
+    type Error = std::convert::Infallible;
+    fn event(&mut self, event: &Event) -> Result<(), Self::Error> {
         self.push(event.clone());
+        Ok(())
     }
 }
 
@@ -486,9 +508,28 @@ pub struct GoldenModel {
     rasterizer: Rasterizer,
 }
 
+/// The rasterizer's output into the functional model and the caller's sink. The rasterizer's
+/// loops cannot stop, so the sink's first error waits here, and nothing more reaches the
+/// sink after it ([`GoldenModel::execute`] returns it when the triangle is done).
 struct Forward<'a, S: EventSink> {
     functional: &'a mut FunctionalModel,
     sink: &'a mut S,
+    error: Option<S::Error>,
+}
+
+impl<S: EventSink> Forward<'_, S> {
+    #[inline(always)]
+    fn send(&mut self, event: &Event) {
+        if self.error.is_none() {
+            if let Err(error) = self.sink.event(event) {
+                self.error = Some(error);
+            }
+        }
+    }
+
+    fn into_result(self) -> Result<(), S::Error> {
+        self.error.map_or(Ok(()), Err)
+    }
 }
 
 impl<S: EventSink> RasterSink for Forward<'_, S> {
@@ -499,13 +540,13 @@ impl<S: EventSink> RasterSink for Forward<'_, S> {
 
     #[inline(always)]
     fn primitive(&mut self) {
-        self.sink.event(&Event::Primitive);
+        self.send(&Event::Primitive);
     }
 
     #[inline(always)]
     fn fragment(&mut self, fragment: Fragment) {
         self.functional.fragment(fragment);
-        self.sink.event(&Event::Fragment(fragment));
+        self.send(&Event::Fragment(fragment));
     }
 }
 
@@ -531,24 +572,31 @@ impl GoldenModel {
     }
 
     /// Execute one command (the scene's `viewport` is the constructor's business and is
-    /// ignored here), sending its events to `sink`. Returns the result of a query it ends.
+    /// ignored here), sending its events to `sink`. Returns the result of a query it ends, or
+    /// the sink's first error (the command's events after it are not sent).
     ///
     /// Consecutive `tri` commands form one draw, and the rasterizer may hold a draw's
     /// triangles back until it ends (see [`Rasterizer`]): any other command ends it first,
     /// and [`GoldenModel::finish`] ends the last one.
-    pub fn execute(&mut self, command: &Command, sink: &mut impl EventSink) -> Option<QueryResult> {
+    pub fn execute<S: EventSink>(
+        &mut self,
+        command: &Command,
+        sink: &mut S,
+    ) -> Result<Option<QueryResult>, S::Error> {
         if let Command::Tri(vertices) = command {
             let state = *self.functional.state();
             let mut forward = Forward {
                 functional: &mut self.functional,
                 sink,
+                error: None,
             };
             self.rasterizer.triangle(&state, vertices, &mut forward);
-            return None;
+            forward.into_result()?;
+            return Ok(None);
         }
-        self.finish(sink);
+        self.finish(sink)?;
         let event = match command {
-            Command::Viewport { .. } | Command::Tri(_) | Command::EndDraw => return None,
+            Command::Viewport { .. } | Command::Tri(_) | Command::EndDraw => return Ok(None),
             Command::Clear => Event::Clear,
             Command::DepthFunc(f) => Event::DepthFunc(*f),
             Command::DepthMask(b) => Event::DepthMask(*b),
@@ -558,22 +606,24 @@ impl GoldenModel {
             Command::Begin(spec) => Event::QueryBegin(spec.clone()),
             Command::End => Event::QueryEnd,
         };
-        sink.event(&event);
+        sink.event(&event)?;
         let result = self.functional.event(&event);
         if let Some(result) = &result {
-            sink.event(&Event::QueryResult(result.clone()));
+            sink.event(&Event::QueryResult(result.clone()))?;
         }
-        result
+        Ok(result)
     }
 
     /// End the current draw: every triangle given so far reaches `sink` (call it at the end
     /// of a scene, or before looking at the depth buffer).
-    pub fn finish(&mut self, sink: &mut impl EventSink) {
+    pub fn finish<S: EventSink>(&mut self, sink: &mut S) -> Result<(), S::Error> {
         let state = *self.functional.state();
         let mut forward = Forward {
             functional: &mut self.functional,
             sink,
+            error: None,
         };
         self.rasterizer.end_draw(&state, &mut forward);
+        forward.into_result()
     }
 }

@@ -125,26 +125,28 @@ impl<S: EventSink> Retile<S> {
 }
 
 impl<S: EventSink> EventSink for Retile<S> {
+    type Error = S::Error;
     #[inline]
-    fn event(&mut self, event: &Event) {
+    fn event(&mut self, event: &Event) -> Result<(), S::Error> {
         match event {
-            Event::QueryResult(_) => {}
+            Event::QueryResult(_) => Ok(()),
             Event::QueryBegin(spec) if spec.mode == QueryMode::Brief => {
                 let mut spec = spec.clone();
                 spec.tiles.clone_from(&self.tiles);
                 let event = Event::QueryBegin(spec);
                 self.golden.event(&event);
-                self.inner.event(&event);
+                self.inner.event(&event)
             }
             Event::Fragment(fragment) => {
                 self.golden.fragment(*fragment);
-                self.inner.event(event);
+                self.inner.event(event)
             }
             _ => {
                 let result = self.golden.event(event);
-                self.inner.event(event);
-                if let Some(result) = result {
-                    self.inner.event(&Event::QueryResult(result));
+                self.inner.event(event)?;
+                match result {
+                    Some(result) => self.inner.event(&Event::QueryResult(result)),
+                    None => Ok(()),
                 }
             }
         }

@@ -33,12 +33,14 @@ impl Fnv {
 }
 
 impl EventSink for Fnv {
-    fn event(&mut self, event: &Event) {
+    type Error = std::convert::Infallible;
+    fn event(&mut self, event: &Event) -> Result<(), Self::Error> {
         if let Event::Fragment(f) = event {
             self.bytes(&f.x.to_le_bytes());
             self.bytes(&f.y.to_le_bytes());
             self.bytes(&f.z.to_le_bytes());
         }
+        Ok(())
     }
 }
 
@@ -53,7 +55,7 @@ fn digests(text: &str, profile: RasterProfile) -> (u64, u64) {
     let mut golden = GoldenModel::with_profile(width, height, profile);
     let mut fragments = Fnv::new();
     for line in &lines {
-        golden.execute(&line.command, &mut fragments);
+        golden.execute(&line.command, &mut fragments).unwrap();
     }
     golden.finish(&mut fragments);
     (scene.0, fragments.0)

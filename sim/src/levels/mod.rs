@@ -140,40 +140,29 @@ impl LevelModel {
     }
 }
 
-/// Feeds a stream's events and spans to a [`LevelModel`] and keeps its first error: how a
-/// decoded trace reaches a model.
+/// Feeds a stream's events and spans to a [`LevelModel`]: how a decoded trace reaches a
+/// model. The model's first error stops the stream.
 pub struct LevelSink {
     pub model: LevelModel,
-    pub error: Option<SimError>,
 }
 
 impl LevelSink {
     pub fn new(model: LevelModel) -> LevelSink {
-        LevelSink { model, error: None }
-    }
-
-    fn keep(&mut self, result: Result<(), SimError>) {
-        if let Err(error) = result {
-            self.error = Some(error);
-        }
+        LevelSink { model }
     }
 }
 
 impl EventSink for LevelSink {
+    type Error = SimError;
+
     #[inline]
-    fn event(&mut self, event: &Event) {
-        if self.error.is_none() {
-            let result = self.model.event(event);
-            self.keep(result);
-        }
+    fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        self.model.event(event)
     }
 
     #[inline]
-    fn span(&mut self, span: Span) {
-        if self.error.is_none() {
-            let result = self.model.span(span);
-            self.keep(result);
-        }
+    fn span(&mut self, span: Span) -> Result<(), SimError> {
+        self.model.span(span)
     }
 }
 

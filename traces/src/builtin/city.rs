@@ -2,7 +2,7 @@
 //! the main street, drawn with occlusion-driven rendering (box test first, draw if visible).
 
 use crate::geometry::{look_at, perspective_gl, quad_tiles, screen_rect, Aabb, SplitMix64};
-use crate::golden::{Discard, GoldenModel};
+use crate::golden::{infallible, Discard, GoldenModel};
 use crate::query::{QueryMode, QueryResult, QuerySpec, BRIEF_RECORD_ENTRIES};
 use crate::scene::{format_command, Command};
 use crate::state::{DepthFunc, Rect};
@@ -105,7 +105,7 @@ impl Recorder {
     fn emit(&mut self, command: Command) -> Option<QueryResult> {
         self.text += &format_command(&command);
         self.text.push('\n');
-        self.golden.execute(&command, &mut Discard)
+        infallible(self.golden.execute(&command, &mut Discard))
     }
 
     fn emit_triangles(&mut self, view_projection: &Mat4, triangles: &[[Vec3; 3]]) {

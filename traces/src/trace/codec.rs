@@ -169,6 +169,19 @@ pub(crate) struct PayloadError {
     pub reason: String,
 }
 
+/// Why draining a payload into a sink stopped.
+#[derive(Debug)]
+pub(crate) enum DrainError<E> {
+    Payload(PayloadError),
+    Sink(E),
+}
+
+impl<E> From<PayloadError> for DrainError<E> {
+    fn from(error: PayloadError) -> DrainError<E> {
+        DrainError::Payload(error)
+    }
+}
+
 #[cold]
 fn bad(pos: usize, reason: impl Into<String>) -> PayloadError {
     PayloadError {
@@ -598,16 +611,18 @@ impl BlockDecoder {
         }
     }
 
-    /// Hand every remaining event of the payload to `sink`: the fast path.
-    pub(crate) fn drain(
+    /// Hand every remaining event of the payload to `sink`: the fast path. Stops at the
+    /// payload's first error or the sink's.
+    pub(crate) fn drain<S: EventSink>(
         &mut self,
         payload: &[u8],
         ctx: &mut DecodeContext,
-        sink: &mut impl EventSink,
-    ) -> Result<(), PayloadError> {
+        sink: &mut S,
+    ) -> Result<(), DrainError<S::Error>> {
         while self.span.remaining > 0 {
             let fragment = self.next_span_fragment(payload)?;
-            sink.event(&Event::Fragment(fragment));
+            sink.event(&Event::Fragment(fragment))
+                .map_err(DrainError::Sink)?;
         }
         while let Some(&t) = payload.get(self.pos) {
             // Spans are most records: skip the general dispatch for them.
@@ -619,7 +634,7 @@ impl BlockDecoder {
                 continue;
             }
             match self.record(payload, ctx)? {
-                Record::Event(event) => sink.event(&event),
+                Record::Event(event) => sink.event(&event).map_err(DrainError::Sink)?,
                 Record::Span => self.drain_span(payload, sink, self.span)?,
                 Record::Part => {}
             }
@@ -767,12 +782,12 @@ impl BlockDecoder {
 
     /// All fragments of `span`, whose header was just read (fast path).
     #[inline(always)]
-    fn drain_span(
+    fn drain_span<S: EventSink>(
         &mut self,
         payload: &[u8],
-        sink: &mut impl EventSink,
+        sink: &mut S,
         span: SpanProgress,
-    ) -> Result<(), PayloadError> {
+    ) -> Result<(), DrainError<S::Error>> {
         let SpanProgress {
             len,
             x,
@@ -783,12 +798,13 @@ impl BlockDecoder {
         } = span;
         let mut depths = std::mem::take(&mut self.span_depths);
         let (pos, depth) = span_depths(payload, self.pos, len, first, slope, &mut depths)?;
-        sink.span(Span {
+        let taken = sink.span(Span {
             x,
             y,
             depths: &depths,
         });
         self.span_depths = depths;
+        taken.map_err(DrainError::Sink)?;
         self.pos = pos;
         self.span.remaining = 0;
         self.predictor.end(first, depth, len);

@@ -53,3 +53,22 @@ pub enum TraceError {
     #[error("event {event}: {reason}")]
     InvalidEvent { event: u64, reason: String },
 }
+
+/// Why reading a trace into a sink stopped: the trace (with its byte offset) or the sink.
+#[derive(Debug, Error)]
+pub enum ReadError<E> {
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    #[error(transparent)]
+    Sink(E),
+}
+
+impl ReadError<std::convert::Infallible> {
+    /// The trace's error, when the sink cannot fail.
+    pub fn into_trace(self) -> TraceError {
+        match self {
+            ReadError::Trace(error) => error,
+            ReadError::Sink(never) => match never {},
+        }
+    }
+}

@@ -41,7 +41,7 @@ pub use block::{
     MAX_STORED_BYTES, MAX_SUMMARY_JSON_BYTES, TRAILER_BYTES,
 };
 pub use codec::MAX_EVENT_BYTES;
-pub use error::TraceError;
+pub use error::{ReadError, TraceError};
 pub use header::{QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary};
 pub use reader::TraceReader;
 pub use writer::{TraceWriter, WriterOptions};

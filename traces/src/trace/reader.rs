@@ -1,9 +1,9 @@
 //! The streaming trace reader: blocks in, events out, one block of memory.
 
 use super::block::*;
-use super::codec::{BlockDecoder, DecodeContext, PayloadError};
+use super::codec::{BlockDecoder, DecodeContext, DrainError, PayloadError};
 use super::header::{StreamTally, TraceHeader, TraceSummary};
-use super::TraceError;
+use super::{ReadError, TraceError};
 use crate::event::Event;
 use crate::golden::EventSink;
 use std::io::{Read, Seek, SeekFrom};
@@ -382,12 +382,14 @@ impl<R: Read> TraceReader<R> {
     }
 
     /// The fast path: hand the rest of the current block (or all of the next one) to `sink`.
-    /// Returns false at the end of the trace.
-    pub fn next_block(&mut self, sink: &mut impl EventSink) -> Result<bool, TraceError> {
+    /// Returns false at the end of the trace. A sink's error stops the reader, as a trace
+    /// error does.
+    pub fn next_block<S: EventSink>(&mut self, sink: &mut S) -> Result<bool, ReadError<S::Error>> {
         if self.at_end() {
             return Ok(false);
         }
-        self.guarded(|reader| {
+        let mut sink_error = None;
+        let result = self.guarded(|reader| {
             if !reader.in_block && !reader.load_block(true)? {
                 return Ok(false);
             }
@@ -397,19 +399,32 @@ impl<R: Read> TraceReader<R> {
                 tally: &mut reader.tally,
                 assembly: &mut reader.assembly,
             };
-            if let Err(e) = reader.decoder.drain(&reader.payload, &mut ctx, sink) {
-                return Err(reader.corrupt(e));
+            match reader.decoder.drain(&reader.payload, &mut ctx, sink) {
+                Ok(()) => {}
+                Err(DrainError::Payload(e)) => return Err(reader.corrupt(e)),
+                Err(DrainError::Sink(e)) => {
+                    sink_error = Some(e);
+                    return Ok(false);
+                }
             }
             debug_assert!(reader.decoder.is_done(&reader.payload));
             reader.end_block()?;
             Ok(true)
-        })
+        });
+        if let Some(error) = sink_error {
+            self.failed = true;
+            return Err(ReadError::Sink(error));
+        }
+        result.map_err(ReadError::Trace)
     }
 
     /// Hand every remaining event to `sink`; returns the (checked) summary.
-    pub fn read_into(&mut self, sink: &mut impl EventSink) -> Result<TraceSummary, TraceError> {
+    pub fn read_into<S: EventSink>(
+        &mut self,
+        sink: &mut S,
+    ) -> Result<TraceSummary, ReadError<S::Error>> {
         while self.next_block(sink)? {}
-        self.finished_summary()
+        self.finished_summary().map_err(ReadError::Trace)
     }
 
     /// Skip to the end without decoding the remaining blocks (their checksums are still

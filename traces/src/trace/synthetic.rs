@@ -45,10 +45,10 @@ impl Xorshift {
 }
 
 /// Send the scene's events to `sink` (a `Clear` first); returns the fragments sent.
-pub fn generate(scene: &SyntheticScene, sink: &mut impl EventSink) -> u64 {
+pub fn generate<S: EventSink>(scene: &SyntheticScene, sink: &mut S) -> Result<u64, S::Error> {
     let mut random = Xorshift(scene.seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1);
     let mut sent = 0;
-    sink.event(&Event::Clear);
+    sink.event(&Event::Clear)?;
     while sent < scene.fragments {
         let center = (
             random.range(0.0, scene.width as f64),
@@ -65,17 +65,21 @@ pub fn generate(scene: &SyntheticScene, sink: &mut impl EventSink) -> u64 {
                 random.range(0.05, 0.95),
             ]
         });
-        sent += rasterize(scene, &vertices, sink);
+        sent += rasterize(scene, &vertices, sink)?;
     }
-    sent
+    Ok(sent)
 }
 
 /// Counter-clockwise triangle (x, y, z) -> fragments at pixel centers inside, bottom row first.
-fn rasterize(scene: &SyntheticScene, v: &[[f64; 3]; 3], sink: &mut impl EventSink) -> u64 {
+fn rasterize<S: EventSink>(
+    scene: &SyntheticScene,
+    v: &[[f64; 3]; 3],
+    sink: &mut S,
+) -> Result<u64, S::Error> {
     let area =
         (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[2][0] - v[0][0]) * (v[1][1] - v[0][1]);
     if area.abs() < 1.0 {
-        return 0;
+        return Ok(0);
     }
     // Edge function of the edge from a to b at p, positive inside for either winding.
     let edge = |a: &[f64; 3], b: &[f64; 3], px: f64, py: f64| {
@@ -91,7 +95,7 @@ fn rasterize(scene: &SyntheticScene, v: &[[f64; 3]; 3], sink: &mut impl EventSin
         clamp_y(v.iter().map(|p| p[1]).fold(f64::MAX, f64::min)),
         clamp_y(v.iter().map(|p| p[1]).fold(f64::MIN, f64::max)),
     );
-    sink.event(&Event::Primitive);
+    sink.event(&Event::Primitive)?;
     let mut sent = 0;
     for y in y0..=y1 {
         let py = y as f64 + 0.5;
@@ -109,9 +113,9 @@ fn rasterize(scene: &SyntheticScene, v: &[[f64; 3]; 3], sink: &mut impl EventSin
                 x: x as u16,
                 y: y as u16,
                 z,
-            }));
+            }))?;
             sent += 1;
         }
     }
-    sent
+    Ok(sent)
 }

@@ -2,7 +2,7 @@ use super::block::{BlockHeader, BLOCK_HEADER_BYTES};
 use super::synthetic::{generate, SyntheticScene};
 use super::*;
 use crate::event::{Event, Fragment, DEPTH_ONE};
-use crate::golden::EventSink;
+use crate::golden::{infallible, EventSink};
 use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult};
 use crate::state::{DepthFunc, Rect};
 use proptest::prelude::*;
@@ -49,7 +49,9 @@ fn read_one_by_one(bytes: &[u8]) -> Result<(Vec<Event>, TraceSummary), TraceErro
 fn read_bulk(bytes: &[u8]) -> Result<(Vec<Event>, TraceSummary), TraceError> {
     let mut reader = TraceReader::new(bytes)?;
     let mut events = Vec::new();
-    let summary = reader.read_into(&mut events)?;
+    let summary = reader
+        .read_into(&mut events)
+        .map_err(ReadError::into_trace)?;
     Ok((events, summary))
 }
 
@@ -227,7 +229,7 @@ fn same_events_give_the_same_bytes() {
     let encode = || {
         let mut out = Vec::new();
         let mut writer = TraceWriter::new(&mut out, &header).unwrap();
-        generate(&scene, &mut writer);
+        generate(&scene, &mut writer).unwrap();
         writer.finish().unwrap();
         out
     };
@@ -370,10 +372,9 @@ fn the_writer_refuses_malformed_streams() {
     ];
     for (events, expected) in cases {
         let mut writer = TraceWriter::new(Vec::new(), &header).unwrap();
-        for event in events {
-            writer.event(event);
-        }
-        let error = writer.finish().err().unwrap().to_string();
+        // The first bad event's error comes back from that event.
+        let first = events.iter().find_map(|event| writer.event(event).err());
+        let error = first.or(writer.finish().err()).unwrap().to_string();
         assert!(error.contains(expected), "{error}");
     }
 }
@@ -402,7 +403,7 @@ fn small_triangles(fragments: u64) -> SyntheticScene {
 
 fn bytes_per_fragment(scene: &SyntheticScene) -> (f64, Vec<u8>) {
     let mut events = Vec::new();
-    let fragments = generate(scene, &mut events);
+    let fragments = infallible(generate(scene, &mut events));
     let (bytes, summary) = write(
         &TraceHeader::new(scene.width, scene.height),
         WriterOptions::default(),

@@ -65,8 +65,6 @@ pub struct TraceWriter<W: Write> {
     blocks: u64,
     payload_bytes: u64,
     stored_bytes: u64,
-    /// The first error met through the `EventSink` interface.
-    error: Option<TraceError>,
     failed: bool,
 }
 
@@ -154,7 +152,6 @@ impl<W: Write> TraceWriter<W> {
             blocks: 0,
             payload_bytes: 0,
             stored_bytes: 0,
-            error: None,
             failed: false,
         })
     }
@@ -320,9 +317,6 @@ impl<W: Write> TraceWriter<W> {
 
     /// Write the last block, the summary and the trailer, and flush.
     fn finish_stream(&mut self) -> Result<TraceSummary, TraceError> {
-        if let Some(error) = self.error.take() {
-            return Err(error);
-        }
         if self.failed {
             return Err(self.invalid("the writer stopped at an earlier error".to_owned()));
         }
@@ -392,11 +386,10 @@ impl<W: Write + std::io::Seek> TraceWriter<W> {
 }
 
 impl<W: Write> EventSink for TraceWriter<W> {
+    type Error = TraceError;
     #[inline]
-    fn event(&mut self, event: &Event) {
-        if let Err(error) = self.write_event(event) {
-            self.error.get_or_insert(error);
-        }
+    fn event(&mut self, event: &Event) -> Result<(), TraceError> {
+        self.write_event(event)
     }
 }
 
@@ -411,7 +404,9 @@ mod tests {
         let header = TraceHeader::new(8, 8);
         let mut file = std::io::Cursor::new(Vec::new());
         let mut writer = TraceWriter::new(&mut file, &header).unwrap();
-        writer.event(&Event::Fragment(Fragment { x: 1, y: 1, z: 5 }));
+        writer
+            .event(&Event::Fragment(Fragment { x: 1, y: 1, z: 5 }))
+            .unwrap();
         writer.finish_seekable().unwrap();
         let mut bytes = file.into_inner();
         let honest = TraceReader::new(&bytes[..]).unwrap().header().clone();

@@ -52,7 +52,7 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     walk: &Walk,
     sink: &mut S,
     observer: &mut O,
-) -> WorkloadStats {
+) -> Result<WorkloadStats, S::Error> {
     let mut renderer = Renderer::new(walk.width, walk.height, walk.raster, sink, observer);
     let mut hierarchical = HierarchicalDriver::new(options, scene.bvh.nodes.len());
     let mut grid = GridDriver::new(options, walk.width, walk.height);
@@ -63,17 +63,19 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     for frame in 0..walk.frames {
         let started = Instant::now();
         let view = scene.frame_view(frame, walk);
-        renderer.start_frame();
+        renderer.start_frame()?;
         match options.kind {
-            DriverKind::Frustum => frustum_frame(scene, &view, &mut renderer),
-            DriverKind::Hierarchical => hierarchical.frame(frame, scene, &view, &mut renderer),
-            DriverKind::LazyGrid | DriverKind::BusyGrid => grid.frame(scene, &view, &mut renderer),
+            DriverKind::Frustum => frustum_frame(scene, &view, &mut renderer)?,
+            DriverKind::Hierarchical => hierarchical.frame(frame, scene, &view, &mut renderer)?,
+            DriverKind::LazyGrid | DriverKind::BusyGrid => {
+                grid.frame(scene, &view, &mut renderer)?
+            }
         }
         let (frame_stats, timing) = renderer.finish_frame(started);
         stats.frames.push(frame_stats);
         stats.timing.push(timing);
     }
-    stats
+    Ok(stats)
 }
 
 /// Draw every leaf whose box meets the view frustum, front to back.
@@ -81,10 +83,10 @@ fn frustum_frame<S: EventSink, O: CommandObserver>(
     scene: &WorkloadScene,
     view: &FrameView,
     renderer: &mut Renderer<S, O>,
-) {
+) -> Result<(), S::Error> {
     let bvh = &scene.bvh;
     if bvh.nodes.is_empty() {
-        return;
+        return Ok(());
     }
     let frustum = Frustum::new(&view.view_projection);
     let mut queue = FrontToBack::new(view.eye);
@@ -102,7 +104,7 @@ fn frustum_frame<S: EventSink, O: CommandObserver>(
                         object,
                         &scene.objects[object as usize],
                         &view.view_projection,
-                    );
+                    )?;
                 }
             }
             NodeContent::Inner { children } => {
@@ -112,4 +114,5 @@ fn frustum_frame<S: EventSink, O: CommandObserver>(
             }
         }
     }
+    Ok(())
 }

@@ -169,10 +169,10 @@ impl GridDriver {
         rect: Rect,
         z_lower: u32,
         renderer: &mut Renderer<S, O>,
-    ) -> bool {
+    ) -> Result<bool, S::Error> {
         // A probe needs room in front of the box for its slack.
         if z_lower <= 2 * PROBE_SLACK + 1 {
-            return true;
+            return Ok(true);
         }
         let mut refreshed = Vec::new();
         let mut probes = Vec::new();
@@ -180,7 +180,7 @@ impl GridDriver {
             let cell = self.cells[index];
             match self.verdict(&cell, cell_rect, rect, z_lower) {
                 CellVerdict::Hidden => {}
-                CellVerdict::Visible => return true,
+                CellVerdict::Visible => return Ok(true),
                 CellVerdict::Refresh(depth) => {
                     refreshed.push((index, depth, probes.len()));
                     probes.push((cell_rect, depth));
@@ -191,10 +191,10 @@ impl GridDriver {
             }
         }
         if probes.is_empty() {
-            return false;
+            return Ok(false);
         }
-        let Some(result) = renderer.depth_probe(&probes) else {
-            return true;
+        let Some(result) = renderer.depth_probe(&probes)? else {
+            return Ok(true);
         };
         for (index, depth, tile) in refreshed {
             self.learn(
@@ -204,7 +204,7 @@ impl GridDriver {
                 &mut renderer.stats,
             );
         }
-        result.tiles.iter().any(|tile| tile.nohc > 0)
+        Ok(result.tiles.iter().any(|tile| tile.nohc > 0))
     }
 
     /// Fold a whole-cell probe at `depth` into the cell's bounds. Probe fragments lie within
@@ -233,7 +233,7 @@ impl GridDriver {
         rect: Rect,
         z_upper: u32,
         renderer: &mut Renderer<S, O>,
-    ) {
+    ) -> Result<(), S::Error> {
         let under: Vec<(usize, Rect)> = self.cells_under(rect).collect();
         for &(index, _) in &under {
             let cell = &mut self.cells[index];
@@ -243,7 +243,7 @@ impl GridDriver {
             cell.pending = cell.pending.max(z_upper);
         }
         if !self.busy {
-            return;
+            return Ok(());
         }
         let mut refreshed = Vec::new();
         let mut probes = Vec::new();
@@ -259,13 +259,14 @@ impl GridDriver {
             }
         }
         if probes.is_empty() {
-            return;
+            return Ok(());
         }
-        if let Some(result) = renderer.depth_probe(&probes) {
+        if let Some(result) = renderer.depth_probe(&probes)? {
             for (&(index, depth), tile) in refreshed.iter().zip(&result.tiles) {
                 self.learn(index, depth, tile.nohc > 0, &mut renderer.stats);
             }
         }
+        Ok(())
     }
 
     /// One frame: the paper's figure 4, front to back through the hierarchy.
@@ -274,11 +275,11 @@ impl GridDriver {
         scene: &WorkloadScene,
         view: &FrameView,
         renderer: &mut Renderer<S, O>,
-    ) {
+    ) -> Result<(), S::Error> {
         self.cells.fill(CLEARED);
         let bvh = &scene.bvh;
         if bvh.nodes.is_empty() {
-            return;
+            return Ok(());
         }
         let viewport = Rect::new(0, 0, self.width, self.height);
         let frustum = Frustum::new(&view.view_projection);
@@ -301,7 +302,7 @@ impl GridDriver {
                         z_lower,
                         z_upper,
                     } => {
-                        if !self.potentially_visible(rect, z_lower, renderer) {
+                        if !self.potentially_visible(rect, z_lower, renderer)? {
                             continue;
                         }
                         (rect, z_upper)
@@ -310,9 +311,9 @@ impl GridDriver {
             match node.content {
                 NodeContent::Leaf { first, count } => {
                     for &object in bvh.leaf_objects(first, count) {
-                        renderer.draw_object(object, &scene.objects[object as usize], vp);
+                        renderer.draw_object(object, &scene.objects[object as usize], vp)?;
                     }
-                    self.after_draw(rect, z_upper, renderer);
+                    self.after_draw(rect, z_upper, renderer)?;
                 }
                 NodeContent::Inner { children } => {
                     for child in children {
@@ -321,6 +322,7 @@ impl GridDriver {
                 }
             }
         }
+        Ok(())
     }
 }
 

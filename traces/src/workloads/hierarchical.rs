@@ -72,10 +72,10 @@ impl HierarchicalDriver {
         scene: &WorkloadScene,
         view: &FrameView,
         renderer: &mut Renderer<S, O>,
-    ) {
+    ) -> Result<(), S::Error> {
         let bvh = &scene.bvh;
         if bvh.nodes.is_empty() {
-            return;
+            return Ok(());
         }
         let frustum = Frustum::new(&view.view_projection);
         let mut queue: FrontToBack<Option<ParentTiles>> = FrontToBack::new(view.eye);
@@ -103,7 +103,7 @@ impl HierarchicalDriver {
                             .triangles()
                             .into_iter()
                             .map(|t| t.map(|p| to_clip(vp, p)));
-                        match renderer.brief_query(tiles.clone(), triangles) {
+                        match renderer.brief_query(tiles.clone(), triangles)? {
                             None => (true, None),
                             Some(result) => {
                                 let root = &result.tiles[0];
@@ -129,7 +129,7 @@ impl HierarchicalDriver {
             match node.content {
                 NodeContent::Leaf { first, count } => {
                     for &object in bvh.leaf_objects(first, count) {
-                        renderer.draw_object(object, &scene.objects[object as usize], vp);
+                        renderer.draw_object(object, &scene.objects[object as usize], vp)?;
                     }
                 }
                 NodeContent::Inner { children } => {
@@ -143,6 +143,7 @@ impl HierarchicalDriver {
                 }
             }
         }
+        Ok(())
     }
 
     /// The verdict to act on: this frame's answer, or with a delay the previous frame's

@@ -474,29 +474,48 @@ pub struct WorkloadStats {
     pub scene_triangles: u64,
 }
 
+/// Why a walkthrough stopped: its options, or the sink its events went to.
+#[derive(Debug, thiserror::Error)]
+pub enum GenerateError<E> {
+    #[error(transparent)]
+    Workload(#[from] WorkloadError),
+    #[error(transparent)]
+    Sink(E),
+}
+
+impl GenerateError<std::convert::Infallible> {
+    /// The options' error, when the sink cannot fail.
+    pub fn into_workload(self) -> WorkloadError {
+        match self {
+            GenerateError::Workload(error) => error,
+            GenerateError::Sink(never) => match never {},
+        }
+    }
+}
+
 /// Walk `scene` with `driver`, sending the golden model's events to `sink`.
-pub fn generate(
+pub fn generate<S: EventSink>(
     scene: &WorkloadScene,
     driver: &DriverOptions,
     walk: &Walk,
-    sink: &mut impl EventSink,
-) -> Result<WorkloadStats, WorkloadError> {
+    sink: &mut S,
+) -> Result<WorkloadStats, GenerateError<S::Error>> {
     generate_observed(scene, driver, walk, sink, &mut ())
 }
 
 /// [`generate`], also showing every scene command to `commands` as it is executed (to
 /// replay the same frames through `occsim count`, or to write them as scene text).
-pub fn generate_observed(
+pub fn generate_observed<S: EventSink>(
     scene: &WorkloadScene,
     driver: &DriverOptions,
     walk: &Walk,
-    sink: &mut impl EventSink,
+    sink: &mut S,
     commands: &mut impl CommandObserver,
-) -> Result<WorkloadStats, WorkloadError> {
+) -> Result<WorkloadStats, GenerateError<S::Error>> {
     walk.validate()?;
     driver.validate()?;
     check_grid_size(driver, walk)?;
-    Ok(drivers::run(scene, driver, walk, sink, commands))
+    drivers::run(scene, driver, walk, sink, commands).map_err(GenerateError::Sink)
 }
 
 /// One probe query may name every cell, so a grid may hold at most `MAX_TILES` cells.

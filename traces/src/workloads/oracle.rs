@@ -3,7 +3,7 @@
 
 use super::{Walk, WorkloadError, WorkloadScene};
 use crate::geometry::to_clip;
-use crate::golden::{Discard, GoldenModel};
+use crate::golden::{infallible, Discard, GoldenModel};
 use crate::query::{QueryMode, QuerySpec, BRIEF_RECORD_ENTRIES};
 use crate::scene::Command;
 use crate::state::{DepthFunc, Rect};
@@ -27,23 +27,23 @@ pub fn full_render_visible_pixels(
         Command::DepthFunc(DepthFunc::Lequal),
         Command::DepthMask(true),
     ] {
-        golden.execute(&command, &mut Discard);
+        infallible(golden.execute(&command, &mut Discard));
     }
     // Each object a draw of its own, as the drivers draw them.
     let draw = |golden: &mut GoldenModel, object: usize| {
         for triangle in &scene.objects[object].triangles {
             let clip = triangle.map(|p| to_clip(&view.view_projection, p));
-            golden.execute(&Command::Tri(clip), &mut Discard);
+            infallible(golden.execute(&Command::Tri(clip), &mut Discard));
         }
-        golden.execute(&Command::EndDraw, &mut Discard);
+        infallible(golden.execute(&Command::EndDraw, &mut Discard));
     };
     for object in 0..scene.objects.len() {
         draw(&mut golden, object);
     }
-    golden.execute(&Command::DepthMask(false), &mut Discard);
+    infallible(golden.execute(&Command::DepthMask(false), &mut Discard));
     let mut visible = Vec::with_capacity(scene.objects.len());
     for object in 0..scene.objects.len() {
-        golden.execute(
+        infallible(golden.execute(
             &Command::Begin(QuerySpec {
                 id: object as u32,
                 mode: QueryMode::Samples,
@@ -51,9 +51,9 @@ pub fn full_render_visible_pixels(
                 tiles: vec![Rect::new(0, 0, walk.width, walk.height)],
             }),
             &mut Discard,
-        );
+        ));
         draw(&mut golden, object);
-        let result = golden.execute(&Command::End, &mut Discard);
+        let result = infallible(golden.execute(&Command::End, &mut Discard));
         visible.push(result.map_or(0, |result| result.value()));
     }
     Ok(visible)

@@ -37,12 +37,13 @@ struct CountingSink<'s, S> {
 }
 
 impl<S: EventSink> EventSink for CountingSink<'_, S> {
+    type Error = S::Error;
     #[inline(always)]
-    fn event(&mut self, event: &Event) {
+    fn event(&mut self, event: &Event) -> Result<(), S::Error> {
         if let Event::Fragment(_) = event {
             self.fragments += 1;
         }
-        self.inner.event(event);
+        self.inner.event(event)
     }
 }
 
@@ -80,14 +81,14 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         }
     }
 
-    fn execute(&mut self, command: &Command) -> Option<QueryResult> {
+    fn execute(&mut self, command: &Command) -> Result<Option<QueryResult>, S::Error> {
         self.observer.command(command);
         self.golden.execute(command, &mut self.sink)
     }
 
     /// Clear, then state every frame relies on, so each frame stands alone: back faces
     /// culled (box counts need it), depth test LEQUAL with writes.
-    pub(crate) fn start_frame(&mut self) {
+    pub(crate) fn start_frame(&mut self) -> Result<(), S::Error> {
         self.stats = FrameStats::default();
         self.golden_time = Duration::ZERO;
         for command in [
@@ -98,8 +99,9 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
             Command::DepthMask(true),
             Command::Scissor(None),
         ] {
-            self.execute(&command);
+            self.execute(&command)?;
         }
+        Ok(())
     }
 
     /// The frame's statistics and the time spent in the golden model.
@@ -112,19 +114,25 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
     }
 
     /// Draw an object's triangles.
-    pub(crate) fn draw_object(&mut self, index: u32, object: &SceneObject, view_projection: &Mat4) {
+    pub(crate) fn draw_object(
+        &mut self,
+        index: u32,
+        object: &SceneObject,
+        view_projection: &Mat4,
+    ) -> Result<(), S::Error> {
         let started = Instant::now();
         let fragments_before = self.sink.fragments;
         for triangle in &object.triangles {
             let clip = triangle.map(|p| to_clip(view_projection, p));
-            self.execute(&Command::Tri(clip));
+            self.execute(&Command::Tri(clip))?;
         }
         // An object is a draw of its own, as an application's glDrawArrays per object.
-        self.execute(&Command::EndDraw);
+        self.execute(&Command::EndDraw)?;
         self.stats.draw_fragments += self.sink.fragments - fragments_before;
         self.stats.triangles_drawn += object.triangles.len() as u64;
         self.stats.objects_drawn.push(index);
         self.golden_time += started.elapsed();
+        Ok(())
     }
 
     /// One brief occlusion query over `tiles` (non-empty, inside the viewport) drawing
@@ -133,7 +141,7 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         &mut self,
         tiles: Vec<Rect>,
         triangles: impl IntoIterator<Item = [[f32; 4]; 3]>,
-    ) -> Option<QueryResult> {
+    ) -> Result<Option<QueryResult>, S::Error> {
         let started = Instant::now();
         let fragments_before = self.sink.fragments;
         self.stats.queries += 1;
@@ -145,21 +153,24 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
             mode: QueryMode::Brief,
             buffer_entries: BRIEF_RECORD_ENTRIES,
             tiles,
-        }));
+        }))?;
         for triangle in triangles {
             self.stats.query_triangles += 1;
-            self.execute(&Command::Tri(triangle));
+            self.execute(&Command::Tri(triangle))?;
         }
-        let result = self.execute(&Command::End);
+        let result = self.execute(&Command::End)?;
         self.stats.query_fragments += self.sink.fragments - fragments_before;
         self.golden_time += started.elapsed();
-        result
+        Ok(result)
     }
 
     /// A brief query drawing, over each tile, a screen-aligned quad at that tile's window
     /// depth (24-bit units, 1 to 2^24 - 2). With LEQUAL a tile has hits exactly where the
     /// stored depth is at least the quad's: the query measures the depth buffer.
-    pub(crate) fn depth_probe(&mut self, tiles: &[(Rect, u32)]) -> Option<QueryResult> {
+    pub(crate) fn depth_probe(
+        &mut self,
+        tiles: &[(Rect, u32)],
+    ) -> Result<Option<QueryResult>, S::Error> {
         let quads: Vec<[[f32; 4]; 3]> = tiles
             .iter()
             .flat_map(|&(tile, depth)| screen_quad(tile, depth, self.width, self.height))
@@ -185,7 +196,7 @@ fn screen_quad(tile: Rect, depth: u32, width: u32, height: u32) -> [[[f32; 4]; 3
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::golden::Discard;
+    use crate::golden::{infallible, Discard};
 
     /// A probe at depth p over a screen filled at depth d: hits everywhere when p is well in
     /// front of d, nowhere when well behind: the slack the grid allows for rounding holds.
@@ -198,12 +209,12 @@ mod tests {
             let mut observer = ();
             let mut renderer =
                 Renderer::new(37, 23, RasterProfile::default(), &mut sink, &mut observer);
-            renderer.start_frame();
+            infallible(renderer.start_frame());
             for triangle in screen_quad(tile, filled, 37, 23) {
-                renderer.execute(&Command::Tri(triangle));
+                infallible(renderer.execute(&Command::Tri(triangle)));
             }
             let probe = |renderer: &mut Renderer<Discard, ()>, depth: u32| {
-                let result = renderer.depth_probe(&[(tile, depth)]).expect("an answer");
+                let result = infallible(renderer.depth_probe(&[(tile, depth)])).expect("an answer");
                 (result.tiles[0].nohc, result.tiles[0].phc)
             };
             assert_eq!(
