@@ -115,3 +115,40 @@ pub fn first_difference(
     }
     None
 }
+
+/// The first difference between a merged result and the golden one, as [`first_difference`]
+/// but with hit lists compared as multisets when no buffer overflowed, and on overflow only
+/// by their length and by every kept hit lying in the tile's box (see the module docs).
+pub fn merged_difference(
+    simulated: &QueryResult,
+    golden: &QueryResult,
+    counter_max: u64,
+) -> Option<(String, String, String)> {
+    let mut simulated = simulated.clone();
+    let mut golden = golden.clone();
+    for (t, (s, g)) in simulated
+        .tiles
+        .iter_mut()
+        .zip(golden.tiles.iter_mut())
+        .enumerate()
+    {
+        if s.overflowed && g.overflowed && s.hits.len() == g.hits.len() {
+            let outside = s.hits.iter().find(|&&(x, y)| {
+                !(s.xmin..=s.xmax).contains(&(x as u32)) || !(s.ymin..=s.ymax).contains(&(y as u32))
+            });
+            if let Some(hit) = outside {
+                return Some((
+                    format!("tile {t} hit outside the box"),
+                    format!("{hit:?}"),
+                    "none".into(),
+                ));
+            }
+            s.hits.clear();
+            g.hits.clear();
+        } else {
+            s.hits.sort_unstable();
+            g.hits.sort_unstable();
+        }
+    }
+    first_difference(&simulated, &golden, counter_max)
+}

@@ -75,6 +75,41 @@ pub struct Summary {
     pub latency_max_cycles: u64,
 }
 
+/// What a machine's run amounts to, for [`Summary::of`].
+pub struct RunTotals<'q> {
+    pub cycles: u64,
+    pub clock_mhz: f64,
+    pub fragments: u64,
+    pub primitives: u64,
+    pub checked_queries: u64,
+    pub queries: &'q [QueryReport],
+}
+
+impl Summary {
+    /// The summary of a run: rates from the totals, latency percentiles from the queries.
+    /// The one definition both machines report.
+    pub fn of(run: RunTotals<'_>) -> Summary {
+        let mut latencies: Vec<u64> = run.queries.iter().map(|q| q.latency_cycles).collect();
+        latencies.sort_unstable();
+        Summary {
+            cycles: run.cycles,
+            simulated_seconds: run.cycles as f64 / (run.clock_mhz * 1e6),
+            fragments: run.fragments,
+            primitives: run.primitives,
+            fragments_per_cycle: if run.cycles == 0 {
+                0.0
+            } else {
+                run.fragments as f64 / run.cycles as f64
+            },
+            queries: run.queries.len() as u64,
+            checked_queries: run.checked_queries,
+            latency_p50_cycles: nearest_rank(&latencies, 50),
+            latency_p95_cycles: nearest_rank(&latencies, 95),
+            latency_max_cycles: latencies.last().copied().unwrap_or(0),
+        }
+    }
+}
+
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct StageReport {
     pub name: String,

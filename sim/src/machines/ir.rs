@@ -66,12 +66,12 @@ use crate::blocks::occu_stage::OccuModel;
 use crate::effects::Effects;
 use crate::error::check_spec;
 use crate::error::SimError;
-use crate::golden_check::first_difference;
+use crate::golden_check::merged_difference;
 use crate::golden_check::GoldenCheck;
 use crate::machines::builder::MachineBuilder;
 use crate::machines::o2::tile_report;
 use crate::report::{
-    nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
+    percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, RunTotals, StageReport,
     Summary, UnitSummary,
 };
 use occsim_traces::golden::DepthBuffer;
@@ -382,29 +382,20 @@ impl IrMachine {
             ),
             UnitSummary::of("occlusion_unit", occu.iter().map(|o| o.busy_cycles), cycles),
         ];
-        let mut latencies: Vec<u64> = self.queries.iter().map(|q| q.latency_cycles).collect();
-        latencies.sort_unstable();
+        let summary = Summary::of(RunTotals {
+            cycles,
+            clock_mhz: self.arch.clock_mhz,
+            fragments,
+            primitives: self.primitives,
+            checked_queries: self.golden.checked(),
+            queries: &self.queries,
+        });
         Ok(Report {
             machine: "ir".to_string(),
             arch: self.arch_entries,
             viewport_width: self.width,
             viewport_height: self.height,
-            summary: Summary {
-                cycles,
-                simulated_seconds: cycles as f64 / (self.arch.clock_mhz * 1e6),
-                fragments,
-                primitives: self.primitives,
-                fragments_per_cycle: if cycles == 0 {
-                    0.0
-                } else {
-                    fragments as f64 / cycles as f64
-                },
-                queries: self.queries.len() as u64,
-                checked_queries: self.golden.checked(),
-                latency_p50_cycles: nearest_rank(&latencies, 50),
-                latency_p95_cycles: nearest_rank(&latencies, 95),
-                latency_max_cycles: latencies.last().copied().unwrap_or(0),
-            },
+            summary,
             stages,
             memory_port: PortReport {
                 occu_words: sum_occu(&|o| o.words_written),
@@ -468,41 +459,4 @@ fn finish_verbose(spec: &QuerySpec, tiles: &mut [TileResult]) -> u32 {
         tile.hits.truncate(room.saturating_sub(1));
     }
     overflowed
-}
-
-/// The first difference between a merged result and the golden one, as `golden_check::first_difference`
-/// but with hit lists compared as multisets when no buffer overflowed, and on overflow only
-/// by their length and by every kept hit lying in the tile's box (see the module docs).
-pub fn merged_difference(
-    simulated: &QueryResult,
-    golden: &QueryResult,
-    counter_max: u64,
-) -> Option<(String, String, String)> {
-    let mut simulated = simulated.clone();
-    let mut golden = golden.clone();
-    for (t, (s, g)) in simulated
-        .tiles
-        .iter_mut()
-        .zip(golden.tiles.iter_mut())
-        .enumerate()
-    {
-        if s.overflowed && g.overflowed && s.hits.len() == g.hits.len() {
-            let outside = s.hits.iter().find(|&&(x, y)| {
-                !(s.xmin..=s.xmax).contains(&(x as u32)) || !(s.ymin..=s.ymax).contains(&(y as u32))
-            });
-            if let Some(hit) = outside {
-                return Some((
-                    format!("tile {t} hit outside the box"),
-                    format!("{hit:?}"),
-                    "none".into(),
-                ));
-            }
-            s.hits.clear();
-            g.hits.clear();
-        } else {
-            s.hits.sort_unstable();
-            g.hits.sort_unstable();
-        }
-    }
-    first_difference(&simulated, &golden, counter_max)
 }

@@ -53,7 +53,7 @@ use crate::error::{check_spec, SimError};
 use crate::golden_check::{first_difference, GoldenCheck};
 use crate::machines::builder::MachineBuilder;
 use crate::report::{
-    nearest_rank, percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, StageReport,
+    percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, RunTotals, StageReport,
     Summary, TileReport,
 };
 use occsim_traces::golden::DepthBuffer;
@@ -434,30 +434,20 @@ impl O2Machine {
                 busy_percent: percent(busy_cycles, cycles),
             })
             .collect();
-        let mut latencies: Vec<u64> = self.queries.iter().map(|q| q.latency_cycles).collect();
-        latencies.sort_unstable();
-        let fragments = self.input.fragments;
+        let summary = Summary::of(RunTotals {
+            cycles,
+            clock_mhz: self.arch.clock_mhz,
+            fragments: self.input.fragments,
+            primitives: self.input.primitives,
+            checked_queries: self.golden.checked(),
+            queries: &self.queries,
+        });
         Ok(Report {
             machine: "o2".to_string(),
             arch: self.arch_entries,
             viewport_width: self.width,
             viewport_height: self.height,
-            summary: Summary {
-                cycles,
-                simulated_seconds: cycles as f64 / (self.arch.clock_mhz * 1e6),
-                fragments,
-                primitives: self.input.primitives,
-                fragments_per_cycle: if cycles == 0 {
-                    0.0
-                } else {
-                    fragments as f64 / cycles as f64
-                },
-                queries: self.queries.len() as u64,
-                checked_queries: self.golden.checked(),
-                latency_p50_cycles: nearest_rank(&latencies, 50),
-                latency_p95_cycles: nearest_rank(&latencies, 95),
-                latency_max_cycles: latencies.last().copied().unwrap_or(0),
-            },
+            summary,
             stages,
             memory_port: PortReport {
                 bits_per_cycle: port_width,
