@@ -302,7 +302,6 @@ fn the_rasterizer_profile_is_chosen_by_name_and_recorded_in_the_trace() {
             serde_json::from_str(&stdout_of(&["trace", "info", trace, "--json"])).unwrap();
         assert_eq!(info["header"]["raster"], profile, "{info}");
     }
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
@@ -343,5 +342,4 @@ fn workload_option_errors_name_their_flags() {
     ]);
     assert!(error.contains("--camera-from/--camera-to"), "{error}");
     assert!(!std::path::Path::new(out).exists());
-    let _ = std::fs::remove_dir_all(&dir);
 }

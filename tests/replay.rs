@@ -118,7 +118,8 @@ fn a_wrong_golden_answer_fails_the_replay_naming_the_query() {
         writer.write_event(&event).unwrap();
     }
     writer.finish().unwrap();
-    let path = std::env::temp_dir().join(format!("occsim-wrong-{}.occt", std::process::id()));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("wrong.occt");
     std::fs::write(&path, &bytes).unwrap();
     let output = Process::new(env!("CARGO_BIN_EXE_occsim"))
         .args(["replay", path.to_str().unwrap(), "--arch", "o2"])
@@ -133,7 +134,8 @@ fn a_wrong_golden_answer_fails_the_replay_naming_the_query() {
 
 #[test]
 fn replay_json_has_the_documented_fields() {
-    let path = std::env::temp_dir().join(format!("occsim-json-{}.occt", std::process::id()));
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("json.occt");
     let bytes = builtin_trace("hardcases");
     let trace_fragments = TraceReader::new(&bytes[..])
         .unwrap()

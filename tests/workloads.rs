@@ -7,8 +7,8 @@ use support::cli::stdout_of as occsim;
 
 #[test]
 fn every_driver_makes_a_trace_that_replays_against_its_golden_answers() {
-    let dir = std::env::temp_dir().join(format!("occsim-workloads-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let dir = dir.path();
     for (scene, driver) in [
         ("city", "frustum"),
         ("city", "hierarchical"),

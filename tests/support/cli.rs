@@ -1,6 +1,6 @@
 //! Running the `occsim` binary from end-to-end tests.
 
-use std::path::PathBuf;
+use std::path::Path;
 use std::process::{Command, Output};
 
 /// Run `occsim` with `args`.
@@ -29,16 +29,34 @@ pub fn stderr_of_failure(args: &[&str]) -> String {
     String::from_utf8(output.stderr).expect("utf-8 output")
 }
 
-/// A fresh, empty scratch directory for one test (tests run in parallel, processes too).
-pub fn scratch_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("occsim-test-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("scratch directory");
-    dir
+/// A fresh, empty scratch directory for one test, removed when dropped, whether the test
+/// passes or panics (a `tempfile::TempDir`; tests run in parallel, processes too).
+pub struct Scratch(tempfile::TempDir);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+impl AsRef<Path> for Scratch {
+    fn as_ref(&self) -> &Path {
+        self.0.path()
+    }
+}
+
+pub fn scratch_dir(name: &str) -> Scratch {
+    Scratch(
+        tempfile::Builder::new()
+            .prefix(&format!("occsim-test-{name}-"))
+            .tempdir()
+            .expect("scratch directory"),
+    )
 }
 
 /// A hardcases trace in a fresh scratch directory: (directory, trace path).
-pub fn hardcases_trace(name: &str) -> (PathBuf, String) {
+pub fn hardcases_trace(name: &str) -> (Scratch, String) {
     let dir = scratch_dir(name);
     let trace = dir.join("hardcases.occt");
     let trace = trace.to_str().expect("utf-8 path").to_string();
