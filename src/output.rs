@@ -55,7 +55,8 @@ mod tests {
 
     #[test]
     fn replaces_contents_and_leaves_no_temporary_file() {
-        let dir = crate::sweep::test_dir("atomic");
+        let temp = crate::sweep::test_dir("atomic");
+        let dir = temp.path();
         let path = dir.join("out.txt");
         std::fs::write(&path, "old contents that are longer").unwrap();
         write_atomically(&path, b"new").unwrap();
@@ -69,7 +70,8 @@ mod tests {
 
     #[test]
     fn a_failed_fill_leaves_the_old_file_and_no_temporary() {
-        let dir = crate::sweep::test_dir("atomic-fail");
+        let temp = crate::sweep::test_dir("atomic-fail");
+        let dir = temp.path();
         let path = dir.join("out.txt");
         std::fs::write(&path, "old").unwrap();
         let failed: Result<()> = write_atomically_with(&path, |w| {
@@ -83,7 +85,8 @@ mod tests {
 
     #[test]
     fn missing_directory_is_an_error_naming_the_path() {
-        let dir = crate::sweep::test_dir("atomic-missing");
+        let temp = crate::sweep::test_dir("atomic-missing");
+        let dir = temp.path();
         let path = dir.join("no-such-dir").join("out.txt");
         let err = format!("{:#}", write_atomically(&path, b"x").unwrap_err());
         assert!(err.contains("no-such-dir"), "{err}");

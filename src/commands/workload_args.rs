@@ -361,10 +361,8 @@ mod tests {
             "48",
         ])
         .unwrap();
-        let dir =
-            std::env::temp_dir().join(format!("occsim-workload-trace-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("walk.occt");
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("walk.occt");
         let (summary, stats) = write_workload_trace(&args, &path).unwrap();
         let fragments: u64 = stats
             .frames

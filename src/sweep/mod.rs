@@ -26,13 +26,12 @@ pub use runner::{run_sweep, Evaluator, SweepOptions};
 #[cfg(test)]
 mod tests;
 
-/// A fresh, empty directory for one test (tests run in parallel, so each gets its own).
+/// A fresh, empty directory for one test, removed when dropped (tests run in parallel, so
+/// each gets its own).
 #[cfg(test)]
-pub(crate) fn test_dir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir()
-        .join(format!("occsim-sweep-tests-{}", std::process::id()))
-        .join(name);
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("cannot create a test directory");
-    dir
+pub(crate) fn test_dir(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("occsim-sweep-{name}-"))
+        .tempdir()
+        .expect("cannot create a test directory")
 }

@@ -301,7 +301,8 @@ mod tests {
 
     #[test]
     fn torn_last_line_is_dropped_and_reported() {
-        let dir = crate::sweep::test_dir("record-torn");
+        let temp = crate::sweep::test_dir("record-torn");
+        let dir = temp.path();
         let path = dir.join("r.jsonl");
         let whole = line(0, "engines=1", &[]).text;
         std::fs::write(&path, format!("{whole}\n{}", &whole[..20])).unwrap();
@@ -312,7 +313,8 @@ mod tests {
 
     #[test]
     fn corrupt_complete_line_is_an_error_with_file_and_line() {
-        let dir = crate::sweep::test_dir("record-corrupt");
+        let temp = crate::sweep::test_dir("record-corrupt");
+        let dir = temp.path();
         let path = dir.join("r.jsonl");
         let whole = line(0, "engines=1", &[]).text;
         std::fs::write(&path, format!("{whole}\n{{oops\n")).unwrap();

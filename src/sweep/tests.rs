@@ -64,7 +64,8 @@ fn reference_run(dir: &Path, grid: &Grid) -> (String, String) {
 
 #[test]
 fn csv_view_holds_the_hand_computed_metrics() {
-    let dir = test_dir("csv-values");
+    let temp = test_dir("csv-values");
+    let dir = temp.path();
     let g = grid(&["boards=1,2", "engines=1,4"]);
     let out = dir.join("r.jsonl");
     let outcome = run_sweep(&options(&g, &out, 2), &fake_machine).unwrap();
@@ -97,7 +98,8 @@ fn csv_view_holds_the_hand_computed_metrics() {
 
 #[test]
 fn one_and_two_jobs_give_identical_files() {
-    let dir = test_dir("jobs");
+    let temp = test_dir("jobs");
+    let dir = temp.path();
     let g = twelve_points();
     let (jsonl, csv) = reference_run(&dir, &g);
     let out = dir.join("two.jsonl");
@@ -117,7 +119,8 @@ fn run_shard(dir: &Path, g: &Grid, number: usize, count: usize) -> PathBuf {
 
 #[test]
 fn three_shards_merged_equal_the_unsharded_run() {
-    let dir = test_dir("shards");
+    let temp = test_dir("shards");
+    let dir = temp.path();
     let g = twelve_points();
     let (jsonl, csv) = reference_run(&dir, &g);
     let shards: Vec<PathBuf> = (1..=3).rev().map(|k| run_shard(&dir, &g, k, 3)).collect();
@@ -135,7 +138,8 @@ fn three_shards_merged_equal_the_unsharded_run() {
 
 #[test]
 fn merge_reports_missing_points_then_resume_fills_them() {
-    let dir = test_dir("merge-missing");
+    let temp = test_dir("merge-missing");
+    let dir = temp.path();
     let g = twelve_points();
     let (jsonl, _) = reference_run(&dir, &g);
     let shards = vec![run_shard(&dir, &g, 1, 3), run_shard(&dir, &g, 3, 3)];
@@ -170,7 +174,8 @@ fn merge_reports_missing_points_then_resume_fills_them() {
 
 #[test]
 fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
-    let dir = test_dir("merge-duplicates");
+    let temp = test_dir("merge-duplicates");
+    let dir = temp.path();
     let g = twelve_points();
     let (jsonl, _) = reference_run(&dir, &g);
     let full = dir.join("full.jsonl");
@@ -194,7 +199,8 @@ fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
 
 #[test]
 fn merge_rejects_shards_of_another_trace_or_grid() {
-    let dir = test_dir("merge-foreign");
+    let temp = test_dir("merge-foreign");
+    let dir = temp.path();
     let g = twelve_points();
     let shard = run_shard(&dir, &g, 1, 2);
     let foreign = dir.join("foreign.jsonl");
@@ -255,7 +261,8 @@ fn append_torn_fragment(out: &Path, of_line: &str) {
 
 #[test]
 fn interrupted_sweep_resumes_without_losing_or_repeating_points() {
-    let dir = test_dir("resume");
+    let temp = test_dir("resume");
+    let dir = temp.path();
     let g = twelve_points();
     let (jsonl, csv) = reference_run(&dir, &g);
     let out = dir.join("r.jsonl");
@@ -313,7 +320,8 @@ fn interrupted_sweep_resumes_without_losing_or_repeating_points() {
 
 #[test]
 fn torn_line_is_reported_when_resuming() {
-    let dir = test_dir("resume-torn");
+    let temp = test_dir("resume-torn");
+    let dir = temp.path();
     let g = twelve_points();
     let (jsonl, _) = reference_run(&dir, &g);
     let out = dir.join("r.jsonl");
@@ -330,7 +338,8 @@ fn torn_line_is_reported_when_resuming() {
 
 #[test]
 fn resume_refuses_results_of_another_trace_or_shard() {
-    let dir = test_dir("resume-foreign");
+    let temp = test_dir("resume-foreign");
+    let dir = temp.path();
     let g = twelve_points();
     let out = run_shard(&dir, &g, 1, 3);
 
@@ -362,7 +371,8 @@ fn resume_refuses_results_of_another_trace_or_shard() {
 
 #[test]
 fn sweep_chart_has_one_series_per_other_axis_combination() {
-    let dir = test_dir("chart");
+    let temp = test_dir("chart");
+    let dir = temp.path();
     let g = grid(&["boards=1,2", "engines=1,4"]);
     let out = dir.join("r.jsonl");
     let outcome = run_sweep(&options(&g, &out, 1), &fake_machine).unwrap();
@@ -394,7 +404,8 @@ fn sweep_chart_has_one_series_per_other_axis_combination() {
 
 #[test]
 fn a_panicking_model_is_an_error_naming_the_point() {
-    let dir = test_dir("panic");
+    let temp = test_dir("panic");
+    let dir = temp.path();
     let g = grid(&["engines=1,2,3"]);
     let out = dir.join("r.jsonl");
     let panicky = |p: &Point| -> Result<PointRecord> {
