@@ -101,7 +101,7 @@ fn one_and_two_jobs_give_identical_files() {
     let temp = test_dir("jobs");
     let dir = temp.path();
     let g = twelve_points();
-    let (jsonl, csv) = reference_run(&dir, &g);
+    let (jsonl, csv) = reference_run(dir, &g);
     let out = dir.join("two.jsonl");
     run_sweep(&options(&g, &out, 2), &fake_machine).unwrap();
     assert_eq!(read(&out), jsonl);
@@ -122,8 +122,8 @@ fn three_shards_merged_equal_the_unsharded_run() {
     let temp = test_dir("shards");
     let dir = temp.path();
     let g = twelve_points();
-    let (jsonl, csv) = reference_run(&dir, &g);
-    let shards: Vec<PathBuf> = (1..=3).rev().map(|k| run_shard(&dir, &g, k, 3)).collect();
+    let (jsonl, csv) = reference_run(dir, &g);
+    let shards: Vec<PathBuf> = (1..=3).rev().map(|k| run_shard(dir, &g, k, 3)).collect();
     assert_eq!(
         read(&shards[0]).lines().count(),
         4,
@@ -141,8 +141,8 @@ fn merge_reports_missing_points_then_resume_fills_them() {
     let temp = test_dir("merge-missing");
     let dir = temp.path();
     let g = twelve_points();
-    let (jsonl, _) = reference_run(&dir, &g);
-    let shards = vec![run_shard(&dir, &g, 1, 3), run_shard(&dir, &g, 3, 3)];
+    let (jsonl, _) = reference_run(dir, &g);
+    let shards = vec![run_shard(dir, &g, 1, 3), run_shard(dir, &g, 3, 3)];
     let merged = dir.join("merged.jsonl");
     let err = format!("{:#}", merge_results(&merged, &shards, false).unwrap_err());
     assert!(
@@ -177,9 +177,9 @@ fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
     let temp = test_dir("merge-duplicates");
     let dir = temp.path();
     let g = twelve_points();
-    let (jsonl, _) = reference_run(&dir, &g);
+    let (jsonl, _) = reference_run(dir, &g);
     let full = dir.join("full.jsonl");
-    let shard = run_shard(&dir, &g, 2, 3);
+    let shard = run_shard(dir, &g, 2, 3);
     let merged = dir.join("merged.jsonl");
     merge_results(&merged, &[shard.clone(), full.clone()], false).unwrap();
     assert_eq!(read(&merged), jsonl);
@@ -202,7 +202,7 @@ fn merge_rejects_shards_of_another_trace_or_grid() {
     let temp = test_dir("merge-foreign");
     let dir = temp.path();
     let g = twelve_points();
-    let shard = run_shard(&dir, &g, 1, 2);
+    let shard = run_shard(dir, &g, 1, 2);
     let foreign = dir.join("foreign.jsonl");
     let mut o = options(&g, &foreign, 1);
     o.trace_digest = "sha256:ffff";
@@ -264,7 +264,7 @@ fn interrupted_sweep_resumes_without_losing_or_repeating_points() {
     let temp = test_dir("resume");
     let dir = temp.path();
     let g = twelve_points();
-    let (jsonl, csv) = reference_run(&dir, &g);
+    let (jsonl, csv) = reference_run(dir, &g);
     let out = dir.join("r.jsonl");
     let mut resuming = options(&g, &out, 2);
     resuming.resume = true;
@@ -323,7 +323,7 @@ fn torn_line_is_reported_when_resuming() {
     let temp = test_dir("resume-torn");
     let dir = temp.path();
     let g = twelve_points();
-    let (jsonl, _) = reference_run(&dir, &g);
+    let (jsonl, _) = reference_run(dir, &g);
     let out = dir.join("r.jsonl");
     let first_four: String = jsonl.lines().take(4).map(|l| format!("{l}\n")).collect();
     std::fs::write(&out, first_four).unwrap();
@@ -341,7 +341,7 @@ fn resume_refuses_results_of_another_trace_or_shard() {
     let temp = test_dir("resume-foreign");
     let dir = temp.path();
     let g = twelve_points();
-    let out = run_shard(&dir, &g, 1, 3);
+    let out = run_shard(dir, &g, 1, 3);
 
     let mut o = options(&g, &out, 1);
     o.resume = true;
