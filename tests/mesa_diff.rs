@@ -420,35 +420,8 @@ fn structured_scenes() -> Vec<(String, String)> {
     scenes
 }
 
-/// splitmix64: a small deterministic generator, so scenes depend on the seed alone.
-struct Random(u64);
-
-impl Random {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: u64) -> u64 {
-        self.next() % n.max(1)
-    }
-
-    fn chance(&mut self, percent: u64) -> bool {
-        self.below(100) < percent
-    }
-
-    /// Uniform in [lo, hi).
-    fn uniform(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * ((self.next() >> 40) as f32 / (1u64 << 24) as f32)
-    }
-
-    fn pick<T: Copy>(&mut self, items: &[T]) -> T {
-        items[self.below(items.len() as u64) as usize]
-    }
-}
+/// The one generator (SplitMix64), so scenes depend on the seed alone.
+use occsim_traces::rng::SplitMix64 as Random;
 
 /// What a random triangle's vertices look like.
 #[derive(Clone, Copy, Debug)]
@@ -492,7 +465,7 @@ fn random_vertex(rng: &mut Random, shape: Shape, near: Option<[f32; 4]>) -> [f32
     let w = if rng.chance(30) {
         1.0
     } else {
-        rng.uniform(0.25, 4.0)
+        rng.range(0.25, 4.0)
     };
     let (xy, z) = match shape {
         Shape::Inside | Shape::Sliver | Shape::Steep => (1.0, 1.0),
@@ -501,9 +474,9 @@ fn random_vertex(rng: &mut Random, shape: Shape, near: Option<[f32; 4]>) -> [f32
         Shape::Huge => (rng.pick(&[1e3, 1e5, 1e7]), 1.0),
     };
     let mut v = [
-        rng.uniform(-xy, xy) * w,
-        rng.uniform(-xy, xy) * w,
-        rng.uniform(-z, z) * w,
+        rng.range(-xy, xy) * w,
+        rng.range(-xy, xy) * w,
+        rng.range(-z, z) * w,
         w,
     ];
     if matches!(shape, Shape::AcrossDepth) && rng.chance(15) {
@@ -511,7 +484,7 @@ fn random_vertex(rng: &mut Random, shape: Shape, near: Option<[f32; 4]>) -> [f32
     }
     if let Some(base) = near {
         // A few sub-pixels (the viewport's side is at most 4096: 2/4096 is half a pixel).
-        let step = |rng: &mut Random| rng.uniform(-1.0, 1.0) * 2e-3 * base[3];
+        let step = |rng: &mut Random| rng.range(-1.0, 1.0) * 2e-3 * base[3];
         v = [base[0] + step(rng), base[1] + step(rng), v[2], base[3]];
     }
     if rng.chance(3) {
@@ -537,7 +510,7 @@ fn random_triangle(rng: &mut Random, shape: Shape) -> [[f32; 4]; 3] {
         t[1][2] = 0.9 * t[1][3];
     } else if rng.chance(15) {
         // Constant window depth.
-        let depth = rng.uniform(-1.0, 1.0);
+        let depth = rng.range(-1.0, 1.0);
         for v in &mut t {
             v[2] = depth * v[3];
         }

@@ -382,13 +382,11 @@ fn the_scan_switches_effects_off_on_the_builtin_traces() {
     assert!(effects.page_model);
 }
 
-#[path = "support/rng.rs"]
-mod rng;
-use rng::Rng;
+use occsim_traces::rng::SplitMix64;
 
 /// A random stream over a `width` x `height` viewport with state changes and every mode.
 fn random_stream(seed: u64, width: u32, height: u32) -> Vec<Event> {
-    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = SplitMix64(seed);
     let mut golden = FunctionalModel::new(width, height);
     let mut events = Vec::new();
     let mut push = |event: Event, events: &mut Vec<Event>| {

@@ -8,11 +8,9 @@ use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QueryResult, QuerySpe
 const WIDTH: u32 = 40;
 const HEIGHT: u32 = 24;
 
-#[path = "support/rng.rs"]
-mod rng;
-use rng::Rng;
+use occsim_traces::rng::SplitMix64;
 
-fn random_tile(rng: &mut Rng) -> Rect {
+fn random_tile(rng: &mut SplitMix64) -> Rect {
     let x = rng.below(WIDTH as u64) as u32;
     let y = rng.below(HEIGHT as u64) as u32;
     let w = 1 + rng.below((WIDTH - x) as u64) as u32;
@@ -23,7 +21,7 @@ fn random_tile(rng: &mut Rng) -> Rect {
 /// The raw stream (no results): state changes, queries over spans and blocks of fragments at
 /// depths with many ties; verbose buffers small enough to overflow often.
 fn raw_stream(seed: u64) -> Vec<Event> {
-    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = SplitMix64(seed);
     let mut events = Vec::new();
     for query in 0..(3 + rng.below(5)) {
         match rng.below(5) {

@@ -10,11 +10,9 @@ use proptest::prelude::*;
 const WIDTH: u32 = 48;
 const HEIGHT: u32 = 40;
 
-#[path = "support/rng.rs"]
-mod rng;
-use rng::Rng;
+use occsim_traces::rng::SplitMix64;
 
-fn random_tile(rng: &mut Rng) -> Rect {
+fn random_tile(rng: &mut SplitMix64) -> Rect {
     let x = rng.below(WIDTH as u64) as u32;
     let y = rng.below(HEIGHT as u64) as u32;
     let w = 1 + rng.below((WIDTH - x) as u64) as u32;
@@ -25,7 +23,7 @@ fn random_tile(rng: &mut Rng) -> Rect {
 /// A stream of state changes, primitives, fragments and queries, with the golden model's
 /// result after every query end. `max_tiles` bounds the tiles of brief/verbose queries.
 fn generated_stream(seed: u64, max_tiles: u64) -> Vec<Event> {
-    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut rng = SplitMix64(seed);
     let mut golden = FunctionalModel::new(WIDTH, HEIGHT);
     let mut events = Vec::new();
     let mut push = |event: Event, events: &mut Vec<Event>| {

@@ -5,25 +5,7 @@
 use crate::state::Rect;
 use glam::{Mat4, Vec3, Vec4};
 
-/// SplitMix64: a tiny, well-mixed, seedable generator (layouts must be reproducible
-/// everywhere, so no platform or crate-version dependent randomness).
-pub(crate) struct SplitMix64(pub(crate) u64);
-
-impl SplitMix64 {
-    pub(crate) fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [lo, hi).
-    pub(crate) fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        let unit = (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32;
-        lo + (hi - lo) * unit
-    }
-}
+pub(crate) use crate::rng::SplitMix64;
 
 /// An axis-aligned box in world space (metres).
 #[derive(Clone, Copy, Debug, PartialEq)]

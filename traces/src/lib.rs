@@ -5,6 +5,7 @@
 //! - [`golden`]: the functional golden model (depth buffer and query semantics).
 //! - [`trace`]: the `.occt` binary fragment trace format (streaming reader and writer).
 //! - [`retile`]: `--retile GxH`, replacing brief queries' tiles by a grid (results recomputed).
+//! - [`rng`]: the one random generator (SplitMix64) of scenes, streams, tests and benchmarks.
 //! - [`builtin`]: built-in scenes (`demo`, `hardcases`).
 //! - [`workloads`]: walkthrough workloads: parametric scenes, camera paths and the culling
 //!   drivers that issue occlusion queries while the golden model answers them.
@@ -16,6 +17,7 @@ pub mod golden;
 pub mod query;
 pub mod raster;
 pub mod retile;
+pub mod rng;
 pub mod scene;
 pub mod state;
 pub mod trace;

@@ -564,13 +564,8 @@ fn the_same_geometry_twice_passes_lequal_and_equal_and_fails_less() {
             tiles: vec![Rect::new(0, 0, width, height)],
         })
     };
-    let mut seed = 12345u64;
-    let mut random = move || {
-        seed ^= seed << 13;
-        seed ^= seed >> 7;
-        seed ^= seed << 17;
-        (seed % 2001) as f32 / 1000.0 - 1.0
-    };
+    let mut rng = occsim_traces::rng::SplitMix64(12345);
+    let mut random = move || rng.below(2001) as f32 / 1000.0 - 1.0;
     let triangles: Vec<Command> = (0..20)
         .map(|_| {
             let mut v = [[0.0f32; 4]; 3];

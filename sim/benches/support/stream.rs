@@ -11,17 +11,7 @@ use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QuerySpec, Rect};
 pub const WIDTH: u32 = 640;
 pub const HEIGHT: u32 = 480;
 
-/// A small deterministic generator (xorshift64*).
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn below(&mut self, n: u64) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) % n
-    }
-}
+use occsim_traces::rng::SplitMix64 as Rng;
 
 /// Rectangles drawn row by row, as spans leave a rasterizer.
 pub fn rectangle(rng: &mut Rng, max_side: u64, events: &mut Vec<Event>) {
@@ -52,7 +42,7 @@ pub fn grid(columns: u32, rows: u32) -> Vec<Rect> {
 /// One frame: occluders drawn plainly, then samples, brief (16-tile grid) and verbose
 /// (4-tile) queries over boxes, with the golden results in the stream.
 pub fn frame(seed: u64) -> Vec<Event> {
-    let mut rng = Rng(seed | 1);
+    let mut rng = Rng(seed);
     let mut raw = vec![Event::Clear, Event::DepthFunc(DepthFunc::Less)];
     for _ in 0..60 {
         rectangle(&mut rng, 120, &mut raw);

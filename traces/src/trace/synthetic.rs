@@ -5,6 +5,7 @@
 
 use crate::event::{Event, Fragment, DEPTH_ONE};
 use crate::golden::EventSink;
+use crate::rng::SplitMix64;
 
 /// What kind of triangles to draw.
 #[derive(Clone, Copy, Debug)]
@@ -23,46 +24,26 @@ pub struct SyntheticScene {
     pub seed: u64,
 }
 
-/// A small deterministic generator (xorshift64*), so the stream needs no dependency.
-struct Xorshift(u64);
-
-impl Xorshift {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn range(&mut self, low: f64, high: f64) -> f64 {
-        low + (high - low) * self.unit()
-    }
-}
-
 /// Send the scene's events to `sink` (a `Clear` first); returns the fragments sent.
 pub fn generate<S: EventSink>(scene: &SyntheticScene, sink: &mut S) -> Result<u64, S::Error> {
-    let mut random = Xorshift(scene.seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1);
+    let mut random = SplitMix64(scene.seed);
     let mut sent = 0;
     sink.event(&Event::Clear)?;
     while sent < scene.fragments {
         let center = (
-            random.range(0.0, scene.width as f64),
-            random.range(0.0, scene.height as f64),
+            random.range_f64(0.0, scene.width as f64),
+            random.range_f64(0.0, scene.height as f64),
         );
-        let radius = random.range(scene.min_radius, scene.max_radius);
-        let start = random.range(0.0, std::f64::consts::TAU);
+        let radius = random.range_f64(scene.min_radius, scene.max_radius);
+        let start = random.range_f64(0.0, std::f64::consts::TAU);
         let vertices: [[f64; 3]; 3] = std::array::from_fn(|i| {
-            let angle = start + i as f64 * std::f64::consts::TAU / 3.0 + random.range(-0.5, 0.5);
-            let r = radius * random.range(0.6, 1.0);
+            let angle =
+                start + i as f64 * std::f64::consts::TAU / 3.0 + random.range_f64(-0.5, 0.5);
+            let r = radius * random.range_f64(0.6, 1.0);
             [
                 center.0 + r * libm::cos(angle),
                 center.1 + r * libm::sin(angle),
-                random.range(0.05, 0.95),
+                random.range_f64(0.05, 0.95),
             ]
         });
         sent += rasterize(scene, &vertices, sink)?;

@@ -6,13 +6,13 @@
 //! (lp_bld_conv.c, `lp_build_clamped_float_to_unsigned_norm` when the width is the mantissa's
 //! plus one, then `lp_build_iround`).
 //!
-//! Denormals are not flushed per pixel: a denormal anywhere in this chain ends as depth 0
-//! either way (|z| < 2^-126 converts to 0), and the coefficients come from the flushing
-//! setup, so skipping the flush here changes no result.
+//! The first multiply-add's result is flushed as FTZ would (a denormal there could break a
+//! rounding tie in the second); the second's need not be: a denormal z converts to 0 either
+//! way. The coefficients come from the flushing setup.
 
 use super::super::coverage::SpanDepths;
 use super::super::RasterSink;
-use super::float::{convert_nearest_even, sse_max, sse_min};
+use super::float::{convert_nearest_even, flush, sse_max, sse_min};
 use super::setup::PlaneCoefficients;
 use super::Framebuffer;
 use crate::event::{Fragment, DEPTH_ONE};
@@ -38,7 +38,9 @@ impl DepthPlane {
 /// unorm24 depth of one pixel at framebuffer column `x`, row `row`.
 #[inline(always)]
 fn depth(plane: &PlaneCoefficients, x: f32, row: f32) -> u32 {
-    let z = plane.dzdy.mul_add(row, plane.dzdx.mul_add(x, plane.a0));
+    let z = plane
+        .dzdy
+        .mul_add(row, flush(plane.dzdx.mul_add(x, plane.a0)));
     let z = sse_max(sse_min(z, 1.0), 0.0);
     convert_nearest_even(z * DEPTH_ONE as f32) as u32
 }

@@ -5,6 +5,7 @@
 use super::float::{add, div, flush, fused, mul};
 use super::Framebuffer;
 use crate::state::RenderState;
+use std::cmp::Ordering::Greater;
 
 /// The viewport transform (st_atom_viewport.c, `_mesa_get_viewport_xform`) for viewport
 /// 0, 0, width, height and depth range 0..1.
@@ -43,15 +44,17 @@ pub(super) const PLANE_COUNT: usize = 6;
 
 /// `generate_clipmask` with x/y clipping (no guard band: a depth buffer is bound) and full-z
 /// depth clipping: bit 0 `x > w`, 1 `0 > x + w`, 2 `y > w`, 3 `0 > y + w`, 4 `0 > z + w`,
-/// 5 `z > w`.
+/// 5 `z > w`. `lp_build_compare` compares unordered (lp_bld_logic.c), so a NaN sets the bit:
+/// `a > b` is taken as `!(a <= b)`.
 pub(super) fn clip_mask(c: &[f32; 4]) -> u32 {
     let [x, y, z, w] = *c;
-    (x > w) as u32
-        | ((0.0 > add(x, w)) as u32) << 1
-        | ((y > w) as u32) << 2
-        | ((0.0 > add(y, w)) as u32) << 3
-        | ((0.0 > add(z, w)) as u32) << 4
-        | ((z > w) as u32) << 5
+    let above = |a: f32, b: f32| matches!(a.partial_cmp(&b), Some(Greater) | None) as u32;
+    above(x, w)
+        | above(0.0, add(x, w)) << 1
+        | above(y, w) << 2
+        | above(0.0, add(y, w)) << 3
+        | above(0.0, add(z, w)) << 4
+        | above(z, w) << 5
 }
 
 /// The vertex stage: inputs read as by DAZ, the mask, and `generate_viewport`'s window
@@ -101,6 +104,8 @@ mod tests {
         assert_eq!(clip_mask(&[0.0, 0.0, 1.5, 1.0]), 0b100000);
         // The clip-space origin with w = 0 is inside every plane.
         assert_eq!(clip_mask(&[0.0, 0.0, 0.0, 0.0]), 0);
+        // Unordered compares: a NaN coordinate sets its planes' bits.
+        assert_eq!(clip_mask(&[0.0, 0.0, f32::NAN, 1.0]), 0b110000);
     }
 
     #[test]
