@@ -619,13 +619,6 @@ fn ir_waveform_dumps_the_first_image_engine() {
     assert_eq!(report.memory_port.occu_words, 4 * 3);
 }
 
-/// FNV-1a, 64 bits: a digest of a VCD's bytes that needs no dependency.
-fn fnv1a(bytes: &[u8]) -> u64 {
-    bytes.iter().fold(0xCBF2_9CE4_8422_2325, |hash, &b| {
-        (hash ^ b as u64).wrapping_mul(0x0000_0100_0000_01B3)
-    })
-}
-
 /// The VCD bytes of random streams on several architectures and windows, pinned by the
 /// digest and length the register-file probe produced (its values are checked against the
 /// model cycle by cycle by the unit test in `sim/src/waveform.rs`): optimising the writer or
@@ -655,7 +648,7 @@ fn waveform_bytes_are_pinned() {
             let (_, text) = waveform(&arch, &random_stream(seed), window.clone());
             all.extend_from_slice(text.as_bytes());
         }
-        digests.push((fnv1a(&all), all.len()));
+        digests.push((occsim_traces::rng::Fnv1a::of(&all), all.len()));
     }
     assert_eq!(
         digests,

@@ -321,7 +321,7 @@ pub fn trace_digest(path: &Path) -> anyhow::Result<String> {
     use std::io::Read;
     let mut file = std::fs::File::open(path)
         .with_context(|| format!("cannot open trace {}", path.display()))?;
-    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut hash = occsim_traces::rng::Fnv1a::default();
     let mut length: u64 = 0;
     let mut buffer = vec![0u8; 1 << 16];
     loop {
@@ -332,9 +332,7 @@ pub fn trace_digest(path: &Path) -> anyhow::Result<String> {
             break;
         }
         length += n as u64;
-        for &byte in &buffer[..n] {
-            hash = (hash ^ byte as u64).wrapping_mul(0x0100_0000_01b3);
-        }
+        hash.bytes(&buffer[..n]);
     }
-    Ok(format!("fnv1a64:{hash:016x}:{length}"))
+    Ok(format!("fnv1a64:{:016x}:{length}", hash.0))
 }

@@ -62,3 +62,41 @@ mod tests {
         assert_eq!(rng.next_u64(), 9817491932198370423);
     }
 }
+
+/// FNV-1a, 64 bits: the one digest of byte streams (trace files in sweep records, fragment
+/// streams and waveforms in pinned tests). Stable and simple; not cryptographic.
+#[derive(Clone, Copy, Debug)]
+pub struct Fnv1a(pub u64);
+
+impl Default for Fnv1a {
+    fn default() -> Fnv1a {
+        Fnv1a(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv1a {
+    pub fn bytes(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ b as u64).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+
+    /// The digest of `bytes` alone.
+    pub fn of(bytes: &[u8]) -> u64 {
+        let mut hash = Fnv1a::default();
+        hash.bytes(bytes);
+        hash.0
+    }
+}
+
+#[cfg(test)]
+mod fnv_tests {
+    use super::*;
+
+    #[test]
+    fn fnv1a_of_the_reference_strings() {
+        // Published FNV-1a 64-bit test vectors: "" and "a".
+        assert_eq!(Fnv1a::of(b""), 0xcbf2_9ce4_8422_2325);
+        assert_eq!(Fnv1a::of(b"a"), 0xaf63_dc4c_8601_ec8c);
+    }
+}

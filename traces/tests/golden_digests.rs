@@ -13,22 +13,20 @@
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions};
 use occsim_traces::golden::{EventSink, GoldenModel};
 use occsim_traces::raster::RasterProfile;
+use occsim_traces::rng::Fnv1a;
 use occsim_traces::scene::{parse_scene, Command};
 use occsim_traces::Event;
 
-/// FNV-1a, 64 bits: stable, simple, enough to tell streams apart.
-#[derive(Clone, Copy)]
-struct Fnv(u64);
+/// Fragments into the one digest (FNV-1a).
+struct Fnv(Fnv1a);
 
 impl Fnv {
     fn new() -> Fnv {
-        Fnv(0xcbf2_9ce4_8422_2325)
+        Fnv(Fnv1a::default())
     }
 
     fn bytes(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = (self.0 ^ b as u64).wrapping_mul(0x0100_0000_01b3);
-        }
+        self.0.bytes(bytes);
     }
 }
 
@@ -58,7 +56,7 @@ fn digests(text: &str, profile: RasterProfile) -> (u64, u64) {
         golden.execute(&line.command, &mut fragments).unwrap();
     }
     golden.finish(&mut fragments);
-    (scene.0, fragments.0)
+    (scene.0 .0, fragments.0 .0)
 }
 
 /// `expected`: the scene text's digest, then the fragments' under each profile in
