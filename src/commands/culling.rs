@@ -3,14 +3,12 @@
 //! simulated cycles per frame on each machine.
 
 use super::workload_args::SceneArgs;
-use anyhow::Context;
-use occsim_traces::golden::EventSink;
-use occsim_traces::workloads::{
-    full_render_visible_pixels, generate, DriverKind, DriverOptions, GenerateError, Walk,
-    WorkloadScene, WorkloadStats,
+use occsim_traces::workloads::compare::{
+    compare as compare_drivers, CompareError, CompareReport, DriverReport, FrameCycleModel,
+    ModelError,
 };
+use occsim_traces::workloads::{DriverKind, DriverOptions};
 use occsim_traces::Event;
-use serde::Serialize;
 use std::io::Write;
 
 #[derive(clap::Args, Clone, Debug)]
@@ -31,99 +29,6 @@ pub struct CompareArgs {
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
-}
-
-/// A timing model the caller supplies (the O2 and ir4 machines live in the sim crate): it is
-/// fed each frame's events and says how many cycles the frame took on its machine.
-///
-/// Frames are self-contained: each begins with `Clear` and the whole render state.
-pub trait FrameCycleModel {
-    /// The machine's name, a column of the report (e.g. `O2`, `ir4`).
-    fn machine(&self) -> String;
-    /// A new frame of `width` x `height` pixels begins; its events follow.
-    fn begin_frame(&mut self, width: u32, height: u32) -> anyhow::Result<()>;
-    fn event(&mut self, event: &Event) -> anyhow::Result<()>;
-    /// Simulated cycles for the frame's events since `begin_frame`.
-    fn end_frame(&mut self) -> anyhow::Result<u64>;
-}
-
-/// Splits the event stream into frames at `Clear` and feeds the timing models.
-struct FrameSplitter<'m> {
-    models: &'m mut [Box<dyn FrameCycleModel>],
-    width: u32,
-    height: u32,
-    in_frame: bool,
-    /// Per model, per frame.
-    cycles: Vec<Vec<u64>>,
-}
-
-impl FrameSplitter<'_> {
-    fn end_frame(&mut self) -> anyhow::Result<()> {
-        if !self.in_frame {
-            return Ok(());
-        }
-        for (model, cycles) in self.models.iter_mut().zip(&mut self.cycles) {
-            cycles.push(model.end_frame()?);
-        }
-        self.in_frame = false;
-        Ok(())
-    }
-}
-
-impl EventSink for FrameSplitter<'_> {
-    type Error = anyhow::Error;
-
-    fn event(&mut self, event: &Event) -> anyhow::Result<()> {
-        if self.models.is_empty() {
-            return Ok(());
-        }
-        if let Event::Clear = event {
-            self.end_frame()?;
-            for model in self.models.iter_mut() {
-                model.begin_frame(self.width, self.height)?;
-            }
-            self.in_frame = true;
-        }
-        for model in self.models.iter_mut() {
-            model.event(event)?;
-        }
-        Ok(())
-    }
-}
-
-/// One driver's line of the report; per-frame figures are means over the walk.
-#[derive(Clone, Debug, Serialize)]
-pub struct DriverReport {
-    pub driver: String,
-    /// Share of the scene's triangles drawn, over all frames.
-    pub triangles_drawn_share: f64,
-    pub triangles_per_frame: f64,
-    pub objects_per_frame: f64,
-    pub draw_fragments_per_frame: f64,
-    pub queries_per_frame: f64,
-    pub query_tiles_per_frame: f64,
-    pub query_fragments_per_frame: f64,
-    pub cells_refreshed_per_frame: f64,
-    /// Visible pixels of the full render whose objects were not drawn, per frame.
-    pub pixels_lost_per_frame: f64,
-    /// Per machine: simulated cycles per frame.
-    pub cycles_per_frame: Vec<(String, f64)>,
-    /// Wall time of the traversal (driver logic, not the golden model), ms per frame.
-    pub traversal_ms_per_frame: f64,
-    /// Wall time inside the golden model, ms per frame.
-    pub golden_model_ms_per_frame: f64,
-}
-
-#[derive(Clone, Debug, Serialize)]
-pub struct CompareReport {
-    pub scene: String,
-    pub frames: u32,
-    pub width: u32,
-    pub height: u32,
-    pub scene_triangles: u64,
-    /// Mean visible pixels per frame in the full render.
-    pub visible_pixels_per_frame: f64,
-    pub drivers: Vec<DriverReport>,
 }
 
 /// The driver configurations the report compares.
@@ -185,33 +90,67 @@ impl MachineFrames {
     }
 }
 
+/// A machine's failure in a frame, naming the machine.
+#[derive(Debug)]
+struct FrameError {
+    machine: &'static str,
+    /// None: the frame ended before it began.
+    source: Option<occsim_sim::SimError>,
+}
+
+impl std::fmt::Display for FrameError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.source {
+            Some(_) => write!(f, "frame on {}", self.machine),
+            None => write!(f, "{}: a frame ended before it began", self.machine),
+        }
+    }
+}
+
+impl std::error::Error for FrameError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        self.source.as_ref().map(|e| e as _)
+    }
+}
+
+impl MachineFrames {
+    fn failed(&self, source: Option<occsim_sim::SimError>) -> ModelError {
+        Box::new(FrameError {
+            machine: self.name,
+            source,
+        })
+    }
+}
+
 impl FrameCycleModel for MachineFrames {
     fn machine(&self) -> String {
         self.name.to_owned()
     }
 
-    fn begin_frame(&mut self, width: u32, height: u32) -> anyhow::Result<()> {
+    fn begin_frame(&mut self, width: u32, height: u32) -> Result<(), ModelError> {
         let machine = occsim_sim::MachineModel::new(&self.arch, width, height)
-            .with_context(|| format!("frame on {}", self.name))?;
+            .map_err(|e| self.failed(Some(e)))?;
         self.machine = Some(machine);
         Ok(())
     }
 
-    fn event(&mut self, event: &Event) -> anyhow::Result<()> {
+    fn event(&mut self, event: &Event) -> Result<(), ModelError> {
+        let name = self.name;
         if let Some(machine) = &mut self.machine {
-            machine
-                .event(event)
-                .with_context(|| format!("frame on {}", self.name))?;
+            machine.event(event).map_err(|e| -> ModelError {
+                Box::new(FrameError {
+                    machine: name,
+                    source: Some(e),
+                })
+            })?;
         }
         Ok(())
     }
 
-    fn end_frame(&mut self) -> anyhow::Result<u64> {
-        let machine = self
-            .machine
-            .take()
-            .ok_or_else(|| anyhow::anyhow!("{}: a frame ended before it began", self.name))?;
-        Ok(machine.finish()?.summary.cycles)
+    fn end_frame(&mut self) -> Result<u64, ModelError> {
+        let machine = self.machine.take().ok_or_else(|| self.failed(None))?;
+        let report = machine.finish().map_err(|e| self.failed(Some(e)))?;
+        Ok(report.summary.cycles)
     }
 }
 
@@ -239,93 +178,14 @@ pub fn compare(
 ) -> anyhow::Result<CompareReport> {
     let scene = args.scene.load_scene()?;
     let walk = args.scene.walk();
-    let full: Vec<Vec<u64>> = (0..walk.frames)
-        .map(|frame| full_render_visible_pixels(&scene, frame, &walk))
-        .collect::<Result<_, _>>()
-        .map_err(super::workload_args::flagged)?;
-    let frames = walk.frames as f64;
-    let visible: u64 = full.iter().flatten().sum();
-    let mut drivers = Vec::new();
-    for options in drivers_to_compare(args) {
-        options.validate().map_err(super::workload_args::flagged)?;
-        let mut splitter = FrameSplitter {
-            cycles: vec![Vec::new(); models.len()],
-            models: &mut *models,
-            width: walk.width,
-            height: walk.height,
-            in_frame: false,
-        };
-        let on_driver = || format!("timing model on the {} driver", options.label());
-        let stats = generate(&scene, &options, &walk, &mut splitter).map_err(|e| match e {
-            GenerateError::Workload(e) => super::workload_args::flagged(e),
-            GenerateError::Sink(e) => e.context(on_driver()),
-        })?;
-        splitter.end_frame().with_context(on_driver)?;
-        let names: Vec<String> = splitter.models.iter().map(|m| m.machine()).collect();
-        let cycles = names
-            .into_iter()
-            .zip(&splitter.cycles)
-            .map(|(name, per_frame)| (name, per_frame.iter().sum::<u64>() as f64 / frames))
-            .collect();
-        drivers.push(driver_report(
-            &options, &scene, &walk, &stats, &full, cycles,
-        ));
-    }
-    Ok(CompareReport {
-        scene: args.scene.describe(&scene),
-        frames: walk.frames,
-        width: walk.width,
-        height: walk.height,
-        scene_triangles: scene.triangle_count(),
-        visible_pixels_per_frame: visible as f64 / frames,
-        drivers,
-    })
-}
-
-fn driver_report(
-    options: &DriverOptions,
-    scene: &WorkloadScene,
-    walk: &Walk,
-    stats: &WorkloadStats,
-    full: &[Vec<u64>],
-    cycles_per_frame: Vec<(String, f64)>,
-) -> DriverReport {
-    let frames = walk.frames as f64;
-    let mean = |f: &dyn Fn(&occsim_traces::workloads::FrameStats) -> u64| {
-        stats.frames.iter().map(f).sum::<u64>() as f64 / frames
-    };
-    let mut pixels_lost = 0u64;
-    for (frame, visible) in stats.frames.iter().zip(full) {
-        let mut drawn = vec![false; visible.len()];
-        for &object in &frame.objects_drawn {
-            drawn[object as usize] = true;
+    let drivers = drivers_to_compare(args);
+    compare_drivers(&scene, args.scene.describe(&scene), &walk, &drivers, models).map_err(|e| {
+        match e {
+            CompareError::Workload(e) => super::workload_args::flagged(e),
+            CompareError::Model { driver, source } => anyhow::Error::from_boxed(source)
+                .context(format!("timing model on the {driver} driver")),
         }
-        pixels_lost += visible
-            .iter()
-            .zip(&drawn)
-            .filter(|(_, &d)| !d)
-            .map(|(&p, _)| p)
-            .sum::<u64>();
-    }
-    let ms = |f: &dyn Fn(&occsim_traces::workloads::FrameTiming) -> std::time::Duration| {
-        stats.timing.iter().map(|t| f(t).as_secs_f64()).sum::<f64>() * 1e3 / frames
-    };
-    let triangles = mean(&|f| f.triangles_drawn);
-    DriverReport {
-        driver: options.label(),
-        triangles_drawn_share: triangles / scene.triangle_count().max(1) as f64,
-        triangles_per_frame: triangles,
-        objects_per_frame: mean(&|f| f.objects_drawn.len() as u64),
-        draw_fragments_per_frame: mean(&|f| f.draw_fragments),
-        queries_per_frame: mean(&|f| f.queries),
-        query_tiles_per_frame: mean(&|f| f.query_tiles),
-        query_fragments_per_frame: mean(&|f| f.query_fragments),
-        cells_refreshed_per_frame: mean(&|f| f.cells_refreshed),
-        pixels_lost_per_frame: pixels_lost as f64 / frames,
-        cycles_per_frame,
-        traversal_ms_per_frame: ms(&|t| t.traversal()),
-        golden_model_ms_per_frame: ms(&|t| t.golden_model),
-    }
+    })
 }
 
 fn print_table(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<()> {
@@ -465,18 +325,18 @@ mod tests {
         fn machine(&self) -> String {
             "frag".into()
         }
-        fn begin_frame(&mut self, _: u32, _: u32) -> anyhow::Result<()> {
+        fn begin_frame(&mut self, _: u32, _: u32) -> Result<(), ModelError> {
             self.fragments = 0;
             self.frames_begun += 1;
             Ok(())
         }
-        fn event(&mut self, event: &Event) -> anyhow::Result<()> {
+        fn event(&mut self, event: &Event) -> Result<(), ModelError> {
             if let Event::Fragment(_) = event {
                 self.fragments += 1;
             }
             Ok(())
         }
-        fn end_frame(&mut self) -> anyhow::Result<u64> {
+        fn end_frame(&mut self) -> Result<u64, ModelError> {
             Ok(self.fragments)
         }
     }

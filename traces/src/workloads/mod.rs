@@ -21,6 +21,7 @@
 
 mod bvh;
 mod camera;
+pub mod compare;
 mod drivers;
 mod grid;
 mod hierarchical;

@@ -1,0 +1,217 @@
+//! Comparing culling drivers on one walkthrough: what each draws, what its queries cost, the
+//! visible pixels it loses against a full render, and (with timing models the caller
+//! supplies, such as the sim crate's machines) the simulated cycles per frame on each.
+
+use super::{
+    full_render_visible_pixels, generate, DriverOptions, FrameStats, FrameTiming, GenerateError,
+    Walk, WorkloadError, WorkloadScene, WorkloadStats,
+};
+use crate::golden::EventSink;
+use crate::Event;
+use serde::Serialize;
+
+/// What a timing model can fail with.
+pub type ModelError = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// Why a comparison stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum CompareError {
+    #[error(transparent)]
+    Workload(#[from] WorkloadError),
+    #[error("timing model on the {driver} driver")]
+    Model {
+        driver: String,
+        #[source]
+        source: ModelError,
+    },
+}
+
+/// A timing model the caller supplies (the O2 and ir4 machines live in the sim crate): it is
+/// fed each frame's events and says how many cycles the frame took on its machine.
+///
+/// Frames are self-contained: each begins with `Clear` and the whole render state.
+pub trait FrameCycleModel {
+    /// The machine's name, a column of the report (e.g. `O2`, `ir4`).
+    fn machine(&self) -> String;
+    /// A new frame of `width` x `height` pixels begins; its events follow.
+    fn begin_frame(&mut self, width: u32, height: u32) -> Result<(), ModelError>;
+    fn event(&mut self, event: &Event) -> Result<(), ModelError>;
+    /// Simulated cycles for the frame's events since `begin_frame`.
+    fn end_frame(&mut self) -> Result<u64, ModelError>;
+}
+
+/// Splits the event stream into frames at `Clear` and feeds the timing models.
+struct FrameSplitter<'m> {
+    models: &'m mut [Box<dyn FrameCycleModel>],
+    width: u32,
+    height: u32,
+    in_frame: bool,
+    /// Per model, per frame.
+    cycles: Vec<Vec<u64>>,
+}
+
+impl FrameSplitter<'_> {
+    fn end_frame(&mut self) -> Result<(), ModelError> {
+        if !self.in_frame {
+            return Ok(());
+        }
+        for (model, cycles) in self.models.iter_mut().zip(&mut self.cycles) {
+            cycles.push(model.end_frame()?);
+        }
+        self.in_frame = false;
+        Ok(())
+    }
+}
+
+impl EventSink for FrameSplitter<'_> {
+    type Error = ModelError;
+
+    fn event(&mut self, event: &Event) -> Result<(), ModelError> {
+        if self.models.is_empty() {
+            return Ok(());
+        }
+        if let Event::Clear = event {
+            self.end_frame()?;
+            for model in self.models.iter_mut() {
+                model.begin_frame(self.width, self.height)?;
+            }
+            self.in_frame = true;
+        }
+        for model in self.models.iter_mut() {
+            model.event(event)?;
+        }
+        Ok(())
+    }
+}
+
+/// One driver's line of the report; per-frame figures are means over the walk.
+#[derive(Clone, Debug, Serialize)]
+pub struct DriverReport {
+    pub driver: String,
+    /// Share of the scene's triangles drawn, over all frames.
+    pub triangles_drawn_share: f64,
+    pub triangles_per_frame: f64,
+    pub objects_per_frame: f64,
+    pub draw_fragments_per_frame: f64,
+    pub queries_per_frame: f64,
+    pub query_tiles_per_frame: f64,
+    pub query_fragments_per_frame: f64,
+    pub cells_refreshed_per_frame: f64,
+    /// Visible pixels of the full render whose objects were not drawn, per frame.
+    pub pixels_lost_per_frame: f64,
+    /// Per machine: simulated cycles per frame.
+    pub cycles_per_frame: Vec<(String, f64)>,
+    /// Wall time of the traversal (driver logic, not the golden model), ms per frame.
+    pub traversal_ms_per_frame: f64,
+    /// Wall time inside the golden model, ms per frame.
+    pub golden_model_ms_per_frame: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct CompareReport {
+    pub scene: String,
+    pub frames: u32,
+    pub width: u32,
+    pub height: u32,
+    pub scene_triangles: u64,
+    /// Mean visible pixels per frame in the full render.
+    pub visible_pixels_per_frame: f64,
+    pub drivers: Vec<DriverReport>,
+}
+
+/// Walk `scene` with each of `drivers` and gather the report; `scene_name` names the scene in
+/// it. The full render each driver is judged against is made once per frame.
+pub fn compare(
+    scene: &WorkloadScene,
+    scene_name: String,
+    walk: &Walk,
+    drivers_to_compare: &[DriverOptions],
+    models: &mut [Box<dyn FrameCycleModel>],
+) -> Result<CompareReport, CompareError> {
+    let full: Vec<Vec<u64>> = (0..walk.frames)
+        .map(|frame| full_render_visible_pixels(scene, frame, walk))
+        .collect::<Result<_, _>>()?;
+    let frames = walk.frames as f64;
+    let visible: u64 = full.iter().flatten().sum();
+    let mut drivers = Vec::new();
+    for options in drivers_to_compare {
+        options.validate()?;
+        let mut splitter = FrameSplitter {
+            cycles: vec![Vec::new(); models.len()],
+            models: &mut *models,
+            width: walk.width,
+            height: walk.height,
+            in_frame: false,
+        };
+        let model_error = |source| CompareError::Model {
+            driver: options.label(),
+            source,
+        };
+        let stats = generate(scene, options, walk, &mut splitter).map_err(|e| match e {
+            GenerateError::Workload(e) => CompareError::Workload(e),
+            GenerateError::Sink(e) => model_error(e),
+        })?;
+        splitter.end_frame().map_err(model_error)?;
+        let names: Vec<String> = splitter.models.iter().map(|m| m.machine()).collect();
+        let cycles = names
+            .into_iter()
+            .zip(&splitter.cycles)
+            .map(|(name, per_frame)| (name, per_frame.iter().sum::<u64>() as f64 / frames))
+            .collect();
+        drivers.push(driver_report(options, scene, walk, &stats, &full, cycles));
+    }
+    Ok(CompareReport {
+        scene: scene_name,
+        frames: walk.frames,
+        width: walk.width,
+        height: walk.height,
+        scene_triangles: scene.triangle_count(),
+        visible_pixels_per_frame: visible as f64 / frames,
+        drivers,
+    })
+}
+
+fn driver_report(
+    options: &DriverOptions,
+    scene: &WorkloadScene,
+    walk: &Walk,
+    stats: &WorkloadStats,
+    full: &[Vec<u64>],
+    cycles_per_frame: Vec<(String, f64)>,
+) -> DriverReport {
+    let frames = walk.frames as f64;
+    let mean =
+        |f: &dyn Fn(&FrameStats) -> u64| stats.frames.iter().map(f).sum::<u64>() as f64 / frames;
+    let mut pixels_lost = 0u64;
+    for (frame, visible) in stats.frames.iter().zip(full) {
+        let mut drawn = vec![false; visible.len()];
+        for &object in &frame.objects_drawn {
+            drawn[object as usize] = true;
+        }
+        pixels_lost += visible
+            .iter()
+            .zip(&drawn)
+            .filter(|(_, &d)| !d)
+            .map(|(&p, _)| p)
+            .sum::<u64>();
+    }
+    let ms = |f: &dyn Fn(&FrameTiming) -> std::time::Duration| {
+        stats.timing.iter().map(|t| f(t).as_secs_f64()).sum::<f64>() * 1e3 / frames
+    };
+    let triangles = mean(&|f| f.triangles_drawn);
+    DriverReport {
+        driver: options.label(),
+        triangles_drawn_share: triangles / scene.triangle_count().max(1) as f64,
+        triangles_per_frame: triangles,
+        objects_per_frame: mean(&|f| f.objects_drawn.len() as u64),
+        draw_fragments_per_frame: mean(&|f| f.draw_fragments),
+        queries_per_frame: mean(&|f| f.queries),
+        query_tiles_per_frame: mean(&|f| f.query_tiles),
+        query_fragments_per_frame: mean(&|f| f.query_fragments),
+        cells_refreshed_per_frame: mean(&|f| f.cells_refreshed),
+        pixels_lost_per_frame: pixels_lost as f64 / frames,
+        cycles_per_frame,
+        traversal_ms_per_frame: ms(&|t| t.traversal()),
+        golden_model_ms_per_frame: ms(&|t| t.golden_model),
+    }
+}
