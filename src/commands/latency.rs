@@ -7,13 +7,13 @@
 use super::arch::ArchSelection;
 use super::replay::replay_trace;
 use crate::plot::{LineChart, Scale, Series};
+use crate::sweep::{Axis, Grid, Point, Pool};
 use anyhow::{bail, Context};
 use occsim_sim::levels::LevelResult;
 use occsim_sim::report::nearest_rank;
 use occsim_sim::Fidelity;
 use occsim_sim::Report;
 use occsim_traces::retile::TileGrid;
-use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -125,17 +125,32 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
         Some(occsim_sim::arch::Value::Float(mhz)) => mhz,
         _ => bail!("the architecture has no clock_mhz"),
     };
-    let rows = args
+    if let Some(twice) = args
         .engines
-        .par_iter()
-        .map(|&engines| {
-            let mut arch = base.clone();
-            arch.set_value("engines", &engines.to_string())
-                .with_context(|| format!("--engines {engines}"))?;
-            let result = replay_trace(&args.trace, &arch, args.retile, args.fidelity)?;
-            Ok(LatencyRow::of(engines, &result, clock_mhz))
-        })
-        .collect::<anyhow::Result<Vec<LatencyRow>>>()?;
+        .iter()
+        .enumerate()
+        .find(|&(i, e)| args.engines[..i].contains(e))
+    {
+        bail!("--engines: {} appears twice", twice.1);
+    }
+    // A sweep over one axis, engines, through the sweep engine's pool (with its progress bar).
+    let grid = Grid::from_axes(vec![Axis {
+        key: "engines".into(),
+        values: args.engines.iter().map(u64::to_string).collect(),
+    }])?;
+    let pool = Pool {
+        grid: &grid,
+        jobs: std::thread::available_parallelism().map_or(1, usize::from),
+        show_progress: true,
+        failure: &|point: &Point| format!("--engines {}", point.values[0].1),
+    };
+    let rows = pool.collect(&|point: &Point| {
+        let engines = &point.values[0].1;
+        let mut arch = base.clone();
+        arch.set_value("engines", engines)?;
+        let result = replay_trace(&args.trace, &arch, args.retile, args.fidelity)?;
+        Ok(LatencyRow::of(engines.parse()?, &result, clock_mhz))
+    })?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
     } else {

@@ -18,10 +18,10 @@ mod record;
 mod runner;
 
 pub use chart::metric_chart;
-pub use grid::{AxisValidator, Grid, Point, Shard};
+pub use grid::{Axis, AxisValidator, Grid, Point, Shard};
 pub use merge::{list_keys, merge_results};
 pub use record::{PointRecord, StoredLine};
-pub use runner::{run_sweep, Evaluator, SweepOptions};
+pub use runner::{run_sweep, Evaluator, Pool, SweepOptions};
 
 #[cfg(test)]
 mod tests;

@@ -165,33 +165,16 @@ fn evaluate_points(
         .open(options.out)
         .with_context(|| format!("cannot open {} for appending", options.out.display()))?;
     let sink = Mutex::new((file, Vec::with_capacity(todo.len())));
-    let bar = progress_bar(
-        options.show_progress,
-        todo.len() + already_done,
-        already_done,
-    );
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(options.jobs)
-        .build()
-        .context("cannot start the worker threads")?;
-
-    let run_one = |index: &usize| -> Result<()> {
-        let point = options
-            .grid
-            .point(*index)
-            .ok_or_else(|| anyhow!("internal error: point {index} outside the grid"))?;
-        // A panicking model becomes an error naming its point; the other points' lines stay.
-        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| evaluate(&point)))
-            .unwrap_or_else(|payload| Err(anyhow!("the model panicked: {}", panic_text(&payload))));
-        let record = outcome.with_context(|| {
-            format!(
-                "point {} ({}) failed; finished points are kept in {}, rerun with --resume",
-                point.index,
-                point.key(),
-                options.out.display()
-            )
-        })?;
-        let line = line_for(&point, options, record);
+    let failure = |point: &Point| {
+        format!(
+            "point {} ({}) failed; finished points are kept in {}, rerun with --resume",
+            point.index,
+            point.key(),
+            options.out.display()
+        )
+    };
+    let keep = |point: &Point, record: PointRecord| -> Result<()> {
+        let line = line_for(point, options, record);
         let text = line.to_json()?;
         let stored = StoredLine {
             line,
@@ -207,16 +190,91 @@ fn evaluate_points(
             .and_then(|()| file.flush())
             .with_context(|| format!("cannot append to {}", options.out.display()))?;
         lines.push(stored);
-        bar.inc(1);
         Ok(())
     };
-    let outcome = pool.install(|| todo.par_iter().try_for_each(run_one));
-    bar.finish_and_clear();
-    outcome?;
+    let pool = Pool {
+        grid: options.grid,
+        jobs: options.jobs,
+        show_progress: options.show_progress,
+        failure: &failure,
+    };
+    pool.run(todo, already_done, evaluate, &keep)?;
     let (_, lines) = sink
         .into_inner()
         .map_err(|_| anyhow!("a worker thread panicked"))?;
     Ok(lines)
+}
+
+/// The one way points are evaluated in parallel, by the sweep and by `latency`: a pool of
+/// `jobs` threads, a progress bar (hidden off a terminal), and a panicking point turned into
+/// an error naming it. The first failure stops the run.
+pub struct Pool<'g> {
+    pub grid: &'g Grid,
+    pub jobs: usize,
+    pub show_progress: bool,
+    /// What a point's failure (an error or a panic) is said to be.
+    pub failure: &'g (dyn Fn(&Point) -> String + Sync),
+}
+
+impl Pool<'_> {
+    /// Evaluate the points at `indices` and hand each result to `keep` as it comes (in no
+    /// particular order); `already_done` points count as finished on the bar.
+    pub fn run<T>(
+        &self,
+        indices: &[usize],
+        already_done: usize,
+        evaluate: &(dyn Fn(&Point) -> Result<T> + Sync),
+        keep: &(dyn Fn(&Point, T) -> Result<()> + Sync),
+    ) -> Result<()> {
+        let bar = progress_bar(
+            self.show_progress,
+            indices.len() + already_done,
+            already_done,
+        );
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(self.jobs)
+            .build()
+            .context("cannot start the worker threads")?;
+        let run_one = |index: &usize| -> Result<()> {
+            let point = self
+                .grid
+                .point(*index)
+                .ok_or_else(|| anyhow!("internal error: point {index} outside the grid"))?;
+            // A panicking model becomes an error naming its point; the other points stay.
+            let outcome =
+                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| evaluate(&point)))
+                    .unwrap_or_else(|payload| {
+                        Err(anyhow!("the model panicked: {}", panic_text(&payload)))
+                    });
+            keep(&point, outcome.with_context(|| (self.failure)(&point))?)?;
+            bar.inc(1);
+            Ok(())
+        };
+        let outcome = pool.install(|| indices.par_iter().try_for_each(run_one));
+        bar.finish_and_clear();
+        outcome
+    }
+
+    /// Evaluate every point of the grid; the results in point order.
+    pub fn collect<T: Send>(
+        &self,
+        evaluate: &(dyn Fn(&Point) -> Result<T> + Sync),
+    ) -> Result<Vec<T>> {
+        let results = Mutex::new(Vec::new());
+        let indices: Vec<usize> = (0..self.grid.len()).collect();
+        self.run(&indices, 0, evaluate, &|point, value| {
+            results
+                .lock()
+                .map_err(|_| anyhow!("a worker thread panicked"))?
+                .push((point.index, value));
+            Ok(())
+        })?;
+        let mut results = results
+            .into_inner()
+            .map_err(|_| anyhow!("a worker thread panicked"))?;
+        results.sort_by_key(|(index, _)| *index);
+        Ok(results.into_iter().map(|(_, value)| value).collect())
+    }
 }
 
 fn panic_text(payload: &Box<dyn std::any::Any + Send>) -> String {
