@@ -249,67 +249,63 @@ fn waveform(arch: &Arch, events: &[Event], window: std::ops::Range<u64>) -> (Rep
     (report, text)
 }
 
-/// Structural check: header, declarations, increasing timestamps, values of declared
-/// widths, no value written twice in a row. Returns per signal name its (time, value)s.
+/// The waveform as an independent reader sees it: wellen (the library the Surfer viewer is
+/// built on) parses it, and per signal (its full dotted name) gives its (time, value)
+/// changes. Also checked: the header occsim writes, increasing timestamps, values that fit
+/// their declared widths, and that only changes are written (no value twice in a row).
 fn parse_vcd(text: &str) -> std::collections::HashMap<String, Vec<(u64, u64)>> {
-    let (header, body) = text
+    assert!(text.starts_with("$version occsim-rtl $end\n$timescale 1ps $end\n"));
+    // A reader keeps a signal's value when it is written again unchanged, so the writer's
+    // promise to write only changes is checked on the text itself.
+    let (_, body) = text
         .split_once("$enddefinitions $end\n")
         .expect("definitions end");
-    assert!(header.starts_with("$version occsim-rtl $end\n$timescale 1ps $end\n"));
-    let mut widths = std::collections::HashMap::new();
-    let mut names = std::collections::HashMap::new();
-    let mut scope = Vec::new();
-    for line in header.lines().skip(2) {
-        let words: Vec<&str> = line.split_whitespace().collect();
-        match words[0] {
-            "$scope" => scope.push(words[2].to_string()),
-            "$upscope" => {
-                scope.pop();
-            }
-            "$var" => {
-                assert!(words[1] == "wire" || words[1] == "reg");
-                let width: u32 = words[2].parse().unwrap();
-                assert!(widths.insert(words[3].to_string(), width).is_none());
-                names.insert(
-                    words[3].to_string(),
-                    format!("{}.{}", scope.join("."), words[4]),
-                );
-                assert_eq!(words[5], "$end");
-            }
-            other => panic!("unexpected header line {other}"),
-        }
-    }
-    assert!(scope.is_empty());
-    let mut time = None;
     let mut last = std::collections::HashMap::new();
-    let mut changes: std::collections::HashMap<String, Vec<(u64, u64)>> = Default::default();
-    for line in body.lines() {
-        if let Some(t) = line.strip_prefix('#') {
-            let t: u64 = t.parse().unwrap();
-            assert!(time.is_none_or(|p| t > p), "timestamps increase");
-            time = Some(t);
-            continue;
-        }
-        let (value, code) = if let Some(rest) = line.strip_prefix('b') {
-            let (bits, code) = rest.split_once(' ').unwrap();
-            assert!(
-                bits.len() as u32 <= widths[code],
-                "value wider than declared"
-            );
-            (u64::from_str_radix(bits, 2).unwrap(), code)
-        } else {
-            assert_eq!(widths[&line[1..]], 1);
-            ((line.as_bytes()[0] - b'0') as u64, &line[1..])
+    for line in body.lines().filter(|l| !l.starts_with('#')) {
+        let (value, code) = match line.strip_prefix('b') {
+            Some(rest) => rest.split_once(' ').expect("a vector value and its code"),
+            None => line.split_at(1),
         };
         assert_ne!(
-            last.insert(code.to_string(), value),
+            last.insert(code, value),
             Some(value),
-            "only changes"
+            "{code}: only changes"
         );
-        changes
-            .entry(names[code].clone())
-            .or_default()
-            .push((time.expect("a timestamp first"), value));
+    }
+    let mut wave = wellen::simple::read_from_reader(std::io::Cursor::new(text.as_bytes().to_vec()))
+        .expect("wellen reads the VCD");
+    let hierarchy = wave.hierarchy();
+    let vars: Vec<(String, wellen::SignalRef, u32)> = hierarchy
+        .iter_vars()
+        .map(|v| {
+            (
+                v.full_name(hierarchy),
+                v.signal_ref(),
+                v.length().unwrap_or(1),
+            )
+        })
+        .collect();
+    let refs: Vec<wellen::SignalRef> = vars.iter().map(|v| v.1).collect();
+    wave.load_signals(&refs);
+    let times = wave.time_table().to_vec();
+    assert!(times.windows(2).all(|t| t[0] < t[1]), "timestamps increase");
+    let mut changes = std::collections::HashMap::new();
+    for (name, signal, width) in vars {
+        let signal = wave.get_signal(signal).expect("a loaded signal");
+        let mut list: Vec<(u64, u64)> = Vec::new();
+        for (time, value) in signal.iter_changes() {
+            let bits = value.to_bit_string().expect("a bit vector");
+            assert!(
+                bits.len() as u32 <= width,
+                "{name}: value wider than declared"
+            );
+            let value = u64::from_str_radix(&bits, 2).expect("binary digits only");
+            list.push((times[time as usize], value));
+        }
+        assert!(
+            changes.insert(name.clone(), list).is_none(),
+            "{name} declared twice"
+        );
     }
     changes
 }
@@ -659,5 +655,16 @@ fn waveform_bytes_are_pinned() {
             (0xdb9b_62a5_9be9_8f03, 1259721),
             (0xf320_a143_ab7b_e9d8, 1104493),
         ]
+    );
+}
+
+/// The reader's checks can fail: a value written twice in a row is caught.
+#[test]
+#[should_panic(expected = "only changes")]
+fn the_vcd_check_catches_a_repeated_value() {
+    parse_vcd(
+        "$version occsim-rtl $end\n$timescale 1ps $end\n$scope module occu $end\n\
+         $var wire 4 ! step $end\n$upscope $end\n$enddefinitions $end\n\
+         #0\nb1 !\n#10\nb1 !\n",
     );
 }

@@ -476,49 +476,33 @@ mod tests {
         }
     }
 
-    struct Rng(u64);
-
-    impl Rng {
-        fn below(&mut self, n: u64) -> u64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            self.0 % n
-        }
-    }
-
-    /// Full signal name (scopes joined by `.`) -> its (time, value) changes.
+    /// Full signal name (scopes joined by `.`) -> its (time, value) changes, as wellen (the
+    /// reader the Surfer viewer is built on) reads the VCD.
     fn changes(vcd: &str) -> HashMap<String, Vec<(u64, u64)>> {
-        let (mut scopes, mut names) = (Vec::new(), HashMap::new());
-        let mut changes: HashMap<String, Vec<(u64, u64)>> = HashMap::new();
-        let mut time = 0;
-        for line in vcd.lines() {
-            let words: Vec<&str> = line.split_whitespace().collect();
-            match words.as_slice() {
-                ["$scope", "module", name, "$end"] => scopes.push(name.to_string()),
-                ["$upscope", "$end"] => drop(scopes.pop()),
-                ["$var", _, _, code, name, "$end"] => {
-                    names.insert(code.to_string(), format!("{}.{name}", scopes.join(".")));
-                }
-                [stamp] if stamp.starts_with('#') => time = stamp[1..].parse().unwrap(),
-                [value, code] if value.starts_with('b') => {
-                    let value = u64::from_str_radix(&value[1..], 2).unwrap();
-                    changes
-                        .entry(names[*code].clone())
-                        .or_default()
-                        .push((time, value));
-                }
-                [bit] if bit.starts_with(['0', '1']) => {
-                    let value = (bit.as_bytes()[0] - b'0') as u64;
-                    changes
-                        .entry(names[&bit[1..]].clone())
-                        .or_default()
-                        .push((time, value));
-                }
-                _ => {}
-            }
-        }
-        changes
+        let bytes = std::io::Cursor::new(vcd.as_bytes().to_vec());
+        let mut wave = wellen::simple::read_from_reader(bytes).expect("wellen reads the VCD");
+        let hierarchy = wave.hierarchy();
+        let vars: Vec<(String, wellen::SignalRef)> = hierarchy
+            .iter_vars()
+            .map(|v| (v.full_name(hierarchy), v.signal_ref()))
+            .collect();
+        let refs: Vec<wellen::SignalRef> = vars.iter().map(|v| v.1).collect();
+        wave.load_signals(&refs);
+        let times = wave.time_table().to_vec();
+        vars.into_iter()
+            .map(|(name, signal)| {
+                let signal = wave.get_signal(signal).expect("a loaded signal");
+                let list = signal
+                    .iter_changes()
+                    .map(|(time, value)| {
+                        let bits = value.to_bit_string().expect("a bit vector");
+                        let value = u64::from_str_radix(&bits, 2).expect("binary digits");
+                        (times[time as usize], value)
+                    })
+                    .collect();
+                (name, list)
+            })
+            .collect()
     }
 
     /// Per dumped cycle, the model's value of every checked signal (full name, value).
@@ -556,7 +540,7 @@ mod tests {
         window: Range<u64>,
         seed: u64,
     ) -> (String, Expected) {
-        let mut rng = Rng(seed | 1);
+        let mut rng = occsim_traces::rng::SplitMix64(seed | 1);
         let mut rtl = OccuRtl::new(params);
         let shared = Shared::default();
         let options = WaveformOptions {
