@@ -1,5 +1,5 @@
 //! Hand-worked timings of tiny traces on the O2-like machine. Every expected cycle count is
-//! derived in the comments from the rules in `sim/src/o2.rs`, not computed by the model.
+//! derived in the comments from the rules in `sim/src/machines/o2.rs`, not computed by the model.
 
 use occsim_sim::machines::o2::MIN_QUERY_LATENCY_CYCLES;
 use occsim_sim::{Arch, O2Machine, Report};

@@ -617,7 +617,7 @@ fn ir_waveform_dumps_the_first_image_engine() {
 
 /// The VCD bytes of random streams on several architectures and windows, pinned by the
 /// digest and length the register-file probe produced (its values are checked against the
-/// model cycle by cycle by the unit test in `sim/src/waveform.rs`): optimising the writer or
+/// model cycle by cycle by the unit test in `sim/src/blocks/waveform.rs`): optimising the writer or
 /// the probe must not change one byte of it. Re-pinned once, when the random streams moved
 /// to the one shared generator (SplitMix64) from a copy of xorshift64*.
 #[test]
