@@ -383,3 +383,20 @@ fn the_path_parser_expands_groups_and_resolves_super() {
         .collect();
     assert_eq!(paths, vec!["real"]);
 }
+
+#[test]
+fn every_source_path_the_docs_name_exists() {
+    let mut missing = Vec::new();
+    for doc in ["README.md", "ARCHITECTURE.md"] {
+        let text = std::fs::read_to_string(root().join(doc)).expect("the doc");
+        for word in text.split(|c: char| c.is_whitespace() || "`()[],;:".contains(c)) {
+            let roots = ["sim/", "traces/", "rtl-model/", "src/", "tests/", "benches/"];
+            if word.ends_with(".rs") && roots.iter().any(|r| word.starts_with(r)) {
+                if !root().join(word).exists() {
+                    missing.push(format!("{doc}: {word}"));
+                }
+            }
+        }
+    }
+    assert!(missing.is_empty(), "paths that do not exist: {missing:?}");
+}
