@@ -197,6 +197,42 @@ fn state_strategy() -> impl Strategy<Value = RenderState> {
         })
 }
 
+/// How many times each pixel is covered by a mesh over the `columns` x `rows` grid of
+/// `point(i, j)`: cell (i, j) split along one diagonal or the other as `diagonals[i·7 + j]`
+/// says, triangle k's winding flipped when `flips[k mod 98]`.
+fn mesh_coverage(
+    profile: RasterProfile,
+    state: &RenderState,
+    (columns, rows): (usize, usize),
+    point: impl Fn(usize, usize) -> [f32; 4],
+    diagonals: &[bool],
+    flips: &[bool],
+) -> Vec<u32> {
+    let mut counts = vec![0u32; (state.width * state.height) as usize];
+    let mut triangle = 0;
+    for i in 0..columns {
+        for j in 0..rows {
+            let (p00, p10) = (point(i, j), point(i + 1, j));
+            let (p11, p01) = (point(i + 1, j + 1), point(i, j + 1));
+            let halves = if diagonals[i * 7 + j] {
+                [[p00, p10, p11], [p00, p11, p01]]
+            } else {
+                [[p00, p10, p01], [p10, p11, p01]]
+            };
+            for mut tri in halves {
+                if flips[triangle % 98] {
+                    tri.swap(1, 2);
+                }
+                triangle += 1;
+                for f in raster_with(profile, state, &tri).fragments {
+                    counts[f.y as usize * state.width as usize + f.x as usize] += 1;
+                }
+            }
+        }
+    }
+    counts
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(300))]
 
@@ -248,27 +284,7 @@ proptest! {
             let y = -1.0 + 2.0 * (j as f32 + fy) / rows as f32;
             [x * w, y * w, 0.0, w]
         };
-        let mut counts = vec![0u32; 48 * 40];
-        let mut triangle = 0;
-        for i in 0..columns {
-            for j in 0..rows {
-                let (p00, p10, p11, p01) = (point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1));
-                let halves = if diagonals[i * 7 + j] {
-                    [[p00, p10, p11], [p00, p11, p01]]
-                } else {
-                    [[p00, p10, p01], [p10, p11, p01]]
-                };
-                for mut tri in halves {
-                    if flips[triangle % 98] {
-                        tri.swap(1, 2);
-                    }
-                    triangle += 1;
-                    for f in raster(&state, &tri).fragments {
-                        counts[f.y as usize * 48 + f.x as usize] += 1;
-                    }
-                }
-            }
-        }
+        let counts = mesh_coverage(RasterProfile::Exact, &state, (columns, rows), point, &diagonals, &flips);
         let wrong: Vec<(usize, u32)> = counts.iter().copied().enumerate().filter(|&(_, c)| c != 1).collect();
         prop_assert!(wrong.is_empty(), "pixels not covered exactly once (index, count): {:?}", wrong);
     }
@@ -678,27 +694,7 @@ proptest! {
             let w = ws[(i * 8 + j) % 64];
             [nx * w, ny * w, (a * nx + b * ny + c) * w, w]
         };
-        let mut counts = vec![0u32; (width * height) as usize];
-        let mut triangle = 0;
-        for i in 0..columns {
-            for j in 0..rows {
-                let (p00, p10, p11, p01) = (point(i, j), point(i + 1, j), point(i + 1, j + 1), point(i, j + 1));
-                let halves = if diagonals[i * 7 + j] {
-                    [[p00, p10, p11], [p00, p11, p01]]
-                } else {
-                    [[p00, p10, p01], [p10, p11, p01]]
-                };
-                for mut tri in halves {
-                    if flips[triangle % 98] {
-                        tri.swap(1, 2);
-                    }
-                    triangle += 1;
-                    for f in raster_with(profile, &state, &tri).fragments {
-                        counts[f.y as usize * width as usize + f.x as usize] += 1;
-                    }
-                }
-            }
-        }
+        let counts = mesh_coverage(profile, &state, (columns, rows), point, &diagonals, &flips);
         let margin = 0.02;
         for py in 0..height {
             for px in 0..width {
