@@ -41,6 +41,9 @@ pub(super) enum Framebuffer {
     Window,
 }
 
+/// A triangle after the vertex stage: each vertex with its clip mask, shaded once.
+type ShadedTriangle = [(Vertex, u32); 3];
+
 /// Triangles the draw module shades together: `max_vertices` = 4096 vertices for a linear
 /// draw (draw_pt_fetch_shade_pipeline_llvm.c), trimmed to whole triangles (4095).
 pub(crate) const SEGMENT_TRIANGLES: usize = 4096 / 3;
@@ -52,8 +55,8 @@ pub(crate) const SEGMENT_TRIANGLES: usize = 4096 / 3;
 #[derive(Clone, Debug)]
 pub(super) struct Draws {
     framebuffer: Framebuffer,
-    /// Triangles of the current segment held back, as given.
-    held: Vec<[[f32; 4]; 3]>,
+    /// Triangles of the current segment held back, shaded.
+    held: Vec<ShadedTriangle>,
     /// Triangles of the current segment already drawn (none are held then).
     streamed: usize,
 }
@@ -74,22 +77,24 @@ impl Draws {
         vertices: &[[f32; 4]; 3],
         sink: &mut impl RasterSink,
     ) {
+        let viewport = Viewport::new(state, self.framebuffer);
+        let shaded = vertices.map(|c| shade(&c, &viewport));
         if self.streamed > 0 {
-            self.draw_one(state, vertices, None, sink);
+            self.draw_one(state, &shaded, &viewport, None, sink);
             self.streamed += 1;
             if self.streamed == SEGMENT_TRIANGLES {
                 self.streamed = 0;
             }
             return;
         }
-        self.held.push(*vertices);
+        self.held.push(shaded);
         if self.held.len() == SEGMENT_TRIANGLES {
             self.flush_segment(state, sink);
         } else if !state.cull_back && self.held.len() > 3 {
             // Past three triangles without culling, nothing depends on the rest.
             let held = std::mem::take(&mut self.held);
             for triangle in &held {
-                self.draw_one(state, triangle, None, sink);
+                self.draw_one(state, triangle, &viewport, None, sink);
             }
             self.streamed = held.len();
             self.held = held;
@@ -110,12 +115,12 @@ impl Draws {
         }
         let viewport = Viewport::new(state, self.framebuffer);
         let held = std::mem::take(&mut self.held);
-        let pipeline = held.iter().flatten().any(|c| shade(c, &viewport).1 != 0);
+        let pipeline = held.iter().flatten().any(|&(_, mask)| mask != 0);
         if !pipeline && held.len() == 3 {
             self.nine_vertices(state, &held, &viewport, sink);
         } else {
             for triangle in &held {
-                self.draw_one(state, triangle, Some(pipeline), sink);
+                self.draw_one(state, triangle, &viewport, Some(pipeline), sink);
             }
         }
         self.held = held;
@@ -128,12 +133,11 @@ impl Draws {
     fn draw_one(
         &self,
         state: &RenderState,
-        vertices: &[[f32; 4]; 3],
+        shaded: &ShadedTriangle,
+        viewport: &Viewport,
         pipeline: Option<bool>,
         sink: &mut impl RasterSink,
     ) {
-        let viewport = Viewport::new(state, self.framebuffer);
-        let shaded = vertices.map(|c| shade(&c, &viewport));
         let (any, all) = shaded
             .iter()
             .fold((0, u32::MAX), |(any, all), (_, m)| (any | m, all & m));
@@ -147,7 +151,7 @@ impl Draws {
         if any == 0 {
             set_up(&triangle);
         } else if all == 0 {
-            clipper::clip_triangle(&triangle, any, &viewport, set_up);
+            clipper::clip_triangle(&triangle, any, viewport, set_up);
         }
     }
 
@@ -174,19 +178,15 @@ impl Draws {
     fn nine_vertices(
         &self,
         state: &RenderState,
-        held: &[[[f32; 4]; 3]],
+        held: &[ShadedTriangle],
         viewport: &Viewport,
         sink: &mut impl RasterSink,
     ) {
-        let v: Vec<Vertex> = held
-            .iter()
-            .flatten()
-            .map(|c| shade(c, viewport).0)
-            .collect();
+        let v: Vec<Vertex> = held.iter().flatten().map(|&(v, _)| v).collect();
         let (x, y) = (|i: usize| v[i].window[0], |i: usize| v[i].window[1]);
         if !(y(8) == y(7) && y(8) == y(6)) {
             for triangle in held {
-                self.draw_one(state, triangle, Some(false), sink);
+                self.draw_one(state, triangle, viewport, Some(false), sink);
             }
             return;
         }
