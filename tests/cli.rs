@@ -163,7 +163,10 @@ fn trace_gen_info_dump_round_trip() {
     let lines: Vec<&str> = dump.lines().collect();
     assert_eq!(lines.len(), 4, "{dump}");
     assert_eq!(lines[1], "begin 1 samples buffer=8 tiles 0,0,64,64");
-    assert_eq!(lines[2], "primitive");
+    // The scene's first draw is two triangles: their geometry batch comes before the
+    // first primitive.
+    assert_eq!(lines[2], "geometry vertices=6 triangles=2 draw");
+    assert_eq!(lines[3], "primitive");
 }
 
 #[test]

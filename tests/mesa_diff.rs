@@ -417,6 +417,30 @@ fn structured_scenes() -> Vec<(String, String)> {
          tri -0.8223223 0.3768852 -0.3658611 1  -0.001898742 0.4581878 0.3025198 1  0.6457618 -0.4365953 -0.343951 1\nend\n"
             .into(),
     ));
+    // Conditional rendering: query 0 passes nothing (behind the near plane drawn first), so
+    // the draws under it are discarded and query 2 sees the buffer as query 1 left it;
+    // under query 1 (which passed) they are drawn. Both through GL_QUERY_WAIT on llvmpipe.
+    let full = |z: f64| {
+        format!("tri -1 -1 {z} 1 1 -1 {z} 1 1 1 {z} 1\ntri -1 -1 {z} 1 1 1 {z} 1 -1 1 {z} 1\n")
+    };
+    scenes.push((
+        "conditional rendering".into(),
+        format!(
+            "viewport 32 32\n{}begin 0\n{}end\nbegin 1 any\n{}end\n\
+             begin_conditional 0\n{}end_conditional\nbegin 2\n{}end\n\
+             begin_conditional 1\nbegin 3\n{}end\nend_conditional\n\
+             begin 4 brief tile=0,0,16,32 tile=16,0,16,32\n{}end\n\
+             begin_conditional 4\nbegin 5\n{}end\nend_conditional\n",
+            full(0.0),
+            full(0.5),
+            full(-0.5),
+            full(-0.9),
+            full(-0.8),
+            full(-0.95),
+            full(0.9),
+            full(-0.99),
+        ),
+    ));
     scenes
 }
 
@@ -590,6 +614,16 @@ fn random_scene(seed: u64, width: u32, height: u32) -> String {
         } else if rng.chance(30) {
             text += "scissor off\n";
         }
+        // A quarter of the queries draw under the condition of an earlier one
+        // (`glBeginConditionalRender` with `GL_QUERY_WAIT`); the closed loop's other
+        // commands change no count but must not disturb one.
+        let conditional = query > 0 && rng.chance(25);
+        if conditional {
+            text += &format!("begin_conditional {}\n", rng.below(query));
+        }
+        if query > 0 && rng.chance(10) {
+            text += &format!("host nodes={}\nwait {}\n", rng.below(9), rng.below(query));
+        }
         let mode = QueryMode::ALL[rng.below(4) as usize];
         text += &format!("begin {query} {}", mode.name());
         if mode.is_occlusion_render_mode() {
@@ -608,6 +642,12 @@ fn random_scene(seed: u64, width: u32, height: u32) -> String {
             random_draw(&mut rng, &mut text);
         }
         text += "end\n";
+        if conditional {
+            text += "end_conditional\n";
+        }
+        if rng.chance(5) {
+            text += "swap\n";
+        }
     }
     text
 }

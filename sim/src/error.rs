@@ -21,6 +21,8 @@ pub enum SimError {
     },
     #[error("event {event}: query {id} begins while query {open_id} is open")]
     NestedQuery { event: u64, id: u32, open_id: u32 },
+    #[error("event {event}: the host waits for query {id}'s result, but no query {id} has ended")]
+    NoResultToWaitFor { event: u64, id: u32 },
     #[error("event {event}: query end without an open query")]
     EndWithoutBegin { event: u64 },
     #[error("event {event}: golden result for query {id}, but no query just ended")]

@@ -20,6 +20,31 @@ pub struct Report {
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub units: Vec<UnitSummary>,
     pub queries: Vec<QueryReport>,
+    /// Each frame's time, split by where the host's time went ([`crate::machines::closed_loop`]);
+    /// empty when the stream has no closed-loop record (a version-1 trace: an open loop).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub frames: Vec<FrameReport>,
+}
+
+/// One frame of a closed-loop replay. On the host's timeline `host_busy + waiting +
+/// pipe_wait = cycles`; `geometry_busy` (on the O2 a part of `host_busy`) and `pixel_busy`
+/// overlap it.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct FrameReport {
+    pub frame: u64,
+    pub cycles: u64,
+    pub seconds: f64,
+    /// The host CPU busy: traversal, driver, bus writes, result reads (and on the O2 the
+    /// software geometry).
+    pub host_busy: u64,
+    /// The geometry stage busy (the O2's host transform; the IR's Geometry Engines, summed).
+    pub geometry_busy: u64,
+    /// The rasterizer (the busiest Fragment Generator) busy.
+    pub pixel_busy: u64,
+    /// The host blocked on query results: drain, merge, notification.
+    pub waiting: u64,
+    /// The host blocked at the frame's end until the pipeline finished it.
+    pub pipe_wait: u64,
 }
 
 /// The busy share of `count` like units (the Image Engines, say): min, mean and max.
@@ -73,6 +98,9 @@ pub struct Summary {
     pub latency_p50_cycles: u64,
     pub latency_p95_cycles: u64,
     pub latency_max_cycles: u64,
+    /// Frames over the run's time (closed-loop streams only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames_per_second: Option<f64>,
 }
 
 /// What a machine's run amounts to, for [`Summary::of`].
@@ -106,7 +134,25 @@ impl Summary {
             latency_p50_cycles: nearest_rank(&latencies, 50),
             latency_p95_cycles: nearest_rank(&latencies, 95),
             latency_max_cycles: latencies.last().copied().unwrap_or(0),
+            frames_per_second: None,
         }
+    }
+}
+
+impl Report {
+    /// Add the closed loop's frames to a machine's report: the run lasts until `end` (the
+    /// host's last cycle, when it outlasts the pipeline), and frames per second follow.
+    pub(crate) fn close_loop(&mut self, frames: Vec<FrameReport>, end: u64, clock_mhz: f64) {
+        let summary = &mut self.summary;
+        if end > summary.cycles {
+            summary.cycles = end;
+            summary.simulated_seconds = end as f64 / (clock_mhz * 1e6);
+            summary.fragments_per_cycle = summary.fragments as f64 / end as f64;
+        }
+        if !frames.is_empty() && summary.simulated_seconds > 0.0 {
+            summary.frames_per_second = Some(frames.len() as f64 / summary.simulated_seconds);
+        }
+        self.frames = frames;
     }
 }
 
@@ -167,6 +213,15 @@ pub struct QueryReport {
     pub fragments: u64,
     pub overflowed_buffers: u32,
     pub tiles: Vec<TileReport>,
+}
+
+impl QueryReport {
+    /// The 32-bit words of the query's result records: a brief record a tile and the hits
+    /// kept (what the host reads back).
+    pub fn record_words(&self) -> u64 {
+        let hits: u64 = self.tiles.iter().map(|t| t.hits_written).sum();
+        self.tiles.len() as u64 * occsim_traces::query::BRIEF_RECORD_ENTRIES as u64 + hits
+    }
 }
 
 #[derive(Clone, Debug, Serialize, PartialEq)]

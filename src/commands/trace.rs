@@ -264,6 +264,21 @@ fn describe(event: &Event) -> String {
         Event::Primitive => "primitive".into(),
         Event::Fragment(f) => format!("fragment {} {} {}", f.x, f.y, f.z),
         Event::QueryResult(r) => result(r),
+        Event::Geometry(b) => format!(
+            "geometry vertices={} triangles={}{}{}",
+            b.vertices,
+            b.triangles,
+            if b.starts_draw { " draw" } else { "" },
+            if b.discarded { " discarded" } else { "" }
+        ),
+        Event::HostWork(w) => format!(
+            "host nodes={} boxes={} decisions={}",
+            w.nodes, w.boxes, w.decisions
+        ),
+        Event::Wait(id) => format!("wait {id}"),
+        Event::ConditionalBegin(id) => format!("begin_conditional {id}"),
+        Event::ConditionalEnd => "end_conditional".into(),
+        Event::Swap => "swap".into(),
     }
 }
 

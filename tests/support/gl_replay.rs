@@ -19,6 +19,11 @@
 //!   be replayed once per tile, so scenes must not put one there.
 //! - `clear` ignores scissor and depth mask (as the golden model's `Event::Clear`), so the
 //!   replay lifts both around `glClear`.
+//! - `begin_conditional ID` on a `samples` or `any` query is
+//!   `glBeginConditionalRender(query, GL_QUERY_WAIT)` on that query's GL object (kept until
+//!   the id is reused); on a `brief` or `verbose` query, which has no GL object of its own,
+//!   the replay skips the draws itself when Mesa's per-tile counts were all zero.
+//! - `wait`, `host` and `swap` end the pending draw and change nothing else.
 //!
 //! Set `LIBGL_ALWAYS_SOFTWARE=1`, `GALLIUM_DRIVER=llvmpipe` (done by [`GlReplay::new`]) before
 //! the first EGL call; [`GlReplay::new`] sets `LP_NUM_THREADS=0` (no rasterizer threads)
@@ -62,6 +67,22 @@ pub struct GlReplay {
     vertex_buffer: glow::Buffer,
     /// Clip coordinates of triangles waiting to be drawn in one `glDrawArrays`.
     pending: Vec<f32>,
+    /// What conditional rendering can read of each ended query.
+    ended: std::collections::HashMap<u32, EndedQuery>,
+    /// Inside a conditional on a per-tile query that passed nothing: draws are dropped.
+    skip_draws: bool,
+    /// Inside a GL conditional render.
+    gl_conditional: bool,
+    begin_conditional_render: unsafe extern "system" fn(u32, u32),
+    end_conditional_render: unsafe extern "system" fn(),
+}
+
+/// An ended query, as `begin_conditional` sees it.
+enum EndedQuery {
+    /// A samples or any query's GL object.
+    Gl(glow::Query),
+    /// A per-tile query: whether any tile passed a fragment.
+    PerTile(bool),
 }
 
 /// The open query while a scene is replayed.
@@ -195,6 +216,24 @@ impl GlReplay {
                     .map_or(std::ptr::null(), |f| f as *const _)
             })
         };
+        // glow has no wrapper for conditional rendering: load the two entry points (GL 3.0).
+        let load = |name: &str| {
+            egl.get_proc_address(name)
+                .ok_or_else(|| format!("no {name} in libGL"))
+        };
+        let (begin, end) = (
+            load("glBeginConditionalRender")?,
+            load("glEndConditionalRender")?,
+        );
+        // SAFETY: the GL 3.0 signatures of these entry points.
+        let (begin_conditional_render, end_conditional_render) = unsafe {
+            (
+                std::mem::transmute::<extern "system" fn(), unsafe extern "system" fn(u32, u32)>(
+                    begin,
+                ),
+                std::mem::transmute::<extern "system" fn(), unsafe extern "system" fn()>(end),
+            )
+        };
         // SAFETY: plain GL calls on the current context.
         let vertex_buffer = unsafe { set_up_pipeline(&gl, target, width, height)? };
         Ok(GlReplay {
@@ -207,6 +246,11 @@ impl GlReplay {
             height,
             vertex_buffer,
             pending: Vec::new(),
+            ended: std::collections::HashMap::new(),
+            skip_draws: false,
+            gl_conditional: false,
+            begin_conditional_render,
+            end_conditional_render,
         })
     }
 
@@ -228,6 +272,12 @@ impl GlReplay {
         };
         self.apply_state(&state, None);
         self.clear();
+        for (_, ended) in std::mem::take(&mut self.ended) {
+            if let EndedQuery::Gl(query) = ended {
+                // SAFETY: a GL call on the current context; the object is no longer named.
+                unsafe { self.gl.delete_query(query) };
+            }
+        }
         let mut open: Option<OpenQuery> = None;
         let mut results = Vec::new();
         for line in lines {
@@ -279,11 +329,9 @@ impl GlReplay {
                             // SAFETY: plain GL calls on the current context.
                             let count = unsafe {
                                 self.gl.end_query(target);
-                                let count =
-                                    self.gl.get_query_parameter_u32(query, glow::QUERY_RESULT);
-                                self.gl.delete_query(query);
-                                count
+                                self.gl.get_query_parameter_u32(query, glow::QUERY_RESULT)
                             };
+                            self.keep_ended(id, EndedQuery::Gl(query));
                             results.push(GlQueryCounts {
                                 id,
                                 mode,
@@ -297,10 +345,12 @@ impl GlReplay {
                             commands,
                             state_at_begin,
                         }) => {
-                            let counts = tiles
+                            let counts: Vec<u64> = tiles
                                 .iter()
                                 .map(|tile| self.count_tile(tile, &commands, state_at_begin))
                                 .collect();
+                            let passed = counts.iter().any(|&c| c > 0);
+                            self.keep_ended(id, EndedQuery::PerTile(passed));
                             results.push(GlQueryCounts { id, mode, counts });
                             self.apply_state(&state, None);
                         }
@@ -311,6 +361,26 @@ impl GlReplay {
                     for vertex in vertices {
                         self.pending.extend_from_slice(vertex);
                     }
+                }
+                Command::BeginConditional(id) => {
+                    self.flush();
+                    match self.ended.get(id) {
+                        // SAFETY: a GL call on the current context with a live query object.
+                        Some(EndedQuery::Gl(query)) => unsafe {
+                            (self.begin_conditional_render)(query.0.get(), glow::QUERY_WAIT);
+                            self.gl_conditional = true;
+                        },
+                        Some(EndedQuery::PerTile(passed)) => self.skip_draws = !passed,
+                        None => {}
+                    }
+                }
+                Command::EndConditional => {
+                    self.flush();
+                    if std::mem::replace(&mut self.gl_conditional, false) {
+                        // SAFETY: a GL call on the current context, inside a conditional.
+                        unsafe { (self.end_conditional_render)() };
+                    }
+                    self.skip_draws = false;
                 }
                 other => {
                     self.flush();
@@ -395,8 +465,20 @@ impl GlReplay {
         }
     }
 
-    /// Draw the pending triangles in one call, in order.
+    /// Keep what conditional rendering needs of query `id`, freeing what it replaces.
+    fn keep_ended(&mut self, id: u32, ended: EndedQuery) {
+        if let Some(EndedQuery::Gl(old)) = self.ended.insert(id, ended) {
+            // SAFETY: a GL call on the current context; the old object is no longer named.
+            unsafe { self.gl.delete_query(old) };
+        }
+    }
+
+    /// Draw the pending triangles in one call, in order (none inside a conditional whose
+    /// per-tile query passed nothing).
     fn flush(&mut self) {
+        if self.skip_draws {
+            self.pending.clear();
+        }
         if self.pending.is_empty() {
             return;
         }

@@ -59,4 +59,47 @@ pub enum Event {
     Fragment(Fragment),
     /// The golden model's answer to the query that just ended.
     QueryResult(QueryResult),
+    /// Geometry the front end transformed: submitted triangles (those culled or clipped away
+    /// included) and their vertices, just before the primitives they produce.
+    Geometry(GeometryBatch),
+    /// The host's own work between commands: the culling traversal.
+    HostWork(HostWork),
+    /// The host blocks until query `id`'s result is available (`glGetQueryObject` with
+    /// `GL_QUERY_RESULT`, HP_occlusion_test's read, the paper's `glRenderMode(GL_RENDER)`).
+    Wait(u32),
+    /// `glBeginConditionalRender(id, GL_QUERY_WAIT)`: the pipeline holds what follows until
+    /// query `id`'s result is known; the draws are discarded when it passed no fragment.
+    ConditionalBegin(u32),
+    ConditionalEnd,
+    /// The frame ends (`SwapBuffers`).
+    Swap,
+}
+
+/// A run of submitted triangles the geometry stage processed. A draw (one `glDrawArrays`)
+/// is one or more batches; its first has `starts_draw`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct GeometryBatch {
+    pub vertices: u32,
+    pub triangles: u32,
+    /// The first batch of a draw (the host's per-draw cost is charged here).
+    pub starts_draw: bool,
+    /// The draw was discarded by conditional rendering: submitted, never rasterized.
+    pub discarded: bool,
+}
+
+/// The host's culling work between two commands, counted in the traversal's own units.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+pub struct HostWork {
+    /// Hierarchy nodes (or grid cells) visited.
+    pub nodes: u32,
+    /// Bounding boxes tested against the view frustum.
+    pub boxes: u32,
+    /// Visibility decisions taken from query answers.
+    pub decisions: u32,
+}
+
+impl HostWork {
+    pub fn is_empty(&self) -> bool {
+        *self == HostWork::default()
+    }
 }

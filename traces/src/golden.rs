@@ -1,11 +1,12 @@
 //! The functional golden model: a depth buffer and the query semantics, giving every query's
 //! exact result. Every timing model must reproduce its counts.
 
-use crate::event::{Event, Fragment, Span, DEPTH_ONE};
+use crate::event::{Event, Fragment, GeometryBatch, Span, DEPTH_ONE};
 use crate::query::{verbose_hits_kept, QueryMode, QueryResult, QuerySpec, TileResult};
 use crate::raster::{RasterProfile, RasterSink, Rasterizer};
 use crate::scene::Command;
 use crate::state::{DepthFunc, Rect, RenderState};
+use std::collections::HashMap;
 
 /// The depth buffer: 24-bit depths, one per pixel, row by row from the bottom.
 #[derive(Clone)]
@@ -506,6 +507,40 @@ impl EventSink for Vec<Event> {
 pub struct GoldenModel {
     functional: FunctionalModel,
     rasterizer: Rasterizer,
+    draw: DrawCount,
+    /// Whether each query that has ended passed a fragment (what conditional rendering reads).
+    passed: HashMap<u32, bool>,
+    /// Inside `begin_conditional`: whether its draws are discarded.
+    discarding: Option<bool>,
+}
+
+/// The current draw's submitted triangles not yet reported in a [`GeometryBatch`].
+#[derive(Default)]
+struct DrawCount {
+    /// Triangles given to the rasterizer since the last batch.
+    pending: u32,
+    /// Triangles discarded by conditional rendering in this draw.
+    discarded: u32,
+    /// Whether this draw has reported a batch already.
+    started: bool,
+}
+
+impl DrawCount {
+    /// The batch of the pending triangles, if any: it goes out before their first primitive.
+    fn take_batch(&mut self) -> Option<GeometryBatch> {
+        if self.pending == 0 {
+            return None;
+        }
+        let batch = GeometryBatch {
+            vertices: self.pending.saturating_mul(3),
+            triangles: self.pending,
+            starts_draw: !self.started,
+            discarded: false,
+        };
+        self.pending = 0;
+        self.started = true;
+        Some(batch)
+    }
 }
 
 /// The rasterizer's output into the functional model and the caller's sink. The rasterizer's
@@ -513,6 +548,7 @@ pub struct GoldenModel {
 /// sink after it ([`GoldenModel::execute`] returns it when the triangle is done).
 struct Forward<'a, S: EventSink> {
     functional: &'a mut FunctionalModel,
+    draw: &'a mut DrawCount,
     sink: &'a mut S,
     error: Option<S::Error>,
 }
@@ -540,6 +576,9 @@ impl<S: EventSink> RasterSink for Forward<'_, S> {
 
     #[inline(always)]
     fn primitive(&mut self) {
+        if let Some(batch) = self.draw.take_batch() {
+            self.send(&Event::Geometry(batch));
+        }
         self.send(&Event::Primitive);
     }
 
@@ -560,6 +599,9 @@ impl GoldenModel {
         GoldenModel {
             functional: FunctionalModel::new(width, height),
             rasterizer: Rasterizer::new(profile),
+            draw: DrawCount::default(),
+            passed: HashMap::new(),
+            discarding: None,
         }
     }
 
@@ -577,16 +619,27 @@ impl GoldenModel {
     ///
     /// Consecutive `tri` commands form one draw, and the rasterizer may hold a draw's
     /// triangles back until it ends (see [`Rasterizer`]): any other command ends it first,
-    /// and [`GoldenModel::finish`] ends the last one.
+    /// and [`GoldenModel::finish`] ends the last one. Every submitted triangle is reported in
+    /// an [`Event::Geometry`] batch before the first primitive it produces (or at the draw's
+    /// end, when it produces none).
+    ///
+    /// Inside `begin_conditional ID`, triangles are discarded when query ID passed no
+    /// fragment (a query that never ended counts as passing: nothing is discarded).
     pub fn execute<S: EventSink>(
         &mut self,
         command: &Command,
         sink: &mut S,
     ) -> Result<Option<QueryResult>, S::Error> {
         if let Command::Tri(vertices) = command {
+            if self.discarding == Some(true) {
+                self.draw.discarded = self.draw.discarded.saturating_add(1);
+                return Ok(None);
+            }
+            self.draw.pending = self.draw.pending.saturating_add(1);
             let state = *self.functional.state();
             let mut forward = Forward {
                 functional: &mut self.functional,
+                draw: &mut self.draw,
                 sink,
                 error: None,
             };
@@ -605,25 +658,51 @@ impl GoldenModel {
             Command::Scissor(s) => Event::Scissor(*s),
             Command::Begin(spec) => Event::QueryBegin(spec.clone()),
             Command::End => Event::QueryEnd,
+            Command::Wait(id) => Event::Wait(*id),
+            Command::BeginConditional(id) => {
+                self.discarding = Some(!self.passed.get(id).copied().unwrap_or(true));
+                Event::ConditionalBegin(*id)
+            }
+            Command::EndConditional => {
+                self.discarding = None;
+                Event::ConditionalEnd
+            }
+            Command::Host(work) => Event::HostWork(*work),
+            Command::Swap => Event::Swap,
         };
         sink.event(&event)?;
         let result = self.functional.event(&event);
         if let Some(result) = &result {
+            self.passed.insert(result.id, result.value() > 0);
             sink.event(&Event::QueryResult(result.clone()))?;
         }
         Ok(result)
     }
 
     /// End the current draw: every triangle given so far reaches `sink` (call it at the end
-    /// of a scene, or before looking at the depth buffer).
+    /// of a scene, or before looking at the depth buffer), and its geometry is reported.
     pub fn finish<S: EventSink>(&mut self, sink: &mut S) -> Result<(), S::Error> {
         let state = *self.functional.state();
         let mut forward = Forward {
             functional: &mut self.functional,
+            draw: &mut self.draw,
             sink,
             error: None,
         };
         self.rasterizer.end_draw(&state, &mut forward);
-        forward.into_result()
+        forward.into_result()?;
+        if let Some(batch) = self.draw.take_batch() {
+            sink.event(&Event::Geometry(batch))?;
+        }
+        if self.draw.discarded > 0 {
+            sink.event(&Event::Geometry(GeometryBatch {
+                vertices: self.draw.discarded.saturating_mul(3),
+                triangles: self.draw.discarded,
+                starts_draw: !self.draw.started,
+                discarded: true,
+            }))?;
+        }
+        self.draw = DrawCount::default();
+        Ok(())
     }
 }

@@ -23,7 +23,7 @@ pub mod state;
 pub mod trace;
 pub mod workloads;
 
-pub use event::{Event, Fragment, Span};
+pub use event::{Event, Fragment, GeometryBatch, HostWork, Span};
 pub use query::{QueryMode, QueryResult, QuerySpec, Tile, TileResult};
 pub use scene::{Command, SceneError, SceneLine};
 pub use state::{DepthFunc, Rect};

@@ -12,19 +12,35 @@
 //! end
 //! tri x y z w  x y z w  x y z w
 //! end_draw
+//! wait ID
+//! begin_conditional ID
+//! end_conditional
+//! host [nodes=N] [boxes=N] [decisions=N]
+//! swap
 //! ```
 //! `viewport` comes first and once. Queries do not nest. Coordinates are clip coordinates,
 //! parsed as 32-bit floats; NaN and infinities are rejected.
+//!
+//! The closed loop's commands mirror the GL calls an application makes: `wait ID` reads
+//! query ID's result, blocking the host (`glGetQueryObject(GL_QUERY_RESULT)`);
+//! `begin_conditional ID` ... `end_conditional` is `glBeginConditionalRender(ID,
+//! GL_QUERY_WAIT)`: the draws between are discarded when query ID passed no fragment (for
+//! brief and verbose queries: when no tile's NOHC is above zero); `host` is the traversal's
+//! work before the next command (nodes visited, boxes tested, decisions taken); `swap` ends
+//! a frame. `wait` and `begin_conditional` name a query that has ended; conditionals do not
+//! nest.
 //!
 //! Consecutive `tri` lines are one draw (one `glDrawArrays`); any other command ends it.
 //! `end_draw` ends it and does nothing else: two objects drawn one after the other with no
 //! state change between are two draws, as an application's two draw calls.
 
+use crate::event::HostWork;
 use crate::query::{
     QueryMode, QuerySpec, Tile, BRIEF_RECORD_ENTRIES, DEFAULT_BRIEF_BUFFER, DEFAULT_VERBOSE_BUFFER,
     MAX_BUFFER_ENTRIES, MAX_TILES,
 };
 use crate::state::{DepthFunc, Rect, MAX_VIEWPORT_SIDE};
+use std::collections::BTreeSet;
 use std::io::BufRead;
 
 /// A scene command, one per line.
@@ -46,6 +62,15 @@ pub enum Command {
     Tri([[f32; 4]; 3]),
     /// The end of a draw, and nothing else.
     EndDraw,
+    /// The host blocks until query ID's result is available.
+    Wait(u32),
+    /// `glBeginConditionalRender(ID, GL_QUERY_WAIT)`.
+    BeginConditional(u32),
+    EndConditional,
+    /// The host's traversal work before the next command.
+    Host(HostWork),
+    /// The frame ends.
+    Swap,
 }
 
 /// A command and the line it came from (1-based).
@@ -84,6 +109,9 @@ pub struct SceneReader<R> {
     buffer: Vec<u8>,
     viewport: Option<(u32, u32)>,
     open_query: Option<u32>,
+    /// Queries that have ended at least once (what `wait` and `begin_conditional` may name).
+    ended_queries: BTreeSet<u32>,
+    open_conditional: Option<u32>,
     finished: bool,
 }
 
@@ -97,6 +125,8 @@ impl<R: BufRead> SceneReader<R> {
             buffer: Vec::new(),
             viewport: None,
             open_query: None,
+            ended_queries: BTreeSet::new(),
+            open_conditional: None,
             finished: false,
         }
     }
@@ -146,6 +176,11 @@ impl<R: BufRead> SceneReader<R> {
         if let Some(id) = self.open_query {
             return Err(self.error(format!("end of scene inside query {id}: expected `end`")));
         }
+        if let Some(id) = self.open_conditional {
+            return Err(self.error(format!(
+                "end of scene inside `begin_conditional {id}`: expected `end_conditional`"
+            )));
+        }
         if self.viewport.is_none() {
             return Err(self.error("empty scene: expected `viewport W H`"));
         }
@@ -187,15 +222,39 @@ impl<R: BufRead> SceneReader<R> {
             "begin" => self.parse_begin(&args)?,
             "end" => {
                 self.expect_args(keyword, &args, 0, "end")?;
-                if self.open_query.take().is_none() {
+                let Some(id) = self.open_query.take() else {
                     return Err(self.error("`end` without an open query"));
-                }
+                };
+                self.ended_queries.insert(id);
                 Command::End
             }
             "tri" => self.parse_tri(&args)?,
+            "wait" => Command::Wait(self.parse_ended_query(keyword, &args)?),
+            "begin_conditional" => {
+                if let Some(open) = self.open_conditional {
+                    return Err(self.error(format!(
+                        "`begin_conditional` inside `begin_conditional {open}`: conditionals do not nest, expected `end_conditional` first"
+                    )));
+                }
+                let id = self.parse_ended_query(keyword, &args)?;
+                self.open_conditional = Some(id);
+                Command::BeginConditional(id)
+            }
+            "end_conditional" => {
+                self.expect_args(keyword, &args, 0, "end_conditional")?;
+                if self.open_conditional.take().is_none() {
+                    return Err(self.error("`end_conditional` without `begin_conditional`"));
+                }
+                Command::EndConditional
+            }
+            "host" => self.parse_host(&args)?,
+            "swap" => {
+                self.expect_args(keyword, &args, 0, "swap")?;
+                Command::Swap
+            }
             other => {
                 return Err(self.error(format!(
-                    "unknown command `{other}`: expected viewport, clear, depth_func, depth_mask, depth_test, cull, scissor, begin, end or tri"
+                    "unknown command `{other}`: expected viewport, clear, depth_func, depth_mask, depth_test, cull, scissor, begin, end, tri, end_draw, wait, begin_conditional, end_conditional, host or swap"
                 )))
             }
         };
@@ -360,6 +419,58 @@ impl<R: BufRead> SceneReader<R> {
         Ok(Rect::new(v[0], v[1], v[2], v[3]))
     }
 
+    /// `wait ID` and `begin_conditional ID`: ID must name a query that has ended, or there
+    /// is no result to wait for (a GL program would block forever or get an error).
+    fn parse_ended_query(&self, keyword: &str, args: &[&str]) -> Result<u32, SceneError> {
+        self.expect_args(keyword, args, 1, &format!("{keyword} ID"))?;
+        let id = self.parse_u32("query id", args[0])?;
+        if !self.ended_queries.contains(&id) {
+            let why = if self.open_query == Some(id) {
+                "is still open (`end` it first)"
+            } else {
+                "has not ended yet"
+            };
+            return Err(self.error(format!(
+                "`{keyword} {id}`: query {id} {why}, so it has no result"
+            )));
+        }
+        Ok(id)
+    }
+
+    fn parse_host(&self, args: &[&str]) -> Result<Command, SceneError> {
+        let usage = "host [nodes=N] [boxes=N] [decisions=N]";
+        if args.is_empty() {
+            return Err(self.error(format!(
+                "`host` needs at least one count: expected `{usage}`"
+            )));
+        }
+        let mut work = HostWork::default();
+        let mut seen = Vec::new();
+        for word in args {
+            let Some((key, value)) = word.split_once('=') else {
+                return Err(
+                    self.error(format!("unexpected `{word}` in `host`: expected `{usage}`"))
+                );
+            };
+            let slot = match key {
+                "nodes" => &mut work.nodes,
+                "boxes" => &mut work.boxes,
+                "decisions" => &mut work.decisions,
+                _ => {
+                    return Err(self.error(format!(
+                        "unknown count `{key}` in `host`: expected `{usage}`"
+                    )))
+                }
+            };
+            if seen.contains(&key) {
+                return Err(self.error(format!("`{key}=` given twice in `host`")));
+            }
+            seen.push(key);
+            *slot = self.parse_u32(key, value)?;
+        }
+        Ok(Command::Host(work))
+    }
+
     fn parse_tri(&self, args: &[&str]) -> Result<Command, SceneError> {
         self.expect_args("tri", args, 12, "tri x y z w  x y z w  x y z w")?;
         let mut vertices = [[0f32; 4]; 3];
@@ -425,6 +536,14 @@ pub fn format_command(command: &Command) -> String {
             s
         }
         Command::End => "end".into(),
+        Command::Wait(id) => format!("wait {id}"),
+        Command::BeginConditional(id) => format!("begin_conditional {id}"),
+        Command::EndConditional => "end_conditional".into(),
+        Command::Host(w) => format!(
+            "host nodes={} boxes={} decisions={}",
+            w.nodes, w.boxes, w.decisions
+        ),
+        Command::Swap => "swap".into(),
         Command::Tri(v) => {
             let mut s = String::from("tri");
             for vertex in v {
@@ -491,7 +610,7 @@ mod tests {
     fn errors_name_file_line_and_expectation() {
         assert_eq!(
             error_of("viewport 4 4\n\nfrobnicate\n"),
-            "s.scene:3: unknown command `frobnicate`: expected viewport, clear, depth_func, depth_mask, depth_test, cull, scissor, begin, end or tri"
+            "s.scene:3: unknown command `frobnicate`: expected viewport, clear, depth_func, depth_mask, depth_test, cull, scissor, begin, end, tri, end_draw, wait, begin_conditional, end_conditional, host or swap"
         );
         assert!(error_of("viewport 4 4\ntri 0 0 0 1 0 0 0 1 0 0 0\n")
             .starts_with("s.scene:2: `tri` takes 12 arguments, found 11"));
@@ -539,8 +658,61 @@ mod tests {
     }
 
     #[test]
+    fn closed_loop_commands_parse() {
+        let text = "viewport 4 4\nbegin 5 any\nend\nhost boxes=2 nodes=7\nwait 5\nbegin_conditional 5\ntri 0 0 0 1 1 0 0 1 0 1 0 1\nend_conditional\nswap\n";
+        let commands: Vec<Command> = parse_scene(text, "s")
+            .unwrap()
+            .into_iter()
+            .map(|l| l.command)
+            .collect();
+        assert_eq!(
+            commands[3..],
+            [
+                Command::Host(HostWork {
+                    nodes: 7,
+                    boxes: 2,
+                    decisions: 0
+                }),
+                Command::Wait(5),
+                Command::BeginConditional(5),
+                Command::Tri([[0., 0., 0., 1.], [1., 0., 0., 1.], [0., 1., 0., 1.]]),
+                Command::EndConditional,
+                Command::Swap,
+            ]
+        );
+    }
+
+    #[test]
+    fn closed_loop_mistakes_are_named() {
+        assert_eq!(
+            error_of("viewport 4 4\nwait 3\n"),
+            "s.scene:2: `wait 3`: query 3 has not ended yet, so it has no result"
+        );
+        assert_eq!(
+            error_of("viewport 4 4\nbegin 3\nwait 3\n"),
+            "s.scene:3: `wait 3`: query 3 is still open (`end` it first), so it has no result"
+        );
+        assert!(error_of("viewport 4 4\nbegin_conditional 1\n").contains("has not ended"));
+        assert!(
+            error_of("viewport 4 4\nbegin 1\nend\nbegin_conditional 1\nbegin_conditional 1\n")
+                .starts_with("s.scene:5: `begin_conditional` inside `begin_conditional 1`")
+        );
+        assert!(error_of("viewport 4 4\nend_conditional\n")
+            .starts_with("s.scene:2: `end_conditional` without `begin_conditional`"));
+        assert!(
+            error_of("viewport 4 4\nbegin 1\nend\nbegin_conditional 1\n")
+                .starts_with("s.scene:4: end of scene inside `begin_conditional 1`")
+        );
+        assert!(error_of("viewport 4 4\nhost\n").contains("at least one count"));
+        assert!(error_of("viewport 4 4\nhost nodes=1 nodes=2\n").contains("given twice"));
+        assert!(error_of("viewport 4 4\nhost cells=1\n").contains("unknown count `cells`"));
+        assert!(error_of("viewport 4 4\nhost nodes=-1\n").contains("whole number"));
+        assert!(error_of("viewport 4 4\nswap 1\n").contains("takes 0 arguments"));
+    }
+
+    #[test]
     fn format_round_trips() {
-        let text = "viewport 64 32\nclear\ndepth_func gequal\nscissor 1 2 3 4\nbegin 7 verbose buffer=9 tile=0,0,8,8\ntri 0.1 0 0 1  1 0 0 1  0 1 0.5 1\nend_draw\nend\nbegin 8 any\nend\n";
+        let text = "viewport 64 32\nclear\ndepth_func gequal\nscissor 1 2 3 4\nbegin 7 verbose buffer=9 tile=0,0,8,8\ntri 0.1 0 0 1  1 0 0 1  0 1 0.5 1\nend_draw\nend\nbegin 8 any\nend\nhost nodes=3 decisions=1\nwait 8\nbegin_conditional 7\nend_conditional\nswap\n";
         let lines = parse_scene(text, "s").unwrap();
         let again: String = lines
             .iter()

@@ -121,6 +121,15 @@ parameters! {
     }
     group occu: OccuArch; {
         memory_port_bits_per_cycle: u32 = 256, [32, 1 << 14], "bits", "the one main-memory port shared by depth reads, depth writes and OccU Control (V)";
+        host_clock_mhz: f64 = 180.0, [0.001, 100_000.0], "MHz", "host CPU clock: the O2's R5000 (V2: R5000 at 180-350 MHz, R10000 at 150-400 MHz)";
+        host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited (I: 100-1000; a pointer chase and a loop over children, cache misses dominate)";
+        host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles", "one bounding box tested against the view frustum (I: 60-300; six planes against the box's nearest corner)";
+        host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles", "one visibility decision taken from a query answer (I: 10-100)";
+        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call: state validation and command setup, the draw's state changes included (I: 500-10000)";
+        geometry_host_cycles_per_vertex: u64 = 80, [0, 1 << 24], "host cycles", "software transform of one vertex on the host CPU: 4x4 transform, clip codes, divide, viewport (V2: the O2's CPU does all vertex processing; I: 40-200 at about one multiply-add a cycle)";
+        geometry_host_cycles_per_triangle: u64 = 120, [0, 1 << 24], "host cycles", "software setup of one submitted triangle on the host CPU before the rendering engine takes it (I: 60-300)";
+        result_notify_latency_cycles: u64 = 8, [0, 1 << 24], "cycles", "from a query's last record word in memory to the host seeing it: one uncached poll read (I: 5-20)";
+        result_read_cycles_per_word: u64 = 1, [0, 1 << 24], "cycles", "the host reading one result record word from main memory (I: 1-4; cache-line reads at 2.13 GB/s)";
     }
 }
 
@@ -147,6 +156,19 @@ parameters! {
         global_merge: MergeKind = MergeKind::Tree, "name", "stage two, the boards: reduction tree, daisy chain, or host reads";
         global_merge_hop_latency_cycles: u64 = 8, [0, 1 << 20], "cycles", "tree or chain: cycles for one report to cross one board-to-board hop (I)";
         global_merge_read_latency_cycles: u64 = 100, [0, 1 << 20], "cycles", "software: cycles for the host to read one board's report over the bus (I)";
+        host_clock_mhz: f64 = 195.0, [0.001, 100_000.0], "MHz", "host CPU clock: an Onyx2's R10000 (V2: 195 MHz R10000 Onyx2 systems)";
+        host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited (I: 100-1000; a pointer chase and a loop over children)";
+        host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles", "one bounding box tested against the view frustum (I: 60-300)";
+        host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles", "one visibility decision taken from a query answer (I: 10-100)";
+        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call, the draw's state changes included (I: 500-10000)";
+        bus_megabytes_per_second: f64 = 200.0, [0.001, 1_000_000.0], "MB/s", "host-to-graphics bus the host writes vertices over (V2: Onyx POWERpath-2 200 MB/s, Onyx2 400 MB/s)";
+        bus_bytes_per_vertex: u64 = 24, [0, 1 << 16], "bytes", "one vertex over the bus: position and normal as 32-bit floats (I: 12-48)";
+        geometry_engines: usize = 4, [1, 64], "engines", "Geometry Engines on the Geometry board, each taking whole batches (V2: up to four, MIMD)";
+        geometry_engine_clock_mhz: f64 = 90.0, [0.001, 100_000.0], "MHz", "Geometry Engine clock (V2: 90 MHz)";
+        geometry_engine_cycles_per_vertex: u64 = 51, [0, 1 << 24], "GE cycles", "one Geometry Engine transforming and lighting one vertex (I: four engines at 90 MHz giving the 7 M lighted triangles/s of Montrym 1997, V, at one new vertex a strip triangle)";
+        geometry_engine_cycles_per_triangle: u64 = 10, [0, 1 << 24], "GE cycles", "one Geometry Engine assembling, clipping and setting up one submitted triangle (I: 5-40)";
+        result_notify_latency_cycles: u64 = 100, [0, 1 << 24], "cycles", "from a query's result at the global merge to the host seeing it: an interrupt or a poll over the bus (I: 50-500, about 1 us)";
+        result_read_cycles_per_word: u64 = 10, [0, 1 << 24], "cycles", "the host reading one result record word over the bus (I: 5-50; 50-500 ns PIO reads)";
     }
 }
 

@@ -48,6 +48,11 @@ impl FragmentGenerator {
         }
     }
 
+    /// Nothing can start before `cycle` (the geometry stage has not delivered it yet).
+    pub fn release(&mut self, cycle: u64) {
+        self.start = self.start.max(cycle);
+    }
+
     /// Set up a primitive.
     pub fn primitive(&mut self) {
         self.start = self.free_cycle() + self.setup_cycles;

@@ -30,6 +30,13 @@ impl FragmentInput {
         }
     }
 
+    /// Nothing can start before `cycle` (the host or the geometry stage has not delivered
+    /// it yet); the idle cycles count as neither busy nor stall.
+    #[inline]
+    pub fn release(&mut self, cycle: u64) {
+        self.free = self.free.max(cycle);
+    }
+
     /// A primitive reached setup.
     #[inline]
     pub fn primitive(&mut self) {

@@ -85,6 +85,15 @@ impl MemoryPort {
         self.cycle_bits = 0;
     }
 
+    /// The first cycle after every transfer granted so far.
+    pub fn last_grant_end(&self) -> u64 {
+        if self.cycle_bits > 0 {
+            self.cycle + 1
+        } else {
+            self.stats.end_cycle
+        }
+    }
+
     /// Close the last cycle and return the statistics.
     pub fn finish(mut self) -> PortStats {
         self.close_cycle();

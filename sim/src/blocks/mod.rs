@@ -6,6 +6,8 @@ pub mod depth_prefetch;
 pub mod fifo;
 pub mod fragment_generator;
 pub mod fragment_input;
+pub mod geometry;
+pub mod host;
 pub mod image_engine;
 pub mod interleave;
 pub mod memory_port;

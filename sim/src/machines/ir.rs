@@ -193,8 +193,56 @@ impl IrMachine {
             Event::QueryBegin(spec) => self.begin(spec, index)?,
             Event::QueryEnd => self.end(index)?,
             Event::QueryResult(golden) => self.check(golden, index)?,
+            // The closed loop's records are the front end's ([`crate::machines::closed_loop`]).
+            Event::Geometry(_)
+            | Event::HostWork(_)
+            | Event::Wait(_)
+            | Event::ConditionalBegin(_)
+            | Event::ConditionalEnd
+            | Event::Swap => {}
         }
         Ok(())
+    }
+
+    /// The Fragment Generators can start nothing before `cycle`.
+    #[inline]
+    pub fn release(&mut self, cycle: u64) {
+        self.generators.iter_mut().for_each(|g| g.release(cycle));
+    }
+
+    /// The cycle by which every block is idle (everything is timed as it is fed).
+    pub fn drain(&mut self) -> Result<u64, SimError> {
+        Ok(self.idle_cycle())
+    }
+
+    fn idle_cycle(&self) -> u64 {
+        self.generators
+            .iter()
+            .map(FragmentGenerator::free_cycle)
+            .chain(self.image_engines.iter().map(ImageEngine::free_cycle))
+            .chain([self.last_available])
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The latest query `id` that has ended: the cycle its result is available and the
+    /// record words the host reads.
+    pub fn result_available(&mut self, id: u32) -> Result<Option<(u64, u64)>, SimError> {
+        Ok(self
+            .queries
+            .iter()
+            .rev()
+            .find(|q| q.id == id)
+            .map(|q| (q.available_cycle, q.record_words())))
+    }
+
+    /// Cycles the busiest Fragment Generator has been busy so far.
+    pub fn raster_busy_cycles(&self) -> u64 {
+        self.generators
+            .iter()
+            .map(|g| g.busy_cycles)
+            .max()
+            .unwrap_or(0)
     }
 
     #[inline]
@@ -324,14 +372,7 @@ impl IrMachine {
         if let Some(query) = &self.open {
             return Err(SimError::OpenAtEnd { id: query.spec.id });
         }
-        let cycles = self
-            .generators
-            .iter()
-            .map(FragmentGenerator::free_cycle)
-            .chain(self.image_engines.iter().map(ImageEngine::free_cycle))
-            .chain([self.last_available])
-            .max()
-            .unwrap_or(0);
+        let cycles = self.idle_cycle();
         let fragments: u64 = self.generators.iter().map(|g| g.fragments).sum();
         let occu = self
             .image_engines
@@ -404,6 +445,7 @@ impl IrMachine {
             engines,
             units,
             queries: self.queries,
+            frames: Vec::new(),
         })
     }
 

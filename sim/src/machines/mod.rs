@@ -2,13 +2,17 @@
 //! line, sweeps and latency reports replay traces through.
 
 pub mod builder;
+pub mod closed_loop;
 pub mod ir;
 pub mod o2;
 
 pub use builder::MachineBuilder;
 
 use crate::arch::{Arch, Machine};
+use crate::blocks::geometry::Geometry;
+use crate::blocks::host::{Host, HostCosts};
 use crate::error::SimError;
+use crate::machines::closed_loop::{ClosedLoop, PipeState};
 use crate::machines::ir::IrMachine;
 use crate::machines::o2::O2Machine;
 use crate::report::Report;
@@ -16,21 +20,114 @@ use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;
 use occsim_traces::Event;
 
-/// A machine being replayed.
+/// A machine being replayed: its pixel pipeline and the closed loop that feeds it.
+pub struct MachineModel {
+    pipe: Pipe,
+    front: ClosedLoop,
+    /// Events fed so far (the index of the next, for errors).
+    events: u64,
+}
+
+/// The pixel pipeline of either kind.
 // One per replay, never in a collection: boxing would only add an indirection per event.
 #[allow(clippy::large_enum_variant)]
-pub enum MachineModel {
+enum Pipe {
     O2(O2Machine),
     Ir(IrMachine),
+}
+
+impl Pipe {
+    fn release(&mut self, cycle: u64) {
+        match self {
+            Pipe::O2(m) => m.release(cycle),
+            Pipe::Ir(m) => m.release(cycle),
+        }
+    }
+
+    fn state(&mut self) -> Result<PipeState, SimError> {
+        Ok(match self {
+            Pipe::O2(m) => PipeState {
+                idle_cycle: m.drain()?,
+                raster_busy_cycles: m.raster_busy_cycles(),
+            },
+            Pipe::Ir(m) => PipeState {
+                idle_cycle: m.drain()?,
+                raster_busy_cycles: m.raster_busy_cycles(),
+            },
+        })
+    }
+
+    fn result_available(&mut self, id: u32) -> Result<Option<(u64, u64)>, SimError> {
+        match self {
+            Pipe::O2(m) => m.result_available(id),
+            Pipe::Ir(m) => m.result_available(id),
+        }
+    }
+}
+
+/// The closed loop `arch` describes: its host, geometry stage and result path.
+fn closed_loop(arch: &Arch) -> Result<ClosedLoop, SimError> {
+    Ok(match arch.machine() {
+        Machine::O2 => {
+            let a = arch.o2()?;
+            let scale = a.clock_mhz / a.host_clock_mhz;
+            ClosedLoop::new(
+                Host::new(HostCosts::from_host_cycles(
+                    a.host_clock_mhz,
+                    a.clock_mhz,
+                    a.host_cycles_per_node,
+                    a.host_cycles_per_box_test,
+                    a.host_cycles_per_decision,
+                    a.host_cycles_per_draw,
+                )),
+                Geometry::OnHost {
+                    per_vertex: a.geometry_host_cycles_per_vertex as f64 * scale,
+                    per_triangle: a.geometry_host_cycles_per_triangle as f64 * scale,
+                },
+                a.result_notify_latency_cycles,
+                a.result_read_cycles_per_word,
+                a.clock_mhz,
+            )
+        }
+        Machine::Ir => {
+            let a = arch.ir()?;
+            let ge_scale = a.clock_mhz / a.geometry_engine_clock_mhz;
+            // Bytes over MB/s is microseconds; times the clock in MHz, cycles.
+            let bus_per_vertex =
+                a.bus_bytes_per_vertex as f64 / a.bus_megabytes_per_second * a.clock_mhz;
+            ClosedLoop::new(
+                Host::new(HostCosts::from_host_cycles(
+                    a.host_clock_mhz,
+                    a.clock_mhz,
+                    a.host_cycles_per_node,
+                    a.host_cycles_per_box_test,
+                    a.host_cycles_per_decision,
+                    a.host_cycles_per_draw,
+                )),
+                Geometry::Engines {
+                    per_vertex: a.geometry_engine_cycles_per_vertex as f64 * ge_scale,
+                    per_triangle: a.geometry_engine_cycles_per_triangle as f64 * ge_scale,
+                    bus_per_vertex,
+                    free: vec![0; a.geometry_engines],
+                    last_release: 0,
+                },
+                a.result_notify_latency_cycles,
+                a.result_read_cycles_per_word,
+                a.clock_mhz,
+            )
+        }
+    })
 }
 
 impl<'a> MachineBuilder<'a> {
     /// The machine at reset for a `width` x `height` viewport.
     pub fn build(self, width: u32, height: u32) -> Result<MachineModel, SimError> {
-        Ok(match self.arch.machine() {
-            Machine::O2 => MachineModel::O2(self.o2(width, height)?),
-            Machine::Ir => MachineModel::Ir(self.ir(width, height)?),
-        })
+        let front = closed_loop(self.arch)?;
+        let pipe = match self.arch.machine() {
+            Machine::O2 => Pipe::O2(self.o2(width, height)?),
+            Machine::Ir => Pipe::Ir(self.ir(width, height)?),
+        };
+        Ok(MachineModel::of(pipe, front))
     }
 
     /// The machine started from a functional model's render state and depths (the sampled
@@ -52,14 +149,12 @@ impl<'a> MachineBuilder<'a> {
             }
             None => depth.clone(),
         };
-        Ok(match self.arch.machine() {
-            Machine::O2 => {
-                MachineModel::O2(O2Machine::assemble(self, width, height, copy, Some(state))?)
-            }
-            Machine::Ir => {
-                MachineModel::Ir(IrMachine::assemble(self, width, height, copy, Some(state))?)
-            }
-        })
+        let front = closed_loop(self.arch)?;
+        let pipe = match self.arch.machine() {
+            Machine::O2 => Pipe::O2(O2Machine::assemble(self, width, height, copy, Some(state))?),
+            Machine::Ir => Pipe::Ir(IrMachine::assemble(self, width, height, copy, Some(state))?),
+        };
+        Ok(MachineModel::of(pipe, front))
     }
 
     /// The O2-like machine at reset (an error when the architecture names another).
@@ -84,28 +179,76 @@ impl MachineModel {
         MachineBuilder::new(arch).build(width, height)
     }
 
-    /// [`Self::finish`], handing the depth buffer's memory back for reuse.
-    pub fn finish_recycling(self) -> Result<(Report, DepthBuffer), SimError> {
-        match self {
-            MachineModel::O2(machine) => machine.finish_recycling(),
-            MachineModel::Ir(machine) => machine.finish_recycling(),
+    fn of(pipe: Pipe, front: ClosedLoop) -> MachineModel {
+        MachineModel {
+            pipe,
+            front,
+            events: 0,
         }
     }
 
-    /// Replay one event.
+    /// [`Self::finish`], handing the depth buffer's memory back for reuse.
+    pub fn finish_recycling(mut self) -> Result<(Report, DepthBuffer), SimError> {
+        let state = self.pipe.state()?;
+        let (mut report, depth) = match self.pipe {
+            Pipe::O2(machine) => machine.finish_recycling()?,
+            Pipe::Ir(machine) => machine.finish_recycling()?,
+        };
+        close_loop(self.front, state, &mut report);
+        Ok((report, depth))
+    }
+
+    /// Replay one event: the closed loop's records drive the host and the geometry stage;
+    /// every event then reaches the pipeline, no earlier than the loop releases it.
     #[inline]
     pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
-        match self {
-            MachineModel::O2(machine) => machine.event(event),
-            MachineModel::Ir(machine) => machine.event(event),
+        let index = self.events;
+        self.events += 1;
+        match event {
+            Event::Fragment(_) => {}
+            Event::Primitive => self.pipe.release(self.front.primitive_release()),
+            Event::Geometry(batch) => self.front.geometry(batch),
+            Event::HostWork(work) => self.front.host_work(work),
+            Event::Wait(id) => {
+                let (available, words) = self.awaited(*id, index)?;
+                self.front.wait(available, words);
+            }
+            Event::ConditionalBegin(id) => {
+                let (available, _) = self.awaited(*id, index)?;
+                self.front.hold_pipe(available);
+            }
+            Event::Swap => {
+                let state = self.pipe.state()?;
+                self.front.swap(state);
+            }
+            _ => self.pipe.release(self.front.command_release()),
         }
+        match &mut self.pipe {
+            Pipe::O2(machine) => machine.event(event),
+            Pipe::Ir(machine) => machine.event(event),
+        }
+    }
+
+    fn awaited(&mut self, id: u32, event: u64) -> Result<(u64, u64), SimError> {
+        self.pipe
+            .result_available(id)?
+            .ok_or(SimError::NoResultToWaitFor { event, id })
     }
 
     /// End the replay and report.
-    pub fn finish(self) -> Result<Report, SimError> {
-        match self {
-            MachineModel::O2(machine) => machine.finish(),
-            MachineModel::Ir(machine) => machine.finish(),
-        }
+    pub fn finish(mut self) -> Result<Report, SimError> {
+        let state = self.pipe.state()?;
+        let mut report = match self.pipe {
+            Pipe::O2(machine) => machine.finish()?,
+            Pipe::Ir(machine) => machine.finish()?,
+        };
+        close_loop(self.front, state, &mut report);
+        Ok(report)
     }
+}
+
+fn close_loop(front: ClosedLoop, state: PipeState, report: &mut Report) {
+    let clock_mhz = front.clock_mhz();
+    let (frames, end) = front.finish(state);
+    report.close_loop(frames, end, clock_mhz);
 }

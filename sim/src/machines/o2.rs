@@ -216,6 +216,13 @@ impl O2Machine {
                     event: index,
                 });
             }
+            // The closed loop's records are the front end's ([`crate::machines::closed_loop`]).
+            Event::Geometry(_)
+            | Event::HostWork(_)
+            | Event::Wait(_)
+            | Event::ConditionalBegin(_)
+            | Event::ConditionalEnd
+            | Event::Swap => {}
             _ => self.pending.push_back(Pending::Other {
                 event: Box::new(event.clone()),
                 index,
@@ -365,6 +372,38 @@ impl O2Machine {
         })
     }
 
+    /// The rasterizer can start nothing before `cycle`.
+    #[inline]
+    pub fn release(&mut self, cycle: u64) {
+        self.input.release(cycle);
+    }
+
+    /// Everything fed so far, through the back end: the cycle by which every block is idle.
+    pub fn drain(&mut self) -> Result<u64, SimError> {
+        while !self.pending.is_empty() {
+            self.back_one()?;
+        }
+        Ok(self.total_cycles().max(self.port.last_grant_end()))
+    }
+
+    /// The latest query `id` that has ended: the cycle its result is available and the
+    /// record words the host reads. Drains the pipeline (nothing fed later can start
+    /// before the result is read).
+    pub fn result_available(&mut self, id: u32) -> Result<Option<(u64, u64)>, SimError> {
+        self.drain()?;
+        Ok(self
+            .queries
+            .iter()
+            .rev()
+            .find(|q| q.id == id)
+            .map(|q| (q.available_cycle, q.record_words())))
+    }
+
+    /// Cycles the rasterizer has been busy so far.
+    pub fn raster_busy_cycles(&self) -> u64 {
+        self.input.busy_cycles
+    }
+
     /// The effect models this machine builds.
     pub fn effects(&self) -> Effects {
         self.effects
@@ -469,6 +508,7 @@ impl O2Machine {
             engines,
             units: Vec::new(),
             queries: self.queries,
+            frames: Vec::new(),
         })
     }
 }

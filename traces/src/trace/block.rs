@@ -4,8 +4,11 @@
 pub const MAGIC: [u8; 8] = *b"OCCT\r\n\x1a\n";
 /// The last 8 bytes of every trace.
 pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
-/// The format version this code writes and reads.
-pub const FORMAT_VERSION: u16 = 1;
+/// The format version this code writes. Version 2 added the closed loop's records
+/// (geometry batches, host work, waits, conditional rendering, frame ends).
+pub const FORMAT_VERSION: u16 = 2;
+/// The oldest version this code reads: version-1 traces replay as an open loop.
+pub const OLDEST_READABLE_VERSION: u16 = 1;
 /// Most bytes of header JSON.
 pub const MAX_HEADER_JSON_BYTES: u32 = 64 << 10;
 /// Most bytes of one block's event payload before compression.

@@ -4,7 +4,7 @@
 //! block start, so each block decodes on its own.
 
 use super::header::StreamTally;
-use crate::event::{Event, Fragment, Span, DEPTH_ONE};
+use crate::event::{Event, Fragment, GeometryBatch, HostWork, Span, DEPTH_ONE};
 use crate::golden::EventSink;
 use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult, MAX_BUFFER_ENTRIES, MAX_TILES};
 use crate::state::{DepthFunc, Rect};
@@ -32,6 +32,17 @@ pub(crate) mod tag {
     /// As PART, and the large event is complete: its bytes are one QUERY_BEGIN or QUERY_RESULT
     /// record.
     pub const PART_END: u8 = 0x0E;
+    /// Then vertices and triangles as varints and a flags byte (bit 0 starts a draw, bit 1
+    /// discarded). Version 2 on, as the five below.
+    pub const GEOMETRY: u8 = 0x0F;
+    /// Then nodes, boxes and decisions as varints.
+    pub const HOST_WORK: u8 = 0x10;
+    /// Then the query id as a varint.
+    pub const WAIT: u8 = 0x11;
+    /// Then the query id as a varint.
+    pub const CONDITIONAL_BEGIN: u8 = 0x12;
+    pub const CONDITIONAL_END: u8 = 0x13;
+    pub const SWAP: u8 = 0x14;
 }
 
 /// Most fragments in one span: a row of the widest viewport.
@@ -379,6 +390,28 @@ pub(crate) fn encode_small_event(out: &mut Vec<u8>, event: &Event) {
         }
         Event::QueryEnd => out.push(tag::QUERY_END),
         Event::Primitive => out.push(tag::PRIMITIVE),
+        Event::Geometry(batch) => {
+            out.push(tag::GEOMETRY);
+            put_uv(out, batch.vertices as u64);
+            put_uv(out, batch.triangles as u64);
+            out.push(batch.starts_draw as u8 | (batch.discarded as u8) << 1);
+        }
+        Event::HostWork(work) => {
+            out.push(tag::HOST_WORK);
+            for v in [work.nodes, work.boxes, work.decisions] {
+                put_uv(out, v as u64);
+            }
+        }
+        Event::Wait(id) => {
+            out.push(tag::WAIT);
+            put_uv(out, *id as u64);
+        }
+        Event::ConditionalBegin(id) => {
+            out.push(tag::CONDITIONAL_BEGIN);
+            put_uv(out, *id as u64);
+        }
+        Event::ConditionalEnd => out.push(tag::CONDITIONAL_END),
+        Event::Swap => out.push(tag::SWAP),
         Event::QueryBegin(_) | Event::QueryResult(_) | Event::Fragment(_) => {
             unreachable!("not a small event: {event:?}")
         }
@@ -430,6 +463,25 @@ fn put_tile_result(out: &mut Vec<u8>, tile: &TileResult) {
         put_zz(out, y as i64 - py);
         (px, py) = (x as i64, y as i64);
     }
+}
+
+fn geometry_batch(c: &mut Cursor) -> Result<GeometryBatch, PayloadError> {
+    let vertices = c.u32("batch vertices")?;
+    let triangles = c.u32("batch triangles")?;
+    let pos = c.pos;
+    let flags = c.byte()?;
+    if flags > 0b11 {
+        return Err(bad(
+            pos,
+            format!("geometry flags {flags:#04x} have unknown bits"),
+        ));
+    }
+    Ok(GeometryBatch {
+        vertices,
+        triangles,
+        starts_draw: flags & 1 != 0,
+        discarded: flags & 2 != 0,
+    })
 }
 
 fn rect(c: &mut Cursor) -> Result<Rect, PayloadError> {
@@ -697,6 +749,16 @@ impl BlockDecoder {
             tag::SCISSOR_ON => Event::Scissor(Some(rect(&mut c)?)),
             tag::QUERY_END => Event::QueryEnd,
             tag::PRIMITIVE => Event::Primitive,
+            tag::GEOMETRY => Event::Geometry(geometry_batch(&mut c)?),
+            tag::HOST_WORK => Event::HostWork(HostWork {
+                nodes: c.u32("host nodes")?,
+                boxes: c.u32("host boxes")?,
+                decisions: c.u32("host decisions")?,
+            }),
+            tag::WAIT => Event::Wait(c.u32("waited query id")?),
+            tag::CONDITIONAL_BEGIN => Event::ConditionalBegin(c.u32("conditional query id")?),
+            tag::CONDITIONAL_END => Event::ConditionalEnd,
+            tag::SWAP => Event::Swap,
             t => return Err(bad(start, format!("unknown record tag {t:#04x}"))),
         };
         ctx.tally

@@ -148,6 +148,9 @@ pub struct TraceSummary {
     pub queries_by_mode: QueryModeCounts,
     /// `QueryResult` events stored.
     pub query_results: u64,
+    /// The closed loop's records (all zero in version-1 traces).
+    #[serde(default)]
+    pub closed_loop: ClosedLoopCounts,
     pub features: TraceFeatures,
     /// Event blocks (the summary block not counted).
     pub blocks: u64,
@@ -155,6 +158,26 @@ pub struct TraceSummary {
     pub payload_bytes: u64,
     /// Event payload bytes as stored (after compression), block headers not counted.
     pub stored_bytes: u64,
+}
+
+/// What a trace holds of the closed loop: draws, host work, waits and frames.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ClosedLoopCounts {
+    /// Draws submitted (discarded ones included).
+    pub draws: u64,
+    /// Triangles submitted, culled and clipped ones included.
+    pub triangles: u64,
+    pub vertices: u64,
+    /// Draws discarded by conditional rendering.
+    pub discarded_draws: u64,
+    /// Host waits for a query result.
+    pub waits: u64,
+    /// Conditional-rendering regions.
+    pub conditionals: u64,
+    /// Frame ends (`swap`).
+    pub frames: u64,
+    /// Hierarchy nodes the host traversed.
+    pub host_nodes: u64,
 }
 
 /// The parts of a query the stream checks need.
@@ -185,6 +208,7 @@ pub(crate) struct StreamTally {
     occlusion_mode_open: bool,
     depth_writes: bool,
     max_query_tiles: u64,
+    conditional_open: bool,
 }
 
 impl StreamTally {
@@ -202,6 +226,7 @@ impl StreamTally {
             occlusion_mode_open: false,
             depth_writes: false,
             max_query_tiles: 0,
+            conditional_open: false,
         }
     }
 
@@ -303,6 +328,28 @@ impl StreamTally {
                 self.check_result(ended, result)?;
                 self.summary.query_results += 1;
             }
+            Event::Geometry(batch) => {
+                let counts = &mut self.summary.closed_loop;
+                counts.draws += batch.starts_draw as u64;
+                counts.discarded_draws += (batch.starts_draw && batch.discarded) as u64;
+                counts.triangles += batch.triangles as u64;
+                counts.vertices += batch.vertices as u64;
+            }
+            Event::HostWork(work) => self.summary.closed_loop.host_nodes += work.nodes as u64,
+            Event::Wait(_) => self.summary.closed_loop.waits += 1,
+            Event::ConditionalBegin(id) => {
+                if self.conditional_open {
+                    return Err(format!("conditional on query {id} begins inside another"));
+                }
+                self.conditional_open = true;
+                self.summary.closed_loop.conditionals += 1;
+            }
+            Event::ConditionalEnd => {
+                if !std::mem::replace(&mut self.conditional_open, false) {
+                    return Err("conditional end without begin".to_owned());
+                }
+            }
+            Event::Swap => self.summary.closed_loop.frames += 1,
         }
         self.summary.events += 1;
         Ok(())

@@ -1,9 +1,9 @@
 //! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
 //!
-//! # Layout (version 1; all integers little-endian)
+//! # Layout (version 2; all integers little-endian; version 1, without the closed loop's records, still reads)
 //!
 //! ```text
-//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 1 | flags u16 = 0
+//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 2 | flags u16 = 0
 //!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
 //!               (the CRC covers version .. end of JSON)
 //! event blocks  block header (20) | stored payload (stored_len)
@@ -38,10 +38,10 @@ mod tests;
 
 pub use block::{
     BLOCK_HEADER_BYTES, END_MAGIC, FORMAT_VERSION, MAGIC, MAX_BLOCK_BYTES, MAX_HEADER_JSON_BYTES,
-    MAX_STORED_BYTES, MAX_SUMMARY_JSON_BYTES, TRAILER_BYTES,
+    MAX_STORED_BYTES, MAX_SUMMARY_JSON_BYTES, OLDEST_READABLE_VERSION, TRAILER_BYTES,
 };
 pub use codec::MAX_EVENT_BYTES;
 pub use error::{ReadError, TraceError};
-pub use header::{QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary};
+pub use header::{ClosedLoopCounts, QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary};
 pub use reader::TraceReader;
 pub use writer::{TraceWriter, WriterOptions};

@@ -35,6 +35,8 @@ pub struct TraceReader<R: Read> {
     skipped: bool,
     summary: Option<TraceSummary>,
     failed: bool,
+    /// The file's format version.
+    version: u16,
 }
 
 impl<R: Read> TraceReader<R> {
@@ -63,6 +65,7 @@ impl<R: Read> TraceReader<R> {
             skipped: false,
             summary: None,
             failed: false,
+            version: FORMAT_VERSION,
         };
         reader.header = reader.read_file_header()?;
         reader.tally = StreamTally::new(&reader.header);
@@ -71,6 +74,17 @@ impl<R: Read> TraceReader<R> {
 
     pub fn header(&self) -> &TraceHeader {
         &self.header
+    }
+
+    /// The file's format version ([`FORMAT_VERSION`] or an older one it still reads).
+    pub fn format_version(&self) -> u16 {
+        self.version
+    }
+
+    /// Whether the trace can hold the closed loop's records (draws, host work, waits,
+    /// frames): version-1 traces cannot, so they replay as an open loop.
+    pub fn has_closed_loop(&self) -> bool {
+        self.version >= 2
     }
 
     /// The summary, once the end of the trace has been reached (and checked).
@@ -129,7 +143,8 @@ impl<R: Read> TraceReader<R> {
         }
         let fixed: [u8; 8] = self.read_array("the file header")?;
         let version = u16::from_le_bytes([fixed[0], fixed[1]]);
-        if version != FORMAT_VERSION {
+        self.version = version;
+        if !(OLDEST_READABLE_VERSION..=FORMAT_VERSION).contains(&version) {
             return Err(TraceError::UnsupportedVersion {
                 offset: 8,
                 version,

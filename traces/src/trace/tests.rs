@@ -1,7 +1,7 @@
 use super::block::{BlockHeader, BLOCK_HEADER_BYTES};
 use super::synthetic::{generate, SyntheticScene};
 use super::*;
-use crate::event::{Event, Fragment, DEPTH_ONE};
+use crate::event::{Event, Fragment, GeometryBatch, HostWork, DEPTH_ONE};
 use crate::golden::{infallible, EventSink};
 use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult};
 use crate::state::{DepthFunc, Rect};
@@ -120,6 +120,29 @@ fn every_kind() -> Vec<Event> {
     }));
     events.push(frag(1, 1, 1));
     events.push(Event::QueryEnd);
+    events.extend([
+        Event::Geometry(GeometryBatch {
+            vertices: u32::MAX,
+            triangles: 0,
+            starts_draw: true,
+            discarded: false,
+        }),
+        Event::Geometry(GeometryBatch {
+            vertices: 3,
+            triangles: 1,
+            starts_draw: false,
+            discarded: true,
+        }),
+        Event::HostWork(HostWork {
+            nodes: 1,
+            boxes: u32::MAX,
+            decisions: 7,
+        }),
+        Event::Wait(0),
+        Event::ConditionalBegin(u32::MAX),
+        Event::ConditionalEnd,
+        Event::Swap,
+    ]);
     events
 }
 
@@ -153,8 +176,23 @@ fn summary_counts_what_the_stream_holds() {
         &every_kind(),
     );
     // Counted by hand: 18 state and query events before the fragments, 2 primitives, 308
-    // fragments, then end, result, begin, end.
-    assert_eq!(summary.events, 18 + 2 + 308 + 4);
+    // fragments, then end, result, begin, end, and 7 closed-loop records.
+    assert_eq!(summary.events, 18 + 2 + 308 + 4 + 7);
+    // The closed-loop records of `every_kind`: two batches (u32::MAX + 3 vertices, 1
+    // triangle, one starting a draw), one wait, one conditional, one frame, one node.
+    assert_eq!(
+        summary.closed_loop,
+        ClosedLoopCounts {
+            draws: 1,
+            triangles: 1,
+            vertices: u32::MAX as u64 + 3,
+            discarded_draws: 0,
+            waits: 1,
+            conditionals: 1,
+            frames: 1,
+            host_nodes: 1,
+        }
+    );
     assert_eq!(summary.fragments, 4 + 300 + 3 + 1);
     assert_eq!(summary.primitives, 2);
     assert_eq!(summary.queries, 2);
@@ -269,20 +307,55 @@ fn wrong_magic_is_named() {
 
 #[test]
 fn unknown_version_is_named() {
-    let mut bytes = write_default(&every_kind());
-    bytes[8] = 2;
-    let error = TraceReader::new(&bytes[..]).err().unwrap();
-    assert!(
-        matches!(
-            error,
-            TraceError::UnsupportedVersion {
-                offset: 8,
-                version: 2,
-                ..
-            }
-        ),
-        "{error}"
-    );
+    for version in [0u8, 3] {
+        let mut bytes = write_default(&every_kind());
+        bytes[8] = version;
+        let error = TraceReader::new(&bytes[..]).err().unwrap();
+        assert!(
+            matches!(
+                error,
+                TraceError::UnsupportedVersion { offset: 8, version: v, known: 2 } if v == version as u16
+            ),
+            "{error}"
+        );
+    }
+}
+
+/// `bytes` as a version-1 file: the version field rewritten and the header's CRC with it.
+fn as_version_1(mut bytes: Vec<u8>) -> Vec<u8> {
+    bytes[8] = 1;
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let crc_at = 16 + json_len;
+    let crc = crc32fast::hash(&bytes[MAGIC.len()..crc_at]);
+    bytes[crc_at..crc_at + 4].copy_from_slice(&crc.to_le_bytes());
+    bytes
+}
+
+#[test]
+fn version_1_traces_still_read_and_say_they_have_no_closed_loop() {
+    let events: Vec<Event> = every_kind()
+        .into_iter()
+        .filter(|e| {
+            !matches!(
+                e,
+                Event::Geometry(_)
+                    | Event::HostWork(_)
+                    | Event::Wait(_)
+                    | Event::ConditionalBegin(_)
+                    | Event::ConditionalEnd
+                    | Event::Swap
+            )
+        })
+        .collect();
+    let bytes = as_version_1(write_default(&events));
+    let reader = TraceReader::new(&bytes[..]).unwrap();
+    assert_eq!(reader.format_version(), 1);
+    assert!(!reader.has_closed_loop());
+    let current_bytes = write_default(&events);
+    let current = TraceReader::new(&current_bytes[..]).unwrap();
+    assert_eq!(current.format_version(), 2);
+    assert!(current.has_closed_loop());
+    assert_eq!(read_bulk(&bytes).unwrap().0, events);
 }
 
 #[test]

@@ -1,0 +1,145 @@
+//! The host CPU: the culling traversal and the GL driver (and, on the O2, the software
+//! geometry, [`crate::blocks::geometry`]) on one timeline, counted in pipeline cycles.
+//!
+//! Rules: the host does one thing at a time, in trace order. Work of `n` units at `c` host
+//! cycles each costs `round(n * c * pipeline_mhz / host_mhz)` pipeline cycles of busy time.
+//! The host blocks (time passes, nothing is done) while it waits for a query's result and,
+//! at a frame's end, for the pipeline to finish the frame. Busy, waiting and pipe-wait
+//! cycles sum to the host's time.
+
+use occsim_traces::HostWork;
+
+/// Host costs per unit of work, in pipeline cycles.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HostCosts {
+    pub node: f64,
+    pub box_test: f64,
+    pub decision: f64,
+    pub draw: f64,
+}
+
+impl HostCosts {
+    /// Costs given in host cycles, on a host at `host_mhz` feeding a pipeline at `pipe_mhz`.
+    pub fn from_host_cycles(
+        host_mhz: f64,
+        pipe_mhz: f64,
+        node: u64,
+        box_test: u64,
+        decision: u64,
+        draw: u64,
+    ) -> HostCosts {
+        let scale = pipe_mhz / host_mhz;
+        HostCosts {
+            node: node as f64 * scale,
+            box_test: box_test as f64 * scale,
+            decision: decision as f64 * scale,
+            draw: draw as f64 * scale,
+        }
+    }
+}
+
+/// `units` at `each` pipeline cycles, rounded to whole cycles.
+pub fn cost(units: u64, each: f64) -> u64 {
+    (units as f64 * each).round() as u64
+}
+
+pub struct Host {
+    costs: HostCosts,
+    /// The first cycle the host is free.
+    now: u64,
+    pub busy_cycles: u64,
+    /// Cycles blocked on query results.
+    pub waiting_cycles: u64,
+    /// Cycles blocked at frame ends on the pipeline.
+    pub pipe_wait_cycles: u64,
+}
+
+impl Host {
+    pub fn new(costs: HostCosts) -> Host {
+        Host {
+            costs,
+            now: 0,
+            busy_cycles: 0,
+            waiting_cycles: 0,
+            pipe_wait_cycles: 0,
+        }
+    }
+
+    pub fn now(&self) -> u64 {
+        self.now
+    }
+
+    /// Spend `cycles` busy.
+    pub fn spend(&mut self, cycles: u64) {
+        self.now += cycles;
+        self.busy_cycles += cycles;
+    }
+
+    /// The traversal's work.
+    pub fn work(&mut self, work: &HostWork) {
+        let c = self.costs;
+        self.spend(
+            cost(work.nodes as u64, c.node)
+                + cost(work.boxes as u64, c.box_test)
+                + cost(work.decisions as u64, c.decision),
+        );
+    }
+
+    /// The driver's work for one draw call.
+    pub fn draw(&mut self) {
+        self.spend(cost(1, self.costs.draw));
+    }
+
+    /// Block until `cycle` for a query result.
+    pub fn wait_for_result(&mut self, cycle: u64) {
+        if cycle > self.now {
+            self.waiting_cycles += cycle - self.now;
+            self.now = cycle;
+        }
+    }
+
+    /// Block until `cycle` for the pipeline to finish a frame.
+    pub fn wait_for_pipe(&mut self, cycle: u64) {
+        if cycle > self.now {
+            self.pipe_wait_cycles += cycle - self.now;
+            self.now = cycle;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn costs_scale_by_the_clock_ratio_and_round() {
+        // A 200 MHz host feeding a 100 MHz pipeline: a host cycle is half a pipeline cycle.
+        let costs = HostCosts::from_host_cycles(200.0, 100.0, 3, 10, 1, 1000);
+        let mut host = Host::new(costs);
+        // 5 nodes * 1.5 = 7.5 -> 8; 2 boxes * 5 = 10; 3 decisions * 0.5 = 1.5 -> 2.
+        host.work(&HostWork {
+            nodes: 5,
+            boxes: 2,
+            decisions: 3,
+        });
+        assert_eq!(host.now(), 20);
+        host.draw();
+        assert_eq!(host.now(), 520);
+        host.wait_for_result(500);
+        assert_eq!(
+            (host.now(), host.waiting_cycles),
+            (520, 0),
+            "no wait into the past"
+        );
+        host.wait_for_result(600);
+        host.wait_for_pipe(650);
+        assert_eq!(
+            (host.busy_cycles, host.waiting_cycles, host.pipe_wait_cycles),
+            (520, 80, 50)
+        );
+        assert_eq!(
+            host.busy_cycles + host.waiting_cycles + host.pipe_wait_cycles,
+            host.now()
+        );
+    }
+}
