@@ -292,6 +292,7 @@ impl Report {
             "machine {}, viewport {}x{}, {} queries checked against golden results",
             self.machine, self.viewport_width, self.viewport_height, self.summary.checked_queries
         );
+        self.write_frames(&mut out);
         let _ = writeln!(
             out,
             "\n{:<16} {:>12} {:>7} {:>12} {:>7} {:>12}",
@@ -330,6 +331,41 @@ impl Report {
             self.write_query_table(&mut out);
         }
         out
+    }
+
+    /// The frames of a closed-loop run, or the note that the run was an open loop.
+    fn write_frames(&self, out: &mut String) {
+        let Some(fps) = self.summary.frames_per_second else {
+            let _ = writeln!(
+                out,
+                "open loop: the stream has no draws, host work, waits or frames (a version-1 trace), so nothing waits for an answer"
+            );
+            return;
+        };
+        let _ = writeln!(
+            out,
+            "\n{} frames, {fps:.2} frames/s; on the host's timeline busy + waiting + pipe wait = cycles",
+            self.frames.len()
+        );
+        let _ = writeln!(
+            out,
+            "{:<6} {:>12} {:>10} {:>12} {:>12} {:>12} {:>12} {:>12}",
+            "frame", "cycles", "ms", "host busy", "geometry", "pixel busy", "waiting", "pipe wait"
+        );
+        for f in &self.frames {
+            let _ = writeln!(
+                out,
+                "{:<6} {:>12} {:>10.3} {:>12} {:>12} {:>12} {:>12} {:>12}",
+                f.frame,
+                f.cycles,
+                f.seconds * 1e3,
+                f.host_busy,
+                f.geometry_busy,
+                f.pixel_busy,
+                f.waiting,
+                f.pipe_wait
+            );
+        }
     }
 
     fn write_units(&self, out: &mut String) {

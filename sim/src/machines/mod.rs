@@ -26,6 +26,9 @@ pub struct MachineModel {
     front: ClosedLoop,
     /// Events fed so far (the index of the next, for errors).
     events: u64,
+    /// Started mid-stream (the sampled level's windows): a query that ended before the
+    /// start is taken as answered at the start.
+    resumed: bool,
 }
 
 /// The pixel pipeline of either kind.
@@ -37,10 +40,13 @@ enum Pipe {
 }
 
 impl Pipe {
-    fn release(&mut self, cycle: u64) {
+    fn release(&mut self, cycle: u64) -> Result<(), SimError> {
         match self {
             Pipe::O2(m) => m.release(cycle),
-            Pipe::Ir(m) => m.release(cycle),
+            Pipe::Ir(m) => {
+                m.release(cycle);
+                Ok(())
+            }
         }
     }
 
@@ -154,7 +160,9 @@ impl<'a> MachineBuilder<'a> {
             Machine::O2 => Pipe::O2(O2Machine::assemble(self, width, height, copy, Some(state))?),
             Machine::Ir => Pipe::Ir(IrMachine::assemble(self, width, height, copy, Some(state))?),
         };
-        Ok(MachineModel::of(pipe, front))
+        let mut machine = MachineModel::of(pipe, front);
+        machine.resumed = true;
+        Ok(machine)
     }
 
     /// The O2-like machine at reset (an error when the architecture names another).
@@ -184,6 +192,7 @@ impl MachineModel {
             pipe,
             front,
             events: 0,
+            resumed: false,
         }
     }
 
@@ -206,7 +215,7 @@ impl MachineModel {
         self.events += 1;
         match event {
             Event::Fragment(_) => {}
-            Event::Primitive => self.pipe.release(self.front.primitive_release()),
+            Event::Primitive => self.pipe.release(self.front.primitive_release())?,
             Event::Geometry(batch) => self.front.geometry(batch),
             Event::HostWork(work) => self.front.host_work(work),
             Event::Wait(id) => {
@@ -221,7 +230,7 @@ impl MachineModel {
                 let state = self.pipe.state()?;
                 self.front.swap(state);
             }
-            _ => self.pipe.release(self.front.command_release()),
+            _ => self.pipe.release(self.front.command_release())?,
         }
         match &mut self.pipe {
             Pipe::O2(machine) => machine.event(event),
@@ -230,9 +239,11 @@ impl MachineModel {
     }
 
     fn awaited(&mut self, id: u32, event: u64) -> Result<(u64, u64), SimError> {
-        self.pipe
-            .result_available(id)?
-            .ok_or(SimError::NoResultToWaitFor { event, id })
+        match self.pipe.result_available(id)? {
+            Some(answer) => Ok(answer),
+            None if self.resumed => Ok((0, 0)),
+            None => Err(SimError::NoResultToWaitFor { event, id }),
+        }
     }
 
     /// End the replay and report.

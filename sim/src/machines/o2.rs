@@ -39,7 +39,11 @@
 //!    `to + 1` ([`crate::blocks::occu_control`]); the result is available in the cycle after the
 //!    last record word's grant. Latency = available - `t_end`, at least
 //!    [`MIN_QUERY_LATENCY_CYCLES`].
-//! 7. State changes, `begin`, and `clear` take no cycles (clear is a fast clear; colour and
+//! 7. Closed loop ([`crate::machines::closed_loop`]): when the host or the geometry stage
+//!    releases a command or primitive later than the rasterizer's first free cycle, the
+//!    rasterizer idles until then, and the items already past it are finished first (their
+//!    port requests precede the later fragments' in rule 5's order).
+//! 8. State changes, `begin`, and `clear` take no cycles (clear is a fast clear; colour and
 //!    stencil traffic and blending are not modelled).
 
 use crate::arch::{Arch, O2Arch};
@@ -372,10 +376,16 @@ impl O2Machine {
         })
     }
 
-    /// The rasterizer can start nothing before `cycle`.
+    /// The rasterizer can start nothing before `cycle`. When that leaves it idle, the back
+    /// end first finishes what it holds, so the memory port sees those requests before the
+    /// later fragments' reads (its order is the order of time across an idle gap).
     #[inline]
-    pub fn release(&mut self, cycle: u64) {
+    pub fn release(&mut self, cycle: u64) -> Result<(), SimError> {
+        if cycle > self.input.free_cycle() {
+            self.drain()?;
+        }
         self.input.release(cycle);
+        Ok(())
     }
 
     /// Everything fed so far, through the back end: the cycle by which every block is idle.

@@ -182,9 +182,11 @@ pub fn demo_scene(options: &DemoOptions) -> String {
             } else {
                 (QueryMode::Brief, BRIEF_RECORD_ENTRIES)
             };
-            recorder.query(mode, buffer, quad_tiles(rect));
+            let id = recorder.query(mode, buffer, quad_tiles(rect));
             recorder.emit_triangles(&view_projection, &building.bounds.triangles());
             let visible = recorder.emit(Command::End).is_some_and(|r| r.value() > 0);
+            // The host reads the answer before it decides (the closed loop waits for it).
+            recorder.emit(Command::Wait(id));
             if visible {
                 recorder.query(
                     QueryMode::Samples,
@@ -197,6 +199,7 @@ pub fn demo_scene(options: &DemoOptions) -> String {
                 recorder.emit(Command::End);
             }
         }
+        recorder.emit(Command::Swap);
     }
     recorder.text
 }

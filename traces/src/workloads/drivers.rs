@@ -54,6 +54,7 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     observer: &mut O,
 ) -> Result<WorkloadStats, S::Error> {
     let mut renderer = Renderer::new(walk.width, walk.height, walk.raster, sink, observer);
+    renderer.set_waits_for_answers(options.query_delay_frames == 0);
     let mut hierarchical = HierarchicalDriver::new(options, scene.bvh.nodes.len());
     let mut grid = GridDriver::new(options, walk.width, walk.height);
     let mut stats = WorkloadStats {
@@ -71,6 +72,7 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
                 grid.frame(scene, &view, &mut renderer)?
             }
         }
+        renderer.swap()?;
         let (frame_stats, timing) = renderer.finish_frame(started);
         stats.frames.push(frame_stats);
         stats.timing.push(timing);
@@ -92,7 +94,7 @@ fn frustum_frame<S: EventSink, O: CommandObserver>(
     let mut queue = FrontToBack::new(view.eye);
     queue.push(bvh, 0, ());
     while let Some((node, _)) = queue.pop() {
-        renderer.stats.nodes_visited += 1;
+        renderer.visit_node();
         let node = &bvh.nodes[node as usize];
         if !frustum.may_see(&node.bounds) {
             continue;

@@ -287,7 +287,7 @@ impl GridDriver {
         let mut queue = FrontToBack::new(view.eye);
         queue.push(bvh, 0, ());
         while let Some((index, _)) = queue.pop() {
-            renderer.stats.nodes_visited += 1;
+            renderer.visit_node();
             let node = &bvh.nodes[index as usize];
             if !frustum.may_see(&node.bounds) {
                 continue;

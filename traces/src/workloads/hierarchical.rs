@@ -81,7 +81,7 @@ impl HierarchicalDriver {
         let mut queue: FrontToBack<Option<ParentTiles>> = FrontToBack::new(view.eye);
         queue.push(bvh, 0, None);
         while let Some((index, parent_tiles)) = queue.pop() {
-            renderer.stats.nodes_visited += 1;
+            renderer.visit_node();
             let node = &bvh.nodes[index as usize];
             if !frustum.may_see(&node.bounds) {
                 continue;

@@ -2,7 +2,7 @@
 //! the caller's sink, and every command is accounted in the frame's statistics.
 
 use super::{FrameStats, FrameTiming, SceneObject};
-use crate::event::{Event, DEPTH_ONE};
+use crate::event::{Event, HostWork, DEPTH_ONE};
 use crate::geometry::to_clip;
 use crate::golden::{EventSink, GoldenModel};
 use crate::query::{QueryMode, QueryResult, QuerySpec, BRIEF_RECORD_ENTRIES};
@@ -56,6 +56,11 @@ pub(crate) struct Renderer<'s, S, O> {
     pub(crate) height: u32,
     pub(crate) stats: FrameStats,
     golden_time: Duration,
+    /// The traversal's work since the last command, sent before the next one.
+    host_work: HostWork,
+    /// Whether the host reads each answer as soon as its query ends (a blocking `wait`);
+    /// false when decisions use an earlier frame's answers.
+    waits_for_answers: bool,
 }
 
 impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
@@ -78,12 +83,36 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
             height,
             stats: FrameStats::default(),
             golden_time: Duration::ZERO,
+            host_work: HostWork::default(),
+            waits_for_answers: true,
         }
     }
 
     fn execute(&mut self, command: &Command) -> Result<Option<QueryResult>, S::Error> {
+        if !self.host_work.is_empty() {
+            let work = Command::Host(std::mem::take(&mut self.host_work));
+            self.observer.command(&work);
+            self.golden.execute(&work, &mut self.sink)?;
+        }
         self.observer.command(command);
         self.golden.execute(command, &mut self.sink)
+    }
+
+    /// The traversal visits a node and tests its box against the view frustum.
+    pub(crate) fn visit_node(&mut self) {
+        self.stats.nodes_visited += 1;
+        self.host_work.nodes = self.host_work.nodes.saturating_add(1);
+        self.host_work.boxes = self.host_work.boxes.saturating_add(1);
+    }
+
+    /// Decisions use an earlier frame's answers: the host never blocks on a query.
+    pub(crate) fn set_waits_for_answers(&mut self, waits: bool) {
+        self.waits_for_answers = waits;
+    }
+
+    /// The frame ends (`swap`), after the traversal's last work.
+    pub(crate) fn swap(&mut self) -> Result<(), S::Error> {
+        self.execute(&Command::Swap).map(|_| ())
     }
 
     /// Clear, then state every frame relies on, so each frame stands alone: back faces
@@ -159,6 +188,11 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
             self.execute(&Command::Tri(triangle))?;
         }
         let result = self.execute(&Command::End)?;
+        if self.waits_for_answers {
+            self.execute(&Command::Wait(id))?;
+        }
+        // The answer (now, or a later frame's) decides the node's fate.
+        self.host_work.decisions = self.host_work.decisions.saturating_add(1);
         self.stats.query_fragments += self.sink.fragments - fragments_before;
         self.golden_time += started.elapsed();
         Ok(result)
