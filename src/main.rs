@@ -18,10 +18,7 @@ macro_rules! out {
 }
 
 mod commands;
-mod output;
-mod plot;
 mod scene_input;
-mod sweep;
 
 use clap::{Parser, Subcommand};
 

@@ -314,7 +314,7 @@ fn rtl_model_has_no_floating_point() {
 
 #[test]
 fn library_error_messages_name_no_command_line_flag() {
-    for krate in ["sim/src", "traces/src", "rtl-model/src"] {
+    for krate in ["sim/src", "traces/src", "rtl-model/src", "sweep/src"] {
         for file in sources(&root().join(krate)) {
             let text = std::fs::read_to_string(&file).expect("readable source");
             for string in split_code(without_tests(&text)).strings {
@@ -341,7 +341,7 @@ fn every_module_is_in_the_code_map() {
         .split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
         .collect();
     let mut missing = Vec::new();
-    for krate in ["src", "sim/src", "traces/src", "rtl-model/src"] {
+    for krate in ["src", "sim/src", "traces/src", "rtl-model/src", "sweep/src"] {
         let src = root().join(krate);
         for file in sources(&src) {
             let module = module_of(&src, &file);
@@ -394,6 +394,7 @@ fn every_source_path_the_docs_name_exists() {
                 "sim/",
                 "traces/",
                 "rtl-model/",
+                "sweep/",
                 "src/",
                 "tests/",
                 "benches/",

@@ -8,12 +8,12 @@
 use super::arch::ArchSelection;
 use super::replay::{in_cli_words, opener};
 use super::trace::open_trace;
-use crate::plot::{LineChart, Scale, Series};
 use anyhow::Context;
 use occsim_sim::effects::EffectsChoice;
 use occsim_sim::levels::{Fidelity, LevelResult};
 use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::Arch;
+use occsim_sweep::plot::{LineChart, Scale, Series};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;

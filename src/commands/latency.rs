@@ -6,13 +6,13 @@
 
 use super::arch::ArchSelection;
 use super::replay::replay_trace;
-use crate::plot::{LineChart, Scale, Series};
-use crate::sweep::{Axis, Grid, Point, Pool};
 use anyhow::{bail, Context};
 use occsim_sim::levels::LevelResult;
 use occsim_sim::report::nearest_rank;
 use occsim_sim::Fidelity;
 use occsim_sim::Report;
+use occsim_sweep::plot::{LineChart, Scale, Series};
+use occsim_sweep::{Axis, Grid, Point, Pool};
 use occsim_traces::retile::TileGrid;
 use serde::Serialize;
 use std::fmt::Write as _;

@@ -186,7 +186,7 @@ enum VcdChunk {
 }
 
 /// The waveform's destination: 1 MiB chunks handed to a thread that writes the file
-/// atomically ([`crate::output::write_atomically_with`]); if the replay fails, the file is
+/// atomically ([`occsim_sweep::output::write_atomically_with`]); if the replay fails, the file is
 /// never made.
 struct VcdSender {
     chunks: std::sync::mpsc::SyncSender<VcdChunk>,
@@ -235,7 +235,7 @@ fn waveform(
     let (sender, receiver) = std::sync::mpsc::sync_channel::<VcdChunk>(4);
     let path = path.clone();
     let thread = std::thread::spawn(move || {
-        crate::output::write_atomically_with(&path, |file| {
+        occsim_sweep::output::write_atomically_with(&path, |file| {
             use std::io::Write;
             loop {
                 match receiver.recv() {

@@ -1,13 +1,16 @@
 //! `occsim sweep`: command-line shape of the architecture sweep and its `merge` subcommand.
 //! The machine wiring supplies the evaluator, the key/value validator and the trace digest.
 
-use crate::sweep::{
-    list_keys, merge_results, metric_chart, run_sweep, AxisValidator, Evaluator, Grid, Shard,
-    StoredLine, SweepOptions,
+use anyhow::{anyhow, Context, Result};
+use occsim_sweep::{
+    list_keys, merge_results, metric_chart, run_sweep, AxisValidator, Grid, Joining, Point,
+    PointRecord, Shard, StoredLine, SweepError, SweepOptions,
 };
-use anyhow::{Context, Result};
 use std::num::NonZeroUsize;
 use std::path::PathBuf;
+
+/// The command line's model of one point, in anyhow's terms (the engine takes any error).
+pub type Evaluator<'a> = &'a (dyn Fn(&Point) -> Result<PointRecord> + Sync);
 
 /// How to split a sweep over a cluster; shown by `occsim sweep --help`.
 const CLUSTER_HELP: &str = "\
@@ -114,7 +117,76 @@ pub struct PlotArgs {
 }
 
 fn parse_shard(spec: &str) -> std::result::Result<Shard, String> {
-    Shard::parse(spec).map_err(|e| format!("{e:#}"))
+    Shard::parse(spec).map_err(|e| format!("{:#}", anyhow::Error::new(e)))
+}
+
+/// What to do about results of another sweep found when resuming.
+const RESUME_ADVICE: &str = "choose another --out, or remove the file to start over";
+
+/// A sweep engine error in the command line's words: where the engine says what happened,
+/// this adds the flag that does something about it. Every other error passes unchanged.
+pub fn in_cli_words(error: SweepError) -> anyhow::Error {
+    match error {
+        SweepError::BadAxis { spec, why } => anyhow!("bad --set '{spec}': {why}"),
+        SweepError::RejectedValue { key, value, why } => {
+            anyhow!("bad --set {key}={value}: {why}")
+        }
+        SweepError::DuplicateAxis { key } => {
+            anyhow!("bad --set: axis '{key}' is given twice; put all its values in one --set")
+        }
+        SweepError::NoWorkers => anyhow!("--jobs must be at least 1"),
+        SweepError::CsvResultsName { path } => anyhow!(
+            "--out {} ends in .csv; use a .jsonl name (the CSV view is written beside it)",
+            path.display()
+        ),
+        SweepError::AlreadyHoldsResults { path } => anyhow!(
+            "{} already holds results; pass --resume to continue that sweep, or remove it to start over",
+            path.display()
+        ),
+        SweepError::ForeignTrace {
+            at,
+            found,
+            expected,
+            joining: Joining::Resume,
+        } => anyhow!(
+            "{at}: results are for trace digest {found}, but this sweep has trace digest \
+             {expected}: they belong to another trace; {RESUME_ADVICE}"
+        ),
+        SweepError::ForeignGrid {
+            at,
+            found,
+            expected,
+            joining: Joining::Resume,
+        } => anyhow!(
+            "{at}: results are for the grid '{found}', but this sweep has the grid '{expected}'; \
+             {RESUME_ADVICE}"
+        ),
+        SweepError::NotInShard { at, key, shard } => anyhow!(
+            "{at}: point '{key}' is not part of shard {shard}; resume a shard's file with the same --shard"
+        ),
+        SweepError::SweepPointFailed {
+            index,
+            key,
+            kept_in,
+            source,
+        } => anyhow::Error::from_boxed(source).context(format!(
+            "point {index} ({key}) failed; finished points are kept in {}, rerun with --resume",
+            kept_in.display()
+        )),
+        SweepError::NoInputs => anyhow!("sweep merge needs at least one shard file to read"),
+        SweepError::BadGrid { at, source } => {
+            in_cli_words(*source).context(format!("{at}: bad grid"))
+        }
+        missing @ SweepError::MissingPoints { .. } => anyhow!(
+            "{missing} (pass --allow-missing to write the partial merge, then run the sweep \
+             with --resume on it to fill the gaps)"
+        ),
+        SweepError::NothingSwept => anyhow!("cannot plot: no parameter is swept (add --set)"),
+        not_numeric @ SweepError::NonNumericAxis { .. } => {
+            anyhow!("{not_numeric} (choose another --plot-x)")
+        }
+        other => anyhow::Error::new(other),
+    }
 }
 
 /// Runs `occsim sweep` (or `occsim sweep merge`, which needs neither evaluator nor trace).
@@ -130,7 +202,7 @@ pub fn run_with(
     }
     let run = &args.run;
     let out = run.out.as_deref().context("sweep needs --out FILE.jsonl")?;
-    let grid = Grid::parse(&run.set, validate)?;
+    let grid = Grid::parse(&run.set, validate).map_err(in_cli_words)?;
     let jobs = match run.jobs {
         Some(jobs) => jobs.get(),
         None => std::thread::available_parallelism().map_or(1, NonZeroUsize::get),
@@ -144,7 +216,8 @@ pub fn run_with(
         resume: run.resume,
         show_progress: true,
     };
-    let outcome = run_sweep(&options, evaluator)?;
+    let evaluate = |point: &Point| evaluator(point).map_err(Into::into);
+    let outcome = run_sweep(&options, &evaluate).map_err(in_cli_words)?;
     if outcome.torn_tail_dropped {
         eprintln!(
             "sweep: dropped a torn last line of {} (recomputed)",
@@ -164,7 +237,8 @@ pub fn run_with(
 
 /// Runs `occsim sweep merge`.
 pub fn run_merge(args: &MergeArgs) -> Result<()> {
-    let report = merge_results(&args.out, &args.shards, args.allow_missing)?;
+    let report =
+        merge_results(&args.out, &args.shards, args.allow_missing).map_err(in_cli_words)?;
     for torn in &report.torn_inputs {
         eprintln!(
             "sweep merge: {} ends in a torn line (its point is missing)",
@@ -215,14 +289,14 @@ pub fn run(args: SweepArgs) -> Result<()> {
             .set_value(key, value)
             .map_err(|e| e.to_string())
     };
-    let evaluate = |point: &crate::sweep::Point| -> Result<crate::sweep::PointRecord> {
+    let evaluate = |point: &Point| -> Result<PointRecord> {
         let mut arch = base.clone();
         for (key, value) in &point.values {
             arch.set_value(key, value)
                 .with_context(|| format!("{key}={value}"))?;
         }
         let result = super::replay::replay_trace(&trace, &arch, args.run.retile, level)?;
-        Ok(crate::sweep::PointRecord {
+        Ok(PointRecord {
             resolved_arch: serde_json::to_value(arch.report_entries())?,
             metrics: point_metrics(&result),
         })
@@ -278,7 +352,8 @@ fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine]) -> Result<()> 
     let Some(path) = args.plot.as_deref() else {
         return Ok(());
     };
-    let chart = metric_chart(grid.axes(), lines, &args.metric, args.plot_x.as_deref())?;
+    let chart = metric_chart(grid.axes(), lines, &args.metric, args.plot_x.as_deref())
+        .map_err(in_cli_words)?;
     chart.write_svg(path)?;
     eprintln!("sweep: plot -> {}", path.display());
     Ok(())
@@ -374,6 +449,64 @@ mod tests {
     }
 
     #[test]
+    fn engine_errors_get_the_command_line_flags_back() {
+        let words = |error: SweepError| format!("{:#}", in_cli_words(error));
+        let path = PathBuf::from("r.jsonl");
+        assert_eq!(
+            words(SweepError::AlreadyHoldsResults { path: path.clone() }),
+            "r.jsonl already holds results; pass --resume to continue that sweep, or remove it to start over"
+        );
+        assert_eq!(
+            words(SweepError::ForeignGrid {
+                at: "r.jsonl:1".into(),
+                found: "engines=1,2".into(),
+                expected: "engines=4".into(),
+                joining: Joining::Resume,
+            }),
+            "r.jsonl:1: results are for the grid 'engines=1,2', but this sweep has the grid \
+             'engines=4'; choose another --out, or remove the file to start over"
+        );
+        assert_eq!(
+            words(SweepError::SweepPointFailed {
+                index: 3,
+                key: "engines=8".into(),
+                kept_in: path,
+                source: anyhow::anyhow!("cause").context("context").into(),
+            }),
+            "point 3 (engines=8) failed; finished points are kept in r.jsonl, rerun with --resume: \
+             context: cause"
+        );
+        assert_eq!(
+            words(SweepError::BadGrid {
+                at: "s.jsonl:1".into(),
+                source: Box::new(SweepError::BadAxis {
+                    spec: "a=".into(),
+                    why: "no values after 'a='".into(),
+                }),
+            }),
+            "s.jsonl:1: bad grid: bad --set 'a=': no values after 'a='"
+        );
+        assert_eq!(
+            words(SweepError::NonNumericAxis {
+                key: "merge".into(),
+                value: "tree".into(),
+            }),
+            "cannot plot against 'merge': value 'tree' is not a number (choose another --plot-x)"
+        );
+        // A merge's mismatch names no flag: it passes as the engine says it.
+        let merge = SweepError::ForeignTrace {
+            at: "b.jsonl:1".into(),
+            found: "d2".into(),
+            expected: "d1".into(),
+            joining: Joining::Merge {
+                first: "a.jsonl:1".into(),
+            },
+        };
+        let engine_words = merge.to_string();
+        assert_eq!(words(merge), engine_words);
+    }
+
+    #[test]
     fn run_with_rejects_keys_the_machine_does_not_know() {
         let args = parse(&["t.trace", "--out", "unused.jsonl", "--set", "engnies=1,2"]).unwrap();
         let machine_keys = |key: &str, _: &str| -> std::result::Result<(), String> {
@@ -384,9 +517,7 @@ mod tests {
                 )),
             }
         };
-        let never = |_: &crate::sweep::Point| -> Result<crate::sweep::PointRecord> {
-            anyhow::bail!("no point may run")
-        };
+        let never = |_: &Point| -> Result<PointRecord> { anyhow::bail!("no point may run") };
         let err = run_with(&args, &never, "d", &machine_keys)
             .unwrap_err()
             .to_string();

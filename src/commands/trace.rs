@@ -1,8 +1,8 @@
 //! `occsim trace gen|info|dump`: make fragment traces and look inside them.
 
-use crate::output::write_atomically_with;
 use crate::scene_input::open_scene;
 use anyhow::Context;
+use occsim_sweep::output::write_atomically_with;
 use occsim_traces::golden::{EventSink, GoldenModel};
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::trace::{ReadError, TraceHeader, TraceReader, TraceSummary, TraceWriter};

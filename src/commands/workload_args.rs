@@ -2,8 +2,8 @@
 //! the walk and the culling driver. Shared by `trace gen` (a workload as a trace) and
 //! `culling compare`.
 
-use crate::output::write_atomically_with;
 use anyhow::Context;
+use occsim_sweep::output::write_atomically_with;
 use occsim_traces::trace::{TraceHeader, TraceSummary, TraceWriter};
 use occsim_traces::workloads::{
     city, forest, generate, load_obj, CameraPath, CityOptions, DriverKind, DriverOptions,

@@ -2,12 +2,24 @@
 //! values (total_cycles = 1000 / (boards * engines) + 10 * boards, tiles = boards * engines).
 
 use super::*;
-use anyhow::{bail, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
 const DIGEST: &str = "sha256:0123abcd";
+
+type Result<T, E = BoxError> = std::result::Result<T, E>;
+
+/// An error and its sources, joined by ": " (as anyhow's `{:#}` prints them).
+fn chain(error: &dyn std::error::Error) -> String {
+    let mut text = error.to_string();
+    let mut source = error.source();
+    while let Some(cause) = source {
+        text.push_str(&format!(": {cause}"));
+        source = cause.source();
+    }
+    text
+}
 
 fn accept_all(_: &str, _: &str) -> std::result::Result<(), String> {
     Ok(())
@@ -144,7 +156,7 @@ fn merge_reports_missing_points_then_resume_fills_them() {
     let (jsonl, _) = reference_run(dir, &g);
     let shards = vec![run_shard(dir, &g, 1, 3), run_shard(dir, &g, 3, 3)];
     let merged = dir.join("merged.jsonl");
-    let err = format!("{:#}", merge_results(&merged, &shards, false).unwrap_err());
+    let err = chain(&merge_results(&merged, &shards, false).unwrap_err());
     assert!(
         err.starts_with(
             "4 of 12 points are missing from the shards: 'boards=1,engines=2', \
@@ -186,10 +198,7 @@ fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
 
     let altered = read(&shard).replacen("\"tiles\":2", "\"tiles\":3", 1);
     std::fs::write(&shard, altered).unwrap();
-    let err = format!(
-        "{:#}",
-        merge_results(&merged, &[shard, full], false).unwrap_err()
-    );
+    let err = chain(&merge_results(&merged, &[shard, full], false).unwrap_err());
     assert!(
         err.contains("hold different results for point 'boards=1,engines=2'"),
         "{err}"
@@ -211,10 +220,8 @@ fn merge_rejects_shards_of_another_trace_or_grid() {
         count: 2,
     });
     run_sweep(&o, &fake_machine).unwrap();
-    let err = format!(
-        "{:#}",
-        merge_results(&dir.join("m.jsonl"), &[shard.clone(), foreign], false).unwrap_err()
-    );
+    let err =
+        chain(&merge_results(&dir.join("m.jsonl"), &[shard.clone(), foreign], false).unwrap_err());
     assert!(
         err.contains("foreign.jsonl:1: results are for trace digest sha256:ffff"),
         "{err}"
@@ -227,10 +234,7 @@ fn merge_rejects_shards_of_another_trace_or_grid() {
     let other_grid = grid(&["boards=1,2,4", "engines=1,2,4"]);
     let other = dir.join("other.jsonl");
     run_sweep(&options(&other_grid, &other, 1), &fake_machine).unwrap();
-    let err = format!(
-        "{:#}",
-        merge_results(&dir.join("m.jsonl"), &[shard, other], false).unwrap_err()
-    );
+    let err = chain(&merge_results(&dir.join("m.jsonl"), &[shard, other], false).unwrap_err());
     assert!(
         err.contains("other.jsonl:1: results are for the grid 'boards=1,2,4 engines=1,2,4'"),
         "{err}"
@@ -246,7 +250,7 @@ fn crashing_machine<'a>(
     move |p: &Point| {
         let mut log = log.lock().unwrap();
         if log.len() >= successes_before_crash {
-            bail!("simulated crash");
+            return Err("simulated crash".into());
         }
         log.push(p.index);
         fake_machine(p)
@@ -272,7 +276,7 @@ fn interrupted_sweep_resumes_without_losing_or_repeating_points() {
     // Run 1: the machine crashes after 5 points; every finished point must be in the file.
     let run1 = Mutex::new(Vec::new());
     let err = run_sweep(&options(&g, &out, 2), &crashing_machine(&run1, 5));
-    let err = format!("{:#}", err.unwrap_err());
+    let err = chain(&err.unwrap_err());
     assert!(err.contains("failed; finished points are kept in"), "{err}");
     assert!(err.contains("simulated crash"), "{err}");
     let run1 = run1.into_inner().unwrap();
@@ -286,7 +290,13 @@ fn interrupted_sweep_resumes_without_losing_or_repeating_points() {
     // A kill during an append leaves an unterminated fragment of a line.
     append_torn_fragment(&out, jsonl.lines().nth(5).unwrap());
     let without_resume = run_sweep(&options(&g, &out, 2), &fake_machine).unwrap_err();
-    assert!(format!("{without_resume:#}").contains("pass --resume"));
+    assert!(matches!(
+        without_resume,
+        SweepError::AlreadyHoldsResults { .. }
+    ));
+    assert!(without_resume
+        .to_string()
+        .ends_with("r.jsonl already holds results; resume that sweep, or remove it to start over"));
 
     // Run 2 drops the fragment, then appends two points and crashes again: the appended lines
     // must not be glued to the fragment.
@@ -313,7 +323,7 @@ fn interrupted_sweep_resumes_without_losing_or_repeating_points() {
     assert_eq!(read(&dir.join("r.csv")), csv);
 
     // Resuming a finished sweep evaluates nothing and leaves the files as they are.
-    let outcome = run_sweep(&resuming, &|_: &Point| bail!("must not run")).unwrap();
+    let outcome = run_sweep(&resuming, &|_: &Point| Err("must not run".into())).unwrap();
     assert_eq!((outcome.evaluated, outcome.reused), (0, 12));
     assert_eq!(read(&out), jsonl);
 }
@@ -350,7 +360,7 @@ fn resume_refuses_results_of_another_trace_or_shard() {
         count: 3,
     });
     o.trace_digest = "sha256:other";
-    let err = format!("{:#}", run_sweep(&o, &fake_machine).unwrap_err());
+    let err = chain(&run_sweep(&o, &fake_machine).unwrap_err());
     assert!(
         err.contains("shard1.jsonl:1: results are for trace digest sha256:0123abcd"),
         "{err}"
@@ -362,7 +372,7 @@ fn resume_refuses_results_of_another_trace_or_shard() {
         number: 2,
         count: 3,
     });
-    let err = format!("{:#}", run_sweep(&o, &fake_machine).unwrap_err());
+    let err = chain(&run_sweep(&o, &fake_machine).unwrap_err());
     assert!(
         err.contains("point 'boards=1,engines=1' is not part of shard 2/3"),
         "{err}"
@@ -414,10 +424,7 @@ fn a_panicking_model_is_an_error_naming_the_point() {
         }
         fake_machine(p)
     };
-    let err = format!(
-        "{:#}",
-        run_sweep(&options(&g, &out, 1), &panicky).unwrap_err()
-    );
+    let err = chain(&run_sweep(&options(&g, &out, 1), &panicky).unwrap_err());
     assert!(err.contains("point 1 (engines=2) failed"), "{err}");
     assert!(
         err.contains("the model panicked: engine count engines=2 unsupported"),

@@ -1,17 +1,19 @@
-//! `occsim sweep merge OUT SHARD...`: joins shard outputs into one results file.
+//! Joining shard outputs into one results file.
 //!
 //! The shards must come from the same sweep: every line repeats the axes and trace digest, and
 //! the first line read sets the expectation. A point found in several inputs must have the same
 //! text everywhere (results are deterministic, so a difference means a real conflict).
 
-use super::grid::Grid;
-use super::record::{
+use crate::error::{Joining, SweepError};
+use crate::grid::Grid;
+use crate::output::write_atomically;
+use crate::record::{
     check_line_belongs, csv_path_for, read_results, render_csv, render_jsonl, Expected, StoredLine,
 };
-use crate::output::write_atomically;
-use anyhow::{bail, Context, Result};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+
+type Result<T, E = SweepError> = std::result::Result<T, E>;
 
 /// How many missing keys an error message lists before summarising the rest.
 const MISSING_KEYS_SHOWN: usize = 20;
@@ -31,11 +33,11 @@ pub struct MergeReport {
 
 /// Merges `inputs` into `out` (and its CSV view). Missing points are an error listing them
 /// unless `allow_missing`; then the partial result is written and the report lists them (an
-/// unsharded `--resume` on `out` can fill them in).
+/// unsharded resumed sweep on `out` can fill them in).
 pub fn merge_results(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Result<MergeReport> {
     let csv = csv_path_for(out)?;
     if inputs.is_empty() {
-        bail!("sweep merge needs at least one shard file to read");
+        return Err(SweepError::NoInputs);
     }
     let mut stored = Vec::new();
     let mut torn_inputs = Vec::new();
@@ -46,21 +48,20 @@ pub fn merge_results(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Res
         }
         stored.extend(file.lines);
     }
-    let first = stored.first().with_context(|| {
-        format!(
-            "no results in {} input files; nothing to merge",
-            inputs.len()
-        )
+    let first = stored.first().ok_or(SweepError::NothingToMerge {
+        inputs: inputs.len(),
     })?;
-    let grid = Grid::from_axes(first.line.axes.clone())
-        .with_context(|| format!("{}: bad grid", first.origin))?;
+    let grid = Grid::from_axes(first.line.axes.clone()).map_err(|e| SweepError::BadGrid {
+        at: first.origin.clone(),
+        source: Box::new(e),
+    })?;
     let trace_digest = first.line.trace_digest.clone();
-    let reference = format!("{} (the first result read)", first.origin);
     let expected = Expected {
         grid: &grid,
         trace_digest: &trace_digest,
-        reference: &reference,
-        advice: "only shards of one sweep can be merged",
+        joining: Joining::Merge {
+            first: first.origin.clone(),
+        },
     };
 
     let mut by_point: BTreeMap<usize, StoredLine> = BTreeMap::new();
@@ -68,12 +69,11 @@ pub fn merge_results(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Res
         check_line_belongs(&line, &expected)?;
         if let Some(earlier) = by_point.get(&line.line.point) {
             if earlier.text != line.text {
-                bail!(
-                    "{} and {} hold different results for point '{}'",
-                    earlier.origin,
-                    line.origin,
-                    line.line.key
-                );
+                return Err(SweepError::Conflict {
+                    first: earlier.origin.clone(),
+                    second: line.origin,
+                    key: line.line.key,
+                });
             }
             continue;
         }
@@ -85,14 +85,10 @@ pub fn merge_results(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Res
         .filter_map(|i| grid.point(i).map(|p| p.key()))
         .collect();
     if !missing.is_empty() && !allow_missing {
-        bail!(
-            "{} of {} points are missing from the shards: {}; nothing written \
-             (pass --allow-missing to write the partial merge, then run the sweep with --resume \
-             on it to fill the gaps)",
-            missing.len(),
-            grid.len(),
-            list_keys(&missing)
-        );
+        return Err(SweepError::MissingPoints {
+            missing,
+            total: grid.len(),
+        });
     }
 
     let lines: Vec<StoredLine> = by_point.into_values().collect();

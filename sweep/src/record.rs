@@ -4,12 +4,14 @@
 //! line tells which sweep it belongs to, shards can be merged without a header, and a torn
 //! last line loses only that line.
 
-use super::grid::{Axis, Grid};
-use anyhow::{bail, Context, Result};
+use crate::error::{Joining, SweepError};
+use crate::grid::{Axis, Grid};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+
+type Result<T, E = SweepError> = std::result::Result<T, E>;
 
 /// Format tag written in every line; bump when the schema changes incompatibly.
 pub const FORMAT: &str = "occsim-sweep/1";
@@ -46,7 +48,7 @@ impl SweepLine {
     /// The JSON text of the line, without the newline. Deterministic: struct fields in
     /// declaration order, maps sorted by key, floats in shortest round-trip form.
     pub fn to_json(&self) -> Result<String> {
-        serde_json::to_string(self).context("cannot encode a sweep result as JSON")
+        serde_json::to_string(self).map_err(SweepError::Encode)
     }
 }
 
@@ -82,7 +84,10 @@ pub struct StoredFile {
 /// interrupted append leaves, so it is dropped (and reported). A complete line that does not
 /// parse is corruption, reported with file and line number.
 pub fn read_results(path: &Path) -> Result<StoredFile> {
-    let bytes = std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let bytes = std::fs::read(path).map_err(|source| SweepError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
     let (complete, tail) = match bytes.iter().rposition(|&b| b == b'\n') {
         Some(last_newline) => bytes.split_at(last_newline + 1),
         None => bytes.split_at(0),
@@ -93,19 +98,30 @@ pub fn read_results(path: &Path) -> Result<StoredFile> {
         if raw.is_empty() {
             continue;
         }
-        let at = || format!("{}:{}", path.display(), number + 1);
+        let line = number + 1;
         let text = std::str::from_utf8(raw)
-            .map_err(|_| anyhow::anyhow!("{}: not UTF-8 text", at()))?
+            .map_err(|_| SweepError::NotUtf8 {
+                path: path.to_path_buf(),
+                line,
+            })?
             .to_string();
-        let line: SweepLine = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a sweep result line", at()))?;
-        if line.format != FORMAT {
-            bail!("{}: format '{}' is not '{FORMAT}'", at(), line.format);
+        let parsed: SweepLine =
+            serde_json::from_str(&text).map_err(|source| SweepError::NotAResultLine {
+                path: path.to_path_buf(),
+                line,
+                source,
+            })?;
+        if parsed.format != FORMAT {
+            return Err(SweepError::WrongFormat {
+                path: path.to_path_buf(),
+                line,
+                found: parsed.format,
+            });
         }
         lines.push(StoredLine {
-            line,
+            line: parsed,
             text,
-            origin: at(),
+            origin: format!("{}:{line}", path.display()),
         });
     }
     Ok(StoredFile {
@@ -114,50 +130,49 @@ pub fn read_results(path: &Path) -> Result<StoredFile> {
     })
 }
 
-/// What a results line must match to belong to a sweep: its grid and trace digest. The
-/// strings `reference` (who set the expectation, e.g. "this sweep") and `advice` (what to do
-/// about a mismatch) shape the messages.
+/// What a results line must match to belong to a sweep: its grid and trace digest. `joining`
+/// (a resume or a merge) shapes the messages.
 pub struct Expected<'a> {
     pub grid: &'a Grid,
     pub trace_digest: &'a str,
-    pub reference: &'a str,
-    pub advice: &'a str,
+    pub joining: Joining,
 }
 
 /// Checks that a stored line belongs to the expected sweep, was made by this tool version, and
 /// carries the key its index gives.
 pub fn check_line_belongs(stored: &StoredLine, expected: &Expected<'_>) -> Result<()> {
     let line = &stored.line;
-    let (at, reference, advice) = (&stored.origin, expected.reference, expected.advice);
+    let at = || stored.origin.clone();
     if line.trace_digest != expected.trace_digest {
-        bail!(
-            "{at}: results are for trace digest {}, but {reference} has trace digest {}: \
-             they belong to another trace; {advice}",
-            line.trace_digest,
-            expected.trace_digest
-        );
+        return Err(SweepError::ForeignTrace {
+            at: at(),
+            found: line.trace_digest.clone(),
+            expected: expected.trace_digest.to_owned(),
+            joining: expected.joining.clone(),
+        });
     }
     if line.axes != expected.grid.axes() {
-        bail!(
-            "{at}: results are for the grid '{}', but {reference} has the grid '{}'; {advice}",
-            describe_axes(&line.axes),
-            describe_axes(expected.grid.axes())
-        );
+        return Err(SweepError::ForeignGrid {
+            at: at(),
+            found: describe_axes(&line.axes),
+            expected: describe_axes(expected.grid.axes()),
+            joining: expected.joining.clone(),
+        });
     }
     if line.tool_version != env!("CARGO_PKG_VERSION") {
-        bail!(
-            "{at}: results were made by occsim {}, this is occsim {}; versions are not mixed",
-            line.tool_version,
-            env!("CARGO_PKG_VERSION")
-        );
+        return Err(SweepError::OtherVersion {
+            at: at(),
+            found: line.tool_version.clone(),
+            this: env!("CARGO_PKG_VERSION").to_owned(),
+        });
     }
     let expected_key = expected.grid.point(line.point).map(|p| p.key());
     if expected_key.as_deref() != Some(line.key.as_str()) {
-        bail!(
-            "{at}: point {} has key '{}', which does not match its grid",
-            line.point,
-            line.key
-        );
+        return Err(SweepError::KeyMismatch {
+            at: at(),
+            point: line.point,
+            key: line.key.clone(),
+        });
     }
     Ok(())
 }
@@ -174,10 +189,9 @@ pub fn describe_axes(axes: &[Axis]) -> String {
 /// `FILE.csv` beside `FILE.jsonl`. A `.csv` output path is refused (it would be overwritten).
 pub fn csv_path_for(jsonl: &Path) -> Result<PathBuf> {
     if jsonl.extension().is_some_and(|e| e == "csv") {
-        bail!(
-            "--out {} ends in .csv; use a .jsonl name (the CSV view is written beside it)",
-            jsonl.display()
-        );
+        return Err(SweepError::CsvResultsName {
+            path: jsonl.to_path_buf(),
+        });
     }
     Ok(jsonl.with_extension("csv"))
 }
@@ -301,7 +315,7 @@ mod tests {
 
     #[test]
     fn torn_last_line_is_dropped_and_reported() {
-        let temp = crate::sweep::test_dir("record-torn");
+        let temp = crate::test_dir("record-torn");
         let dir = temp.path();
         let path = dir.join("r.jsonl");
         let whole = line(0, "engines=1", &[]).text;
@@ -313,12 +327,12 @@ mod tests {
 
     #[test]
     fn corrupt_complete_line_is_an_error_with_file_and_line() {
-        let temp = crate::sweep::test_dir("record-corrupt");
+        let temp = crate::test_dir("record-corrupt");
         let dir = temp.path();
         let path = dir.join("r.jsonl");
         let whole = line(0, "engines=1", &[]).text;
         std::fs::write(&path, format!("{whole}\n{{oops\n")).unwrap();
-        let err = format!("{:#}", read_results(&path).unwrap_err());
+        let err = read_results(&path).unwrap_err().to_string();
         assert!(err.contains("r.jsonl:2: not a sweep result line"), "{err}");
     }
 

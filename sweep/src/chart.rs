@@ -1,11 +1,13 @@
 //! The sweep's plot: one metric against one swept parameter, one series per combination of the
 //! other axes' values (named by their canonical key, e.g. `boards=2`).
 
-use super::grid::Axis;
-use super::record::StoredLine;
+use crate::error::SweepError;
+use crate::grid::Axis;
 use crate::plot::{LineChart, Scale, Series};
-use anyhow::{bail, Context, Result};
+use crate::record::StoredLine;
 use serde_json::Value;
+
+type Result<T, E = SweepError> = std::result::Result<T, E>;
 
 /// Largest / smallest positive x at or above which the x axis is drawn log10 (power-of-two
 /// sweeps such as engines=1,2,4,8,16 read better that way).
@@ -21,15 +23,14 @@ pub fn metric_chart(
     x_key: Option<&str>,
 ) -> Result<LineChart> {
     let x_axis = match x_key {
-        Some(key) => axes.iter().find(|a| a.key == key).with_context(|| {
-            format!(
-                "cannot plot against '{key}': it is not swept (swept: {})",
-                axis_names(axes)
-            )
-        })?,
-        None => axes
-            .last()
-            .context("cannot plot: no parameter is swept (add --set)")?,
+        Some(key) => axes
+            .iter()
+            .find(|a| a.key == key)
+            .ok_or_else(|| SweepError::NotSwept {
+                key: key.to_owned(),
+                swept: axes.iter().map(|a| a.key.clone()).collect(),
+            })?,
+        None => axes.last().ok_or(SweepError::NothingSwept)?,
     };
     let x_values = numeric_values(x_axis)?;
     if !lines.iter().any(|s| s.line.metrics.contains_key(metric)) {
@@ -37,11 +38,10 @@ pub fn metric_chart(
             .iter()
             .flat_map(|s| s.line.metrics.keys().map(String::as_str))
             .collect();
-        let known: Vec<&str> = known.into_iter().collect();
-        bail!(
-            "no result has metric '{metric}'; metrics present: {}",
-            known.join(", ")
-        );
+        return Err(SweepError::NoSuchMetric {
+            metric: metric.to_owned(),
+            present: known.into_iter().map(str::to_owned).collect(),
+        });
     }
 
     let mut series: Vec<Series> = Vec::new();
@@ -49,11 +49,10 @@ pub fn metric_chart(
         let line = &stored.line;
         let y = match line.metrics.get(metric) {
             None | Some(Value::Null) => continue,
-            Some(value) => value.as_f64().with_context(|| {
-                format!(
-                    "metric '{metric}' of point '{}' is {value}, not a number",
-                    line.key
-                )
+            Some(value) => value.as_f64().ok_or_else(|| SweepError::MetricNotANumber {
+                metric: metric.to_owned(),
+                key: line.key.clone(),
+                value: value.to_string(),
             })?,
         };
         let mut x = None;
@@ -65,7 +64,10 @@ pub fn metric_chart(
                 others.push(format!("{}={}", pair.0, pair.1));
             }
         }
-        let x = x.with_context(|| format!("point '{}' has no numeric {}", line.key, x_axis.key))?;
+        let x = x.ok_or_else(|| SweepError::NoNumericX {
+            key: line.key.clone(),
+            axis: x_axis.key.clone(),
+        })?;
         let name = if others.is_empty() {
             metric.to_string()
         } else {
@@ -96,11 +98,6 @@ pub fn metric_chart(
     })
 }
 
-fn axis_names(axes: &[Axis]) -> String {
-    let names: Vec<&str> = axes.iter().map(|a| a.key.as_str()).collect();
-    names.join(", ")
-}
-
 /// The axis values as numbers (the chart's x ticks), or an error naming a non-numeric one.
 fn numeric_values(axis: &Axis) -> Result<Vec<f64>> {
     if let Some(bad) = axis
@@ -108,10 +105,10 @@ fn numeric_values(axis: &Axis) -> Result<Vec<f64>> {
         .iter()
         .find(|v| !v.parse::<f64>().is_ok_and(f64::is_finite))
     {
-        bail!(
-            "cannot plot against '{}': value '{bad}' is not a number (choose another --plot-x)",
-            axis.key
-        );
+        return Err(SweepError::NonNumericAxis {
+            key: axis.key.clone(),
+            value: bad.clone(),
+        });
     }
     Ok(axis.values.iter().filter_map(|v| v.parse().ok()).collect())
 }

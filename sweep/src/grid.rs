@@ -1,9 +1,11 @@
-//! The sweep grid: `--set key=v1,v2,...` axes, their cartesian product, and `--shard K/N`.
+//! The sweep grid: `key=v1,v2,...` axes, their cartesian product, and shards `K/N`.
 //!
-//! Architecture invariant: a point's index and key depend only on the axes as given on the
-//! command line (their order and their values' order), never on jobs, shards or timing.
+//! Architecture invariant: a point's index and key depend only on the axes as given (their
+//! order and their values' order), never on jobs, shards or timing.
 
-use anyhow::{bail, Context, Result};
+use crate::error::SweepError;
+
+type Result<T, E = SweepError> = std::result::Result<T, E>;
 
 /// Largest grid we agree to enumerate, in points; guards against typos like `engines=1,...`
 /// repeated over many axes allocating without bound.
@@ -56,7 +58,7 @@ impl Point {
     }
 }
 
-/// `--shard K/N`: this run evaluates the points whose index % N == K - 1.
+/// A shard `K/N`: this run evaluates the points whose index % N == K - 1.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Shard {
     /// 1-based shard number K, 1 <= K <= count.
@@ -68,22 +70,28 @@ pub struct Shard {
 impl Shard {
     /// Parses `K/N` (1-based K), e.g. `2/8`, as used by a Slurm array (`$SLURM_ARRAY_TASK_ID/8`).
     pub fn parse(spec: &str) -> Result<Shard> {
+        let bad = |why: String, source| SweepError::BadShard {
+            spec: spec.to_owned(),
+            why,
+            source,
+        };
         let (k, n) = spec
             .split_once('/')
-            .with_context(|| format!("bad shard '{spec}': expected K/N, e.g. 1/4"))?;
-        let number: usize = k
-            .trim()
-            .parse()
-            .with_context(|| format!("bad shard '{spec}': K '{k}' is not a whole number"))?;
-        let count: usize = n
-            .trim()
-            .parse()
-            .with_context(|| format!("bad shard '{spec}': N '{n}' is not a whole number"))?;
+            .ok_or_else(|| bad("expected K/N, e.g. 1/4".to_owned(), None))?;
+        let whole = |part: &str, name: &str| {
+            part.trim()
+                .parse::<usize>()
+                .map_err(|e| bad(format!("{name} '{part}' is not a whole number"), Some(e)))
+        };
+        let (number, count) = (whole(k, "K")?, whole(n, "N")?);
         if count == 0 {
-            bail!("bad shard '{spec}': N must be at least 1");
+            return Err(bad("N must be at least 1".to_owned(), None));
         }
         if number == 0 || number > count {
-            bail!("bad shard '{spec}': K must be between 1 and N={count} (K is 1-based)");
+            return Err(bad(
+                format!("K must be between 1 and N={count} (K is 1-based)"),
+                None,
+            ));
         }
         Ok(Shard { number, count })
     }
@@ -99,16 +107,29 @@ impl std::fmt::Display for Shard {
     }
 }
 
+fn bad_axis(spec: &str, why: String) -> SweepError {
+    SweepError::BadAxis {
+        spec: spec.to_owned(),
+        why,
+    }
+}
+
 /// Keys may contain letters, digits, `_`, `-` and `.` (for nested keys like `memory.cas`).
 fn check_key(key: &str, spec: &str) -> Result<()> {
     if key.is_empty() {
-        bail!("bad --set '{spec}': missing key before '=' (expected key=v1,v2,...)");
+        return Err(bad_axis(
+            spec,
+            "missing key before '=' (expected key=v1,v2,...)".to_owned(),
+        ));
     }
     if let Some(c) = key
         .chars()
         .find(|c| !(c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.')))
     {
-        bail!("bad --set '{spec}': key '{key}' contains '{c}'; keys use letters, digits, '_', '-', '.'");
+        return Err(bad_axis(
+            spec,
+            format!("key '{key}' contains '{c}'; keys use letters, digits, '_', '-', '.'"),
+        ));
     }
     Ok(())
 }
@@ -116,34 +137,41 @@ fn check_key(key: &str, spec: &str) -> Result<()> {
 /// Values must keep the canonical key unambiguous: no `,` `=` `"`, whitespace or control codes.
 fn check_value(value: &str, key: &str, spec: &str) -> Result<()> {
     if value.is_empty() {
-        bail!("bad --set '{spec}': empty value in the list for '{key}'");
+        return Err(bad_axis(
+            spec,
+            format!("empty value in the list for '{key}'"),
+        ));
     }
     if let Some(c) = value
         .chars()
         .find(|c| c.is_whitespace() || c.is_control() || matches!(c, '=' | '"'))
     {
-        bail!(
-            "bad --set '{spec}': value '{value}' for '{key}' contains {c:?}, which is not allowed"
-        );
+        return Err(bad_axis(
+            spec,
+            format!("value '{value}' for '{key}' contains {c:?}, which is not allowed"),
+        ));
     }
     Ok(())
 }
 
-/// Parses one `--set key=v1,v2,...` into an axis (structure only; see [`Grid::parse`]).
+/// Parses one `key=v1,v2,...` into an axis (structure only; see [`Grid::parse`]).
 pub fn parse_axis(spec: &str) -> Result<Axis> {
     let (key, list) = spec
         .split_once('=')
-        .with_context(|| format!("bad --set '{spec}': expected key=v1,v2,... (no '=' found)"))?;
+        .ok_or_else(|| bad_axis(spec, "expected key=v1,v2,... (no '=' found)".to_owned()))?;
     let key = key.trim();
     check_key(key, spec)?;
     if list.trim().is_empty() {
-        bail!("bad --set '{spec}': no values after '{key}='");
+        return Err(bad_axis(spec, format!("no values after '{key}='")));
     }
     let mut values: Vec<String> = Vec::new();
     for value in list.split(',').map(str::trim) {
         check_value(value, key, spec)?;
         if values.iter().any(|v| v == value) {
-            bail!("bad --set '{spec}': value '{value}' appears twice for '{key}'");
+            return Err(bad_axis(
+                spec,
+                format!("value '{value}' appears twice for '{key}'"),
+            ));
         }
         values.push(value.to_string());
     }
@@ -154,7 +182,7 @@ pub fn parse_axis(spec: &str) -> Result<Axis> {
 }
 
 impl Grid {
-    /// Parses repeatable `--set` specs, in order, and asks `validate` about every key=value.
+    /// Parses axis specs `key=v1,v2,...`, in order, and asks `validate` about every key=value.
     pub fn parse(specs: &[String], validate: AxisValidator<'_>) -> Result<Grid> {
         let axes = specs
             .iter()
@@ -162,8 +190,11 @@ impl Grid {
             .collect::<Result<Vec<_>>>()?;
         for axis in &axes {
             for value in &axis.values {
-                validate(&axis.key, value)
-                    .map_err(|why| anyhow::anyhow!("bad --set {}={}: {why}", axis.key, value))?;
+                validate(&axis.key, value).map_err(|why| SweepError::RejectedValue {
+                    key: axis.key.clone(),
+                    value: value.clone(),
+                    why,
+                })?;
             }
         }
         Grid::from_axes(axes)
@@ -177,27 +208,28 @@ impl Grid {
             let spec = format!("{}={}", axis.key, axis.values.join(","));
             check_key(&axis.key, &spec)?;
             if axis.values.is_empty() {
-                bail!("bad --set '{spec}': no values after '{}='", axis.key);
+                return Err(bad_axis(&spec, format!("no values after '{}='", axis.key)));
             }
             for (j, value) in axis.values.iter().enumerate() {
                 check_value(value, &axis.key, &spec)?;
                 if axis.values[..j].contains(value) {
-                    bail!(
-                        "bad --set '{spec}': value '{value}' appears twice for '{}'",
-                        axis.key
-                    );
+                    return Err(bad_axis(
+                        &spec,
+                        format!("value '{value}' appears twice for '{}'", axis.key),
+                    ));
                 }
             }
             if axes[..i].iter().any(|a| a.key == axis.key) {
-                bail!(
-                    "bad --set: axis '{}' is given twice; put all its values in one --set",
-                    axis.key
-                );
+                return Err(SweepError::DuplicateAxis {
+                    key: axis.key.clone(),
+                });
             }
             point_count = point_count
                 .checked_mul(axis.values.len())
                 .filter(|&n| n <= MAX_GRID_POINTS)
-                .with_context(|| format!("the sweep has more than {MAX_GRID_POINTS} points"))?;
+                .ok_or(SweepError::TooManyPoints {
+                    limit: MAX_GRID_POINTS,
+                })?;
         }
         Ok(Grid { axes, point_count })
     }
@@ -207,6 +239,10 @@ impl Grid {
     }
 
     /// Number of points in the full product (1 for a grid without axes).
+    #[expect(
+        clippy::len_without_is_empty,
+        reason = "a grid always has a point: one without axes has the empty one"
+    )]
     pub fn len(&self) -> usize {
         self.point_count
     }
@@ -249,7 +285,7 @@ mod tests {
     }
 
     fn error_of(specs: &[&str]) -> String {
-        format!("{:#}", grid(specs).unwrap_err())
+        grid(specs).unwrap_err().to_string()
     }
 
     #[test]
@@ -309,11 +345,10 @@ mod tests {
                 _ => Err(format!("unknown key '{key}'")),
             }
         };
-        let err = format!(
-            "{:#}",
-            Grid::parse(&specs, &only_powers_of_two).unwrap_err()
-        );
-        assert_eq!(err, "bad --set boards=3: boards must be 1, 2 or 4");
+        let err = Grid::parse(&specs, &only_powers_of_two)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(err, "bad axis value boards=3: boards must be 1, 2 or 4");
     }
 
     #[test]
@@ -342,7 +377,7 @@ mod tests {
 
     #[test]
     fn bad_shard_specs_are_rejected_clearly() {
-        let err = |spec: &str| format!("{:#}", Shard::parse(spec).unwrap_err());
+        let err = |spec: &str| Shard::parse(spec).unwrap_err().to_string();
         assert!(err("3").contains("expected K/N"));
         assert!(err("0/3").contains("K must be between 1 and N=3"));
         assert!(err("4/3").contains("K must be between 1 and N=3"));

@@ -2,18 +2,18 @@
 //!
 //! Architecture invariants:
 //! - each finished point is appended to `FILE.jsonl` as one line at once, so an interrupted run
-//!   loses at most the unterminated last line, which `--resume` drops and recomputes;
+//!   loses at most the unterminated last line, which a resumed run drops and recomputes;
 //! - the finished files (JSONL sorted by point index, CSV view) are written atomically and are
-//!   byte-identical whatever `--jobs`, shard split or resume history produced them: records
+//!   byte-identical whatever job count, shard split or resume history produced them: records
 //!   hold no wall-clock time and their text is never re-encoded once written.
 
-use super::grid::{Grid, Point, Shard};
-use super::record::{
+use crate::error::{BoxError, Joining, SweepError};
+use crate::grid::{Grid, Point, Shard};
+use crate::output::write_atomically;
+use crate::record::{
     check_line_belongs, csv_path_for, read_results, render_csv, render_jsonl, Expected,
     PointRecord, StoredLine, SweepLine, FORMAT,
 };
-use crate::output::write_atomically;
-use anyhow::{anyhow, bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -21,9 +21,12 @@ use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
+type Result<T, E = SweepError> = std::result::Result<T, E>;
+
 /// The caller's model of one point: builds the architecture from the point's values, runs it
-/// on the trace, and returns the resolved architecture and metrics. Called from many threads.
-pub type Evaluator<'a> = &'a (dyn Fn(&Point) -> Result<PointRecord> + Sync);
+/// on the trace, and returns the resolved architecture and metrics, or the caller's own error.
+/// Called from many threads.
+pub type Evaluator<'a> = &'a (dyn Fn(&Point) -> Result<PointRecord, BoxError> + Sync);
 
 /// What to run and where to put it.
 pub struct SweepOptions<'a> {
@@ -49,9 +52,9 @@ pub struct SweepOutcome {
     pub lines: Vec<StoredLine>,
     /// Points evaluated by this run.
     pub evaluated: usize,
-    /// Points taken from the existing file (`--resume`).
+    /// Points taken from the existing file (when resuming).
     pub reused: usize,
-    /// Whether `--resume` found and dropped a torn last line.
+    /// Whether resuming found and dropped a torn last line.
     pub torn_tail_dropped: bool,
     pub csv: PathBuf,
 }
@@ -60,7 +63,7 @@ pub struct SweepOutcome {
 pub fn run_sweep(options: &SweepOptions<'_>, evaluate: Evaluator<'_>) -> Result<SweepOutcome> {
     let csv = csv_path_for(options.out)?;
     if options.jobs == 0 {
-        bail!("--jobs must be at least 1");
+        return Err(SweepError::NoWorkers);
     }
     let selected = options.grid.selected_indices(options.shard);
     let (mut done, torn_tail_dropped) = load_previous(options, &selected)?;
@@ -75,11 +78,11 @@ pub fn run_sweep(options: &SweepOptions<'_>, evaluate: Evaluator<'_>) -> Result<
     let evaluated = fresh.len();
     done.extend(fresh.into_iter().map(|s| (s.line.point, s)));
     if done.len() != selected.len() {
-        return Err(anyhow!(
-            "internal error: {} of {} points done after the sweep",
+        return Err(SweepError::Internal(format!(
+            "{} of {} points done after the sweep",
             done.len(),
             selected.len()
-        ));
+        )));
     }
 
     let lines: Vec<StoredLine> = done.into_values().collect();
@@ -108,45 +111,47 @@ fn load_previous(
         return Ok((done, false));
     }
     if !options.resume {
-        bail!(
-            "{} already holds results; pass --resume to continue that sweep, or remove it to start over",
-            out.display()
-        );
+        return Err(SweepError::AlreadyHoldsResults {
+            path: out.to_path_buf(),
+        });
     }
     let file = read_results(out)?;
     let expected = Expected {
         grid: options.grid,
         trace_digest: options.trace_digest,
-        reference: "this sweep",
-        advice: "choose another --out, or remove the file to start over",
+        joining: Joining::Resume,
     };
     for stored in file.lines {
         check_line_belongs(&stored, &expected)?;
         if selected.binary_search(&stored.line.point).is_err() {
-            bail!(
-                "{}: point '{}' is not part of shard {}; resume a shard's file with the same --shard",
-                stored.origin,
-                stored.line.key,
-                options.shard.map_or("(none)".to_string(), |s| s.to_string())
-            );
+            return Err(SweepError::NotInShard {
+                at: stored.origin,
+                key: stored.line.key,
+                shard: options
+                    .shard
+                    .map_or("(none)".to_string(), |s| s.to_string()),
+            });
         }
         if let Some(earlier) = done.get(&stored.line.point) {
             let earlier: &StoredLine = earlier;
             if earlier.text != stored.text {
-                bail!(
-                    "{} and {} hold different results for point '{}'",
-                    earlier.origin,
-                    stored.origin,
-                    stored.line.key
-                );
+                return Err(SweepError::Conflict {
+                    first: earlier.origin.clone(),
+                    second: stored.origin,
+                    key: stored.line.key,
+                });
             }
         }
         done.insert(stored.line.point, stored.compact());
     }
     if file.torn_tail_dropped {
         let refs: Vec<&StoredLine> = done.values().collect();
-        write_atomically(out, render_jsonl(&refs).as_bytes())
-            .with_context(|| format!("cannot repair the torn last line of {}", out.display()))?;
+        write_atomically(out, render_jsonl(&refs).as_bytes()).map_err(|source| {
+            SweepError::RepairTornLine {
+                path: out.to_path_buf(),
+                source,
+            }
+        })?;
     }
     Ok((done, file.torn_tail_dropped))
 }
@@ -163,16 +168,11 @@ fn evaluate_points(
         .create(true)
         .append(true)
         .open(options.out)
-        .with_context(|| format!("cannot open {} for appending", options.out.display()))?;
+        .map_err(|source| SweepError::OpenForAppend {
+            path: options.out.to_path_buf(),
+            source,
+        })?;
     let sink = Mutex::new((file, Vec::with_capacity(todo.len())));
-    let failure = |point: &Point| {
-        format!(
-            "point {} ({}) failed; finished points are kept in {}, rerun with --resume",
-            point.index,
-            point.key(),
-            options.out.display()
-        )
-    };
     let keep = |point: &Point, record: PointRecord| -> Result<()> {
         let line = line_for(point, options, record);
         let text = line.to_json()?;
@@ -182,13 +182,14 @@ fn evaluate_points(
             origin: String::new(),
         }
         .compact();
-        let mut guard = sink
-            .lock()
-            .map_err(|_| anyhow!("a worker thread panicked"))?;
+        let mut guard = sink.lock().map_err(|_| SweepError::Poisoned)?;
         let (file, lines) = &mut *guard;
         file.write_all(format!("{}\n", stored.text).as_bytes())
             .and_then(|()| file.flush())
-            .with_context(|| format!("cannot append to {}", options.out.display()))?;
+            .map_err(|source| SweepError::Append {
+                path: options.out.to_path_buf(),
+                source,
+            })?;
         lines.push(stored);
         Ok(())
     };
@@ -196,23 +197,35 @@ fn evaluate_points(
         grid: options.grid,
         jobs: options.jobs,
         show_progress: options.show_progress,
-        failure: &failure,
+        failure: &|point: &Point| format!("point {}", point.index),
     };
-    pool.run(todo, already_done, evaluate, &keep)?;
-    let (_, lines) = sink
-        .into_inner()
-        .map_err(|_| anyhow!("a worker thread panicked"))?;
+    pool.run(todo, already_done, evaluate, &keep)
+        .map_err(|error| match error {
+            SweepError::PointFailed { index, source, .. } => SweepError::SweepPointFailed {
+                index,
+                key: options
+                    .grid
+                    .point(index)
+                    .map(|p| p.key())
+                    .unwrap_or_default(),
+                kept_in: options.out.to_path_buf(),
+                source,
+            },
+            other => other,
+        })?;
+    let (_, lines) = sink.into_inner().map_err(|_| SweepError::Poisoned)?;
     Ok(lines)
 }
 
-/// The one way points are evaluated in parallel, by the sweep and by `latency`: a pool of
-/// `jobs` threads, a progress bar (hidden off a terminal), and a panicking point turned into
-/// an error naming it. The first failure stops the run.
+/// The one way points are evaluated in parallel, by the sweep and by callers with a grid of
+/// their own: a pool of `jobs` threads, a progress bar (hidden off a terminal), and a failing
+/// or panicking point turned into [`SweepError::PointFailed`] naming it. The first failure
+/// stops the run.
 pub struct Pool<'g> {
     pub grid: &'g Grid,
     pub jobs: usize,
     pub show_progress: bool,
-    /// What a point's failure (an error or a panic) is said to be.
+    /// What a failing point (an error or a panic) is called in the error, e.g. `point 3`.
     pub failure: &'g (dyn Fn(&Point) -> String + Sync),
 }
 
@@ -223,7 +236,7 @@ impl Pool<'_> {
         &self,
         indices: &[usize],
         already_done: usize,
-        evaluate: &(dyn Fn(&Point) -> Result<T> + Sync),
+        evaluate: &(dyn Fn(&Point) -> Result<T, BoxError> + Sync),
         keep: &(dyn Fn(&Point, T) -> Result<()> + Sync),
     ) -> Result<()> {
         let bar = progress_bar(
@@ -234,19 +247,27 @@ impl Pool<'_> {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(self.jobs)
             .build()
-            .context("cannot start the worker threads")?;
+            .map_err(SweepError::Threads)?;
         let run_one = |index: &usize| -> Result<()> {
             let point = self
                 .grid
                 .point(*index)
-                .ok_or_else(|| anyhow!("internal error: point {index} outside the grid"))?;
+                .ok_or_else(|| SweepError::Internal(format!("point {index} outside the grid")))?;
             // A panicking model becomes an error naming its point; the other points stay.
             let outcome =
                 std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| evaluate(&point)))
                     .unwrap_or_else(|payload| {
-                        Err(anyhow!("the model panicked: {}", panic_text(&payload)))
+                        Err(SweepError::Panicked {
+                            message: panic_text(&payload),
+                        }
+                        .into())
                     });
-            keep(&point, outcome.with_context(|| (self.failure)(&point))?)?;
+            let value = outcome.map_err(|source| SweepError::PointFailed {
+                index: point.index,
+                what: (self.failure)(&point),
+                source,
+            })?;
+            keep(&point, value)?;
             bar.inc(1);
             Ok(())
         };
@@ -258,20 +279,18 @@ impl Pool<'_> {
     /// Evaluate every point of the grid; the results in point order.
     pub fn collect<T: Send>(
         &self,
-        evaluate: &(dyn Fn(&Point) -> Result<T> + Sync),
+        evaluate: &(dyn Fn(&Point) -> Result<T, BoxError> + Sync),
     ) -> Result<Vec<T>> {
         let results = Mutex::new(Vec::new());
         let indices: Vec<usize> = (0..self.grid.len()).collect();
         self.run(&indices, 0, evaluate, &|point, value| {
             results
                 .lock()
-                .map_err(|_| anyhow!("a worker thread panicked"))?
+                .map_err(|_| SweepError::Poisoned)?
                 .push((point.index, value));
             Ok(())
         })?;
-        let mut results = results
-            .into_inner()
-            .map_err(|_| anyhow!("a worker thread panicked"))?;
+        let mut results = results.into_inner().map_err(|_| SweepError::Poisoned)?;
         results.sort_by_key(|(index, _)| *index);
         Ok(results.into_iter().map(|(_, value)| value).collect())
     }
