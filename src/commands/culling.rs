@@ -4,8 +4,8 @@
 
 use super::workload_args::SceneArgs;
 use occsim_traces::workloads::compare::{
-    compare as compare_drivers, CompareError, CompareReport, DriverReport, FrameCycleModel,
-    ModelError,
+    compare as compare_drivers, CompareError, CompareReport, DriverReport, FrameCost,
+    FrameCycleModel, ModelError,
 };
 use occsim_traces::workloads::{DriverKind, DriverOptions};
 use occsim_traces::Event;
@@ -147,10 +147,22 @@ impl FrameCycleModel for MachineFrames {
         Ok(())
     }
 
-    fn end_frame(&mut self) -> Result<u64, ModelError> {
+    fn end_frame(&mut self) -> Result<FrameCost, ModelError> {
         let machine = self.machine.take().ok_or_else(|| self.failed(None))?;
         let report = machine.finish().map_err(|e| self.failed(Some(e)))?;
-        Ok(report.summary.cycles)
+        // A driver's frame is one closed-loop frame (it ends in `swap`); its split sums the
+        // report's frames should there be more.
+        let sum = |f: &dyn Fn(&occsim_sim::report::FrameReport) -> u64| {
+            report.frames.iter().map(f).sum::<u64>()
+        };
+        Ok(FrameCost {
+            cycles: report.summary.cycles,
+            seconds: report.summary.simulated_seconds,
+            host_busy: sum(&|f| f.host_busy),
+            geometry_busy: sum(&|f| f.geometry_busy),
+            pixel_busy: sum(&|f| f.pixel_busy),
+            waiting: sum(&|f| f.waiting),
+        })
     }
 }
 
@@ -239,7 +251,42 @@ fn print_table(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<(
             d.traversal_ms_per_frame, d.golden_model_ms_per_frame
         )?;
     }
+    print_frame_time(report, out)?;
     print_accuracy(report, &machines, out)
+}
+
+/// Each driver's frame time on each machine: frames per second, and where the frame's time
+/// went (the host busy and waiting on answers, the geometry stage and rasterizer busy).
+fn print_frame_time(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(
+        out,
+        "\n{:<24} {:<8} {:>9} {:>10} {:>12} {:>12} {:>12} {:>12}",
+        "frame time",
+        "machine",
+        "frames/s",
+        "ms/frame",
+        "host busy",
+        "waiting",
+        "geometry",
+        "pixel busy"
+    )?;
+    for d in &report.drivers {
+        for m in &d.frame_time {
+            writeln!(
+                out,
+                "{:<24} {:<8} {:>9.2} {:>10.2} {:>12.0} {:>12.0} {:>12.0} {:>12.0}",
+                d.driver,
+                m.machine,
+                m.frames_per_second,
+                m.ms_per_frame,
+                m.host_busy_cycles,
+                m.waiting_cycles,
+                m.geometry_busy_cycles,
+                m.pixel_busy_cycles
+            )?;
+        }
+    }
+    Ok(())
 }
 
 /// What accuracy costs: each adaptive row against the conservative hierarchical driver.
@@ -336,8 +383,12 @@ mod tests {
             }
             Ok(())
         }
-        fn end_frame(&mut self) -> Result<u64, ModelError> {
-            Ok(self.fragments)
+        fn end_frame(&mut self) -> Result<FrameCost, ModelError> {
+            Ok(FrameCost {
+                cycles: self.fragments,
+                seconds: self.fragments as f64 * 1e-6,
+                ..FrameCost::default()
+            })
         }
     }
 
@@ -377,6 +428,13 @@ mod tests {
         print_table(&report, &mut text).unwrap();
         let text = String::from_utf8(text).unwrap();
         assert!(text.contains("cycles frag"), "{text}");
+        // The stand-in's frame time: a microsecond a fragment.
+        for d in &report.drivers {
+            let fragments = d.draw_fragments_per_frame + d.query_fragments_per_frame;
+            let ms = d.frame_time[0].ms_per_frame;
+            assert!((ms - fragments * 1e-3).abs() < 1e-9, "{}: {ms}", d.driver);
+        }
+        assert!(text.contains("frames/s"), "{text}");
         assert!(text.contains("cycles saved frag"), "{text}");
     }
 

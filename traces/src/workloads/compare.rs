@@ -36,8 +36,53 @@ pub trait FrameCycleModel {
     /// A new frame of `width` x `height` pixels begins; its events follow.
     fn begin_frame(&mut self, width: u32, height: u32) -> Result<(), ModelError>;
     fn event(&mut self, event: &Event) -> Result<(), ModelError>;
-    /// Simulated cycles for the frame's events since `begin_frame`.
-    fn end_frame(&mut self) -> Result<u64, ModelError>;
+    /// The frame's time for its events since `begin_frame`.
+    fn end_frame(&mut self) -> Result<FrameCost, ModelError>;
+}
+
+/// What one frame cost on a machine: its cycles and seconds, and where the host's time went
+/// (busy, waiting on answers) beside the geometry stage's and the rasterizer's busy cycles.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct FrameCost {
+    pub cycles: u64,
+    pub seconds: f64,
+    pub host_busy: u64,
+    pub geometry_busy: u64,
+    pub pixel_busy: u64,
+    pub waiting: u64,
+}
+
+/// A driver's frames on one machine, as means per frame.
+#[derive(Clone, Debug, Serialize)]
+pub struct MachineFrameTime {
+    pub machine: String,
+    pub frames_per_second: f64,
+    pub ms_per_frame: f64,
+    pub host_busy_cycles: f64,
+    pub geometry_busy_cycles: f64,
+    pub pixel_busy_cycles: f64,
+    pub waiting_cycles: f64,
+}
+
+impl MachineFrameTime {
+    fn of(machine: String, frames: &[FrameCost]) -> MachineFrameTime {
+        let n = frames.len().max(1) as f64;
+        let mean = |f: &dyn Fn(&FrameCost) -> u64| frames.iter().map(f).sum::<u64>() as f64 / n;
+        let seconds: f64 = frames.iter().map(|f| f.seconds).sum();
+        MachineFrameTime {
+            machine,
+            frames_per_second: if seconds > 0.0 {
+                frames.len() as f64 / seconds
+            } else {
+                0.0
+            },
+            ms_per_frame: seconds * 1e3 / n,
+            host_busy_cycles: mean(&|f| f.host_busy),
+            geometry_busy_cycles: mean(&|f| f.geometry_busy),
+            pixel_busy_cycles: mean(&|f| f.pixel_busy),
+            waiting_cycles: mean(&|f| f.waiting),
+        }
+    }
 }
 
 /// Splits the event stream into frames at `Clear` and feeds the timing models.
@@ -47,7 +92,7 @@ struct FrameSplitter<'m> {
     height: u32,
     in_frame: bool,
     /// Per model, per frame.
-    cycles: Vec<Vec<u64>>,
+    cycles: Vec<Vec<FrameCost>>,
 }
 
 impl FrameSplitter<'_> {
@@ -101,6 +146,8 @@ pub struct DriverReport {
     pub pixels_lost_per_frame: f64,
     /// Per machine: simulated cycles per frame.
     pub cycles_per_frame: Vec<(String, f64)>,
+    /// Per machine: frames per second and the split of a frame's time.
+    pub frame_time: Vec<MachineFrameTime>,
     /// Wall time of the traversal (driver logic, not the golden model), ms per frame.
     pub traversal_ms_per_frame: f64,
     /// Wall time inside the golden model, ms per frame.
@@ -154,11 +201,20 @@ pub fn compare(
         splitter.end_frame().map_err(model_error)?;
         let names: Vec<String> = splitter.models.iter().map(|m| m.machine()).collect();
         let cycles = names
+            .iter()
+            .zip(&splitter.cycles)
+            .map(|(name, per_frame)| {
+                let total: u64 = per_frame.iter().map(|f| f.cycles).sum();
+                (name.clone(), total as f64 / frames)
+            })
+            .collect();
+        let mut report = driver_report(options, scene, walk, &stats, &full, cycles);
+        report.frame_time = names
             .into_iter()
             .zip(&splitter.cycles)
-            .map(|(name, per_frame)| (name, per_frame.iter().sum::<u64>() as f64 / frames))
+            .map(|(name, per_frame)| MachineFrameTime::of(name, per_frame))
             .collect();
-        drivers.push(driver_report(options, scene, walk, &stats, &full, cycles));
+        drivers.push(report);
     }
     Ok(CompareReport {
         scene: scene_name,
@@ -211,6 +267,7 @@ fn driver_report(
         cells_refreshed_per_frame: mean(&|f| f.cells_refreshed),
         pixels_lost_per_frame: pixels_lost as f64 / frames,
         cycles_per_frame,
+        frame_time: Vec::new(),
         traversal_ms_per_frame: ms(&|t| t.traversal()),
         golden_model_ms_per_frame: ms(&|t| t.golden_model),
     }
