@@ -66,6 +66,11 @@ pub struct LatencyRow {
     pub global_merge_mean_cycles: Option<f64>,
     pub total_cycles: u64,
     pub fragments_per_cycle: f64,
+    /// Frames of a closed-loop trace and their mean time (None for an open-loop trace or a
+    /// level that does not time frames).
+    pub frames: u64,
+    pub frame_mean_cycles: Option<f64>,
+    pub frames_per_second: Option<f64>,
 }
 
 impl LatencyRow {
@@ -108,6 +113,9 @@ impl LatencyRow {
             } else {
                 result.fragments as f64 / total_cycles as f64
             },
+            frames: result.frame_cycles.len() as u64,
+            frame_mean_cycles: result.frame_mean_cycles(),
+            frames_per_second: result.frames_per_second,
         }
     }
 }
@@ -169,7 +177,7 @@ fn table(rows: &[LatencyRow]) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "{:>7} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>12} {:>8}",
+        "{:>7} {:>7} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>12} {:>8} {:>12} {:>9}",
         "engines",
         "queries",
         "p50",
@@ -182,12 +190,14 @@ fn table(rows: &[LatencyRow]) -> String {
         "local",
         "global",
         "cycles",
-        "frag/cyc"
+        "frag/cyc",
+        "frame cyc",
+        "frames/s"
     );
     for r in rows {
         let _ = writeln!(
             out,
-            "{:>7} {:>7} {:>9} {:>9} {:>9} {:>9.3} {:>9.3} {:>9.3} {:>9} {:>9} {:>9} {:>12} {:>8.3}",
+            "{:>7} {:>7} {:>9} {:>9} {:>9} {:>9.3} {:>9.3} {:>9.3} {:>9} {:>9} {:>9} {:>12} {:>8.3} {:>12} {:>9}",
             r.engines,
             r.queries,
             r.latency_p50_cycles,
@@ -200,12 +210,16 @@ fn table(rows: &[LatencyRow]) -> String {
             split(r.local_merge_mean_cycles),
             split(r.global_merge_mean_cycles),
             r.total_cycles,
-            r.fragments_per_cycle
+            r.fragments_per_cycle,
+            r.frame_mean_cycles
+                .map_or("-".to_string(), |c| format!("{c:.0}")),
+            r.frames_per_second
+                .map_or("-".to_string(), |f| format!("{f:.2}"))
         );
     }
     let _ = writeln!(
         out,
-        "latency in cycles; drain, local and global are mean cycles per query (they add up to the mean latency; - where the level predicts latency whole)"
+        "latency in cycles; drain, local and global are mean cycles per query (they add up to the mean latency; - where the level predicts latency whole); frame cyc is the mean frame time of a closed-loop trace (- for an open loop or a level that does not time frames)"
     );
     out
 }

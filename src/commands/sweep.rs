@@ -321,6 +321,14 @@ fn point_metrics(
             "latency_p95_cycles",
             serde_json::json!(result.latency_p95_cycles),
         ),
+        (
+            "frame_mean_cycles",
+            serde_json::json!(result.frame_mean_cycles()),
+        ),
+        (
+            "frames_per_second",
+            serde_json::json!(result.frames_per_second),
+        ),
     ]
     .into_iter()
     .map(|(k, v)| (k.to_owned(), v))

@@ -157,6 +157,8 @@ impl FunctionalCore {
             effects: None,
             sampled_windows: None,
             queries: self.queries,
+            frame_cycles: Vec::new(),
+            frames_per_second: None,
             report: None,
         })
     }

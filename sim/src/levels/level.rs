@@ -113,6 +113,13 @@ pub struct LevelResult {
     pub effects: Option<Effects>,
     pub sampled_windows: Option<SampledWindows>,
     pub queries: Vec<QueryOutcome>,
+    /// Each frame's cycles, for a closed-loop stream at a level that times frames (empty
+    /// otherwise).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub frame_cycles: Vec<u64>,
+    /// Frames over the run's time, when frames were timed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames_per_second: Option<f64>,
     /// The full cycle-level report (cycle level only).
     #[serde(skip)]
     pub report: Option<Report>,
@@ -168,11 +175,19 @@ impl LevelResult {
             effects: Some(effects),
             sampled_windows: None,
             queries,
+            frame_cycles: report.frames.iter().map(|f| f.cycles).collect(),
+            frames_per_second: report.summary.frames_per_second,
             report: None,
         };
         result.set_timing(report.summary.cycles);
         result.report = Some(report);
         result
+    }
+
+    /// The mean frame time in cycles, when frames were timed.
+    pub fn frame_mean_cycles(&self) -> Option<f64> {
+        (!self.frame_cycles.is_empty())
+            .then(|| self.frame_cycles.iter().sum::<u64>() as f64 / self.frame_cycles.len() as f64)
     }
 
     /// A short text form (what `occsim replay --fidelity` prints below the cycle level).
