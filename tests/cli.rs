@@ -330,6 +330,19 @@ fn workload_option_errors_name_their_flags() {
         error.contains("--query-delay applies to the frustum"),
         "{error}"
     );
+    let error = with(&[
+        "--driver",
+        "hierarchical",
+        "--quadtree-levels",
+        "2",
+        "--virtual-occlusion-buffer",
+    ]);
+    assert!(
+        error.contains(
+            "--virtual-occlusion-buffer applies to the hierarchical driver without quadtree levels"
+        ),
+        "{error}"
+    );
     let error = with(&["--driver", "hierarchical", "--quadtree-levels", "9"]);
     assert!(
         error.contains("--quadtree-levels 9 out of range"),

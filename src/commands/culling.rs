@@ -37,9 +37,12 @@ fn drivers_to_compare(args: &CompareArgs) -> Vec<DriverOptions> {
         options.query_delay_frames = args.query_delay;
         options
     };
+    let mut vob = DriverOptions::new(DriverKind::Hierarchical);
+    vob.virtual_occlusion_buffer = true;
     let mut list = vec![
         delayed(DriverOptions::new(DriverKind::Frustum)),
         delayed(DriverOptions::new(DriverKind::Hierarchical)),
+        delayed(vob),
     ];
     if args.quadtree_levels > 0 {
         let mut quadtree = delayed(DriverOptions::new(DriverKind::Hierarchical));
@@ -405,6 +408,7 @@ mod tests {
             [
                 "frustum",
                 "hierarchical",
+                "hierarchical/vob",
                 "hierarchical/q2",
                 "lazy-grid",
                 "busy-grid",
@@ -454,7 +458,8 @@ mod tests {
         )
         .unwrap();
         let value: serde_json::Value = serde_json::from_slice(&out).unwrap();
-        assert_eq!(value["drivers"].as_array().unwrap().len(), 5);
+        // frustum, hierarchical, hierarchical/vob, the two grids, one adaptive threshold.
+        assert_eq!(value["drivers"].as_array().unwrap().len(), 6);
         assert_eq!(value["frames"], 2);
     }
 }

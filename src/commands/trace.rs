@@ -272,8 +272,8 @@ fn describe(event: &Event) -> String {
             if b.discarded { " discarded" } else { "" }
         ),
         Event::HostWork(w) => format!(
-            "host nodes={} boxes={} decisions={}",
-            w.nodes, w.boxes, w.decisions
+            "host nodes={} boxes={} decisions={} pixels={}",
+            w.nodes, w.boxes, w.decisions, w.pixels
         ),
         Event::Wait(id) => format!("wait {id}"),
         Event::ConditionalBegin(id) => format!("begin_conditional {id}"),

@@ -78,6 +78,10 @@ pub struct DriverArgs {
     /// Grids: cell side in pixels.
     #[arg(long, default_value_t = 32)]
     pub grid_cell_pixels: u32,
+    /// Hierarchical: test boxes without the Occlusion Unit, as the paper's software method
+    /// did: draw the box, read its rectangle of the framebuffer back and search it.
+    #[arg(long)]
+    pub virtual_occlusion_buffer: bool,
 }
 
 /// Everything `trace gen` needs to make a workload trace.
@@ -208,6 +212,7 @@ impl DriverArgs {
             quadtree_levels: self.quadtree_levels,
             adaptive_threshold: self.adaptive_threshold,
             grid_cell_pixels: self.grid_cell_pixels,
+            virtual_occlusion_buffer: self.virtual_occlusion_buffer,
         };
         options.validate().map_err(flagged)?;
         Ok(options)
@@ -226,6 +231,7 @@ pub fn flagged(error: WorkloadError) -> anyhow::Error {
                 WorkloadOption::QuadtreeLevels => "--quadtree-levels",
                 WorkloadOption::AdaptiveThreshold => "--adaptive-threshold",
                 WorkloadOption::GridCellPixels => "--grid-cell-pixels",
+                WorkloadOption::VirtualOcclusionBuffer => "--virtual-occlusion-buffer",
             };
             anyhow::anyhow!("{flag} {detail}")
         }

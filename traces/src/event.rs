@@ -96,6 +96,9 @@ pub struct HostWork {
     pub boxes: u32,
     /// Visibility decisions taken from query answers.
     pub decisions: u32,
+    /// Framebuffer pixels read back and searched for changes (the software occlusion test
+    /// of the paper's reference [10], a virtual occlusion buffer).
+    pub pixels: u32,
 }
 
 impl HostWork {

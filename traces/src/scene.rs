@@ -15,7 +15,7 @@
 //! wait ID
 //! begin_conditional ID
 //! end_conditional
-//! host [nodes=N] [boxes=N] [decisions=N]
+//! host [nodes=N] [boxes=N] [decisions=N] [pixels=N]
 //! swap
 //! ```
 //! `viewport` comes first and once. Queries do not nest. Coordinates are clip coordinates,
@@ -26,7 +26,8 @@
 //! `begin_conditional ID` ... `end_conditional` is `glBeginConditionalRender(ID,
 //! GL_QUERY_WAIT)`: the draws between are discarded when query ID passed no fragment (for
 //! brief and verbose queries: when no tile's NOHC is above zero); `host` is the traversal's
-//! work before the next command (nodes visited, boxes tested, decisions taken); `swap` ends
+//! work before the next command (nodes visited, boxes tested, decisions taken, framebuffer
+//! pixels read back and searched); `swap` ends
 //! a frame. `wait` and `begin_conditional` name a query that has ended; conditionals do not
 //! nest.
 //!
@@ -438,7 +439,7 @@ impl<R: BufRead> SceneReader<R> {
     }
 
     fn parse_host(&self, args: &[&str]) -> Result<Command, SceneError> {
-        let usage = "host [nodes=N] [boxes=N] [decisions=N]";
+        let usage = "host [nodes=N] [boxes=N] [decisions=N] [pixels=N]";
         if args.is_empty() {
             return Err(self.error(format!(
                 "`host` needs at least one count: expected `{usage}`"
@@ -456,6 +457,7 @@ impl<R: BufRead> SceneReader<R> {
                 "nodes" => &mut work.nodes,
                 "boxes" => &mut work.boxes,
                 "decisions" => &mut work.decisions,
+                "pixels" => &mut work.pixels,
                 _ => {
                     return Err(self.error(format!(
                         "unknown count `{key}` in `host`: expected `{usage}`"
@@ -540,8 +542,8 @@ pub fn format_command(command: &Command) -> String {
         Command::BeginConditional(id) => format!("begin_conditional {id}"),
         Command::EndConditional => "end_conditional".into(),
         Command::Host(w) => format!(
-            "host nodes={} boxes={} decisions={}",
-            w.nodes, w.boxes, w.decisions
+            "host nodes={} boxes={} decisions={} pixels={}",
+            w.nodes, w.boxes, w.decisions, w.pixels
         ),
         Command::Swap => "swap".into(),
         Command::Tri(v) => {
@@ -671,7 +673,8 @@ mod tests {
                 Command::Host(HostWork {
                     nodes: 7,
                     boxes: 2,
-                    decisions: 0
+                    decisions: 0,
+                    pixels: 0,
                 }),
                 Command::Wait(5),
                 Command::BeginConditional(5),
@@ -712,7 +715,7 @@ mod tests {
 
     #[test]
     fn format_round_trips() {
-        let text = "viewport 64 32\nclear\ndepth_func gequal\nscissor 1 2 3 4\nbegin 7 verbose buffer=9 tile=0,0,8,8\ntri 0.1 0 0 1  1 0 0 1  0 1 0.5 1\nend_draw\nend\nbegin 8 any\nend\nhost nodes=3 decisions=1\nwait 8\nbegin_conditional 7\nend_conditional\nswap\n";
+        let text = "viewport 64 32\nclear\ndepth_func gequal\nscissor 1 2 3 4\nbegin 7 verbose buffer=9 tile=0,0,8,8\ntri 0.1 0 0 1  1 0 0 1  0 1 0.5 1\nend_draw\nend\nbegin 8 any\nend\nhost nodes=3 decisions=1 pixels=99\nwait 8\nbegin_conditional 7\nend_conditional\nswap\n";
         let lines = parse_scene(text, "s").unwrap();
         let again: String = lines
             .iter()

@@ -159,7 +159,8 @@ fn waits_host_work_and_swaps_pass_through_in_order() {
             &Event::HostWork(occsim_traces::HostWork {
                 nodes: 5,
                 boxes: 2,
-                decisions: 0
+                decisions: 0,
+                pixels: 0,
             }),
             &Event::Wait(1),
             &Event::Swap

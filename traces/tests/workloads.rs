@@ -355,3 +355,64 @@ fn an_obj_model_walks_with_every_driver() {
         assert_eq!(stats.frames[0].objects_drawn, vec![0], "{}", kind.name());
     }
 }
+
+#[test]
+fn the_virtual_occlusion_buffer_draws_what_the_occlusion_unit_does_and_reads_the_boxes_back() {
+    let scene = small_city();
+    let walk = Walk {
+        frames: 2,
+        width: 160,
+        height: 120,
+        raster: RasterProfile::default(),
+    };
+    let hierarchical = DriverOptions::new(DriverKind::Hierarchical);
+    let mut vob = hierarchical.clone();
+    vob.virtual_occlusion_buffer = true;
+    assert_eq!(vob.label(), "hierarchical/vob");
+    let run = |options: &DriverOptions| {
+        let mut events: Vec<Event> = Vec::new();
+        let stats = generate(&scene, options, &walk, &mut events).unwrap();
+        (stats, events)
+    };
+    let ((unit_stats, unit_events), (vob_stats, vob_events)) = (run(&hierarchical), run(&vob));
+    // The same decisions: the same objects drawn, frame by frame.
+    let drawn = |stats: &occsim_traces::workloads::WorkloadStats| -> Vec<Vec<u32>> {
+        stats
+            .frames
+            .iter()
+            .map(|f| f.objects_drawn.clone())
+            .collect()
+    };
+    assert_eq!(drawn(&unit_stats), drawn(&vob_stats));
+    let pixels = |events: &[Event]| -> u64 {
+        events
+            .iter()
+            .map(|e| match e {
+                Event::HostWork(w) => w.pixels as u64,
+                _ => 0,
+            })
+            .sum()
+    };
+    assert_eq!(
+        pixels(&unit_events),
+        0,
+        "the Occlusion Unit's record is read, not pixels"
+    );
+    // Every box test reads its rectangle: at least one pixel per query, at most the screen.
+    let queries: u64 = vob_stats.frames.iter().map(|f| f.queries).sum();
+    let read = pixels(&vob_events);
+    assert!(queries > 0);
+    assert!(
+        read >= queries && read <= queries * 160 * 120,
+        "{read} pixels for {queries} queries"
+    );
+    // One wait per query, and one frame end per frame, in both.
+    for events in [&unit_events, &vob_events] {
+        let waits = events
+            .iter()
+            .filter(|e| matches!(e, Event::Wait(_)))
+            .count() as u64;
+        let swaps = events.iter().filter(|e| matches!(e, Event::Swap)).count();
+        assert_eq!((waits, swaps), (queries, 2));
+    }
+}

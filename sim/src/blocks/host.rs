@@ -16,24 +16,21 @@ pub struct HostCosts {
     pub box_test: f64,
     pub decision: f64,
     pub draw: f64,
+    pub readback_pixel: f64,
 }
 
 impl HostCosts {
-    /// Costs given in host cycles, on a host at `host_mhz` feeding a pipeline at `pipe_mhz`.
-    pub fn from_host_cycles(
-        host_mhz: f64,
-        pipe_mhz: f64,
-        node: u64,
-        box_test: u64,
-        decision: u64,
-        draw: u64,
-    ) -> HostCosts {
+    /// Costs given in host cycles (per node, box test, decision, draw and read-back
+    /// pixel), on a host at `host_mhz` feeding a pipeline at `pipe_mhz`.
+    pub fn from_host_cycles(host_mhz: f64, pipe_mhz: f64, cycles: [u64; 5]) -> HostCosts {
         let scale = pipe_mhz / host_mhz;
+        let [node, box_test, decision, draw, readback_pixel] = cycles.map(|c| c as f64 * scale);
         HostCosts {
-            node: node as f64 * scale,
-            box_test: box_test as f64 * scale,
-            decision: decision as f64 * scale,
-            draw: draw as f64 * scale,
+            node,
+            box_test,
+            decision,
+            draw,
+            readback_pixel,
         }
     }
 }
@@ -81,7 +78,8 @@ impl Host {
         self.spend(
             cost(work.nodes as u64, c.node)
                 + cost(work.boxes as u64, c.box_test)
-                + cost(work.decisions as u64, c.decision),
+                + cost(work.decisions as u64, c.decision)
+                + cost(work.pixels as u64, c.readback_pixel),
         );
     }
 
@@ -114,28 +112,30 @@ mod tests {
     #[test]
     fn costs_scale_by_the_clock_ratio_and_round() {
         // A 200 MHz host feeding a 100 MHz pipeline: a host cycle is half a pipeline cycle.
-        let costs = HostCosts::from_host_cycles(200.0, 100.0, 3, 10, 1, 1000);
+        let costs = HostCosts::from_host_cycles(200.0, 100.0, [3, 10, 1, 1000, 4]);
         let mut host = Host::new(costs);
-        // 5 nodes * 1.5 = 7.5 -> 8; 2 boxes * 5 = 10; 3 decisions * 0.5 = 1.5 -> 2.
+        // 5 nodes * 1.5 = 7.5 -> 8; 2 boxes * 5 = 10; 3 decisions * 0.5 = 1.5 -> 2; 5
+        // pixels * 2 = 10.
         host.work(&HostWork {
             nodes: 5,
             boxes: 2,
             decisions: 3,
+            pixels: 5,
         });
-        assert_eq!(host.now(), 20);
+        assert_eq!(host.now(), 30);
         host.draw();
-        assert_eq!(host.now(), 520);
+        assert_eq!(host.now(), 530);
         host.wait_for_result(500);
         assert_eq!(
             (host.now(), host.waiting_cycles),
-            (520, 0),
+            (530, 0),
             "no wait into the past"
         );
         host.wait_for_result(600);
         host.wait_for_pipe(650);
         assert_eq!(
             (host.busy_cycles, host.waiting_cycles, host.pipe_wait_cycles),
-            (520, 80, 50)
+            (530, 70, 50)
         );
         assert_eq!(
             host.busy_cycles + host.waiting_cycles + host.pipe_wait_cycles,

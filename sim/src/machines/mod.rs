@@ -81,10 +81,13 @@ fn closed_loop(arch: &Arch) -> Result<ClosedLoop, SimError> {
                 Host::new(HostCosts::from_host_cycles(
                     a.host_clock_mhz,
                     a.clock_mhz,
-                    a.host_cycles_per_node,
-                    a.host_cycles_per_box_test,
-                    a.host_cycles_per_decision,
-                    a.host_cycles_per_draw,
+                    [
+                        a.host_cycles_per_node,
+                        a.host_cycles_per_box_test,
+                        a.host_cycles_per_decision,
+                        a.host_cycles_per_draw,
+                        a.host_cycles_per_readback_pixel,
+                    ],
                 )),
                 Geometry::OnHost {
                     per_vertex: a.geometry_host_cycles_per_vertex as f64 * scale,
@@ -105,10 +108,13 @@ fn closed_loop(arch: &Arch) -> Result<ClosedLoop, SimError> {
                 Host::new(HostCosts::from_host_cycles(
                     a.host_clock_mhz,
                     a.clock_mhz,
-                    a.host_cycles_per_node,
-                    a.host_cycles_per_box_test,
-                    a.host_cycles_per_decision,
-                    a.host_cycles_per_draw,
+                    [
+                        a.host_cycles_per_node,
+                        a.host_cycles_per_box_test,
+                        a.host_cycles_per_decision,
+                        a.host_cycles_per_draw,
+                        a.host_cycles_per_readback_pixel,
+                    ],
                 )),
                 Geometry::Engines {
                     per_vertex: a.geometry_engine_cycles_per_vertex as f64 * ge_scale,

@@ -35,7 +35,7 @@ pub(crate) mod tag {
     /// Then vertices and triangles as varints and a flags byte (bit 0 starts a draw, bit 1
     /// discarded). Version 2 on, as the five below.
     pub const GEOMETRY: u8 = 0x0F;
-    /// Then nodes, boxes and decisions as varints.
+    /// Then nodes, boxes, decisions and read-back pixels as varints.
     pub const HOST_WORK: u8 = 0x10;
     /// Then the query id as a varint.
     pub const WAIT: u8 = 0x11;
@@ -398,7 +398,7 @@ pub(crate) fn encode_small_event(out: &mut Vec<u8>, event: &Event) {
         }
         Event::HostWork(work) => {
             out.push(tag::HOST_WORK);
-            for v in [work.nodes, work.boxes, work.decisions] {
+            for v in [work.nodes, work.boxes, work.decisions, work.pixels] {
                 put_uv(out, v as u64);
             }
         }
@@ -754,6 +754,7 @@ impl BlockDecoder {
                 nodes: c.u32("host nodes")?,
                 boxes: c.u32("host boxes")?,
                 decisions: c.u32("host decisions")?,
+                pixels: c.u32("host read-back pixels")?,
             }),
             tag::WAIT => Event::Wait(c.u32("waited query id")?),
             tag::CONDITIONAL_BEGIN => Event::ConditionalBegin(c.u32("conditional query id")?),

@@ -137,6 +137,7 @@ fn every_kind() -> Vec<Event> {
             nodes: 1,
             boxes: u32::MAX,
             decisions: 7,
+            pixels: 640 * 480,
         }),
         Event::Wait(0),
         Event::ConditionalBegin(u32::MAX),

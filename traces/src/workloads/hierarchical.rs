@@ -43,6 +43,8 @@ pub(crate) struct HierarchicalDriver {
     levels: u32,
     threshold: Option<f32>,
     delay: u32,
+    /// The box tests read the framebuffer back instead of the Occlusion Unit's record.
+    virtual_occlusion_buffer: bool,
     /// Per node: the frame of its last query and whether its box passed.
     previous: Vec<Option<(u32, bool)>>,
 }
@@ -53,6 +55,7 @@ impl HierarchicalDriver {
             levels: options.quadtree_levels,
             threshold: options.adaptive_threshold,
             delay: options.query_delay_frames,
+            virtual_occlusion_buffer: options.virtual_occlusion_buffer,
             previous: vec![None; nodes],
         }
     }
@@ -103,7 +106,12 @@ impl HierarchicalDriver {
                             .triangles()
                             .into_iter()
                             .map(|t| t.map(|p| to_clip(vp, p)));
-                        match renderer.brief_query(tiles.clone(), triangles)? {
+                        let answer = renderer.brief_query(tiles.clone(), triangles)?;
+                        if self.virtual_occlusion_buffer {
+                            // The host reads the box's rectangle back and searches it.
+                            renderer.read_back(rect.area());
+                        }
+                        match answer {
                             None => (true, None),
                             Some(result) => {
                                 let root = &result.tiles[0];

@@ -78,6 +78,7 @@ pub enum WorkloadOption {
     QuadtreeLevels,
     AdaptiveThreshold,
     GridCellPixels,
+    VirtualOcclusionBuffer,
 }
 
 impl WorkloadOption {
@@ -91,6 +92,7 @@ impl WorkloadOption {
             WorkloadOption::QuadtreeLevels => "quadtree levels",
             WorkloadOption::AdaptiveThreshold => "adaptive threshold",
             WorkloadOption::GridCellPixels => "grid cell pixels",
+            WorkloadOption::VirtualOcclusionBuffer => "virtual occlusion buffer",
         }
     }
 }
@@ -329,6 +331,10 @@ pub struct DriverOptions {
     pub adaptive_threshold: Option<f32>,
     /// Grids: side of a grid cell in pixels.
     pub grid_cell_pixels: u32,
+    /// Hierarchical: test boxes the paper's earlier software way (its reference [10]): draw
+    /// the box, then read the framebuffer back over the box's rectangle and search it for
+    /// changed pixels on the host, instead of reading the Occlusion Unit's record.
+    pub virtual_occlusion_buffer: bool,
 }
 
 impl DriverOptions {
@@ -340,6 +346,7 @@ impl DriverOptions {
             quadtree_levels: 0,
             adaptive_threshold: None,
             grid_cell_pixels: 32,
+            virtual_occlusion_buffer: false,
         }
     }
 
@@ -351,6 +358,9 @@ impl DriverOptions {
         }
         if let Some(t) = self.adaptive_threshold {
             label += &format!("/t{t}");
+        }
+        if self.virtual_occlusion_buffer {
+            label += "/vob";
         }
         if self.query_delay_frames > 0 {
             label += &format!("/d{}", self.query_delay_frames);
@@ -414,6 +424,12 @@ impl DriverOptions {
                     "applies to the hierarchical driver only".into(),
                 );
             }
+        }
+        if self.virtual_occlusion_buffer && (!hierarchical || self.quadtree_levels > 0) {
+            return fail(
+                WorkloadOption::VirtualOcclusionBuffer,
+                "applies to the hierarchical driver without quadtree levels (the host reads the box's whole rectangle)".into(),
+            );
         }
         if !(4..=1024).contains(&self.grid_cell_pixels) {
             return fail(

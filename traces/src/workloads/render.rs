@@ -105,6 +105,12 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         self.host_work.boxes = self.host_work.boxes.saturating_add(1);
     }
 
+    /// The host reads `pixels` of the framebuffer back and searches them for changes.
+    pub(crate) fn read_back(&mut self, pixels: u64) {
+        let pixels = u32::try_from(pixels).unwrap_or(u32::MAX);
+        self.host_work.pixels = self.host_work.pixels.saturating_add(pixels);
+    }
+
     /// Decisions use an earlier frame's answers: the host never blocks on a query.
     pub(crate) fn set_waits_for_answers(&mut self, waits: bool) {
         self.waits_for_answers = waits;
