@@ -66,6 +66,9 @@ struct LevelRow {
     /// |predicted - reference| / reference, of the total cycles and the mean latency.
     cycles_error: Option<f64>,
     latency_error: Option<f64>,
+    /// The mean frame time of a closed-loop trace, and its error against the reference's.
+    frame_mean_cycles: Option<f64>,
+    frame_error: Option<f64>,
     /// Every query's value equals the reference level's.
     results_exact: Option<bool>,
     note: Option<String>,
@@ -167,6 +170,11 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
                     result.latency_mean_cycles,
                     reference.latency_mean_cycles,
                 ),
+                frame_mean_cycles: result.frame_mean_cycles(),
+                frame_error: relative_error(
+                    result.frame_mean_cycles(),
+                    reference.frame_mean_cycles(),
+                ),
                 results_exact: Some(values == reference_values),
                 note: (*level == reference_level).then(|| "reference".to_string()),
             }
@@ -204,7 +212,7 @@ fn table(
     );
     let _ = writeln!(
         out,
-        "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>8}",
+        "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>12} {:>10} {:>8}",
         "level",
         "wall s",
         "fragments/s",
@@ -213,6 +221,8 @@ fn table(
         "p95 lat",
         "cycles err",
         "lat err",
+        "frame cycles",
+        "frame err",
         "results"
     );
     let float =
@@ -222,7 +232,7 @@ fn table(
     for row in rows {
         let _ = writeln!(
             out,
-            "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>8}",
+            "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>12} {:>10} {:>8}",
             row.level,
             float(row.wall_seconds, 4),
             row.fragments_per_second
@@ -232,6 +242,8 @@ fn table(
             int(row.latency_p95_cycles),
             percent(row.cycles_error),
             percent(row.latency_error),
+            float(row.frame_mean_cycles, 0),
+            percent(row.frame_error),
             match row.results_exact {
                 Some(true) => "exact",
                 Some(false) => "DIFFER",

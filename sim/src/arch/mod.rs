@@ -553,6 +553,16 @@ fn edit_distance(a: &str, b: &str) -> usize {
 /// Bits of one OccU Control word (a record entry or a hit).
 pub const OCCU_WORD_BITS: u32 = 32;
 
+impl Arch {
+    /// The machine's pipeline clock.
+    pub fn clock_mhz(&self) -> Result<f64, ArchError> {
+        Ok(match self.machine() {
+            Machine::O2 => self.o2()?.clock_mhz,
+            Machine::Ir => self.ir()?.clock_mhz,
+        })
+    }
+}
+
 impl O2Arch {
     /// Cross-parameter rules the per-key ranges cannot express.
     fn check(&self) -> Result<(), ArchError> {

@@ -76,6 +76,16 @@ impl Serialize for Fidelity {
     }
 }
 
+/// What a level's formulas predict when a window closes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WindowEnd {
+    /// `T_w`: the window's cycles.
+    pub cycles: f64,
+    /// The latency of the query that closed it (or, for the final window without a query
+    /// end, the pipe's drain), in cycles.
+    pub latency: f64,
+}
+
 /// One query as a level saw it.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct QueryOutcome {
@@ -182,6 +192,14 @@ impl LevelResult {
         result.set_timing(report.summary.cycles);
         result.report = Some(report);
         result
+    }
+
+    /// Record the frames' cycles and the rate they give over the run (set_timing first).
+    pub(crate) fn set_frames(&mut self, frame_cycles: Vec<u64>, clock_mhz: f64) {
+        let total = self.total_cycles.unwrap_or(0);
+        self.frames_per_second = (!frame_cycles.is_empty() && total > 0)
+            .then(|| frame_cycles.len() as f64 / (total as f64 / (clock_mhz * 1e6)));
+        self.frame_cycles = frame_cycles;
     }
 
     /// The mean frame time in cycles, when frames were timed.

@@ -16,6 +16,7 @@
 pub mod analytic;
 pub mod functional;
 pub mod level;
+mod predicted_loop;
 pub mod sampled;
 
 pub use functional::FunctionalCore;

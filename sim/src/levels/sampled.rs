@@ -22,9 +22,12 @@
 //! - A sampled window's cost is the cycle its query's `end` entered the pipe minus that of
 //!   the window before it in the same machine (the final window: the machine's total cycles
 //!   minus that); its query's latency is the machine's.
+//! - A `swap` also ends a window (a sampled one costs up to the machine's frame end), so
+//!   frames are sums of windows: each frame's time is its windows' costs.
 //! - Every other window (warm-up ones included) costs `r_c · work`, with `work` the
-//!   analytic level's `T_w` for the window ([`crate::levels::analytic`]: the slowest block's cycles,
-//!   counted on every event) and `r_c` the ratio of measured cycles to work over the sampled
+//!   window's time on the analytic level's timeline ([`crate::levels::predicted_loop`]: the
+//!   formulas' `T_w`, the slowest block's cycles counted on every event, placed after the
+//!   host and geometry stage release it) and `r_c` the ratio of measured cycles to work over the sampled
 //!   (non-final) windows of its class `c` = (its query's mode, `s` = OccU cycles per fragment
 //!   of its query), or over all sampled windows when none is of its class: the cycle model
 //!   calibrates the formulas where they are off. Its query's latency is the mean over
@@ -40,6 +43,7 @@ use crate::error::SimError;
 use crate::levels::analytic::{service_cycles, Formulas};
 use crate::levels::functional::FunctionalCore;
 use crate::levels::level::{LevelResult, SampledWindows};
+use crate::levels::predicted_loop::PredictedLoop;
 use crate::machines::{MachineBuilder, MachineModel};
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::{Event, QueryMode, QuerySpec, Span};
@@ -52,6 +56,8 @@ struct Window {
     class: Class,
     /// The window's query ended; it closes before the next event that is not its result.
     query_ended: bool,
+    /// A `swap` ended the frame inside it; it closes before the next event.
+    frame_ended: bool,
 }
 
 impl Window {
@@ -60,6 +66,7 @@ impl Window {
             work: 0,
             class: None,
             query_ended: false,
+            frame_ended: false,
         }
     }
 }
@@ -75,6 +82,9 @@ struct Closed {
     query: Option<(usize, QueryMode)>,
     sampled: bool,
     last: bool,
+    /// The frame it belongs to, and whether its end is that frame's end.
+    frame: u64,
+    frame_ended: bool,
 }
 
 /// One cycle-model machine over consecutive simulated windows.
@@ -101,8 +111,9 @@ pub struct SampledModel {
     formulas: Formulas,
     /// The open query.
     open: Option<QuerySpec>,
-    /// `Σ T_w` of the windows closed so far (the formulas' timeline).
-    predicted_cycles: f64,
+    /// The formulas' windows in the closed loop: the analytic level's timeline, whose
+    /// window durations are the work the sampled windows calibrate.
+    predicted: PredictedLoop,
     window: Window,
     /// Windows closed so far (the index of the current one).
     windows: u64,
@@ -122,6 +133,12 @@ pub struct SampledModel {
     latencies: Vec<Option<u64>>,
     /// Per query (in order): the formulas' latency, the last resort of extrapolation.
     predicted_latencies: Vec<u64>,
+    /// Frames ended so far (the index of the current one).
+    frames: u64,
+    /// Whether the stream has closed-loop records (frames are timed only then).
+    closed_loop: bool,
+    /// The sampled windows' measured costs, with their frames.
+    sampled_costs: Vec<(u64, u64)>,
 }
 
 impl SampledModel {
@@ -155,7 +172,7 @@ impl SampledModel {
             core: FunctionalCore::new(width, height)?,
             formulas: Formulas::new(arch, width)?,
             open: None,
-            predicted_cycles: 0.0,
+            predicted: PredictedLoop::new(arch)?,
             window: Window::empty(),
             windows: 0,
             run: None,
@@ -167,6 +184,9 @@ impl SampledModel {
             extrapolated: Vec::new(),
             latencies: Vec::new(),
             predicted_latencies: Vec::new(),
+            frames: 0,
+            closed_loop: false,
+            sampled_costs: Vec::new(),
         };
         model.start_window()?;
         Ok(model)
@@ -227,8 +247,25 @@ impl SampledModel {
                 self.open = Some(spec.clone());
             }
             Event::QueryEnd => self.window.query_ended = true,
+            // A frame's end closes its window: the formulas' work so far, as if the stream
+            // ended there.
+            Event::Swap => self.window.frame_ended = true,
             _ => {}
         }
+        let before = self.predicted.pipe_end();
+        let formulas = &mut self.formulas;
+        self.predicted.event(event, || formulas.cut());
+        if matches!(event, Event::Swap) {
+            self.window.work = (self.predicted.pipe_end() - before).ceil() as u64;
+        }
+        self.closed_loop |= matches!(
+            event,
+            Event::Geometry(_)
+                | Event::HostWork(_)
+                | Event::Wait(_)
+                | Event::ConditionalBegin(_)
+                | Event::Swap
+        );
         self.formulas.event(event);
         if let Some(run) = &mut self.run {
             run.machine.event(event)?;
@@ -248,11 +285,12 @@ impl SampledModel {
             self.latencies.push(None);
             // The core ended a query, so it began here: `open` holds it.
             let predicted = self.open.take().map_or(0, |spec| {
-                let end = self
-                    .formulas
-                    .end_query(&spec, &result, self.predicted_cycles);
-                self.predicted_cycles += end.cycles;
-                self.window.work = end.cycles.ceil() as u64;
+                let start = self.predicted.window_start();
+                let before = self.predicted.pipe_end();
+                let end = self.formulas.end_query(&spec, &result, start);
+                self.predicted.end_query(end, &result);
+                // The window's work: its time on the predicted timeline, host gaps and all.
+                self.window.work = (self.predicted.pipe_end() - before).ceil() as u64;
                 end.latency.ceil() as u64
             });
             self.predicted_latencies.push(predicted);
@@ -284,9 +322,10 @@ impl SampledModel {
         Ok(())
     }
 
-    /// After a query's end and its golden result, the next event opens a new window.
+    /// After a query's end and its golden result, or a frame's end, the next event opens a
+    /// new window.
     fn close_ended_window(&mut self) -> Result<(), SimError> {
-        if self.window.query_ended {
+        if self.window.query_ended || self.window.frame_ended {
             self.close_window(false);
             self.window = Window::empty();
             self.start_window()?;
@@ -296,11 +335,13 @@ impl SampledModel {
 
     /// Close the current window: hand it to the running machine's run or to extrapolation.
     fn close_window(&mut self, last: bool) {
-        if last && !self.window.query_ended {
+        if last && !self.window.query_ended && !self.window.frame_ended {
+            // On the predicted timeline: from the last window's end to this one's.
+            let (start, end) = (self.predicted.window_start(), self.predicted.pipe_end());
             self.window.work = self
                 .formulas
                 .finish()
-                .map_or(0, |end| end.cycles.ceil() as u64);
+                .map_or(0, |w| (start + w.cycles - end).max(0.0).ceil() as u64);
         }
         let query = self
             .window
@@ -313,7 +354,10 @@ impl SampledModel {
             query,
             sampled: self.is_sampled(self.windows),
             last,
+            frame: self.frames,
+            frame_ended: self.window.frame_ended,
         };
+        self.frames += self.window.frame_ended as u64;
         self.windows += 1;
         match &mut self.run {
             Some(run) => run.windows.push(closed),
@@ -336,17 +380,25 @@ impl SampledModel {
         let (report, depth) = run.machine.finish_recycling()?;
         self.spare_depth = Some(depth);
         let mut queries = report.queries.iter();
+        // The machine's frame ends, in its own cycles (its frames are its run's swaps).
+        let mut frame_ends = report.frames.iter().scan(0, |end, frame| {
+            *end += frame.cycles;
+            Some(*end)
+        });
         let mut previous_end: Option<u64> = None;
         for window in run.windows {
             let query = window.query.and_then(|_| queries.next());
+            let frame_end = window.frame_ended.then(|| frame_ends.next()).flatten();
             if window.sampled {
                 self.sampled += 1;
-                let end = match query {
-                    Some(q) if !window.last => q.end_cycle,
+                let end = match (query, frame_end) {
+                    (_, Some(end)) if !window.last => end,
+                    (Some(q), _) if !window.last => q.end_cycle,
                     _ => report.summary.cycles,
                 };
                 let cost = end.saturating_sub(previous_end.unwrap_or(0));
                 self.sampled_cycles += cost;
+                self.sampled_costs.push((window.frame, cost));
                 if !window.last {
                     let entry = self.measured_by_class.entry(window.class).or_default();
                     entry.0 += cost;
@@ -361,7 +413,7 @@ impl SampledModel {
             } else {
                 self.extrapolated.push(window);
             }
-            previous_end = query.map(|q| q.end_cycle).or(previous_end);
+            previous_end = frame_end.or(query.map(|q| q.end_cycle)).or(previous_end);
         }
         Ok(())
     }
@@ -397,8 +449,15 @@ impl SampledModel {
         };
         let mut total = self.sampled_cycles as f64;
         let mut filled = self.latencies.clone();
+        // Each frame's cycles: its windows' costs (the final window's drain in the last).
+        let mut frame_cycles = vec![0f64; self.frames as usize + 1];
+        for &(frame, cost) in &self.sampled_costs {
+            frame_cycles[frame as usize] += cost as f64;
+        }
         for window in &self.extrapolated {
-            total += ratio(&window.class) * window.work as f64;
+            let cost = ratio(&window.class) * window.work as f64;
+            total += cost;
+            frame_cycles[window.frame as usize] += cost;
             if let Some((index, mode)) = window.query {
                 let latency = match self.latency_by_class.get(&window.class) {
                     Some(&(sum, count)) if count > 0 => Some(sum as f64 / count as f64),
@@ -411,6 +470,7 @@ impl SampledModel {
                 // The final window's drain: its query's latency.
                 if window.last {
                     total += latency;
+                    frame_cycles[window.frame as usize] += latency;
                 }
             }
         }
@@ -426,6 +486,14 @@ impl SampledModel {
         result.effects = Some(self.effects);
         result.sampled_windows = Some(windows);
         result.set_timing(total.round() as u64);
+        if self.closed_loop {
+            // A last frame of nothing (the stream ended on its swap) is no frame.
+            if frame_cycles.len() > 1 && frame_cycles.last() == Some(&0.0) {
+                frame_cycles.pop();
+            }
+            let frame_cycles = frame_cycles.iter().map(|c| c.round() as u64).collect();
+            result.set_frames(frame_cycles, self.arch.clock_mhz()?);
+        }
         Ok(result)
     }
 }

@@ -72,7 +72,7 @@ impl Pipe {
 }
 
 /// The closed loop `arch` describes: its host, geometry stage and result path.
-fn closed_loop(arch: &Arch) -> Result<ClosedLoop, SimError> {
+pub(crate) fn closed_loop_of(arch: &Arch) -> Result<ClosedLoop, SimError> {
     Ok(match arch.machine() {
         Machine::O2 => {
             let a = arch.o2()?;
@@ -134,7 +134,7 @@ fn closed_loop(arch: &Arch) -> Result<ClosedLoop, SimError> {
 impl<'a> MachineBuilder<'a> {
     /// The machine at reset for a `width` x `height` viewport.
     pub fn build(self, width: u32, height: u32) -> Result<MachineModel, SimError> {
-        let front = closed_loop(self.arch)?;
+        let front = closed_loop_of(self.arch)?;
         let pipe = match self.arch.machine() {
             Machine::O2 => Pipe::O2(self.o2(width, height)?),
             Machine::Ir => Pipe::Ir(self.ir(width, height)?),
@@ -161,7 +161,7 @@ impl<'a> MachineBuilder<'a> {
             }
             None => depth.clone(),
         };
-        let front = closed_loop(self.arch)?;
+        let front = closed_loop_of(self.arch)?;
         let pipe = match self.arch.machine() {
             Machine::O2 => Pipe::O2(O2Machine::assemble(self, width, height, copy, Some(state))?),
             Machine::Ir => Pipe::Ir(IrMachine::assemble(self, width, height, copy, Some(state))?),

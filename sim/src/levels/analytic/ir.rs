@@ -303,6 +303,11 @@ impl IrBottleneck {
             .map(move |&cycles| 3 + cycles.min(queued * pace))
     }
 
+    /// Start the window again with no work (a frame ended inside it).
+    pub(super) fn clear_window(&mut self) {
+        self.window.clear();
+    }
+
     /// The stream ended after a window without a query end: its cycles and the slowest
     /// Image Engine's drain.
     pub(super) fn finish(&self) -> Option<WindowEnd> {

@@ -10,7 +10,9 @@
 //!   words), then the two merge stages.
 //!
 //! Total cycles = `Σ_w T_w` + the last window's tail (the last query's latency, or the pipe's
-//! drain when the stream ends without a query end). Costs: the functional model plus a few
+//! drain when the stream ends without a query end), in an open loop; in a closed loop the
+//! windows start no earlier than the host and geometry stage release them and frames are
+//! timed ([`crate::levels::predicted_loop`]). Costs: the functional model plus a few
 //! integer operations per fragment.
 
 pub mod ir;
@@ -20,18 +22,11 @@ use crate::arch::{Arch, Machine};
 use crate::error::SimError;
 use crate::levels::functional::FunctionalCore;
 use crate::levels::level::{Fidelity, LevelResult};
+use crate::levels::predicted_loop::PredictedLoop;
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, Span};
 
-/// What the formulas predict when a window closes.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct WindowEnd {
-    /// `T_w`: the window's cycles.
-    pub cycles: f64,
-    /// The latency of the query that closed it (or, for the final window without a query
-    /// end, the pipe's drain), in cycles.
-    pub latency: f64,
-}
+pub use crate::levels::level::WindowEnd;
 
 /// Cycles one fragment occupies an Occlusion Unit of `engines` engines under a query of
 /// `tiles` tiles: the tiles are dealt round-robin and each engine tests one a cycle.
@@ -100,6 +95,17 @@ impl Formulas {
             Formulas::Ir(ir) => ir.finish(),
         }
     }
+
+    /// A frame ends inside the window: its prediction so far (as [`Formulas::finish`]), and
+    /// the window starts again empty.
+    pub(crate) fn cut(&mut self) -> Option<WindowEnd> {
+        let end = self.finish();
+        match self {
+            Formulas::O2(o2) => o2.clear_window(),
+            Formulas::Ir(ir) => ir.clear_window(),
+        }
+        end
+    }
 }
 
 /// The analytic level's model.
@@ -107,11 +113,10 @@ pub struct AnalyticModel {
     core: FunctionalCore,
     formulas: Formulas,
     open: Option<QuerySpec>,
-    /// `Σ T_w` of the windows closed so far: the predicted cycle the current window began.
-    total_cycles: f64,
-    /// The last window's tail (see the module docs).
-    tail: f64,
+    /// The windows' times in the closed loop (`Σ T_w` when nothing holds the pipe back).
+    frames: PredictedLoop,
     latencies: Vec<u64>,
+    clock_mhz: f64,
 }
 
 impl AnalyticModel {
@@ -120,9 +125,9 @@ impl AnalyticModel {
             core: FunctionalCore::new(width, height)?,
             formulas: Formulas::new(arch, width)?,
             open: None,
-            total_cycles: 0.0,
-            tail: 0.0,
+            frames: PredictedLoop::new(arch)?,
             latencies: Vec::new(),
+            clock_mhz: arch.clock_mhz()?,
         })
     }
 
@@ -140,13 +145,16 @@ impl AnalyticModel {
             Event::QueryBegin(spec) => self.open = Some(spec.clone()),
             _ => {}
         }
+        let formulas = &mut self.formulas;
+        self.frames.event(event, || formulas.cut());
         self.formulas.event(event);
         if let Some(result) = self.core.event(event)? {
             let Some(spec) = self.open.take() else {
                 return Ok(());
             };
-            let end = self.formulas.end_query(&spec, &result, self.total_cycles);
-            self.close_window(end);
+            let start = self.frames.window_start();
+            let end = self.formulas.end_query(&spec, &result, start);
+            self.frames.end_query(end, &result);
             self.latencies.push(end.latency.ceil() as u64);
         }
         Ok(())
@@ -163,23 +171,16 @@ impl AnalyticModel {
         Ok(())
     }
 
-    fn close_window(&mut self, end: WindowEnd) {
-        self.total_cycles += end.cycles;
-        self.tail = end.latency;
-    }
-
     pub fn finish(mut self) -> Result<LevelResult, SimError> {
-        if let Some(end) = self.formulas.finish() {
-            self.close_window(end);
-        }
-        let total = self.total_cycles + self.tail;
+        let (frame_cycles, total) = self.frames.finish(self.formulas.finish());
         let latencies = std::mem::take(&mut self.latencies);
         let mut result = self.core.finish()?;
         for (query, latency) in result.queries.iter_mut().zip(&latencies) {
             query.latency_cycles = Some(*latency);
         }
         result.level = Fidelity::Analytic;
-        result.set_timing(total.round() as u64);
+        result.set_timing(total);
+        result.set_frames(frame_cycles, self.clock_mhz);
         Ok(result)
     }
 }

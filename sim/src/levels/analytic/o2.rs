@@ -239,6 +239,11 @@ impl O2Bottleneck {
         }
     }
 
+    /// Start the window again with no work (a frame ended inside it).
+    pub(super) fn clear_window(&mut self) {
+        self.window = WindowCounts::default();
+    }
+
     /// The stream ended after a window without a query end: its cycles and the pipe's drain
     /// (+ 3: through the depth pipeline, the OccU and the last write).
     pub(super) fn finish(&self) -> Option<WindowEnd> {

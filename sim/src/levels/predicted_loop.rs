@@ -1,0 +1,122 @@
+//! Frame time at a level that predicts its pipeline's cycles (the analytic level): the
+//! closed loop's host and geometry stage ([`crate::machines::closed_loop`], the same blocks
+//! as at the cycle level, so exact) around a pixel pipeline whose windows take the cycles the
+//! level predicts.
+//!
+//! # Rules
+//! - Window `w`'s work starts at `s_w = max(e_{w-1}, r_w)`, with `r_w` the release of its
+//!   first primitive (the closed loop's rule 3; `e_{w-1}` when it has none), and ends at
+//!   `e_w = s_w + T_w`; its query's answer is available at `e_w + L_w`. Releases after a
+//!   window's first primitive do not stretch it: the prediction is for the window whole.
+//! - `wait`, `begin_conditional`: as in the closed loop, against those predicted answers (a
+//!   query that never ended counts as answered at 0).
+//! - `swap` closes the window it falls in (its work so far predicted as if the stream ended
+//!   there, `T` and its drain `D`) and ends the frame when the host has issued it and the
+//!   pipe is done: `max(h, e + D)`.
+//!
+//! With no closed-loop record, every `r_w` is 0 and `e_w = Σ T_w`: the open-loop prediction.
+
+use crate::arch::Arch;
+use crate::error::SimError;
+use crate::levels::level::WindowEnd;
+use crate::machines::closed_loop::{ClosedLoop, PipeState};
+use occsim_traces::{Event, QueryResult};
+use std::collections::HashMap;
+
+pub(crate) struct PredictedLoop {
+    front: ClosedLoop,
+    /// `e` of the last window closed.
+    pipe_end: f64,
+    /// `s` of the window open, once its first primitive came.
+    window_start: Option<f64>,
+    /// The last window's latency (or drain).
+    tail: f64,
+    /// Each query's predicted answer: available cycle and record words.
+    answers: HashMap<u32, (u64, u64)>,
+}
+
+impl PredictedLoop {
+    pub(crate) fn new(arch: &Arch) -> Result<PredictedLoop, SimError> {
+        Ok(PredictedLoop {
+            front: crate::machines::closed_loop_of(arch)?,
+            pipe_end: 0.0,
+            window_start: None,
+            tail: 0.0,
+            answers: HashMap::new(),
+        })
+    }
+
+    /// Feed the events the loop acts on (the others pass by); a `swap` needs the open
+    /// window's prediction, `cut`, which the caller takes from its formulas.
+    pub(crate) fn event(&mut self, event: &Event, cut: impl FnOnce() -> Option<WindowEnd>) {
+        match event {
+            Event::Geometry(batch) => self.front.geometry(batch),
+            Event::HostWork(work) => self.front.host_work(work),
+            Event::Primitive if self.window_start.is_none() => {
+                let release = self.front.primitive_release() as f64;
+                self.window_start = Some(self.pipe_end.max(release));
+            }
+            Event::Wait(id) => {
+                let (available, words) = self.answers.get(id).copied().unwrap_or((0, 0));
+                self.front.wait(available, words);
+            }
+            Event::ConditionalBegin(id) => {
+                let (available, _) = self.answers.get(id).copied().unwrap_or((0, 0));
+                self.front.hold_pipe(available);
+            }
+            Event::Swap => {
+                if let Some(end) = cut() {
+                    self.close(end);
+                }
+                let idle = self.idle_cycle();
+                self.front.swap(idle);
+            }
+            _ => {}
+        }
+    }
+
+    /// `e` of the last window closed.
+    pub(crate) fn pipe_end(&self) -> f64 {
+        self.pipe_end
+    }
+
+    /// `s` of the window open (where its work starts).
+    pub(crate) fn window_start(&self) -> f64 {
+        self.window_start.unwrap_or(self.pipe_end)
+    }
+
+    fn close(&mut self, end: WindowEnd) {
+        self.pipe_end = self.window_start() + end.cycles;
+        self.tail = end.latency;
+        self.window_start = None;
+    }
+
+    /// A query ended, closing its window: `end` is the level's prediction.
+    pub(crate) fn end_query(&mut self, end: WindowEnd, result: &QueryResult) {
+        self.close(end);
+        let hits: u64 = result.tiles.iter().map(|t| t.hits.len() as u64).sum();
+        let words =
+            result.tiles.len() as u64 * occsim_traces::query::BRIEF_RECORD_ENTRIES as u64 + hits;
+        let available = (self.pipe_end + end.latency).ceil() as u64;
+        self.answers.insert(result.id, (available, words));
+    }
+
+    fn idle_cycle(&self) -> PipeState {
+        PipeState {
+            idle_cycle: (self.pipe_end + self.tail).round() as u64,
+            // The level predicts no busy split.
+            raster_busy_cycles: 0,
+        }
+    }
+
+    /// The stream ended (`last`: the final window's prediction): each frame's cycles, and
+    /// the cycle the run ends.
+    pub(crate) fn finish(mut self, last: Option<WindowEnd>) -> (Vec<u64>, u64) {
+        if let Some(end) = last {
+            self.close(end);
+        }
+        let idle = self.idle_cycle();
+        let (frames, end) = self.front.finish(idle);
+        (frames.iter().map(|f| f.cycles).collect(), end)
+    }
+}
