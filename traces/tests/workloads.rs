@@ -416,3 +416,29 @@ fn the_virtual_occlusion_buffer_draws_what_the_occlusion_unit_does_and_reads_the
         assert_eq!((waits, swaps), (queries, 2));
     }
 }
+
+#[test]
+fn a_query_delay_never_waits_and_an_immediate_answer_always_does() {
+    let scene = small_city();
+    let walk = Walk {
+        frames: 3,
+        width: 160,
+        height: 120,
+        raster: RasterProfile::default(),
+    };
+    for kind in [DriverKind::Frustum, DriverKind::Hierarchical] {
+        for delay in [0, 1] {
+            let mut options = DriverOptions::new(kind);
+            options.query_delay_frames = delay;
+            let mut events: Vec<Event> = Vec::new();
+            let stats = generate(&scene, &options, &walk, &mut events).unwrap();
+            let queries: u64 = stats.frames.iter().map(|f| f.queries).sum();
+            let waits = events
+                .iter()
+                .filter(|e| matches!(e, Event::Wait(_)))
+                .count() as u64;
+            let expected = if delay == 0 { queries } else { 0 };
+            assert_eq!(waits, expected, "{} with delay {delay}", options.label());
+        }
+    }
+}
