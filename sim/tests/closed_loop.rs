@@ -59,13 +59,15 @@ fn query_of_one_draw(id: u32, x: u16) -> Vec<Event> {
     ]
 }
 
-/// The O2 with a host at the pipeline's clock (a host cycle is a pipeline cycle), a draw
-/// costing 100, a vertex 10, a triangle nothing, notification 8 and a word 1.
+/// The O2 with a host at the pipeline's clock (a host cycle is a pipeline cycle), a state
+/// change costing 10, a draw 100, a vertex 10, a triangle nothing, notification 8 and a
+/// word 1.
 fn o2() -> Arch {
     arch(
         "o2",
         &[
             "host_clock_mhz=66.67",
+            "host_cycles_per_state_change=10",
             "host_cycles_per_draw=100",
             "geometry_host_cycles_per_vertex=10",
             "geometry_host_cycles_per_triangle=0",
@@ -87,29 +89,32 @@ fn o2_a_query_a_wait_and_a_dependent_draw() {
     events.extend(query_of_one_draw(2, 1));
     events.push(Event::Swap);
     let report = run(&o2(), &events);
-    // Draw 1: the host's driver 100, then its geometry 3 vertices * 10 = 30: the primitive
-    // is released at 130; setup 4 cycles (130..=133), the fragment emitted in 134, so the
-    // end token enters at 135.
+    // `depth_test 0` and `begin 1` wait (20) for the first closed-loop record, the draw's
+    // batch: then the driver's 100 and the geometry, 3 vertices * 10 = 30: the primitive is
+    // released at 150; setup 4 cycles (150..=153), the fragment emitted in 154 (the
+    // rasterizer free at 155); `end` costs the host 10 more, so the token enters at 160.
     let first = query(&report, 1);
-    assert_eq!(first.end_cycle, 135);
+    assert_eq!(first.end_cycle, 160);
     // The wait: the host sees the result 8 after it is available and reads one brief
-    // record (8 words, 1 each); then draw 2 costs the host 130 again, setup 4, emission 1.
+    // record (8 words, 1 each); then `begin 2` 10, draw 2 130, `end` 10: the token enters
+    // when the host issues it, 150 after the wait (the rasterizer is free at 145).
     let host_after_wait = first.available_cycle + 8 + 8;
     let second = query(&report, 2);
-    assert_eq!(second.end_cycle, host_after_wait + 130 + 4 + 1);
+    assert_eq!(second.end_cycle, host_after_wait + 150);
     assert!(
         second.end_cycle > first.available_cycle,
         "no draw before the answer"
     );
     // One frame, ending when the pipeline is done with the second query; on the host's
-    // timeline: busy 130 + 8 + 130, waiting from 130 until the result is seen.
+    // timeline: busy 20 + 130 + 10 + 8 + 10 + 130 + 10, waiting from 160 until the result
+    // is seen.
     assert_eq!(report.frames.len(), 1);
     let frame = &report.frames[0];
     assert_eq!(frame.cycles, report.summary.cycles);
     assert_eq!(frame.cycles, second.available_cycle);
-    assert_eq!(frame.host_busy, 130 + 8 + 130);
+    assert_eq!(frame.host_busy, 20 + 130 + 10 + 8 + 10 + 130 + 10);
     assert_eq!(frame.geometry_busy, 60);
-    assert_eq!(frame.waiting, first.available_cycle + 8 - 130);
+    assert_eq!(frame.waiting, first.available_cycle + 8 - 160);
     assert_eq!(
         frame.host_busy + frame.waiting + frame.pipe_wait,
         frame.cycles
@@ -125,6 +130,7 @@ fn o2_a_predicated_draw_holds_the_pipe_but_not_the_host() {
     let free_host = arch(
         "o2",
         &[
+            "host_cycles_per_state_change=0",
             "host_cycles_per_draw=0",
             "geometry_host_cycles_per_vertex=0",
             "geometry_host_cycles_per_triangle=0",
@@ -158,6 +164,7 @@ fn ir_a_query_a_wait_and_a_dependent_draw() {
         "ir1",
         &[
             "host_clock_mhz=100",
+            "host_cycles_per_state_change=0",
             "host_cycles_per_draw=100",
             "bus_bytes_per_vertex=0",
             "geometry_engine_clock_mhz=100",
@@ -247,6 +254,7 @@ fn with_a_free_host_and_no_waits_frame_time_is_the_open_loop_cycle_count() {
         let free = arch(
             name,
             &[
+                "host_cycles_per_state_change=0",
                 "host_cycles_per_draw=0",
                 "host_cycles_per_node=0",
                 "host_cycles_per_box_test=0",

@@ -125,7 +125,8 @@ parameters! {
         host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited (I: 100-1000; a pointer chase and a loop over children, cache misses dominate)";
         host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles", "one bounding box tested against the view frustum (I: 60-300; six planes against the box's nearest corner)";
         host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles", "one visibility decision taken from a query answer (I: 10-100)";
-        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call: state validation and command setup, the draw's state changes included (I: 500-10000)";
+        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call: state validation and command setup (I: 500-10000)";
+        host_cycles_per_state_change: u64 = 150, [0, 1 << 24], "host cycles", "the GL driver's work per state change, clear, or query begin or end (I: 50-500)";
         host_cycles_per_readback_pixel: u64 = 12, [0, 1 << 24], "host cycles", "reading back one framebuffer pixel from main memory and testing it for a change, the software occlusion test (I: 5-40; a 32-bit read at the CPU's 100-300 MB/s from unified memory and a compare)";
         geometry_host_cycles_per_vertex: u64 = 80, [0, 1 << 24], "host cycles", "software transform of one vertex on the host CPU: 4x4 transform, clip codes, divide, viewport (V2: the O2's CPU does all vertex processing; I: 40-200 at about one multiply-add a cycle)";
         geometry_host_cycles_per_triangle: u64 = 120, [0, 1 << 24], "host cycles", "software setup of one submitted triangle on the host CPU before the rendering engine takes it (I: 60-300)";
@@ -161,7 +162,8 @@ parameters! {
         host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited (I: 100-1000; a pointer chase and a loop over children)";
         host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles", "one bounding box tested against the view frustum (I: 60-300)";
         host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles", "one visibility decision taken from a query answer (I: 10-100)";
-        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call, the draw's state changes included (I: 500-10000)";
+        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call (I: 500-10000)";
+        host_cycles_per_state_change: u64 = 150, [0, 1 << 24], "host cycles", "the GL driver's work per state change, clear, or query begin or end (I: 50-500)";
         host_cycles_per_readback_pixel: u64 = 40, [0, 1 << 24], "host cycles", "reading back one framebuffer pixel over the bus and testing it for a change, the software occlusion test (I: 20-100; PIO reads from the raster boards)";
         bus_megabytes_per_second: f64 = 200.0, [0.001, 1_000_000.0], "MB/s", "host-to-graphics bus the host writes vertices over (V2: Onyx POWERpath-2 200 MB/s, Onyx2 400 MB/s)";
         bus_bytes_per_vertex: u64 = 24, [0, 1 << 16], "bytes", "one vertex over the bus: position and normal as 32-bit floats (I: 12-48)";

@@ -85,7 +85,7 @@ mod tests {
     }
 
     fn idle_host() -> Host {
-        Host::new(HostCosts::from_host_cycles(1.0, 1.0, [0; 5]))
+        Host::new(HostCosts::from_host_cycles(1.0, 1.0, [0; 6]))
     }
 
     #[test]

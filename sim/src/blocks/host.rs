@@ -17,20 +17,23 @@ pub struct HostCosts {
     pub decision: f64,
     pub draw: f64,
     pub readback_pixel: f64,
+    pub state_change: f64,
 }
 
 impl HostCosts {
-    /// Costs given in host cycles (per node, box test, decision, draw and read-back
-    /// pixel), on a host at `host_mhz` feeding a pipeline at `pipe_mhz`.
-    pub fn from_host_cycles(host_mhz: f64, pipe_mhz: f64, cycles: [u64; 5]) -> HostCosts {
+    /// Costs given in host cycles (per node, box test, decision, draw, read-back pixel and
+    /// state change), on a host at `host_mhz` feeding a pipeline at `pipe_mhz`.
+    pub fn from_host_cycles(host_mhz: f64, pipe_mhz: f64, cycles: [u64; 6]) -> HostCosts {
         let scale = pipe_mhz / host_mhz;
-        let [node, box_test, decision, draw, readback_pixel] = cycles.map(|c| c as f64 * scale);
+        let [node, box_test, decision, draw, readback_pixel, state_change] =
+            cycles.map(|c| c as f64 * scale);
         HostCosts {
             node,
             box_test,
             decision,
             draw,
             readback_pixel,
+            state_change,
         }
     }
 }
@@ -88,6 +91,11 @@ impl Host {
         self.spend(cost(1, self.costs.draw));
     }
 
+    /// The driver's work for `count` state changes (clears, query begins and ends).
+    pub fn state_changes(&mut self, count: u64) {
+        self.spend(cost(count, self.costs.state_change));
+    }
+
     /// Block until `cycle` for a query result.
     pub fn wait_for_result(&mut self, cycle: u64) {
         if cycle > self.now {
@@ -112,7 +120,7 @@ mod tests {
     #[test]
     fn costs_scale_by_the_clock_ratio_and_round() {
         // A 200 MHz host feeding a 100 MHz pipeline: a host cycle is half a pipeline cycle.
-        let costs = HostCosts::from_host_cycles(200.0, 100.0, [3, 10, 1, 1000, 4]);
+        let costs = HostCosts::from_host_cycles(200.0, 100.0, [3, 10, 1, 1000, 4, 0]);
         let mut host = Host::new(costs);
         // 5 nodes * 1.5 = 7.5 -> 8; 2 boxes * 5 = 10; 3 decisions * 0.5 = 1.5 -> 2; 5
         // pixels * 2 = 10.

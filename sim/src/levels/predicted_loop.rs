@@ -71,7 +71,7 @@ impl PredictedLoop {
                 let idle = self.idle_cycle();
                 self.front.swap(idle);
             }
-            _ => {}
+            other => self.front.command(other),
         }
     }
 

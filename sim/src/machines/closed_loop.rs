@@ -4,7 +4,10 @@
 //!
 //! # Timing rules
 //! All cycles are pipeline cycles. The host's time `h` starts at 0.
-//! 1. `host` work: the host is busy for its nodes, box tests and decisions.
+//! 1. `host` work: the host is busy for its nodes, box tests, decisions and read-back
+//!    pixels; every state change, clear and query begin or end costs it
+//!    `host_cycles_per_state_change` (those before the stream's first closed-loop record are
+//!    charged when it comes).
 //! 2. A geometry batch: the first of a draw costs the host `host_cycles_per_draw`; then the
 //!    geometry stage processes it and releases its primitives at `r` (rules in
 //!    [`crate::blocks::geometry`]).
@@ -26,7 +29,7 @@
 use crate::blocks::geometry::Geometry;
 use crate::blocks::host::Host;
 use crate::report::FrameReport;
-use occsim_traces::{GeometryBatch, HostWork};
+use occsim_traces::{Event, GeometryBatch, HostWork};
 
 /// What the front end needs of the pipeline it feeds.
 #[derive(Clone, Copy, Debug)]
@@ -63,6 +66,8 @@ pub struct ClosedLoop {
     frames: Vec<FrameReport>,
     /// Whether any closed-loop record has been seen (frames are reported only then).
     seen: bool,
+    /// State changes before the first record, charged when it comes.
+    pending_state_changes: u64,
     /// Whether the current frame has had any record since it started.
     frame_open: bool,
 }
@@ -87,13 +92,43 @@ impl ClosedLoop {
             frame: FrameStart::default(),
             frames: Vec::new(),
             seen: false,
+            pending_state_changes: 0,
             frame_open: false,
         }
     }
 
     fn mark(&mut self) {
+        if !self.seen {
+            self.host
+                .state_changes(std::mem::take(&mut self.pending_state_changes));
+        }
         self.seen = true;
         self.frame_open = true;
+    }
+
+    /// A command the driver issues: a state change, clear, or query begin or end costs the
+    /// host (counted from the stream's start, but charged only once the stream shows a
+    /// closed-loop record, so a stream without one stays the open loop it is).
+    pub fn command(&mut self, event: &Event) {
+        let is_state_change = matches!(
+            event,
+            Event::Clear
+                | Event::DepthFunc(_)
+                | Event::DepthMask(_)
+                | Event::DepthTest(_)
+                | Event::Cull(_)
+                | Event::Scissor(_)
+                | Event::QueryBegin(_)
+                | Event::QueryEnd
+        );
+        if !is_state_change {
+            return;
+        }
+        if self.seen {
+            self.host.state_changes(1);
+        } else {
+            self.pending_state_changes += 1;
+        }
     }
 
     pub fn clock_mhz(&self) -> f64 {

@@ -87,6 +87,7 @@ pub(crate) fn closed_loop_of(arch: &Arch) -> Result<ClosedLoop, SimError> {
                         a.host_cycles_per_decision,
                         a.host_cycles_per_draw,
                         a.host_cycles_per_readback_pixel,
+                        a.host_cycles_per_state_change,
                     ],
                 )),
                 Geometry::OnHost {
@@ -114,6 +115,7 @@ pub(crate) fn closed_loop_of(arch: &Arch) -> Result<ClosedLoop, SimError> {
                         a.host_cycles_per_decision,
                         a.host_cycles_per_draw,
                         a.host_cycles_per_readback_pixel,
+                        a.host_cycles_per_state_change,
                     ],
                 )),
                 Geometry::Engines {
@@ -236,7 +238,10 @@ impl MachineModel {
                 let state = self.pipe.state()?;
                 self.front.swap(state);
             }
-            _ => self.pipe.release(self.front.command_release())?,
+            _ => {
+                self.front.command(event);
+                self.pipe.release(self.front.command_release())?
+            }
         }
         match &mut self.pipe {
             Pipe::O2(machine) => machine.event(event),
