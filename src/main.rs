@@ -63,6 +63,7 @@ enum CullingCommand {
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
+    remove_temporaries_on_interrupt();
     let outcome = match cli.command {
         Command::Demo(args) => commands::demo::run(args),
         Command::Count(args) => commands::count::run(args),
@@ -83,6 +84,23 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// On SIGINT, SIGTERM or SIGHUP: remove the temporary files of the writes under way (they
+/// will never finish), then end as the signal would have ended the process.
+fn remove_temporaries_on_interrupt() {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else {
+        // Without the handler an interrupt leaves its temporary; the next write removes it.
+        return;
+    };
+    std::thread::spawn(move || {
+        if let Some(signal) = signals.forever().next() {
+            occsim_sweep::output::remove_temporaries();
+            let _ = signal_hook::low_level::emulate_default_handler(signal);
+            std::process::exit(128 + signal);
+        }
+    });
 }
 
 fn is_broken_pipe(error: &anyhow::Error) -> bool {

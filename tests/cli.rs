@@ -359,3 +359,137 @@ fn workload_option_errors_name_their_flags() {
     assert!(error.contains("--camera-from/--camera-to"), "{error}");
     assert!(!std::path::Path::new(out).exists());
 }
+
+#[test]
+fn an_interrupted_write_leaves_nothing_behind_and_ends_by_its_signal() {
+    use std::os::unix::process::ExitStatusExt;
+    for (name, number) in [("INT", 2), ("TERM", 15), ("HUP", 1)] {
+        let dir = scratch_dir(&format!("interrupt-{name}"));
+        let out = dir.join("demo.occt");
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
+            .args(["trace", "gen", "demo", "-o", out.to_str().unwrap()])
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        // Signal once the temporary exists (the demo trace takes about a second to write).
+        let started = std::time::Instant::now();
+        while std::fs::read_dir(&dir).unwrap().count() == 0 {
+            assert!(started.elapsed().as_secs() < 20, "no temporary appeared");
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        let killed = std::process::Command::new("kill")
+            .args([&format!("-{name}"), &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(killed.success());
+        let status = child.wait().unwrap();
+        let left: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+        if status.success() {
+            // The write finished before the signal came: only the finished file is there.
+            assert_eq!(left.len(), 1, "SIG{name}");
+            continue;
+        }
+        assert_eq!(status.signal(), Some(number), "SIG{name}: {status:?}");
+        assert!(left.is_empty(), "SIG{name} left {left:?}");
+    }
+}
+
+#[test]
+fn a_reader_that_stops_early_is_no_failure() {
+    let dir = scratch_dir("closed-pipe");
+    let trace = dir.join("hc.occt");
+    let trace = trace.to_str().unwrap();
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace]);
+    for args in [
+        vec!["latency", trace, "--arch", "o2", "--engines", "1,2"],
+        vec!["fidelity", trace, "--arch", "o2", "--no-rtl"],
+    ] {
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
+            .args(&args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // `| head -0`: the reader closes the pipe before the first line.
+        drop(child.stdout.take());
+        let output = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(output.status.success(), "{args:?}: {stderr}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
+}
+
+#[test]
+fn a_huge_buffer_costs_the_memory_it_uses_not_its_capacity() {
+    // 320 Image Engines with a million-word OccU write buffer each: reserving the buffers'
+    // rings up front took about 10 GiB of address space; what the trace uses is megabytes.
+    let dir = scratch_dir("huge-buffer");
+    let trace = dir.join("hc.occt");
+    let trace = trace.to_str().unwrap();
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace]);
+    let command = format!(
+        "ulimit -v 4000000 && exec {} replay {trace} --arch ir4 --set occu_write_buffer_words=1048576",
+        env!("CARGO_BIN_EXE_occsim")
+    );
+    let output = std::process::Command::new("sh")
+        .args(["-c", &command])
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(String::from_utf8_lossy(&output.stdout).contains("cycles"));
+}
+
+#[test]
+fn a_sweep_asked_for_absurd_jobs_caps_them_and_finishes() {
+    let dir = scratch_dir("jobs-cap");
+    let trace = dir.join("hc.occt");
+    let out = dir.join("s.jsonl");
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace.to_str().unwrap()]);
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
+        .args([
+            "sweep",
+            trace.to_str().unwrap(),
+            "--arch",
+            "o2",
+            "--set",
+            "engines=1,2",
+            "--jobs",
+            "100000",
+            "--out",
+            out.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("--jobs 100000 capped to 2 (2 points to run"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_waveform_that_cannot_be_created_names_its_path() {
+    let dir = scratch_dir("vcd-path");
+    let trace = dir.join("hc.occt");
+    let trace = trace.to_str().unwrap();
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace]);
+    let missing = dir.join("no-such-dir").join("x.vcd");
+    let error = stderr_of_failure(&[
+        "replay",
+        trace,
+        "--fidelity",
+        "rtl",
+        "--vcd",
+        missing.to_str().unwrap(),
+    ]);
+    // It said only "VCD writer stopped".
+    assert!(
+        error.contains(&format!("cannot write the waveform {}", missing.display())),
+        "{error}"
+    );
+}

@@ -73,7 +73,7 @@ fn unknown_keys_name_the_close_ones() {
     let err = Arch::from_toml("machine = \"o2\"\n[o2]\nengines = \"four\"\n").unwrap_err();
     assert!(
         err.to_string()
-            .starts_with("line 3: parameter 'engines' = four"),
+            .starts_with("line 3: parameter 'engines' = \"four\" (a TOML string)"),
         "{err}"
     );
 }
@@ -144,4 +144,42 @@ fn files_must_name_a_known_machine() {
         Arch::builtin("o3"),
         Err(ArchError::UnknownBuiltin { .. })
     ));
+}
+
+#[test]
+fn toml_values_must_have_their_parameters_type_and_errors_name_the_line() {
+    // A number written as a string is refused, on its line.
+    let error = Arch::from_toml("machine = \"o2\"\n[o2]\nengines = \"4\"\n")
+        .unwrap_err()
+        .to_string();
+    assert_eq!(
+        error,
+        "line 3: parameter 'engines' = \"4\" (a TOML string): expected an integer in 1..=1024"
+    );
+    // So are a flag written as a number and a name written as a number.
+    let error = Arch::from_toml("machine = \"o2\"\n[o2]\nall_tiles_one_cycle = 1\n")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.starts_with("line 3: parameter 'all_tiles_one_cycle' = 1 (a TOML integer)"),
+        "{error}"
+    );
+    let error = Arch::from_toml("machine = \"ir\"\n[ir]\ninterleave = 3\n")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.contains("(a TOML integer): expected one of columns"),
+        "{error}"
+    );
+    // An integer is a fine value for a real parameter.
+    let arch = Arch::from_toml("machine = \"o2\"\n[o2]\nclock_mhz = 100\n").unwrap();
+    assert_eq!(arch.clock_mhz().unwrap(), 100.0);
+    // Inside an inline table the error still names the line (it said line 0).
+    let error = Arch::from_toml("machine = \"o2\"\no2 = { counter_bits = 32, engines = 0 }\n")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.starts_with("line 2: parameter 'engines' = 0"),
+        "{error}"
+    );
 }

@@ -186,9 +186,9 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
             .with_context(|| format!("cannot write {}", plot.display()))?;
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+        outln!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
-        print!(
+        out!(
             "{}",
             table(&rows, &path, &arch, fragments as u64, reference_level)
         );

@@ -160,9 +160,9 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
         Ok(LatencyRow::of(engines.parse()?, &result, clock_mhz))
     })?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+        outln!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
-        print!("{}", table(&rows));
+        out!("{}", table(&rows));
     }
     if let Some(path) = &args.plot {
         chart(&args, &rows)

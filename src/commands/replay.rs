@@ -241,7 +241,7 @@ fn waveform(
                 match receiver.recv() {
                     Ok(VcdChunk::Data(data)) => file.write_all(&data)?,
                     Ok(VcdChunk::Done) => return Ok(()),
-                    Err(_) => anyhow::bail!("the replay failed; no waveform written"),
+                    Err(_) => return Err(anyhow::Error::new(ReplayStopped)),
                 }
             }
         })
@@ -259,7 +259,21 @@ fn waveform(
     Ok(Some((options, (sender, thread))))
 }
 
-/// Keep or drop the waveform file after the replay's `outcome`.
+/// The replay stopped before the waveform was complete (its own error says why).
+#[derive(Debug)]
+struct ReplayStopped;
+
+impl std::fmt::Display for ReplayStopped {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("the replay failed; no waveform written")
+    }
+}
+
+impl std::error::Error for ReplayStopped {}
+
+/// Keep or drop the waveform file after the replay's `outcome`. When the writer failed (it
+/// could not create or write the file), its error, which names the file, is the one to
+/// report: the replay only saw the writer stop.
 fn close_vcd<T>(vcd: Option<VcdThread>, outcome: anyhow::Result<T>) -> anyhow::Result<T> {
     let Some((sender, thread)) = vcd else {
         return outcome;
@@ -272,7 +286,12 @@ fn close_vcd<T>(vcd: Option<VcdThread>, outcome: anyhow::Result<T>) -> anyhow::R
     let written = thread
         .join()
         .map_err(|_| anyhow::anyhow!("the waveform writer panicked"))?;
-    let value = outcome?;
-    written?;
-    Ok(value)
+    match (outcome, written) {
+        (Ok(value), Ok(())) => Ok(value),
+        (Err(replay), Err(writer)) if writer.chain().any(|c| c.is::<ReplayStopped>()) => {
+            Err(replay)
+        }
+        (_, Err(writer)) => Err(writer),
+        (Err(replay), Ok(())) => Err(replay),
+    }
 }

@@ -203,10 +203,15 @@ pub fn run_with(
     let run = &args.run;
     let out = run.out.as_deref().context("sweep needs --out FILE.jsonl")?;
     let grid = Grid::parse(&run.set, validate).map_err(in_cli_words)?;
-    let jobs = match run.jobs {
-        Some(jobs) => jobs.get(),
-        None => std::thread::available_parallelism().map_or(1, NonZeroUsize::get),
-    };
+    let cores = std::thread::available_parallelism().map_or(1, NonZeroUsize::get);
+    let points = grid.selected_indices(run.shard).len();
+    let requested = run.jobs.map_or(cores, NonZeroUsize::get);
+    let jobs = capped_jobs(requested, points, cores);
+    if jobs < requested && run.jobs.is_some() {
+        eprintln!(
+            "sweep: --jobs {requested} capped to {jobs} ({points} points to run, {cores} cores)"
+        );
+    }
     let options = SweepOptions {
         grid: &grid,
         shard: run.shard,
@@ -234,6 +239,17 @@ pub fn run_with(
     );
     write_plot(&run.plot, &grid, &outcome.lines)
 }
+
+/// Worker threads for `requested` jobs: no more than the points to run, nor than
+/// `JOBS_PER_CORE` a core (more only wait on one another and on memory).
+fn capped_jobs(requested: usize, points: usize, cores: usize) -> usize {
+    requested
+        .min(points.max(1))
+        .min(JOBS_PER_CORE * cores.max(1))
+}
+
+/// Most worker threads a core: points are CPU-bound, so beyond a few a core they only queue.
+const JOBS_PER_CORE: usize = 4;
 
 /// Runs `occsim sweep merge`.
 pub fn run_merge(args: &MergeArgs) -> Result<()> {
@@ -533,5 +549,13 @@ mod tests {
             err,
             "bad --set engnies=1: unknown parameter 'engnies' (known: boards, engines)"
         );
+    }
+
+    #[test]
+    fn jobs_are_capped_by_the_points_and_the_cores() {
+        assert_eq!(capped_jobs(100_000, 30, 2), 8, "4 a core");
+        assert_eq!(capped_jobs(100_000, 5, 2), 5, "no more than the points");
+        assert_eq!(capped_jobs(3, 30, 2), 3, "a sane request stands");
+        assert_eq!(capped_jobs(4, 0, 2), 1, "an empty shard still gets one");
     }
 }

@@ -5,6 +5,7 @@
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 /// What can go wrong writing a file atomically; every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -32,40 +33,118 @@ pub enum OutputError {
     },
 }
 
-/// Replace `path` with what `fill` writes; on any error nothing is left behind. `fill` may
-/// fail with the caller's own error type, which also carries this module's errors.
+/// Temporary files being written now: what [`remove_temporaries`] removes when the process
+/// is interrupted (the binary calls it from its signal handler).
+static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Remove every temporary file this process is writing (for a signal handler, just before
+/// the process exits: the writes they belong to will never finish).
+pub fn remove_temporaries() {
+    let live = match LIVE.lock() {
+        Ok(mut live) => std::mem::take(&mut *live),
+        Err(poisoned) => std::mem::take(&mut *poisoned.into_inner()),
+    };
+    for path in live {
+        let _ = std::fs::remove_file(path);
+    }
+}
+
+/// A temporary file that is removed when dropped unless it was renamed into place: on an
+/// error, a panic, or [`remove_temporaries`].
+struct Temporary {
+    path: PathBuf,
+    renamed: bool,
+}
+
+impl Temporary {
+    fn new(path: PathBuf) -> Temporary {
+        if let Ok(mut live) = LIVE.lock() {
+            live.push(path.clone());
+        }
+        Temporary {
+            path,
+            renamed: false,
+        }
+    }
+}
+
+impl Drop for Temporary {
+    fn drop(&mut self) {
+        if !self.renamed {
+            // Best effort: the original error matters more.
+            let _ = std::fs::remove_file(&self.path);
+        }
+        if let Ok(mut live) = LIVE.lock() {
+            live.retain(|p| p != &self.path);
+        }
+    }
+}
+
+/// Replace `path` with what `fill` writes; on any error (or panic) nothing is left behind.
+/// `fill` may fail with the caller's own error type, which also carries this module's errors.
+/// Temporaries that earlier, killed processes left beside `path` are removed first.
 pub fn write_atomically_with<T, E: From<OutputError>>(
     path: &Path,
     fill: impl FnOnce(&mut BufWriter<File>) -> Result<T, E>,
 ) -> Result<T, E> {
-    let temp = temp_path_beside(path)?;
-    let outcome = (|| {
-        let file = File::create(&temp).map_err(|source| OutputError::Create {
-            path: temp.clone(),
+    let temp_path = temp_path_beside(path)?;
+    remove_stale_temporaries(path);
+    let mut temp = Temporary::new(temp_path);
+    let file = File::create(&temp.path).map_err(|source| OutputError::Create {
+        path: temp.path.clone(),
+        source,
+    })?;
+    let mut writer = BufWriter::with_capacity(1 << 20, file);
+    let value = fill(&mut writer)?;
+    writer
+        .into_inner()
+        .map_err(|e| e.into_error())
+        .and_then(|file| file.sync_all())
+        .map_err(|source| OutputError::Write {
+            path: temp.path.clone(),
             source,
         })?;
-        let mut writer = BufWriter::with_capacity(1 << 20, file);
-        let value = fill(&mut writer)?;
-        writer
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .and_then(|file| file.sync_all())
-            .map_err(|source| OutputError::Write {
-                path: temp.clone(),
-                source,
-            })?;
-        std::fs::rename(&temp, path).map_err(|source| OutputError::Rename {
-            from: temp.clone(),
-            to: path.to_path_buf(),
-            source,
-        })?;
-        Ok(value)
-    })();
-    if outcome.is_err() {
-        // Best effort: do not leave the temporary file behind; the original error matters more.
-        let _ = std::fs::remove_file(&temp);
+    std::fs::rename(&temp.path, path).map_err(|source| OutputError::Rename {
+        from: temp.path.clone(),
+        to: path.to_path_buf(),
+        source,
+    })?;
+    temp.renamed = true;
+    Ok(value)
+}
+
+/// Remove `.NAME.tmp-PID` files beside `path` whose process no longer exists (on systems
+/// with `/proc`, where that can be told; elsewhere nothing is removed).
+fn remove_stale_temporaries(path: &Path) {
+    let (Some(name), Some(dir)) = (path.file_name(), path.parent()) else {
+        return;
+    };
+    if !Path::new("/proc/self").exists() {
+        return;
     }
-    outcome
+    let dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let prefix = format!(".{}.tmp-", name.to_string_lossy());
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let file_name = entry.file_name();
+        let Some(pid) = file_name
+            .to_str()
+            .and_then(|n| n.strip_prefix(&prefix))
+            .and_then(|pid| pid.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let alive = pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists();
+        if !alive {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
 }
 
 /// Replace `path` with `contents` atomically.
@@ -131,5 +210,72 @@ mod tests {
         let err = write_atomically(&path, b"x").unwrap_err();
         assert!(matches!(err, OutputError::Create { .. }), "{err:?}");
         assert!(err.to_string().contains("no-such-dir"), "{err}");
+    }
+
+    #[test]
+    fn a_panicking_fill_leaves_no_temporary() {
+        let temp = crate::test_dir("atomic-panic");
+        let dir = temp.path();
+        let path = dir.join("out.txt");
+        let outcome = std::panic::catch_unwind(|| {
+            let _: Result<(), OutputError> = write_atomically_with(&path, |w| {
+                w.write_all(b"half").unwrap();
+                panic!("the model failed")
+            });
+        });
+        assert!(outcome.is_err());
+        assert_eq!(std::fs::read_dir(dir).unwrap().count(), 0);
+    }
+
+    #[test]
+    fn the_temporary_being_written_is_listed_for_the_signal_handler() {
+        let temp = crate::test_dir("atomic-listed");
+        let dir = temp.path().to_path_buf();
+        let path = dir.join("out.txt");
+        let mine = || -> Vec<PathBuf> {
+            let live = LIVE.lock().unwrap();
+            live.iter()
+                .filter(|p| p.starts_with(&dir))
+                .cloned()
+                .collect()
+        };
+        write_atomically_with(&path, |w| -> Result<(), OutputError> {
+            w.write_all(b"half").unwrap();
+            // What `remove_temporaries` would remove if a signal came now (other tests'
+            // writes run in parallel, so only this directory's entry is looked at).
+            assert_eq!(
+                mine(),
+                [dir.join(".out.txt.tmp-".to_owned() + &std::process::id().to_string())]
+            );
+            Ok(())
+        })
+        .unwrap();
+        assert!(mine().is_empty(), "a finished write is no longer listed");
+    }
+
+    #[test]
+    fn the_next_write_removes_temporaries_of_processes_that_are_gone() {
+        let temp = crate::test_dir("atomic-stale");
+        let dir = temp.path();
+        let path = dir.join("out.txt");
+        // Linux process ids stay below 2^22 = 4194304, so 4999999 is no process; 1 (init) is
+        // always one; another destination's temporary is not this write's business.
+        for name in [
+            ".out.txt.tmp-4999999",
+            ".out.txt.tmp-1",
+            ".other.txt.tmp-4999999",
+        ] {
+            std::fs::write(dir.join(name), "left behind").unwrap();
+        }
+        write_atomically(&path, b"new").unwrap();
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        assert_eq!(
+            names,
+            [".other.txt.tmp-4999999", ".out.txt.tmp-1", "out.txt"]
+        );
     }
 }

@@ -164,6 +164,11 @@ impl<R: BufRead> SceneReader<R> {
         while self.read_line()? {
             let text = std::str::from_utf8(&self.buffer)
                 .map_err(|_| self.error("line is not valid UTF-8"))?;
+            // A byte order mark (Windows Notepad writes one) is no part of the first command.
+            let text = match self.line_number {
+                1 => text.strip_prefix('\u{feff}').unwrap_or(text),
+                _ => text,
+            };
             let text = text.split('#').next().unwrap_or("").trim().to_owned();
             if text.is_empty() {
                 continue;
@@ -657,6 +662,20 @@ mod tests {
         assert!(error_of("viewport 4 4\nbegin 1 brief tile=0,0,0,1\n").contains("empty"));
         assert!(error_of("viewport 4 4\ndepth_mask 2\n").contains("takes 0 or 1"));
         assert!(error_of("").contains("empty scene"));
+    }
+
+    #[test]
+    fn a_byte_order_mark_before_the_first_line_is_accepted() {
+        let lines = parse_scene("\u{feff}viewport 4 4\nclear\n", "s").unwrap();
+        assert_eq!(
+            lines[0].command,
+            Command::Viewport {
+                width: 4,
+                height: 4
+            }
+        );
+        // Only there: elsewhere it is an unknown command.
+        assert!(error_of("viewport 4 4\n\u{feff}clear\n").contains("unknown command"));
     }
 
     #[test]

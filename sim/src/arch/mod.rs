@@ -315,14 +315,14 @@ impl Arch {
                 ("machine", _) => {}
                 (section, toml::Value::Table(entries)) if section == machine.name() => {
                     for (name, value) in entries {
-                        let rendered = value.to_string();
-                        let at_line = |error| ArchError::AtLine {
-                            line: line_of_key(text, name),
-                            error: Box::new(error),
+                        let at_line = |error| match line_of_key(text, name) {
+                            0 => error,
+                            line => ArchError::AtLine {
+                                line,
+                                error: Box::new(error),
+                            },
                         };
-                        let parsed = arch
-                            .parse_value(name, value_as_text(value, &rendered))
-                            .map_err(at_line)?;
+                        let parsed = arch.toml_value(name, value).map_err(at_line)?;
                         let index = arch.index(name).map_err(at_line)?;
                         arch.values[index] = parsed;
                     }
@@ -465,6 +465,34 @@ impl Arch {
             })
     }
 
+    /// A TOML value for `key`: of the TOML type the parameter's kind is written in (a
+    /// number for numbers, `true`/`false` for flags, a string for names), then checked as
+    /// `--set` text is.
+    fn toml_value(&self, key: &str, value: &toml::Value) -> Result<Value, ArchError> {
+        let param = &self.machine.params()[self.index(key)?];
+        let fits = matches!(
+            (param.kind, value),
+            (
+                ParamKind::Float { .. },
+                toml::Value::Float(_) | toml::Value::Integer(_)
+            ) | (ParamKind::Int { .. }, toml::Value::Integer(_))
+                | (ParamKind::Bool, toml::Value::Boolean(_))
+                | (ParamKind::Choice { .. }, toml::Value::String(_))
+        );
+        if !fits {
+            return Err(ArchError::BadValue {
+                key: key.to_string(),
+                value: format!("{value} (a TOML {})", value.type_str()),
+                expected: param.kind.describe(),
+            });
+        }
+        let text = match value {
+            toml::Value::String(s) => s.clone(),
+            other => other.to_string(),
+        };
+        self.parse_value(key, &text)
+    }
+
     fn parse_value(&self, key: &str, text: &str) -> Result<Value, ArchError> {
         let param = &self.machine.params()[self.index(key)?];
         let bad = || ArchError::BadValue {
@@ -500,24 +528,17 @@ impl Arch {
     }
 }
 
-/// The text of a TOML scalar as `--set` would spell it (strings lose their quotes so they
-/// fail as numbers with a clear message rather than parse).
-fn value_as_text<'a>(value: &'a toml::Value, rendered: &'a str) -> &'a str {
-    match value {
-        toml::Value::String(s) => s,
-        _ => rendered,
-    }
-}
-
-/// The 1-based line where `key` is assigned in a TOML text (0 when not found).
+/// The 1-based line where `key` is assigned in a TOML text, at the start of a line or inside
+/// an inline table (0 when not found).
 fn line_of_key(text: &str, key: &str) -> usize {
-    text.lines()
-        .position(|line| {
-            let line = line.trim_start();
-            line.strip_prefix(key)
-                .is_some_and(|rest| rest.trim_start().starts_with('='))
+    let assigns = |line: &str| {
+        line.match_indices(key).any(|(at, _)| {
+            let before = line[..at].chars().next_back();
+            let word_start = before.is_none_or(|c| !(c.is_alphanumeric() || c == '_'));
+            word_start && line[at + key.len()..].trim_start().starts_with('=')
         })
-        .map_or(0, |index| index + 1)
+    };
+    text.lines().position(assigns).map_or(0, |index| index + 1)
 }
 
 /// " (did you mean a, b?)" for the keys close to `key`, or the list of all keys.

@@ -10,12 +10,18 @@
 #[derive(Clone, Debug)]
 pub struct Fifo {
     capacity: usize,
-    /// Ring of departure cycles; its length is a power of two > capacity.
+    /// Ring of departure cycles. It grows with the departures (doubling while none has
+    /// wrapped) up to `full_size`, so memory follows use, not capacity.
     departures: Vec<u64>,
     mask: usize,
+    /// The ring's final length: a power of two > 2 * capacity.
+    full_size: usize,
     /// Entries that have left so far.
     count: usize,
 }
+
+/// The ring's first length: enough for the FIFOs of the built-in machines at once.
+const FIRST_RING: usize = 64;
 
 impl Fifo {
     /// A FIFO of `capacity` entries; `capacity` >= 1.
@@ -23,13 +29,20 @@ impl Fifo {
         assert!(capacity >= 1, "a FIFO needs at least one entry");
         // Room for the last `2 * capacity` departures: a writer may run up to `capacity`
         // entries ahead of the departures recorded so far (see `slot_free_cycle_for`).
-        let size = (2 * capacity + 1).next_power_of_two();
+        let full_size = (2 * capacity + 1).next_power_of_two();
+        let size = full_size.min(FIRST_RING);
         Fifo {
             capacity,
             departures: vec![0; size],
             mask: size - 1,
+            full_size,
             count: 0,
         }
+    }
+
+    /// Ring entries allocated now (what the FIFO's memory follows).
+    pub fn allocated_entries(&self) -> usize {
+        self.departures.len()
     }
 
     pub fn capacity(&self) -> usize {
@@ -66,8 +79,20 @@ impl Fifo {
     /// Record the departure cycle of the next entry, in entry order.
     #[inline(always)]
     pub fn depart(&mut self, cycle: u64) {
+        if self.count == self.departures.len() && self.count < self.full_size {
+            self.grow();
+        }
         self.departures[self.count & self.mask] = cycle;
         self.count += 1;
+    }
+
+    /// Double the ring. Called only before any departure wrapped around it, so entry `n`
+    /// sits at index `n` and stays there.
+    #[cold]
+    fn grow(&mut self) {
+        let size = (self.departures.len() * 2).min(self.full_size);
+        self.departures.resize(size, 0);
+        self.mask = size - 1;
     }
 }
 
@@ -89,6 +114,48 @@ mod tests {
         );
         fifo.depart(9);
         assert_eq!(fifo.slot_free_cycle(), 7);
+    }
+
+    #[test]
+    fn memory_follows_use_not_capacity() {
+        // A FIFO of a million entries that ten entries pass holds a small ring; the ring
+        // grows with the departures, and gives the answers a full-sized one would.
+        let mut big = Fifo::new(1 << 20);
+        assert!(
+            big.allocated_entries() <= FIRST_RING,
+            "{}",
+            big.allocated_entries()
+        );
+        for cycle in 0..10 {
+            big.depart(cycle);
+        }
+        assert!(big.allocated_entries() <= FIRST_RING);
+        for capacity in [1, 3, 40, 100, 1000] {
+            let mut fifo = Fifo::new(capacity);
+            let departures: Vec<u64> = (0..5000u64).map(|i| i * 3 + i % 7).collect();
+            for (n, &cycle) in departures.iter().enumerate() {
+                // Entry n waits for entry n - capacity (0 for the first `capacity`).
+                let expected = |entry: usize| {
+                    if entry < capacity {
+                        0
+                    } else {
+                        departures[entry - capacity]
+                    }
+                };
+                assert_eq!(
+                    fifo.slot_free_cycle(),
+                    expected(n),
+                    "capacity {capacity}, n {n}"
+                );
+                if n > 0 {
+                    // The farthest a writer may run ahead: entry n - 1 + capacity.
+                    let ahead = n - 1 + capacity;
+                    assert_eq!(fifo.slot_free_cycle_for(ahead), expected(ahead));
+                }
+                fifo.depart(cycle);
+            }
+            assert!(fifo.allocated_entries() <= (2 * capacity + 1).next_power_of_two());
+        }
     }
 
     #[test]
