@@ -74,6 +74,11 @@ pub enum SweepError {
     Encode(#[source] serde_json::Error),
     #[error("{}:{line}: not UTF-8 text", path.display())]
     NotUtf8 { path: PathBuf, line: usize },
+    #[error(
+        "{}:{line}: the line's digest does not match its content (edited, damaged, or not a sweep result line)",
+        path.display()
+    )]
+    BadDigest { path: PathBuf, line: usize },
     #[error("{}:{line}: not a sweep result line", path.display())]
     NotAResultLine {
         path: PathBuf,

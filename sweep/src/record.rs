@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 type Result<T, E = SweepError> = std::result::Result<T, E>;
 
 /// Format tag written in every line; bump when the schema changes incompatibly.
-pub const FORMAT: &str = "occsim-sweep/1";
+pub const FORMAT: &str = "occsim-sweep/2";
 
 /// What the caller's evaluator returns for one point.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -45,11 +45,36 @@ pub struct SweepLine {
 }
 
 impl SweepLine {
-    /// The JSON text of the line, without the newline. Deterministic: struct fields in
-    /// declaration order, maps sorted by key, floats in shortest round-trip form.
+    /// The JSON text of the line, without the newline, ending in the digest of the rest
+    /// ([`with_digest`]). Deterministic: struct fields in declaration order, maps sorted by
+    /// key, floats in shortest round-trip form.
     pub fn to_json(&self) -> Result<String> {
-        serde_json::to_string(self).map_err(SweepError::Encode)
+        let body = serde_json::to_string(self).map_err(SweepError::Encode)?;
+        Ok(with_digest(&body))
     }
+}
+
+/// The field each line ends in: the FNV-1a 64 digest of the line's text without it.
+const DIGEST_FIELD: &str = ",\"digest\":\"";
+
+/// `body` (a JSON object's text) with `"digest":"<16 hex digits>"` added as its last field:
+/// the digest of `body` itself, so any edit of the line shows.
+pub(crate) fn with_digest(body: &str) -> String {
+    let digest = occsim_traces::rng::Fnv1a::of(body.as_bytes());
+    let open = body.strip_suffix('}').unwrap_or(body);
+    format!("{open}{DIGEST_FIELD}{digest:016x}\"}}")
+}
+
+/// The line's text without its digest field if the digest matches it; None if the line has
+/// none or it does not match.
+fn checked_body(text: &str) -> Option<String> {
+    let at = text.rfind(DIGEST_FIELD)?;
+    let hex = text[at + DIGEST_FIELD.len()..].strip_suffix("\"}")?;
+    let stored = u64::from_str_radix(hex, 16)
+        .ok()
+        .filter(|_| hex.len() == 16)?;
+    let body = format!("{}}}", &text[..at]);
+    (occsim_traces::rng::Fnv1a::of(body.as_bytes()) == stored).then_some(body)
 }
 
 /// A line read back from a file: the parsed record and its exact text (compared and rewritten
@@ -105,8 +130,12 @@ pub fn read_results(path: &Path) -> Result<StoredFile> {
                 line,
             })?
             .to_string();
+        let body = checked_body(&text).ok_or_else(|| SweepError::BadDigest {
+            path: path.to_path_buf(),
+            line,
+        })?;
         let parsed: SweepLine =
-            serde_json::from_str(&text).map_err(|source| SweepError::NotAResultLine {
+            serde_json::from_str(&body).map_err(|source| SweepError::NotAResultLine {
                 path: path.to_path_buf(),
                 line,
                 source,
@@ -283,19 +312,25 @@ mod tests {
         }
     }
 
+    fn read_results_of(path: &Path, line: &str) -> Result<StoredFile> {
+        std::fs::write(path, format!("{line}\n")).unwrap();
+        read_results(path)
+    }
+
     #[test]
     fn line_schema_is_stable() {
         let l = line(1, "engines=2", &[("total_cycles", Value::from(1.5))]);
         let version = env!("CARGO_PKG_VERSION");
-        assert_eq!(
-            l.text,
-            format!(
-                "{{\"format\":\"occsim-sweep/1\",\"point\":1,\"key\":\"engines=2\",\
-                 \"axes\":[{{\"key\":\"engines\",\"values\":[\"1\",\"2\"]}}],\
-                 \"trace_digest\":\"d\",\"tool_version\":\"{version}\",\
-                 \"resolved_arch\":{{\"engines\":2}},\"metrics\":{{\"total_cycles\":1.5}}}}"
-            )
+        let body = format!(
+            "{{\"format\":\"occsim-sweep/2\",\"point\":1,\"key\":\"engines=2\",\
+             \"axes\":[{{\"key\":\"engines\",\"values\":[\"1\",\"2\"]}}],\
+             \"trace_digest\":\"d\",\"tool_version\":\"{version}\",\
+             \"resolved_arch\":{{\"engines\":2}},\"metrics\":{{\"total_cycles\":1.5}}}}"
         );
+        // The digest field closes the line: FNV-1a 64 of everything before it (and the brace).
+        let digest = occsim_traces::rng::Fnv1a::of(body.as_bytes());
+        let open = &body[..body.len() - 1];
+        assert_eq!(l.text, format!("{open},\"digest\":\"{digest:016x}\"}}"));
     }
 
     #[test]
@@ -333,7 +368,28 @@ mod tests {
         let whole = line(0, "engines=1", &[]).text;
         std::fs::write(&path, format!("{whole}\n{{oops\n")).unwrap();
         let err = read_results(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("r.jsonl:2: the line's digest does not match"),
+            "{err}"
+        );
+        // A line with a good digest that is no result line is named as such.
+        std::fs::write(&path, format!("{whole}\n{}\n", with_digest("{\"oops\":1}"))).unwrap();
+        let err = read_results(&path).unwrap_err().to_string();
         assert!(err.contains("r.jsonl:2: not a sweep result line"), "{err}");
+    }
+
+    #[test]
+    fn an_edited_line_is_caught_by_its_digest() {
+        let temp = crate::test_dir("record-edited");
+        let path = temp.path().join("r.jsonl");
+        let whole = line(0, "engines=1", &[("total_cycles", Value::from(1.5))]).text;
+        assert!(read_results_of(&path, &whole).is_ok());
+        let edited = whole.replace("1.5", "2.5");
+        let err = read_results_of(&path, &edited).unwrap_err().to_string();
+        assert!(
+            err.contains("r.jsonl:1: the line's digest does not match"),
+            "{err}"
+        );
     }
 
     #[test]

@@ -98,10 +98,10 @@ fn csv_view_holds_the_hand_computed_metrics() {
     assert_eq!(
         keys,
         [
-            r#"{"format":"occsim-sweep/1","point":0,"key":"boards=1,engines=1""#,
-            r#"{"format":"occsim-sweep/1","point":1,"key":"boards=1,engines=4""#,
-            r#"{"format":"occsim-sweep/1","point":2,"key":"boards=2,engines=1""#,
-            r#"{"format":"occsim-sweep/1","point":3,"key":"boards=2,engines=4""#,
+            r#"{"format":"occsim-sweep/2","point":0,"key":"boards=1,engines=1""#,
+            r#"{"format":"occsim-sweep/2","point":1,"key":"boards=1,engines=4""#,
+            r#"{"format":"occsim-sweep/2","point":2,"key":"boards=2,engines=1""#,
+            r#"{"format":"occsim-sweep/2","point":3,"key":"boards=2,engines=4""#,
         ]
     );
     assert!(jsonl.contains(r#""trace_digest":"sha256:0123abcd""#));
@@ -196,7 +196,15 @@ fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
     merge_results(&merged, &[shard.clone(), full.clone()], false).unwrap();
     assert_eq!(read(&merged), jsonl);
 
-    let altered = read(&shard).replacen("\"tiles\":2", "\"tiles\":3", 1);
+    // An edit with its digest made good again (an edit without is caught as such: below).
+    let altered: String = read(&shard)
+        .replacen("\"tiles\":2", "\"tiles\":3", 1)
+        .lines()
+        .map(|l| {
+            crate::record::with_digest(&format!("{}}}", &l[..l.rfind(",\"digest\"").unwrap()]))
+                + "\n"
+        })
+        .collect();
     std::fs::write(&shard, altered).unwrap();
     let err = chain(&merge_results(&merged, &[shard, full], false).unwrap_err());
     assert!(
@@ -204,6 +212,35 @@ fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
         "{err}"
     );
     assert!(err.contains("shard2.jsonl:1 and "), "{err}");
+}
+
+#[test]
+fn an_edited_metric_is_caught_on_resume_and_by_merge() {
+    let temp = test_dir("edited-metric");
+    let dir = temp.path();
+    let g = twelve_points();
+    let (_, _) = reference_run(dir, &g);
+    let full = dir.join("full.jsonl");
+    let shard = run_shard(dir, &g, 2, 3);
+    let edited = read(&shard).replacen("\"tiles\":2", "\"tiles\":3", 1);
+    std::fs::write(&shard, edited).unwrap();
+    let merged = dir.join("merged.jsonl");
+    let err = chain(&merge_results(&merged, &[shard.clone(), full], false).unwrap_err());
+    assert!(
+        err.contains("shard2.jsonl:1: the line's digest does not match"),
+        "{err}"
+    );
+    let mut o = options(&g, &shard, 2);
+    o.resume = true;
+    o.shard = Some(Shard {
+        number: 2,
+        count: 3,
+    });
+    let err = chain(&run_sweep(&o, &fake_machine).unwrap_err());
+    assert!(
+        err.contains("shard2.jsonl:1: the line's digest does not match"),
+        "{err}"
+    );
 }
 
 #[test]
