@@ -7,7 +7,7 @@ use std::io::Write;
 
 #[derive(clap::Args)]
 pub struct CountArgs {
-    /// A scene file, or a built-in scene: demo, hardcases.
+    /// A scene file, or a built-in scene: demo, hardcases, random.
     pub scene: String,
     /// Print every query's full result (all modes, every tile) as JSON instead.
     #[arg(long)]
@@ -16,8 +16,10 @@ pub struct CountArgs {
     pub raster: super::raster_args::RasterArgs,
 }
 
-/// Prints `query ID N` for every samples query, in order, exactly as a GL program printing
-/// GL_SAMPLES_PASSED would.
+/// Prints every query's answer in order: `query ID N` for a samples query, exactly as a GL
+/// program printing GL_SAMPLES_PASSED would; `query ID any 0|1` for an any query; and for
+/// brief and verbose queries one line a tile, `query ID MODE tile K nohc N phc P`, verbose
+/// ones with `hits H` kept (and `overflowed` when the buffer overflowed).
 pub fn run(args: CountArgs) -> anyhow::Result<()> {
     let mut scene = open_scene(&args.scene)?;
     let mut golden = GoldenModel::with_profile(scene.width, scene.height, args.raster.profile);
@@ -31,8 +33,30 @@ pub fn run(args: CountArgs) -> anyhow::Result<()> {
         };
         if args.json {
             results.push(result);
-        } else if result.mode == QueryMode::Samples {
-            writeln!(out, "query {} {}", result.id, result.value())?;
+            continue;
+        }
+        match result.mode {
+            QueryMode::Samples => writeln!(out, "query {} {}", result.id, result.value())?,
+            QueryMode::Any => writeln!(out, "query {} any {}", result.id, result.value())?,
+            QueryMode::Brief | QueryMode::Verbose => {
+                for (k, tile) in result.tiles.iter().enumerate() {
+                    write!(
+                        out,
+                        "query {} {} tile {k} nohc {} phc {}",
+                        result.id,
+                        result.mode.name(),
+                        tile.nohc,
+                        tile.phc
+                    )?;
+                    if result.mode == QueryMode::Verbose {
+                        write!(out, " hits {}", tile.hits.len())?;
+                    }
+                    if tile.overflowed {
+                        write!(out, " overflowed")?;
+                    }
+                    writeln!(out)?;
+                }
+            }
         }
     }
     if args.json {
