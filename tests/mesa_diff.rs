@@ -37,7 +37,10 @@ fn mesa_or_skip(target: Target, width: u32, height: u32) -> Option<GlReplay> {
             if std::env::var("CI").is_ok_and(|v| v == "true") {
                 panic!("mesa_diff: Mesa is required under CI=true but unavailable: {why}");
             }
-            println!("mesa_diff: SKIPPED: {why}");
+            // Straight to the process's stderr: `println!` and `eprintln!` are captured by the
+            // test harness and shown only for failures, and a skip must be seen.
+            use std::io::Write as _;
+            let _ = writeln!(std::io::stderr(), "mesa_diff: SKIPPED: {why}");
             None
         }
     }
