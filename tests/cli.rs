@@ -249,7 +249,7 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
     assert!(!text.contains("$scope module slot_16 $end"));
     // Flags only the rtl fidelity takes, and windows that cannot be read, fail clearly.
     let without_rtl = stderr_of_failure(&["replay", trace_arg, "--vcd", vcd_arg]);
-    assert!(without_rtl.contains("--vcd and --window need --fidelity rtl"));
+    assert!(without_rtl.contains("--vcd and --fst need --fidelity rtl"));
     for (window, message) in [
         ("5..3", "END must be greater than START"),
         ("1-3", "expected START..END"),
@@ -267,6 +267,49 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
         ]);
         assert!(error.contains(message), "{window}: {error}");
     }
+}
+
+#[test]
+fn replay_writes_an_fst_beside_a_vcd_and_nothing_when_the_replay_fails() {
+    let dir = scratch_dir("fst");
+    let trace = dir.join("hardcases.occt");
+    let (vcd, fst) = (dir.join("waves.vcd"), dir.join("waves.fst"));
+    let trace_arg = trace.to_str().unwrap();
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace_arg]);
+    let dump = |trace: &str| {
+        vec![
+            "replay".to_string(),
+            trace.into(),
+            "--fidelity".into(),
+            "rtl".into(),
+            "--vcd".into(),
+            vcd.to_str().unwrap().into(),
+            "--fst".into(),
+            fst.to_str().unwrap().into(),
+            "--window".into(),
+            "10..200".into(),
+        ]
+    };
+    let args = dump(trace_arg);
+    stdout_of(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    // An FST begins with its header block: type 0, then its length, 329 bytes, big-endian.
+    let bytes = std::fs::read(&fst).unwrap();
+    assert_eq!(bytes[..9], [0, 0, 0, 0, 0, 0, 0, 1, 73]);
+    assert!(std::fs::metadata(&vcd).unwrap().len() > 0);
+    // A trace cut short fails the replay: neither file is made, no temporary is left.
+    std::fs::remove_file(&vcd).unwrap();
+    std::fs::remove_file(&fst).unwrap();
+    let truncated = dir.join("truncated.occt");
+    let whole = std::fs::read(&trace).unwrap();
+    std::fs::write(&truncated, &whole[..whole.len() - 5]).unwrap();
+    let args = dump(truncated.to_str().unwrap());
+    stderr_of_failure(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["hardcases.occt", "truncated.occt"]);
 }
 
 #[test]

@@ -46,7 +46,7 @@ pub mod report;
 
 pub use arch::{Arch, ArchError, IrArch, O2Arch};
 pub use blocks::occu_stage::OccuModel;
-pub use blocks::waveform::WaveformOptions;
+pub use blocks::waveform::{WaveformOptions, WriteSeek};
 pub use effects::{Effects, EffectsChoice};
 pub use error::SimError;
 pub use levels::{Fidelity, LevelModel, LevelResult};

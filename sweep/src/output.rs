@@ -38,34 +38,81 @@ pub fn write_atomically_with<T, E: From<OutputError>>(
     path: &Path,
     fill: impl FnOnce(&mut BufWriter<File>) -> Result<T, E>,
 ) -> Result<T, E> {
-    let temp = temp_path_beside(path)?;
-    let outcome = (|| {
+    let file = AtomicFile::create(path)?;
+    let mut writer = BufWriter::with_capacity(1 << 20, file.handle()?);
+    let value = fill(&mut writer)?;
+    writer.into_inner().map_err(|e| OutputError::Write {
+        path: file.temp.clone(),
+        source: e.into_error(),
+    })?;
+    file.commit()?;
+    Ok(value)
+}
+
+/// A file that becomes `path` only when committed, for a writer that must own its
+/// destination or seek in it: the temporary sibling, created at once; [`AtomicFile::commit`]
+/// flushes it to disk and renames it over `path`; dropped uncommitted, it is removed.
+pub struct AtomicFile {
+    temp: PathBuf,
+    target: PathBuf,
+    file: Option<File>,
+}
+
+impl AtomicFile {
+    pub fn create(path: &Path) -> Result<AtomicFile, OutputError> {
+        let temp = temp_path_beside(path)?;
         let file = File::create(&temp).map_err(|source| OutputError::Create {
             path: temp.clone(),
             source,
         })?;
-        let mut writer = BufWriter::with_capacity(1 << 20, file);
-        let value = fill(&mut writer)?;
-        writer
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .and_then(|file| file.sync_all())
-            .map_err(|source| OutputError::Write {
-                path: temp.clone(),
-                source,
-            })?;
-        std::fs::rename(&temp, path).map_err(|source| OutputError::Rename {
-            from: temp.clone(),
-            to: path.to_path_buf(),
-            source,
-        })?;
-        Ok(value)
-    })();
-    if outcome.is_err() {
-        // Best effort: do not leave the temporary file behind; the original error matters more.
-        let _ = std::fs::remove_file(&temp);
+        Ok(AtomicFile {
+            temp,
+            target: path.to_path_buf(),
+            file: Some(file),
+        })
     }
-    outcome
+
+    /// Another handle on the temporary file (sharing its position), to write it through.
+    pub fn handle(&self) -> Result<File, OutputError> {
+        let file = self.file.as_ref().expect("an uncommitted file");
+        file.try_clone().map_err(|source| OutputError::Create {
+            path: self.temp.clone(),
+            source,
+        })
+    }
+
+    /// Flush the file to disk and rename it over the target (the writers through
+    /// [`AtomicFile::handle`] must have flushed).
+    pub fn commit(mut self) -> Result<(), OutputError> {
+        let file = self.file.take().expect("an uncommitted file");
+        let outcome = file
+            .sync_all()
+            .map_err(|source| OutputError::Write {
+                path: self.temp.clone(),
+                source,
+            })
+            .and_then(|()| {
+                std::fs::rename(&self.temp, &self.target).map_err(|source| OutputError::Rename {
+                    from: self.temp.clone(),
+                    to: self.target.clone(),
+                    source,
+                })
+            });
+        if outcome.is_err() {
+            // Best effort: the original error matters more.
+            let _ = std::fs::remove_file(&self.temp);
+        }
+        outcome
+    }
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        if self.file.take().is_some() {
+            // Uncommitted: best effort, nothing left behind.
+            let _ = std::fs::remove_file(&self.temp);
+        }
+    }
 }
 
 /// Replace `path` with `contents` atomically.
@@ -120,6 +167,24 @@ mod tests {
         });
         assert_eq!(failed.unwrap_err().to_string(), "interrupted");
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "old");
+        assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn an_uncommitted_file_leaves_nothing_and_a_committed_one_replaces() {
+        let temp = crate::test_dir("atomic-file");
+        let dir = temp.path();
+        let path = dir.join("out.bin");
+        std::fs::write(&path, "old").unwrap();
+        let file = AtomicFile::create(&path).unwrap();
+        file.handle().unwrap().write_all(b"dropped").unwrap();
+        drop(file);
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "old");
+        assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
+        let file = AtomicFile::create(&path).unwrap();
+        file.handle().unwrap().write_all(b"new").unwrap();
+        file.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "new");
         assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
     }
 
