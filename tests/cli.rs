@@ -313,6 +313,88 @@ fn replay_writes_an_fst_beside_a_vcd_and_nothing_when_the_replay_fails() {
 }
 
 #[test]
+fn replay_writes_a_timeline_whose_tracks_do_not_overlap() {
+    let dir = scratch_dir("timeline");
+    let trace = dir.join("hardcases.occt");
+    let timeline = dir.join("hc.json");
+    let (trace_arg, timeline_arg) = (trace.to_str().unwrap(), timeline.to_str().unwrap());
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace_arg]);
+    for arch in ["o2", "ir4"] {
+        let report = stdout_of(&["replay", trace_arg, "--arch", arch, "--json"]);
+        let report: serde_json::Value = serde_json::from_str(&report).unwrap();
+        stdout_of(&[
+            "replay",
+            trace_arg,
+            "--arch",
+            arch,
+            "--timeline",
+            timeline_arg,
+        ]);
+        let text = std::fs::read_to_string(&timeline).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&text).expect("the timeline is JSON");
+        let events = json["traceEvents"].as_array().unwrap();
+        let mhz = if arch == "o2" { 66.67 } else { 100.0 };
+        let mut by_track: std::collections::BTreeMap<u64, Vec<(u64, u64)>> = Default::default();
+        let mut queries = 0;
+        for event in events.iter().filter(|e| e["ph"] == "X") {
+            let args = &event["args"];
+            let (start, end) = (
+                args["start_cycle"].as_u64().unwrap(),
+                args["end_cycle"].as_u64().unwrap(),
+            );
+            assert!(start < end, "{event}");
+            // ts and dur are cycles / clock MHz.
+            let (ts, dur) = (
+                event["ts"].as_f64().unwrap(),
+                event["dur"].as_f64().unwrap(),
+            );
+            assert!((ts - start as f64 / mhz).abs() < 1e-6, "{event}");
+            assert!((dur - (end - start) as f64 / mhz).abs() < 1e-6, "{event}");
+            by_track
+                .entry(event["tid"].as_u64().unwrap())
+                .or_default()
+                .push((start, end));
+            if event["name"].as_str().unwrap().starts_with("query ") {
+                // A query's slice runs from its end token to its result: its latency.
+                let latency = args["latency_cycles"].as_u64().unwrap();
+                assert_eq!(end - start, latency, "{event}");
+                let query = &report["queries"][queries];
+                assert_eq!(args["id"], query["id"]);
+                assert_eq!(latency, query["latency_cycles"].as_u64().unwrap());
+                queries += 1;
+            }
+        }
+        assert_eq!(
+            queries,
+            report["queries"].as_array().unwrap().len(),
+            "{arch}"
+        );
+        assert!(by_track.len() >= 4, "{arch}: tracks {:?}", by_track.keys());
+        for (tid, mut slices) in by_track {
+            slices.sort();
+            for pair in slices.windows(2) {
+                assert!(
+                    pair[0].1 <= pair[1].0,
+                    "{arch}: track {tid} overlaps: {pair:?}"
+                );
+            }
+        }
+    }
+    let error = stderr_of_failure(&[
+        "replay",
+        trace_arg,
+        "--fidelity",
+        "analytic",
+        "--timeline",
+        timeline_arg,
+    ]);
+    assert!(
+        error.contains("--timeline needs --fidelity cycle or rtl"),
+        "{error}"
+    );
+}
+
+#[test]
 fn the_rasterizer_profile_is_chosen_by_name_and_recorded_in_the_trace() {
     let error = stderr_of_failure(&["count", "hardcases", "--raster", "softpipe"]);
     assert!(

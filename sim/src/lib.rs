@@ -43,6 +43,7 @@ pub mod levels;
 pub mod machines;
 pub mod replay;
 pub mod report;
+pub mod timeline;
 
 pub use arch::{Arch, ArchError, IrArch, O2Arch};
 pub use blocks::occu_stage::OccuModel;

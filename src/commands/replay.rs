@@ -8,6 +8,7 @@ use super::fidelity::FidelityArg;
 use anyhow::Context;
 use occsim_sim::levels::{Fidelity, LevelResult};
 use occsim_sim::replay::{max_query_tiles, replay, ReplayError, ReplayOptions};
+use occsim_sim::timeline::Timeline;
 use occsim_sim::{Arch, WaveformOptions};
 use occsim_traces::retile::TileGrid;
 use occsim_traces::trace::TraceReader;
@@ -48,6 +49,11 @@ pub struct WaveformArgs {
     /// --fidelity rtl; may be given with --vcd).
     #[arg(long, value_name = "FILE")]
     pub fst: Option<PathBuf>,
+    /// Write a timeline of the blocks' busy and stall slices, the queries and the frames
+    /// as Chrome trace-event JSON to FILE (Perfetto, chrome://tracing; needs --fidelity
+    /// cycle or rtl).
+    #[arg(long, value_name = "FILE")]
+    pub timeline: Option<PathBuf>,
     /// Cycles the waveform (and the timeline) covers, START..END (END exclusive; default: the whole run).
     #[arg(long, value_name = "START..END")]
     pub window: Option<String>,
@@ -71,14 +77,24 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         Some((options, outputs)) => (Some(options), Some(outputs)),
         None => (None, None),
     };
+    let timeline = timeline(&args.waveform, level, &arch)?;
     let options = ReplayOptions {
         level,
         effects: args.level.effects,
         retile: args.retile,
         waveform,
+        timeline: timeline.as_ref().map(|t| t.0.clone()),
     };
     let outcome = replay(opener(&args.trace), &arch, options).map_err(cli_words);
     let mut result = close_waveform(outputs, outcome)?;
+    if let Some((recorder, file)) = timeline {
+        recorder.flush();
+        let report = result
+            .report
+            .as_ref()
+            .context("the cycle and rtl levels give a report")?;
+        file.finish(report)?;
+    }
     let queries = result.queries.len() as u64;
     if result.checked_queries < queries {
         eprintln!(
@@ -165,6 +181,33 @@ pub fn parse_window(text: &str) -> anyhow::Result<std::ops::Range<u64>> {
         "--window {text:?}: END must be greater than START"
     );
     Ok(start..end)
+}
+
+/// The timeline the flags ask for: the recorder to hand the machine and the file it
+/// streams into.
+fn timeline(
+    args: &WaveformArgs,
+    level: Fidelity,
+    arch: &Arch,
+) -> anyhow::Result<Option<(Timeline, super::timeline::TimelineFile)>> {
+    let Some(path) = &args.timeline else {
+        if args.window.is_some() && args.vcd.is_none() && args.fst.is_none() {
+            anyhow::bail!("--window needs --vcd, --fst or --timeline");
+        }
+        return Ok(None);
+    };
+    if !matches!(level, Fidelity::Cycle | Fidelity::Rtl) {
+        anyhow::bail!("--timeline needs --fidelity cycle or rtl");
+    }
+    let window = match &args.window {
+        Some(window) => parse_window(window)?,
+        None => 0..u64::MAX,
+    };
+    let clock_mhz = arch.clock_mhz()?;
+    let machine = arch.machine().name();
+    let (file, sink) =
+        super::timeline::TimelineFile::create(path, machine, clock_mhz, window.clone())?;
+    Ok(Some((Timeline::new(sink, window), file)))
 }
 
 /// Check the flags' combination; the waveform window if a VCD is asked for.
