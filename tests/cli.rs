@@ -59,7 +59,10 @@ fn count_hardcases_gives_the_hand_worked_counts() {
         assert!(out.lines().any(|l| l == line), "no `{line}` in\n{out}");
     }
     for id in [23, 24, 25, 26, 27] {
-        assert!(!counts.contains_key(&id), "query {id} printed as a samples query");
+        assert!(
+            !counts.contains_key(&id),
+            "query {id} printed as a samples query"
+        );
     }
 }
 
@@ -264,7 +267,7 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
     assert!(!text.contains("$scope module slot_16 $end"));
     // Flags only the rtl fidelity takes, and windows that cannot be read, fail clearly.
     let without_rtl = stderr_of_failure(&["replay", trace_arg, "--vcd", vcd_arg]);
-    assert!(without_rtl.contains("--vcd and --window need --fidelity rtl"));
+    assert!(without_rtl.contains("--vcd and --fst need --fidelity rtl"));
     for (window, message) in [
         ("5..3", "END must be greater than START"),
         ("1-3", "expected START..END"),
@@ -282,6 +285,131 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
         ]);
         assert!(error.contains(message), "{window}: {error}");
     }
+}
+
+#[test]
+fn replay_writes_an_fst_beside_a_vcd_and_nothing_when_the_replay_fails() {
+    let dir = scratch_dir("fst");
+    let trace = dir.join("hardcases.occt");
+    let (vcd, fst) = (dir.join("waves.vcd"), dir.join("waves.fst"));
+    let trace_arg = trace.to_str().unwrap();
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace_arg]);
+    let dump = |trace: &str| {
+        vec![
+            "replay".to_string(),
+            trace.into(),
+            "--fidelity".into(),
+            "rtl".into(),
+            "--vcd".into(),
+            vcd.to_str().unwrap().into(),
+            "--fst".into(),
+            fst.to_str().unwrap().into(),
+            "--window".into(),
+            "10..200".into(),
+        ]
+    };
+    let args = dump(trace_arg);
+    stdout_of(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    // An FST begins with its header block: type 0, then its length, 329 bytes, big-endian.
+    let bytes = std::fs::read(&fst).unwrap();
+    assert_eq!(bytes[..9], [0, 0, 0, 0, 0, 0, 0, 1, 73]);
+    assert!(std::fs::metadata(&vcd).unwrap().len() > 0);
+    // A trace cut short fails the replay: neither file is made, no temporary is left.
+    std::fs::remove_file(&vcd).unwrap();
+    std::fs::remove_file(&fst).unwrap();
+    let truncated = dir.join("truncated.occt");
+    let whole = std::fs::read(&trace).unwrap();
+    std::fs::write(&truncated, &whole[..whole.len() - 5]).unwrap();
+    let args = dump(truncated.to_str().unwrap());
+    stderr_of_failure(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut names: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().into_string().unwrap())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["hardcases.occt", "truncated.occt"]);
+}
+
+#[test]
+fn replay_writes_a_timeline_whose_tracks_do_not_overlap() {
+    let dir = scratch_dir("timeline");
+    let trace = dir.join("hardcases.occt");
+    let timeline = dir.join("hc.json");
+    let (trace_arg, timeline_arg) = (trace.to_str().unwrap(), timeline.to_str().unwrap());
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace_arg]);
+    for arch in ["o2", "ir4"] {
+        let report = stdout_of(&["replay", trace_arg, "--arch", arch, "--json"]);
+        let report: serde_json::Value = serde_json::from_str(&report).unwrap();
+        stdout_of(&[
+            "replay",
+            trace_arg,
+            "--arch",
+            arch,
+            "--timeline",
+            timeline_arg,
+        ]);
+        let text = std::fs::read_to_string(&timeline).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&text).expect("the timeline is JSON");
+        let events = json["traceEvents"].as_array().unwrap();
+        let mhz = if arch == "o2" { 66.67 } else { 100.0 };
+        let mut by_track: std::collections::BTreeMap<u64, Vec<(u64, u64)>> = Default::default();
+        let mut queries = 0;
+        for event in events.iter().filter(|e| e["ph"] == "X") {
+            let args = &event["args"];
+            let (start, end) = (
+                args["start_cycle"].as_u64().unwrap(),
+                args["end_cycle"].as_u64().unwrap(),
+            );
+            assert!(start < end, "{event}");
+            // ts and dur are cycles / clock MHz.
+            let (ts, dur) = (
+                event["ts"].as_f64().unwrap(),
+                event["dur"].as_f64().unwrap(),
+            );
+            assert!((ts - start as f64 / mhz).abs() < 1e-6, "{event}");
+            assert!((dur - (end - start) as f64 / mhz).abs() < 1e-6, "{event}");
+            by_track
+                .entry(event["tid"].as_u64().unwrap())
+                .or_default()
+                .push((start, end));
+            if event["name"].as_str().unwrap().starts_with("query ") {
+                // A query's slice runs from its end token to its result: its latency.
+                let latency = args["latency_cycles"].as_u64().unwrap();
+                assert_eq!(end - start, latency, "{event}");
+                let query = &report["queries"][queries];
+                assert_eq!(args["id"], query["id"]);
+                assert_eq!(latency, query["latency_cycles"].as_u64().unwrap());
+                queries += 1;
+            }
+        }
+        assert_eq!(
+            queries,
+            report["queries"].as_array().unwrap().len(),
+            "{arch}"
+        );
+        assert!(by_track.len() >= 4, "{arch}: tracks {:?}", by_track.keys());
+        for (tid, mut slices) in by_track {
+            slices.sort();
+            for pair in slices.windows(2) {
+                assert!(
+                    pair[0].1 <= pair[1].0,
+                    "{arch}: track {tid} overlaps: {pair:?}"
+                );
+            }
+        }
+    }
+    let error = stderr_of_failure(&[
+        "replay",
+        trace_arg,
+        "--fidelity",
+        "analytic",
+        "--timeline",
+        timeline_arg,
+    ]);
+    assert!(
+        error.contains("--timeline needs --fidelity cycle or rtl"),
+        "{error}"
+    );
 }
 
 #[test]

@@ -10,19 +10,22 @@
 //!   current registers and inputs ([`OccuRtl::eval`], `&self`), then latches the registers
 //!   from those wires ([`OccuRtl::latch`]); a waveform probe sees both in between;
 //! - the crate knows nothing of the simulator (`occsim-sim` depends on it, not the reverse);
-//! - no IO besides the [`vcd`] writer's `std::io::Write`.
+//! - no IO besides the waveform encoders' `std::io::Write` (and, for [`fst`], `Seek`).
 //!
 //! Blocks, one module each: [`bits`] (fixed-width helpers), [`occlusion_engine`],
-//! [`occu_control`], [`occlusion_unit`] (the top level and its ports), [`vcd`].
+//! [`occu_control`], [`occlusion_unit`] (the top level and its ports); waveforms: [`wave`]
+//! (the one writer: declarations and change detection) with two encoders, [`vcd`] and [`fst`].
 
 #![deny(clippy::float_arithmetic)]
 #![forbid(unsafe_code)]
 
 pub mod bits;
+pub mod fst;
 pub mod occlusion_engine;
 pub mod occlusion_unit;
 pub mod occu_control;
 pub mod vcd;
+pub mod wave;
 
 pub use occlusion_unit::{
     CycleInputs, CycleOutputs, FragmentPort, OccuParams, OccuRtl, QueryConfig, ResultPath, TileRect,

@@ -1,5 +1,6 @@
-//! A small Value Change Dump (IEEE 1364 §18) writer: only changes written, gathered into
-//! 64 KiB writes to its destination.
+//! A small Value Change Dump (IEEE 1364 §18) encoder behind the shared
+//! [`crate::wave::WaveWriter`] (which does the change detection): lines gathered into 64 KiB
+//! writes to its destination.
 //!
 //! Format: `$version`, `$timescale 1ps`, nested `$scope module NAME $end` with
 //! `$var wire|reg WIDTH CODE NAME $end`, `$enddefinitions $end`; then `#TIME` lines (strictly
@@ -8,45 +9,31 @@
 //! ones. A signal's first value is written the first time it is given, changed or not.
 //! Identifier codes are printable ASCII 33..=126 in base 94.
 //!
-//! Speed (a whole-run dump is dominated by this writer): signals are given in blocks
-//! ([`VcdWriter::change_block`], `N` consecutive signals, `N <= 64`). Inlined into the caller,
-//! a block is one unrolled, branch-free compare of the values (still in registers, unmasked)
-//! with those last given, gathering a bit per difference; the set bits alone are visited
-//! (no mispredicted branch per unchanged signal), and a signal's writing state is one struct.
-//! A changed value is formatted into a fixed buffer whose slack past its spill mark holds a
-//! whole block (checked once per block), so the formatter writes whole groups (8 binary
-//! digits per table entry, 4 groups for signals up to 32 bits and 8 above, then the
-//! pre-encoded 16-byte ` CODE\n` tail; a 1-bit line is the same with no `b`) and advances
-//! by the bytes that count: no per-bit loop, no variable-length copy, no bounds checks.
-//! A timestamp's digits above its last 8 are kept from the one before (they change every
-//! 10^8 ps, 6,667 cycles at 66.67 MHz); the last 8 come from a 100-entry pair table.
+//! Speed: a changed value is formatted into a fixed buffer whose slack past its spill mark
+//! holds a whole block (checked once per block, at [`WaveEncoder::block_end`]), so the
+//! formatter writes whole groups (8 binary digits per table entry, 4 groups for signals up to
+//! 32 bits and 8 above, then the pre-encoded 16-byte ` CODE\n` tail; a 1-bit line is the same
+//! with no `b`) and advances by the bytes that count: no per-bit loop, no variable-length
+//! copy, no bounds checks. A timestamp's digits above its last 8 are kept from the one before
+//! (they change every 10^8 ps, 6,667 cycles at 66.67 MHz); the last 8 come from a 100-entry
+//! pair table.
 
 use crate::bits::mask;
+use crate::wave::{WaveEncoder, WaveWriter, BLOCK_SIGNALS};
 use std::io::{self, Write};
+
+pub use crate::wave::{SignalId, VarKind};
 
 /// Bytes gathered before one write to the destination.
 const BUFFER_BYTES: usize = 1 << 16;
 /// Bytes one line's writes may touch: a value line's whole groups (`b`, 64 digits, a
 /// 16-byte tail: 81) or a timestamp line (`#`, 20 digits, newline: 22).
 const LINE_SCRATCH: usize = 128;
-/// Most signals in a block.
-const BLOCK_SIGNALS: usize = 64;
 /// Room past the spill mark: a timestamp line and then a whole block's lines fit in it, so
 /// the buffer is checked once per block, not once per line.
 const SLACK_BYTES: usize = (BLOCK_SIGNALS + 1) * LINE_SCRATCH;
 /// A timestamp's last 8 digits are formatted every time; those above them are kept.
 const LOW_DIGITS_RANGE: u64 = 100_000_000;
-
-/// Declared kind of a signal.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum VarKind {
-    Wire,
-    Reg,
-}
-
-/// Handle of a declared signal.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct SignalId(pub usize);
 
 /// The ASCII binary digits of every byte value, most significant bit first.
 const BINARY_DIGITS: [[u8; 8]; 256] = {
@@ -111,20 +98,23 @@ impl TimePrefix {
     }
 }
 
-pub struct VcdWriter<W: Write> {
+/// The VCD writer: change detection in front of the VCD encoder.
+pub type VcdWriter<W> = WaveWriter<VcdEncoder<W>>;
+
+impl<W: Write> VcdWriter<W> {
+    /// Start a dump whose time unit is 1 ps.
+    pub fn new(out: W, version: &str) -> VcdWriter<W> {
+        WaveWriter::with_encoder(VcdEncoder::new(out, version))
+    }
+}
+
+/// The VCD text of declarations and changes.
+pub struct VcdEncoder<W: Write> {
     out: W,
-    /// Per signal, by id: the value last given (unmasked, so the compare needs no mask;
-    /// its masked bits are those last written, once written).
-    given: Vec<u64>,
     /// Per signal, by id.
     signals: Vec<Signal>,
-    /// A bit per signal with no value written yet (a 64-bit signal has no spare value for
-    /// a sentinel).
-    unwritten: Vec<u64>,
-    /// Signals with no value written yet.
-    unwritten_count: usize,
-    defining: bool,
-    clock: Clock,
+    /// The text above the last 8 digits of the last timestamp at or above 10^8.
+    prefix: TimePrefix,
     error: Option<io::Error>,
     lines: Lines,
 }
@@ -145,16 +135,6 @@ impl Lines {
             .try_into()
             .expect("a window of LINE_SCRATCH bytes")
     }
-}
-
-/// The dump's current time and what of it is written.
-struct Clock {
-    time: u64,
-    /// `time` is not yet written: the next change writes it first.
-    pending: bool,
-    written: Option<u64>,
-    /// The text above the last 8 digits of the last timestamp at or above 10^8.
-    prefix: TimePrefix,
 }
 
 /// Decimal digits of `value` (at least 1): one more than a guess of log10 from the bit
@@ -197,22 +177,13 @@ fn identifier(mut n: usize) -> String {
     }
 }
 
-impl<W: Write> VcdWriter<W> {
+impl<W: Write> VcdEncoder<W> {
     /// Start a dump whose time unit is 1 ps.
-    pub fn new(out: W, version: &str) -> VcdWriter<W> {
-        let mut vcd = VcdWriter {
+    pub fn new(out: W, version: &str) -> VcdEncoder<W> {
+        let mut vcd = VcdEncoder {
             out,
-            given: Vec::new(),
             signals: Vec::new(),
-            unwritten: Vec::new(),
-            unwritten_count: 0,
-            defining: true,
-            clock: Clock {
-                time: 0,
-                pending: true,
-                written: None,
-                prefix: TimePrefix::of(0),
-            },
+            prefix: TimePrefix::of(0),
             error: None,
             lines: Lines {
                 buffer: vec![0; BUFFER_BYTES + SLACK_BYTES],
@@ -256,19 +227,63 @@ impl<W: Write> VcdWriter<W> {
         self.lines.filled = 0;
     }
 
-    pub fn scope(&mut self, name: &str) {
-        debug_assert!(self.defining);
+    /// `#TIME\n`, before the first change at it.
+    #[inline(never)]
+    fn write_time(&mut self, time: u64) {
+        let high = time / LOW_DIGITS_RANGE;
+        if high == 0 {
+            self.write_short_time(time);
+        } else {
+            if high != self.prefix.high {
+                self.prefix = TimePrefix::of(high);
+            }
+            // The kept `#` and high digits, then 8 digits and the newline.
+            let prefix = &self.prefix;
+            let buffer = self.lines.window();
+            buffer[..16].copy_from_slice(&prefix.text);
+            let at = prefix.len & 15;
+            let low: &mut [u8; 8] = (&mut buffer[at..at + 8]).try_into().expect("8 bytes");
+            write_eight_digits(low, time % LOW_DIGITS_RANGE);
+            buffer[at + 8] = b'\n';
+            self.lines.filled += at + 9;
+        }
+    }
+
+    /// `#TIME\n` for a time below 10^8 (the first 100 µs), digit pair by pair.
+    #[cold]
+    fn write_short_time(&mut self, t: u64) {
+        let length = decimal_digits(t);
+        let buffer = self.lines.window();
+        buffer[0] = b'#';
+        buffer[1 + length] = b'\n';
+        let digits = &mut buffer[1..1 + length];
+        let mut rest = t as u32;
+        let mut end = length;
+        while end >= 2 {
+            digits[end - 2..end].copy_from_slice(&DECIMAL_PAIRS[(rest % 100) as usize]);
+            rest /= 100;
+            end -= 2;
+        }
+        if end == 1 {
+            digits[0] = b'0' + rest as u8;
+        }
+        self.lines.filled += 2 + length;
+    }
+}
+
+impl<W: Write> WaveEncoder for VcdEncoder<W> {
+    type Output = W;
+
+    fn scope(&mut self, name: &str) {
         self.put(&format!("$scope module {name} $end\n"));
     }
 
-    pub fn upscope(&mut self) {
+    fn upscope(&mut self) {
         self.put("$upscope $end\n");
     }
 
-    /// Declare a signal `width` bits wide (1..=64).
-    pub fn var(&mut self, kind: VarKind, name: &str, width: u32) -> SignalId {
-        assert!(self.defining && (1..=64).contains(&width));
-        let id = self.given.len();
+    fn var(&mut self, kind: VarKind, name: &str, width: u32) {
+        let id = self.signals.len();
         let code = identifier(id);
         let kind = match kind {
             VarKind::Wire => "wire",
@@ -283,7 +298,6 @@ impl<W: Write> VcdWriter<W> {
         };
         let mut tail = [0u8; 16];
         tail[..tail_text.len()].copy_from_slice(tail_text.as_bytes());
-        self.given.push(0);
         self.signals.push(Signal {
             mask: mask(width),
             tail,
@@ -291,167 +305,48 @@ impl<W: Write> VcdWriter<W> {
             prefix: (width > 1) as u8,
             wide: width > 32,
         });
-        // Room for a block's bits to be read as two words from any signal on.
-        self.unwritten.resize(id / 64 + 2, 0);
-        self.unwritten[id / 64] |= 1 << (id % 64);
-        self.unwritten_count += 1;
-        SignalId(id)
     }
 
-    pub fn end_definitions(&mut self) {
+    fn end_definitions(&mut self) {
         self.put("$enddefinitions $end\n");
-        self.defining = false;
     }
 
-    /// Following changes happen at `time` (ps), which must not go back.
-    #[inline]
-    pub fn set_time(&mut self, time: u64) {
-        debug_assert!(!self.defining);
-        debug_assert!(self.clock.written.is_none_or(|t| time >= t));
-        self.clock.time = time;
-        self.clock.pending = self.clock.written != Some(time);
-    }
-
-    /// The signal holds `value` (masked to its width) from the current time on.
-    #[inline]
-    pub fn change(&mut self, id: SignalId, value: u64) {
-        self.change_block(id, &[value]);
-    }
-
-    /// Signals `first .. first + N` (N <= 64) hold `values` (each masked to its width) from
-    /// the current time on; lines are written in signal order. Inlined into the caller, a
-    /// block is one unrolled, branch-free compare of the values (still in registers) with
-    /// those last given, gathering a bit per difference; only a block with a difference
-    /// writes, visiting the set bits.
     #[inline(always)]
-    pub fn change_block<const N: usize>(&mut self, first: SignalId, values: &[u64; N]) {
-        const { assert!(N <= BLOCK_SIGNALS, "a block has at most 64 signals") };
-        let given: &[u64; N] = (&self.given[first.0..first.0 + N])
+    fn time(&mut self, time: u64) {
+        self.write_time(time);
+    }
+
+    /// The slack past the spill mark holds a timestamp and a whole block of lines, so the
+    /// buffer is checked once, after the block.
+    #[inline(always)]
+    fn value(&mut self, id: usize, value: u64) {
+        let signal = &self.signals[id];
+        let at = self.lines.filled;
+        let window: &mut [u8; LINE_SCRATCH] = (&mut self.lines.buffer[at..at + LINE_SCRATCH])
             .try_into()
-            .expect("a slice of N");
-        let mut changed = 0u64;
-        for bit in 0..N {
-            changed |= ((values[bit] != given[bit]) as u64) << bit;
-        }
-        let unwritten = if self.unwritten_count != 0 {
-            self.unwritten_in(first.0, N)
-        } else {
-            0
-        };
-        changed |= unwritten;
-        if changed != 0 {
-            self.write_changed(first.0, values, changed, unwritten);
-        }
+            .expect("a window of LINE_SCRATCH bytes");
+        self.lines.filled += write_line(window, signal, value);
     }
 
-    /// A bit per signal of `first .. first + count` (count <= 64) with no value written yet.
-    #[cold]
-    fn unwritten_in(&self, first: usize, count: usize) -> u64 {
-        let (word, shift) = (first / 64, first % 64);
-        let low = self.unwritten[word] >> shift;
-        let high = (self.unwritten[word + 1] << 1) << (63 - shift);
-        (low | high) & mask(count as u32)
-    }
-
-    /// Take the values of signals `first + i` for the bits `i` set in `changed`, writing
-    /// those whose masked value changed or, for the bits set in `unwritten`, their first
-    /// value (after the pending timestamp, if any). The slack
-    /// past the spill mark holds a timestamp and a whole block of lines, so the buffer is
-    /// checked once, after the block.
     #[inline(always)]
-    fn write_changed(&mut self, first: usize, values: &[u64], mut changed: u64, unwritten: u64) {
-        let given = &mut self.given[first..first + values.len()];
-        let signals = &self.signals[first..first + values.len()];
-        while changed != 0 {
-            let offset = changed.trailing_zeros() as usize;
-            changed &= changed - 1;
-            let value = values[offset];
-            let old = std::mem::replace(&mut given[offset], value);
-            let signal = &signals[offset];
-            let first_value = (unwritten >> offset) & 1 != 0;
-            if (old ^ value) & signal.mask != 0 || first_value {
-                if first_value {
-                    let id = first + offset;
-                    self.unwritten[id / 64] &= !(1 << (id % 64));
-                    self.unwritten_count -= 1;
-                }
-                if self.clock.pending {
-                    self.clock.write(&mut self.lines);
-                }
-                self.lines.filled += write_line(self.lines.window(), signal, value);
-            }
-        }
+    fn block_end(&mut self) {
         if self.lines.filled >= BUFFER_BYTES {
             self.spill();
         }
     }
 
-    /// Write a last timestamp `time` (if later than every change) so that viewers show the
-    /// dump up to it.
-    pub fn end_at(&mut self, time: u64) {
-        if self.clock.written.is_none_or(|t| time > t) {
-            self.put(&format!("#{time}\n"));
-            self.clock.written = Some(time);
-            self.clock.pending = false;
-        }
+    fn end_at(&mut self, time: u64) {
+        self.put(&format!("#{time}\n"));
     }
 
-    /// Flush and return the writer, or the first write error.
-    pub fn finish(mut self) -> io::Result<W> {
+    /// Flush and return the destination, or the first write error.
+    fn finish(mut self) -> io::Result<W> {
         self.spill();
         if let Some(e) = self.error.take() {
             return Err(e);
         }
         self.out.flush()?;
         Ok(self.out)
-    }
-}
-
-impl Clock {
-    /// `#TIME\n` for the current time, before the first change at it.
-    #[inline(never)]
-    fn write(&mut self, lines: &mut Lines) {
-        let high = self.time / LOW_DIGITS_RANGE;
-        if high == 0 {
-            self.write_short(lines);
-        } else {
-            if high != self.prefix.high {
-                self.prefix = TimePrefix::of(high);
-            }
-            // The kept `#` and high digits, then 8 digits and the newline.
-            let prefix = &self.prefix;
-            let buffer = lines.window();
-            buffer[..16].copy_from_slice(&prefix.text);
-            let at = prefix.len & 15;
-            let low: &mut [u8; 8] = (&mut buffer[at..at + 8]).try_into().expect("8 bytes");
-            write_eight_digits(low, self.time % LOW_DIGITS_RANGE);
-            buffer[at + 8] = b'\n';
-            lines.filled += at + 9;
-        }
-        self.written = Some(self.time);
-        self.pending = false;
-    }
-
-    /// `#TIME\n` for a time below 10^8 (the first 100 µs), digit pair by pair.
-    #[cold]
-    fn write_short(&self, lines: &mut Lines) {
-        let t = self.time;
-        let length = decimal_digits(t);
-        let buffer = lines.window();
-        buffer[0] = b'#';
-        buffer[1 + length] = b'\n';
-        let digits = &mut buffer[1..1 + length];
-        let mut rest = t as u32;
-        let mut end = length;
-        while end >= 2 {
-            digits[end - 2..end].copy_from_slice(&DECIMAL_PAIRS[(rest % 100) as usize]);
-            rest /= 100;
-            end -= 2;
-        }
-        if end == 1 {
-            digits[0] = b'0' + rest as u8;
-        }
-        lines.filled += 2 + length;
     }
 }
 

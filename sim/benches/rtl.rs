@@ -1,6 +1,7 @@
 //! The `rtl` fidelity's cost: the O2-like machine with its OccU at `cycle` fidelity, at
-//! `rtl` fidelity, and at `rtl` dumping a VCD of the whole run and of a tenth of it (into a
-//! sink that discards it, so disk speed is not measured; the bytes are counted), at 1, 4
+//! `rtl` fidelity, and at `rtl` dumping a VCD of the whole run and of a tenth of it, and an
+//! FST of the whole run (into sinks that discard them, so disk speed is not measured; the
+//! bytes are counted; the FST's sink seeks in a counted length), at 1, 4
 //! and 16 engines, on a synthetic stream of about 1.5 M fragments (the replay benchmark's
 //! frame, three times); then the InfiniteReality-like `ir4` (320 Image Engines, each unit
 //! the RTL) at `cycle` and `rtl`. Prints fragments per second (wall time, the fastest of
@@ -39,6 +40,36 @@ impl Write for Counting {
     }
 }
 
+/// A seekable sink that keeps no bytes: it counts the file's length (the furthest byte
+/// written) into the shared counter at every write.
+struct CountingSeek {
+    length: Arc<AtomicU64>,
+    position: u64,
+}
+
+impl Write for CountingSeek {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        self.position += bytes.len() as u64;
+        self.length.fetch_max(self.position, Ordering::Relaxed);
+        Ok(bytes.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+impl std::io::Seek for CountingSeek {
+    fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+        let length = self.length.load(Ordering::Relaxed);
+        self.position = match to {
+            std::io::SeekFrom::Start(at) => at,
+            std::io::SeekFrom::End(by) => length.saturating_add_signed(by),
+            std::io::SeekFrom::Current(by) => self.position.saturating_add_signed(by),
+        };
+        Ok(self.position)
+    }
+}
+
 /// How one configuration's OccU model is made, once per run.
 type Maker<'a> = &'a dyn Fn() -> OccuModel;
 
@@ -67,8 +98,25 @@ fn dumping(
     bytes.store(0, Ordering::Relaxed);
     OccuModel::Rtl {
         waveform: Some(WaveformOptions {
-            out: Box::new(Counting(bytes.clone())),
+            vcd: Some(Box::new(Counting(bytes.clone()))),
+            fst: None,
             window,
+            max_query_tiles,
+        }),
+    }
+}
+
+/// The rtl model dumping the whole run as FST into a sink that counts its length.
+fn dumping_fst(bytes: &Arc<AtomicU64>, max_query_tiles: u64) -> OccuModel {
+    bytes.store(0, Ordering::Relaxed);
+    OccuModel::Rtl {
+        waveform: Some(WaveformOptions {
+            vcd: None,
+            fst: Some(Box::new(CountingSeek {
+                length: bytes.clone(),
+                position: 0,
+            })),
+            window: 0..u64::MAX,
             max_query_tiles,
         }),
     }
@@ -111,7 +159,8 @@ fn main() {
         // A window of a tenth of the run in its middle: what a user dumping the cycles
         // around an event pays.
         let window = cycles * 45 / 100..cycles * 55 / 100;
-        let (whole_bytes, window_bytes) = (Arc::default(), Arc::default());
+        let (whole_bytes, window_bytes, fst_bytes) =
+            (Arc::default(), Arc::default(), Arc::default());
         let results = fastest(
             &arch,
             &frame,
@@ -120,20 +169,32 @@ fn main() {
                 &|| OccuModel::Rtl { waveform: None },
                 &|| dumping(0..u64::MAX, &whole_bytes, max_query_tiles),
                 &|| dumping(window.clone(), &window_bytes, max_query_tiles),
+                &|| dumping_fst(&fst_bytes, max_query_tiles),
             ],
         );
-        let [cycle, rtl, vcd, windowed] = [0, 1, 2, 3].map(|i| results[i].0);
+        let [cycle, rtl, vcd, windowed, fst] = [0, 1, 2, 3, 4].map(|i| results[i].0);
         assert_eq!(results[0].1, results[1].1, "rtl and cycle reports differ");
         let bytes = whole_bytes.load(Ordering::Relaxed);
+        let fst_bytes = fst_bytes.load(Ordering::Relaxed);
         println!(
-            "engines {engines:>2}: cycle {:.2} M fragments/s, rtl {:.2} M/s ({:.1}x slower), rtl+vcd {:.2} M/s ({:.2}x the rtl run's time; {} MB of VCD over {cycles} cycles), a tenth of the run dumped {:.2}x",
+            "engines {engines:>2}: cycle {:.2} M fragments/s, rtl {:.2} M/s ({:.1}x slower), rtl+vcd {:.2} M/s ({:.2}x the rtl run's time; {} MB of VCD over {cycles} cycles, {:.1} B/cycle), a tenth of the run dumped {:.2}x",
             cycle / 1e6,
             rtl / 1e6,
             cycle / rtl,
             vcd / 1e6,
             rtl / vcd,
             bytes / 1_000_000,
+            bytes as f64 / cycles as f64,
             rtl / windowed,
+        );
+        println!(
+            "            rtl+fst {:.2} M/s ({:.2}x the rtl run's time, {:.2}x the VCD's; {:.1} MB of FST, {:.2} B/cycle, {:.1}x smaller than the VCD)",
+            fst / 1e6,
+            rtl / fst,
+            vcd / fst,
+            fst_bytes as f64 / 1e6,
+            fst_bytes as f64 / cycles as f64,
+            bytes as f64 / fst_bytes as f64,
         );
     }
     let arch = Arch::builtin("ir4").expect("built-in ir4");

@@ -56,6 +56,8 @@ pub enum SimError {
     OpenAtEnd { id: u32 },
     #[error("cannot write the waveform: {0}")]
     Waveform(String),
+    #[error("cannot record the timeline: {0}")]
+    Timeline(String),
 }
 
 /// A machine's viewport must fit the rasterizer's proven range: one check for every model.

@@ -43,10 +43,11 @@ pub mod levels;
 pub mod machines;
 pub mod replay;
 pub mod report;
+pub mod timeline;
 
 pub use arch::{Arch, ArchError, IrArch, O2Arch};
 pub use blocks::occu_stage::OccuModel;
-pub use blocks::waveform::WaveformOptions;
+pub use blocks::waveform::{WaveformOptions, WriteSeek};
 pub use effects::{Effects, EffectsChoice};
 pub use error::SimError;
 pub use levels::{Fidelity, LevelModel, LevelResult};

@@ -22,6 +22,7 @@ use crate::blocks::waveform::WaveformOptions;
 use crate::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
+use crate::timeline::Timeline;
 use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, RetileError, TileGrid};
 use occsim_traces::trace::{ReadError, TraceError, TraceReader};
@@ -38,6 +39,8 @@ pub struct ReplayOptions {
     /// Replace every brief query's tiles by this grid (golden results recomputed).
     pub retile: Option<TileGrid>,
     pub waveform: Option<WaveformOptions>,
+    /// At the cycle and rtl levels, where the blocks' intervals go ([`crate::timeline`]).
+    pub timeline: Option<Timeline>,
 }
 
 impl ReplayOptions {
@@ -48,6 +51,7 @@ impl ReplayOptions {
             effects: EffectsChoice::Auto,
             retile: None,
             waveform: None,
+            timeline: None,
         }
     }
 
@@ -58,6 +62,7 @@ impl ReplayOptions {
             effects: EffectsChoice::All,
             retile,
             waveform: None,
+            timeline: None,
         }
     }
 }
@@ -122,13 +127,14 @@ pub fn replay<R: Read>(
     )?;
     let mut reader = open()?;
     let (width, height) = (reader.header().width, reader.header().height);
-    let model = LevelModel::with_waveform(
+    let model = LevelModel::with_outputs(
         options.level,
         arch,
         width,
         height,
         effects,
         options.waveform,
+        options.timeline,
     )
     .map_err(ReplayError::Setup)?;
     let model_error = |source| ReplayError::Model {

@@ -239,7 +239,8 @@ fn waveform(arch: &Arch, events: &[Event], window: std::ops::Range<u64>) -> (Rep
         events,
         OccuModel::Rtl {
             waveform: Some(WaveformOptions {
-                out: Box::new(shared.clone()),
+                vcd: Some(Box::new(shared.clone())),
+                fst: None,
                 window,
                 max_query_tiles: max_query_tiles(events),
             }),
@@ -597,7 +598,8 @@ fn ir_waveform_dumps_the_first_image_engine() {
         &events,
         OccuModel::Rtl {
             waveform: Some(WaveformOptions {
-                out: Box::new(shared.clone()),
+                vcd: Some(Box::new(shared.clone())),
+                fst: None,
                 window: 0..u64::MAX,
                 max_query_tiles: max_query_tiles(&events),
             }),
@@ -668,4 +670,110 @@ fn the_vcd_check_catches_a_repeated_value() {
          $var wire 4 ! step $end\n$upscope $end\n$enddefinitions $end\n\
          #0\nb1 !\n#10\nb1 !\n",
     );
+}
+
+/// A seekable `Write` the test can read back (an FST is rewritten at its header).
+#[derive(Clone, Default)]
+struct SharedSeek(Arc<Mutex<std::io::Cursor<Vec<u8>>>>);
+
+impl Write for SharedSeek {
+    fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+        self.0.lock().unwrap().write(bytes)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+impl std::io::Seek for SharedSeek {
+    fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+        self.0.lock().unwrap().seek(to)
+    }
+}
+
+/// Per signal (full dotted name), its (time, value) changes as wellen reads the waveform
+/// file `bytes` (VCD or FST); values with an `x` (an FST's signals before their first
+/// value) are left out.
+fn read_wave(bytes: &[u8]) -> std::collections::HashMap<String, Vec<(u64, u64)>> {
+    let mut wave = wellen::simple::read_from_reader(std::io::Cursor::new(bytes.to_vec()))
+        .expect("wellen reads the waveform");
+    let hierarchy = wave.hierarchy();
+    let vars: Vec<(String, wellen::SignalRef)> = hierarchy
+        .iter_vars()
+        .map(|v| (v.full_name(hierarchy), v.signal_ref()))
+        .collect();
+    let refs: Vec<wellen::SignalRef> = vars.iter().map(|v| v.1).collect();
+    wave.load_signals(&refs);
+    let times = wave.time_table().to_vec();
+    vars.into_iter()
+        .map(|(name, signal)| {
+            let signal = wave.get_signal(signal).expect("a loaded signal");
+            let list = signal
+                .iter_changes()
+                .filter_map(|(time, value)| {
+                    let bits = value.to_bit_string()?;
+                    Some((times[time as usize], u64::from_str_radix(&bits, 2).ok()?))
+                })
+                .collect();
+            (name, list)
+        })
+        .collect()
+}
+
+/// The value `changes` holds at `time`, if any.
+fn value_at(changes: &[(u64, u64)], time: u64) -> Option<u64> {
+    let at = changes.partition_point(|&(t, _)| t <= time);
+    at.checked_sub(1).map(|i| changes[i].1)
+}
+
+/// The FST holds the VCD's signals with the VCD's values in every dumped cycle, on the
+/// built-in hard cases, for the whole run and a window; dumping both does not change the
+/// report.
+#[test]
+fn fst_equals_vcd_in_every_dumped_cycle() {
+    let (width, height, events) = scene_events(HARDCASES);
+    let arch = arch(&["engines=3".into()]);
+    let cycle_report = replay(&arch, width, height, &events, OccuModel::Cycle);
+    let cycles = cycle_report.summary.cycles;
+    for window in [0..u64::MAX, 1000..1500] {
+        let (vcd, fst) = (Shared::default(), SharedSeek::default());
+        let report = replay(
+            &arch,
+            width,
+            height,
+            &events,
+            OccuModel::Rtl {
+                waveform: Some(WaveformOptions {
+                    vcd: Some(Box::new(vcd.clone())),
+                    fst: Some(Box::new(fst.clone())),
+                    window: window.clone(),
+                    max_query_tiles: max_query_tiles(&events),
+                }),
+            },
+        );
+        assert_eq!(report, cycle_report);
+        let vcd_text = String::from_utf8(vcd.0.lock().unwrap().clone()).unwrap();
+        let from_vcd = parse_vcd(&vcd_text);
+        let from_fst = read_wave(fst.0.lock().unwrap().get_ref());
+        assert_eq!(
+            from_vcd.keys().collect::<std::collections::BTreeSet<_>>(),
+            from_fst.keys().collect(),
+            "the same signals"
+        );
+        // The hard cases run past the window's end, so the window is dumped whole.
+        assert!(cycles > 1500, "{cycles} cycles");
+        let period = 14999; // 66.67 MHz, in whole picoseconds
+        let dumped = window.start..window.end.min(cycles);
+        let mut compared = 0;
+        for (name, list) in &from_vcd {
+            for cycle in dumped.clone() {
+                let time = cycle * period;
+                let value = value_at(list, time);
+                assert!(value.is_some(), "{name} has a value at cycle {cycle}");
+                assert_eq!(value_at(&from_fst[name], time), value, "{name} at {cycle}");
+                compared += 1;
+            }
+        }
+        assert!(compared > 0);
+    }
 }

@@ -9,5 +9,6 @@ pub mod latency;
 pub mod raster_args;
 pub mod replay;
 pub mod sweep;
+pub mod timeline;
 pub mod trace;
 pub mod workload_args;

@@ -1,13 +1,14 @@
 //! `occsim replay TRACE`: replay a fragment trace on a machine model at a fidelity level,
 //! check every query's counts against the golden results in the trace, and report; at the
-//! rtl level, optionally dump a window of the Occlusion Unit's waveform as VCD (on the
-//! InfiniteReality-like machine, Image Engine 0 of board 0's unit).
+//! rtl level, optionally dump a window of the Occlusion Unit's waveform as VCD, FST or both
+//! (on the InfiniteReality-like machine, Image Engine 0 of board 0's unit).
 
 use super::arch::ArchSelection;
 use super::fidelity::FidelityArg;
 use anyhow::Context;
 use occsim_sim::levels::{Fidelity, LevelResult};
 use occsim_sim::replay::{max_query_tiles, replay, ReplayError, ReplayOptions};
+use occsim_sim::timeline::Timeline;
 use occsim_sim::{Arch, WaveformOptions};
 use occsim_traces::retile::TileGrid;
 use occsim_traces::trace::TraceReader;
@@ -44,7 +45,16 @@ pub struct WaveformArgs {
     /// --fidelity rtl; on an ir machine, Image Engine 0 of board 0's Occlusion Unit).
     #[arg(long, value_name = "FILE")]
     pub vcd: Option<PathBuf>,
-    /// Cycles the waveform covers, START..END (END exclusive; default: the whole run).
+    /// Write the same waveform as FST (GTKWave's compressed format) to FILE (needs
+    /// --fidelity rtl; may be given with --vcd).
+    #[arg(long, value_name = "FILE")]
+    pub fst: Option<PathBuf>,
+    /// Write a timeline of the blocks' busy and stall slices, the queries and the frames
+    /// as Chrome trace-event JSON to FILE (Perfetto, chrome://tracing; needs --fidelity
+    /// cycle or rtl).
+    #[arg(long, value_name = "FILE")]
+    pub timeline: Option<PathBuf>,
+    /// Cycles the waveform (and the timeline) covers, START..END (END exclusive; default: the whole run).
     #[arg(long, value_name = "START..END")]
     pub window: Option<String>,
 }
@@ -58,23 +68,33 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let path = args.trace.display().to_string();
     let level = args.level.fidelity;
     let cli_words = |e| in_cli_words(&path, e);
-    let (waveform, vcd) = match waveform(&args.waveform, level, || {
+    let (waveform, outputs) = match waveform(&args.waveform, level, || {
         // Every slot a query fills is shown: a retiled brief query has the grid's tiles.
         let grid = args.retile.map_or(0, |g| g.columns as u64 * g.rows as u64);
         let tiles = max_query_tiles(opener(&args.trace), &arch).map_err(cli_words)?;
         Ok(tiles.max(grid))
     })? {
-        Some((options, thread)) => (Some(options), Some(thread)),
+        Some((options, outputs)) => (Some(options), Some(outputs)),
         None => (None, None),
     };
+    let timeline = timeline(&args.waveform, level, &arch)?;
     let options = ReplayOptions {
         level,
         effects: args.level.effects,
         retile: args.retile,
         waveform,
+        timeline: timeline.as_ref().map(|t| t.0.clone()),
     };
     let outcome = replay(opener(&args.trace), &arch, options).map_err(cli_words);
-    let mut result = close_vcd(vcd, outcome)?;
+    let mut result = close_waveform(outputs, outcome)?;
+    if let Some((recorder, file)) = timeline {
+        recorder.flush();
+        let report = result
+            .report
+            .as_ref()
+            .context("the cycle and rtl levels give a report")?;
+        file.finish(report)?;
+    }
     let queries = result.queries.len() as u64;
     if result.checked_queries < queries {
         eprintln!(
@@ -163,19 +183,46 @@ pub fn parse_window(text: &str) -> anyhow::Result<std::ops::Range<u64>> {
     Ok(start..end)
 }
 
+/// The timeline the flags ask for: the recorder to hand the machine and the file it
+/// streams into.
+fn timeline(
+    args: &WaveformArgs,
+    level: Fidelity,
+    arch: &Arch,
+) -> anyhow::Result<Option<(Timeline, super::timeline::TimelineFile)>> {
+    let Some(path) = &args.timeline else {
+        if args.window.is_some() && args.vcd.is_none() && args.fst.is_none() {
+            anyhow::bail!("--window needs --vcd, --fst or --timeline");
+        }
+        return Ok(None);
+    };
+    if !matches!(level, Fidelity::Cycle | Fidelity::Rtl) {
+        anyhow::bail!("--timeline needs --fidelity cycle or rtl");
+    }
+    let window = match &args.window {
+        Some(window) => parse_window(window)?,
+        None => 0..u64::MAX,
+    };
+    let clock_mhz = arch.clock_mhz()?;
+    let machine = arch.machine().name();
+    let (file, sink) =
+        super::timeline::TimelineFile::create(path, machine, clock_mhz, window.clone())?;
+    Ok(Some((Timeline::new(sink, window), file)))
+}
+
 /// Check the flags' combination; the waveform window if a VCD is asked for.
 fn waveform_window(
     args: &WaveformArgs,
     level: Fidelity,
 ) -> anyhow::Result<Option<std::ops::Range<u64>>> {
-    if level != Fidelity::Rtl && (args.vcd.is_some() || args.window.is_some()) {
-        anyhow::bail!("--vcd and --window need --fidelity rtl");
+    let dumps = args.vcd.is_some() || args.fst.is_some();
+    if level != Fidelity::Rtl && dumps {
+        anyhow::bail!("--vcd and --fst need --fidelity rtl");
     }
-    match (&args.vcd, &args.window) {
-        (None, Some(_)) => anyhow::bail!("--window needs --vcd FILE"),
-        (None, None) => Ok(None),
-        (Some(_), None) => Ok(Some(0..u64::MAX)),
-        (Some(_), Some(window)) => parse_window(window).map(Some),
+    match (dumps, &args.window) {
+        (false, _) => Ok(None),
+        (true, None) => Ok(Some(0..u64::MAX)),
+        (true, Some(window)) => parse_window(window).map(Some),
     }
 }
 
@@ -215,25 +262,60 @@ impl std::io::Write for VcdSender {
     }
 }
 
-/// The channel to the thread writing a waveform, and the thread.
+/// The channel to the thread writing a VCD, and the thread.
 type VcdThread = (
     std::sync::mpsc::SyncSender<VcdChunk>,
     std::thread::JoinHandle<anyhow::Result<()>>,
 );
 
-/// The waveform the flags ask for (rtl level only), and the thread writing it;
-/// `max_query_tiles` finds how many tile slots to show.
+/// Where a waveform goes: the thread writing the VCD, the FST's file (written by the model
+/// through a handle, kept only when the replay succeeds) and its path.
+struct WaveformOutputs {
+    vcd: Option<VcdThread>,
+    fst: Option<(occsim_sweep::output::AtomicFile, PathBuf)>,
+}
+
+/// The waveform the flags ask for (rtl level only), and where it goes; `max_query_tiles`
+/// finds how many tile slots to show.
 fn waveform(
     args: &WaveformArgs,
     level: Fidelity,
     max_query_tiles: impl FnOnce() -> anyhow::Result<u64>,
-) -> anyhow::Result<Option<(WaveformOptions, VcdThread)>> {
-    let (Some(window), Some(path)) = (waveform_window(args, level)?, &args.vcd) else {
+) -> anyhow::Result<Option<(WaveformOptions, WaveformOutputs)>> {
+    let Some(window) = waveform_window(args, level)? else {
         return Ok(None);
     };
     let max_query_tiles = max_query_tiles()?;
+    let (vcd_out, vcd) = match &args.vcd {
+        Some(path) => {
+            let (out, thread) = vcd_thread(path.clone());
+            (Some(out), Some(thread))
+        }
+        None => (None, None),
+    };
+    let (fst_out, fst) = match &args.fst {
+        Some(path) => {
+            let cannot = || format!("cannot write the waveform {}", path.display());
+            let file = occsim_sweep::output::AtomicFile::create(path).with_context(cannot)?;
+            let handle = file.handle().with_context(cannot)?;
+            let out: Box<dyn occsim_sim::WriteSeek> =
+                Box::new(std::io::BufWriter::with_capacity(1 << 20, handle));
+            (Some(out), Some((file, path.clone())))
+        }
+        None => (None, None),
+    };
+    let options = WaveformOptions {
+        vcd: vcd_out,
+        fst: fst_out,
+        window,
+        max_query_tiles,
+    };
+    Ok(Some((options, WaveformOutputs { vcd, fst })))
+}
+
+/// The VCD's destination: a writer handing chunks to a thread that writes `path`.
+fn vcd_thread(path: PathBuf) -> (Box<dyn std::io::Write + Send>, VcdThread) {
     let (sender, receiver) = std::sync::mpsc::sync_channel::<VcdChunk>(4);
-    let path = path.clone();
     let thread = std::thread::spawn(move || {
         occsim_sweep::output::write_atomically_with(&path, |file| {
             use std::io::Write;
@@ -251,12 +333,7 @@ fn waveform(
         chunks: sender.clone(),
         buffer: Vec::with_capacity(1 << 20),
     });
-    let options = WaveformOptions {
-        out,
-        window,
-        max_query_tiles,
-    };
-    Ok(Some((options, (sender, thread))))
+    (out, (sender, thread))
 }
 
 /// The replay stopped before the waveform was complete (its own error says why).
@@ -271,7 +348,27 @@ impl std::fmt::Display for ReplayStopped {
 
 impl std::error::Error for ReplayStopped {}
 
-/// Keep or drop the waveform file after the replay's `outcome`. When the writer failed (it
+/// Keep or drop the waveform files after the replay's `outcome`.
+fn close_waveform<T>(
+    outputs: Option<WaveformOutputs>,
+    outcome: anyhow::Result<T>,
+) -> anyhow::Result<T> {
+    let Some(WaveformOutputs { vcd, fst }) = outputs else {
+        return outcome;
+    };
+    let outcome = close_vcd(vcd, outcome);
+    match (fst, outcome) {
+        (Some((file, path)), Ok(value)) => {
+            // The model finished (and flushed) the FST; an error dropped the file.
+            file.commit()
+                .with_context(|| format!("cannot write the waveform {}", path.display()))?;
+            Ok(value)
+        }
+        (_, outcome) => outcome,
+    }
+}
+
+/// Keep or drop the VCD file after the replay's `outcome`. When the writer failed (it
 /// could not create or write the file), its error, which names the file, is the one to
 /// report: the replay only saw the writer stop.
 fn close_vcd<T>(vcd: Option<VcdThread>, outcome: anyhow::Result<T>) -> anyhow::Result<T> {

@@ -49,37 +49,6 @@ pub fn remove_temporaries() {
     }
 }
 
-/// A temporary file that is removed when dropped unless it was renamed into place: on an
-/// error, a panic, or [`remove_temporaries`].
-struct Temporary {
-    path: PathBuf,
-    renamed: bool,
-}
-
-impl Temporary {
-    fn new(path: PathBuf) -> Temporary {
-        if let Ok(mut live) = LIVE.lock() {
-            live.push(path.clone());
-        }
-        Temporary {
-            path,
-            renamed: false,
-        }
-    }
-}
-
-impl Drop for Temporary {
-    fn drop(&mut self) {
-        if !self.renamed {
-            // Best effort: the original error matters more.
-            let _ = std::fs::remove_file(&self.path);
-        }
-        if let Ok(mut live) = LIVE.lock() {
-            live.retain(|p| p != &self.path);
-        }
-    }
-}
-
 /// Replace `path` with what `fill` writes; on any error (or panic) nothing is left behind.
 /// `fill` may fail with the caller's own error type, which also carries this module's errors.
 /// Temporaries that earlier, killed processes left beside `path` are removed first.
@@ -87,30 +56,90 @@ pub fn write_atomically_with<T, E: From<OutputError>>(
     path: &Path,
     fill: impl FnOnce(&mut BufWriter<File>) -> Result<T, E>,
 ) -> Result<T, E> {
-    let temp_path = temp_path_beside(path)?;
-    remove_stale_temporaries(path);
-    let mut temp = Temporary::new(temp_path);
-    let file = File::create(&temp.path).map_err(|source| OutputError::Create {
-        path: temp.path.clone(),
-        source,
-    })?;
-    let mut writer = BufWriter::with_capacity(1 << 20, file);
+    let file = AtomicFile::create(path)?;
+    let mut writer = BufWriter::with_capacity(1 << 20, file.handle()?);
     let value = fill(&mut writer)?;
-    writer
-        .into_inner()
-        .map_err(|e| e.into_error())
-        .and_then(|file| file.sync_all())
-        .map_err(|source| OutputError::Write {
-            path: temp.path.clone(),
+    writer.into_inner().map_err(|e| OutputError::Write {
+        path: file.temp.clone(),
+        source: e.into_error(),
+    })?;
+    file.commit()?;
+    Ok(value)
+}
+
+/// A file that becomes `path` only when committed, for a writer that must own its
+/// destination or seek in it: the temporary sibling, created at once; [`AtomicFile::commit`]
+/// flushes it to disk and renames it over `path`; dropped uncommitted, it is removed.
+pub struct AtomicFile {
+    temp: PathBuf,
+    target: PathBuf,
+    file: Option<File>,
+}
+
+impl AtomicFile {
+    /// Temporaries that earlier, killed processes left beside `path` are removed first; the
+    /// new one is listed for [`remove_temporaries`] until it is committed or dropped.
+    pub fn create(path: &Path) -> Result<AtomicFile, OutputError> {
+        let temp = temp_path_beside(path)?;
+        remove_stale_temporaries(path);
+        let file = File::create(&temp).map_err(|source| OutputError::Create {
+            path: temp.clone(),
             source,
         })?;
-    std::fs::rename(&temp.path, path).map_err(|source| OutputError::Rename {
-        from: temp.path.clone(),
-        to: path.to_path_buf(),
-        source,
-    })?;
-    temp.renamed = true;
-    Ok(value)
+        if let Ok(mut live) = LIVE.lock() {
+            live.push(temp.clone());
+        }
+        Ok(AtomicFile {
+            temp,
+            target: path.to_path_buf(),
+            file: Some(file),
+        })
+    }
+
+    /// Another handle on the temporary file (sharing its position), to write it through.
+    pub fn handle(&self) -> Result<File, OutputError> {
+        let file = self.file.as_ref().expect("an uncommitted file");
+        file.try_clone().map_err(|source| OutputError::Create {
+            path: self.temp.clone(),
+            source,
+        })
+    }
+
+    /// Flush the file to disk and rename it over the target (the writers through
+    /// [`AtomicFile::handle`] must have flushed).
+    pub fn commit(mut self) -> Result<(), OutputError> {
+        let file = self.file.take().expect("an uncommitted file");
+        let outcome = file
+            .sync_all()
+            .map_err(|source| OutputError::Write {
+                path: self.temp.clone(),
+                source,
+            })
+            .and_then(|()| {
+                std::fs::rename(&self.temp, &self.target).map_err(|source| OutputError::Rename {
+                    from: self.temp.clone(),
+                    to: self.target.clone(),
+                    source,
+                })
+            });
+        if outcome.is_err() {
+            // Best effort: the original error matters more.
+            let _ = std::fs::remove_file(&self.temp);
+        }
+        outcome
+    }
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        if let Ok(mut live) = LIVE.lock() {
+            live.retain(|p| p != &self.temp);
+        }
+        if self.file.take().is_some() {
+            // Uncommitted (an error or a panic): best effort, nothing left behind.
+            let _ = std::fs::remove_file(&self.temp);
+        }
+    }
 }
 
 /// Remove `.NAME.tmp-PID` files beside `path` whose process no longer exists (on systems
@@ -199,6 +228,24 @@ mod tests {
         });
         assert_eq!(failed.unwrap_err().to_string(), "interrupted");
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "old");
+        assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn an_uncommitted_file_leaves_nothing_and_a_committed_one_replaces() {
+        let temp = crate::test_dir("atomic-file");
+        let dir = temp.path();
+        let path = dir.join("out.bin");
+        std::fs::write(&path, "old").unwrap();
+        let file = AtomicFile::create(&path).unwrap();
+        file.handle().unwrap().write_all(b"dropped").unwrap();
+        drop(file);
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "old");
+        assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
+        let file = AtomicFile::create(&path).unwrap();
+        file.handle().unwrap().write_all(b"new").unwrap();
+        file.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "new");
         assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
     }
 

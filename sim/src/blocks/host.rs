@@ -7,6 +7,7 @@
 //! at a frame's end, for the pipeline to finish the frame. Busy, waiting and pipe-wait
 //! cycles sum to the host's time.
 
+use crate::timeline::{note, State, Timeline, Track};
 use occsim_traces::HostWork;
 
 /// Host costs per unit of work, in pipeline cycles.
@@ -52,6 +53,8 @@ pub struct Host {
     pub waiting_cycles: u64,
     /// Cycles blocked at frame ends on the pipeline.
     pub pipe_wait_cycles: u64,
+    /// Where the host's busy and waiting intervals go, if anywhere.
+    pub timeline: Option<Timeline>,
 }
 
 impl Host {
@@ -62,6 +65,7 @@ impl Host {
             busy_cycles: 0,
             waiting_cycles: 0,
             pipe_wait_cycles: 0,
+            timeline: None,
         }
     }
 
@@ -71,6 +75,13 @@ impl Host {
 
     /// Spend `cycles` busy.
     pub fn spend(&mut self, cycles: u64) {
+        note(
+            &self.timeline,
+            Track::Host,
+            State::Busy,
+            self.now,
+            self.now + cycles,
+        );
         self.now += cycles;
         self.busy_cycles += cycles;
     }
@@ -99,6 +110,8 @@ impl Host {
     /// Block until `cycle` for a query result.
     pub fn wait_for_result(&mut self, cycle: u64) {
         if cycle > self.now {
+            let waiting = State::WaitingForResult;
+            note(&self.timeline, Track::Host, waiting, self.now, cycle);
             self.waiting_cycles += cycle - self.now;
             self.now = cycle;
         }
@@ -107,6 +120,8 @@ impl Host {
     /// Block until `cycle` for the pipeline to finish a frame.
     pub fn wait_for_pipe(&mut self, cycle: u64) {
         if cycle > self.now {
+            let waiting = State::WaitingAtFrameEnd;
+            note(&self.timeline, Track::Host, waiting, self.now, cycle);
             self.pipe_wait_cycles += cycle - self.now;
             self.now = cycle;
         }

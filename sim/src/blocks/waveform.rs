@@ -1,5 +1,8 @@
 //! Waveforms of the `rtl` fidelity: the unit sequencer's, every engine's and OccU
-//! Control's registers and wires as a VCD file, for a window of cycles.
+//! Control's registers and wires as a VCD file, an FST file or both, for a window of
+//! cycles. The signal set, the scopes and the skips below are defined once, here; the
+//! change detection is `occsim_rtl::wave`'s writer, and VCD and FST are its two encoders
+//! (`occsim_rtl::vcd`, `occsim_rtl::fst`), fed the same changes.
 //!
 //! The window `start..end` is half-open: cycles `start` to `end - 1` are dumped, each at
 //! time `cycle * period` with `period` the clock period rounded to whole picoseconds
@@ -18,7 +21,7 @@
 //!
 //! Cost: the signals are declared in blocks (the sequencer; the fragment it shows; each
 //! engine's wires; each tile slot; OccU Control) whose values are handed to the writer as
-//! arrays, each compared in one branch-free loop ([`VcdWriter::change_block`]). Blocks are
+//! arrays, each compared in one branch-free loop ([`WaveWriter::change_block`]). Blocks are
 //! compared only where the model can have changed them since the last dumped cycle (inside
 //! the window every evaluated cycle is dumped, and cycles skipped between change nothing):
 //! a tile slot only if the last dumped cycle's wires latched it (a tested slot holding the
@@ -29,19 +32,34 @@
 //! dump's cost against the `rtl` run without it (see the README).
 
 use occsim_rtl::bits::bits_for;
+use occsim_rtl::fst::FstEncoder;
 use occsim_rtl::occlusion_engine::{EngineWires, OcclusionEngine, TileSlot};
 use occsim_rtl::occlusion_unit::{Wires, MAX_TILES};
-use occsim_rtl::vcd::{SignalId, VarKind, VcdWriter};
+use occsim_rtl::vcd::VcdEncoder;
+use occsim_rtl::wave::{SignalId, VarKind, WaveEncoder, WaveWriter};
 use occsim_rtl::OccuRtl;
-use std::io::Write;
+use std::io::{Seek, Write};
 use std::ops::Range;
 
 use VarKind::{Reg, Wire};
 
+/// A destination that seeks (an FST's header is rewritten at its end).
+pub trait WriteSeek: Write + Seek + Send {}
+impl<T: Write + Seek + Send> WriteSeek for T {}
+
+/// The encoders a dump feeds: a VCD, an FST, or both.
+type Encoders = (
+    Option<VcdEncoder<Box<dyn Write + Send>>>,
+    Option<FstEncoder<Box<dyn WriteSeek>>>,
+);
+
 /// Where and what to dump.
 pub struct WaveformOptions {
-    /// The VCD's destination (the writer gathers its lines into large writes).
-    pub out: Box<dyn Write + Send>,
+    /// The VCD's destination, if one is wanted (the encoder gathers its lines into large
+    /// writes).
+    pub vcd: Option<Box<dyn Write + Send>>,
+    /// The FST's destination, if one is wanted.
+    pub fst: Option<Box<dyn WriteSeek>>,
     /// Cycles to dump, half-open.
     pub window: Range<u64>,
     /// The most tiles one query of the run has (a trace's `max_query_tiles`): each engine
@@ -246,8 +264,8 @@ fn control_values(rtl: &OccuRtl, wires: &Wires) -> [u64; CONTROL_SIGNALS] {
 }
 
 /// Declare a block's signals; returns the first one's id (the others follow it).
-fn declare<W: Write, const N: usize>(
-    vcd: &mut VcdWriter<W>,
+fn declare<E: WaveEncoder, const N: usize>(
+    vcd: &mut WaveWriter<E>,
     declarations: Declarations<N>,
 ) -> SignalId {
     let ids: Vec<SignalId> = declarations
@@ -282,7 +300,7 @@ impl EngineProbe {
     /// Compare the slots that may have changed since the last dumped cycle: those it
     /// latched, or all of them after a load or an unload; at the first dump, every slot
     /// shown (one not loaded yet shows its reset value, 0).
-    fn dump_slots<W: Write>(&mut self, vcd: &mut VcdWriter<W>, engine: &OcclusionEngine) {
+    fn dump_slots<E: WaveEncoder>(&mut self, vcd: &mut WaveWriter<E>, engine: &OcclusionEngine) {
         let slots = if self.dumped_loads == engine.loads {
             self.latched.clone()
         } else {
@@ -306,7 +324,7 @@ impl EngineProbe {
 }
 
 pub struct Waveform {
-    vcd: VcdWriter<Box<dyn Write + Send>>,
+    vcd: WaveWriter<Encoders>,
     window: Range<u64>,
     period_ps: u64,
     unit: SignalId,
@@ -329,7 +347,12 @@ pub fn period_ps(clock_mhz: f64) -> u64 {
 
 impl Waveform {
     pub fn new(options: WaveformOptions, rtl: &OccuRtl, clock_mhz: f64) -> Waveform {
-        let mut vcd = VcdWriter::new(options.out, "occsim-rtl");
+        const VERSION: &str = "occsim-rtl";
+        let encoders = (
+            options.vcd.map(|out| VcdEncoder::new(out, VERSION)),
+            options.fst.map(|out| FstEncoder::new(out, VERSION)),
+        );
+        let mut vcd = WaveWriter::with_encoder(encoders);
         let params = rtl.params();
         let widths = Widths::of(rtl);
         let tiles = options.max_query_tiles.min(MAX_TILES as u64) as usize;
@@ -476,10 +499,30 @@ mod tests {
         }
     }
 
+    /// A seekable shared buffer, for the FST.
+    #[derive(Clone, Default)]
+    struct SharedSeek(Arc<Mutex<std::io::Cursor<Vec<u8>>>>);
+
+    impl Write for SharedSeek {
+        fn write(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
+            self.0.lock().unwrap().write(bytes)
+        }
+        fn flush(&mut self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    impl Seek for SharedSeek {
+        fn seek(&mut self, to: std::io::SeekFrom) -> std::io::Result<u64> {
+            self.0.lock().unwrap().seek(to)
+        }
+    }
+
     /// Full signal name (scopes joined by `.`) -> its (time, value) changes, as wellen (the
-    /// reader the Surfer viewer is built on) reads the VCD.
-    fn changes(vcd: &str) -> HashMap<String, Vec<(u64, u64)>> {
-        let bytes = std::io::Cursor::new(vcd.as_bytes().to_vec());
+    /// reader the Surfer viewer is built on) reads the VCD or FST file `file` (an FST's
+    /// signals start undefined, `x`, before their first value: such values are left out).
+    fn changes(file: &[u8]) -> HashMap<String, Vec<(u64, u64)>> {
+        let bytes = std::io::Cursor::new(file.to_vec());
         let mut wave = wellen::simple::read_from_reader(bytes).expect("wellen reads the VCD");
         let hierarchy = wave.hierarchy();
         let vars: Vec<(String, wellen::SignalRef)> = hierarchy
@@ -494,10 +537,10 @@ mod tests {
                 let signal = wave.get_signal(signal).expect("a loaded signal");
                 let list = signal
                     .iter_changes()
-                    .map(|(time, value)| {
+                    .filter_map(|(time, value)| {
                         let bits = value.to_bit_string().expect("a bit vector");
-                        let value = u64::from_str_radix(&bits, 2).expect("binary digits");
-                        (times[time as usize], value)
+                        let value = u64::from_str_radix(&bits, 2).ok()?;
+                        Some((times[time as usize], value))
                     })
                     .collect();
                 (name, list)
@@ -532,19 +575,20 @@ mod tests {
 
     /// Random queries (1 to `max_tiles` tiles of a 16 x 16 area, brief or verbose) of
     /// random fragments on a unit of `params`, clocked cycle by cycle with every word
-    /// granted the cycle after it enters; the VCD of `window` and, per dumped cycle, the
-    /// expected values.
+    /// granted the cycle after it enters; the VCD and the FST of `window` and, per dumped
+    /// cycle, the expected values.
     fn run(
         params: OccuParams,
         max_tiles: u64,
         window: Range<u64>,
         seed: u64,
-    ) -> (String, Expected) {
+    ) -> (Vec<u8>, Vec<u8>, Expected) {
         let mut rng = occsim_traces::rng::SplitMix64(seed | 1);
         let mut rtl = OccuRtl::new(params);
-        let shared = Shared::default();
+        let (shared, shared_fst) = (Shared::default(), SharedSeek::default());
         let options = WaveformOptions {
-            out: Box::new(shared.clone()),
+            vcd: Some(Box::new(shared.clone())),
+            fst: Some(Box::new(shared_fst.clone())),
             window,
             max_query_tiles: max_tiles,
         };
@@ -606,24 +650,49 @@ mod tests {
         }
         let last = rtl.cycle;
         waveform.finish(last).unwrap();
-        let text = String::from_utf8(shared.0.lock().unwrap().clone()).unwrap();
-        (text, expected_by_cycle)
+        let vcd = shared.0.lock().unwrap().clone();
+        let fst = shared_fst.0.lock().unwrap().get_ref().clone();
+        (vcd, fst, expected_by_cycle)
+    }
+
+    /// The value `list` holds at `time`, if any.
+    fn at(list: &[(u64, u64)], time: u64) -> Option<u64> {
+        let at = list.partition_point(|&(t, _)| t <= time);
+        at.checked_sub(1).map(|i| list[i].1)
     }
 
     fn check(params: OccuParams, max_tiles: u64, window: Range<u64>) {
         let period = period_ps(66.67);
         for seed in 0..30 {
-            let (vcd, expected) = run(params, max_tiles, window.clone(), seed);
-            let changes = changes(&vcd);
+            let (vcd, fst, expected) = run(params, max_tiles, window.clone(), seed);
+            let (changes, fst_changes) = (changes(&vcd), changes(&fst));
             assert!(!expected.is_empty());
+            // Every signal of the VCD is in the FST, with the VCD's value in every dumped
+            // cycle.
+            assert_eq!(
+                changes.len(),
+                fst_changes.len(),
+                "signal counts, seed {seed}"
+            );
+            for (name, list) in &changes {
+                let fst_list = &fst_changes[name];
+                for &(cycle, _) in &expected {
+                    let time = cycle * period;
+                    assert_eq!(
+                        at(fst_list, time),
+                        at(list, time),
+                        "{name} in the FST at cycle {cycle}, seed {seed}"
+                    );
+                }
+            }
             for (cycle, values) in expected {
                 for (name, value) in values {
                     let list = &changes[&name];
-                    let at = list.partition_point(|&(t, _)| t <= cycle * period);
-                    assert!(at > 0, "{name} has no value at cycle {cycle}");
+                    let value_then = at(list, cycle * period);
+                    assert!(value_then.is_some(), "{name} has no value at cycle {cycle}");
                     assert_eq!(
-                        list[at - 1].1,
-                        value,
+                        value_then,
+                        Some(value),
                         "{name} at cycle {cycle}, seed {seed}"
                     );
                 }

@@ -30,6 +30,7 @@ use crate::error::SimError;
 use crate::levels::analytic::AnalyticModel;
 use crate::levels::sampled::SampledModel;
 use crate::machines::{MachineBuilder, MachineModel};
+use crate::timeline::Timeline;
 use occsim_traces::golden::EventSink;
 use occsim_traces::{Event, Span};
 
@@ -64,6 +65,29 @@ impl LevelModel {
         effects: Effects,
         waveform: Option<WaveformOptions>,
     ) -> Result<LevelModel, SimError> {
+        LevelModel::with_outputs(level, arch, width, height, effects, waveform, None)
+    }
+
+    /// As [`LevelModel::with_waveform`]; at the cycle and rtl levels, the blocks' intervals
+    /// go to `timeline` (other levels have no blocks: an error).
+    pub fn with_outputs(
+        level: Fidelity,
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+        waveform: Option<WaveformOptions>,
+        timeline: Option<Timeline>,
+    ) -> Result<LevelModel, SimError> {
+        if timeline.is_some() && !matches!(level, Fidelity::Cycle | Fidelity::Rtl) {
+            return Err(SimError::Timeline(format!(
+                "the {level} level has no blocks to show: use the cycle or rtl level"
+            )));
+        }
+        let builder = |arch| match &timeline {
+            Some(timeline) => MachineBuilder::new(arch).timeline(timeline.clone()),
+            None => MachineBuilder::new(arch),
+        };
         if waveform.is_some() && level != Fidelity::Rtl {
             return Err(SimError::Waveform(format!(
                 "the {level} level has no registers to dump: use the rtl level"
@@ -80,18 +104,14 @@ impl LevelModel {
                 arch, width, height, effects, every,
             )?)),
             Fidelity::Cycle => LevelModel::Cycle(
-                Box::new(
-                    MachineBuilder::new(arch)
-                        .effects(effects)
-                        .build(width, height)?,
-                ),
+                Box::new(builder(arch).effects(effects).build(width, height)?),
                 effects,
             ),
             // The Occlusion Unit and OccU Control from the rtl-model crate, clocked every
             // cycle; every effect model is built (the rtl model has no shortcuts).
             Fidelity::Rtl => LevelModel::Cycle(
                 Box::new(
-                    MachineBuilder::new(arch)
+                    builder(arch)
                         .occu(OccuModel::Rtl { waveform })
                         .build(width, height)?,
                 ),

@@ -5,6 +5,7 @@
 use crate::arch::Arch;
 use crate::blocks::occu_stage::OccuModel;
 use crate::effects::Effects;
+use crate::timeline::Timeline;
 
 /// The one way to build a machine: the architecture (which names the machine), the effect
 /// models to build, the Occlusion Unit's fidelity, then a viewport at reset or a warm start.
@@ -22,6 +23,7 @@ pub struct MachineBuilder<'a> {
     pub(crate) arch: &'a Arch,
     pub(crate) effects: Effects,
     pub(crate) occu: OccuModel,
+    pub(crate) timeline: Option<Timeline>,
 }
 
 impl<'a> MachineBuilder<'a> {
@@ -31,6 +33,7 @@ impl<'a> MachineBuilder<'a> {
             arch,
             effects: Effects::ALL,
             occu: OccuModel::Cycle,
+            timeline: None,
         }
     }
 
@@ -43,5 +46,13 @@ impl<'a> MachineBuilder<'a> {
     /// Model every Occlusion Unit as `occu` says (the `cycle` and `rtl` fidelity levels).
     pub fn occu(self, occu: OccuModel) -> MachineBuilder<'a> {
         MachineBuilder { occu, ..self }
+    }
+
+    /// Report the blocks' busy and stall intervals to `timeline` ([`crate::timeline`]).
+    pub fn timeline(self, timeline: Timeline) -> MachineBuilder<'a> {
+        MachineBuilder {
+            timeline: Some(timeline),
+            ..self
+        }
     }
 }

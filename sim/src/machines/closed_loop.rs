@@ -52,7 +52,7 @@ struct FrameStart {
 }
 
 pub struct ClosedLoop {
-    host: Host,
+    pub(crate) host: Host,
     geometry: Geometry,
     result_notify_latency_cycles: u64,
     result_read_cycles_per_word: u64,

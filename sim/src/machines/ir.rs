@@ -74,6 +74,7 @@ use crate::report::{
     percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, RunTotals, StageReport,
     Summary, UnitSummary,
 };
+use crate::timeline::{note, State, Timeline, Track};
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;
 use occsim_traces::{Event, Fragment, QueryMode, QueryResult, QuerySpec, TileResult};
@@ -111,6 +112,8 @@ pub struct IrMachine {
     events: u64,
     primitives: u64,
     last_available: u64,
+    /// Where the blocks' intervals go, if anywhere.
+    timeline: Option<Timeline>,
 }
 
 impl IrMachine {
@@ -166,6 +169,7 @@ impl IrMachine {
             events: 0,
             primitives: 0,
             last_available: 0,
+            timeline: build.timeline,
         })
     }
 
@@ -251,6 +255,7 @@ impl IrMachine {
         let owner = self.interleave.owner(fragment.x, fragment.y);
         let engine = &mut self.image_engines
             [owner.board * self.arch.image_engines_per_board + owner.image_engine];
+        let free = self.generators[owner.board].free_cycle();
         let emitted = self.generators[owner.board].emit(engine.slot_free_cycle());
         let occlusion_mode = self
             .open
@@ -262,6 +267,22 @@ impl IrMachine {
             query.fragments += 1;
         }
         engine.fragment(fragment, passed, emitted, self.open.is_some());
+        if self.timeline.is_some() {
+            let (t, board) = (&self.timeline, owner.board as u32);
+            let generator = Track::FragmentGenerator(board);
+            note(t, generator, State::Stalled, free, emitted);
+            note(t, generator, State::Busy, emitted, emitted + 1);
+            // The board's Image Engines together: busy while one of them services a
+            // fragment (as reported in fragment order, see `Track::ImageEngines`).
+            let service_end = engine.free_cycle();
+            note(
+                t,
+                Track::ImageEngines(board),
+                State::Busy,
+                emitted + 1,
+                service_end,
+            );
+        }
         Ok(())
     }
 

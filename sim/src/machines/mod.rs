@@ -136,7 +136,8 @@ pub(crate) fn closed_loop_of(arch: &Arch) -> Result<ClosedLoop, SimError> {
 impl<'a> MachineBuilder<'a> {
     /// The machine at reset for a `width` x `height` viewport.
     pub fn build(self, width: u32, height: u32) -> Result<MachineModel, SimError> {
-        let front = closed_loop_of(self.arch)?;
+        let mut front = closed_loop_of(self.arch)?;
+        front.host.timeline = self.timeline.clone();
         let pipe = match self.arch.machine() {
             Machine::O2 => Pipe::O2(self.o2(width, height)?),
             Machine::Ir => Pipe::Ir(self.ir(width, height)?),

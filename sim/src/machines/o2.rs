@@ -60,6 +60,7 @@ use crate::report::{
     percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, RunTotals, StageReport,
     Summary, TileReport,
 };
+use crate::timeline::{note, State, Timeline, Track};
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;
 use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, TileResult};
@@ -123,6 +124,8 @@ pub struct O2Machine {
     /// The effect models built ([`crate::effects`]); all of them unless a scan proved some
     /// unobservable.
     effects: Effects,
+    /// Where the blocks' intervals go, if anywhere.
+    timeline: Option<Timeline>,
 }
 
 impl O2Machine {
@@ -179,6 +182,7 @@ impl O2Machine {
             events: 0,
             last_available: 0,
             effects,
+            timeline: build.timeline,
         };
         if let Some(state) = state {
             machine.depth.load_state(state);
@@ -194,7 +198,18 @@ impl O2Machine {
         self.events += 1;
         match event {
             Event::Fragment(f) => return self.front_fragment(*f, index),
-            Event::Primitive => self.input.primitive(),
+            Event::Primitive => {
+                let free = self.input.free_cycle();
+                self.input.primitive();
+                let setup_end = self.input.free_cycle();
+                note(
+                    &self.timeline,
+                    Track::Rasterizer,
+                    State::Busy,
+                    free,
+                    setup_end,
+                );
+            }
             Event::DepthTest(on) => {
                 self.front_depth_test = *on;
                 self.pending.push_back(Pending::Other {
@@ -246,9 +261,15 @@ impl O2Machine {
         // The back end lags up to `lookahead` fragments behind: address the FIFO and the
         // prefetch slots by this fragment's number, not by the departures recorded so far.
         let index = self.input.fragments as usize;
+        let free = self.input.free_cycle();
         let emitted = self
             .input
             .emit(self.raster_to_depth.slot_free_cycle_for(index));
+        if self.timeline.is_some() {
+            let t = &self.timeline;
+            note(t, Track::Rasterizer, State::Stalled, free, emitted);
+            note(t, Track::Rasterizer, State::Busy, emitted, emitted + 1);
+        }
         let arrive = emitted + 1;
         let data_ready = self.depth.fetch(
             index,
@@ -314,6 +335,11 @@ impl O2Machine {
             &mut self.port,
         );
         self.raster_to_depth.depart(tested.cycle);
+        if self.timeline.is_some() {
+            let (t, cycle) = (&self.timeline, tested.cycle);
+            note(t, Track::DepthPipeline, State::Stalled, arrive, cycle);
+            note(t, Track::DepthPipeline, State::Busy, cycle, cycle + 1);
+        }
         let start = self.occu.fragment(
             fragment,
             tested.passed,
@@ -323,6 +349,16 @@ impl O2Machine {
             self.effects.verbose_hit_writes,
         );
         self.depth_to_occu.depart(start);
+        if self.timeline.is_some() {
+            let free = self.occu.free_cycle();
+            note(
+                &self.timeline,
+                Track::OcclusionUnit,
+                State::Busy,
+                start,
+                free,
+            );
+        }
         if let Some(query) = &mut self.open {
             query.fragments += 1;
         }
