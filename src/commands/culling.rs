@@ -24,7 +24,7 @@ pub struct CompareArgs {
     pub quadtree_levels: u32,
     /// Adaptive thresholds (NOHC/PHC shares) to run the hierarchical driver with, comma
     /// separated; each row shows the pixels lost against the cycles saved.
-    #[arg(long, value_delimiter = ',', default_values_t = [0.05f32, 0.2, 0.5])]
+    #[arg(long, value_delimiter = ',', default_value = "0.05,0.2,0.5")]
     pub adaptive_threshold: Vec<f32>,
     /// Print the report as JSON.
     #[arg(long)]

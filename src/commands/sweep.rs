@@ -56,7 +56,7 @@ pub struct SweepRunArgs {
     /// Trace every point runs on.
     #[arg(required = true)]
     pub trace: Option<PathBuf>,
-    /// Built-in base architecture (e.g. o2, ir) the swept values override.
+    /// Built-in base architecture (e.g. o2, ir) the swept values override [default: o2].
     #[arg(long, conflicts_with = "arch_file")]
     pub arch: Option<String>,
     /// Base architecture from a TOML file.

@@ -36,6 +36,7 @@ pub struct GenArgs {
 
 #[derive(clap::Args)]
 pub struct InfoArgs {
+    /// The `.occt` trace file to describe.
     pub trace: PathBuf,
     /// Decode every block and check the summary against what the blocks hold.
     #[arg(long)]
@@ -47,6 +48,7 @@ pub struct InfoArgs {
 
 #[derive(clap::Args)]
 pub struct DumpArgs {
+    /// The `.occt` trace file whose events to print.
     pub trace: PathBuf,
     /// Stop after this many events.
     #[arg(long)]
