@@ -76,12 +76,7 @@ impl UnitSummary {
     }
 }
 
-#[derive(Clone, Debug, Serialize, PartialEq)]
-pub struct ArchEntry {
-    pub key: String,
-    pub value: String,
-    pub unit: String,
-}
+pub use crate::arch::ArchEntry;
 
 #[derive(Clone, Debug, Serialize, PartialEq)]
 pub struct Summary {

@@ -53,6 +53,27 @@ pub enum Value {
     Choice(&'static str),
 }
 
+/// One resolved parameter, as reports list them; in JSON its value is a number, a boolean
+/// or (for a named choice) a string.
+#[derive(Clone, Debug, serde::Serialize, PartialEq)]
+pub struct ArchEntry {
+    pub key: String,
+    pub value: Value,
+    pub unit: String,
+}
+
+/// As JSON: a number, a boolean, or a choice's name as a string.
+impl serde::Serialize for Value {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        match *self {
+            Value::Float(v) => serializer.serialize_f64(v),
+            Value::Int(v) => serializer.serialize_u64(v),
+            Value::Bool(v) => serializer.serialize_bool(v),
+            Value::Choice(v) => serializer.serialize_str(v),
+        }
+    }
+}
+
 impl std::fmt::Display for Value {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -375,11 +396,11 @@ impl Arch {
 
     /// `(key, value)` for every parameter, in table order.
     /// Every parameter with its value and unit, as reports and sweep records carry them.
-    pub fn report_entries(&self) -> Vec<crate::report::ArchEntry> {
+    pub fn report_entries(&self) -> Vec<ArchEntry> {
         self.entries()
-            .map(|(param, value)| crate::report::ArchEntry {
+            .map(|(param, value)| ArchEntry {
                 key: param.key.to_string(),
-                value: value.to_string(),
+                value,
                 unit: param.unit.to_string(),
             })
             .collect()

@@ -144,7 +144,9 @@ pub struct DriverReport {
     pub cells_refreshed_per_frame: f64,
     /// Visible pixels of the full render whose objects were not drawn, per frame.
     pub pixels_lost_per_frame: f64,
-    /// Per machine: simulated cycles per frame.
+    /// Per machine: simulated cycles per frame (in JSON an object, machine -> cycles, in
+    /// the machines' order).
+    #[serde(serialize_with = "pairs_as_object")]
     pub cycles_per_frame: Vec<(String, f64)>,
     /// Per machine: frames per second and the split of a frame's time.
     pub frame_time: Vec<MachineFrameTime>,
@@ -152,6 +154,19 @@ pub struct DriverReport {
     pub traversal_ms_per_frame: f64,
     /// Wall time inside the golden model, ms per frame.
     pub golden_model_ms_per_frame: f64,
+}
+
+/// `[(name, value)]` as a JSON object, in the pairs' order.
+fn pairs_as_object<S: serde::Serializer>(
+    pairs: &[(String, f64)],
+    serializer: S,
+) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeMap;
+    let mut map = serializer.serialize_map(Some(pairs.len()))?;
+    for (name, value) in pairs {
+        map.serialize_entry(name, value)?;
+    }
+    map.end()
 }
 
 #[derive(Clone, Debug, Serialize)]
