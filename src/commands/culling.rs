@@ -61,15 +61,21 @@ fn drivers_to_compare(args: &CompareArgs) -> Vec<DriverOptions> {
 
 /// `culling compare` without timing models: the cycle columns are left out.
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
+    // One step a frame a machine a driver (on a terminal).
+    let steps = drivers_to_compare(&args).len() * args.scene.frames as usize * CYCLE_MACHINES.len();
+    let bar = crate::progress::bar(steps as u64, "frames timed");
+    bar.set_message("culling compare");
     let mut models: Vec<Box<dyn FrameCycleModel>> = Vec::new();
     for name in CYCLE_MACHINES {
         // A machine this build does not have is simply left out of the table.
         if let Ok(arch) = occsim_sim::Arch::builtin(name) {
-            models.push(Box::new(MachineFrames::new(name, arch)));
+            models.push(Box::new(MachineFrames::new(name, arch, bar.clone())));
         }
     }
     let stdout = std::io::stdout();
-    run_with(&args, &mut models, &mut stdout.lock())
+    let outcome = run_with(&args, &mut models, &mut stdout.lock());
+    bar.finish_and_clear();
+    outcome
 }
 
 /// The machines `culling compare` times every frame on.
@@ -81,14 +87,21 @@ struct MachineFrames {
     name: &'static str,
     arch: occsim_sim::Arch,
     machine: Option<occsim_sim::MachineModel>,
+    /// Moves a step each frame timed.
+    progress: indicatif::ProgressBar,
 }
 
 impl MachineFrames {
-    fn new(name: &'static str, arch: occsim_sim::Arch) -> MachineFrames {
+    fn new(
+        name: &'static str,
+        arch: occsim_sim::Arch,
+        progress: indicatif::ProgressBar,
+    ) -> MachineFrames {
         MachineFrames {
             name,
             arch,
             machine: None,
+            progress,
         }
     }
 }
@@ -153,6 +166,7 @@ impl FrameCycleModel for MachineFrames {
     fn end_frame(&mut self) -> Result<FrameCost, ModelError> {
         let machine = self.machine.take().ok_or_else(|| self.failed(None))?;
         let report = machine.finish().map_err(|e| self.failed(Some(e)))?;
+        self.progress.inc(1);
         // A driver's frame is one closed-loop frame (it ends in `swap`); its split sums the
         // report's frames should there be more.
         let sum = |f: &dyn Fn(&occsim_sim::report::FrameReport) -> u64| {

@@ -85,7 +85,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         waveform,
         timeline: timeline.as_ref().map(|t| t.0.clone()),
     };
-    let outcome = replay(opener(&args.trace), &arch, options).map_err(cli_words);
+    let outcome = replay(opener_with_progress(&args.trace), &arch, options).map_err(cli_words);
     let mut result = close_waveform(outputs, outcome)?;
     if let Some((recorder, file)) = timeline {
         recorder.flush();
@@ -148,6 +148,36 @@ pub fn opener(
     path: &Path,
 ) -> impl FnMut() -> Result<TraceReader<std::io::BufReader<std::fs::File>>, ReplayError> + '_ {
     move || super::trace::open_trace(path).map_err(|e| ReplayError::Open(e.into()))
+}
+
+/// As [`opener`], with a progress bar over the bytes of each pass (on a terminal).
+fn opener_with_progress(
+    path: &Path,
+) -> impl FnMut() -> Result<
+    TraceReader<crate::progress::Counted<std::io::BufReader<std::fs::File>>>,
+    ReplayError,
+> + '_ {
+    let size = std::fs::metadata(path).map_or(0, |m| m.len());
+    let mut passes = 0;
+    move || {
+        passes += 1;
+        let file = std::fs::File::open(path)
+            .with_context(|| format!("cannot open trace {}", path.display()))
+            .map_err(|e| ReplayError::Open(e.into()))?;
+        let bar = crate::progress::bytes_bar(size);
+        let name = path
+            .file_name()
+            .unwrap_or(path.as_os_str())
+            .to_string_lossy();
+        bar.set_message(format!("{name} pass {passes}"));
+        let counted = crate::progress::Counted {
+            inner: std::io::BufReader::with_capacity(1 << 20, file),
+            bar,
+        };
+        TraceReader::new(counted)
+            .with_context(|| format!("{}: not a readable occsim trace", path.display()))
+            .map_err(|e| ReplayError::Open(e.into()))
+    }
 }
 
 /// A replay error in the command line's words, naming the trace `name` and the flag a

@@ -6,9 +6,9 @@ use anyhow::Context;
 use occsim_sweep::output::write_atomically_with;
 use occsim_traces::trace::{TraceHeader, TraceSummary, TraceWriter};
 use occsim_traces::workloads::{
-    city, forest, generate, load_obj, CameraPath, CityOptions, DriverKind, DriverOptions,
-    ForestOptions, GenerateError, ObjOptions, Walk, WorkloadError, WorkloadOption, WorkloadScene,
-    WorkloadStats,
+    city, forest, generate_observed, load_obj, CameraPath, CityOptions, CommandObserver,
+    DriverKind, DriverOptions, ForestOptions, GenerateError, ObjOptions, Walk, WorkloadError,
+    WorkloadOption, WorkloadScene, WorkloadStats,
 };
 use std::io::Read;
 use std::path::Path;
@@ -263,19 +263,37 @@ pub fn write_workload_trace(
     let header = TraceHeader::new(walk.width, walk.height)
         .with_scene(args.describe(&scene, &driver))
         .with_raster(walk.raster);
-    write_atomically_with(output, |file| {
+    let mut frames = FrameProgress(crate::progress::bar(walk.frames as u64, "frames"));
+    frames
+        .0
+        .set_message(format!("{} walkthrough", driver.label()));
+    let written = write_atomically_with(output, |file| {
         let mut writer = TraceWriter::new(file, &header)?;
-        let stats = generate(&scene, &driver, &walk, &mut writer).map_err(|e| match e {
-            GenerateError::Workload(e) => flagged(e),
-            GenerateError::Sink(e) => {
-                anyhow::Error::new(e).context(format!("{}: cannot write trace", output.display()))
-            }
-        })?;
+        let stats = generate_observed(&scene, &driver, &walk, &mut writer, &mut frames).map_err(
+            |e| match e {
+                GenerateError::Workload(e) => flagged(e),
+                GenerateError::Sink(e) => anyhow::Error::new(e)
+                    .context(format!("{}: cannot write trace", output.display())),
+            },
+        )?;
         let summary = writer
             .finish_seekable()
             .with_context(|| format!("{}: cannot write trace", output.display()))?;
         Ok((summary, stats))
-    })
+    });
+    frames.0.finish_and_clear();
+    written
+}
+
+/// Moves a progress bar a step at each frame's end.
+struct FrameProgress(indicatif::ProgressBar);
+
+impl CommandObserver for FrameProgress {
+    fn command(&mut self, command: &occsim_traces::Command) {
+        if let occsim_traces::Command::Swap = command {
+            self.0.inc(1);
+        }
+    }
 }
 
 #[cfg(test)]
