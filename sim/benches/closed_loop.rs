@@ -13,18 +13,6 @@ use std::time::Instant;
 
 const REPEATS: usize = 5;
 
-fn is_closed_loop_record(event: &Event) -> bool {
-    matches!(
-        event,
-        Event::Geometry(_)
-            | Event::HostWork(_)
-            | Event::Wait(_)
-            | Event::ConditionalBegin(_)
-            | Event::ConditionalEnd
-            | Event::Swap
-    )
-}
-
 fn main() {
     let scene = city(&CityOptions::default());
     let walk = Walk {
@@ -43,7 +31,7 @@ fn main() {
     .expect("the walkthrough generates");
     let open: Vec<Event> = closed
         .iter()
-        .filter(|e| !is_closed_loop_record(e))
+        .filter(|e| !e.is_closed_loop_record())
         .cloned()
         .collect();
     let fragments = closed

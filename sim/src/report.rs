@@ -210,6 +210,16 @@ pub struct QueryReport {
     pub tiles: Vec<TileReport>,
 }
 
+/// The latest query `id` among `queries`: the cycle its result is available and the record
+/// words the host reads back.
+pub(crate) fn latest_answer(queries: &[QueryReport], id: u32) -> Option<(u64, u64)> {
+    queries
+        .iter()
+        .rev()
+        .find(|q| q.id == id)
+        .map(|q| (q.available_cycle, q.record_words()))
+}
+
 impl QueryReport {
     /// The 32-bit words of the query's result records: a brief record a tile and the hits
     /// kept (what the host reads back).

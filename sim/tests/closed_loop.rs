@@ -231,16 +231,7 @@ fn demo_events(closed_loop: bool) -> (u32, u32, Vec<Event>) {
         if matches!(e, Event::Wait(_) | Event::Swap) {
             return false;
         }
-        closed_loop
-            || !matches!(
-                e,
-                Event::Geometry(_)
-                    | Event::HostWork(_)
-                    | Event::Wait(_)
-                    | Event::ConditionalBegin(_)
-                    | Event::ConditionalEnd
-                    | Event::Swap
-            )
+        closed_loop || !e.is_closed_loop_record()
     };
     (width, height, events.into_iter().filter(keep).collect())
 }

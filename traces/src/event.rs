@@ -75,6 +75,22 @@ pub enum Event {
     Swap,
 }
 
+impl Event {
+    /// One of the closed loop's records (geometry batches, host work, waits, conditional
+    /// rendering, frame ends): what a version-1 trace cannot hold.
+    pub fn is_closed_loop_record(&self) -> bool {
+        matches!(
+            self,
+            Event::Geometry(_)
+                | Event::HostWork(_)
+                | Event::Wait(_)
+                | Event::ConditionalBegin(_)
+                | Event::ConditionalEnd
+                | Event::Swap
+        )
+    }
+}
+
 /// A run of submitted triangles the geometry stage processed. A draw (one `glDrawArrays`)
 /// is one or more batches; its first has `starts_draw`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]

@@ -258,14 +258,7 @@ impl SampledModel {
         if matches!(event, Event::Swap) {
             self.window.work = (self.predicted.pipe_end() - before).ceil() as u64;
         }
-        self.closed_loop |= matches!(
-            event,
-            Event::Geometry(_)
-                | Event::HostWork(_)
-                | Event::Wait(_)
-                | Event::ConditionalBegin(_)
-                | Event::Swap
-        );
+        self.closed_loop |= event.is_closed_loop_record();
         self.formulas.event(event);
         if let Some(run) = &mut self.run {
             run.machine.event(event)?;

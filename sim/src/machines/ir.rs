@@ -232,12 +232,7 @@ impl IrMachine {
     /// The latest query `id` that has ended: the cycle its result is available and the
     /// record words the host reads.
     pub fn result_available(&mut self, id: u32) -> Result<Option<(u64, u64)>, SimError> {
-        Ok(self
-            .queries
-            .iter()
-            .rev()
-            .find(|q| q.id == id)
-            .map(|q| (q.available_cycle, q.record_words())))
+        Ok(crate::report::latest_answer(&self.queries, id))
     }
 
     /// Cycles the busiest Fragment Generator has been busy so far.

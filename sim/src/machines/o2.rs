@@ -437,12 +437,7 @@ impl O2Machine {
     /// before the result is read).
     pub fn result_available(&mut self, id: u32) -> Result<Option<(u64, u64)>, SimError> {
         self.drain()?;
-        Ok(self
-            .queries
-            .iter()
-            .rev()
-            .find(|q| q.id == id)
-            .map(|q| (q.available_cycle, q.record_words())))
+        Ok(crate::report::latest_answer(&self.queries, id))
     }
 
     /// Cycles the rasterizer has been busy so far.

@@ -336,17 +336,7 @@ fn as_version_1(mut bytes: Vec<u8>) -> Vec<u8> {
 fn version_1_traces_still_read_and_say_they_have_no_closed_loop() {
     let events: Vec<Event> = every_kind()
         .into_iter()
-        .filter(|e| {
-            !matches!(
-                e,
-                Event::Geometry(_)
-                    | Event::HostWork(_)
-                    | Event::Wait(_)
-                    | Event::ConditionalBegin(_)
-                    | Event::ConditionalEnd
-                    | Event::Swap
-            )
-        })
+        .filter(|e| !e.is_closed_loop_record())
         .collect();
     let bytes = as_version_1(write_default(&events));
     let reader = TraceReader::new(&bytes[..]).unwrap();
