@@ -71,6 +71,24 @@ impl Pipe {
     }
 }
 
+/// The host of a machine's parameters (both tables name the host's parameters alike).
+macro_rules! host_of {
+    ($a:expr) => {
+        Host::new(HostCosts::from_host_cycles(
+            $a.host_clock_mhz,
+            $a.clock_mhz,
+            [
+                $a.host_cycles_per_node,
+                $a.host_cycles_per_box_test,
+                $a.host_cycles_per_decision,
+                $a.host_cycles_per_draw,
+                $a.host_cycles_per_readback_pixel,
+                $a.host_cycles_per_state_change,
+            ],
+        ))
+    };
+}
+
 /// The closed loop `arch` describes: its host, geometry stage and result path.
 pub(crate) fn closed_loop_of(arch: &Arch) -> Result<ClosedLoop, SimError> {
     Ok(match arch.machine() {
@@ -78,18 +96,7 @@ pub(crate) fn closed_loop_of(arch: &Arch) -> Result<ClosedLoop, SimError> {
             let a = arch.o2()?;
             let scale = a.clock_mhz / a.host_clock_mhz;
             ClosedLoop::new(
-                Host::new(HostCosts::from_host_cycles(
-                    a.host_clock_mhz,
-                    a.clock_mhz,
-                    [
-                        a.host_cycles_per_node,
-                        a.host_cycles_per_box_test,
-                        a.host_cycles_per_decision,
-                        a.host_cycles_per_draw,
-                        a.host_cycles_per_readback_pixel,
-                        a.host_cycles_per_state_change,
-                    ],
-                )),
+                host_of!(a),
                 Geometry::OnHost {
                     per_vertex: a.geometry_host_cycles_per_vertex as f64 * scale,
                     per_triangle: a.geometry_host_cycles_per_triangle as f64 * scale,
@@ -106,18 +113,7 @@ pub(crate) fn closed_loop_of(arch: &Arch) -> Result<ClosedLoop, SimError> {
             let bus_per_vertex =
                 a.bus_bytes_per_vertex as f64 / a.bus_megabytes_per_second * a.clock_mhz;
             ClosedLoop::new(
-                Host::new(HostCosts::from_host_cycles(
-                    a.host_clock_mhz,
-                    a.clock_mhz,
-                    [
-                        a.host_cycles_per_node,
-                        a.host_cycles_per_box_test,
-                        a.host_cycles_per_decision,
-                        a.host_cycles_per_draw,
-                        a.host_cycles_per_readback_pixel,
-                        a.host_cycles_per_state_change,
-                    ],
-                )),
+                host_of!(a),
                 Geometry::Engines {
                     per_vertex: a.geometry_engine_cycles_per_vertex as f64 * ge_scale,
                     per_triangle: a.geometry_engine_cycles_per_triangle as f64 * ge_scale,
