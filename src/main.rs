@@ -18,7 +18,7 @@ macro_rules! out {
 }
 
 mod commands;
-mod progress;
+
 mod scene_input;
 
 use clap::{Parser, Subcommand};

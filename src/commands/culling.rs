@@ -63,7 +63,7 @@ fn drivers_to_compare(args: &CompareArgs) -> Vec<DriverOptions> {
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     // One step a frame a machine a driver (on a terminal).
     let steps = drivers_to_compare(&args).len() * args.scene.frames as usize * CYCLE_MACHINES.len();
-    let bar = crate::progress::bar(steps as u64, "frames timed");
+    let bar = occsim_sweep::progress::bar(steps as u64, "frames timed");
     bar.set_message("culling compare");
     let mut models: Vec<Box<dyn FrameCycleModel>> = Vec::new();
     for name in CYCLE_MACHINES {
@@ -88,14 +88,14 @@ struct MachineFrames {
     arch: occsim_sim::Arch,
     machine: Option<occsim_sim::MachineModel>,
     /// Moves a step each frame timed.
-    progress: indicatif::ProgressBar,
+    progress: occsim_sweep::progress::ProgressBar,
 }
 
 impl MachineFrames {
     fn new(
         name: &'static str,
         arch: occsim_sim::Arch,
-        progress: indicatif::ProgressBar,
+        progress: occsim_sweep::progress::ProgressBar,
     ) -> MachineFrames {
         MachineFrames {
             name,

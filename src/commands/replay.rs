@@ -154,7 +154,7 @@ pub fn opener(
 fn opener_with_progress(
     path: &Path,
 ) -> impl FnMut() -> Result<
-    TraceReader<crate::progress::Counted<std::io::BufReader<std::fs::File>>>,
+    TraceReader<occsim_sweep::progress::Counted<std::io::BufReader<std::fs::File>>>,
     ReplayError,
 > + '_ {
     let size = std::fs::metadata(path).map_or(0, |m| m.len());
@@ -164,13 +164,13 @@ fn opener_with_progress(
         let file = std::fs::File::open(path)
             .with_context(|| format!("cannot open trace {}", path.display()))
             .map_err(|e| ReplayError::Open(e.into()))?;
-        let bar = crate::progress::bytes_bar(size);
+        let bar = occsim_sweep::progress::bytes_bar(size);
         let name = path
             .file_name()
             .unwrap_or(path.as_os_str())
             .to_string_lossy();
         bar.set_message(format!("{name} pass {passes}"));
-        let counted = crate::progress::Counted {
+        let counted = occsim_sweep::progress::Counted {
             inner: std::io::BufReader::with_capacity(1 << 20, file),
             bar,
         };

@@ -263,7 +263,7 @@ pub fn write_workload_trace(
     let header = TraceHeader::new(walk.width, walk.height)
         .with_scene(args.describe(&scene, &driver))
         .with_raster(walk.raster);
-    let mut frames = FrameProgress(crate::progress::bar(walk.frames as u64, "frames"));
+    let mut frames = FrameProgress(occsim_sweep::progress::bar(walk.frames as u64, "frames"));
     frames
         .0
         .set_message(format!("{} walkthrough", driver.label()));
@@ -286,7 +286,7 @@ pub fn write_workload_trace(
 }
 
 /// Moves a progress bar a step at each frame's end.
-struct FrameProgress(indicatif::ProgressBar);
+struct FrameProgress(occsim_sweep::progress::ProgressBar);
 
 impl CommandObserver for FrameProgress {
     fn command(&mut self, command: &occsim_traces::Command) {

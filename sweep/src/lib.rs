@@ -19,6 +19,7 @@ mod grid;
 mod merge;
 pub mod output;
 pub mod plot;
+pub mod progress;
 mod record;
 mod runner;
 

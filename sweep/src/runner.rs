@@ -14,10 +14,10 @@ use crate::record::{
     check_line_belongs, csv_path_for, read_results, render_csv, render_jsonl, Expected,
     PointRecord, StoredLine, SweepLine, FORMAT,
 };
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
-use std::io::{IsTerminal, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
@@ -320,15 +320,10 @@ fn line_for(point: &Point, options: &SweepOptions<'_>, record: PointRecord) -> S
 }
 
 fn progress_bar(wanted: bool, total: usize, position: usize) -> ProgressBar {
-    if !wanted || !std::io::stderr().is_terminal() {
+    if !wanted {
         return ProgressBar::hidden();
     }
-    let bar = ProgressBar::new(total as u64);
-    if let Ok(style) =
-        ProgressStyle::with_template("{bar:40} {pos}/{len} points  {elapsed_precise} (eta {eta})")
-    {
-        bar.set_style(style);
-    }
+    let bar = crate::progress::bar(total as u64, "points");
     bar.set_position(position as u64);
     bar
 }

@@ -1,7 +1,8 @@
 //! Progress bars on long work: drawn on stderr when it is a terminal, hidden otherwise (so
 //! pipes, files and tests see nothing).
 
-use indicatif::{ProgressBar, ProgressStyle};
+pub use indicatif::ProgressBar;
+use indicatif::ProgressStyle;
 use std::io::{IsTerminal, Read};
 
 /// A bar of `total` steps of `unit` (hidden off a terminal).
