@@ -8,8 +8,8 @@
 use occsim_sim::machines::MachineBuilder;
 use occsim_sim::{Arch, Report};
 use occsim_traces::builtin::{demo_scene, DemoOptions};
-use occsim_traces::golden::GoldenModel;
-use occsim_traces::scene::{parse_scene, Command};
+
+mod support;
 use occsim_traces::{
     Event, Fragment, GeometryBatch, QueryMode, QueryResult, QuerySpec, Rect, TileResult,
 };
@@ -213,20 +213,7 @@ fn demo_events(closed_loop: bool) -> (u32, u32, Vec<Event>) {
         lots_per_side: 6,
         ..DemoOptions::default()
     });
-    let lines = parse_scene(&text, "demo").unwrap();
-    let (width, height) = lines
-        .iter()
-        .find_map(|l| match l.command {
-            Command::Viewport { width, height } => Some((width, height)),
-            _ => None,
-        })
-        .unwrap();
-    let mut golden = GoldenModel::new(width, height);
-    let mut events = Vec::new();
-    for line in &lines {
-        golden.execute(&line.command, &mut events).unwrap();
-    }
-    golden.finish(&mut events).unwrap();
+    let (width, height, events) = support::scene_events(&text);
     let keep = |e: &Event| {
         if matches!(e, Event::Wait(_) | Event::Swap) {
             return false;

@@ -7,24 +7,16 @@ use occsim_sim::effects::{
 use occsim_sim::levels::{run_level, Fidelity};
 use occsim_sim::{Arch, MachineBuilder, Report};
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
-use occsim_traces::golden::{EventSink, FunctionalModel, GoldenModel};
-use occsim_traces::scene::{parse_scene, Command};
+use occsim_traces::golden::{EventSink, FunctionalModel};
 use occsim_traces::trace::{TraceFeatures, TraceHeader, TraceReader, TraceWriter};
 use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QuerySpec, Rect};
 use proptest::prelude::*;
 
+mod support;
+
 /// The events of a scene, with the golden results, and its viewport.
 fn scene_events(text: &str) -> (Vec<Event>, u32, u32) {
-    let lines = parse_scene(text, "scene").expect("built-in scenes parse");
-    let Command::Viewport { width, height } = lines[0].command else {
-        panic!("a scene starts with its viewport");
-    };
-    let mut golden = GoldenModel::new(width, height);
-    let mut events = Vec::new();
-    for line in &lines {
-        golden.execute(&line.command, &mut events).unwrap();
-    }
-    golden.finish(&mut events);
+    let (width, height, events) = support::scene_events(text);
     (events, width, height)
 }
 

@@ -6,8 +6,7 @@
 
 use occsim_sim::{Arch, MachineBuilder, OccuModel, Report, WaveformOptions};
 use occsim_traces::builtin::{demo_scene, DemoOptions, HARDCASES};
-use occsim_traces::golden::{FunctionalModel, GoldenModel};
-use occsim_traces::scene::{parse_scene, Command};
+use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{DepthFunc, Event, Fragment, QueryMode, QueryResult, QuerySpec, Rect};
 use proptest::prelude::*;
 use std::io::Write;
@@ -47,24 +46,8 @@ fn check_equivalent(arch: &Arch, width: u32, height: u32, events: &[Event]) -> R
     cycle
 }
 
-/// A scene's events with the golden results, as `occsim trace gen` makes them.
-fn scene_events(text: &str) -> (u32, u32, Vec<Event>) {
-    let lines = parse_scene(text, "scene").unwrap();
-    let (width, height) = lines
-        .iter()
-        .find_map(|l| match l.command {
-            Command::Viewport { width, height } => Some((width, height)),
-            _ => None,
-        })
-        .unwrap();
-    let mut golden = GoldenModel::new(width, height);
-    let mut events = Vec::new();
-    for line in &lines {
-        golden.execute(&line.command, &mut events).unwrap();
-    }
-    golden.finish(&mut events);
-    (width, height, events)
-}
+mod support;
+use support::scene_events;
 
 #[test]
 fn hardcases_scene_is_identical() {
