@@ -335,6 +335,34 @@ fn a_wait_for_a_query_that_never_ended_is_an_error_naming_the_event() {
 }
 
 #[test]
+fn every_level_refuses_a_wait_for_a_query_that_never_ended() {
+    use occsim_sim::levels::{run_level, Fidelity};
+    let events = [
+        Event::DepthTest(false),
+        begin(1),
+        Event::QueryEnd,
+        Event::Wait(9),
+    ];
+    for level in ["functional", "analytic", "sampled:2", "cycle", "rtl"] {
+        let level: Fidelity = level.parse().unwrap();
+        let error = run_level(
+            level,
+            &o2(),
+            8,
+            8,
+            occsim_sim::effects::EffectsChoice::Auto,
+            &events,
+        )
+        .unwrap_err()
+        .to_string();
+        assert_eq!(
+            error, "event 3: the host waits for query 9's result, but no query 9 has ended",
+            "{level}"
+        );
+    }
+}
+
+#[test]
 fn golden_results_still_check_in_the_closed_loop() {
     // A wrong golden result is caught as in the open loop.
     let mut events = vec![Event::DepthTest(false)];

@@ -8,7 +8,8 @@ use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{Event, Fragment, QueryMode, QueryResult, Span};
 
 /// The functional model with the stream checks every level shares: fragments inside the
-/// viewport, well-formed queries, results equal to the golden results stored in the stream.
+/// viewport, well-formed queries, results equal to the golden results stored in the stream,
+/// waits and conditionals naming a query that has ended.
 pub struct FunctionalCore {
     pub(crate) functional: FunctionalModel,
     width: u32,
@@ -16,6 +17,8 @@ pub struct FunctionalCore {
     events: u64,
     open: Option<u32>,
     open_fragments: u64,
+    /// Queries that have ended: what a wait or a conditional may name.
+    ended: std::collections::HashSet<u32>,
     /// The result of the query that just ended, waiting for the stream's golden result.
     golden: GoldenCheck,
     queries: Vec<QueryOutcome>,
@@ -33,6 +36,7 @@ impl FunctionalCore {
             events: 0,
             open: None,
             open_fragments: 0,
+            ended: std::collections::HashSet::new(),
             golden: GoldenCheck::default(),
             queries: Vec::new(),
             fragments: 0,
@@ -107,9 +111,17 @@ impl FunctionalCore {
                 self.open_fragments = 0;
             }
             Event::QueryEnd => {
-                self.open
+                let id = self
+                    .open
                     .take()
                     .ok_or(SimError::EndWithoutBegin { event: index })?;
+                self.ended.insert(id);
+            }
+            Event::Wait(id) | Event::ConditionalBegin(id) if !self.ended.contains(id) => {
+                return Err(SimError::NoResultToWaitFor {
+                    event: index,
+                    id: *id,
+                });
             }
             Event::QueryResult(golden) => {
                 self.events += 1;
