@@ -83,17 +83,32 @@ fn count_json_gives_verbose_buffers_and_tiles() {
     assert_eq!(by_id(23)["tiles"][0]["nohc"], 1);
     // A 2x2-pixel square at window (30..32, 30..32): 4 hits.
     let fits = by_id(24);
-    assert_eq!(fits["tiles"][0]["hits"].as_array().unwrap().len(), 4);
+    assert_eq!(fits["tiles"][0]["hits"]["count"], 4);
+    assert_eq!(
+        fits["tiles"][0]["hits"]["listed"].as_array().unwrap().len(),
+        4
+    );
+    assert_eq!(
+        fits["tiles"][0]["hits"]["listed"][0],
+        serde_json::json!([30, 30])
+    );
     assert_eq!(fits["tiles"][0]["overflowed"], false);
     assert_eq!(fits["overflowed_buffers"], 0);
     assert_eq!(fits["tiles"][0]["xmin"], 30);
     assert_eq!(fits["tiles"][0]["xmax"], 31);
     let by_one = by_id(25);
-    assert_eq!(by_one["tiles"][0]["hits"].as_array().unwrap().len(), 2);
+    assert_eq!(by_one["tiles"][0]["hits"]["count"], 2);
+    assert_eq!(
+        by_one["tiles"][0]["hits"]["listed"]
+            .as_array()
+            .unwrap()
+            .len(),
+        2
+    );
     assert_eq!(by_one["tiles"][0]["overflowed"], true);
     assert_eq!(by_one["overflowed_buffers"], 1);
     let minimum = by_id(26);
-    assert_eq!(minimum["tiles"][0]["hits"].as_array().unwrap().len(), 0);
+    assert_eq!(minimum["tiles"][0]["hits"]["count"], 0);
     assert_eq!(minimum["tiles"][0]["nohc"], 4);
     assert_eq!(minimum["overflowed_buffers"], 1);
     let brief = by_id(27);
@@ -570,20 +585,78 @@ fn a_huge_buffer_costs_the_memory_it_uses_not_its_capacity() {
     let trace = dir.join("hc.occt");
     let trace = trace.to_str().unwrap();
     stdout_of(&["trace", "gen", "hardcases", "-o", trace]);
-    let command = format!(
-        "ulimit -v 4000000 && exec {} replay {trace} --arch ir4 --set occu_write_buffer_words=1048576",
-        env!("CARGO_BIN_EXE_occsim")
+    let output = occsim_within(
+        4_000_000,
+        &format!("replay {trace} --arch ir4 --set occu_write_buffer_words=1048576"),
     );
-    let output = std::process::Command::new("sh")
-        .args(["-c", &command])
-        .output()
-        .unwrap();
     assert!(
         output.status.success(),
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
     assert!(String::from_utf8_lossy(&output.stdout).contains("cycles"));
+}
+
+/// Run `occsim args` with its address space limited to `kib` KiB; its output.
+fn occsim_within(kib: u64, args: &str) -> std::process::Output {
+    let command = format!(
+        "ulimit -v {kib} && exec {} {args}",
+        env!("CARGO_BIN_EXE_occsim")
+    );
+    std::process::Command::new("sh")
+        .args(["-c", &command])
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn verbose_hits_cost_memory_by_the_tile_not_by_the_hit() {
+    // One 99x99 quad under a verbose query of 16,384 copies of the whole-viewport tile with
+    // 16 Mi-entry buffers: 16,384 * 9,801 = 160.6 million hits kept. Held as lists they took
+    // 4 bytes or more each (over 640 MB; the result record was also too large to store in a
+    // trace); held as `HitList`s each tile costs a few words, so every stage runs in 512 MB
+    // of address space.
+    let dir = scratch_dir("verbose-memory");
+    let scene = dir.join("many-tiles.scene");
+    let tiles = vec!["tile=0,0,99,99"; 16384].join(" ");
+    std::fs::write(
+        &scene,
+        format!(
+            "viewport 99 99\nclear\nbegin 1 verbose buffer=16777216 {tiles}\n\
+             tri -1 -1 0 1  1 -1 0 1  1 1 0 1\ntri -1 -1 0 1  1 1 0 1  -1 1 0 1\nend\n"
+        ),
+    )
+    .unwrap();
+    let (scene, trace) = (scene.to_str().unwrap(), dir.join("t.occt"));
+    let trace = trace.to_str().unwrap();
+    let limit = 512_000;
+    for args in [
+        format!("count {scene}"),
+        format!("trace gen {scene} -o {trace}"),
+        format!("replay {trace}"),
+        format!("replay {trace} --arch ir1"),
+    ] {
+        let output = occsim_within(limit, &args);
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        assert!(
+            output.status.success(),
+            "{args}: {}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        if args.starts_with("count") {
+            // Every tile holds every pixel: 9,801 hits, all fitting the buffer.
+            let last = stdout.lines().last().unwrap();
+            assert_eq!(
+                last,
+                "query 1 verbose tile 16383 nohc 9801 phc 9801 hits 9801"
+            );
+        } else if args.starts_with("replay") {
+            assert!(
+                stdout.contains("1 queries checked against golden results"),
+                "{stdout}"
+            );
+        }
+    }
 }
 
 #[test]

@@ -2,7 +2,7 @@
 //! golden result the stream carries right after its end, and the two must agree.
 
 use crate::error::SimError;
-use occsim_traces::QueryResult;
+use occsim_traces::{QueryResult, TileResult};
 
 /// The first field where a simulated result differs from the golden one:
 /// (field, simulated value, golden value).
@@ -53,12 +53,43 @@ impl GoldenCheck {
     }
 }
 
+/// How two hit lists must agree.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum HitOrder {
+    /// In the same order (one engine stream in fragment order, as the golden model).
+    Same,
+    /// As multisets, the simulated list merged from partial lists in another order; on
+    /// overflow, which hits a buffer keeps depends on that order, so only their number and
+    /// their lying in the tile's box are compared.
+    Merged,
+}
+
 /// The first field where the simulated result differs from the golden one, whose counters
 /// are first saturated to the hardware's width: `(field, simulated, golden)`.
 pub fn first_difference(
     simulated: &QueryResult,
     golden: &QueryResult,
     counter_max: u64,
+) -> Option<(String, String, String)> {
+    difference(simulated, golden, counter_max, HitOrder::Same)
+}
+
+/// The first difference between a merged result and the golden one, as [`first_difference`]
+/// but with hit lists compared as multisets when no buffer overflowed, and on overflow only
+/// by their length and by every kept hit lying in the tile's box (see [`HitOrder::Merged`]).
+pub fn merged_difference(
+    simulated: &QueryResult,
+    golden: &QueryResult,
+    counter_max: u64,
+) -> Option<(String, String, String)> {
+    difference(simulated, golden, counter_max, HitOrder::Merged)
+}
+
+fn difference(
+    simulated: &QueryResult,
+    golden: &QueryResult,
+    counter_max: u64,
+    order: HitOrder,
 ) -> Option<(String, String, String)> {
     let differ = |field: String, s: &dyn std::fmt::Debug, g: &dyn std::fmt::Debug| {
         Some((field, format!("{s:?}"), format!("{g:?}")))
@@ -99,11 +130,11 @@ pub fn first_difference(
                 &g.hits.len(),
             );
         }
-        if let Some(h) = (0..s.hits.len()).find(|&h| s.hits[h] != g.hits[h]) {
-            return differ(format!("tile {t} hit {h}"), &s.hits[h], &g.hits[h]);
-        }
         if s.overflowed != g.overflowed {
             return differ(format!("tile {t} overflowed"), &s.overflowed, &g.overflowed);
+        }
+        if let Some(found) = hit_difference(s, g, order) {
+            return Some((format!("tile {t} {}", found.0), found.1, found.2));
         }
     }
     if simulated.overflowed_buffers != golden.overflowed_buffers {
@@ -116,39 +147,53 @@ pub fn first_difference(
     None
 }
 
-/// The first difference between a merged result and the golden one, as [`first_difference`]
-/// but with hit lists compared as multisets when no buffer overflowed, and on overflow only
-/// by their length and by every kept hit lying in the tile's box (see the module docs).
-pub fn merged_difference(
-    simulated: &QueryResult,
-    golden: &QueryResult,
-    counter_max: u64,
+/// The first difference between two tiles' hit lists of equal length.
+fn hit_difference(
+    s: &TileResult,
+    g: &TileResult,
+    order: HitOrder,
 ) -> Option<(String, String, String)> {
-    let mut simulated = simulated.clone();
-    let mut golden = golden.clone();
-    for (t, (s, g)) in simulated
-        .tiles
-        .iter_mut()
-        .zip(golden.tiles.iter_mut())
-        .enumerate()
-    {
-        if s.overflowed && g.overflowed && s.hits.len() == g.hits.len() {
-            let outside = s.hits.iter().find(|&&(x, y)| {
-                !(s.xmin..=s.xmax).contains(&(x as u32)) || !(s.ymin..=s.ymax).contains(&(y as u32))
-            });
-            if let Some(hit) = outside {
-                return Some((
-                    format!("tile {t} hit outside the box"),
-                    format!("{hit:?}"),
-                    "none".into(),
-                ));
+    let differ = |field: &str, sv: &dyn std::fmt::Debug, gv: &dyn std::fmt::Debug| {
+        Some((field.to_owned(), format!("{sv:?}"), format!("{gv:?}")))
+    };
+    let (sd, gd) = (s.hits.digests(), g.hits.digests());
+    match order {
+        HitOrder::Same => {
+            let (sl, gl) = (s.hits.listed(), g.hits.listed());
+            if let Some(h) = (0..sl.len().min(gl.len())).find(|&h| sl[h] != gl[h]) {
+                return differ(&format!("hit {h}"), &sl[h], &gl[h]);
             }
-            s.hits.clear();
-            g.hits.clear();
-        } else {
-            s.hits.sort_unstable();
-            g.hits.sort_unstable();
+            if sl.len() != gl.len() {
+                return differ("hits listed", &sl.len(), &gl.len());
+            }
+            if sd.map(|d| d.in_order) != gd.map(|d| d.in_order) {
+                return differ("hits (in-order digest)", &sd, &gd);
+            }
+        }
+        HitOrder::Merged if s.overflowed && g.overflowed => {
+            let inside = s.hits.bounds().is_none_or(|b| {
+                (s.xmin..=s.xmax).contains(&(b.xmin as u32))
+                    && (s.xmin..=s.xmax).contains(&(b.xmax as u32))
+                    && (s.ymin..=s.ymax).contains(&(b.ymin as u32))
+                    && (s.ymin..=s.ymax).contains(&(b.ymax as u32))
+            });
+            if !inside {
+                return differ("hit outside the box", &s.hits.bounds(), &"none");
+            }
+        }
+        HitOrder::Merged => {
+            if s.hits.is_fully_listed() && g.hits.is_fully_listed() {
+                let (mut sl, mut gl) = (s.hits.listed().to_vec(), g.hits.listed().to_vec());
+                sl.sort_unstable();
+                gl.sort_unstable();
+                if let Some(h) = (0..sl.len()).find(|&h| sl[h] != gl[h]) {
+                    return differ(&format!("hit {h} (sorted)"), &sl[h], &gl[h]);
+                }
+            }
+            if sd.map(|d| d.as_set) != gd.map(|d| d.as_set) {
+                return differ("hits (multiset digest)", &sd, &gd);
+            }
         }
     }
-    first_difference(&simulated, &golden, counter_max)
+    None
 }

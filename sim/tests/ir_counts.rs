@@ -157,7 +157,7 @@ fn counts_equal_the_golden_model_for_every_interleave_and_count() {
                         for (result, truth) in results.iter().zip(&truth) {
                             for (tile, true_tile) in result.tiles.iter().zip(&truth.tiles) {
                                 assert!(
-                                    is_sub_multiset(&tile.hits, &true_tile.hits),
+                                    is_sub_multiset(tile.hits.listed(), true_tile.hits.listed()),
                                     "{context}: query {} kept a hit that is not a true hit",
                                     result.id
                                 );
@@ -204,20 +204,20 @@ fn a_tile_split_across_boards_and_image_engines_is_merged_exactly() {
         (1, 5, 1, 3)
     );
     assert_eq!((merged.zmin, merged.zmax), (111, 153));
-    let mut hits = merged.hits.clone();
+    let mut hits = merged.hits.listed().to_vec();
     hits.sort_unstable();
     let expected: Vec<(u16, u16)> = (1..=5).flat_map(|x| (1..=3).map(move |y| (x, y))).collect();
     assert_eq!(hits, expected);
     assert!(!merged.overflowed);
     // Board 1 owns columns 1, 3, 5; board 0 columns 0, 2, 4: hits come board by board.
     assert_eq!(
-        merged.hits[0],
+        merged.hits.listed()[0],
         (2, 1),
         "board 0's first Image Engine with a hit owns column 2"
     );
     let corner = &results[0].tiles[1];
     assert_eq!(
-        (corner.nohc, corner.hits.as_slice()),
+        (corner.nohc, corner.hits.listed()),
         (1, &[(0u16, 0u16)][..])
     );
 }
@@ -243,7 +243,7 @@ fn overflowed_hit_lists_keep_room_minus_one_true_hits() {
         4,
         "room 5, one entry taken by the -1 terminator"
     );
-    assert!(tile.hits.iter().all(|&(x, y)| x < 8 && y == 0));
+    assert!(tile.hits.listed().iter().all(|&(x, y)| x < 8 && y == 0));
     assert_eq!(report.queries[0].overflowed_buffers, 1);
 }
 

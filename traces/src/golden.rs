@@ -211,20 +211,27 @@ impl TileIndex {
     }
 }
 
-/// Account a fragment inside a tile. Hits beyond `hit_room` are only counted (in NOHC);
+/// A verbose tile's room for hits and how many of them its result lists.
+#[derive(Clone, Copy, Debug)]
+struct HitRoom {
+    room: u64,
+    listed: usize,
+}
+
+/// Account a fragment inside a tile. Hits beyond the room are only counted (in NOHC);
 /// `OpenQuery::finish` trims the list on overflow.
 #[inline(always)]
-fn record_in_tile(result: &mut TileResult, fragment: Fragment, passed: bool, hit_room: usize) {
+fn record_in_tile(result: &mut TileResult, fragment: Fragment, passed: bool, hits: HitRoom) {
     result.record(fragment.x, fragment.y, fragment.z, passed);
-    if passed && result.hits.len() < hit_room {
-        result.hits.push((fragment.x, fragment.y));
+    if passed && result.hits.len() < hits.room {
+        result.hits.push((fragment.x, fragment.y), hits.listed);
     }
 }
 
 /// Account a run of fragments, all inside this tile, as [`record_in_tile`] does one by one:
 /// the counters and bounds once, the hits in order.
 #[inline]
-fn record_run(result: &mut TileResult, run: Span, passed: &[bool], hit_room: usize) {
+fn record_run(result: &mut TileResult, run: Span, passed: &[bool], hits: HitRoom) {
     result.phc += run.depths.len() as u64;
     // One whole-run reduction without branches per fragment (it vectorises).
     // (A passing fragment's mask is all ones, a failing one's zero; a run is at most
@@ -250,13 +257,13 @@ fn record_run(result: &mut TileResult, run: Span, passed: &[bool], hit_room: usi
     result.ymax = result.ymax.max(y);
     result.zmin = result.zmin.min(zmin);
     result.zmax = result.zmax.max(zmax);
-    if result.hits.len() < hit_room {
-        let room = hit_room - result.hits.len();
-        let hits = (first..=last)
+    if result.hits.len() < hits.room {
+        let room = hits.room - result.hits.len();
+        (first..=last)
             .filter(|&i| passed[i])
             .map(|i| (run.x + i as u16, run.y))
-            .take(room);
-        result.hits.extend(hits);
+            .take(room.min(usize::MAX as u64) as usize)
+            .for_each(|hit| result.hits.push(hit, hits.listed));
     }
 }
 
@@ -265,17 +272,20 @@ struct OpenQuery {
     spec: QuerySpec,
     tiles: Vec<TileResult>,
     index: Option<TileIndex>,
-    /// Hit-list room per tile when every hit fits (verbose only).
-    hit_room: usize,
+    /// Hit-list room per tile when every hit fits (verbose only), and the hits listed.
+    hit_room: HitRoom,
 }
 
 impl OpenQuery {
     fn new(spec: QuerySpec, state: &RenderState) -> OpenQuery {
         let tiles = vec![TileResult::default(); spec.tiles.len()];
         let index = TileIndex::build(&spec, state);
-        let hit_room = match spec.mode {
-            QueryMode::Verbose => spec.hit_capacity() as usize,
-            _ => 0,
+        let hit_room = HitRoom {
+            room: match spec.mode {
+                QueryMode::Verbose => spec.hit_capacity() as u64,
+                _ => 0,
+            },
+            listed: spec.listed_hits_per_tile(),
         };
         OpenQuery {
             spec,
@@ -365,7 +375,7 @@ impl OpenQuery {
         if self.spec.mode == QueryMode::Verbose {
             for tile in &mut self.tiles {
                 let (kept, overflowed) = verbose_hits_kept(self.spec.buffer_entries, tile.nohc);
-                tile.hits.truncate(kept as usize);
+                tile.hits.truncate(kept);
                 tile.overflowed = overflowed;
                 overflowed_buffers += overflowed as u32;
             }

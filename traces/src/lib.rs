@@ -14,6 +14,7 @@ pub mod builtin;
 pub mod event;
 mod geometry;
 pub mod golden;
+pub mod hit_list;
 pub mod query;
 pub mod raster;
 pub mod retile;
@@ -24,6 +25,7 @@ pub mod trace;
 pub mod workloads;
 
 pub use event::{Event, Fragment, GeometryBatch, HostWork, Span};
+pub use hit_list::{Hit, HitList};
 pub use query::{QueryMode, QueryResult, QuerySpec, Tile, TileResult};
 pub use scene::{Command, SceneError, SceneLine};
 pub use state::{DepthFunc, Rect};

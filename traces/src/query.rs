@@ -1,5 +1,6 @@
 //! Query semantics: what a query asks (its mode, tiles, buffers) and what it answers.
 
+use crate::hit_list::{listed_hits_per_tile, HitList};
 use crate::state::Rect;
 use serde::{Deserialize, Serialize};
 
@@ -84,6 +85,12 @@ impl QuerySpec {
     pub fn hit_capacity(&self) -> u32 {
         self.buffer_entries - BRIEF_RECORD_ENTRIES
     }
+
+    /// Hits each tile's result lists (the rest are counted and digested only): every
+    /// model of the query lists the same ones.
+    pub fn listed_hits_per_tile(&self) -> usize {
+        listed_hits_per_tile(self.tiles.len())
+    }
 }
 
 /// One tile's answer: the brief record and, in verbose mode, the stored hits.
@@ -102,8 +109,9 @@ pub struct TileResult {
     pub ymax: u32,
     pub zmin: u32,
     pub zmax: u32,
-    /// Verbose mode: the (x, y) of passing fragments, in arrival order, as many as fit.
-    pub hits: Vec<(u16, u16)>,
+    /// Verbose mode: the (x, y) of passing fragments, in arrival order, as many as fit
+    /// (counted and digested exactly; the first ones listed, see [`HitList`]).
+    pub hits: HitList,
     /// Verbose mode: more hits arrived than the buffer holds (it ends with -1 then).
     pub overflowed: bool,
 }
@@ -119,7 +127,7 @@ impl Default for TileResult {
             ymax: 0,
             zmin: u32::MAX,
             zmax: 0,
-            hits: Vec::new(),
+            hits: HitList::default(),
             overflowed: false,
         }
     }
@@ -141,9 +149,9 @@ impl TileResult {
         }
     }
 
-    /// Fold another partial result for the same tile into this one (hits concatenated;
-    /// counters add saturating at `u64::MAX`).
-    pub fn merge(&mut self, other: &TileResult) {
+    /// Fold another partial result for the same tile into this one (hits concatenated and
+    /// listed up to `list_cap`; counters add saturating at `u64::MAX`).
+    pub fn merge(&mut self, other: &TileResult, list_cap: usize) {
         self.nohc = self.nohc.saturating_add(other.nohc);
         self.phc = self.phc.saturating_add(other.phc);
         self.xmin = self.xmin.min(other.xmin);
@@ -152,7 +160,7 @@ impl TileResult {
         self.ymax = self.ymax.max(other.ymax);
         self.zmin = self.zmin.min(other.zmin);
         self.zmax = self.zmax.max(other.zmax);
-        self.hits.extend_from_slice(&other.hits);
+        self.hits.append(&other.hits, list_cap);
         self.overflowed |= other.overflowed;
     }
 }

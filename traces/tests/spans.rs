@@ -167,8 +167,8 @@ fn a_span_over_two_tiles_counts_in_each_and_keeps_its_hits_in_order() {
     assert_eq!((tiles[0].phc, tiles[0].nohc), (3, 3));
     assert_eq!((tiles[0].xmin, tiles[0].xmax), (1, 3));
     assert_eq!((tiles[0].zmin, tiles[0].zmax), (10, 30));
-    assert_eq!(tiles[0].hits, [(1, 0), (2, 0), (3, 0)]);
+    assert_eq!(tiles[0].hits.listed(), [(1, 0), (2, 0), (3, 0)]);
     assert_eq!((tiles[1].phc, tiles[1].nohc), (3, 3));
     assert_eq!((tiles[1].xmin, tiles[1].xmax), (4, 6));
-    assert_eq!(tiles[1].hits, [(4, 0), (5, 0), (6, 0)]);
+    assert_eq!(tiles[1].hits.listed(), [(4, 0), (5, 0), (6, 0)]);
 }

@@ -17,6 +17,7 @@
 //!   host is one reader for both stages and all queries, so its reads never overlap.
 
 use crate::arch::{MergeKind, MergeNetwork};
+use occsim_traces::hit_list::listed_hits_per_tile;
 use occsim_traces::TileResult;
 
 /// Fold `part` into `total`: counters saturate at `counter_max`, hit lists keep `hit_room`.
@@ -26,12 +27,13 @@ pub fn merge_partial(
     counter_max: u64,
     hit_room: usize,
 ) {
+    let list_cap = listed_hits_per_tile(total.len());
     for (t, p) in total.iter_mut().zip(part) {
-        t.merge(p);
+        t.merge(p, list_cap);
         t.nohc = t.nohc.min(counter_max);
         t.phc = t.phc.min(counter_max);
-        if t.hits.len() > hit_room {
-            t.hits.truncate(hit_room);
+        if t.hits.len() > hit_room as u64 {
+            t.hits.truncate(hit_room as u64);
             t.overflowed = true;
         }
     }
@@ -72,6 +74,7 @@ pub fn merged_ready(network: &MergeNetwork, inputs: &[u64], host: &mut u64) -> u
 #[cfg(test)]
 mod tests {
     use super::*;
+    use occsim_traces::HitList;
 
     fn network(kind: MergeKind) -> MergeNetwork {
         MergeNetwork {
@@ -112,16 +115,17 @@ mod tests {
     fn hit_lists_concatenate_within_the_room() {
         let part = |hits: Vec<(u16, u16)>| TileResult {
             nohc: hits.len() as u64,
+            hits: HitList::from_hits(hits, 10),
             phc: 9,
             xmin: 1,
             xmax: 1,
-            hits,
             ..TileResult::default()
         };
         let mut total = vec![TileResult::default()];
         merge_partial(&mut total, &[part(vec![(1, 0), (1, 1)])], 10, 3);
         merge_partial(&mut total, &[part(vec![(1, 2), (1, 3)])], 10, 3);
-        assert_eq!(total[0].hits, [(1, 0), (1, 1), (1, 2)]);
+        assert_eq!(total[0].hits.listed(), [(1, 0), (1, 1), (1, 2)]);
+        assert_eq!(total[0].hits.len(), 3);
         assert!(total[0].overflowed);
         assert_eq!(
             (total[0].nohc, total[0].phc),

@@ -26,6 +26,8 @@ pub struct OcclusionEngine {
     tiles: Vec<TileRegisters>,
     verbose: bool,
     hit_room: u64,
+    /// Hits each tile's result lists (`QuerySpec::listed_hits_per_tile`).
+    hit_list_cap: usize,
     counter_max: u64,
     /// Cycles spent testing tiles.
     pub busy_cycles: u64,
@@ -35,16 +37,19 @@ pub struct OcclusionEngine {
 
 impl OcclusionEngine {
     /// Load the tiles of a new query: `(index in the query, rectangle)`. `verbose` queries
-    /// send hits while a tile's buffer has `hit_room` entries for them.
+    /// send hits while a tile's buffer has `hit_room` entries for them, listing the first
+    /// `hit_list_cap` of a tile's hits in its result.
     pub fn load(
         &mut self,
         tiles: impl Iterator<Item = (usize, Tile)>,
         verbose: bool,
         hit_room: u64,
+        hit_list_cap: usize,
         counter_max: u64,
     ) {
         self.verbose = verbose;
         self.hit_room = hit_room;
+        self.hit_list_cap = hit_list_cap;
         self.counter_max = counter_max;
         self.tiles.clear();
         self.tiles.extend(tiles.map(|(index, rect)| TileRegisters {
@@ -83,7 +88,7 @@ impl OcclusionEngine {
                 if self.verbose {
                     if tile.hits_sent < self.hit_room {
                         tile.hits_sent += 1;
-                        r.hits.push((fragment.x, fragment.y));
+                        r.hits.push((fragment.x, fragment.y), self.hit_list_cap);
                         hit_words += 1;
                     } else {
                         r.overflowed = true;

@@ -80,7 +80,13 @@ impl OcclusionUnit {
                 .enumerate()
                 .skip(e)
                 .step_by(count);
-            engine.load(dealt, verbose, room, self.counter_max);
+            engine.load(
+                dealt,
+                verbose,
+                room,
+                spec.listed_hits_per_tile(),
+                self.counter_max,
+            );
         }
         for (cycles, engine) in self.engine_cycles.iter_mut().zip(&self.engines) {
             let k = engine.tile_count() as u64;

@@ -86,7 +86,7 @@ impl OccuControl {
                 if room > 0 {
                     words += 1;
                     self.terminator_words += 1;
-                    tile.hits.truncate(room as usize - 1);
+                    tile.hits.truncate(room - 1);
                 }
             }
             self.record_words += BRIEF_RECORD_ENTRIES as u64;

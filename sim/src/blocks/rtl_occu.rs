@@ -39,7 +39,7 @@ use occsim_rtl::{
     CycleInputs, CycleOutputs, FragmentPort, OccuParams, OccuRtl, QueryConfig, ResultPath, TileRect,
 };
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
-use occsim_traces::{Fragment, QueryMode, QuerySpec, TileResult};
+use occsim_traces::{Fragment, HitList, QueryMode, QuerySpec, TileResult};
 use std::collections::VecDeque;
 
 pub struct RtlOccu {
@@ -55,7 +55,9 @@ pub struct RtlOccu {
     words_written: u64,
     grant_cycles: u64,
     /// The open query's hit entries per tile, as written to memory.
-    hits: Vec<Vec<(u16, u16)>>,
+    hits: Vec<HitList>,
+    /// Hits each tile's result lists (`QuerySpec::listed_hits_per_tile`).
+    hit_list_cap: usize,
     /// First cycle the unit is free (`c_last + 1`).
     free: u64,
     /// The last tick changed nothing and left only idle wires.
@@ -105,6 +107,7 @@ impl RtlOccu {
             words_written: 0,
             grant_cycles: 0,
             hits: Vec::new(),
+            hit_list_cap: 0,
             free: 0,
             last_tick_idle: false,
             waveform,
@@ -152,7 +155,10 @@ impl RtlOccu {
                 WordKind::Hit => {
                     let hits = &mut self.hits[word.tile as usize];
                     debug_assert_eq!(word.offset, BRIEF_RECORD_ENTRIES + hits.len() as u32);
-                    hits.push((word.data as u16, (word.data >> 16) as u16));
+                    hits.push(
+                        (word.data as u16, (word.data >> 16) as u16),
+                        self.hit_list_cap,
+                    );
                     self.claim(t, port)
                 }
                 WordKind::Record | WordKind::Terminator => {
@@ -206,7 +212,8 @@ impl RtlOccu {
             hit_room: spec.buffer_entries.saturating_sub(BRIEF_RECORD_ENTRIES),
         });
         self.hits.clear();
-        self.hits.resize(spec.tiles.len(), Vec::new());
+        self.hits.resize(spec.tiles.len(), HitList::default());
+        self.hit_list_cap = spec.listed_hits_per_tile();
     }
 
     #[inline]
@@ -271,7 +278,7 @@ impl RtlOccu {
                 6 => tile.zmin = word.data as u32,
                 7 => tile.zmax = word.data as u32,
                 entry => {
-                    self.hits[word.tile as usize].truncate((entry - BRIEF_RECORD_ENTRIES) as usize)
+                    self.hits[word.tile as usize].truncate((entry - BRIEF_RECORD_ENTRIES) as u64)
                 }
             }
         }

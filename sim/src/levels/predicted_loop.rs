@@ -94,7 +94,7 @@ impl PredictedLoop {
     /// A query ended, closing its window: `end` is the level's prediction.
     pub(crate) fn end_query(&mut self, end: WindowEnd, result: &QueryResult) {
         self.close(end);
-        let hits: u64 = result.tiles.iter().map(|t| t.hits.len() as u64).sum();
+        let hits: u64 = result.tiles.iter().map(|t| t.hits.len()).sum();
         let words =
             result.tiles.len() as u64 * occsim_traces::query::BRIEF_RECORD_ENTRIES as u64 + hits;
         let available = (self.pipe_end + end.latency).ceil() as u64;

@@ -514,7 +514,7 @@ fn finish_verbose(spec: &QuerySpec, tiles: &mut [TileResult]) -> u32 {
     let mut overflowed = 0;
     for tile in tiles.iter_mut().filter(|t| t.overflowed) {
         overflowed += 1;
-        tile.hits.truncate(room.saturating_sub(1));
+        tile.hits.truncate(room.saturating_sub(1) as u64);
     }
     overflowed
 }

@@ -564,7 +564,7 @@ pub(crate) fn tile_report(tile: &TileResult) -> TileReport {
         ymax: tile.ymax,
         zmin: tile.zmin,
         zmax: tile.zmax,
-        hits_written: tile.hits.len() as u64,
+        hits_written: tile.hits.len(),
         overflowed: tile.overflowed,
     }
 }

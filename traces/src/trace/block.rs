@@ -5,8 +5,10 @@ pub const MAGIC: [u8; 8] = *b"OCCT\r\n\x1a\n";
 /// The last 8 bytes of every trace.
 pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// The format version this code writes. Version 2 added the closed loop's records
-/// (geometry batches, host work, waits, conditional rendering, frame ends).
-pub const FORMAT_VERSION: u16 = 2;
+/// (geometry batches, host work, waits, conditional rendering, frame ends); version 3 stores
+/// verbose hit lists as counts, digests and the first hits listed (`HitList`), so a result's
+/// size no longer grows with its hits.
+pub const FORMAT_VERSION: u16 = 3;
 /// The oldest version this code reads: version-1 traces replay as an open loop.
 pub const OLDEST_READABLE_VERSION: u16 = 1;
 /// Most bytes of header JSON.

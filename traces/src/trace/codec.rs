@@ -6,6 +6,9 @@
 use super::header::StreamTally;
 use crate::event::{Event, Fragment, GeometryBatch, HostWork, Span, DEPTH_ONE};
 use crate::golden::EventSink;
+use crate::hit_list::{
+    listed_hits_per_tile, Hit, HitBounds, HitDigests, HitList, LISTED_HITS_PER_QUERY,
+};
 use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult, MAX_BUFFER_ENTRIES, MAX_TILES};
 use crate::state::{DepthFunc, Rect};
 
@@ -26,7 +29,8 @@ pub(crate) mod tag {
     pub const PRIMITIVE: u8 = 0x0A;
     /// A run of fragments on one row at x, x+1, ...
     pub const SPAN: u8 = 0x0B;
-    pub const QUERY_RESULT: u8 = 0x0C;
+    /// A query result whose verbose tiles store every hit (versions 1 and 2; read only).
+    pub const QUERY_RESULT_LISTED: u8 = 0x0C;
     /// Then a varint length and that many bytes of a large event (continued).
     pub const PART: u8 = 0x0D;
     /// As PART, and the large event is complete: its bytes are one QUERY_BEGIN or QUERY_RESULT
@@ -43,6 +47,9 @@ pub(crate) mod tag {
     pub const CONDITIONAL_BEGIN: u8 = 0x12;
     pub const CONDITIONAL_END: u8 = 0x13;
     pub const SWAP: u8 = 0x14;
+    /// A query result whose verbose tiles store their hit lists as `HitList` holds them:
+    /// count, the listed hits, digests, bounds and the last hit. Version 3 on.
+    pub const QUERY_RESULT: u8 = 0x15;
 }
 
 /// Most fragments in one span: a row of the widest viewport.
@@ -276,6 +283,18 @@ impl<'a> Cursor<'a> {
         self.uv_max(u32::MAX as u64, what).map(|v| v as u32)
     }
 
+    /// Eight bytes, little-endian.
+    fn u64_le(&mut self, what: &str) -> Result<u64, PayloadError> {
+        let Some(bytes) = self.bytes.get(self.pos..self.pos + 8) else {
+            return Err(bad(
+                self.pos,
+                format!("{what} runs past the end of the payload"),
+            ));
+        };
+        self.pos += 8;
+        Ok(u64::from_le_bytes(bytes.try_into().expect("eight bytes")))
+    }
+
     fn flag(&mut self, what: &str) -> Result<bool, PayloadError> {
         let pos = self.pos;
         match self.byte()? {
@@ -456,9 +475,37 @@ fn put_tile_result(out: &mut Vec<u8>, tile: &TileResult) {
         put_uv(out, v as u64);
     }
     out.push(tile.overflowed as u8);
-    put_uv(out, tile.hits.len() as u64);
+    put_hit_list(out, &tile.hits);
+}
+
+/// Count and listed hits (as deltas); then, for a list that holds any, a flags byte (bit 0
+/// digests known, bit 1 last hit known), the two digests as little-endian u64s, the bounds
+/// and the last hit.
+fn put_hit_list(out: &mut Vec<u8>, hits: &HitList) {
+    put_uv(out, hits.len());
+    put_uv(out, hits.listed().len() as u64);
+    put_hits(out, hits.listed());
+    let Some(bounds) = hits.bounds() else {
+        return;
+    };
+    let digests = hits.digests();
+    out.push(digests.is_some() as u8 | (hits.last().is_some() as u8) << 1);
+    if let Some(d) = digests {
+        out.extend_from_slice(&d.in_order.to_le_bytes());
+        out.extend_from_slice(&d.as_set.to_le_bytes());
+    }
+    for v in [bounds.xmin, bounds.xmax, bounds.ymin, bounds.ymax] {
+        put_uv(out, v as u64);
+    }
+    if let Some((x, y)) = hits.last() {
+        put_uv(out, x as u64);
+        put_uv(out, y as u64);
+    }
+}
+
+fn put_hits(out: &mut Vec<u8>, hits: &[Hit]) {
     let (mut px, mut py) = (0i64, 0i64);
-    for &(x, y) in &tile.hits {
+    for &(x, y) in hits {
         put_zz(out, x as i64 - px);
         put_zz(out, y as i64 - py);
         (px, py) = (x as i64, y as i64);
@@ -498,7 +545,8 @@ fn decode_large_event(bytes: &[u8]) -> Result<Event, PayloadError> {
     let mut c = Cursor::new(bytes, 0);
     let event = match c.byte()? {
         tag::QUERY_BEGIN => Event::QueryBegin(query_spec(&mut c)?),
-        tag::QUERY_RESULT => Event::QueryResult(query_result(&mut c)?),
+        tag::QUERY_RESULT => Event::QueryResult(query_result(&mut c, HitCoding::Digested)?),
+        tag::QUERY_RESULT_LISTED => Event::QueryResult(query_result(&mut c, HitCoding::Listed)?),
         t => return Err(bad(0, format!("multi-block event has tag {t:#04x}"))),
     };
     if !c.at_end() {
@@ -525,15 +573,25 @@ fn query_spec(c: &mut Cursor) -> Result<QuerySpec, PayloadError> {
     })
 }
 
-fn query_result(c: &mut Cursor) -> Result<QueryResult, PayloadError> {
+/// How a query result record stores its hit lists.
+#[derive(Clone, Copy)]
+enum HitCoding {
+    /// Every hit (versions 1 and 2).
+    Listed,
+    /// As [`put_hit_list`] writes them.
+    Digested,
+}
+
+fn query_result(c: &mut Cursor, coding: HitCoding) -> Result<QueryResult, PayloadError> {
     let id = c.u32("query id")?;
     let mode = c.mode()?;
     let overflowed_buffers = c.u32("overflowed buffers")?;
     let count = c.uv_max(MAX_TILES as u64, "tile count")? as usize;
+    let list_cap = listed_hits_per_tile(count);
     // Every tile result takes at least 10 bytes.
     let mut tiles = Vec::with_capacity(count.min(c.remaining() / 10));
     for _ in 0..count {
-        tiles.push(tile_result(c)?);
+        tiles.push(tile_result(c, coding, list_cap)?);
     }
     Ok(QueryResult {
         id,
@@ -543,7 +601,11 @@ fn query_result(c: &mut Cursor) -> Result<QueryResult, PayloadError> {
     })
 }
 
-fn tile_result(c: &mut Cursor) -> Result<TileResult, PayloadError> {
+fn tile_result(
+    c: &mut Cursor,
+    coding: HitCoding,
+    list_cap: usize,
+) -> Result<TileResult, PayloadError> {
     let nohc = c.uv()?;
     let phc = c.uv()?;
     let mut bounds = [0u32; 6];
@@ -552,19 +614,13 @@ fn tile_result(c: &mut Cursor) -> Result<TileResult, PayloadError> {
     }
     let [xmin, xmax, ymin, ymax, zmin, zmax] = bounds;
     let overflowed = c.flag("overflow")?;
-    let count = c.uv_max(MAX_BUFFER_ENTRIES as u64, "hit count")? as usize;
-    // Every hit takes at least 2 bytes.
-    let mut hits = Vec::with_capacity(count.min(c.remaining() / 2));
-    let (mut x, mut y) = (0i64, 0i64);
-    for _ in 0..count {
-        let pos = c.pos;
-        x = x.wrapping_add(c.zz()?);
-        y = y.wrapping_add(c.zz()?);
-        if !(0..=u16::MAX as i64).contains(&x) || !(0..=u16::MAX as i64).contains(&y) {
-            return Err(bad(pos, "hit coordinates outside 0..=65535"));
+    let hits = match coding {
+        HitCoding::Listed => {
+            let count = c.uv_max(MAX_BUFFER_ENTRIES as u64, "hit count")? as usize;
+            HitList::from_hits(hits(c, count)?, list_cap)
         }
-        hits.push((x as u16, y as u16));
-    }
+        HitCoding::Digested => hit_list(c)?,
+    };
     Ok(TileResult {
         nohc,
         phc,
@@ -577,6 +633,61 @@ fn tile_result(c: &mut Cursor) -> Result<TileResult, PayloadError> {
         hits,
         overflowed,
     })
+}
+
+fn hit_list(c: &mut Cursor) -> Result<HitList, PayloadError> {
+    let start = c.pos;
+    let len = c.uv_max(MAX_BUFFER_ENTRIES as u64, "hit count")?;
+    let listed_count = c.uv_max(len.min(LISTED_HITS_PER_QUERY as u64), "listed hits")?;
+    let listed: Vec<Hit> = hits(c, listed_count as usize)?.collect();
+    let (mut digests, mut bounds, mut last) = (None, None, None);
+    if len > 0 {
+        let pos = c.pos;
+        let flags = c.byte()?;
+        if flags > 0b11 {
+            return Err(bad(
+                pos,
+                format!("hit list flags {flags:#04x} have unknown bits"),
+            ));
+        }
+        if flags & 1 == 1 {
+            digests = Some(HitDigests {
+                in_order: c.u64_le("in-order hit digest")?,
+                as_set: c.u64_le("hit set digest")?,
+            });
+        }
+        let mut coordinate = || c.uv_max(u16::MAX as u64, "hit bound").map(|v| v as u16);
+        bounds = Some(HitBounds {
+            xmin: coordinate()?,
+            xmax: coordinate()?,
+            ymin: coordinate()?,
+            ymax: coordinate()?,
+        });
+        if flags & 2 == 2 {
+            last = Some((coordinate()?, coordinate()?));
+        }
+    }
+    HitList::from_parts(len, listed, digests, bounds, last).map_err(|why| bad(start, why))
+}
+
+/// `count` hits coded as deltas, checked to lie in 0..=65535.
+fn hits<'c>(
+    c: &'c mut Cursor,
+    count: usize,
+) -> Result<impl Iterator<Item = Hit> + 'c, PayloadError> {
+    // Every hit takes at least 2 bytes.
+    let mut hits = Vec::with_capacity(count.min(c.remaining() / 2));
+    let (mut x, mut y) = (0i64, 0i64);
+    for _ in 0..count {
+        let pos = c.pos;
+        x = x.wrapping_add(c.zz()?);
+        y = y.wrapping_add(c.zz()?);
+        if !(0..=u16::MAX as i64).contains(&x) || !(0..=u16::MAX as i64).contains(&y) {
+            return Err(bad(pos, "hit coordinates outside 0..=65535"));
+        }
+        hits.push((x as u16, y as u16));
+    }
+    Ok(hits.into_iter())
 }
 
 /// A span being handed out one fragment at a time (the `next_event` path).
@@ -732,7 +843,10 @@ impl BlockDecoder {
                 event
             }
             tag::QUERY_BEGIN => Event::QueryBegin(query_spec(&mut c)?),
-            tag::QUERY_RESULT => Event::QueryResult(query_result(&mut c)?),
+            tag::QUERY_RESULT => Event::QueryResult(query_result(&mut c, HitCoding::Digested)?),
+            tag::QUERY_RESULT_LISTED => {
+                Event::QueryResult(query_result(&mut c, HitCoding::Listed)?)
+            }
             tag::CLEAR => Event::Clear,
             tag::DEPTH_FUNC => {
                 let pos = c.pos;
@@ -922,6 +1036,52 @@ mod tests {
         assert_eq!(error.pos, 0);
         assert!(
             error.reason.contains("depth -2 outside"),
+            "{}",
+            error.reason
+        );
+    }
+
+    #[test]
+    fn a_version_2_result_with_every_hit_listed_reads_as_a_hit_list() {
+        // The record as versions 1 and 2 wrote it: tag, id 7, mode verbose, 0 overflowed
+        // buffers, 1 tile; nohc 3, phc 4, six bounds, not overflowed; 3 hits as zigzag
+        // deltas from (0, 0): (2, 1) -> +2 +1, (5, 1) -> +3 0, (4, 2) -> -1 +1.
+        let mut record = vec![tag::QUERY_RESULT_LISTED, 7, QueryMode::Verbose.code(), 0, 1];
+        record.extend([3, 4, 2, 5, 1, 2, 9, 9, 0, 3]);
+        record.extend([4, 2, 6, 0, 1, 2]);
+        let Event::QueryResult(result) = decode_large_event(&record).unwrap() else {
+            panic!("not a result");
+        };
+        let hits = [(2, 1), (5, 1), (4, 2)];
+        assert_eq!(
+            result.tiles[0].hits,
+            HitList::from_hits(hits, LISTED_HITS_PER_QUERY)
+        );
+        assert_eq!(result.tiles[0].hits.listed(), hits);
+    }
+
+    #[test]
+    fn hit_lists_round_trip_and_contradicting_parts_name_their_offset() {
+        let mut cut = HitList::from_hits([(1, 2), (3, 4), (5, 6)], 2);
+        cut.truncate(1);
+        for list in [
+            HitList::default(),
+            HitList::from_hits([(9, 9)], 0),
+            HitList::from_hits([(65535, 0), (0, 65535), (7, 7)], 2),
+            cut,
+        ] {
+            let mut bytes = Vec::new();
+            put_hit_list(&mut bytes, &list);
+            let mut c = Cursor::new(&bytes, 0);
+            assert_eq!(hit_list(&mut c).unwrap(), list);
+            assert!(c.at_end());
+        }
+        // Two hits listed of one held.
+        let bytes = [1, 2, 0, 0, 2, 2];
+        let error = hit_list(&mut Cursor::new(&bytes, 0)).unwrap_err();
+        assert_eq!(error.pos, 1, "{}", error.reason);
+        assert!(
+            error.reason.contains("listed hits 2 exceeds 1"),
             "{}",
             error.reason
         );

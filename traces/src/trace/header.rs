@@ -364,7 +364,7 @@ impl StreamTally {
         }
         let hit_room = match ended.mode {
             QueryMode::Verbose => {
-                (ended.buffer_entries - crate::query::BRIEF_RECORD_ENTRIES) as usize
+                (ended.buffer_entries - crate::query::BRIEF_RECORD_ENTRIES) as u64
             }
             _ => 0,
         };
@@ -376,15 +376,13 @@ impl StreamTally {
                     tile.hits.len()
                 ));
             }
-            if let Some(&(x, y)) = tile
-                .hits
-                .iter()
-                .find(|&&(x, y)| x as u32 >= self.width || y as u32 >= self.height)
-            {
-                return Err(format!(
-                    "tile {index} of query {}: hit ({x}, {y}) outside the viewport",
-                    ended.id
-                ));
+            if let Some(b) = tile.hits.bounds() {
+                if b.xmax as u32 >= self.width || b.ymax as u32 >= self.height {
+                    return Err(format!(
+                        "tile {index} of query {}: hits up to ({}, {}) outside the viewport",
+                        ended.id, b.xmax, b.ymax
+                    ));
+                }
             }
         }
         Ok(())

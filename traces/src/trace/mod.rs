@@ -1,9 +1,10 @@
 //! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
 //!
-//! # Layout (version 2; all integers little-endian; version 1, without the closed loop's records, still reads)
+//! # Layout (version 3; all integers little-endian; versions 1, without the closed loop's
+//! records, and 2, with verbose hits stored one by one, still read)
 //!
 //! ```text
-//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 2 | flags u16 = 0
+//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 3 | flags u16 = 0
 //!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
 //!               (the CRC covers version .. end of JSON)
 //! event blocks  block header (20) | stored payload (stored_len)

@@ -3,6 +3,7 @@ use super::synthetic::{generate, SyntheticScene};
 use super::*;
 use crate::event::{Event, Fragment, GeometryBatch, HostWork, DEPTH_ONE};
 use crate::golden::{infallible, EventSink};
+use crate::hit_list::{listed_hits_per_tile, HitList};
 use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult};
 use crate::state::{DepthFunc, Rect};
 use proptest::prelude::*;
@@ -102,10 +103,13 @@ fn every_kind() -> Vec<Event> {
         ymax: 4,
         zmin: 0,
         zmax: DEPTH_ONE,
-        hits: vec![(0, 0), (16383, 16383), (5, 0)],
+        hits: HitList::from_hits([(0, 0), (16383, 16383), (5, 0)], 2),
         overflowed: true,
     };
-    result_tiles[4095].hits = vec![(16383, 0)];
+    result_tiles[4095].hits = HitList::from_hits([(16383, 0)], 1);
+    // A list a merge cut short: its digests and last hit unknown.
+    result_tiles[7].hits = HitList::from_hits([(1, 2), (3, 4), (5, 6)], 1);
+    result_tiles[7].hits.truncate(1);
     events.push(Event::QueryResult(QueryResult {
         id: u32::MAX,
         mode: QueryMode::Verbose,
@@ -220,13 +224,15 @@ fn summary_counts_what_the_stream_holds() {
 #[test]
 fn a_result_larger_than_a_block_travels_in_parts() {
     let tiles = grid_tiles(256, 256, 64);
-    let hits: Vec<(u16, u16)> = (0..256).map(|i| (i * 61 % 16384, i * 17)).collect();
-    let results = tiles
-        .iter()
-        .map(|_| TileResult {
+    let listed = listed_hits_per_tile(tiles.len());
+    let results = (0..tiles.len())
+        .map(|t| TileResult {
             nohc: 300,
             phc: 300,
-            hits: hits.clone(),
+            hits: HitList::from_hits(
+                (0..256).map(|i| (i * 61 % 16384, i * 17 + (t % 8192) as u16)),
+                listed,
+            ),
             ..TileResult::default()
         })
         .collect();
@@ -252,8 +258,11 @@ fn a_result_larger_than_a_block_travels_in_parts() {
         WriterOptions::default(),
         &events,
     );
+    // The result's 65,536 tiles take about 50 bytes each (counters, bounds, one listed hit,
+    // two 8-byte digests, the hits' box and last hit): over 3 MiB, so at least three of the
+    // 1 MiB blocks.
     assert!(
-        summary.blocks >= 10,
+        summary.blocks >= 3,
         "expected the result to span blocks: {summary:?}"
     );
     assert_eq!(read_one_by_one(&bytes).unwrap().0, events);
@@ -308,14 +317,14 @@ fn wrong_magic_is_named() {
 
 #[test]
 fn unknown_version_is_named() {
-    for version in [0u8, 3] {
+    for version in [0u8, 4] {
         let mut bytes = write_default(&every_kind());
         bytes[8] = version;
         let error = TraceReader::new(&bytes[..]).err().unwrap();
         assert!(
             matches!(
                 error,
-                TraceError::UnsupportedVersion { offset: 8, version: v, known: 2 } if v == version as u16
+                TraceError::UnsupportedVersion { offset: 8, version: v, known: 3 } if v == version as u16
             ),
             "{error}"
         );
@@ -344,7 +353,7 @@ fn version_1_traces_still_read_and_say_they_have_no_closed_loop() {
     assert!(!reader.has_closed_loop());
     let current_bytes = write_default(&events);
     let current = TraceReader::new(&current_bytes[..]).unwrap();
-    assert_eq!(current.format_version(), 2);
+    assert_eq!(current.format_version(), 3);
     assert!(current.has_closed_loop());
     assert_eq!(read_bulk(&bytes).unwrap().0, events);
 }
