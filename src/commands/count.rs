@@ -25,14 +25,22 @@ pub fn run(args: CountArgs) -> anyhow::Result<()> {
     let mut golden = GoldenModel::with_profile(scene.width, scene.height, args.raster.profile);
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
-    let mut results = Vec::new();
+    // The JSON array is written result by result, so memory does not grow with the queries.
+    let mut results = 0usize;
+    if args.json {
+        write!(out, "[")?;
+    }
     for line in &mut scene.reader {
         let line = line?;
         let Some(result) = infallible(golden.execute(&line.command, &mut Discard)) else {
             continue;
         };
         if args.json {
-            results.push(result);
+            // Each result as `to_writer_pretty` would nest it in the array: indented once.
+            let pretty = serde_json::to_string_pretty(&result)?;
+            let separator = if results == 0 { "\n" } else { ",\n" };
+            write!(out, "{separator}  {}", pretty.replace('\n', "\n  "))?;
+            results += 1;
             continue;
         }
         match result.mode {
@@ -60,8 +68,7 @@ pub fn run(args: CountArgs) -> anyhow::Result<()> {
         }
     }
     if args.json {
-        serde_json::to_writer_pretty(&mut out, &results)?;
-        writeln!(out)?;
+        writeln!(out, "{}]", if results == 0 { "" } else { "\n" })?;
     }
     out.flush()?;
     Ok(())
