@@ -24,8 +24,27 @@ pub enum Track {
     Rasterizer,
     /// The O2's depth pipeline (prefetch, test, write buffer).
     DepthPipeline,
-    /// The O2's Occlusion Unit (all its engines in lockstep).
+    /// The O2's Occlusion Unit (all its engines in lockstep): busy while it services a
+    /// fragment, from the cycle the fragment starts to the cycle the unit is free again.
     OcclusionUnit,
+    /// One Occlusion Engine of the O2's unit: busy the cycles it tests its tiles for each
+    /// fragment of a query (one a tile, or one for all with `all_tiles_one_cycle`).
+    Engine(u32),
+    /// The O2's OccU Control: busy from the cycle a fragment with hits starts in the unit
+    /// (or a query's end token leaves the depth pipeline) to the port's grant of the last
+    /// hit (or record) word it wrote for it.
+    OccuControl,
+    /// The O2's memory port, one track a client: the cycles the port granted it.
+    MemoryPort(PortLane),
+    /// The geometry stage (transform and setup of submitted triangles), busy per batch: on
+    /// the O2 the host's own geometry work (lane 0, inside the host's busy time), on the
+    /// InfiniteReality each Geometry Engine's lane.
+    Geometry(u32),
+    /// The IR's stage-one merge of a board's Image Engines' partial reports: from the last
+    /// engine's report to the board's merged one.
+    LocalMerge(u32),
+    /// The IR's stage-two merge of the boards' reports, to the result's availability.
+    GlobalMerge,
     /// The IR's Fragment Generator of a board.
     FragmentGenerator(u32),
     /// The IR's Image Engines of a board, aggregated (80 a board are too many tracks): busy
@@ -34,6 +53,28 @@ pub enum Track {
     /// starts before the end of the track's last slice shows only its part after it: the
     /// track shows when the board's engines work, not how many of them.
     ImageEngines(u32),
+}
+
+/// A client of the O2's memory port, as the timeline names it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum PortLane {
+    DepthReads,
+    DepthWrites,
+    OccuControl,
+}
+
+/// A query's life on the machine: begun, ended and answered (cycles).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct QuerySlice {
+    pub id: u32,
+    pub mode: occsim_traces::QueryMode,
+    pub tiles: usize,
+    /// The cycle its `begin` entered the pipe.
+    pub begin_cycle: u64,
+    /// The cycle its `end` entered the pipe (latency counts from here).
+    pub end_cycle: u64,
+    /// The cycle its result is available.
+    pub available_cycle: u64,
 }
 
 /// What a block does in a slice.
@@ -69,9 +110,11 @@ pub struct Slice {
     pub end: u64,
 }
 
-/// Where closed slices go, each once, in no order across tracks (in order along one).
+/// Where closed slices go, each once, in no order across tracks (in order along one), and
+/// every query, in the order the queries end.
 pub trait TimelineSink: Send {
     fn slice(&mut self, slice: Slice);
+    fn query(&mut self, query: QuerySlice);
 }
 
 struct Recorder {
@@ -136,6 +179,15 @@ impl Timeline {
         }
     }
 
+    /// A query was answered: to the sink when any of its life lies in the window.
+    pub fn query(&self, query: QuerySlice) {
+        let mut recorder = self.lock();
+        let window = recorder.window.clone();
+        if query.begin_cycle < window.end && query.available_cycle >= window.start {
+            recorder.sink.query(query);
+        }
+    }
+
     /// Close every open slice (at the run's end).
     pub fn flush(&self) {
         let mut recorder = self.lock();
@@ -167,6 +219,7 @@ mod tests {
         fn slice(&mut self, slice: Slice) {
             self.0.lock().unwrap().push(slice);
         }
+        fn query(&mut self, _: QuerySlice) {}
     }
 
     #[test]

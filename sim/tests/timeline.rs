@@ -1,15 +1,24 @@
 //! The timeline recorder on a hand-worked stream: the slices the O2's blocks report.
 
-use occsim_sim::timeline::{Slice, State, Timeline, TimelineSink, Track};
+use occsim_sim::timeline::{PortLane, QuerySlice, Slice, State, Timeline, TimelineSink, Track};
 use occsim_sim::{Arch, MachineBuilder};
 use occsim_traces::{Event, Fragment, QueryMode, QuerySpec, Rect};
 use std::sync::{Arc, Mutex};
 
-struct Collect(Arc<Mutex<Vec<Slice>>>);
+#[derive(Default)]
+struct Collected {
+    slices: Vec<Slice>,
+    queries: Vec<QuerySlice>,
+}
+
+struct Collect(Arc<Mutex<Collected>>);
 
 impl TimelineSink for Collect {
     fn slice(&mut self, slice: Slice) {
-        self.0.lock().unwrap().push(slice);
+        self.0.lock().unwrap().slices.push(slice);
+    }
+    fn query(&mut self, query: QuerySlice) {
+        self.0.lock().unwrap().queries.push(query);
     }
 }
 
@@ -25,7 +34,7 @@ fn hand_worked_o2_slices() {
     let mut arch = Arch::builtin("o2").unwrap();
     arch.set("engines=1").unwrap();
     arch.set("page_miss_latency_cycles=8").unwrap();
-    let slices = Arc::new(Mutex::new(Vec::new()));
+    let slices = Arc::new(Mutex::new(Collected::default()));
     let timeline = Timeline::new(Box::new(Collect(slices.clone())), 0..u64::MAX);
     let mut machine = MachineBuilder::new(&arch)
         .timeline(timeline.clone())
@@ -47,7 +56,7 @@ fn hand_worked_o2_slices() {
     }
     machine.finish().unwrap();
     timeline.flush();
-    let mut got = slices.lock().unwrap().clone();
+    let mut got = slices.lock().unwrap().slices.clone();
     got.sort_by_key(|s| (s.track, s.start));
     let slice = |track, state, start, end| Slice {
         track,
@@ -62,6 +71,35 @@ fn hand_worked_o2_slices() {
             slice(Track::DepthPipeline, State::Stalled, 1, 9),
             slice(Track::DepthPipeline, State::Busy, 9, 11),
             slice(Track::OcclusionUnit, State::Busy, 10, 12),
+            // The one engine holds the one tile: busy with the unit.
+            slice(Track::Engine(0), State::Busy, 10, 12),
+            // The end token leaves the depth pipeline in 11 (the pipe free after fragment
+            // 1's test in 10); the unit is free in 12, the record's 8 words enter OccU
+            // Control's buffer in 13 and go out in one 256-bit port cycle, 14.
+            slice(Track::OccuControl, State::Busy, 11, 15),
+            // The port: fragment 0's depth read in 1 (fragment 1 reuses the word; a brief
+            // query is an occlusion render mode, so passing fragments write no depth), and
+            // the record in 14.
+            slice(Track::MemoryPort(PortLane::DepthReads), State::Busy, 1, 2),
+            slice(
+                Track::MemoryPort(PortLane::OccuControl),
+                State::Busy,
+                14,
+                15
+            ),
         ]
+    );
+    // The query: its begin entered the pipe before any fragment (0), its end after the
+    // rasterizer emitted both (2); the result is available after the record's grant (15).
+    assert_eq!(
+        slices.lock().unwrap().queries,
+        [QuerySlice {
+            id: 1,
+            mode: QueryMode::Brief,
+            tiles: 1,
+            begin_cycle: 0,
+            end_cycle: 2,
+            available_cycle: 15,
+        }]
     );
 }

@@ -1,13 +1,14 @@
 //! `replay --timeline FILE.json`: the blocks' busy, stall and waiting slices the sim
 //! crate's recorder closes ([`occsim_sim::timeline`]), streamed as Chrome trace-event JSON
 //! (`{"traceEvents": [...]}`, "X" complete events and "M" metadata naming the tracks) as
-//! they come, then a slice per query and per frame from the report. Times are simulated
+//! they come, a slice per query from its begin to its result as each is answered, then a
+//! slice per frame from the report. Times are simulated
 //! microseconds, cycles / clock MHz; every slice's `args` also give its cycles exactly.
 //! The file is written to a temporary beside the target and renamed when the replay
 //! succeeds (nothing is left on an error).
 
 use anyhow::Context;
-use occsim_sim::timeline::{Slice, TimelineSink, Track};
+use occsim_sim::timeline::{PortLane, QuerySlice, Slice, TimelineSink, Track};
 use occsim_sim::Report;
 use occsim_sweep::output::AtomicFile;
 use std::collections::BTreeSet;
@@ -16,21 +17,34 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-/// The `tid` of a track, and its name.
+/// The `tid` of a track (also its place, top to bottom), and its name.
 fn track_id(track: Track) -> (u32, String) {
     match track {
         Track::Host => (1, "host".into()),
-        Track::Rasterizer => (2, "rasterizer (fragment_input)".into()),
-        Track::DepthPipeline => (3, "depth pipeline".into()),
-        Track::OcclusionUnit => (4, "occlusion unit".into()),
-        Track::FragmentGenerator(b) => (100 + b, format!("board {b} fragment generator")),
-        Track::ImageEngines(b) => (200 + b, format!("board {b} image engines")),
+        Track::Geometry(g) => (10 + g, format!("geometry {g}")),
+        Track::Rasterizer => (100, "rasterizer (fragment_input)".into()),
+        Track::DepthPipeline => (101, "depth pipeline".into()),
+        Track::OcclusionUnit => (102, "occlusion unit".into()),
+        Track::Engine(e) => (200 + e, format!("occlusion engine {e}")),
+        Track::OccuControl => (400, "OccU Control".into()),
+        Track::MemoryPort(lane) => {
+            let (offset, client) = match lane {
+                PortLane::DepthReads => (1, "depth reads"),
+                PortLane::DepthWrites => (2, "depth writes"),
+                PortLane::OccuControl => (3, "OccU Control writes"),
+            };
+            (400 + offset, format!("memory port: {client}"))
+        }
+        Track::FragmentGenerator(b) => (1000 + 10 * b, format!("board {b} fragment generator")),
+        Track::ImageEngines(b) => (1001 + 10 * b, format!("board {b} image engines")),
+        Track::LocalMerge(b) => (1002 + 10 * b, format!("board {b} merge (stage one)")),
+        Track::GlobalMerge => (FRAMES_TID - 1, "global merge (stage two)".into()),
     }
 }
 
 /// The frames track's `tid`; query lanes follow it.
-const FRAMES_TID: u32 = 900;
-const QUERIES_TID: u32 = 1000;
+const FRAMES_TID: u32 = 9000;
+const QUERIES_TID: u32 = 10000;
 
 /// The JSON being streamed.
 struct Writer {
@@ -42,6 +56,8 @@ struct Writer {
     error: Option<std::io::Error>,
     /// No event written yet (the next needs no separator).
     first: bool,
+    /// Per query lane, the cycle its last query was answered.
+    lanes: Vec<u64>,
 }
 
 impl Writer {
@@ -98,6 +114,34 @@ impl TimelineSink for Sink {
         let args = serde_json::json!({});
         writer.complete(tid, state, slice.start, slice.end, args);
     }
+
+    /// A query's slice from its begin to its result, on lanes `queries N`: the first lane
+    /// free at its begin, so none overlap.
+    fn query(&mut self, query: QuerySlice) {
+        let mut writer = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let (start, end) = (query.begin_cycle, query.available_cycle);
+        let lane = match writer.lanes.iter().position(|&free| free <= start) {
+            Some(lane) => lane,
+            None => {
+                writer.lanes.push(0);
+                writer.lanes.len() - 1
+            }
+        };
+        writer.lanes[lane] = end;
+        let tid = QUERIES_TID + lane as u32;
+        writer.name_track(tid, &format!("queries {lane}"));
+        let name = format!("query {} {}", query.id, query.mode.name());
+        let latency = query.available_cycle - query.end_cycle;
+        let args = serde_json::json!({
+            "id": query.id,
+            "mode": query.mode.name(),
+            "tiles": query.tiles,
+            "query_end_cycle": query.end_cycle,
+            "latency_cycles": latency,
+            "latency_us": latency as f64 / writer.clock_mhz,
+        });
+        writer.complete(tid, &name, start, end, args);
+    }
 }
 
 /// A timeline file being written: its writer, shared with the sink, and the file.
@@ -127,6 +171,7 @@ impl TimelineFile {
             named: BTreeSet::new(),
             error: None,
             first: true,
+            lanes: Vec::new(),
         };
         writer.put(serde_json::json!({
             "name": "process_name", "ph": "M", "pid": 1, "tid": 0,
@@ -143,40 +188,13 @@ impl TimelineFile {
         Ok((timeline, sink))
     }
 
-    /// After a successful replay: a slice per query (on lanes `queries N`: a query's slice
-    /// goes on the first lane free at its start, so none overlap) and per frame, then the
-    /// file is closed and renamed into place.
+    /// After a successful replay: a slice per frame, then the file is closed and renamed
+    /// into place.
     pub fn finish(self, report: &Report) -> anyhow::Result<()> {
         let cannot = || format!("cannot write the timeline {}", self.path.display());
         let mut writer = self.writer.lock().unwrap_or_else(|e| e.into_inner());
         let window = self.window.clone();
         let inside = |start: u64, end: u64| start < window.end && end > window.start;
-        let mut lanes: Vec<u64> = Vec::new();
-        for query in &report.queries {
-            let (start, end) = (query.end_cycle, query.available_cycle);
-            if !inside(start, end) {
-                continue;
-            }
-            let lane = match lanes.iter().position(|&free| free <= start) {
-                Some(lane) => lane,
-                None => {
-                    lanes.push(0);
-                    lanes.len() - 1
-                }
-            };
-            lanes[lane] = end;
-            let tid = QUERIES_TID + lane as u32;
-            writer.name_track(tid, &format!("queries {lane}"));
-            let name = format!("query {} {}", query.id, query.mode.name());
-            let args = serde_json::json!({
-                "id": query.id,
-                "mode": query.mode.name(),
-                "latency_cycles": query.latency_cycles,
-                "latency_us": query.latency_cycles as f64 / writer.clock_mhz,
-                "tiles": query.tiles.len(),
-            });
-            writer.complete(tid, &name, start, end, args);
-        }
         let mut start = 0;
         for frame in &report.frames {
             let end = start + frame.cycles;

@@ -16,6 +16,7 @@
 //!   cost the engines nothing: the pipeline holds and then drops them.
 
 use crate::blocks::host::{cost, Host};
+use crate::timeline::{note, State, Track};
 use occsim_traces::GeometryBatch;
 
 pub enum Geometry {
@@ -45,7 +46,15 @@ impl Geometry {
             } => {
                 let busy = cost(v, *per_vertex) + cost(t, *per_triangle);
                 host.spend(busy);
-                (host.now(), busy)
+                let done = host.now();
+                note(
+                    &host.timeline,
+                    Track::Geometry(0),
+                    State::Busy,
+                    done - busy,
+                    done,
+                );
+                (done, busy)
             }
             Geometry::Engines {
                 per_vertex,
@@ -63,6 +72,8 @@ impl Geometry {
                 let engine = (0..free.len()).min_by_key(|&e| free[e]).unwrap_or(0);
                 let done = free[engine].max(host.now()) + busy;
                 free[engine] = done;
+                let lane = Track::Geometry(engine as u32);
+                note(&host.timeline, lane, State::Busy, done - busy, done);
                 *last_release = (*last_release).max(done);
                 (*last_release, busy)
             }

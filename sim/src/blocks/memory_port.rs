@@ -10,12 +10,24 @@
 //! In-order service keeps the machine monotone: a request made earlier can never make a
 //! later one wait longer, so speeding up any block never slows a query down.
 
-/// Who asked for port bandwidth (for statistics).
+use crate::timeline::{note, PortLane, State, Timeline, Track};
+
+/// Who asked for port bandwidth (for statistics and the timeline's lanes).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PortClient {
     DepthRead,
     DepthWrite,
     OccuControl,
+}
+
+impl PortClient {
+    fn lane(self) -> PortLane {
+        match self {
+            PortClient::DepthRead => PortLane::DepthReads,
+            PortClient::DepthWrite => PortLane::DepthWrites,
+            PortClient::OccuControl => PortLane::OccuControl,
+        }
+    }
 }
 
 /// Port statistics.
@@ -40,6 +52,8 @@ pub struct MemoryPort {
     /// Bits granted so far in `cycle`.
     cycle_bits: u32,
     stats: PortStats,
+    /// Where each grant's cycle goes, if anywhere (a lane a client).
+    timeline: Option<Timeline>,
 }
 
 impl MemoryPort {
@@ -49,7 +63,13 @@ impl MemoryPort {
             cycle: 0,
             cycle_bits: 0,
             stats: PortStats::default(),
+            timeline: None,
         }
+    }
+
+    /// Report every grant's cycle to `timeline`, on its client's lane.
+    pub fn set_timeline(&mut self, timeline: Option<Timeline>) {
+        self.timeline = timeline;
     }
 
     pub fn bits_per_cycle(&self) -> u32 {
@@ -72,6 +92,14 @@ impl MemoryPort {
             PortClient::DepthWrite => self.stats.depth_write_transfers += 1,
             PortClient::OccuControl => self.stats.occu_transfers += 1,
         }
+        let lane = Track::MemoryPort(client.lane());
+        note(
+            &self.timeline,
+            lane,
+            State::Busy,
+            self.cycle,
+            self.cycle + 1,
+        );
         self.cycle
     }
 

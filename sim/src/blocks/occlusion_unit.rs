@@ -88,14 +88,8 @@ impl OcclusionUnit {
                 self.counter_max,
             );
         }
-        for (cycles, engine) in self.engine_cycles.iter_mut().zip(&self.engines) {
-            let k = engine.tile_count() as u64;
-            *cycles = if self.all_tiles_one_cycle {
-                k.min(1)
-            } else {
-                k
-            };
-        }
+        self.engine_cycles =
+            engine_service_cycles(spec.tiles.len(), count, self.all_tiles_one_cycle);
         self.service_cycles = self.engine_cycles.iter().copied().max().unwrap_or(0).max(1);
         self.active = count.min(spec.tiles.len());
     }
@@ -167,6 +161,22 @@ impl OcclusionUnit {
         self.active = 0;
         results
     }
+}
+
+/// The cycles each of `engines` engines tests one fragment of a query of `tiles` tiles
+/// dealt round-robin (engine `e` holds tiles `e, e + engines, ...`): one a tile it holds,
+/// or one for all of them with `all_tiles_one_cycle`.
+pub fn engine_service_cycles(tiles: usize, engines: usize, all_tiles_one_cycle: bool) -> Vec<u64> {
+    (0..engines)
+        .map(|e| {
+            let held = tiles.saturating_sub(e).div_ceil(engines.max(1)) as u64;
+            if all_tiles_one_cycle {
+                held.min(1)
+            } else {
+                held
+            }
+        })
+        .collect()
 }
 
 /// Statistics the report needs from an Occlusion Unit stage (either fidelity).

@@ -74,7 +74,7 @@ use crate::report::{
     percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, RunTotals, StageReport,
     Summary, UnitSummary,
 };
-use crate::timeline::{note, State, Timeline, Track};
+use crate::timeline::{note, QuerySlice, State, Timeline, Track};
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;
 use occsim_traces::{Event, Fragment, QueryMode, QueryResult, QuerySpec, TileResult};
@@ -87,6 +87,8 @@ struct OpenQuery {
     /// Distinguishes queries, so each Image Engine loads a query's tiles once, lazily.
     generation: u64,
     fragments: u64,
+    /// The cycle its begin entered the pipe (the boards' last free cycle).
+    begin_cycle: u64,
 }
 
 pub struct IrMachine {
@@ -298,8 +300,18 @@ impl IrMachine {
             spec: spec.clone(),
             generation: self.generation,
             fragments: 0,
+            begin_cycle: self.generators_free(),
         });
         Ok(())
+    }
+
+    /// The last cycle a board's Fragment Generator is busy: where a command enters the pipe.
+    fn generators_free(&self) -> u64 {
+        self.generators
+            .iter()
+            .map(FragmentGenerator::free_cycle)
+            .max()
+            .unwrap_or(0)
     }
 
     fn end(&mut self, event: u64) -> Result<(), SimError> {
@@ -308,12 +320,7 @@ impl IrMachine {
             .take()
             .ok_or(SimError::EndWithoutBegin { event })?;
         let spec = &query.spec;
-        let end_cycle = self
-            .generators
-            .iter()
-            .map(FragmentGenerator::free_cycle)
-            .max()
-            .unwrap_or(0);
+        let end_cycle = self.generators_free();
         let counter_max = self.arch.counter_max();
         let room = match spec.mode {
             QueryMode::Verbose => hit_room(spec.buffer_entries) as usize,
@@ -332,12 +339,12 @@ impl IrMachine {
                     merge_partial(&mut tiles, &partial, counter_max, room);
                 }
             }
-            last_drained = last_drained.max(ready.iter().copied().max().unwrap_or(0));
-            board_ready.push(merged_ready(
-                &self.arch.local_merge_network(),
-                &ready,
-                &mut self.host,
-            ));
+            let board_drained = ready.iter().copied().max().unwrap_or(0);
+            last_drained = last_drained.max(board_drained);
+            let merged = merged_ready(&self.arch.local_merge_network(), &ready, &mut self.host);
+            let lane = Track::LocalMerge(board_ready.len() as u32);
+            note(&self.timeline, lane, State::Busy, board_drained, merged);
+            board_ready.push(merged);
         }
         let boards_merged = board_ready.iter().copied().max().unwrap_or(last_drained);
         let available = merged_ready(
@@ -347,6 +354,18 @@ impl IrMachine {
         );
         let overflowed_buffers = finish_verbose(spec, &mut tiles);
         self.last_available = self.last_available.max(available);
+        if let Some(timeline) = &self.timeline {
+            let global = Track::GlobalMerge;
+            timeline.interval(global, State::Busy, boards_merged, available);
+            timeline.query(QuerySlice {
+                id: spec.id,
+                mode: spec.mode,
+                tiles: spec.tiles.len(),
+                begin_cycle: query.begin_cycle,
+                end_cycle,
+                available_cycle: available,
+            });
+        }
         self.queries.push(QueryReport {
             id: spec.id,
             mode: spec.mode,

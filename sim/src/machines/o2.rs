@@ -51,6 +51,7 @@ use crate::blocks::depth_pipeline::DepthPipeline;
 use crate::blocks::fifo::Fifo;
 use crate::blocks::fragment_input::FragmentInput;
 use crate::blocks::memory_port::MemoryPort;
+use crate::blocks::occlusion_unit::engine_service_cycles;
 use crate::blocks::occu_stage::OccuStage;
 use crate::effects::Effects;
 use crate::error::{check_spec, SimError};
@@ -60,7 +61,7 @@ use crate::report::{
     percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, RunTotals, StageReport,
     Summary, TileReport,
 };
-use crate::timeline::{note, State, Timeline, Track};
+use crate::timeline::{note, QuerySlice, State, Timeline, Track};
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;
 use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, TileResult};
@@ -74,6 +75,10 @@ pub const MIN_QUERY_LATENCY_CYCLES: u64 = 5;
 struct OpenQuery {
     spec: QuerySpec,
     fragments: u64,
+    /// The cycle its begin entered the pipe.
+    begin_cycle: u64,
+    /// With a timeline: each engine's cycles per fragment.
+    engine_cycles: Vec<u64>,
 }
 
 /// An item that passed the front end (rasterizer and prefetch) and waits for the back end
@@ -86,6 +91,8 @@ enum Pending {
         /// Cycle its depth data is ready.
         data_ready: u64,
     },
+    /// A query begin that entered the pipe in `entered`.
+    QueryBegin { spec: Box<QuerySpec>, entered: u64 },
     /// A query end that entered the pipe in `entered`.
     QueryEnd { entered: u64, event: u64 },
     /// Any other event, applied in order by the back end.
@@ -184,6 +191,7 @@ impl O2Machine {
             effects,
             timeline: build.timeline,
         };
+        machine.port.set_timeline(machine.timeline.clone());
         if let Some(state) = state {
             machine.depth.load_state(state);
             machine.front_depth_test = state.depth_test;
@@ -220,9 +228,9 @@ impl O2Machine {
             Event::QueryBegin(spec) => {
                 check_spec(spec, index, self.front_open)?;
                 self.front_open = Some(spec.id);
-                self.pending.push_back(Pending::Other {
-                    event: Box::new(event.clone()),
-                    index,
+                self.pending.push_back(Pending::QueryBegin {
+                    spec: Box::new(spec.clone()),
+                    entered: self.input.free_cycle(),
                 });
             }
             Event::QueryEnd => {
@@ -298,6 +306,7 @@ impl O2Machine {
                 self.pending_fragments -= 1;
                 self.back_fragment(fragment, arrive, data_ready);
             }
+            Some(Pending::QueryBegin { spec, entered }) => self.begin(&spec, entered),
             Some(Pending::QueryEnd { entered, event }) => self.end(entered, event)?,
             Some(Pending::Other { event, index }) => self.back_event(&event, index)?,
             None => {}
@@ -311,7 +320,6 @@ impl O2Machine {
         }
         match event {
             Event::Clear => self.depth.clear(),
-            Event::QueryBegin(spec) => self.begin(spec),
             Event::QueryResult(golden) => return self.check(golden, index),
             _ => {}
         }
@@ -340,6 +348,7 @@ impl O2Machine {
             note(t, Track::DepthPipeline, State::Stalled, arrive, cycle);
             note(t, Track::DepthPipeline, State::Busy, cycle, cycle + 1);
         }
+        let granted_before = self.occu.last_grant();
         let start = self.occu.fragment(
             fragment,
             tested.passed,
@@ -350,25 +359,70 @@ impl O2Machine {
         );
         self.depth_to_occu.depart(start);
         if self.timeline.is_some() {
-            let free = self.occu.free_cycle();
-            note(
-                &self.timeline,
-                Track::OcclusionUnit,
-                State::Busy,
-                start,
-                free,
-            );
+            self.note_occu(start, granted_before);
         }
         if let Some(query) = &mut self.open {
             query.fragments += 1;
         }
     }
 
-    fn begin(&mut self, spec: &QuerySpec) {
+    /// The timeline's Occlusion Unit, engine and OccU Control slices of a fragment that
+    /// started in the unit in `start` (OccU Control's last grant was `granted_before`).
+    fn note_occu(&self, start: u64, granted_before: Option<u64>) {
+        let t = &self.timeline;
+        note(
+            t,
+            Track::OcclusionUnit,
+            State::Busy,
+            start,
+            self.occu.free_cycle(),
+        );
+        if let Some(query) = &self.open {
+            for (e, &cycles) in query.engine_cycles.iter().enumerate() {
+                note(
+                    t,
+                    Track::Engine(e as u32),
+                    State::Busy,
+                    start,
+                    start + cycles,
+                );
+            }
+        }
+        self.note_occu_control(start, granted_before);
+    }
+
+    /// OccU Control busy from `from` to the grant of its last word, if it wrote any since
+    /// `granted_before`.
+    fn note_occu_control(&self, from: u64, granted_before: Option<u64>) {
+        match self.occu.last_grant() {
+            Some(last) if Some(last) != granted_before => {
+                note(
+                    &self.timeline,
+                    Track::OccuControl,
+                    State::Busy,
+                    from,
+                    last + 1,
+                );
+            }
+            _ => {}
+        }
+    }
+
+    fn begin(&mut self, spec: &QuerySpec, begin_cycle: u64) {
         self.occu.begin(spec);
+        let engine_cycles = match self.timeline {
+            Some(_) => engine_service_cycles(
+                spec.tiles.len(),
+                self.arch.occu.engines,
+                self.arch.occu.all_tiles_one_cycle,
+            ),
+            None => Vec::new(),
+        };
         self.open = Some(OpenQuery {
             spec: spec.clone(),
             fragments: 0,
+            begin_cycle,
+            engine_cycles,
         });
     }
 
@@ -379,8 +433,20 @@ impl O2Machine {
             .take()
             .ok_or(SimError::EndWithoutBegin { event })?;
         let through_depth = (end_cycle + 1).max(self.depth.free_cycle());
+        let granted_before = self.occu.last_grant();
         let (tiles, available, overflowed_buffers) =
             self.occu.end(&query.spec, through_depth, &mut self.port);
+        if let Some(timeline) = &self.timeline {
+            self.note_occu_control(through_depth, granted_before);
+            timeline.query(QuerySlice {
+                id: query.spec.id,
+                mode: query.spec.mode,
+                tiles: query.spec.tiles.len(),
+                begin_cycle: query.begin_cycle,
+                end_cycle,
+                available_cycle: available,
+            });
+        }
         self.last_available = self.last_available.max(available);
         self.queries.push(QueryReport {
             id: query.spec.id,
