@@ -7,7 +7,7 @@ use occsim_traces::workloads::compare::{
     compare as compare_drivers, CompareError, CompareReport, DriverReport, FrameCost,
     FrameCycleModel, ModelError,
 };
-use occsim_traces::workloads::{DriverKind, DriverOptions};
+use occsim_traces::workloads::{DriverKind, DriverOptions, GridVariant};
 use occsim_traces::Event;
 use std::io::Write;
 
@@ -49,8 +49,13 @@ fn drivers_to_compare(args: &CompareArgs) -> Vec<DriverOptions> {
         quadtree.quadtree_levels = args.quadtree_levels;
         list.push(quadtree);
     }
-    list.push(DriverOptions::new(DriverKind::LazyGrid));
-    list.push(DriverOptions::new(DriverKind::BusyGrid));
+    for kind in [DriverKind::LazyGrid, DriverKind::BusyGrid] {
+        for variant in GridVariant::ALL {
+            let mut grid = DriverOptions::new(kind);
+            grid.grid_variant = variant;
+            list.push(grid);
+        }
+    }
     for &threshold in &args.adaptive_threshold {
         let mut adaptive = delayed(DriverOptions::new(DriverKind::Hierarchical));
         adaptive.adaptive_threshold = Some(threshold);
@@ -425,7 +430,9 @@ mod tests {
                 "hierarchical/vob",
                 "hierarchical/q2",
                 "lazy-grid",
+                "lazy-grid/obuf",
                 "busy-grid",
+                "busy-grid/obuf",
                 "hierarchical/t0.3"
             ]
         );
@@ -472,8 +479,9 @@ mod tests {
         )
         .unwrap();
         let value: serde_json::Value = serde_json::from_slice(&out).unwrap();
-        // frustum, hierarchical, hierarchical/vob, the two grids, one adaptive threshold.
-        assert_eq!(value["drivers"].as_array().unwrap().len(), 6);
+        // frustum, hierarchical, hierarchical/vob, the two grids in both variants, one
+        // adaptive threshold.
+        assert_eq!(value["drivers"].as_array().unwrap().len(), 8);
         assert_eq!(value["frames"], 2);
     }
 }

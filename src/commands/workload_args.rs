@@ -78,6 +78,11 @@ pub struct DriverArgs {
     /// Grids: cell side in pixels.
     #[arg(long, default_value_t = 32)]
     pub grid_cell_pixels: u32,
+    /// Grids: what a cell keeps: z-buffer (the farthest depth of its pixels, any
+    /// front-to-back order) or occlusion-buffer (whether all its pixels are drawn; boxes are
+    /// tested before anything not wholly in front of them is drawn).
+    #[arg(long, default_value = "z-buffer")]
+    pub variant: String,
     /// Hierarchical: test boxes without the Occlusion Unit, as the paper's software method
     /// did: draw the box, read its rectangle of the framebuffer back and search it.
     #[arg(long)]
@@ -212,6 +217,7 @@ impl DriverArgs {
             quadtree_levels: self.quadtree_levels,
             adaptive_threshold: self.adaptive_threshold,
             grid_cell_pixels: self.grid_cell_pixels,
+            grid_variant: self.variant.parse().map_err(flagged)?,
             virtual_occlusion_buffer: self.virtual_occlusion_buffer,
         };
         options.validate().map_err(flagged)?;
@@ -231,6 +237,7 @@ pub fn flagged(error: WorkloadError) -> anyhow::Error {
                 WorkloadOption::QuadtreeLevels => "--quadtree-levels",
                 WorkloadOption::AdaptiveThreshold => "--adaptive-threshold",
                 WorkloadOption::GridCellPixels => "--grid-cell-pixels",
+                WorkloadOption::GridVariant => "--variant",
                 WorkloadOption::VirtualOcclusionBuffer => "--virtual-occlusion-buffer",
             };
             anyhow::anyhow!("{flag} {detail}")

@@ -5,7 +5,7 @@ use occsim_traces::golden::Discard;
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::workloads::{
     city, forest, full_render_visible_pixels, generate, load_obj, CameraPath, CityOptions,
-    DriverKind, DriverOptions, ForestOptions, ObjOptions, Walk, WorkloadScene,
+    DriverKind, DriverOptions, ForestOptions, GridVariant, ObjOptions, Walk, WorkloadScene,
 };
 use occsim_traces::Event;
 
@@ -44,6 +44,11 @@ fn conservative_drivers() -> Vec<DriverOptions> {
         .collect();
     all.push(quadtree);
     all.push(coarse_grid);
+    for kind in [DriverKind::LazyGrid, DriverKind::BusyGrid] {
+        let mut occlusion_buffer = DriverOptions::new(kind);
+        occlusion_buffer.grid_variant = GridVariant::OcclusionBuffer;
+        all.push(occlusion_buffer);
+    }
     all
 }
 
@@ -183,16 +188,23 @@ fn occlusion_culling_draws_fewer_triangles_than_frustum_culling_in_the_city() {
     };
     let frustum = triangles(&DriverOptions::new(DriverKind::Frustum));
     assert!(frustum > 0);
-    for kind in [
+    let mut drivers: Vec<DriverOptions> = [
         DriverKind::Hierarchical,
         DriverKind::LazyGrid,
         DriverKind::BusyGrid,
-    ] {
-        let culled = triangles(&DriverOptions::new(kind));
+    ]
+    .into_iter()
+    .map(DriverOptions::new)
+    .collect();
+    let mut occlusion_buffer = DriverOptions::new(DriverKind::LazyGrid);
+    occlusion_buffer.grid_variant = GridVariant::OcclusionBuffer;
+    drivers.push(occlusion_buffer);
+    for driver in drivers {
+        let culled = triangles(&driver);
         assert!(
             culled * 4 < frustum * 3,
             "{}: {culled} triangles against frustum culling's {frustum}",
-            kind.name()
+            driver.label()
         );
     }
 }

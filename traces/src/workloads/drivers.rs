@@ -4,9 +4,12 @@
 use super::bvh::{Bvh, NodeContent};
 use super::grid::GridDriver;
 use super::hierarchical::HierarchicalDriver;
+use super::occlusion_buffer_grid::OcclusionBufferGrid;
 use super::project::Frustum;
 use super::render::{CommandObserver, Renderer};
-use super::{DriverKind, DriverOptions, FrameView, Walk, WorkloadScene, WorkloadStats};
+use super::{
+    DriverKind, DriverOptions, FrameView, GridVariant, Walk, WorkloadScene, WorkloadStats,
+};
 use crate::golden::EventSink;
 use glam::Vec3;
 use std::cmp::Reverse;
@@ -57,6 +60,7 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     renderer.set_waits_for_answers(options.query_delay_frames == 0);
     let mut hierarchical = HierarchicalDriver::new(options, scene.bvh.nodes.len());
     let mut grid = GridDriver::new(options, walk.width, walk.height);
+    let mut obuffer_grid = OcclusionBufferGrid::new(options, walk.width, walk.height);
     let mut stats = WorkloadStats {
         scene_triangles: scene.triangle_count(),
         ..WorkloadStats::default()
@@ -68,9 +72,10 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
         match options.kind {
             DriverKind::Frustum => frustum_frame(scene, &view, &mut renderer)?,
             DriverKind::Hierarchical => hierarchical.frame(frame, scene, &view, &mut renderer)?,
-            DriverKind::LazyGrid | DriverKind::BusyGrid => {
-                grid.frame(scene, &view, &mut renderer)?
-            }
+            DriverKind::LazyGrid | DriverKind::BusyGrid => match options.grid_variant {
+                GridVariant::ZBuffer => grid.frame(scene, &view, &mut renderer)?,
+                GridVariant::OcclusionBuffer => obuffer_grid.frame(scene, &view, &mut renderer)?,
+            },
         }
         renderer.swap()?;
         let (frame_stats, timing) = renderer.finish_frame(started);

@@ -80,30 +80,36 @@ enum CellVerdict {
     ProbePart(Rect),
 }
 
-pub(crate) struct GridDriver {
-    busy: bool,
+/// The screen cut into square cells of `cell` pixels (the last column and row clipped to
+/// the viewport): the geometry both grid variants share.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct CellLayout {
     /// Cell side in pixels.
-    cell: u32,
-    columns: u32,
-    rows: u32,
+    pub(crate) cell: u32,
+    pub(crate) columns: u32,
+    pub(crate) rows: u32,
     width: u32,
     height: u32,
-    cells: Vec<Cell>,
 }
 
-impl GridDriver {
-    pub(crate) fn new(options: &DriverOptions, width: u32, height: u32) -> GridDriver {
-        let cell = options.grid_cell_pixels.max(1);
-        let (columns, rows) = (width.div_ceil(cell), height.div_ceil(cell));
-        GridDriver {
-            busy: options.kind == DriverKind::BusyGrid,
+impl CellLayout {
+    pub(crate) fn new(cell: u32, width: u32, height: u32) -> CellLayout {
+        let cell = cell.max(1);
+        CellLayout {
             cell,
-            columns,
-            rows,
+            columns: width.div_ceil(cell),
+            rows: height.div_ceil(cell),
             width,
             height,
-            cells: vec![CLEARED; columns as usize * rows as usize],
         }
+    }
+
+    pub(crate) fn cell_count(&self) -> usize {
+        self.columns as usize * self.rows as usize
+    }
+
+    pub(crate) fn viewport(&self) -> Rect {
+        Rect::new(0, 0, self.width, self.height)
     }
 
     fn cell_rect(&self, column: u32, row: u32) -> Rect {
@@ -118,7 +124,7 @@ impl GridDriver {
 
     /// Indices and rectangles of the cells meeting `rect` (non-empty, inside the viewport),
     /// row by row.
-    fn cells_under(&self, rect: Rect) -> impl Iterator<Item = (usize, Rect)> + '_ {
+    pub(crate) fn cells_under(&self, rect: Rect) -> impl Iterator<Item = (usize, Rect)> + '_ {
         let (c0, c1) = (rect.x / self.cell, (rect.x + rect.width - 1) / self.cell);
         let (r0, r1) = (rect.y / self.cell, (rect.y + rect.height - 1) / self.cell);
         (r0..=r1.min(self.rows - 1)).flat_map(move |row| {
@@ -129,6 +135,27 @@ impl GridDriver {
                 )
             })
         })
+    }
+}
+
+pub(crate) struct GridDriver {
+    busy: bool,
+    layout: CellLayout,
+    cells: Vec<Cell>,
+}
+
+impl GridDriver {
+    pub(crate) fn new(options: &DriverOptions, width: u32, height: u32) -> GridDriver {
+        let layout = CellLayout::new(options.grid_cell_pixels, width, height);
+        GridDriver {
+            busy: options.kind == DriverKind::BusyGrid,
+            layout,
+            cells: vec![CLEARED; layout.cell_count()],
+        }
+    }
+
+    fn cells_under(&self, rect: Rect) -> impl Iterator<Item = (usize, Rect)> + '_ {
+        self.layout.cells_under(rect)
     }
 
     /// Depth of a probe whose fragments lie just behind everything drawn into a cell with
@@ -281,7 +308,7 @@ impl GridDriver {
         if bvh.nodes.is_empty() {
             return Ok(());
         }
-        let viewport = Rect::new(0, 0, self.width, self.height);
+        let viewport = self.layout.viewport();
         let frustum = Frustum::new(&view.view_projection);
         let vp = &view.view_projection;
         let mut queue = FrontToBack::new(view.eye);
@@ -333,7 +360,7 @@ mod tests {
     #[test]
     fn cells_under_a_rectangle_clip_at_the_viewport() {
         let grid = GridDriver::new(&DriverOptions::new(DriverKind::LazyGrid), 100, 70);
-        assert_eq!((grid.columns, grid.rows), (4, 3));
+        assert_eq!((grid.layout.columns, grid.layout.rows), (4, 3));
         let under: Vec<(usize, Rect)> = grid.cells_under(Rect::new(60, 30, 40, 40)).collect();
         let indices: Vec<usize> = under.iter().map(|&(i, _)| i).collect();
         assert_eq!(indices, vec![1, 2, 3, 5, 6, 7, 9, 10, 11]);

@@ -26,6 +26,7 @@ mod drivers;
 mod grid;
 mod hierarchical;
 mod obj;
+mod occlusion_buffer_grid;
 mod oracle;
 mod project;
 mod render;
@@ -78,6 +79,7 @@ pub enum WorkloadOption {
     QuadtreeLevels,
     AdaptiveThreshold,
     GridCellPixels,
+    GridVariant,
     VirtualOcclusionBuffer,
 }
 
@@ -92,6 +94,7 @@ impl WorkloadOption {
             WorkloadOption::QuadtreeLevels => "quadtree levels",
             WorkloadOption::AdaptiveThreshold => "adaptive threshold",
             WorkloadOption::GridCellPixels => "grid cell pixels",
+            WorkloadOption::GridVariant => "grid variant",
             WorkloadOption::VirtualOcclusionBuffer => "virtual occlusion buffer",
         }
     }
@@ -312,6 +315,44 @@ impl std::str::FromStr for DriverKind {
     }
 }
 
+/// What a grid cell knows of its pixels (seed 000, sections 3.1 and 3.2).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum GridVariant {
+    /// The farthest depth of its pixels, bounded by depth probes: boxes in any
+    /// front-to-back order.
+    ZBuffer,
+    /// Whether its pixels are all drawn (one bit a pixel): boxes tested before anything
+    /// not wholly in front of them is drawn.
+    OcclusionBuffer,
+}
+
+impl GridVariant {
+    pub const ALL: [GridVariant; 2] = [GridVariant::ZBuffer, GridVariant::OcclusionBuffer];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            GridVariant::ZBuffer => "z-buffer",
+            GridVariant::OcclusionBuffer => "occlusion-buffer",
+        }
+    }
+}
+
+impl std::str::FromStr for GridVariant {
+    type Err = WorkloadError;
+
+    fn from_str(name: &str) -> Result<GridVariant, WorkloadError> {
+        GridVariant::ALL
+            .into_iter()
+            .find(|v| v.name() == name)
+            .ok_or_else(|| WorkloadError::Option {
+                option: WorkloadOption::GridVariant,
+                detail: format!(
+                    "`{name}` is not a grid variant: expected z-buffer or occlusion-buffer"
+                ),
+            })
+    }
+}
+
 /// Most quadtree levels below a hierarchical query's root tile (4 levels: 341 tiles).
 pub const MAX_QUADTREE_LEVELS: u32 = 4;
 
@@ -331,6 +372,8 @@ pub struct DriverOptions {
     pub adaptive_threshold: Option<f32>,
     /// Grids: side of a grid cell in pixels.
     pub grid_cell_pixels: u32,
+    /// Grids: what a cell keeps.
+    pub grid_variant: GridVariant,
     /// Hierarchical: test boxes the paper's earlier software way (its reference [10]): draw
     /// the box, then read the framebuffer back over the box's rectangle and search it for
     /// changed pixels on the host, instead of reading the Occlusion Unit's record.
@@ -346,6 +389,7 @@ impl DriverOptions {
             quadtree_levels: 0,
             adaptive_threshold: None,
             grid_cell_pixels: 32,
+            grid_variant: GridVariant::ZBuffer,
             virtual_occlusion_buffer: false,
         }
     }
@@ -367,6 +411,9 @@ impl DriverOptions {
         }
         if self.grid_cell_pixels != 32 && self.is_grid() {
             label += &format!("/c{}", self.grid_cell_pixels);
+        }
+        if self.grid_variant == GridVariant::OcclusionBuffer {
+            label += "/obuf";
         }
         label
     }
@@ -435,6 +482,12 @@ impl DriverOptions {
             return fail(
                 WorkloadOption::GridCellPixels,
                 format!("{} out of range: expected 4 to 1024", self.grid_cell_pixels),
+            );
+        }
+        if self.grid_variant != GridVariant::ZBuffer && !self.is_grid() {
+            return fail(
+                WorkloadOption::GridVariant,
+                "applies to the lazy-grid and busy-grid drivers only".into(),
             );
         }
         Ok(())
