@@ -72,6 +72,7 @@ fn generate(args: GenArgs) -> anyhow::Result<()> {
         None => {
             let (summary, stats) =
                 super::workload_args::write_workload_trace(&args.workload, &args.output)?;
+            print_collisions(&stats.frames)?;
             (summary, format!("{} frames, ", stats.frames.len()))
         }
     };
@@ -85,6 +86,39 @@ fn generate(args: GenArgs) -> anyhow::Result<()> {
         bytes,
         bytes as f64 / summary.fragments.max(1) as f64
     );
+    Ok(())
+}
+
+/// The collision driver's tests, a line a frame: the figure 7 area, the step and the tiles
+/// that collide (nothing for other drivers).
+fn print_collisions(frames: &[occsim_traces::workloads::FrameStats]) -> anyhow::Result<()> {
+    for (frame, stats) in frames.iter().enumerate() {
+        let Some(test) = &stats.collision else {
+            if frames.iter().any(|f| f.collision.is_some()) {
+                outln!("frame {frame}: heading not testable from this image (backward or still)");
+            }
+            continue;
+        };
+        let hits: Vec<String> = (test.tiles.iter().enumerate())
+            .filter(|(_, &(_, hit))| hit)
+            .map(|(k, _)| k.to_string())
+            .collect();
+        outln!(
+            "frame {frame}: step {:.2} m into area column {} row {}: {}",
+            test.step,
+            test.area.0,
+            test.area.1,
+            if hits.is_empty() {
+                format!("free ({} tiles)", test.tiles.len())
+            } else {
+                format!(
+                    "collision in tiles {} of {}",
+                    hits.join(","),
+                    test.tiles.len()
+                )
+            }
+        );
+    }
     Ok(())
 }
 

@@ -62,7 +62,7 @@ pub struct SceneArgs {
 /// The culling driver and its options.
 #[derive(clap::Args, Clone, Debug)]
 pub struct DriverArgs {
-    /// The culling driver: frustum, hierarchical, lazy-grid or busy-grid.
+    /// The culling driver: frustum, hierarchical, lazy-grid, busy-grid or collision.
     #[arg(long, default_value = "hierarchical")]
     pub driver: String,
     /// Frames before a query's answer is used: 0 (at once) or 1 (frustum, hierarchical).
@@ -83,6 +83,13 @@ pub struct DriverArgs {
     /// tested before anything not wholly in front of them is drawn).
     #[arg(long, default_value = "z-buffer")]
     pub variant: String,
+    /// Collision: tiles a side the check area is cut into (1 to 16).
+    #[arg(long, default_value_t = 2)]
+    pub collision_tiles: u32,
+    /// Collision: the step's length in metres, the customised frustum's far plane (default:
+    /// the distance to the next frame's eye).
+    #[arg(long)]
+    pub collision_step: Option<f32>,
     /// Hierarchical: test boxes without the Occlusion Unit, as the paper's software method
     /// did: draw the box, read its rectangle of the framebuffer back and search it.
     #[arg(long)]
@@ -218,6 +225,8 @@ impl DriverArgs {
             adaptive_threshold: self.adaptive_threshold,
             grid_cell_pixels: self.grid_cell_pixels,
             grid_variant: self.variant.parse().map_err(flagged)?,
+            collision_tiles: self.collision_tiles,
+            collision_step: self.collision_step,
             virtual_occlusion_buffer: self.virtual_occlusion_buffer,
         };
         options.validate().map_err(flagged)?;
@@ -238,6 +247,8 @@ pub fn flagged(error: WorkloadError) -> anyhow::Error {
                 WorkloadOption::AdaptiveThreshold => "--adaptive-threshold",
                 WorkloadOption::GridCellPixels => "--grid-cell-pixels",
                 WorkloadOption::GridVariant => "--variant",
+                WorkloadOption::CollisionTiles => "--collision-tiles",
+                WorkloadOption::CollisionStep => "--collision-step",
                 WorkloadOption::VirtualOcclusionBuffer => "--virtual-occlusion-buffer",
             };
             anyhow::anyhow!("{flag} {detail}")

@@ -4,8 +4,9 @@
 use occsim_traces::golden::Discard;
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::workloads::{
-    city, forest, full_render_visible_pixels, generate, load_obj, CameraPath, CityOptions,
-    DriverKind, DriverOptions, ForestOptions, GridVariant, ObjOptions, Walk, WorkloadScene,
+    city, collision_oracle, forest, full_render_visible_pixels, generate, load_obj, CameraPath,
+    CityOptions, DriverKind, DriverOptions, ForestOptions, GridVariant, ObjOptions, Walk,
+    WorkloadScene,
 };
 use occsim_traces::Event;
 
@@ -453,4 +454,47 @@ fn a_query_delay_never_waits_and_an_immediate_answer_always_does() {
             assert_eq!(waits, expected, "{} with delay {delay}", options.label());
         }
     }
+}
+
+#[test]
+fn collision_tests_agree_with_the_geometric_oracle() {
+    // Every tile's answer lies between the oracle's bounds: a tile a front-facing triangle
+    // surely covers nearer than the far plane collides; a tile no triangle possibly reaches
+    // nearer than it does not. Steps of 5 and 60 metres and the walk's own steps give both
+    // answers along the city walk.
+    let scene = small_city();
+    let walk = Walk { frames: 8, ..WALK };
+    let (mut collided, mut free, mut untested) = (0, 0, 0);
+    for step in [None, Some(5.0), Some(60.0)] {
+        let mut options = DriverOptions::new(DriverKind::Collision);
+        options.collision_step = step;
+        let stats = generate(&scene, &options, &walk, &mut Discard).unwrap();
+        for (frame, frame_stats) in stats.frames.iter().enumerate() {
+            let Some(test) = &frame_stats.collision else {
+                untested += 1;
+                continue;
+            };
+            assert_eq!(test.tiles.len(), 4, "2 x 2 tiles by default");
+            for &(tile, hit) in &test.tiles {
+                let (surely, possibly) =
+                    collision_oracle(&scene, frame as u32, &walk, tile, test.step);
+                let context = format!("step {step:?} frame {frame} tile {tile:?}");
+                assert!(
+                    !surely || hit,
+                    "{context}: surely collides, the query says free"
+                );
+                assert!(
+                    !hit || possibly,
+                    "{context}: nothing there, the query says collides"
+                );
+                if hit {
+                    collided += 1;
+                } else {
+                    free += 1;
+                }
+            }
+        }
+    }
+    assert!(collided > 0 && free > 0, "collided {collided}, free {free}");
+    assert!(untested < 3 * walk.frames as usize, "every frame untested");
 }

@@ -2,6 +2,7 @@
 //! driver (the baseline).
 
 use super::bvh::{Bvh, NodeContent};
+use super::collision::CollisionDriver;
 use super::grid::GridDriver;
 use super::hierarchical::HierarchicalDriver;
 use super::occlusion_buffer_grid::OcclusionBufferGrid;
@@ -61,6 +62,7 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     let mut hierarchical = HierarchicalDriver::new(options, scene.bvh.nodes.len());
     let mut grid = GridDriver::new(options, walk.width, walk.height);
     let mut obuffer_grid = OcclusionBufferGrid::new(options, walk.width, walk.height);
+    let collision = CollisionDriver::new(options);
     let mut stats = WorkloadStats {
         scene_triangles: scene.triangle_count(),
         ..WorkloadStats::default()
@@ -72,6 +74,11 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
         match options.kind {
             DriverKind::Frustum => frustum_frame(scene, &view, &mut renderer)?,
             DriverKind::Hierarchical => hierarchical.frame(frame, scene, &view, &mut renderer)?,
+            DriverKind::Collision => {
+                hierarchical.frame(frame, scene, &view, &mut renderer)?;
+                let test = collision.test(frame, scene, walk, &view, &mut renderer)?;
+                renderer.stats.collision = test;
+            }
             DriverKind::LazyGrid | DriverKind::BusyGrid => match options.grid_variant {
                 GridVariant::ZBuffer => grid.frame(scene, &view, &mut renderer)?,
                 GridVariant::OcclusionBuffer => obuffer_grid.frame(scene, &view, &mut renderer)?,

@@ -21,6 +21,7 @@
 
 mod bvh;
 mod camera;
+mod collision;
 pub mod compare;
 mod drivers;
 mod grid;
@@ -33,6 +34,7 @@ mod render;
 mod scenes;
 
 pub use camera::{CameraKeyframe, CameraPath};
+pub use collision::{collision_oracle, CollisionTest};
 pub use obj::{load_obj, ObjOptions};
 pub use oracle::full_render_visible_pixels;
 pub use render::CommandObserver;
@@ -80,6 +82,8 @@ pub enum WorkloadOption {
     AdaptiveThreshold,
     GridCellPixels,
     GridVariant,
+    CollisionTiles,
+    CollisionStep,
     VirtualOcclusionBuffer,
 }
 
@@ -95,6 +99,8 @@ impl WorkloadOption {
             WorkloadOption::AdaptiveThreshold => "adaptive threshold",
             WorkloadOption::GridCellPixels => "grid cell pixels",
             WorkloadOption::GridVariant => "grid variant",
+            WorkloadOption::CollisionTiles => "collision tiles",
+            WorkloadOption::CollisionStep => "collision step",
             WorkloadOption::VirtualOcclusionBuffer => "virtual occlusion buffer",
         }
     }
@@ -284,14 +290,18 @@ pub enum DriverKind {
     LazyGrid,
     /// The grid refreshed after every draw.
     BusyGrid,
+    /// Occlusion-driven rendering, then a collision test along the heading: a customised
+    /// view frustum in brief mode (seed 001, section 5).
+    Collision,
 }
 
 impl DriverKind {
-    pub const ALL: [DriverKind; 4] = [
+    pub const ALL: [DriverKind; 5] = [
         DriverKind::Frustum,
         DriverKind::Hierarchical,
         DriverKind::LazyGrid,
         DriverKind::BusyGrid,
+        DriverKind::Collision,
     ];
 
     pub fn name(self) -> &'static str {
@@ -300,6 +310,7 @@ impl DriverKind {
             DriverKind::Hierarchical => "hierarchical",
             DriverKind::LazyGrid => "lazy-grid",
             DriverKind::BusyGrid => "busy-grid",
+            DriverKind::Collision => "collision",
         }
     }
 }
@@ -374,6 +385,10 @@ pub struct DriverOptions {
     pub grid_cell_pixels: u32,
     /// Grids: what a cell keeps.
     pub grid_variant: GridVariant,
+    /// Collision: the check area is cut into this many tiles a side.
+    pub collision_tiles: u32,
+    /// Collision: the step's length in metres (None: the distance to the next frame's eye).
+    pub collision_step: Option<f32>,
     /// Hierarchical: test boxes the paper's earlier software way (its reference [10]): draw
     /// the box, then read the framebuffer back over the box's rectangle and search it for
     /// changed pixels on the host, instead of reading the Occlusion Unit's record.
@@ -390,6 +405,8 @@ impl DriverOptions {
             adaptive_threshold: None,
             grid_cell_pixels: 32,
             grid_variant: GridVariant::ZBuffer,
+            collision_tiles: 2,
+            collision_step: None,
             virtual_occlusion_buffer: false,
         }
     }
@@ -432,6 +449,12 @@ impl DriverOptions {
                     "{}: expected 0 (read answers at once) or 1 (a frame later)",
                     self.query_delay_frames
                 ),
+            );
+        }
+        if self.query_delay_frames > 0 && self.kind == DriverKind::Collision {
+            return fail(
+                WorkloadOption::QueryDelay,
+                "applies to the frustum and hierarchical drivers: a collision must be known before the step".into(),
             );
         }
         if self.query_delay_frames > 0 && self.is_grid() {
@@ -484,6 +507,20 @@ impl DriverOptions {
                 format!("{} out of range: expected 4 to 1024", self.grid_cell_pixels),
             );
         }
+        if !(1..=16).contains(&self.collision_tiles) {
+            return fail(
+                WorkloadOption::CollisionTiles,
+                format!("{} out of range: expected 1 to 16", self.collision_tiles),
+            );
+        }
+        if let Some(step) = self.collision_step {
+            if !(step.is_finite() && step > 0.0) {
+                return fail(
+                    WorkloadOption::CollisionStep,
+                    format!("{step}: expected a length in metres above 0"),
+                );
+            }
+        }
         if self.grid_variant != GridVariant::ZBuffer && !self.is_grid() {
             return fail(
                 WorkloadOption::GridVariant,
@@ -495,7 +532,7 @@ impl DriverOptions {
 }
 
 /// What one frame cost the driver. Deterministic: equal for equal inputs.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct FrameStats {
     /// Scene triangles drawn (sent as geometry, before back-face culling).
     pub triangles_drawn: u64,
@@ -515,6 +552,8 @@ pub struct FrameStats {
     pub cells_refreshed: u64,
     /// Hierarchy nodes taken from the traversal queue.
     pub nodes_visited: u64,
+    /// Collision: the frame's test (None when its heading could not be tested).
+    pub collision: Option<CollisionTest>,
     /// Hierarchical: nodes culled by their parent's quadtree tiles, without a query.
     pub culled_by_parent_tiles: u64,
 }

@@ -98,6 +98,11 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         self.golden.execute(command, &mut self.sink)
     }
 
+    /// Back-face culling on or off (the frame starts with it on).
+    pub(crate) fn set_culling(&mut self, on: bool) -> Result<(), S::Error> {
+        self.execute(&Command::Cull(on)).map(|_| ())
+    }
+
     /// The traversal visits a node and tests its box against the view frustum.
     pub(crate) fn visit_node(&mut self) {
         self.stats.nodes_visited += 1;
