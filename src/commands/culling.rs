@@ -49,6 +49,7 @@ fn drivers_to_compare(args: &CompareArgs) -> Vec<DriverOptions> {
         quadtree.quadtree_levels = args.quadtree_levels;
         list.push(quadtree);
     }
+    list.push(DriverOptions::new(DriverKind::Collision));
     for kind in [DriverKind::LazyGrid, DriverKind::BusyGrid] {
         for variant in GridVariant::ALL {
             let mut grid = DriverOptions::new(kind);
@@ -429,6 +430,7 @@ mod tests {
                 "hierarchical",
                 "hierarchical/vob",
                 "hierarchical/q2",
+                "collision",
                 "lazy-grid",
                 "lazy-grid/obuf",
                 "busy-grid",
@@ -479,9 +481,9 @@ mod tests {
         )
         .unwrap();
         let value: serde_json::Value = serde_json::from_slice(&out).unwrap();
-        // frustum, hierarchical, hierarchical/vob, the two grids in both variants, one
-        // adaptive threshold.
-        assert_eq!(value["drivers"].as_array().unwrap().len(), 8);
+        // frustum, hierarchical, hierarchical/vob, collision, the two grids in both
+        // variants, one adaptive threshold.
+        assert_eq!(value["drivers"].as_array().unwrap().len(), 9);
         assert_eq!(value["frames"], 2);
     }
 }
