@@ -2,7 +2,7 @@
 
 mod support;
 
-use support::cli::{scratch_dir, stderr_of_failure, stdout_of};
+use support::cli::{occsim, scratch_dir, stderr_of_failure, stdout_of};
 
 /// The hand-worked counts of tests/../traces/src/builtin/hardcases.scene (see its comments).
 #[test]
@@ -229,7 +229,7 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
     stdout_of(&["trace", "gen", "hardcases", "-o", trace_arg]);
     // The rtl level builds every effect model, so compare with the cycle level doing so too.
     let cycle = stdout_of(&["replay", trace_arg, "--json", "--effects", "all"]);
-    let rtl = stdout_of(&[
+    let output = occsim(&[
         "replay",
         trace_arg,
         "--json",
@@ -240,7 +240,24 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
         "--window",
         "10..200",
     ]);
-    assert_eq!(cycle, rtl);
+    assert!(output.status.success());
+    let json = |text: &[u8]| -> serde_json::Value { serde_json::from_slice(text).unwrap() };
+    let (mut cycle, mut rtl) = (json(cycle.as_bytes()), json(&output.stdout));
+    assert_eq!(
+        (&cycle["level"], &rtl["level"]),
+        (&"cycle".into(), &"rtl".into())
+    );
+    cycle["level"] = serde_json::Value::Null;
+    rtl["level"] = serde_json::Value::Null;
+    assert_eq!(cycle, rtl, "the same report but for its level");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains(&format!(
+            "occsim: wrote {vcd_arg}: VCD waveform of the Occlusion Unit and OccU Control, cycles 10..200 of the run's {}",
+            cycle["summary"]["cycles"]
+        )),
+        "{stderr}"
+    );
     let text = std::fs::read_to_string(&vcd).unwrap();
     assert!(text.starts_with("$version occsim-rtl $end\n$timescale 1ps $end\n"));
     assert!(
@@ -272,6 +289,7 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
         ("5..3", "END must be greater than START"),
         ("1-3", "expected START..END"),
         ("a..9", "START \"a\" is not a cycle number"),
+        ("100000..100500", "starts after the run, which has"),
     ] {
         let error = stderr_of_failure(&[
             "replay",
@@ -285,6 +303,8 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
         ]);
         assert!(error.contains(message), "{window}: {error}");
     }
+    // A window past the end kept nothing: the VCD is the 0..10 one of the retiled run.
+    assert_eq!(std::fs::read_to_string(&vcd).unwrap(), text);
 }
 
 #[test]
