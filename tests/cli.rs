@@ -656,3 +656,38 @@ fn a_waveform_that_cannot_be_created_names_its_path() {
         "{error}"
     );
 }
+
+/// `trace dump --json`: the header and the events, streamed as one JSON document.
+#[test]
+fn trace_dump_json_gives_the_header_and_events() {
+    let dir = scratch_dir("dump-json");
+    let trace = dir.join("hardcases.occt");
+    let trace = trace.to_str().unwrap();
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace]);
+    let dump: serde_json::Value = serde_json::from_str(&stdout_of(&[
+        "trace", "dump", trace, "--json", "--limit", "5",
+    ]))
+    .unwrap();
+    assert_eq!(
+        (&dump["header"]["width"], &dump["header"]["height"]),
+        (&64.into(), &64.into())
+    );
+    assert_eq!(dump["events"].as_array().unwrap().len(), 5, "{dump}");
+    let all: serde_json::Value =
+        serde_json::from_str(&stdout_of(&["trace", "dump", trace, "--json"])).unwrap();
+    let events = all["events"].as_array().unwrap();
+    let count = |name: &str| events.iter().filter(|e| e.get(name).is_some()).count();
+    assert_eq!(count("QueryBegin"), 28, "the hard cases' 28 queries");
+    assert_eq!(&events[..5], dump["events"].as_array().unwrap().as_slice());
+}
+
+/// `demo --json` prints only the replay's JSON, as `replay --json` does.
+#[test]
+fn demo_json_is_the_replay_report() {
+    let out = stdout_of(&["demo", "--json"]);
+    let report: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(report["level"], "cycle");
+    assert_eq!(report["machine"], "o2");
+    assert_eq!(report["viewport_width"], 1280);
+    assert!(report["summary"]["frames_per_second"].as_f64().unwrap() > 0.0);
+}

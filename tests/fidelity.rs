@@ -22,7 +22,11 @@ fn fidelity_prints_every_level_against_cycle_and_plots() {
     let lines: Vec<&str> = out.lines().collect();
     assert!(lines[0].contains("63404 fragments"), "{out}");
     let level_of = |line: &str| line.split_whitespace().next().unwrap_or("").to_string();
-    let levels: Vec<String> = lines[2..].iter().map(|l| level_of(l)).collect();
+    let levels: Vec<String> = lines[2..7].iter().map(|l| level_of(l)).collect();
+    assert!(
+        lines[7].starts_with("  wall s: seconds on this computer") && lines.len() == 8,
+        "the legend closes the table:\n{out}"
+    );
     assert_eq!(
         levels,
         ["functional", "analytic", "sampled:3", "cycle", "rtl"],
@@ -136,6 +140,13 @@ fn the_rtl_level_of_the_ir_machine_reports_as_its_cycle_level() {
     let rtl = run("rtl");
     let first = "level rtl, machine ir (2 boards, 80 Image Engines a board, 4 engines an Occlusion Unit, interleave columns) at 100 MHz";
     assert!(rtl.starts_with(first), "{rtl}");
+    // The IR's busy cycles are sums over many units, its percentages their means: said so.
+    for legend in [
+        "summed over the units; busy%: of the run's cycles, the mean over the units",
+        "the least, the mean and the most busy of count units",
+    ] {
+        assert!(rtl.contains(legend), "no `{legend}` in\n{rtl}");
+    }
     assert_eq!(rtl.replacen("level rtl", "level cycle", 1), run("cycle"));
 }
 

@@ -126,6 +126,33 @@ fn results_files_are_replaced_only_with_force() {
     );
 }
 
+/// `--json` prints the lines `--out` holds, as one array.
+#[test]
+fn sweep_json_prints_the_results_lines() {
+    let dir = scratch("json");
+    let trace = dir.join("hard.occt");
+    ok(&["trace", "gen", "hardcases", "-o", s(&trace)]);
+    let out = dir.join("r.jsonl");
+    let printed = stdout_of(&[
+        "sweep",
+        s(&trace),
+        "--out",
+        s(&out),
+        "--set",
+        "engines=1,2",
+        "--json",
+    ]);
+    let array: Vec<serde_json::Value> = serde_json::from_str(&printed).unwrap();
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(&out)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(array, lines);
+    assert_eq!(array.len(), 2);
+    assert_eq!(array[1]["metrics"]["queries"], 28);
+}
+
 #[test]
 fn bad_axes_are_rejected_by_name() {
     let dir = scratch("bad");

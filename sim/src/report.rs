@@ -264,6 +264,9 @@ pub fn nearest_rank(sorted: &[u64], p: u64) -> u64 {
 /// What the report says of a stream with no closed-loop record.
 pub(crate) const OPEN_LOOP_NOTE: &str = "open loop: the stream has no draws, host work, waits or frames (a version-1 trace), so nothing waits for an answer";
 
+/// What the frames table's columns are, at every level.
+pub(crate) const FRAMES_LEGEND: &str = "  in pipeline cycles (ms: simulated milliseconds): host busy (traversal, driver, result reads; on the O2 its software geometry too), geometry (the geometry stage busy), pixel busy (the rasterizer busy), waiting (the host blocked on answers), pipe wait (the host blocked at the frame's end)";
+
 /// The frames table's heading, at every level.
 pub(crate) const FRAMES_HEADING: &str = "frame        cycles         ms    host busy     geometry   pixel busy      waiting    pipe wait";
 
@@ -288,6 +291,13 @@ impl Report {
                 s.memory_stall_cycles
             );
         }
+        let _ = writeln!(
+            out,
+            "  busy, stall: cycles, summed over a stage's units where it has several; busy%, stall%: \
+             of the run's {} cycles, the mean over its units; stall: a ready item waiting for memory \
+             data or for room downstream; memory stall: the part of stall waiting for memory data",
+            self.summary.cycles
+        );
         let p = &self.memory_port;
         if p.bits_per_cycle > 0 {
             self.write_port(out);
@@ -305,6 +315,15 @@ impl Report {
                 e.engine, e.busy_cycles, e.busy_percent, e.stall_cycles
             );
         }
+        let legend = if self.units.is_empty() {
+            "engine E of the Occlusion Unit: busy: cycles testing fragments against its tiles; \
+             busy%: of the run's cycles; stall: cycles holding a tested fragment with no room downstream"
+        } else {
+            "engine E of every Image Engine's Occlusion Unit: busy, stall: cycles testing \
+             fragments against its tiles and holding a tested fragment with no room downstream, \
+             summed over the units; busy%: of the run's cycles, the mean over the units"
+        };
+        let _ = writeln!(out, "  {legend}");
     }
 
     /// The frames of a closed-loop run, or the note that the run was an open loop.
@@ -318,6 +337,7 @@ impl Report {
             "\n{} frames, {fps:.2} frames/s; on the host's timeline busy + waiting + pipe wait = cycles",
             self.frames.len()
         );
+        let _ = writeln!(out, "{FRAMES_LEGEND}");
         let _ = writeln!(out, "{FRAMES_HEADING}");
         for f in &self.frames {
             let _ = writeln!(
@@ -351,13 +371,17 @@ impl Report {
                 u.name, u.count, u.busy_percent_min, u.busy_percent_mean, u.busy_percent_max
             );
         }
+        let _ = writeln!(
+            out,
+            "  each unit's busy cycles as % of the run's cycles: the least, the mean and the most busy of count units"
+        );
     }
 
     fn write_port(&self, out: &mut String) {
         let p = &self.memory_port;
         let _ = writeln!(
             out,
-            "\nmemory port: {} bits/cycle, busy {} cycles ({:.1}%), utilization {:.1}%, max {} bits in a cycle",
+            "\nmemory port: {} bits/cycle; busy {} cycles ({:.1}% of the run: cycles it carried any bits), utilization {:.1}% (bits carried over the bits it could have carried), max {} bits in a cycle",
             p.bits_per_cycle, p.busy_cycles, p.busy_percent, p.utilization_percent, p.max_bits_in_one_cycle
         );
         let _ = writeln!(

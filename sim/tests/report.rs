@@ -54,6 +54,15 @@ fn the_text_starts_with_the_level_and_summary_lines_and_has_every_table() {
         );
     }
     assert!(text.lines().any(|l| l.contains("occlusion_unit")));
+    // Every table says what its columns are, with units.
+    for legend in [
+        "  busy, stall: cycles, summed over a stage's units where it has several",
+        "(bits carried over the bits it could have carried)",
+        "  engine E of the Occlusion Unit: busy: cycles testing fragments",
+        "nohc, phc: passing and projected fragments summed over the tiles",
+    ] {
+        assert!(text.contains(legend), "no legend `{legend}` in\n{text}");
+    }
     let query_rows = |text: &str| {
         text.lines()
             .filter(|l| l.split_whitespace().nth(2) == Some("verbose"))

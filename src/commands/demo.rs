@@ -16,6 +16,9 @@ pub struct DemoArgs {
     /// Add a table of every query.
     #[arg(long)]
     pub queries: bool,
+    /// Print the replay's report as JSON (as `occsim replay --json` does), and nothing else.
+    #[arg(long)]
+    pub json: bool,
     #[command(flatten)]
     pub raster: super::raster_args::RasterArgs,
 }
@@ -37,7 +40,7 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     }
     golden.finish(&mut writer)?;
     let summary = writer.finish()?;
-    outln!(
+    let line = format!(
         "demo: a city block, {} frames at {width}x{height}: {} fragments, {} primitives, {} queries ({} brief, {} verbose, {} samples); trace {} bytes",
         options.frames,
         summary.fragments,
@@ -48,9 +51,16 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         summary.queries_by_mode.samples,
         trace.len()
     );
+    if !args.json {
+        outln!("{line}");
+    }
     let open = || Ok(TraceReader::new(&trace[..])?);
     let result = replay(open, &arch, ReplayOptions::cycle(None))
         .map_err(|e| super::replay::in_cli_words("demo", e))?;
-    out!("{}", result.to_text(args.queries));
+    if args.json {
+        outln!("{}", super::replay::result_json(&result)?);
+    } else {
+        out!("{}", result.to_text(args.queries));
+    }
     Ok(())
 }

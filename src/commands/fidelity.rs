@@ -251,6 +251,14 @@ fn table(
             }
         );
     }
+    let _ = writeln!(
+        out,
+        "  wall s: seconds on this computer, decoding the trace included; fragments/s: fragments \
+         over wall s; cycles: the run's simulated cycles; mean lat, p95 lat: query latency in \
+         cycles; frame cycles: the mean frame in cycles; cycles err, lat err, frame err: \
+         |level - {reference}| / {reference} of cycles, mean latency and frame cycles; results: \
+         every query's counts equal the golden ones (exact); -: the level has no such figure"
+    );
     out
 }
 

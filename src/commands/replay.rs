@@ -98,7 +98,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             check_window(window.as_ref(), &result)?;
             Ok(result)
         });
-    let mut result = close_waveform(outputs, outcome)?;
+    let result = close_waveform(outputs, outcome)?;
     let total = result.total_cycles.unwrap_or(0);
     let covered = window.clone().unwrap_or(0..total);
     let covered = format!(
@@ -145,22 +145,26 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         );
     }
     if args.json {
-        let json = match result.report.take() {
-            // The cycle report with its level and the effect models that were built.
-            Some(report) => {
-                let mut json = serde_json::to_value(&report)?;
-                json["level"] = serde_json::to_value(result.level)?;
-                json["effects"] = serde_json::to_value(result.effects)?;
-                serde_json::to_string_pretty(&json)?
-            }
-            // Below the cycle level: the level's own result, in its fields' order.
-            None => serde_json::to_string_pretty(&result)?,
-        };
-        outln!("{json}");
+        outln!("{}", result_json(&result)?);
     } else {
         out!("{}", result.to_text(args.queries));
     }
     Ok(())
+}
+
+/// A result as `--json` prints it: at the cycle and rtl levels the machine's report with its
+/// level and the effect models that were built; below, the level's own result.
+pub fn result_json(result: &LevelResult) -> anyhow::Result<String> {
+    Ok(match &result.report {
+        Some(report) => {
+            let mut json = serde_json::to_value(report)?;
+            json["level"] = serde_json::to_value(result.level)?;
+            json["effects"] = serde_json::to_value(result.effects)?;
+            serde_json::to_string_pretty(&json)?
+        }
+        // In its fields' order.
+        None => serde_json::to_string_pretty(result)?,
+    })
 }
 
 /// A `--window` that starts at or after the run's last cycle would show nothing: an error.

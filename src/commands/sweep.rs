@@ -91,6 +91,10 @@ pub struct SweepRunArgs {
     /// Results file (one JSON line per point); the CSV view is written beside it.
     #[arg(long, value_name = "FILE.jsonl", required = true)]
     pub out: Option<PathBuf>,
+    /// Also print every point's results line (as --out holds them) as one JSON array on
+    /// standard output.
+    #[arg(long)]
+    pub json: bool,
     #[command(flatten)]
     pub plot: PlotArgs,
 }
@@ -252,6 +256,10 @@ pub fn run_with(
         out.display(),
         outcome.csv.display()
     );
+    if run.json {
+        let texts: Vec<&str> = outcome.lines.iter().map(|l| l.text.as_str()).collect();
+        outln!("[\n{}\n]", texts.join(",\n"));
+    }
     write_plot(&run.plot, &grid, &outcome.lines)
 }
 

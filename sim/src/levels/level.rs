@@ -365,6 +365,7 @@ impl LevelResult {
             "\n{} frames, {fps:.2} frames/s; host busy, geometry, pixel busy, waiting, pipe wait: - (the cycle and rtl levels split a frame)",
             self.frame_cycles.len()
         );
+        let _ = writeln!(out, "{}", crate::report::FRAMES_LEGEND);
         let _ = writeln!(out, "{}", crate::report::FRAMES_HEADING);
         let mhz = clock_mhz(&self.arch).unwrap_or(0.0);
         for (frame, cycles) in self.frame_cycles.iter().enumerate() {
