@@ -45,8 +45,11 @@ fn fidelity_prints_every_level_against_cycle_and_plots() {
     assert!(lines[2].contains(" - "), "{out}");
     let svg = std::fs::read_to_string(&plot).unwrap();
     assert!(svg.starts_with("<svg") || svg.starts_with("<?xml"), "{svg}");
-    assert!(svg.contains("cycle (error 0, drawn at 0.0001)"), "{svg}");
-    assert!(svg.contains("rtl (error 0, drawn at 0.0001)"), "{svg}");
+    // Errors in percent, as the table prints them; the trace and the machine in the title.
+    assert!(svg.contains("cycle (error 0, drawn at 0.01%)"), "{svg}");
+    assert!(svg.contains("rtl (error 0, drawn at 0.01%)"), "{svg}");
+    assert!(svg.contains("error vs rtl (%, the worse of"), "{svg}");
+    assert!(svg.contains("hardcases.occt on o2"), "{svg}");
     assert!(svg.contains("analytic"));
 
     let json: serde_json::Value =

@@ -153,6 +153,58 @@ fn sweep_json_prints_the_results_lines() {
     assert_eq!(array[1]["metrics"]["queries"], 28);
 }
 
+/// A sweep's chart names the metric with its unit, the swept parameter, the trace, the
+/// machine and the level; a merge's names the shards' trace digest and machine.
+#[test]
+fn sweep_charts_say_what_they_show() {
+    let dir = scratch("chart");
+    let trace = dir.join("hard.occt");
+    ok(&["trace", "gen", "hardcases", "-o", s(&trace)]);
+    let (out, svg) = (dir.join("r.jsonl"), dir.join("r.svg"));
+    ok(&[
+        "sweep",
+        s(&trace),
+        "--arch",
+        "o2",
+        "--out",
+        s(&out),
+        "--set",
+        "engines=1,2",
+        "--set",
+        "page_miss_latency_cycles=4,8",
+        "--plot",
+        s(&svg),
+        "--retile",
+        "2x2",
+    ]);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(
+        text.contains("total_cycles (cycles) against page_miss_latency_cycles: "),
+        "{text}"
+    );
+    assert!(
+        text.contains("hard.occt retiled 2x2 on o2, cycle"),
+        "{text}"
+    );
+    assert!(
+        text.contains("page_miss_latency_cycles (cycles)"),
+        "the x unit: {text}"
+    );
+    let merged = dir.join("m.jsonl");
+    let merged_svg = dir.join("m.svg");
+    ok(&[
+        "sweep",
+        "merge",
+        s(&merged),
+        s(&out),
+        "--plot",
+        s(&merged_svg),
+    ]);
+    let text = std::fs::read_to_string(&merged_svg).unwrap();
+    assert!(text.contains("1 shards of trace fnv1a64:"), "{text}");
+    assert!(text.contains(" on o2"), "{text}");
+}
+
 #[test]
 fn bad_axes_are_rejected_by_name() {
     let dir = scratch("bad");

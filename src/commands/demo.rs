@@ -35,9 +35,13 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         .with_raster(raster);
     let mut writer = TraceWriter::new(&mut trace, &header)?;
     let mut golden = GoldenModel::with_profile(width, height, raster);
+    let bar = occsim_sweep::progress::bar(text.lines().count() as u64, "scene lines");
+    bar.set_message("demo: making the trace");
     for line in SceneReader::new(text.as_bytes(), "demo") {
         golden.execute(&line?.command, &mut writer)?;
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     golden.finish(&mut writer)?;
     let summary = writer.finish()?;
     let line = format!(
@@ -54,7 +58,15 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
     if !args.json {
         outln!("{line}");
     }
-    let open = || Ok(TraceReader::new(&trace[..])?);
+    let open = || {
+        let bar = occsim_sweep::progress::bytes_bar(trace.len() as u64);
+        bar.set_message("demo: replaying");
+        let counted = occsim_sweep::progress::Counted {
+            inner: &trace[..],
+            bar,
+        };
+        Ok(TraceReader::new(counted)?)
+    };
     let result = replay(open, &arch, ReplayOptions::cycle(None))
         .map_err(|e| super::replay::in_cli_words("demo", e))?;
     if args.json {

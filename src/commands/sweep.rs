@@ -260,7 +260,20 @@ pub fn run_with(
         let texts: Vec<&str> = outcome.lines.iter().map(|l| l.text.as_str()).collect();
         outln!("[\n{}\n]", texts.join(",\n"));
     }
-    write_plot(&run.plot, &grid, &outcome.lines)
+    let trace = run
+        .trace
+        .as_deref()
+        .map_or("the trace".to_string(), |t| t.display().to_string());
+    let arch = super::arch::describe(
+        run.arch.as_deref().unwrap_or("o2"),
+        run.arch_file.as_deref(),
+        &[],
+    );
+    let retiled = run
+        .retile
+        .map_or(String::new(), |grid| format!(" retiled {grid}"));
+    let subject = format!("{trace}{retiled} on {arch}, {}", run.fidelity);
+    write_plot(&run.plot, &grid, &outcome.lines, &subject)
 }
 
 /// Worker threads for `requested` jobs: no more than the points to run, nor than
@@ -298,7 +311,30 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         args.out.display(),
         report.csv.display()
     );
-    write_plot(&args.plot, &report.grid, &report.lines)
+    let subject = match report.lines.first() {
+        Some(first) => format!(
+            "{} shards of trace {} on {}",
+            args.shards.len(),
+            first.line.trace_digest,
+            machine_of(&first.text)
+        ),
+        None => "nothing merged".to_string(),
+    };
+    write_plot(&args.plot, &report.grid, &report.lines, &subject)
+}
+
+/// The machine a results line's resolved architecture is of: the InfiniteReality-like one
+/// has boards, the O2-like one not.
+fn machine_of(text: &str) -> &'static str {
+    let line: serde_json::Value = serde_json::from_str(text).unwrap_or_default();
+    let has_boards = line["resolved_arch"]
+        .as_array()
+        .is_some_and(|entries| entries.iter().any(|e| e["key"] == "boards"));
+    if has_boards {
+        "ir"
+    } else {
+        "o2"
+    }
 }
 
 /// Runs `occsim sweep` on the machine models: every point replays the trace on the base
@@ -395,12 +431,18 @@ fn point_metrics(
     metrics
 }
 
-fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine]) -> Result<()> {
+fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine], subject: &str) -> Result<()> {
     let Some(path) = args.plot.as_deref() else {
         return Ok(());
     };
-    let chart = metric_chart(grid.axes(), lines, &args.metric, args.plot_x.as_deref())
-        .map_err(in_cli_words)?;
+    let chart = metric_chart(
+        grid.axes(),
+        lines,
+        &args.metric,
+        args.plot_x.as_deref(),
+        subject,
+    )
+    .map_err(in_cli_words)?;
     chart.write_svg(path)?;
     eprintln!("sweep: plot -> {}", path.display());
     Ok(())

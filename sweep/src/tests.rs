@@ -475,14 +475,41 @@ fn resume_refuses_results_of_another_trace_or_shard() {
 }
 
 #[test]
+fn metrics_get_their_units_from_their_names() {
+    for (metric, unit) in [
+        ("total_cycles", Some("cycles")),
+        ("latency_p95_cycles", Some("cycles")),
+        ("frames_per_second", Some("frames/s")),
+        ("fragments_per_cycle", Some("fragments/cycle")),
+        ("simulated_seconds", Some("s")),
+        ("queries", Some("queries")),
+        ("tiles", None),
+    ] {
+        assert_eq!(crate::chart::metric_unit(metric), unit, "{metric}");
+    }
+}
+
+#[test]
 fn sweep_chart_has_one_series_per_other_axis_combination() {
     let temp = test_dir("chart");
     let dir = temp.path();
     let g = grid(&["boards=1,2", "engines=1,4"]);
     let out = dir.join("r.jsonl");
     let outcome = run_sweep(&options(&g, &out, 1), &fake_machine).unwrap();
-    let chart = metric_chart(g.axes(), &outcome.lines, "total_cycles", None).unwrap();
+    let chart = metric_chart(
+        g.axes(),
+        &outcome.lines,
+        "total_cycles",
+        None,
+        "t.occt on ir",
+    )
+    .unwrap();
     assert_eq!(chart.x_label, "engines");
+    assert_eq!(chart.y_label, "total_cycles (cycles)");
+    assert_eq!(
+        chart.title,
+        "total_cycles (cycles) against engines: t.occt on ir"
+    );
     let series: Vec<(&str, &[(f64, f64)])> = chart
         .series
         .iter()
@@ -495,12 +522,12 @@ fn sweep_chart_has_one_series_per_other_axis_combination() {
             ("boards=2", &[(1.0, 520.0), (4.0, 145.0)][..]),
         ]
     );
-    let err = metric_chart(g.axes(), &outcome.lines, "wall_seconds", None).unwrap_err();
+    let err = metric_chart(g.axes(), &outcome.lines, "wall_seconds", None, "").unwrap_err();
     assert_eq!(
         err.to_string(),
         "no result has metric 'wall_seconds'; metrics present: tiles, total_cycles"
     );
-    let err = metric_chart(g.axes(), &outcome.lines, "tiles", Some("memory")).unwrap_err();
+    let err = metric_chart(g.axes(), &outcome.lines, "tiles", Some("memory"), "").unwrap_err();
     assert_eq!(
         err.to_string(),
         "cannot plot against 'memory': it is not swept (swept: boards, engines)"
