@@ -7,18 +7,20 @@
 //! - the `occsim count` command end to end (parsing the scene file and printing included),
 //! - llvmpipe on one thread (LP_NUM_THREADS=1), depth only, reading every query's result,
 //!
-//! and prints each one's fragment rate and the ratios. Best of three runs each.
+//! and prints each one's fragment rate and the ratios: the fastest of three interleaved rounds
+//! each (`occsim_traces::rounds`), so a slow spell of the machine falls on all three alike.
 
 #[path = "../tests/support/mod.rs"]
 mod support;
 
 use occsim_traces::builtin::{random_scene, RandomOptions};
 use occsim_traces::golden::{infallible, Discard, EventSink, GoldenModel};
+use occsim_traces::rounds::fastest_of_rounds;
 use occsim_traces::scene::{parse_scene, SceneLine};
 use occsim_traces::{Event, QueryMode};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-const RUNS: usize = 3;
+const ROUNDS: usize = 3;
 
 struct FragmentCounter(u64);
 
@@ -48,17 +50,6 @@ fn golden_counts(
     counts
 }
 
-fn best_of(mut run: impl FnMut()) -> Duration {
-    (0..RUNS)
-        .map(|_| {
-            let start = Instant::now();
-            run();
-            start.elapsed()
-        })
-        .min()
-        .unwrap_or_default()
-}
-
 fn rate(fragments: u64, time: Duration) -> f64 {
     fragments as f64 / time.as_secs_f64() / 1e6
 }
@@ -79,14 +70,14 @@ fn main() {
         options.triangles, options.queries, width, height
     );
 
-    let golden_time = best_of(|| {
-        std::hint::black_box(golden_counts(&lines, width, height, &mut Discard));
-    });
-
     let scene_file =
         std::env::temp_dir().join(format!("occsim-bench-{}.scene", std::process::id()));
     std::fs::write(&scene_file, &text).expect("temporary scene file");
-    let command_time = best_of(|| {
+    let mut golden = || {
+        std::hint::black_box(golden_counts(&lines, width, height, &mut Discard));
+        Vec::new()
+    };
+    let mut command = || {
         let output = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
             .arg("count")
             .arg(&scene_file)
@@ -97,37 +88,56 @@ fn main() {
             String::from_utf8_lossy(&output.stdout).lines().count(),
             expected.len()
         );
-    });
+        Vec::new()
+    };
+    let gl = support::gl_replay::GlReplay::new(width, height);
+    let renderer = gl
+        .as_ref()
+        .map(|gl| gl.renderer().to_string())
+        .map_err(String::clone);
+    let figures = match gl {
+        Ok(mut gl) => {
+            let mut llvmpipe =
+                || -> Vec<u64> { gl.run(&lines).into_iter().map(|q| q.counts[0]).collect() };
+            let jobs: &mut [&mut dyn FnMut() -> Vec<u64>] =
+                &mut [&mut golden, &mut command, &mut llvmpipe];
+            fastest_of_rounds(ROUNDS, 0.0, jobs)
+        }
+        Err(_) => {
+            let jobs: &mut [&mut dyn FnMut() -> Vec<u64>] = &mut [&mut golden, &mut command];
+            fastest_of_rounds(ROUNDS, 0.0, jobs)
+        }
+    };
     let _ = std::fs::remove_file(&scene_file);
+    let time = |i: usize| Duration::from_secs_f64(figures[i].seconds);
 
     println!(
         "{:<34} {:>10} {:>14} {:>12}",
         "counter", "seconds", "M fragments/s", "vs llvmpipe"
     );
-    let mut rows = vec![
-        ("occsim golden model (in process)", golden_time),
-        ("occsim count (end to end)", command_time),
+    let rows = [
+        ("occsim golden model (in process)", time(0)),
+        ("occsim count (end to end)", time(1)),
     ];
-    match support::gl_replay::GlReplay::new(width, height) {
-        Ok(mut gl) => {
-            let mut gl_counts = Vec::new();
-            let gl_time = best_of(|| {
-                gl_counts = gl.run(&lines).into_iter().map(|q| q.counts[0]).collect();
-            });
+    match renderer {
+        Ok(renderer) => {
             // The default profile is llvmpipe's arithmetic: every count equal, or the
             // comparison means nothing.
-            assert_eq!(gl_counts, expected, "llvmpipe and occsim count differently");
+            assert_eq!(
+                figures[2].output, expected,
+                "llvmpipe and occsim count differently"
+            );
             println!(
                 "llvmpipe agrees exactly on all {} queries ({fragments} fragments)",
                 expected.len()
             );
-            let name = format!("llvmpipe, 1 thread ({})", gl.renderer());
-            rows.push((Box::leak(name.into_boxed_str()), gl_time));
-            for (name, time) in &rows {
+            let gl_time = time(2);
+            let name = format!("llvmpipe, 1 thread ({renderer})");
+            for (name, time) in rows.iter().copied().chain([(name.as_str(), gl_time)]) {
                 println!(
                     "{name:<34} {:>10.3} {:>14.1} {:>11.2}x",
                     time.as_secs_f64(),
-                    rate(fragments, *time),
+                    rate(fragments, time),
                     gl_time.as_secs_f64() / time.as_secs_f64()
                 );
             }

@@ -1,12 +1,16 @@
-//! Sweep scaling: 30 points over the demo trace, run with 1 and with 2 jobs in the same run;
-//! prints both wall times and the speed-up (aim: near linear), and checks the two result
-//! files are identical (results never depend on --jobs).
+//! Sweep scaling: 30 points over the demo trace, run with 1 and with 2 jobs in the same run,
+//! taking turns in two rounds (`occsim_traces::rounds`; each keeps its fastest); prints both
+//! wall times and the speed-up (aim: near linear), and checks the two result files are
+//! identical (results never depend on --jobs).
 //!
 //! `cargo bench --bench sweep` (set OCCSIM_SWEEP_ARCH to sweep another built-in machine).
 
+use occsim_traces::rounds::fastest_of_rounds;
 use std::path::Path;
 use std::process::Command;
-use std::time::Instant;
+
+/// Rounds in which the two job counts take turns (a round is about a minute).
+const ROUNDS: usize = 2;
 
 fn occsim(args: &[&str]) {
     let output = Command::new(env!("CARGO_BIN_EXE_occsim"))
@@ -33,10 +37,9 @@ fn main() {
         "--set",
         "counter_bits=16,24,32",
     ];
-    let mut times = Vec::new();
-    for jobs in ["1", "2"] {
+    let run = |jobs: &str| {
         let out = dir.join(format!("jobs-{jobs}.jsonl"));
-        let start = Instant::now();
+        // Each round replaces the last round's results.
         let mut args = vec![
             "sweep".to_owned(),
             path(&trace),
@@ -46,12 +49,18 @@ fn main() {
             jobs.into(),
             "--out".into(),
             path(&out),
+            "--force".into(),
         ];
         args.extend(axes.iter().map(|a| a.to_string()));
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
         occsim(&args);
-        times.push(start.elapsed().as_secs_f64());
-    }
+    };
+    let run = &run;
+    let mut jobs = ["1", "2"].map(|jobs| move || run(jobs));
+    let times: Vec<f64> = fastest_of_rounds(ROUNDS, 0.0, &mut jobs)
+        .iter()
+        .map(|f| f.seconds)
+        .collect();
     let one = std::fs::read(dir.join("jobs-1.jsonl")).expect("results");
     let two = std::fs::read(dir.join("jobs-2.jsonl")).expect("results");
     assert_eq!(one, two, "results depend on --jobs");

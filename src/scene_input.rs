@@ -3,7 +3,7 @@
 use anyhow::Context;
 use occsim_traces::builtin;
 use occsim_traces::scene::{Command, SceneReader};
-use std::io::{BufRead, BufReader, Cursor};
+use std::io::{BufRead, BufReader, Cursor, Read};
 
 /// A scene being read: its commands as they come, and its size from the first line.
 pub struct SceneInput {
@@ -15,9 +15,13 @@ pub struct SceneInput {
 }
 
 /// Open SCENE: a built-in name (`demo`, `hardcases`) or a path to a scene file.
+/// A progress bar over its bytes is drawn on a terminal while it is read (`count`, `trace gen`).
 pub fn open_scene(scene: &str) -> anyhow::Result<SceneInput> {
-    let input: Box<dyn BufRead> = match builtin::scene_text(scene) {
-        Some(text) => Box::new(Cursor::new(text.into_bytes())),
+    let (input, size): (Box<dyn Read>, u64) = match builtin::scene_text(scene) {
+        Some(text) => {
+            let size = text.len() as u64;
+            (Box::new(Cursor::new(text.into_bytes())), size)
+        }
         None => {
             let file = std::fs::File::open(scene).with_context(|| {
                 format!(
@@ -25,9 +29,14 @@ pub fn open_scene(scene: &str) -> anyhow::Result<SceneInput> {
                     builtin::NAMES.join(", ")
                 )
             })?;
-            Box::new(BufReader::with_capacity(1 << 16, file))
+            let size = file.metadata().map_or(0, |m| m.len());
+            (Box::new(file), size)
         }
     };
+    let bar = occsim_sweep::progress::bytes_bar(size);
+    bar.set_message(format!("scene {scene}"));
+    let counted = occsim_sweep::progress::Counted { inner: input, bar };
+    let input: Box<dyn BufRead> = Box::new(BufReader::with_capacity(1 << 16, counted));
     let mut reader = SceneReader::new(input, scene);
     // The parser guarantees the first command is the viewport.
     let first = reader.next().transpose()?.map(|line| line.command);

@@ -2,7 +2,7 @@
 
 mod support;
 
-use support::cli::{scratch_dir, stderr_of_failure, stdout_of};
+use support::cli::{occsim, scratch_dir, stderr_of_failure, stdout_of};
 
 /// The hand-worked counts of tests/../traces/src/builtin/hardcases.scene (see its comments).
 #[test]
@@ -244,7 +244,7 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
     stdout_of(&["trace", "gen", "hardcases", "-o", trace_arg]);
     // The rtl level builds every effect model, so compare with the cycle level doing so too.
     let cycle = stdout_of(&["replay", trace_arg, "--json", "--effects", "all"]);
-    let rtl = stdout_of(&[
+    let output = occsim(&[
         "replay",
         trace_arg,
         "--json",
@@ -255,7 +255,24 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
         "--window",
         "10..200",
     ]);
-    assert_eq!(cycle, rtl);
+    assert!(output.status.success());
+    let json = |text: &[u8]| -> serde_json::Value { serde_json::from_slice(text).unwrap() };
+    let (mut cycle, mut rtl) = (json(cycle.as_bytes()), json(&output.stdout));
+    assert_eq!(
+        (&cycle["level"], &rtl["level"]),
+        (&"cycle".into(), &"rtl".into())
+    );
+    cycle["level"] = serde_json::Value::Null;
+    rtl["level"] = serde_json::Value::Null;
+    assert_eq!(cycle, rtl, "the same report but for its level");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains(&format!(
+            "occsim: wrote {vcd_arg}: VCD waveform of the Occlusion Unit and OccU Control, cycles 10..200 of the run's {}",
+            cycle["summary"]["cycles"]
+        )),
+        "{stderr}"
+    );
     let text = std::fs::read_to_string(&vcd).unwrap();
     assert!(text.starts_with("$version occsim-rtl $end\n$timescale 1ps $end\n"));
     assert!(
@@ -287,6 +304,7 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
         ("5..3", "END must be greater than START"),
         ("1-3", "expected START..END"),
         ("a..9", "START \"a\" is not a cycle number"),
+        ("100000..100500", "starts after the run, which has"),
     ] {
         let error = stderr_of_failure(&[
             "replay",
@@ -300,6 +318,8 @@ fn replay_at_rtl_fidelity_matches_cycle_and_writes_a_vcd_window() {
         ]);
         assert!(error.contains(message), "{window}: {error}");
     }
+    // A window past the end kept nothing: the VCD is the 0..10 one of the retiled run.
+    assert_eq!(std::fs::read_to_string(&vcd).unwrap(), text);
 }
 
 #[test]
@@ -690,7 +710,7 @@ fn verbose_hits_cost_memory_by_the_tile_not_by_the_hit() {
             );
         } else if args.starts_with("replay") {
             assert!(
-                stdout.contains("1 queries checked against golden results"),
+                stdout.contains("(1 checked against golden results)"),
                 "{stdout}"
             );
         }
@@ -746,4 +766,39 @@ fn a_waveform_that_cannot_be_created_names_its_path() {
         error.contains(&format!("cannot write the waveform {}", missing.display())),
         "{error}"
     );
+}
+
+/// `trace dump --json`: the header and the events, streamed as one JSON document.
+#[test]
+fn trace_dump_json_gives_the_header_and_events() {
+    let dir = scratch_dir("dump-json");
+    let trace = dir.join("hardcases.occt");
+    let trace = trace.to_str().unwrap();
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace]);
+    let dump: serde_json::Value = serde_json::from_str(&stdout_of(&[
+        "trace", "dump", trace, "--json", "--limit", "5",
+    ]))
+    .unwrap();
+    assert_eq!(
+        (&dump["header"]["width"], &dump["header"]["height"]),
+        (&64.into(), &64.into())
+    );
+    assert_eq!(dump["events"].as_array().unwrap().len(), 5, "{dump}");
+    let all: serde_json::Value =
+        serde_json::from_str(&stdout_of(&["trace", "dump", trace, "--json"])).unwrap();
+    let events = all["events"].as_array().unwrap();
+    let count = |name: &str| events.iter().filter(|e| e.get(name).is_some()).count();
+    assert_eq!(count("QueryBegin"), 28, "the hard cases' 28 queries");
+    assert_eq!(&events[..5], dump["events"].as_array().unwrap().as_slice());
+}
+
+/// `demo --json` prints only the replay's JSON, as `replay --json` does.
+#[test]
+fn demo_json_is_the_replay_report() {
+    let out = stdout_of(&["demo", "--json"]);
+    let report: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(report["level"], "cycle");
+    assert_eq!(report["machine"], "o2");
+    assert_eq!(report["viewport_width"], 1280);
+    assert!(report["summary"]["frames_per_second"].as_f64().unwrap() > 0.0);
 }

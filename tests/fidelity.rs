@@ -22,7 +22,11 @@ fn fidelity_prints_every_level_against_cycle_and_plots() {
     let lines: Vec<&str> = out.lines().collect();
     assert!(lines[0].contains("63404 fragments"), "{out}");
     let level_of = |line: &str| line.split_whitespace().next().unwrap_or("").to_string();
-    let levels: Vec<String> = lines[2..].iter().map(|l| level_of(l)).collect();
+    let levels: Vec<String> = lines[2..7].iter().map(|l| level_of(l)).collect();
+    assert!(
+        lines[7].starts_with("  wall s: seconds on this computer") && lines.len() == 8,
+        "the legend closes the table:\n{out}"
+    );
     assert_eq!(
         levels,
         ["functional", "analytic", "sampled:3", "cycle", "rtl"],
@@ -41,8 +45,11 @@ fn fidelity_prints_every_level_against_cycle_and_plots() {
     assert!(lines[2].contains(" - "), "{out}");
     let svg = std::fs::read_to_string(&plot).unwrap();
     assert!(svg.starts_with("<svg") || svg.starts_with("<?xml"), "{svg}");
-    assert!(svg.contains("cycle (error 0, drawn at 0.0001)"), "{svg}");
-    assert!(svg.contains("rtl (error 0, drawn at 0.0001)"), "{svg}");
+    // Errors in percent, as the table prints them; the trace and the machine in the title.
+    assert!(svg.contains("cycle (error 0, drawn at 0.01%)"), "{svg}");
+    assert!(svg.contains("rtl (error 0, drawn at 0.01%)"), "{svg}");
+    assert!(svg.contains("error vs rtl (%, the worse of"), "{svg}");
+    assert!(svg.contains("hardcases.occt on o2"), "{svg}");
     assert!(svg.contains("analytic"));
 
     let json: serde_json::Value =
@@ -83,14 +90,13 @@ fn replay_reports_its_level_and_the_active_effects() {
 
     let analytic = stdout_of(&["replay", &trace, "--fidelity", "analytic"]);
     assert!(
-        analytic.starts_with("level: analytic on o2\n"),
+        analytic
+            .starts_with("level analytic, machine o2 (4 engines) at 66.67 MHz, viewport 64x64\n"),
         "{analytic}"
     );
-    assert!(analytic.contains("queries: 28 (28 checked"), "{analytic}");
-    let functional = stdout_of(&["replay", &trace, "--fidelity", "functional"]);
     assert!(
-        functional.contains("predicted cycles: none"),
-        "{functional}"
+        analytic.contains("28 queries (28 checked against golden results)"),
+        "{analytic}"
     );
     let sampled: serde_json::Value = serde_json::from_str(&stdout_of(&[
         "replay",
@@ -135,6 +141,89 @@ fn the_rtl_level_of_the_ir_machine_reports_as_its_cycle_level() {
         ])
     };
     let rtl = run("rtl");
-    assert!(rtl.contains("machine ir"), "{rtl}");
-    assert_eq!(rtl, run("cycle"));
+    let first = "level rtl, machine ir (2 boards, 80 Image Engines a board, 4 engines an Occlusion Unit, interleave columns) at 100 MHz";
+    assert!(rtl.starts_with(first), "{rtl}");
+    // The IR's busy cycles are sums over many units, its percentages their means: said so.
+    for legend in [
+        "summed over the units; busy%: of the run's cycles, the mean over the units",
+        "the least, the mean and the most busy of count units",
+    ] {
+        assert!(rtl.contains(legend), "no `{legend}` in\n{rtl}");
+    }
+    assert_eq!(rtl.replacen("level rtl", "level cycle", 1), run("cycle"));
+}
+
+/// Every level prints one shape: the level and the machine first, the same summary line,
+/// the same frames and query columns, `-` where the level has no figure.
+#[test]
+fn every_level_reports_in_one_shape() {
+    let (_dir, trace) = hardcases_trace("shape");
+    let levels = ["functional", "analytic", "sampled:5", "cycle", "rtl"];
+    let mut query_headings = Vec::new();
+    for level in levels {
+        let text = stdout_of(&["replay", &trace, "--fidelity", level, "--queries"]);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(
+            lines[0],
+            format!("level {level}, machine o2 (4 engines) at 66.67 MHz, viewport 64x64")
+        );
+        let summary = lines[1];
+        for part in [
+            " cycles (",
+            "63404 fragments",
+            "fragments/cycle",
+            "28 queries (28 checked",
+            "latency p50 ",
+        ] {
+            assert!(summary.contains(part), "{level}: {summary}");
+        }
+        let heading = lines
+            .iter()
+            .find(|l| l.trim_start().starts_with("# ") && l.contains("latency"))
+            .unwrap_or_else(|| panic!("{level}: no query table in\n{text}"));
+        query_headings.push(heading.to_string());
+        // Query 27: five brief tiles (the whole screen and its quarters, hardcases.scene).
+        let row = lines
+            .iter()
+            .find(|l| l.split_whitespace().nth(1) == Some("27"))
+            .unwrap();
+        let cells: Vec<&str> = row.split_whitespace().collect();
+        assert_eq!((cells[2], cells[3]), ("brief", "5"), "{level}: {row}");
+        let has_time = level != "functional";
+        assert_eq!(cells[4] != "-", has_time, "{level}: latency in {row}");
+        let splits_latency = matches!(level, "cycle" | "rtl");
+        assert_eq!(cells[5] != "-", splits_latency, "{level}: drain in {row}");
+        assert_eq!(
+            summary.starts_with("- cycles (- s)"),
+            !has_time,
+            "{level}: {summary}"
+        );
+        assert_eq!(
+            text.contains("stages, memory port, units, engines: - (the"),
+            !splits_latency,
+            "{level}"
+        );
+    }
+    assert!(
+        query_headings.windows(2).all(|w| w[0] == w[1]),
+        "{query_headings:?}"
+    );
+}
+
+/// The hard cases' largest query has 5 tiles (query 27: the screen and its four quarters),
+/// so of 8 engines 3 get none; at 4 or 5 engines every engine gets one.
+#[test]
+fn the_report_says_when_engines_outnumber_the_tiles() {
+    let (_dir, trace) = hardcases_trace("idle-engines");
+    for level in ["cycle", "analytic"] {
+        let eight = stdout_of(&["replay", &trace, "--engines", "8", "--fidelity", level]);
+        assert!(
+            eight.contains(
+                "note: 8 engines, but no query has more than 5 tiles: 3 engines get no tile"
+            ),
+            "{level}: {eight}"
+        );
+        let five = stdout_of(&["replay", &trace, "--engines", "5", "--fidelity", level]);
+        assert!(!five.contains("note: "), "{level}: {five}");
+    }
 }

@@ -65,6 +65,146 @@ fn results_do_not_depend_on_jobs_or_shards() {
     assert!(stderr.contains("engines=2,counter_bits=8"), "{stderr}");
 }
 
+/// README's rule: a results file is replaced only with `--force`, by `sweep` (which
+/// otherwise continues it with `--resume` or refuses) and by `sweep merge` alike.
+#[test]
+fn results_files_are_replaced_only_with_force() {
+    let dir = scratch("force");
+    let trace = dir.join("hard.occt");
+    ok(&["trace", "gen", "hardcases", "-o", s(&trace)]);
+    let sweep = |out: &Path, set: &str, extra: &[&str]| {
+        let mut args = vec!["sweep", s(&trace), "--out", s(out), "--set", set];
+        args.extend(extra);
+        occsim(&args)
+    };
+    // An earlier 3-point sweep, then a 2-point one in two shards.
+    let earlier = dir.join("sweep.jsonl");
+    assert!(sweep(&earlier, "engines=1,2,4", &[]).status.success());
+    let before = std::fs::read(&earlier).unwrap();
+    let shards: Vec<PathBuf> = (1..=2)
+        .map(|k| dir.join(format!("shard-{k}.jsonl")))
+        .collect();
+    for (k, shard) in shards.iter().enumerate() {
+        let shard_flag = format!("{}/2", k + 1);
+        assert!(sweep(shard, "engines=1,8", &["--shard", &shard_flag])
+            .status
+            .success());
+    }
+    let merge = |extra: &[&str]| {
+        let mut args = vec!["sweep", "merge", s(&earlier), s(&shards[0]), s(&shards[1])];
+        args.extend(extra);
+        occsim(&args)
+    };
+    let refused = merge(&[]);
+    assert!(!refused.status.success());
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        stderr.contains("sweep.jsonl already exists; pass --force to replace it"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(&earlier).unwrap(), before, "untouched");
+    assert!(merge(&["--force"]).status.success());
+    let merged = std::fs::read_to_string(&earlier).unwrap();
+    assert_eq!(merged.lines().count(), 2, "the 2-point merge replaced it");
+
+    // A fresh sweep over a results file: refused, then replaced with --force.
+    let refused = sweep(&earlier, "engines=1,2,4", &[]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success());
+    assert!(
+        stderr.contains("pass --resume to continue that sweep, or --force to replace it"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read_to_string(&earlier).unwrap(), merged);
+    assert!(sweep(&earlier, "engines=1,2,4", &["--force"])
+        .status
+        .success());
+    assert_eq!(
+        std::fs::read(&earlier).unwrap(),
+        before,
+        "the same sweep again"
+    );
+}
+
+/// `--json` prints the lines `--out` holds, as one array.
+#[test]
+fn sweep_json_prints_the_results_lines() {
+    let dir = scratch("json");
+    let trace = dir.join("hard.occt");
+    ok(&["trace", "gen", "hardcases", "-o", s(&trace)]);
+    let out = dir.join("r.jsonl");
+    let printed = stdout_of(&[
+        "sweep",
+        s(&trace),
+        "--out",
+        s(&out),
+        "--set",
+        "engines=1,2",
+        "--json",
+    ]);
+    let array: Vec<serde_json::Value> = serde_json::from_str(&printed).unwrap();
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(&out)
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(array, lines);
+    assert_eq!(array.len(), 2);
+    assert_eq!(array[1]["metrics"]["queries"], 28);
+}
+
+/// A sweep's chart names the metric with its unit, the swept parameter, the trace, the
+/// machine and the level; a merge's names the shards' trace digest and machine.
+#[test]
+fn sweep_charts_say_what_they_show() {
+    let dir = scratch("chart");
+    let trace = dir.join("hard.occt");
+    ok(&["trace", "gen", "hardcases", "-o", s(&trace)]);
+    let (out, svg) = (dir.join("r.jsonl"), dir.join("r.svg"));
+    ok(&[
+        "sweep",
+        s(&trace),
+        "--arch",
+        "o2",
+        "--out",
+        s(&out),
+        "--set",
+        "engines=1,2",
+        "--set",
+        "page_miss_latency_cycles=4,8",
+        "--plot",
+        s(&svg),
+        "--retile",
+        "2x2",
+    ]);
+    let text = std::fs::read_to_string(&svg).unwrap();
+    assert!(
+        text.contains("total_cycles (cycles) against page_miss_latency_cycles: "),
+        "{text}"
+    );
+    assert!(
+        text.contains("hard.occt retiled 2x2 on o2, cycle"),
+        "{text}"
+    );
+    assert!(
+        text.contains("page_miss_latency_cycles (cycles)"),
+        "the x unit: {text}"
+    );
+    let merged = dir.join("m.jsonl");
+    let merged_svg = dir.join("m.svg");
+    ok(&[
+        "sweep",
+        "merge",
+        s(&merged),
+        s(&out),
+        "--plot",
+        s(&merged_svg),
+    ]);
+    let text = std::fs::read_to_string(&merged_svg).unwrap();
+    assert!(text.contains("1 shards of trace fnv1a64:"), "{text}");
+    assert!(text.contains(" on o2"), "{text}");
+}
+
 #[test]
 fn bad_axes_are_rejected_by_name() {
     let dir = scratch("bad");

@@ -3,7 +3,7 @@
 
 mod support;
 
-use support::cli::stdout_of as occsim;
+use support::cli::{stderr_of_failure, stdout_of, stdout_of as occsim};
 
 #[test]
 fn every_driver_makes_a_trace_that_replays_against_its_golden_answers() {
@@ -50,4 +50,70 @@ fn culling_compare_lists_every_driver_with_o2_and_ir4_cycles() {
     }
     assert!(table.contains("cycles o2"), "{table}");
     assert!(table.contains("cycles ir4"), "{table}");
+    assert!(
+        table.contains("query frag: fragments of the queries' boxes")
+            && table.contains("trav ms, golden ms: wall-clock milliseconds"),
+        "every column explained:\n{table}"
+    );
+}
+
+/// `--arch` and `--set` choose the machines as on `replay`: one column each, every --set
+/// applied to each; a machine's failure names it.
+#[test]
+fn culling_compare_takes_arch_and_set() {
+    let walk = [
+        "culling",
+        "compare",
+        "--scene",
+        "city",
+        "--frames",
+        "1",
+        "--width",
+        "96",
+        "--height",
+        "64",
+        "--adaptive-threshold",
+        "0.2",
+        "--quadtree-levels",
+        "0",
+    ];
+    let run = |extra: &[&str]| {
+        let mut args = walk.to_vec();
+        args.extend(extra);
+        stdout_of(&args)
+    };
+    let cycles_of = |table: &str, column: usize| -> f64 {
+        let row = table
+            .lines()
+            .find(|l| l.starts_with("lazy-grid "))
+            .unwrap_or_else(|| panic!("no lazy-grid row in\n{table}"));
+        // The cycle columns follow the nine count columns (driver, tris %, ..., px lost).
+        row.split_whitespace()
+            .nth(9 + column)
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    let one = run(&["--arch", "o2"]);
+    assert!(
+        one.contains("cycles o2") && !one.contains("cycles ir4"),
+        "{one}"
+    );
+    let two = run(&["--arch", "ir2,o2", "--set", "engines=1"]);
+    assert!(
+        two.contains("cycles ir2") && two.contains("cycles o2"),
+        "{two}"
+    );
+    assert!(
+        two.find("cycles ir2") < two.find("cycles o2"),
+        "columns in --arch order: {two}"
+    );
+    // The lazy grid's queries have many tiles (the outdated cells a box covers); one engine
+    // tests them one after another, four share them.
+    assert!(cycles_of(&two, 1) > cycles_of(&one, 0), "{one}\n{two}");
+    let wrong = stderr_of_failure(&[&walk[..], &["--arch", "o2", "--set", "boards=2"]].concat());
+    assert!(
+        wrong.contains("--arch o2") && wrong.contains("boards"),
+        "{wrong}"
+    );
 }

@@ -7,11 +7,12 @@
 
 use occsim_sim::{Arch, MachineModel};
 use occsim_traces::raster::RasterProfile;
+use occsim_traces::rounds::fastest_of_rounds;
 use occsim_traces::workloads::{city, generate, CityOptions, DriverKind, DriverOptions, Walk};
 use occsim_traces::Event;
-use std::time::Instant;
 
-const REPEATS: usize = 5;
+/// Rounds in which the open and the closed loop take turns; each keeps its fastest run.
+const ROUNDS: usize = 5;
 
 fn main() {
     let scene = city(&CityOptions::default());
@@ -39,14 +40,16 @@ fn main() {
         .filter(|e| matches!(e, Event::Fragment(_)))
         .count();
     println!(
-        "city hierarchical walkthrough, 2 frames at 1280x1024: {} events ({} closed-loop records), {fragments} fragments; best of {REPEATS}",
+        "city hierarchical walkthrough, 2 frames at 1280x1024: {} events ({} closed-loop records), {fragments} fragments; fastest of {ROUNDS} interleaved rounds",
         closed.len(),
         closed.len() - open.len()
     );
     for name in ["o2", "ir4"] {
         let arch = Arch::builtin(name).expect("built-in architecture");
-        let open_s = best_of(&arch, &walk, &open);
-        let closed_s = best_of(&arch, &walk, &closed);
+        let (arch, walk) = (&arch, &walk);
+        let mut jobs = [&open, &closed].map(|events| move || replay(arch, walk, events));
+        let figures = fastest_of_rounds(ROUNDS, 0.0, &mut jobs);
+        let (open_s, closed_s) = (figures[0].seconds, figures[1].seconds);
         println!(
             "{name:<4}: open loop {open_s:.3} s, closed loop {closed_s:.3} s: {:.3}x",
             closed_s / open_s
@@ -54,19 +57,13 @@ fn main() {
     }
 }
 
-/// The fastest of `REPEATS` replays of `events`, in seconds.
-fn best_of(arch: &Arch, walk: &Walk, events: &[Event]) -> f64 {
-    (0..REPEATS)
-        .map(|_| {
-            let start = Instant::now();
-            let mut machine = MachineModel::new(arch, walk.width, walk.height).expect("machine");
-            for event in events {
-                machine
-                    .event(event)
-                    .expect("replay matches the golden model");
-            }
-            std::hint::black_box(machine.finish().expect("report"));
-            start.elapsed().as_secs_f64()
-        })
-        .fold(f64::INFINITY, f64::min)
+/// One replay of `events` on a fresh machine.
+fn replay(arch: &Arch, walk: &Walk, events: &[Event]) {
+    let mut machine = MachineModel::new(arch, walk.width, walk.height).expect("machine");
+    for event in events {
+        machine
+            .event(event)
+            .expect("replay matches the golden model");
+    }
+    std::hint::black_box(machine.finish().expect("report"));
 }

@@ -10,6 +10,7 @@ use occsim_sim::effects::{effects_of_features, observe, Effects};
 use occsim_sim::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use occsim_sim::{Arch, MachineBuilder};
 use occsim_traces::golden::{EventSink, FunctionalModel};
+use occsim_traces::rounds::fastest_of_rounds;
 use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
 use occsim_traces::{Event, QueryMode, QuerySpec, Rect};
 use std::time::Instant;
@@ -58,27 +59,15 @@ fn replay(level: Fidelity, arch: &Arch, trace: &[u8], effects: Effects) -> Level
     sink.model.finish(arch).expect("replays")
 }
 
-/// One turn of `level`: runs adding up to at least `MIN_SECONDS` (the effects choice
-/// included where the level builds effects); the fastest in seconds, and the predicted
-/// cycles.
-fn time_level(level: Fidelity, arch: &Arch, trace: &[u8]) -> (f64, Option<u64>) {
-    let mut best = f64::INFINITY;
-    let mut cycles = None;
-    let mut spent = 0.0;
-    while spent < MIN_SECONDS {
-        let start = Instant::now();
-        let effects = if level.builds_effects() {
-            effects_from_header(arch, trace)
-        } else {
-            Effects::every_model_of(arch.machine())
-        };
-        let result = replay(level, arch, trace, effects);
-        let seconds = start.elapsed().as_secs_f64();
-        best = best.min(seconds);
-        spent += seconds;
-        cycles = result.total_cycles;
-    }
-    (best, cycles)
+/// One run of `level` (the effects choice included where the level builds effects): its
+/// predicted cycles.
+fn run_level(level: Fidelity, arch: &Arch, trace: &[u8]) -> Option<u64> {
+    let effects = if level.builds_effects() {
+        effects_from_header(arch, trace)
+    } else {
+        Effects::every_model_of(arch.machine())
+    };
+    replay(level, arch, trace, effects).total_cycles
 }
 
 fn main() {
@@ -115,17 +104,12 @@ fn levels(arch: &Arch, trace: &[u8], fragments: f64) {
         Fidelity::Cycle,
         Fidelity::Rtl,
     ];
-    let mut timings: Vec<(Fidelity, f64, Option<u64>)> = levels
+    let mut jobs = levels.map(|level| move || run_level(level, arch, trace));
+    let timings: Vec<(Fidelity, f64, Option<u64>)> = levels
         .iter()
-        .map(|&level| (level, f64::INFINITY, None))
+        .zip(fastest_of_rounds(REPEATS, MIN_SECONDS, &mut jobs))
+        .map(|(&level, figure)| (level, figure.seconds, figure.output))
         .collect();
-    for _ in 0..REPEATS {
-        for (level, best, cycles) in &mut timings {
-            let (seconds, predicted) = time_level(*level, arch, trace);
-            *best = best.min(seconds);
-            *cycles = predicted;
-        }
-    }
     let cycle_seconds = timings[4].1;
     for (level, seconds, cycles) in &timings {
         println!(
@@ -176,10 +160,8 @@ fn compare_effects(arch: &Arch, events: &[Event], fragments: f64, name: &str) {
     let header_start = Instant::now();
     assert_eq!(effects_from_header(arch, &trace), chosen, "header = scan");
     let header = header_start.elapsed().as_secs_f64();
-    let (mut all, mut auto) = (f64::INFINITY, f64::INFINITY);
-    for _ in 0..REPEATS {
-        for (effects, best) in [(Effects::ALL, &mut all), (chosen, &mut auto)] {
-            let start = Instant::now();
+    let mut jobs = [Effects::ALL, chosen].map(|effects| {
+        move || {
             let mut machine = MachineBuilder::new(arch)
                 .effects(effects)
                 .build(WIDTH, HEIGHT)
@@ -188,9 +170,10 @@ fn compare_effects(arch: &Arch, events: &[Event], fragments: f64, name: &str) {
                 machine.event(event).expect("replays");
             }
             machine.finish().expect("report");
-            *best = best.min(start.elapsed().as_secs_f64());
         }
-    }
+    });
+    let figures = fastest_of_rounds(REPEATS, 0.0, &mut jobs);
+    let (all, auto) = (figures[0].seconds, figures[1].seconds);
     println!(
         "  {name}: effects chosen: {}; cycle with all: {:.1} M fragments/s, with the choice: {:.1} M fragments/s ({:+.1}%); deciding from the header: {:.0} us, by a scan: {:.1} ms ({:.1}% of a replay)",
         chosen.active_names(),

@@ -11,6 +11,7 @@
 //! Run: `cargo bench -p occsim-sim --bench rtl`
 
 use occsim_sim::{Arch, MachineBuilder, OccuModel, WaveformOptions};
+use occsim_traces::rounds::fastest_of_rounds;
 use occsim_traces::Event;
 use std::io::Write;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -73,20 +74,21 @@ impl std::io::Seek for CountingSeek {
 /// How one configuration's OccU model is made, once per run.
 type Maker<'a> = &'a dyn Fn() -> OccuModel;
 
-/// Per configuration, the fastest of `REPEATS` replays with the OccU model it makes:
-/// (fragments per second, report). Each round runs every configuration once in
-/// turn, so a slow spell of the shared machine falls on all of them alike.
+/// Per configuration, the fastest of `REPEATS` interleaved rounds of replays with the OccU
+/// model it makes (`occsim_traces::rounds`, the machine's construction included):
+/// (fragments per second, report).
 fn fastest(arch: &Arch, frame: &[Event], makers: &[Maker]) -> Vec<(f64, occsim_sim::Report)> {
-    let mut best: Vec<Option<(f64, occsim_sim::Report)>> = vec![None; makers.len()];
-    for _ in 0..REPEATS {
-        for (make, best) in makers.iter().zip(&mut best) {
-            let next = run(arch, frame, make());
-            if best.as_ref().is_none_or(|b| next.0 > b.0) {
-                *best = Some(next);
-            }
-        }
-    }
-    best.into_iter().map(|b| b.expect("REPEATS >= 1")).collect()
+    let mut jobs: Vec<_> = makers
+        .iter()
+        .map(|make| move || run(arch, frame, make()).1)
+        .collect();
+    fastest_of_rounds(REPEATS, 0.0, &mut jobs)
+        .into_iter()
+        .map(|figure| {
+            let fragments = figure.output.summary.fragments as f64;
+            (fragments / figure.seconds, figure.output)
+        })
+        .collect()
 }
 
 /// The rtl model dumping `window` as VCD into a sink that counts its bytes into `bytes`.

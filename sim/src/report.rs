@@ -261,43 +261,19 @@ pub fn nearest_rank(sorted: &[u64], p: u64) -> u64 {
     sorted[rank - 1]
 }
 
+/// What the report says of a stream with no closed-loop record.
+pub(crate) const OPEN_LOOP_NOTE: &str = "open loop: the stream has no draws, host work, waits or frames (a version-1 trace), so nothing waits for an answer";
+
+/// What the frames table's columns are, at every level.
+pub(crate) const FRAMES_LEGEND: &str = "  in pipeline cycles (ms: simulated milliseconds): host busy (traversal, driver, result reads; on the O2 its software geometry too), geometry (the geometry stage busy), pixel busy (the rasterizer busy), waiting (the host blocked on answers), pipe wait (the host blocked at the frame's end)";
+
+/// The frames table's heading, at every level.
+pub(crate) const FRAMES_HEADING: &str = "frame        cycles         ms    host busy     geometry   pixel busy      waiting    pipe wait";
+
 impl Report {
-    /// The one-line summary.
-    pub fn summary_line(&self) -> String {
-        let s = &self.summary;
-        format!(
-            "{} cycles ({:.6} s at {}), {} fragments, {:.3} fragments/cycle, {} queries, latency p50 {} p95 {} max {} cycles",
-            s.cycles,
-            s.simulated_seconds,
-            self.clock_text(),
-            s.fragments,
-            s.fragments_per_cycle,
-            s.queries,
-            s.latency_p50_cycles,
-            s.latency_p95_cycles,
-            s.latency_max_cycles
-        )
-    }
-
-    fn clock_text(&self) -> String {
-        self.arch
-            .iter()
-            .find(|e| e.key == "clock_mhz")
-            .map(|e| format!("{} MHz", e.value))
-            .unwrap_or_default()
-    }
-
-    /// The readable report: summary line, stages, memory port, engines, and with
-    /// `with_queries` a table of every query.
-    pub fn to_text(&self, with_queries: bool) -> String {
-        let mut out = String::new();
-        let _ = writeln!(out, "{}", self.summary_line());
-        let _ = writeln!(
-            out,
-            "machine {}, viewport {}x{}, {} queries checked against golden results",
-            self.machine, self.viewport_width, self.viewport_height, self.summary.checked_queries
-        );
-        self.write_frames(&mut out);
+    /// The blocks' tables: stages, memory port (when the machine has one), units of many
+    /// like blocks, engines.
+    pub(crate) fn write_blocks(&self, out: &mut String) {
         let _ = writeln!(
             out,
             "\n{:<16} {:>12} {:>7} {:>12} {:>7} {:>12}",
@@ -315,11 +291,18 @@ impl Report {
                 s.memory_stall_cycles
             );
         }
+        let _ = writeln!(
+            out,
+            "  busy, stall: cycles, summed over a stage's units where it has several; busy%, stall%: \
+             of the run's {} cycles, the mean over its units; stall: a ready item waiting for memory \
+             data or for room downstream; memory stall: the part of stall waiting for memory data",
+            self.summary.cycles
+        );
         let p = &self.memory_port;
         if p.bits_per_cycle > 0 {
-            self.write_port(&mut out);
+            self.write_port(out);
         }
-        self.write_units(&mut out);
+        self.write_units(out);
         let _ = writeln!(
             out,
             "\n{:<8} {:>12} {:>7} {:>12}",
@@ -332,19 +315,21 @@ impl Report {
                 e.engine, e.busy_cycles, e.busy_percent, e.stall_cycles
             );
         }
-        if with_queries {
-            self.write_query_table(&mut out);
-        }
-        out
+        let legend = if self.units.is_empty() {
+            "engine E of the Occlusion Unit: busy: cycles testing fragments against its tiles; \
+             busy%: of the run's cycles; stall: cycles holding a tested fragment with no room downstream"
+        } else {
+            "engine E of every Image Engine's Occlusion Unit: busy, stall: cycles testing \
+             fragments against its tiles and holding a tested fragment with no room downstream, \
+             summed over the units; busy%: of the run's cycles, the mean over the units"
+        };
+        let _ = writeln!(out, "  {legend}");
     }
 
     /// The frames of a closed-loop run, or the note that the run was an open loop.
-    fn write_frames(&self, out: &mut String) {
+    pub(crate) fn write_frames(&self, out: &mut String) {
         let Some(fps) = self.summary.frames_per_second else {
-            let _ = writeln!(
-                out,
-                "open loop: the stream has no draws, host work, waits or frames (a version-1 trace), so nothing waits for an answer"
-            );
+            let _ = writeln!(out, "{OPEN_LOOP_NOTE}");
             return;
         };
         let _ = writeln!(
@@ -352,11 +337,8 @@ impl Report {
             "\n{} frames, {fps:.2} frames/s; on the host's timeline busy + waiting + pipe wait = cycles",
             self.frames.len()
         );
-        let _ = writeln!(
-            out,
-            "{:<6} {:>12} {:>10} {:>12} {:>12} {:>12} {:>12} {:>12}",
-            "frame", "cycles", "ms", "host busy", "geometry", "pixel busy", "waiting", "pipe wait"
-        );
+        let _ = writeln!(out, "{FRAMES_LEGEND}");
+        let _ = writeln!(out, "{FRAMES_HEADING}");
         for f in &self.frames {
             let _ = writeln!(
                 out,
@@ -389,13 +371,17 @@ impl Report {
                 u.name, u.count, u.busy_percent_min, u.busy_percent_mean, u.busy_percent_max
             );
         }
+        let _ = writeln!(
+            out,
+            "  each unit's busy cycles as % of the run's cycles: the least, the mean and the most busy of count units"
+        );
     }
 
     fn write_port(&self, out: &mut String) {
         let p = &self.memory_port;
         let _ = writeln!(
             out,
-            "\nmemory port: {} bits/cycle, busy {} cycles ({:.1}%), utilization {:.1}%, max {} bits in a cycle",
+            "\nmemory port: {} bits/cycle; busy {} cycles ({:.1}% of the run: cycles it carried any bits), utilization {:.1}% (bits carried over the bits it could have carried), max {} bits in a cycle",
             p.bits_per_cycle, p.busy_cycles, p.busy_percent, p.utilization_percent, p.max_bits_in_one_cycle
         );
         let _ = writeln!(
@@ -403,44 +389,5 @@ impl Report {
             "  depth reads {} words ({} word hits, {} page hits, {} page misses), depth writes {}, OccU words {}",
             p.depth_read_words, p.depth_read_word_hits, p.depth_read_page_hits, p.depth_read_page_misses, p.depth_writes, p.occu_words
         );
-    }
-
-    fn write_query_table(&self, out: &mut String) {
-        let _ = writeln!(
-            out,
-            "\n{:>6} {:>10} {:<8} {:>6} {:>10} {:>8} {:>8} {:>8} {:>9} {:>12} {:>12} {:>10}",
-            "#",
-            "id",
-            "mode",
-            "tiles",
-            "latency",
-            "drain",
-            "local",
-            "global",
-            "overflow",
-            "nohc",
-            "phc",
-            "fragments"
-        );
-        for (index, q) in self.queries.iter().enumerate() {
-            let nohc: u64 = q.tiles.iter().map(|t| t.nohc).sum();
-            let phc: u64 = q.tiles.iter().map(|t| t.phc).sum();
-            let _ = writeln!(
-                out,
-                "{:>6} {:>10} {:<8} {:>6} {:>10} {:>8} {:>8} {:>8} {:>9} {:>12} {:>12} {:>10}",
-                index,
-                q.id,
-                q.mode.name(),
-                q.tiles.len(),
-                q.latency_cycles,
-                q.drain_cycles,
-                q.local_merge_cycles,
-                q.global_merge_cycles,
-                q.overflowed_buffers,
-                nohc,
-                phc,
-                q.fragments
-            );
-        }
     }
 }

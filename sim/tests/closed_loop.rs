@@ -264,11 +264,17 @@ fn with_a_free_host_and_no_waits_frame_time_is_the_open_loop_cycle_count() {
         let (closed, open) = (replay(&closed), replay(&open));
         assert!(open.frames.is_empty(), "{name}: no records, no frames");
         assert!(
-            open.to_text(false)
+            occsim_sim::LevelResult::from_report(open.clone(), occsim_sim::Effects::ALL)
+                .to_text(false)
                 .contains("open loop: the stream has no draws"),
             "{name}: the report says it was an open loop"
         );
-        assert!(closed.to_text(false).contains("1 frames"), "{name}");
+        assert!(
+            occsim_sim::LevelResult::from_report(closed.clone(), occsim_sim::Effects::ALL)
+                .to_text(false)
+                .contains("1 frames"),
+            "{name}"
+        );
         assert_eq!(closed.frames.len(), 1, "{name}");
         assert_eq!(closed.frames[0].cycles, open.summary.cycles, "{name}");
         assert_eq!(closed.summary.cycles, open.summary.cycles, "{name}");

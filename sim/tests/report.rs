@@ -23,18 +23,28 @@ fn report() -> occsim_sim::Report {
     machine.finish().unwrap()
 }
 
+fn text(report: &occsim_sim::Report, with_queries: bool) -> String {
+    occsim_sim::LevelResult::from_report(report.clone(), occsim_sim::Effects::ALL)
+        .to_text(with_queries)
+}
+
 #[test]
-fn the_text_starts_with_the_summary_line_and_has_every_table() {
+fn the_text_starts_with_the_level_and_summary_lines_and_has_every_table() {
     let report = report();
-    let text = report.to_text(true);
-    let first = text.lines().next().unwrap();
+    let text = text(&report, true);
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "level cycle, machine o2 (4 engines) at 66.67 MHz, viewport 16x16"
+    );
+    let summary = lines.next().unwrap();
     assert!(
-        first.starts_with(&format!("{} cycles (", report.summary.cycles)),
-        "{first}"
+        summary.starts_with(&format!("{} cycles (", report.summary.cycles)),
+        "{summary}"
     );
     assert!(
-        first.contains("2 fragments") && first.contains("latency p50"),
-        "{first}"
+        summary.contains("2 fragments") && summary.contains("latency p50"),
+        "{summary}"
     );
     for heading in ["stage", "memory port:", "engine", "mode"] {
         assert!(
@@ -44,13 +54,24 @@ fn the_text_starts_with_the_summary_line_and_has_every_table() {
         );
     }
     assert!(text.lines().any(|l| l.contains("occlusion_unit")));
+    // Every table says what its columns are, with units.
+    for legend in [
+        "  busy, stall: cycles, summed over a stage's units where it has several",
+        "(bits carried over the bits it could have carried)",
+        "  engine E of the Occlusion Unit: busy: cycles testing fragments",
+        "nohc, phc: passing and projected fragments summed over the tiles",
+    ] {
+        assert!(text.contains(legend), "no legend `{legend}` in\n{text}");
+    }
+    let query_rows = |text: &str| {
+        text.lines()
+            .filter(|l| l.split_whitespace().nth(2) == Some("verbose"))
+            .count()
+    };
+    assert_eq!(query_rows(&text), 1, "one query row");
     assert_eq!(
-        text.lines().filter(|l| l.contains("verbose")).count(),
-        1,
-        "one query row"
-    );
-    assert!(
-        !report.to_text(false).contains("verbose"),
+        query_rows(&self::text(&report, false)),
+        0,
         "no query table without --queries"
     );
 }

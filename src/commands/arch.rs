@@ -51,6 +51,21 @@ impl ArchSelection {
     pub fn resolve(&self) -> anyhow::Result<Arch> {
         resolve(&self.arch, self.arch_file.as_deref(), &self.set)
     }
+
+    /// The architecture as a chart's title names it: `ir4`, `my.toml`, `o2 (engines=2)`.
+    pub fn describe(&self) -> String {
+        describe(&self.arch, self.arch_file.as_deref(), &self.set)
+    }
+}
+
+/// A built-in name or a file, with its overrides: `o2 (engines=2, counter_bits=16)`.
+pub fn describe(name: &str, file: Option<&Path>, sets: &[String]) -> String {
+    let base = file.map_or(name.to_string(), |f| f.display().to_string());
+    if sets.is_empty() {
+        base
+    } else {
+        format!("{base} ({})", sets.join(", "))
+    }
 }
 
 /// A built-in or file architecture with the `--set` overrides applied in order.

@@ -3,6 +3,7 @@
 //! simulated cycles per frame on each machine.
 
 use super::workload_args::SceneArgs;
+use anyhow::Context;
 use occsim_traces::workloads::compare::{
     compare as compare_drivers, CompareError, CompareReport, DriverReport, FrameCost,
     FrameCycleModel, ModelError,
@@ -29,6 +30,43 @@ pub struct CompareArgs {
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
+    /// A built-in architecture to time every frame on (repeatable, or comma separated; see
+    /// `occsim arch list`) [default: o2,ir4 when no --arch-file is given either].
+    #[arg(long, value_delimiter = ',', value_name = "NAME")]
+    pub arch: Vec<String>,
+    /// An architecture file to time every frame on (repeatable; see `occsim arch show`).
+    #[arg(long, value_name = "FILE")]
+    pub arch_file: Vec<std::path::PathBuf>,
+    /// Override one parameter of every machine (repeatable), e.g. --set engines=8.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    pub set: Vec<String>,
+}
+
+impl CompareArgs {
+    /// The machines to time frames on, each with its column's name: the --arch names and
+    /// --arch-file stems in order, every --set applied to each.
+    pub fn machines(&self) -> anyhow::Result<Vec<(String, occsim_sim::Arch)>> {
+        let defaults: Vec<String> = CYCLE_MACHINES.iter().map(|m| m.to_string()).collect();
+        let names = if self.arch.is_empty() && self.arch_file.is_empty() {
+            &defaults
+        } else {
+            &self.arch
+        };
+        let mut machines = Vec::new();
+        for name in names {
+            let arch = super::arch::resolve(name, None, &self.set)
+                .with_context(|| format!("--arch {name}"))?;
+            machines.push((name.clone(), arch));
+        }
+        for file in &self.arch_file {
+            let arch = super::arch::resolve("", Some(file), &self.set)?;
+            let name = file.file_stem().map_or(file.display().to_string(), |s| {
+                s.to_string_lossy().into_owned()
+            });
+            machines.push((name, arch));
+        }
+        Ok(machines)
+    }
 }
 
 /// The driver configurations the report compares.
@@ -68,15 +106,13 @@ fn drivers_to_compare(args: &CompareArgs) -> Vec<DriverOptions> {
 /// `culling compare` without timing models: the cycle columns are left out.
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     // One step a frame a machine a driver (on a terminal).
-    let steps = drivers_to_compare(&args).len() * args.scene.frames as usize * CYCLE_MACHINES.len();
+    let machines = args.machines()?;
+    let steps = drivers_to_compare(&args).len() * args.scene.frames as usize * machines.len();
     let bar = occsim_sweep::progress::bar(steps as u64, "frames timed");
     bar.set_message("culling compare");
     let mut models: Vec<Box<dyn FrameCycleModel>> = Vec::new();
-    for name in CYCLE_MACHINES {
-        // A machine this build does not have is simply left out of the table.
-        if let Ok(arch) = occsim_sim::Arch::builtin(name) {
-            models.push(Box::new(MachineFrames::new(name, arch, bar.clone())));
-        }
+    for (name, arch) in machines {
+        models.push(Box::new(MachineFrames::new(name, arch, bar.clone())));
     }
     let stdout = std::io::stdout();
     let outcome = run_with(&args, &mut models, &mut stdout.lock());
@@ -84,13 +120,13 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     outcome
 }
 
-/// The machines `culling compare` times every frame on.
+/// The machines `culling compare` times every frame on by default.
 const CYCLE_MACHINES: [&str; 2] = ["o2", "ir4"];
 
 /// A sim machine as a per-frame timing model: each frame replays on a fresh machine (frames
 /// are self-contained: each begins with a clear and the whole render state).
 struct MachineFrames {
-    name: &'static str,
+    name: String,
     arch: occsim_sim::Arch,
     machine: Option<occsim_sim::MachineModel>,
     /// Moves a step each frame timed.
@@ -99,7 +135,7 @@ struct MachineFrames {
 
 impl MachineFrames {
     fn new(
-        name: &'static str,
+        name: String,
         arch: occsim_sim::Arch,
         progress: occsim_sweep::progress::ProgressBar,
     ) -> MachineFrames {
@@ -115,7 +151,7 @@ impl MachineFrames {
 /// A machine's failure in a frame, naming the machine.
 #[derive(Debug)]
 struct FrameError {
-    machine: &'static str,
+    machine: String,
     /// None: the frame ended before it began.
     source: Option<occsim_sim::SimError>,
 }
@@ -138,7 +174,7 @@ impl std::error::Error for FrameError {
 impl MachineFrames {
     fn failed(&self, source: Option<occsim_sim::SimError>) -> ModelError {
         Box::new(FrameError {
-            machine: self.name,
+            machine: self.name.clone(),
             source,
         })
     }
@@ -146,7 +182,7 @@ impl MachineFrames {
 
 impl FrameCycleModel for MachineFrames {
     fn machine(&self) -> String {
-        self.name.to_owned()
+        self.name.clone()
     }
 
     fn begin_frame(&mut self, width: u32, height: u32) -> Result<(), ModelError> {
@@ -157,11 +193,11 @@ impl FrameCycleModel for MachineFrames {
     }
 
     fn event(&mut self, event: &Event) -> Result<(), ModelError> {
-        let name = self.name;
         if let Some(machine) = &mut self.machine {
+            let name = &self.name;
             machine.event(event).map_err(|e| -> ModelError {
                 Box::new(FrameError {
-                    machine: name,
+                    machine: name.clone(),
                     source: Some(e),
                 })
             })?;
@@ -274,6 +310,15 @@ fn print_table(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<(
             d.traversal_ms_per_frame, d.golden_model_ms_per_frame
         )?;
     }
+    writeln!(
+        out,
+        "  means per frame: tris %: the scene's triangles drawn; queries issued and their tiles; \
+         query frag: fragments of the queries' boxes (tested, never drawn); draw frag: fragments of \
+         the drawn geometry; cells: occlusion-grid cells refreshed (grid drivers); px lost: visible \
+         pixels of the full render whose objects were not drawn; cycles M: simulated cycles of a \
+         frame on machine M; trav ms, golden ms: wall-clock milliseconds on this computer in the \
+         driver's traversal and in the golden model (rasterizing and answering the queries)"
+    )?;
     print_frame_time(report, out)?;
     print_accuracy(report, &machines, out)
 }
@@ -309,6 +354,12 @@ fn print_frame_time(report: &CompareReport, out: &mut dyn Write) -> std::io::Res
             )?;
         }
     }
+    writeln!(
+        out,
+        "  on the simulated machine, per frame: host busy (traversal, driver, result reads), \
+         waiting (the host blocked on answers), geometry (the geometry stage busy), pixel busy \
+         (the rasterizer busy), in the machine's pipeline cycles"
+    )?;
     Ok(())
 }
 
@@ -361,6 +412,12 @@ fn print_accuracy(
         }
         writeln!(out)?;
     }
+    writeln!(
+        out,
+        "  px lost: visible pixels not drawn, and as % of the visible pixels; triangles and \
+         simulated cycles a frame saved against {}",
+        exact.driver
+    )?;
     Ok(())
 }
 

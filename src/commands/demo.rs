@@ -3,7 +3,6 @@
 //! drawn when visible), replays it on the O2-like machine and prints what the queries cost.
 
 use super::arch::ArchSelection;
-use anyhow::Context;
 use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_traces::builtin::{demo_scene, DemoOptions};
 use occsim_traces::golden::GoldenModel;
@@ -17,6 +16,9 @@ pub struct DemoArgs {
     /// Add a table of every query.
     #[arg(long)]
     pub queries: bool,
+    /// Print the replay's report as JSON (as `occsim replay --json` does), and nothing else.
+    #[arg(long)]
+    pub json: bool,
     #[command(flatten)]
     pub raster: super::raster_args::RasterArgs,
 }
@@ -33,12 +35,16 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         .with_raster(raster);
     let mut writer = TraceWriter::new(&mut trace, &header)?;
     let mut golden = GoldenModel::with_profile(width, height, raster);
+    let bar = occsim_sweep::progress::bar(text.lines().count() as u64, "scene lines");
+    bar.set_message("demo: making the trace");
     for line in SceneReader::new(text.as_bytes(), "demo") {
         golden.execute(&line?.command, &mut writer)?;
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     golden.finish(&mut writer)?;
     let summary = writer.finish()?;
-    outln!(
+    let line = format!(
         "demo: a city block, {} frames at {width}x{height}: {} fragments, {} primitives, {} queries ({} brief, {} verbose, {} samples); trace {} bytes",
         options.frames,
         summary.fragments,
@@ -49,12 +55,24 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         summary.queries_by_mode.samples,
         trace.len()
     );
-    let open = || Ok(TraceReader::new(&trace[..])?);
+    if !args.json {
+        outln!("{line}");
+    }
+    let open = || {
+        let bar = occsim_sweep::progress::bytes_bar(trace.len() as u64);
+        bar.set_message("demo: replaying");
+        let counted = occsim_sweep::progress::Counted {
+            inner: &trace[..],
+            bar,
+        };
+        Ok(TraceReader::new(counted)?)
+    };
     let result = replay(open, &arch, ReplayOptions::cycle(None))
         .map_err(|e| super::replay::in_cli_words("demo", e))?;
-    let report = result
-        .report
-        .context("demo: the cycle level gave no report")?;
-    out!("{}", report.to_text(args.queries));
+    if args.json {
+        outln!("{}", super::replay::result_json(&result)?);
+    } else {
+        out!("{}", result.to_text(args.queries));
+    }
     Ok(())
 }

@@ -144,9 +144,14 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
         levels.push(Fidelity::Rtl);
     }
     let mut runs = Vec::new();
+    // One step a level (not a bar over bytes: drawing one would be timed with the level).
+    let bar = occsim_sweep::progress::bar(levels.len() as u64, "levels");
     for level in levels {
+        bar.set_message(format!("fidelity: {level}"));
         runs.push((level, timed(level, &arch, &args.trace, args.effects)?));
+        bar.inc(1);
     }
+    bar.finish_and_clear();
     // The reference is the most detailed level that ran: rtl, else cycle.
     let (reference_level, (reference, _)) = runs.last().context("no level ran")?;
     let reference_level = *reference_level;
@@ -181,7 +186,7 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
         })
         .collect();
     if let Some(plot) = &args.plot {
-        error_chart(&rows, &path, reference_level)?
+        error_chart(&rows, &path, &args.arch.describe(), reference_level)?
             .write_svg(plot)
             .with_context(|| format!("cannot write {}", plot.display()))?;
     }
@@ -251,26 +256,40 @@ fn table(
             }
         );
     }
+    let _ = writeln!(
+        out,
+        "  wall s: seconds on this computer, decoding the trace included; fragments/s: fragments \
+         over wall s; cycles: the run's simulated cycles; mean lat, p95 lat: query latency in \
+         cycles; frame cycles: the mean frame in cycles; cycles err, lat err, frame err: \
+         |level - {reference}| / {reference} of cycles, mean latency and frame cycles; results: \
+         every query's counts equal the golden ones (exact); -: the level has no such figure"
+    );
     out
 }
 
-/// The error drawn for a level whose error is 0 (the reference), so a log axis can show it.
-const ERROR_FLOOR: f64 = 1e-4;
+/// The error drawn for a level whose error is 0 (the reference), so a log axis can show it,
+/// in percent as the table prints errors.
+const ERROR_FLOOR_PERCENT: f64 = 0.01;
 
-/// Error (the larger of total-cycle and mean-latency error) against wall time, log-log;
-/// one single-point series per timed level.
-fn error_chart(rows: &[LevelRow], path: &str, reference: Fidelity) -> anyhow::Result<LineChart> {
+/// Error in percent (the larger of total-cycle and mean-latency error) against wall time,
+/// log-log; one single-point series per timed level.
+fn error_chart(
+    rows: &[LevelRow],
+    path: &str,
+    arch: &str,
+    reference: Fidelity,
+) -> anyhow::Result<LineChart> {
     let series = rows
         .iter()
         .filter_map(|row| {
             let seconds = row.wall_seconds?;
-            let error = row.cycles_error?.max(row.latency_error?);
+            let error = 100.0 * row.cycles_error?.max(row.latency_error?);
             let (y, name) = if error > 0.0 {
                 (error, row.level.clone())
             } else {
                 (
-                    ERROR_FLOOR,
-                    format!("{} (error 0, drawn at {ERROR_FLOOR})", row.level),
+                    ERROR_FLOOR_PERCENT,
+                    format!("{} (error 0, drawn at {ERROR_FLOOR_PERCENT}%)", row.level),
                 )
             };
             Some(Series {
@@ -280,9 +299,11 @@ fn error_chart(rows: &[LevelRow], path: &str, reference: Fidelity) -> anyhow::Re
         })
         .collect();
     Ok(LineChart {
-        title: format!("The price of accuracy: {path} (functional has no time: not drawn)"),
+        title: format!(
+            "The price of accuracy: {path} on {arch} (functional has no time: not drawn)"
+        ),
         x_label: "wall time (s)".to_string(),
-        y_label: format!("relative error vs {reference} (worst of total cycles, mean latency)"),
+        y_label: format!("error vs {reference} (%, the worse of total cycles and mean latency)"),
         x_scale: Scale::Log10,
         y_scale: Scale::Log10,
         x_ticks: None,

@@ -229,14 +229,11 @@ fn chart(args: &LatencyArgs, rows: &[LatencyRow]) -> LineChart {
         name: name.to_string(),
         points: rows.iter().map(|r| (r.engines as f64, y(r))).collect(),
     };
-    let arch = match &args.arch.arch_file {
-        Some(file) => file.display().to_string(),
-        None => args.arch.arch.clone(),
-    };
+    let arch = args.arch.describe();
     LineChart {
         title: format!("query latency, {} on {arch}", args.trace.display()),
         x_label: "occlusion engines per Occlusion Unit".to_string(),
-        y_label: "cycles".to_string(),
+        y_label: "query latency (cycles)".to_string(),
         x_scale: Scale::Log10,
         y_scale: Scale::Linear,
         x_ticks: Some(rows.iter().map(|r| r.engines as f64).collect()),

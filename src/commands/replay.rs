@@ -85,8 +85,42 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         waveform,
         timeline: timeline.as_ref().map(|t| t.0.clone()),
     };
-    let outcome = replay(opener_with_progress(&args.trace), &arch, options).map_err(cli_words);
-    let mut result = close_waveform(outputs, outcome)?;
+    let window = args
+        .waveform
+        .window
+        .as_deref()
+        .map(parse_window)
+        .transpose()?;
+    let outcome = replay(opener_with_progress(&args.trace), &arch, options)
+        .map_err(cli_words)
+        .and_then(|result| {
+            // Checked before any file is kept: a window past the end would dump nothing.
+            check_window(window.as_ref(), &result)?;
+            Ok(result)
+        });
+    let result = close_waveform(outputs, outcome)?;
+    let total = result.total_cycles.unwrap_or(0);
+    let covered = window.clone().unwrap_or(0..total);
+    let covered = format!(
+        "cycles {}..{} of the run's {total}",
+        covered.start,
+        covered.end.min(total)
+    );
+    let unit = match arch.machine() {
+        occsim_sim::arch::Machine::O2 => "the Occlusion Unit and OccU Control",
+        occsim_sim::arch::Machine::Ir => {
+            "Image Engine 0 of board 0's Occlusion Unit and OccU Control"
+        }
+    };
+    for (path, format) in [(&args.waveform.vcd, "VCD"), (&args.waveform.fst, "FST")] {
+        if let Some(path) = path {
+            eprintln!(
+                "occsim: wrote {}: {format} waveform of {unit}, {covered}, {}",
+                path.display(),
+                file_size(path)
+            );
+        }
+    }
     if let Some((recorder, file)) = timeline {
         recorder.flush();
         let report = result
@@ -94,6 +128,13 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             .as_ref()
             .context("the cycle and rtl levels give a report")?;
         file.finish(report)?;
+        if let Some(path) = &args.waveform.timeline {
+            eprintln!(
+                "occsim: wrote {}: timeline of {covered}, {}",
+                path.display(),
+                file_size(path)
+            );
+        }
     }
     let queries = result.queries.len() as u64;
     if result.checked_queries < queries {
@@ -103,28 +144,45 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             queries
         );
     }
-    let Some(report) = result.report.take() else {
-        // Below the cycle level: the level's own summary.
-        if args.json {
-            outln!("{}", serde_json::to_string_pretty(&result)?);
-        } else {
-            out!("{}", result.to_text());
-        }
-        return Ok(());
-    };
-    let effects = result
-        .effects
-        .context("a level with a report builds effect models")?;
     if args.json {
-        // The cycle report with the effect models that were built.
-        let mut json = serde_json::to_value(&report)?;
-        json["effects"] = serde_json::to_value(effects)?;
-        outln!("{}", serde_json::to_string_pretty(&json)?);
+        outln!("{}", result_json(&result)?);
     } else {
-        out!("{}", report.to_text(args.queries));
-        outln!("active effects: {}", effects.active_names());
+        out!("{}", result.to_text(args.queries));
     }
     Ok(())
+}
+
+/// A result as `--json` prints it: at the cycle and rtl levels the machine's report with its
+/// level and the effect models that were built; below, the level's own result.
+pub fn result_json(result: &LevelResult) -> anyhow::Result<String> {
+    Ok(match &result.report {
+        Some(report) => {
+            let mut json = serde_json::to_value(report)?;
+            json["level"] = serde_json::to_value(result.level)?;
+            json["effects"] = serde_json::to_value(result.effects)?;
+            serde_json::to_string_pretty(&json)?
+        }
+        // In its fields' order.
+        None => serde_json::to_string_pretty(result)?,
+    })
+}
+
+/// A `--window` that starts at or after the run's last cycle would show nothing: an error.
+fn check_window(window: Option<&std::ops::Range<u64>>, result: &LevelResult) -> anyhow::Result<()> {
+    if let (Some(window), Some(total)) = (window, result.total_cycles) {
+        anyhow::ensure!(
+            window.start < total,
+            "--window {}..{} starts after the run, which has {total} cycles (0..{total}); nothing would be written",
+            window.start,
+            window.end
+        );
+    }
+    Ok(())
+}
+
+/// `1234 bytes`, or `?` bytes when the file cannot be read.
+fn file_size(path: &Path) -> String {
+    std::fs::metadata(path).map_or("? bytes".to_string(), |m| format!("{} bytes", m.len()))
 }
 
 /// Replay the trace at `trace` on `arch` at `level`, every effect model built, its brief

@@ -14,21 +14,24 @@ pub type Evaluator<'a> = &'a (dyn Fn(&Point) -> Result<PointRecord> + Sync);
 
 /// How to split a sweep over a cluster; shown by `occsim sweep --help`.
 const CLUSTER_HELP: &str = "\
-Results do not depend on --jobs or on sharding. On a cluster, run one shard per task and merge:
+Results do not depend on --jobs or on sharding. On a cluster, run one shard a task, then merge
+(README's recipe). As a Slurm job array script (sbatch it; by hand, bash it, and the 8 shards
+run one after another):
 
-  Slurm job array (8 shards):
+    #!/bin/bash
     #SBATCH --array=1-8
-    occsim sweep scene.trace --arch ir --set boards=1,2,4 --set engines=1,2,4,8,16 \\
-        --shard $SLURM_ARRAY_TASK_ID/8 --out shard-$SLURM_ARRAY_TASK_ID.jsonl --resume
-    # afterwards:
-    occsim sweep merge sweep.jsonl shard-*.jsonl --plot sweep.svg
+    for shard in ${SLURM_ARRAY_TASK_ID:-1 2 3 4 5 6 7 8}; do
+        occsim sweep demo.occt --arch o2 --set engines=1,2,4,8,16 --set page_miss_latency_cycles=6,8,10 \\
+            --shard $shard/8 --out cluster-$shard.jsonl --resume
+    done
 
-  GNU parallel (4 shards on this machine or over --sshlogin hosts):
-    parallel occsim sweep scene.trace --arch ir --set engines=1,2,4,8,16 \\
-        --shard {}/4 --out shard-{}.jsonl --resume ::: 1 2 3 4
-    occsim sweep merge sweep.jsonl shard-*.jsonl
+When every task has finished:
 
---resume makes a rerun of an interrupted task continue where it stopped.";
+    occsim sweep merge cluster.jsonl cluster-*.jsonl --plot cluster.svg
+
+--resume makes a rerun of a stopped task continue where it stopped; a shard's file holds only
+its own sweep's points, so each sweep's shards need names of their own. A results file is
+replaced only with --force.";
 
 /// Run a machine over the cartesian product of parameter values.
 #[derive(clap::Args, Debug)]
@@ -74,6 +77,10 @@ pub struct SweepRunArgs {
     /// Continue an interrupted sweep: keep the points already in --out, run the rest.
     #[arg(long)]
     pub resume: bool,
+    /// Replace --out when it already holds results (they are lost); without it a sweep
+    /// refuses such a file.
+    #[arg(long, conflicts_with = "resume")]
+    pub force: bool,
     /// Replace every brief query's tiles by a G by H grid over the viewport (the golden
     /// results are recomputed), so tile counts can be swept too.
     #[arg(long, value_name = "GxH")]
@@ -84,6 +91,10 @@ pub struct SweepRunArgs {
     /// Results file (one JSON line per point); the CSV view is written beside it.
     #[arg(long, value_name = "FILE.jsonl", required = true)]
     pub out: Option<PathBuf>,
+    /// Also print every point's results line (as --out holds them) as one JSON array on
+    /// standard output.
+    #[arg(long)]
+    pub json: bool,
     #[command(flatten)]
     pub plot: PlotArgs,
 }
@@ -99,6 +110,9 @@ pub struct MergeArgs {
     /// Write the merge even if points are missing (they are still listed).
     #[arg(long)]
     pub allow_missing: bool,
+    /// Replace OUT when it exists; without it a merge refuses to touch an existing file.
+    #[arg(long)]
+    pub force: bool,
     #[command(flatten)]
     pub plot: PlotArgs,
 }
@@ -140,7 +154,11 @@ pub fn in_cli_words(error: SweepError) -> anyhow::Error {
             path.display()
         ),
         SweepError::AlreadyHoldsResults { path } => anyhow!(
-            "{} already holds results; pass --resume to continue that sweep, or remove it to start over",
+            "{} already holds results; pass --resume to continue that sweep, or --force to replace it",
+            path.display()
+        ),
+        SweepError::MergeWouldReplace { path } => anyhow!(
+            "{} already exists; pass --force to replace it, or merge into another file",
             path.display()
         ),
         SweepError::ForeignTrace {
@@ -219,6 +237,7 @@ pub fn run_with(
         out,
         jobs,
         resume: run.resume,
+        replace: run.force,
         show_progress: true,
     };
     let evaluate = |point: &Point| evaluator(point).map_err(Into::into);
@@ -237,7 +256,24 @@ pub fn run_with(
         out.display(),
         outcome.csv.display()
     );
-    write_plot(&run.plot, &grid, &outcome.lines)
+    if run.json {
+        let texts: Vec<&str> = outcome.lines.iter().map(|l| l.text.as_str()).collect();
+        outln!("[\n{}\n]", texts.join(",\n"));
+    }
+    let trace = run
+        .trace
+        .as_deref()
+        .map_or("the trace".to_string(), |t| t.display().to_string());
+    let arch = super::arch::describe(
+        run.arch.as_deref().unwrap_or("o2"),
+        run.arch_file.as_deref(),
+        &[],
+    );
+    let retiled = run
+        .retile
+        .map_or(String::new(), |grid| format!(" retiled {grid}"));
+    let subject = format!("{trace}{retiled} on {arch}, {}", run.fidelity);
+    write_plot(&run.plot, &grid, &outcome.lines, &subject)
 }
 
 /// Worker threads for `requested` jobs: no more than the points to run, nor than
@@ -253,8 +289,8 @@ const JOBS_PER_CORE: usize = 4;
 
 /// Runs `occsim sweep merge`.
 pub fn run_merge(args: &MergeArgs) -> Result<()> {
-    let report =
-        merge_results(&args.out, &args.shards, args.allow_missing).map_err(in_cli_words)?;
+    let report = merge_results(&args.out, &args.shards, args.allow_missing, args.force)
+        .map_err(in_cli_words)?;
     for torn in &report.torn_inputs {
         eprintln!(
             "sweep merge: {} ends in a torn line (its point is missing)",
@@ -275,7 +311,30 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         args.out.display(),
         report.csv.display()
     );
-    write_plot(&args.plot, &report.grid, &report.lines)
+    let subject = match report.lines.first() {
+        Some(first) => format!(
+            "{} shards of trace {} on {}",
+            args.shards.len(),
+            first.line.trace_digest,
+            machine_of(&first.text)
+        ),
+        None => "nothing merged".to_string(),
+    };
+    write_plot(&args.plot, &report.grid, &report.lines, &subject)
+}
+
+/// The machine a results line's resolved architecture is of: the InfiniteReality-like one
+/// has boards, the O2-like one not.
+fn machine_of(text: &str) -> &'static str {
+    let line: serde_json::Value = serde_json::from_str(text).unwrap_or_default();
+    let has_boards = line["resolved_arch"]
+        .as_array()
+        .is_some_and(|entries| entries.iter().any(|e| e["key"] == "boards"));
+    if has_boards {
+        "ir"
+    } else {
+        "o2"
+    }
 }
 
 /// Runs `occsim sweep` on the machine models: every point replays the trace on the base
@@ -372,12 +431,18 @@ fn point_metrics(
     metrics
 }
 
-fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine]) -> Result<()> {
+fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine], subject: &str) -> Result<()> {
     let Some(path) = args.plot.as_deref() else {
         return Ok(());
     };
-    let chart = metric_chart(grid.axes(), lines, &args.metric, args.plot_x.as_deref())
-        .map_err(in_cli_words)?;
+    let chart = metric_chart(
+        grid.axes(),
+        lines,
+        &args.metric,
+        args.plot_x.as_deref(),
+        subject,
+    )
+    .map_err(in_cli_words)?;
     chart.write_svg(path)?;
     eprintln!("sweep: plot -> {}", path.display());
     Ok(())
@@ -478,7 +543,11 @@ mod tests {
         let path = PathBuf::from("r.jsonl");
         assert_eq!(
             words(SweepError::AlreadyHoldsResults { path: path.clone() }),
-            "r.jsonl already holds results; pass --resume to continue that sweep, or remove it to start over"
+            "r.jsonl already holds results; pass --resume to continue that sweep, or --force to replace it"
+        );
+        assert_eq!(
+            words(SweepError::MergeWouldReplace { path: path.clone() }),
+            "r.jsonl already exists; pass --force to replace it, or merge into another file"
         );
         assert_eq!(
             words(SweepError::ForeignGrid {

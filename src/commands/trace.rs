@@ -53,6 +53,10 @@ pub struct DumpArgs {
     /// Stop after this many events.
     #[arg(long)]
     pub limit: Option<u64>,
+    /// Print `{"header": ..., "events": [...]}` as JSON (each event as serde names it, e.g.
+    /// `{"Fragment":{"x":1,"y":2,"z":3}}`, `"Primitive"`), streamed.
+    #[arg(long)]
+    pub json: bool,
 }
 
 pub fn run(command: TraceCommand) -> anyhow::Result<()> {
@@ -318,10 +322,13 @@ fn describe(event: &Event) -> String {
     }
 }
 
-/// Prints events until the limit (the rest of the block then passes unprinted).
+/// Prints events until the limit (the rest of the block then passes unprinted): as text, or
+/// as the elements of a JSON array.
 struct Printer<W: Write> {
     out: W,
     remaining: u64,
+    json: bool,
+    printed: u64,
 }
 
 impl<W: Write> EventSink for Printer<W> {
@@ -332,7 +339,13 @@ impl<W: Write> EventSink for Printer<W> {
             return Ok(());
         }
         self.remaining -= 1;
-        writeln!(self.out, "{}", describe(event))
+        self.printed += 1;
+        if self.json {
+            let separator = if self.printed == 1 { "" } else { "," };
+            writeln!(self.out, "{separator}{}", serde_json::to_string(event)?)
+        } else {
+            writeln!(self.out, "{}", describe(event))
+        }
     }
 }
 
@@ -342,13 +355,23 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
     let mut printer = Printer {
         out: std::io::BufWriter::new(stdout.lock()),
         remaining: args.limit.unwrap_or(u64::MAX),
+        json: args.json,
+        printed: 0,
     };
     let header = reader.header().clone();
-    writeln!(
-        printer.out,
-        "# {} {}x{} from {}",
-        header.generator, header.width, header.height, header.scene
-    )?;
+    if args.json {
+        writeln!(
+            printer.out,
+            "{{\"header\": {},\n\"events\": [",
+            serde_json::to_string(&header)?
+        )?;
+    } else {
+        writeln!(
+            printer.out,
+            "# {} {}x{} from {}",
+            header.generator, header.width, header.height, header.scene
+        )?;
+    }
     while printer.remaining > 0 {
         let more = match reader.next_block(&mut printer) {
             Ok(more) => more,
@@ -361,6 +384,9 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
         if !more {
             break;
         }
+    }
+    if args.json {
+        writeln!(printer.out, "]}}")?;
     }
     printer.out.flush()?;
     Ok(())

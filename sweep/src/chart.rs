@@ -15,12 +15,56 @@ const LOG_X_RATIO: f64 = 8.0;
 /// The same for y: only very wide metric ranges switch to log10.
 const LOG_Y_RATIO: f64 = 1000.0;
 
-/// Builds the chart of `metric` against axis `x_key` (the last axis when None).
+/// The unit of a metric, from its name's ending (`_cycles`, `_seconds`, `_per_second`, ...).
+pub fn metric_unit(metric: &str) -> Option<&'static str> {
+    let units = [
+        ("frames_per_second", "frames/s"),
+        ("fragments_per_cycle", "fragments/cycle"),
+        ("_per_second", "/s"),
+        ("_cycles", "cycles"),
+        ("_seconds", "s"),
+        ("_percent", "%"),
+        ("fragments", "fragments"),
+        ("queries", "queries"),
+    ];
+    units
+        .iter()
+        .find(|(ending, _)| metric.ends_with(ending))
+        .map(|(_, unit)| *unit)
+}
+
+/// `name (unit)`, or `name` alone when the unit says nothing more.
+fn with_unit(name: &str, unit: Option<&str>) -> String {
+    match unit {
+        Some(unit) if !unit.is_empty() && unit != name && unit != "name" && unit != "bool" => {
+            format!("{name} ({unit})")
+        }
+        _ => name.to_string(),
+    }
+}
+
+/// The unit a swept parameter's resolved architecture entry carries (`{"key", "value",
+/// "unit"}` in the first line's `resolved_arch`, read from its text), if it has one.
+fn parameter_unit(lines: &[StoredLine], key: &str) -> Option<String> {
+    let first: Value = serde_json::from_str(&lines.first()?.text).ok()?;
+    first["resolved_arch"]
+        .as_array()?
+        .iter()
+        .find(|e| e["key"] == key)?
+        .get("unit")?
+        .as_str()
+        .map(str::to_owned)
+}
+
+/// Builds the chart of `metric` against axis `x_key` (the last axis when None). The title
+/// names the metric and its unit, the x axis, and `subject` (what was swept: the trace and
+/// the machine, as the caller words them); each axis label carries its unit.
 pub fn metric_chart(
     axes: &[Axis],
     lines: &[StoredLine],
     metric: &str,
     x_key: Option<&str>,
+    subject: &str,
 ) -> Result<LineChart> {
     let x_axis = match x_key {
         Some(key) => axes
@@ -87,10 +131,12 @@ pub fn metric_chart(
             .flat_map(|s| s.points.iter().map(pick))
             .collect::<Vec<f64>>()
     };
+    let y_label = with_unit(metric, metric_unit(metric));
+    let x_label = with_unit(&x_axis.key, parameter_unit(lines, &x_axis.key).as_deref());
     Ok(LineChart {
-        title: format!("{metric} vs {}", x_axis.key),
-        x_label: x_axis.key.clone(),
-        y_label: metric.to_string(),
+        title: format!("{y_label} against {}: {subject}", x_axis.key),
+        x_label,
+        y_label,
         x_scale: pick_scale(&all(|p| p.0), LOG_X_RATIO),
         y_scale: pick_scale(&all(|p| p.1), LOG_Y_RATIO),
         x_ticks: Some(x_values),

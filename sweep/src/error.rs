@@ -44,6 +44,9 @@ pub enum SweepError {
     /// A fresh sweep would append to a file that holds results already.
     #[error("{} already holds results; resume that sweep, or remove it to start over", path.display())]
     AlreadyHoldsResults { path: PathBuf },
+    /// A merge's output exists and holds something: a merge replaces it only when told to.
+    #[error("{} already exists; a merge replaces a file only when told to", path.display())]
+    MergeWouldReplace { path: PathBuf },
     #[error("cannot read {}", path.display())]
     Read {
         path: PathBuf,

@@ -33,11 +33,23 @@ pub struct MergeReport {
 
 /// Merges `inputs` into `out` (and its CSV view). Missing points are an error listing them
 /// unless `allow_missing`; then the partial result is written and the report lists them (an
-/// unsharded resumed sweep on `out` can fill them in).
-pub fn merge_results(out: &Path, inputs: &[PathBuf], allow_missing: bool) -> Result<MergeReport> {
+/// unsharded resumed sweep on `out` can fill them in). An `out` that already holds anything
+/// is an error unless `replace`: a merge never silently replaces results. (The inputs are
+/// read before `out` is written, so `out` may be one of them.)
+pub fn merge_results(
+    out: &Path,
+    inputs: &[PathBuf],
+    allow_missing: bool,
+    replace: bool,
+) -> Result<MergeReport> {
     let csv = csv_path_for(out)?;
     if inputs.is_empty() {
         return Err(SweepError::NoInputs);
+    }
+    if !replace && std::fs::metadata(out).is_ok_and(|m| m.len() > 0) {
+        return Err(SweepError::MergeWouldReplace {
+            path: out.to_path_buf(),
+        });
     }
     let mut stored = Vec::new();
     let mut torn_inputs = Vec::new();

@@ -378,7 +378,13 @@ impl AxisMap {
             (lo.min(v), hi.max(v))
         });
         let (low, high, ticks) = match scale {
-            Scale::Linear => linear_ticks(min, max),
+            Scale::Linear => {
+                // Ticks at whole steps; the frame a little beyond the data, so no point or
+                // line lies on the frame.
+                let (low, high, ticks) = linear_ticks(min, max);
+                let pad = (high - low) * LINEAR_PAD;
+                (low.min(min - pad), high.max(max + pad), ticks)
+            }
             Scale::Log10 => log_ticks(min, max),
         };
         AxisMap {
@@ -435,15 +441,26 @@ impl AxisMap {
     }
 }
 
+/// The share of a linear axis's span left between the data and the frame.
+const LINEAR_PAD: f64 = 0.04;
+
+/// The fewest ticks a log axis shows when finer steps can give them.
+const MIN_LOG_TICKS: usize = 4;
+
 /// Ticks every 1, 2 or 5 x 10^k, about five of them, the range widened to whole ticks.
 fn linear_ticks(min: f64, max: f64) -> (f64, f64, Vec<Tick>) {
+    linear_ticks_about(min, max, 5.0)
+}
+
+/// As [`linear_ticks`], about `count` of them.
+fn linear_ticks_about(min: f64, max: f64, count: f64) -> (f64, f64, Vec<Tick>) {
     let (min, max) = if max > min {
         (min, max)
     } else {
         let pad = if min == 0.0 { 1.0 } else { min.abs() * 0.1 };
         (min - pad, max + pad)
     };
-    let rough = (max - min) / 5.0;
+    let rough = (max - min) / count;
     let exponent = rough.log10().floor() as i32;
     let magnitude = 10f64.powi(exponent);
     let mantissa = [1.0, 2.0, 5.0, 10.0]
@@ -472,21 +489,14 @@ fn linear_ticks(min: f64, max: f64) -> (f64, f64, Vec<Tick>) {
 }
 
 /// Log ticks over the data range padded by 5% of its span (half a decade each side for a
-/// single value): every 1..9 x 10^k on narrow ranges, 1, 2, 5 x 10^k up to 2.5 decades, whole
-/// decades beyond (every other or fifth one on very wide ranges). Falls back to the range's
-/// ends when no such tick lies inside.
+/// single value): whole decades (every other or fifth one on very wide ranges), or, when
+/// that gives fewer than [`MIN_LOG_TICKS`], 1, 2, 5 x 10^k, then every 1..9 x 10^k, then
+/// round linear steps; the range's ends when nothing else lies inside.
 fn log_ticks(min: f64, max: f64) -> (f64, f64, Vec<Tick>) {
     let (low, high) = (min.log10(), max.log10());
     let pad = if high > low { (high - low) * 0.05 } else { 0.5 };
     let (low, high) = (low - pad, high + pad);
     let span = high - low;
-    let mantissas: &[f64] = if span <= 0.6 {
-        &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]
-    } else if span <= 2.5 {
-        &[1.0, 2.0, 5.0]
-    } else {
-        &[1.0]
-    };
     let every = if span > 16.0 {
         5
     } else if span > 8.0 {
@@ -494,23 +504,50 @@ fn log_ticks(min: f64, max: f64) -> (f64, f64, Vec<Tick>) {
     } else {
         1
     };
-    let mut ticks = Vec::new();
-    for exponent in (low.floor() as i32)..=(high.ceil() as i32) {
-        if exponent.rem_euclid(every) != 0 {
-            continue;
-        }
-        for &m in mantissas {
-            let value = m * 10f64.powi(exponent);
-            let at = value.log10();
-            if at < low - 1e-9 || at > high + 1e-9 {
+    let inside = |value: f64| {
+        let at = value.log10();
+        at >= low - 1e-9 && at <= high + 1e-9
+    };
+    let decade_ticks = |mantissas: &[f64]| {
+        let mut ticks = Vec::new();
+        for exponent in (low.floor() as i32)..=(high.ceil() as i32) {
+            if exponent.rem_euclid(every) != 0 {
                 continue;
             }
-            let label = if (-3..6).contains(&exponent) {
-                format_tick(value, (-exponent).max(0) as usize)
-            } else {
-                format!("{m}e{exponent}")
-            };
-            ticks.push(Tick { value, label });
+            for &m in mantissas {
+                let value = m * 10f64.powi(exponent);
+                if !inside(value) {
+                    continue;
+                }
+                let label = if (-3..6).contains(&exponent) {
+                    format_tick(value, (-exponent).max(0) as usize)
+                } else {
+                    format!("{m}e{exponent}")
+                };
+                ticks.push(Tick { value, label });
+            }
+        }
+        ticks
+    };
+    let mut ticks = Vec::new();
+    for mantissas in [
+        &[1.0][..],
+        &[1.0, 2.0, 5.0],
+        &[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0],
+    ] {
+        ticks = decade_ticks(mantissas);
+        if ticks.len() >= MIN_LOG_TICKS {
+            break;
+        }
+    }
+    if ticks.len() < MIN_LOG_TICKS {
+        let (_, _, linear) = linear_ticks_about(10f64.powf(low), 10f64.powf(high), 8.0);
+        let linear: Vec<Tick> = linear
+            .into_iter()
+            .filter(|t| t.value > 0.0 && inside(t.value))
+            .collect();
+        if linear.len() > ticks.len() {
+            ticks = linear;
         }
     }
     if ticks.is_empty() {
@@ -791,7 +828,24 @@ mod tests {
             labels(1.0, 1e10),
             ["1", "100", "10000", "1e6", "1e8", "1e10"]
         );
-        assert_eq!(labels(1.1, 1.3), ["1.1", "1.3"]);
+        // Narrower than the 1..9 steps: round linear steps, placed on the log axis.
+        assert_eq!(labels(1.1, 1.3), ["1.10", "1.15", "1.20", "1.25", "1.30"]);
+        // The demo sweep's cycles, 3.16e7 to 6.40e7 (0.31 decades): 1..9 x 10^7 gives only
+        // 4e7, 5e7, 6e7; steps of 5e6 give seven.
+        assert_eq!(
+            labels(3.16e7, 6.40e7),
+            ["3.5e7", "4e7", "4.5e7", "5e7", "5.5e7", "6e7", "6.5e7"]
+        );
+    }
+
+    #[test]
+    fn linear_axes_keep_the_data_off_the_frame() {
+        // Ticks 0..10 cover data 0..10 exactly; the frame stands 4% of the span outside.
+        let axis = AxisMap::fit(Scale::Linear, [0.0, 10.0].into_iter());
+        assert!((axis.low + 0.4).abs() < 1e-9 && (axis.high - 10.4).abs() < 1e-9);
+        // Data inside whole ticks keeps the ticks' range.
+        let axis = AxisMap::fit(Scale::Linear, [0.5, 9.5].into_iter());
+        assert_eq!((axis.low, axis.high), (0.0, 10.0));
     }
 
     #[test]

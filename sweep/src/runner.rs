@@ -41,6 +41,9 @@ pub struct SweepOptions<'a> {
     pub jobs: usize,
     /// Continue the existing `out` instead of refusing to touch it.
     pub resume: bool,
+    /// Replace an existing `out` (its results are lost) instead of refusing to touch it;
+    /// `resume` wins when both are set.
+    pub replace: bool,
     /// Draw a progress bar on stderr (it is hidden anyway when stderr is not a terminal).
     pub show_progress: bool,
 }
@@ -111,6 +114,10 @@ fn load_previous(
         return Ok((done, false));
     }
     if !options.resume {
+        if options.replace {
+            write_atomically(out, b"")?;
+            return Ok((done, false));
+        }
         return Err(SweepError::AlreadyHoldsResults {
             path: out.to_path_buf(),
         });

@@ -59,6 +59,7 @@ fn options<'a>(grid: &'a Grid, out: &'a Path, jobs: usize) -> SweepOptions<'a> {
         out,
         jobs,
         resume: false,
+        replace: false,
         show_progress: false,
     }
 }
@@ -142,7 +143,7 @@ fn three_shards_merged_equal_the_unsharded_run() {
         "shard 3/3 holds points 2, 5, 8, 11"
     );
     let merged = dir.join("merged.jsonl");
-    let report = merge_results(&merged, &shards, false).unwrap();
+    let report = merge_results(&merged, &shards, false, false).unwrap();
     assert!(report.missing.is_empty());
     assert_eq!(read(&merged), jsonl);
     assert_eq!(read(&dir.join("merged.csv")), csv);
@@ -156,7 +157,7 @@ fn merge_reports_missing_points_then_resume_fills_them() {
     let (jsonl, _) = reference_run(dir, &g);
     let shards = vec![run_shard(dir, &g, 1, 3), run_shard(dir, &g, 3, 3)];
     let merged = dir.join("merged.jsonl");
-    let err = chain(&merge_results(&merged, &shards, false).unwrap_err());
+    let err = chain(&merge_results(&merged, &shards, false, false).unwrap_err());
     assert!(
         err.starts_with(
             "4 of 12 points are missing from the shards: 'boards=1,engines=2', \
@@ -166,7 +167,7 @@ fn merge_reports_missing_points_then_resume_fills_them() {
     );
     assert!(!merged.exists());
 
-    let report = merge_results(&merged, &shards, true).unwrap();
+    let report = merge_results(&merged, &shards, true, false).unwrap();
     assert_eq!(report.missing.len(), 4);
     assert_eq!(read(&merged).lines().count(), 8);
 
@@ -185,6 +186,54 @@ fn merge_reports_missing_points_then_resume_fills_them() {
 }
 
 #[test]
+fn merge_never_replaces_a_file_unless_told_to() {
+    let temp = test_dir("merge-replace");
+    let dir = temp.path();
+    let g = twelve_points();
+    let (jsonl, _) = reference_run(dir, &g);
+    let full = dir.join("full.jsonl");
+    // An earlier, different sweep's results where the merge would go.
+    let other_grid = grid(&["boards=1,2,4", "engines=1,2,4"]);
+    let earlier = dir.join("earlier.jsonl");
+    run_sweep(&options(&other_grid, &earlier, 1), &fake_machine).unwrap();
+    let before = read(&earlier);
+    let shards = vec![run_shard(dir, &g, 1, 2), run_shard(dir, &g, 2, 2)];
+    let err = chain(&merge_results(&earlier, &shards, false, false).unwrap_err());
+    assert!(
+        err.contains("earlier.jsonl already exists; a merge replaces a file only when told to"),
+        "{err}"
+    );
+    assert_eq!(read(&earlier), before, "the earlier results are untouched");
+    merge_results(&earlier, &shards, false, true).unwrap();
+    assert_eq!(read(&earlier), jsonl);
+    // An empty file holds nothing to lose.
+    let empty = dir.join("empty.jsonl");
+    std::fs::write(&empty, "").unwrap();
+    merge_results(&empty, &[full], false, false).unwrap();
+    assert_eq!(read(&empty), jsonl);
+}
+
+#[test]
+fn a_sweep_replaces_its_results_file_only_when_told_to() {
+    let temp = test_dir("sweep-replace");
+    let dir = temp.path();
+    let g = twelve_points();
+    let (jsonl, _) = reference_run(dir, &g);
+    let out = dir.join("out.jsonl");
+    let other_grid = grid(&["boards=1,2,4", "engines=1,2,4"]);
+    run_sweep(&options(&other_grid, &out, 1), &fake_machine).unwrap();
+    let before = read(&out);
+    let err = chain(&run_sweep(&options(&g, &out, 1), &fake_machine).unwrap_err());
+    assert!(err.contains("out.jsonl already holds results"), "{err}");
+    assert_eq!(read(&out), before);
+    let mut o = options(&g, &out, 2);
+    o.replace = true;
+    let outcome = run_sweep(&o, &fake_machine).unwrap();
+    assert_eq!((outcome.evaluated, outcome.reused), (12, 0));
+    assert_eq!(read(&out), jsonl);
+}
+
+#[test]
 fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
     let temp = test_dir("merge-duplicates");
     let dir = temp.path();
@@ -193,7 +242,7 @@ fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
     let full = dir.join("full.jsonl");
     let shard = run_shard(dir, &g, 2, 3);
     let merged = dir.join("merged.jsonl");
-    merge_results(&merged, &[shard.clone(), full.clone()], false).unwrap();
+    merge_results(&merged, &[shard.clone(), full.clone()], false, false).unwrap();
     assert_eq!(read(&merged), jsonl);
 
     // An edit with its digest made good again (an edit without is caught as such: below).
@@ -206,7 +255,8 @@ fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
         })
         .collect();
     std::fs::write(&shard, altered).unwrap();
-    let err = chain(&merge_results(&merged, &[shard, full], false).unwrap_err());
+    // (`merged` holds the first merge: replace it.)
+    let err = chain(&merge_results(&merged, &[shard, full], false, true).unwrap_err());
     assert!(
         err.contains("hold different results for point 'boards=1,engines=2'"),
         "{err}"
@@ -225,7 +275,7 @@ fn an_edited_metric_is_caught_on_resume_and_by_merge() {
     let edited = read(&shard).replacen("\"tiles\":2", "\"tiles\":3", 1);
     std::fs::write(&shard, edited).unwrap();
     let merged = dir.join("merged.jsonl");
-    let err = chain(&merge_results(&merged, &[shard.clone(), full], false).unwrap_err());
+    let err = chain(&merge_results(&merged, &[shard.clone(), full], false, false).unwrap_err());
     assert!(
         err.contains("shard2.jsonl:1: the line's digest does not match"),
         "{err}"
@@ -257,8 +307,15 @@ fn merge_rejects_shards_of_another_trace_or_grid() {
         count: 2,
     });
     run_sweep(&o, &fake_machine).unwrap();
-    let err =
-        chain(&merge_results(&dir.join("m.jsonl"), &[shard.clone(), foreign], false).unwrap_err());
+    let err = chain(
+        &merge_results(
+            &dir.join("m.jsonl"),
+            &[shard.clone(), foreign],
+            false,
+            false,
+        )
+        .unwrap_err(),
+    );
     assert!(
         err.contains("foreign.jsonl:1: results are for trace digest sha256:ffff"),
         "{err}"
@@ -271,7 +328,8 @@ fn merge_rejects_shards_of_another_trace_or_grid() {
     let other_grid = grid(&["boards=1,2,4", "engines=1,2,4"]);
     let other = dir.join("other.jsonl");
     run_sweep(&options(&other_grid, &other, 1), &fake_machine).unwrap();
-    let err = chain(&merge_results(&dir.join("m.jsonl"), &[shard, other], false).unwrap_err());
+    let err =
+        chain(&merge_results(&dir.join("m.jsonl"), &[shard, other], false, false).unwrap_err());
     assert!(
         err.contains("other.jsonl:1: results are for the grid 'boards=1,2,4 engines=1,2,4'"),
         "{err}"
@@ -417,14 +475,41 @@ fn resume_refuses_results_of_another_trace_or_shard() {
 }
 
 #[test]
+fn metrics_get_their_units_from_their_names() {
+    for (metric, unit) in [
+        ("total_cycles", Some("cycles")),
+        ("latency_p95_cycles", Some("cycles")),
+        ("frames_per_second", Some("frames/s")),
+        ("fragments_per_cycle", Some("fragments/cycle")),
+        ("simulated_seconds", Some("s")),
+        ("queries", Some("queries")),
+        ("tiles", None),
+    ] {
+        assert_eq!(crate::chart::metric_unit(metric), unit, "{metric}");
+    }
+}
+
+#[test]
 fn sweep_chart_has_one_series_per_other_axis_combination() {
     let temp = test_dir("chart");
     let dir = temp.path();
     let g = grid(&["boards=1,2", "engines=1,4"]);
     let out = dir.join("r.jsonl");
     let outcome = run_sweep(&options(&g, &out, 1), &fake_machine).unwrap();
-    let chart = metric_chart(g.axes(), &outcome.lines, "total_cycles", None).unwrap();
+    let chart = metric_chart(
+        g.axes(),
+        &outcome.lines,
+        "total_cycles",
+        None,
+        "t.occt on ir",
+    )
+    .unwrap();
     assert_eq!(chart.x_label, "engines");
+    assert_eq!(chart.y_label, "total_cycles (cycles)");
+    assert_eq!(
+        chart.title,
+        "total_cycles (cycles) against engines: t.occt on ir"
+    );
     let series: Vec<(&str, &[(f64, f64)])> = chart
         .series
         .iter()
@@ -437,12 +522,12 @@ fn sweep_chart_has_one_series_per_other_axis_combination() {
             ("boards=2", &[(1.0, 520.0), (4.0, 145.0)][..]),
         ]
     );
-    let err = metric_chart(g.axes(), &outcome.lines, "wall_seconds", None).unwrap_err();
+    let err = metric_chart(g.axes(), &outcome.lines, "wall_seconds", None, "").unwrap_err();
     assert_eq!(
         err.to_string(),
         "no result has metric 'wall_seconds'; metrics present: tiles, total_cycles"
     );
-    let err = metric_chart(g.axes(), &outcome.lines, "tiles", Some("memory")).unwrap_err();
+    let err = metric_chart(g.axes(), &outcome.lines, "tiles", Some("memory"), "").unwrap_err();
     assert_eq!(
         err.to_string(),
         "cannot plot against 'memory': it is not swept (swept: boards, engines)"

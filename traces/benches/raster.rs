@@ -4,10 +4,10 @@
 //! is one draw a repeat. Run with `cargo bench -p occsim-traces --bench raster`.
 
 use occsim_traces::raster::{RasterProfile, RasterSink, Rasterizer};
+use occsim_traces::rounds::fastest_of_rounds;
 use occsim_traces::state::RenderState;
 use occsim_traces::Fragment;
 use std::hint::black_box;
-use std::time::Instant;
 
 /// Counts fragments and folds their depths so the work cannot be optimised away.
 struct Count {
@@ -27,47 +27,47 @@ impl RasterSink for Count {
 }
 
 /// Fragments per second of `profile` on `triangles`, and the fragments.
-fn rate(
+/// One run: `repeats` passes over `triangles`; the fragments a pass gives.
+fn pass(
     profile: RasterProfile,
     state: &RenderState,
     triangles: &[[[f32; 4]; 3]],
     repeats: u32,
-) -> (f64, f64, u64) {
+) -> u64 {
     let mut sink = Count {
         fragments: 0,
         checksum: 0,
     };
     let mut rasterizer = Rasterizer::new(profile);
-    let start = Instant::now();
     for _ in 0..repeats {
         for triangle in triangles {
             rasterizer.triangle(state, black_box(triangle), &mut sink);
         }
         rasterizer.end_draw(state, &mut sink);
     }
-    let seconds = start.elapsed().as_secs_f64();
     black_box(sink.checksum);
-    let triangles_done = triangles.len() as f64 * repeats as f64;
-    (
-        sink.fragments as f64 / seconds,
-        triangles_done / seconds,
-        sink.fragments / repeats as u64,
-    )
+    sink.fragments / repeats as u64
 }
 
-/// Best of three runs of each profile, the profiles taking turns so a slow spell of the
-/// machine falls on all alike.
+/// The fastest of three interleaved rounds of each profile (`occsim_traces::rounds`), so a
+/// slow spell of the machine falls on all alike: (fragments/s, triangles/s, fragments a
+/// pass).
 fn measure(name: &str, state: &RenderState, triangles: &[[[f32; 4]; 3]], repeats: u32) {
     println!("{name}:");
-    let mut best = [(0.0f64, 0.0f64, 0u64); 3];
-    for _ in 0..3 {
-        for (slot, profile) in best.iter_mut().zip(RasterProfile::ALL) {
-            let run = rate(profile, state, triangles, repeats);
-            if run.0 > slot.0 {
-                *slot = run;
-            }
-        }
-    }
+    let mut jobs =
+        RasterProfile::ALL.map(|profile| move || pass(profile, state, triangles, repeats));
+    let figures = fastest_of_rounds(3, 0.0, &mut jobs);
+    let triangles_done = triangles.len() as f64 * repeats as f64;
+    let best: Vec<(f64, f64, u64)> = figures
+        .iter()
+        .map(|f| {
+            (
+                f.output as f64 * repeats as f64 / f.seconds,
+                triangles_done / f.seconds,
+                f.output,
+            )
+        })
+        .collect();
     let exact = best[2].0;
     for (profile, (fragments, primitives, per_repeat)) in RasterProfile::ALL.into_iter().zip(best) {
         println!(

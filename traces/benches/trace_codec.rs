@@ -7,11 +7,11 @@
 
 use occsim_traces::builtin::scene_text;
 use occsim_traces::golden::{infallible, EventSink, GoldenModel};
+use occsim_traces::rounds::{fastest_of, fastest_of_rounds};
 use occsim_traces::scene::{parse_scene, Command};
 use occsim_traces::trace::synthetic::{generate, SyntheticScene};
 use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter, WriterOptions};
 use occsim_traces::Event;
-use std::time::Instant;
 
 /// Fragments per synthetic scene.
 const FRAGMENTS: u64 = 12_000_000;
@@ -36,16 +36,13 @@ impl EventSink for Checksum {
     }
 }
 
-fn best_of<T>(runs: usize, mut run: impl FnMut() -> T) -> (f64, T) {
-    let mut best = f64::MAX;
-    let mut last = None;
-    for _ in 0..runs {
-        let start = Instant::now();
-        let out = run();
-        best = best.min(start.elapsed().as_secs_f64());
-        last = Some(out);
-    }
-    (best, last.expect("at least one run"))
+/// Rounds of every measurement (`occsim_traces::rounds`: interleaved where two are compared).
+const ROUNDS: usize = 3;
+
+/// The fastest of [`ROUNDS`] runs: (seconds, the last run's output).
+fn best_of<T>(run: impl FnMut() -> T) -> (f64, T) {
+    let figure = fastest_of(ROUNDS, 0.0, run);
+    (figure.seconds, figure.output)
 }
 
 fn bench_scene(name: &str, scene: &SyntheticScene) {
@@ -58,7 +55,7 @@ fn bench_scene(name: &str, scene: &SyntheticScene) {
             zstd_level: level,
             ..WriterOptions::default()
         };
-        let (encode_s, bytes) = best_of(2, || {
+        let (encode_s, bytes) = best_of(|| {
             let mut bytes = Vec::new();
             let mut writer =
                 TraceWriter::with_options(&mut bytes, &header, options).expect("header");
@@ -68,21 +65,25 @@ fn bench_scene(name: &str, scene: &SyntheticScene) {
             writer.finish().expect("encode");
             bytes
         });
-        let (bulk_s, sum) = best_of(3, || {
+        // Bulk decoding and event-by-event iteration take turns.
+        let mut bulk = || {
             let mut sum = Checksum::default();
             let mut reader = TraceReader::new(&bytes[..]).expect("header");
             reader.read_into(&mut sum).expect("decode");
-            sum
-        });
-        assert_eq!(sum.fragments, fragments);
-        let (single_s, count) = best_of(2, || {
+            sum.fragments
+        };
+        let mut single = || {
             let reader = TraceReader::new(&bytes[..]).expect("header");
             reader
                 .map(|e| e.expect("decode"))
                 .filter(|e| matches!(e, Event::Fragment(_)))
-                .count()
-        });
-        assert_eq!(count as u64, fragments);
+                .count() as u64
+        };
+        let jobs: &mut [&mut dyn FnMut() -> u64] = &mut [&mut bulk, &mut single];
+        let figures = fastest_of_rounds(ROUNDS, 0.0, jobs);
+        assert_eq!(figures[0].output, fragments);
+        assert_eq!(figures[1].output, fragments);
+        let (bulk_s, single_s) = (figures[0].seconds, figures[1].seconds);
         let rate = |s: f64| fragments as f64 / s / 1e6;
         println!(
             "  zstd {level}: {:.3} bytes/fragment ({} bytes) | encode {:6.1} M frag/s | decode bulk {:6.1} M frag/s, next_event {:6.1} M frag/s",
@@ -111,7 +112,7 @@ fn bench_builtin(name: &str) {
     }
     golden.finish(&mut writer).unwrap();
     let summary = writer.finish().expect("encode");
-    let (bulk_s, sum) = best_of(3, || {
+    let (bulk_s, sum) = best_of(|| {
         let mut sum = Checksum::default();
         let mut reader = TraceReader::new(&bytes[..]).expect("header");
         reader.read_into(&mut sum).expect("decode");

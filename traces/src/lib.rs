@@ -19,6 +19,7 @@ pub mod query;
 pub mod raster;
 pub mod retile;
 pub mod rng;
+pub mod rounds;
 pub mod scene;
 pub mod state;
 pub mod trace;

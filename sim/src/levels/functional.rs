@@ -135,13 +135,8 @@ impl FunctionalCore {
         self.events += 1;
         let ended = self.functional.event(event);
         if let Some(result) = &ended {
-            self.queries.push(QueryOutcome {
-                id: result.id,
-                mode: result.mode,
-                fragments: self.open_fragments,
-                value: result.value(),
-                latency_cycles: None,
-            });
+            self.queries
+                .push(QueryOutcome::of(result, self.open_fragments));
             self.golden.expect(self.queries.len() - 1, result.clone());
         }
         Ok(ended)
@@ -160,12 +155,17 @@ impl FunctionalCore {
         Ok(LevelResult {
             level: Fidelity::Functional,
             machine: String::new(),
+            arch: Vec::new(),
+            viewport_width: self.width,
+            viewport_height: self.height,
             fragments: self.fragments,
             primitives: self.primitives,
             checked_queries: self.golden.checked(),
             total_cycles: None,
             latency_mean_cycles: None,
+            latency_p50_cycles: None,
             latency_p95_cycles: None,
+            latency_max_cycles: None,
             effects: None,
             sampled_windows: None,
             queries: self.queries,

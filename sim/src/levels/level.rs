@@ -1,6 +1,7 @@
 //! What every fidelity level speaks: the level's name, and the common result each ends in
 //! (the vocabulary below the levels, so none of them depends on another to use it).
 
+use crate::arch::{ArchEntry, Value};
 use crate::effects::Effects;
 use crate::report::{nearest_rank, Report};
 use occsim_traces::QueryMode;
@@ -94,8 +95,32 @@ pub struct QueryOutcome {
     pub fragments: u64,
     /// The value a GL program reads ([`occsim_traces::QueryResult::value`]).
     pub value: u64,
+    /// The query's tiles (1 for a samples or any query).
+    pub tiles: usize,
+    /// NOHC and PHC summed over the tiles.
+    pub nohc: u64,
+    pub phc: u64,
+    /// Tiles whose verbose buffer overflowed.
+    pub overflowed_buffers: u32,
     /// Predicted or simulated latency in cycles; None at the functional level.
     pub latency_cycles: Option<u64>,
+}
+
+impl QueryOutcome {
+    /// The outcome of the query that gave `result`, `fragments` of them inside it.
+    pub(crate) fn of(result: &occsim_traces::QueryResult, fragments: u64) -> QueryOutcome {
+        QueryOutcome {
+            id: result.id,
+            mode: result.mode,
+            fragments,
+            value: result.value(),
+            tiles: result.tiles.len(),
+            nohc: result.tiles.iter().map(|t| t.nohc).sum(),
+            phc: result.tiles.iter().map(|t| t.phc).sum(),
+            overflowed_buffers: result.overflowed_buffers,
+            latency_cycles: None,
+        }
+    }
 }
 
 /// Windows the sampled level simulated.
@@ -110,6 +135,10 @@ pub struct SampledWindows {
 pub struct LevelResult {
     pub level: Fidelity,
     pub machine: String,
+    /// The fully resolved architecture the run used.
+    pub arch: Vec<ArchEntry>,
+    pub viewport_width: u32,
+    pub viewport_height: u32,
     pub fragments: u64,
     pub primitives: u64,
     /// Queries compared with a golden result stored in the stream.
@@ -117,8 +146,10 @@ pub struct LevelResult {
     /// Predicted (or simulated) cycles of the whole run; None at the functional level.
     pub total_cycles: Option<u64>,
     pub latency_mean_cycles: Option<f64>,
-    /// Nearest-rank 95th percentile of the query latencies.
+    /// Nearest-rank 50th and 95th percentiles and the largest of the query latencies.
+    pub latency_p50_cycles: Option<u64>,
     pub latency_p95_cycles: Option<u64>,
+    pub latency_max_cycles: Option<u64>,
     /// The effect models the cycle model built (cycle and sampled levels).
     pub effects: Option<Effects>,
     pub sampled_windows: Option<SampledWindows>,
@@ -150,25 +181,32 @@ impl LevelResult {
         } else {
             latencies.iter().sum::<u64>() as f64 / latencies.len() as f64
         });
+        self.latency_p50_cycles = Some(nearest_rank(&latencies, 50));
         self.latency_p95_cycles = Some(nearest_rank(&latencies, 95));
+        self.latency_max_cycles = Some(latencies.last().copied().unwrap_or(0));
     }
 
-    /// From a cycle-level report.
-    pub(crate) fn from_report(report: Report, effects: Effects) -> LevelResult {
+    /// From a cycle-level report (the level is `cycle`; [`crate::LevelModel::finish`] says
+    /// `rtl` when it was).
+    pub fn from_report(report: Report, effects: Effects) -> LevelResult {
         let queries = report
             .queries
             .iter()
             .map(|q| {
-                let passed: u64 = q.tiles.iter().map(|t| t.nohc).sum();
+                let nohc: u64 = q.tiles.iter().map(|t| t.nohc).sum();
                 QueryOutcome {
                     id: q.id,
                     mode: q.mode,
                     fragments: q.fragments,
                     value: if q.mode == QueryMode::Any {
-                        (passed > 0) as u64
+                        (nohc > 0) as u64
                     } else {
-                        passed
+                        nohc
                     },
+                    tiles: q.tiles.len(),
+                    nohc,
+                    phc: q.tiles.iter().map(|t| t.phc).sum(),
+                    overflowed_buffers: q.overflowed_buffers,
                     latency_cycles: Some(q.latency_cycles),
                 }
             })
@@ -176,12 +214,17 @@ impl LevelResult {
         let mut result = LevelResult {
             level: Fidelity::Cycle,
             machine: report.machine.clone(),
+            arch: report.arch.clone(),
+            viewport_width: report.viewport_width,
+            viewport_height: report.viewport_height,
             fragments: report.summary.fragments,
             primitives: report.summary.primitives,
             checked_queries: report.summary.checked_queries,
             total_cycles: None,
             latency_mean_cycles: None,
+            latency_p50_cycles: None,
             latency_p95_cycles: None,
+            latency_max_cycles: None,
             effects: Some(effects),
             sampled_windows: None,
             queries,
@@ -208,31 +251,35 @@ impl LevelResult {
             .then(|| self.frame_cycles.iter().sum::<u64>() as f64 / self.frame_cycles.len() as f64)
     }
 
-    /// A short text form (what `occsim replay --fidelity` prints below the cycle level).
-    pub fn to_text(&self) -> String {
+    /// The readable report, one shape at every level: the level and the machine with its
+    /// key parameters; the summary line; the frames; the blocks' tables (cycle and rtl); the
+    /// sampled windows and effect models; with `with_queries` a table of every query. What a
+    /// level cannot give prints as `-`.
+    pub fn to_text(&self, with_queries: bool) -> String {
         let mut out = String::new();
-        let _ = writeln!(out, "level: {} on {}", self.level, self.machine);
         let _ = writeln!(
             out,
-            "fragments: {}  primitives: {}  queries: {} ({} checked against golden results)",
-            self.fragments,
-            self.primitives,
-            self.queries.len(),
-            self.checked_queries
+            "level {}, machine {}, viewport {}x{}",
+            self.level,
+            machine_text(&self.machine, &self.arch),
+            self.viewport_width,
+            self.viewport_height
         );
-        match (
-            self.total_cycles,
-            self.latency_mean_cycles,
-            self.latency_p95_cycles,
-        ) {
-            (Some(total), Some(mean), Some(p95)) => {
-                let _ = writeln!(out, "predicted cycles: {total}");
-                let _ = writeln!(out, "query latency: mean {mean:.1}  p95 {p95} cycles");
-            }
-            _ => {
+        let _ = writeln!(out, "{}", self.summary_line());
+        if let Some(note) = self.idle_engines_note() {
+            let _ = writeln!(out, "{note}");
+        }
+        match &self.report {
+            Some(report) => report.write_frames(&mut out),
+            None => self.write_predicted_frames(&mut out),
+        }
+        match &self.report {
+            Some(report) => report.write_blocks(&mut out),
+            None => {
                 let _ = writeln!(
                     out,
-                    "predicted cycles: none (the functional level has no time)"
+                    "\nstages, memory port, units, engines: - (the {} level models no blocks; the cycle and rtl levels do)",
+                    self.level
                 );
             }
         }
@@ -243,9 +290,198 @@ impl LevelResult {
                 windows.simulated, windows.total
             );
         }
-        if let Some(effects) = self.effects {
-            let _ = writeln!(out, "active effects: {}", effects.active_names());
+        match self.effects {
+            Some(effects) => {
+                let _ = writeln!(out, "active effects: {}", effects.active_names());
+            }
+            None => {
+                let _ = writeln!(
+                    out,
+                    "active effects: - (the {} level builds no effect models)",
+                    self.level
+                );
+            }
+        }
+        if with_queries {
+            self.write_query_table(&mut out);
         }
         out
     }
+
+    /// The one-line summary: cycles, simulated time, fragments, rate, queries, latency.
+    pub fn summary_line(&self) -> String {
+        let clock = clock_mhz(&self.arch);
+        let dash = |v: Option<u64>| v.map_or("-".to_string(), |v| v.to_string());
+        let seconds = match (self.total_cycles, clock) {
+            (Some(cycles), Some(mhz)) => format!("{:.6} s", cycles as f64 / (mhz * 1e6)),
+            _ => "- s".to_string(),
+        };
+        let rate = match self.total_cycles {
+            Some(cycles) if cycles > 0 => format!("{:.3}", self.fragments as f64 / cycles as f64),
+            Some(_) => "0.000".to_string(),
+            None => "-".to_string(),
+        };
+        format!(
+            "{} cycles ({seconds}), {} fragments, {rate} fragments/cycle, {} queries ({} checked against golden results), latency p50 {} p95 {} max {} cycles",
+            dash(self.total_cycles),
+            self.fragments,
+            self.queries.len(),
+            self.checked_queries,
+            dash(self.latency_p50_cycles),
+            dash(self.latency_p95_cycles),
+            dash(self.latency_max_cycles),
+        )
+    }
+
+    /// When the machine has more engines an Occlusion Unit than any query has tiles, the
+    /// extra engines get none (tiles are dealt round-robin), so they change nothing.
+    pub fn idle_engines_note(&self) -> Option<String> {
+        let engines = match arch_value(&self.arch, "engines") {
+            Some(Value::Int(engines)) => *engines,
+            _ => return None,
+        };
+        let most = self.queries.iter().map(|q| q.tiles as u64).max()?;
+        (engines > most).then(|| {
+            format!(
+                "note: {engines} engines, but no query has more than {most} tiles: {} engines get no tile and change nothing here",
+                engines - most
+            )
+        })
+    }
+
+    /// The frames a level without a report timed: their cycles and time; the host's split
+    /// is the cycle level's (`-`).
+    fn write_predicted_frames(&self, out: &mut String) {
+        if self.total_cycles.is_none() {
+            let _ = writeln!(out, "\nframes: - (the {} level has no time)", self.level);
+            return;
+        }
+        let Some(fps) = self.frames_per_second else {
+            let _ = writeln!(out, "{}", crate::report::OPEN_LOOP_NOTE);
+            return;
+        };
+        let _ = writeln!(
+            out,
+            "\n{} frames, {fps:.2} frames/s; host busy, geometry, pixel busy, waiting, pipe wait: - (the cycle and rtl levels split a frame)",
+            self.frame_cycles.len()
+        );
+        let _ = writeln!(out, "{}", crate::report::FRAMES_LEGEND);
+        let _ = writeln!(out, "{}", crate::report::FRAMES_HEADING);
+        let mhz = clock_mhz(&self.arch).unwrap_or(0.0);
+        for (frame, cycles) in self.frame_cycles.iter().enumerate() {
+            let ms = if mhz > 0.0 {
+                format!("{:.3}", *cycles as f64 / (mhz * 1e3))
+            } else {
+                "-".to_string()
+            };
+            let _ = writeln!(
+                out,
+                "{:<6} {:>12} {:>10} {:>12} {:>12} {:>12} {:>12} {:>12}",
+                frame, cycles, ms, "-", "-", "-", "-", "-"
+            );
+        }
+    }
+
+    /// Every query: the same columns at every level (`-` where the level has no figure).
+    fn write_query_table(&self, out: &mut String) {
+        let _ = writeln!(
+            out,
+            "\nqueries: latency from the end entering the pipe to the result written, in cycles, \
+             = drain (last fragment through every Occlusion Unit) + local merge + global merge (IR); \
+             overflow: tiles whose verbose buffer overflowed; nohc, phc: passing and projected \
+             fragments summed over the tiles; fragments: inside the query"
+        );
+        let _ = writeln!(
+            out,
+            "{:>6} {:>10} {:<8} {:>6} {:>10} {:>8} {:>8} {:>8} {:>9} {:>12} {:>12} {:>10}",
+            "#",
+            "id",
+            "mode",
+            "tiles",
+            "latency",
+            "drain",
+            "local",
+            "global",
+            "overflow",
+            "nohc",
+            "phc",
+            "fragments"
+        );
+        let reported = self.report.as_ref().map(|r| &r.queries);
+        let dash = |v: Option<u64>| v.map_or("-".to_string(), |v| v.to_string());
+        for (index, q) in self.queries.iter().enumerate() {
+            let split = reported.and_then(|r| r.get(index));
+            let _ = writeln!(
+                out,
+                "{:>6} {:>10} {:<8} {:>6} {:>10} {:>8} {:>8} {:>8} {:>9} {:>12} {:>12} {:>10}",
+                index,
+                q.id,
+                q.mode.name(),
+                q.tiles,
+                dash(q.latency_cycles),
+                dash(split.map(|s| s.drain_cycles)),
+                dash(split.map(|s| s.local_merge_cycles)),
+                dash(split.map(|s| s.global_merge_cycles)),
+                q.overflowed_buffers,
+                q.nohc,
+                q.phc,
+                q.fragments
+            );
+        }
+    }
+}
+
+fn arch_value<'a>(arch: &'a [ArchEntry], key: &str) -> Option<&'a Value> {
+    arch.iter().find(|e| e.key == key).map(|e| &e.value)
+}
+
+fn clock_mhz(arch: &[ArchEntry]) -> Option<f64> {
+    match arch_value(arch, "clock_mhz") {
+        Some(Value::Float(mhz)) => Some(*mhz),
+        _ => None,
+    }
+}
+
+/// The machine and its key parameters: `o2 (4 engines) at 66.67 MHz`, `ir (4 boards, 80
+/// Image Engines a board, 4 engines an Occlusion Unit, interleave columns) at 100 MHz`.
+pub fn machine_text(machine: &str, arch: &[ArchEntry]) -> String {
+    let text = |key: &str| match arch_value(arch, key) {
+        Some(Value::Choice(name)) => Some(name.to_string()),
+        Some(value) => Some(value.to_string()),
+        None => None,
+    };
+    let mut parts = Vec::new();
+    if let Some(boards) = text("boards") {
+        parts.push(format!("{boards} boards"));
+    }
+    if let Some(ies) = text("image_engines_per_board") {
+        parts.push(format!("{ies} Image Engines a board"));
+    }
+    if let Some(engines) = text("engines") {
+        parts.push(match machine {
+            "ir" => format!("{engines} engines an Occlusion Unit"),
+            _ => format!("{engines} engines"),
+        });
+    }
+    if let Some(interleave) = text("interleave") {
+        match interleave.as_str() {
+            "columns" => parts.push("interleave columns".to_string()),
+            other => parts.push(format!(
+                "interleave {other} of {}x{} pixels",
+                text("block_width_pixels").unwrap_or_default(),
+                text("block_height_pixels").unwrap_or_default()
+            )),
+        }
+    }
+    if let Some(Value::Bool(true)) = arch_value(arch, "all_tiles_one_cycle") {
+        parts.push("all tiles in one cycle".to_string());
+    }
+    let mut out = machine.to_string();
+    if !parts.is_empty() {
+        let _ = write!(out, " ({})", parts.join(", "));
+    }
+    if let Some(mhz) = clock_mhz(arch) {
+        let _ = write!(out, " at {mhz} MHz");
+    }
+    out
 }

@@ -39,7 +39,8 @@ pub enum LevelModel {
     Functional(Box<FunctionalCore>),
     Analytic(Box<AnalyticModel>),
     Sampled(Box<SampledModel>),
-    Cycle(Box<MachineModel>, Effects),
+    /// The cycle and rtl levels: the machine model, its effect models and which of the two.
+    Cycle(Box<MachineModel>, Effects, Fidelity),
 }
 
 impl LevelModel {
@@ -106,6 +107,7 @@ impl LevelModel {
             Fidelity::Cycle => LevelModel::Cycle(
                 Box::new(builder(arch).effects(effects).build(width, height)?),
                 effects,
+                Fidelity::Cycle,
             ),
             // The Occlusion Unit and OccU Control from the rtl-model crate, clocked every
             // cycle; every effect model is built (the rtl model has no shortcuts).
@@ -116,6 +118,7 @@ impl LevelModel {
                         .build(width, height)?,
                 ),
                 Effects::every_model_of(arch.machine()),
+                Fidelity::Rtl,
             ),
         })
     }
@@ -127,7 +130,7 @@ impl LevelModel {
             LevelModel::Functional(core) => core.event(event).map(|_| ()),
             LevelModel::Analytic(model) => model.event(event),
             LevelModel::Sampled(model) => model.event(event),
-            LevelModel::Cycle(machine, _) => machine.event(event),
+            LevelModel::Cycle(machine, _, _) => machine.event(event),
         }
     }
 
@@ -139,7 +142,7 @@ impl LevelModel {
             LevelModel::Functional(core) => core.span(span),
             LevelModel::Analytic(model) => model.span(span),
             LevelModel::Sampled(model) => model.span(span),
-            LevelModel::Cycle(machine, _) => span
+            LevelModel::Cycle(machine, _, _) => span
                 .fragments()
                 .try_for_each(|fragment| machine.event(&Event::Fragment(fragment))),
         }
@@ -152,11 +155,14 @@ impl LevelModel {
             LevelModel::Functional(core) => core.finish()?,
             LevelModel::Analytic(model) => model.finish()?,
             LevelModel::Sampled(model) => model.finish()?,
-            LevelModel::Cycle(machine, effects) => {
-                LevelResult::from_report(machine.finish()?, effects)
+            LevelModel::Cycle(machine, effects, level) => {
+                let mut result = LevelResult::from_report(machine.finish()?, effects);
+                result.level = level;
+                result
             }
         };
         result.machine = name;
+        result.arch = arch.report_entries();
         Ok(result)
     }
 }
