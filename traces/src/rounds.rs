@@ -97,8 +97,9 @@ mod tests {
             (3, 3),
             "the last run's output"
         );
+        // The slow run sleeps at least 30 ms; the fastest is one of the 1 ms ones.
         assert!(
-            figures[0].seconds < 0.025,
+            figures[0].seconds < 0.030,
             "the fastest run: {}",
             figures[0].seconds
         );
