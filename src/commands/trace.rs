@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 #[derive(clap::Subcommand)]
 pub enum TraceCommand {
     /// Rasterize a scene and write its fragments and golden results as a trace.
-    Gen(GenArgs),
+    Gen(Box<GenArgs>),
     /// Print a trace's header, counts, features and bytes per fragment.
     Info(InfoArgs),
     /// Print a trace's events, one a line.
@@ -57,7 +57,7 @@ pub struct DumpArgs {
 
 pub fn run(command: TraceCommand) -> anyhow::Result<()> {
     match command {
-        TraceCommand::Gen(args) => generate(args),
+        TraceCommand::Gen(args) => generate(*args),
         TraceCommand::Info(args) => info(args),
         TraceCommand::Dump(args) => dump(args),
     }

@@ -4,6 +4,8 @@
 use super::bvh::{Bvh, NodeContent};
 use super::grid::GridDriver;
 use super::hierarchical::HierarchicalDriver;
+use super::hom::HomDriver;
+use super::large::LargeOccluderDriver;
 use super::project::Frustum;
 use super::render::{CommandObserver, Renderer};
 use super::{DriverKind, DriverOptions, FrameView, Walk, WorkloadScene, WorkloadStats};
@@ -57,6 +59,9 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     renderer.set_waits_for_answers(options.query_delay_frames == 0);
     let mut hierarchical = HierarchicalDriver::new(options, scene.bvh.nodes.len());
     let mut grid = GridDriver::new(options, walk.width, walk.height);
+    let mut hom = (options.kind == DriverKind::Hom).then(|| HomDriver::new(options, scene));
+    let mut large =
+        (options.kind == DriverKind::LargeOccluders).then(|| LargeOccluderDriver::new(scene));
     let mut stats = WorkloadStats {
         scene_triangles: scene.triangle_count(),
         ..WorkloadStats::default()
@@ -70,6 +75,16 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
             DriverKind::Hierarchical => hierarchical.frame(frame, scene, &view, &mut renderer)?,
             DriverKind::LazyGrid | DriverKind::BusyGrid => {
                 grid.frame(scene, &view, &mut renderer)?
+            }
+            DriverKind::Hom => {
+                if let Some(hom) = hom.as_mut() {
+                    hom.frame(scene, &view, &mut renderer)?
+                }
+            }
+            DriverKind::LargeOccluders => {
+                if let Some(large) = large.as_mut() {
+                    large.frame(scene, &view, &mut renderer)?
+                }
             }
         }
         renderer.swap()?;
