@@ -241,7 +241,7 @@ fn hom_reads_its_map_by_queries_and_approximate_culling_loses_pixels() {
     let conservative = DriverOptions::new(DriverKind::Hom);
     let stats = generate(&scene, &conservative, &WALK, &mut Discard).unwrap();
     for frame in &stats.frames {
-        // 160x120 in 4-pixel cells: 40 x 30 = 1200 map pixels, in one query (under 65,536).
+        // 160x120 in 4-pixel cells: 40 x 30 = 1200 map pixels, in one query (under 8,192).
         assert_eq!(frame.queries, 1);
         assert_eq!(frame.query_tiles, 1200);
         assert_eq!(
@@ -252,6 +252,17 @@ fn hom_reads_its_map_by_queries_and_approximate_culling_loses_pixels() {
         // At least the map, its 20x15, 10x8, 5x4, 3x2 averages and the overlap tests.
         assert!(frame.host_tests > 1200 + 300 + 80 + 20 + 6, "{frame:?}");
     }
+    // 640x480: 160 x 120 = 19,200 map pixels; a query holds at most 8,192, i.e. 51 rows of
+    // 160, so the map takes bands of 51, 51 and 18 rows: 3 queries.
+    let wide = Walk {
+        frames: 1,
+        width: 640,
+        height: 480,
+        ..WALK
+    };
+    let wide_stats = generate(&scene, &conservative, &wide, &mut Discard).unwrap();
+    assert_eq!(wide_stats.frames[0].queries, 3);
+    assert_eq!(wide_stats.frames[0].query_tiles, 19_200);
     let drawn = |stats: &occsim_traces::workloads::WorkloadStats| -> u64 {
         stats
             .frames

@@ -7,7 +7,7 @@
 //!    distance from the eye to their boxes' centres; the nearest are taken while their
 //!    triangles stay within the budget L.
 //! 2. The occluders are drawn (they are part of the image anyway), then the occlusion map
-//!    is read: one brief query per band of map rows, whose tiles are the map's pixels (cells
+//!    is read: one brief query per band of map rows (at most 8,192 pixels), whose tiles are the map's pixels (cells
 //!    of `cell` x `cell` screen pixels), drawing one screen-aligned quad just in front of the
 //!    clear depth with depth writes off. A tile's hits are its pixels no occluder covers, so
 //!    its opacity is exactly the covered share of its cell: the box-filtered occlusion map
@@ -56,6 +56,10 @@ use crate::state::Rect;
 
 /// The map's probe quad: just in front of the clear depth by more than a quad's rounding.
 const PROBE_DEPTH: u32 = DEPTH_ONE - 8;
+/// Map pixels a probe query holds at most: under `MAX_TILES`, and small enough that every
+/// machine's tile registers hold the query (ir4's 320 Image Engines each keep every tile
+/// of a query; its model allows 4,194,304 tile registers, 320 x 8,192 = 2,621,440).
+const MAP_TILES_PER_QUERY: u32 = 8192;
 /// Depth estimation buffer entries along each side.
 const DEB_SIDE: u32 = 64;
 /// The coarsest pyramid level has at most this many pixels along each side.
@@ -382,7 +386,7 @@ impl HomDriver {
     ) -> Result<Vec<u8>, S::Error> {
         let (width, height) = (renderer.width, renderer.height);
         let (columns, rows) = (width.div_ceil(self.cell), height.div_ceil(self.cell));
-        let band_rows = (MAX_TILES as u32 / columns).max(1);
+        let band_rows = (MAP_TILES_PER_QUERY.min(MAX_TILES as u32) / columns).max(1);
         let mut finest = Vec::with_capacity((columns * rows) as usize);
         let mut row = 0;
         while row < rows {
