@@ -27,6 +27,10 @@ pub struct CompareArgs {
     /// separated; each row shows the pixels lost against the cycles saved.
     #[arg(long, value_delimiter = ',', default_value = "0.05,0.2,0.5")]
     pub adaptive_threshold: Vec<f32>,
+    /// Opacity thresholds below 1 to run the hom driver's approximate culling with, comma
+    /// separated (the conservative hom row is always there).
+    #[arg(long, value_delimiter = ',', default_value = "0.9")]
+    pub opacity_threshold: Vec<f32>,
     /// Print the report as JSON.
     #[arg(long)]
     pub json: bool,
@@ -100,7 +104,19 @@ fn drivers_to_compare(args: &CompareArgs) -> Vec<DriverOptions> {
         adaptive.adaptive_threshold = Some(threshold);
         list.push(adaptive);
     }
+    seed_drivers(args, &mut list);
     list
+}
+
+/// The drivers of seeds 002 to 004, each conservative, then each approximate variant.
+fn seed_drivers(args: &CompareArgs, list: &mut Vec<DriverOptions>) {
+    list.push(DriverOptions::new(DriverKind::Hom));
+    for &threshold in &args.opacity_threshold {
+        let mut approximate = DriverOptions::new(DriverKind::Hom);
+        approximate.opacity_threshold = threshold;
+        list.push(approximate);
+    }
+    list.push(DriverOptions::new(DriverKind::LargeOccluders));
 }
 
 /// `culling compare` without timing models: the cycle columns are left out.
@@ -363,30 +379,48 @@ fn print_frame_time(report: &CompareReport, out: &mut dyn Write) -> std::io::Res
     Ok(())
 }
 
-/// What accuracy costs: each adaptive row against the conservative hierarchical driver.
+/// What accuracy costs: each adaptive row against the conservative hierarchical driver,
+/// each approximate hom row against the conservative hom driver.
 fn print_accuracy(
     report: &CompareReport,
     machines: &[String],
     out: &mut dyn Write,
 ) -> std::io::Result<()> {
-    let Some(exact) = report
-        .drivers
-        .iter()
-        .find(|d| d.driver == "hierarchical" || d.driver.starts_with("hierarchical/d"))
-    else {
+    let hierarchical =
+        |d: &&DriverReport| d.driver == "hierarchical" || d.driver.starts_with("hierarchical/d");
+    print_approximate(report, machines, "adaptive", hierarchical, "/t", out)?;
+    print_approximate(
+        report,
+        machines,
+        "approximate",
+        |d| d.driver == "hom",
+        "hom/o",
+        out,
+    )
+}
+
+fn print_approximate(
+    report: &CompareReport,
+    machines: &[String],
+    what: &str,
+    is_exact: impl Fn(&&DriverReport) -> bool,
+    marker: &str,
+    out: &mut dyn Write,
+) -> std::io::Result<()> {
+    let Some(exact) = report.drivers.iter().find(is_exact) else {
         return Ok(());
     };
     let adaptive: Vec<&DriverReport> = report
         .drivers
         .iter()
-        .filter(|d| d.driver.contains("/t"))
+        .filter(|d| d.driver.contains(marker))
         .collect();
     if adaptive.is_empty() {
         return Ok(());
     }
     writeln!(
         out,
-        "\nadaptive culling against {} (per frame):",
+        "\n{what} culling against {} (per frame):",
         exact.driver
     )?;
     write!(
@@ -492,7 +526,10 @@ mod tests {
                 "lazy-grid/obuf",
                 "busy-grid",
                 "busy-grid/obuf",
-                "hierarchical/t0.3"
+                "hierarchical/t0.3",
+                "hom",
+                "hom/o0.9",
+                "large-occluders"
             ]
         );
         for d in &report.drivers {
@@ -504,7 +541,7 @@ mod tests {
                 "{}",
                 d.driver
             );
-            if !d.driver.contains("/t") {
+            if !d.driver.contains("/t") && !d.driver.contains("/o") {
                 assert_eq!(d.pixels_lost_per_frame, 0.0, "{} is conservative", d.driver);
             }
         }
@@ -520,6 +557,7 @@ mod tests {
         }
         assert!(text.contains("frames/s"), "{text}");
         assert!(text.contains("cycles saved frag"), "{text}");
+        assert!(text.contains("approximate culling against hom"), "{text}");
     }
 
     #[test]
@@ -539,8 +577,8 @@ mod tests {
         .unwrap();
         let value: serde_json::Value = serde_json::from_slice(&out).unwrap();
         // frustum, hierarchical, hierarchical/vob, collision, the two grids in both
-        // variants, one adaptive threshold.
-        assert_eq!(value["drivers"].as_array().unwrap().len(), 9);
+        // variants, one adaptive threshold, hom, hom/o0.9 and large-occluders.
+        assert_eq!(value["drivers"].as_array().unwrap().len(), 12);
         assert_eq!(value["frames"], 2);
     }
 }

@@ -62,7 +62,8 @@ pub struct SceneArgs {
 /// The culling driver and its options.
 #[derive(clap::Args, Clone, Debug)]
 pub struct DriverArgs {
-    /// The culling driver: frustum, hierarchical, lazy-grid, busy-grid or collision.
+    /// The culling driver: frustum, hierarchical, lazy-grid, busy-grid, collision, hom or
+    /// large-occluders.
     #[arg(long, default_value = "hierarchical")]
     pub driver: String,
     /// Frames before a query's answer is used: 0 (at once) or 1 (frustum, hierarchical).
@@ -94,6 +95,16 @@ pub struct DriverArgs {
     /// did: draw the box, read its rectangle of the framebuffer back and search it.
     #[arg(long)]
     pub virtual_occlusion_buffer: bool,
+    /// Hom: side of an occlusion-map pixel in screen pixels (1 to 64).
+    #[arg(long, default_value_t = 4)]
+    pub occlusion_map_cell_pixels: u32,
+    /// Hom: opacity threshold T, level k of the pyramid at T^k; 1 is conservative, below 1
+    /// approximate culling.
+    #[arg(long, default_value_t = 1.0)]
+    pub opacity_threshold: f32,
+    /// Hom: the occluders' triangle budget a frame (default: a sixteenth of the scene's).
+    #[arg(long)]
+    pub occluder_triangles: Option<u64>,
 }
 
 /// Everything `trace gen` needs to make a workload trace.
@@ -228,6 +239,9 @@ impl DriverArgs {
             collision_tiles: self.collision_tiles,
             collision_step: self.collision_step,
             virtual_occlusion_buffer: self.virtual_occlusion_buffer,
+            occlusion_map_cell_pixels: self.occlusion_map_cell_pixels,
+            opacity_threshold: self.opacity_threshold,
+            occluder_triangles: self.occluder_triangles,
         };
         options.validate().map_err(flagged)?;
         Ok(options)
@@ -250,6 +264,9 @@ pub fn flagged(error: WorkloadError) -> anyhow::Error {
                 WorkloadOption::CollisionTiles => "--collision-tiles",
                 WorkloadOption::CollisionStep => "--collision-step",
                 WorkloadOption::VirtualOcclusionBuffer => "--virtual-occlusion-buffer",
+                WorkloadOption::OcclusionMapCellPixels => "--occlusion-map-cell-pixels",
+                WorkloadOption::OpacityThreshold => "--opacity-threshold",
+                WorkloadOption::OccluderTriangles => "--occluder-triangles",
             };
             anyhow::anyhow!("{flag} {detail}")
         }

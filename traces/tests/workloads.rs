@@ -193,6 +193,8 @@ fn occlusion_culling_draws_fewer_triangles_than_frustum_culling_in_the_city() {
         DriverKind::Hierarchical,
         DriverKind::LazyGrid,
         DriverKind::BusyGrid,
+        DriverKind::Hom,
+        DriverKind::LargeOccluders,
     ]
     .into_iter()
     .map(DriverOptions::new)
@@ -240,6 +242,84 @@ fn an_adaptive_threshold_draws_no_more_than_the_conservative_traversal() {
     let exact = drawn(None);
     let adaptive = drawn(Some(0.5));
     assert!(adaptive < exact, "adaptive {adaptive} exact {exact}");
+}
+
+/// Hom: the occlusion map is read by queries whose tiles are its pixels, the host's tests
+/// are charged, and approximate culling (opacity threshold below 1) draws fewer objects than
+/// conservative culling and loses pixels of the full render.
+#[test]
+fn hom_reads_its_map_by_queries_and_approximate_culling_loses_pixels() {
+    let scene = small_city();
+    let full = full_renders(&scene, &WALK);
+    let conservative = DriverOptions::new(DriverKind::Hom);
+    let stats = generate(&scene, &conservative, &WALK, &mut Discard).unwrap();
+    for frame in &stats.frames {
+        // 160x120 in 4-pixel cells: 40 x 30 = 1200 map pixels, in one query (under 8,192).
+        assert_eq!(frame.queries, 1);
+        assert_eq!(frame.query_tiles, 1200);
+        assert_eq!(
+            frame.query_fragments,
+            160 * 120,
+            "one quad over the viewport"
+        );
+        // At least the map, its 20x15, 10x8, 5x4, 3x2 averages and the overlap tests.
+        assert!(frame.host_tests > 1200 + 300 + 80 + 20 + 6, "{frame:?}");
+    }
+    // 640x480: 160 x 120 = 19,200 map pixels; a query holds at most 8,192, i.e. 51 rows of
+    // 160, so the map takes bands of 51, 51 and 18 rows: 3 queries.
+    let wide = Walk {
+        frames: 1,
+        width: 640,
+        height: 480,
+        ..WALK
+    };
+    let wide_stats = generate(&scene, &conservative, &wide, &mut Discard).unwrap();
+    assert_eq!(wide_stats.frames[0].queries, 3);
+    assert_eq!(wide_stats.frames[0].query_tiles, 19_200);
+    let drawn = |stats: &occsim_traces::workloads::WorkloadStats| -> u64 {
+        stats
+            .frames
+            .iter()
+            .map(|f| f.objects_drawn.len() as u64)
+            .sum()
+    };
+    let mut approximate = DriverOptions::new(DriverKind::Hom);
+    approximate.opacity_threshold = 0.5;
+    let loose = generate(&scene, &approximate, &WALK, &mut Discard).unwrap();
+    assert!(
+        drawn(&loose) < drawn(&stats),
+        "{} {}",
+        drawn(&loose),
+        drawn(&stats)
+    );
+    assert!(!missed_objects(&scene, &WALK, &full, &approximate).is_empty());
+}
+
+/// Large occluders: no queries at all; from a camera that stands still, the second frame
+/// draws what the first did and finds every occluder-node pair's planes in the cache, so
+/// its host tests are fewer (eye tests only, no tangent planes computed).
+#[test]
+fn large_occluders_reuse_their_planes_between_frames() {
+    let scene = small_city().with_camera(
+        CameraPath::line([0.0, 1.7, 60.0], [0.0, 1.7, 60.0], [0.0, 1.7, -100.0]).unwrap(),
+    );
+    let walk = Walk { frames: 2, ..WALK };
+    let stats = generate(
+        &scene,
+        &DriverOptions::new(DriverKind::LargeOccluders),
+        &walk,
+        &mut Discard,
+    )
+    .unwrap();
+    let (first, second) = (&stats.frames[0], &stats.frames[1]);
+    assert_eq!(first.queries + second.queries, 0);
+    assert_eq!(first.objects_drawn, second.objects_drawn);
+    assert!(
+        second.host_tests < first.host_tests,
+        "{} then {}",
+        first.host_tests,
+        second.host_tests
+    );
 }
 
 #[test]
@@ -308,8 +388,14 @@ fn bad_options_are_refused_clearly() {
     let unknown = "z-pyramid".parse::<DriverKind>().unwrap_err().to_string();
     assert_eq!(
         unknown,
-        "unknown driver `z-pyramid`: expected frustum, hierarchical, lazy-grid or busy-grid"
+        "unknown driver `z-pyramid`: expected one of frustum, hierarchical, lazy-grid, busy-grid, collision, hom, large-occluders"
     );
+    let mut opaque = DriverOptions::new(DriverKind::Hom);
+    opaque.opacity_threshold = 1.5;
+    assert!(error(&opaque, &WALK).contains("opacity threshold 1.5 out of range"));
+    let mut not_hom = DriverOptions::new(DriverKind::Hierarchical);
+    not_hom.opacity_threshold = 0.5;
+    assert!(error(&not_hom, &WALK).contains("opacity threshold applies to the hom driver only"));
     let obj = load_obj(
         "v 0 0 0\nf 1 1\n".as_bytes(),
         "model.obj",

@@ -5,6 +5,8 @@ use super::bvh::{Bvh, NodeContent};
 use super::collision::CollisionDriver;
 use super::grid::GridDriver;
 use super::hierarchical::HierarchicalDriver;
+use super::hom::HomDriver;
+use super::large::LargeOccluderDriver;
 use super::occlusion_buffer_grid::OcclusionBufferGrid;
 use super::project::Frustum;
 use super::render::{CommandObserver, Renderer};
@@ -63,6 +65,9 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     let mut grid = GridDriver::new(options, walk.width, walk.height);
     let mut obuffer_grid = OcclusionBufferGrid::new(options, walk.width, walk.height);
     let collision = CollisionDriver::new(options);
+    let mut hom = (options.kind == DriverKind::Hom).then(|| HomDriver::new(options, scene));
+    let mut large =
+        (options.kind == DriverKind::LargeOccluders).then(|| LargeOccluderDriver::new(scene));
     let mut stats = WorkloadStats {
         scene_triangles: scene.triangle_count(),
         ..WorkloadStats::default()
@@ -83,6 +88,16 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
                 GridVariant::ZBuffer => grid.frame(scene, &view, &mut renderer)?,
                 GridVariant::OcclusionBuffer => obuffer_grid.frame(scene, &view, &mut renderer)?,
             },
+            DriverKind::Hom => {
+                if let Some(hom) = hom.as_mut() {
+                    hom.frame(scene, &view, &mut renderer)?
+                }
+            }
+            DriverKind::LargeOccluders => {
+                if let Some(large) = large.as_mut() {
+                    large.frame(scene, &view, &mut renderer)?
+                }
+            }
         }
         renderer.swap()?;
         let (frame_stats, timing) = renderer.finish_frame(started);

@@ -18,6 +18,11 @@
 //!   leaves whose box has visible pixels.
 //! - `lazy-grid`, `busy-grid`: the lazy occlusion grid (Hey et al.), z-buffer variant, in
 //!   query form (see `grid.rs`).
+//!
+//! Drivers of seeds 002 to 004:
+//! - `hom`: hierarchical occlusion maps (Zhang et al.), the map read by queries (`hom.rs`).
+//! - `large-occluders`: supporting and separating planes of large occluders (Coorg and
+//!   Teller), object space on the host, no queries (`large.rs`).
 
 mod bvh;
 mod camera;
@@ -26,6 +31,8 @@ pub mod compare;
 mod drivers;
 mod grid;
 mod hierarchical;
+mod hom;
+mod large;
 mod obj;
 mod occlusion_buffer_grid;
 mod oracle;
@@ -59,7 +66,7 @@ pub enum WorkloadError {
         option: WorkloadOption,
         detail: String,
     },
-    #[error("unknown driver `{0}`: expected frustum, hierarchical, lazy-grid or busy-grid")]
+    #[error("unknown driver `{0}`: expected one of {names}", names = DriverKind::names())]
     UnknownDriver(String),
     #[error("{file}:{line}: {message}")]
     Obj {
@@ -85,6 +92,9 @@ pub enum WorkloadOption {
     CollisionTiles,
     CollisionStep,
     VirtualOcclusionBuffer,
+    OcclusionMapCellPixels,
+    OpacityThreshold,
+    OccluderTriangles,
 }
 
 impl WorkloadOption {
@@ -102,6 +112,9 @@ impl WorkloadOption {
             WorkloadOption::CollisionTiles => "collision tiles",
             WorkloadOption::CollisionStep => "collision step",
             WorkloadOption::VirtualOcclusionBuffer => "virtual occlusion buffer",
+            WorkloadOption::OcclusionMapCellPixels => "occlusion map cell pixels",
+            WorkloadOption::OpacityThreshold => "opacity threshold",
+            WorkloadOption::OccluderTriangles => "occluder triangles",
         }
     }
 }
@@ -293,16 +306,28 @@ pub enum DriverKind {
     /// Occlusion-driven rendering, then a collision test along the heading: a customised
     /// view frustum in brief mode (seed 001, section 5).
     Collision,
+    /// Hierarchical occlusion maps (seed 003).
+    Hom,
+    /// Large occluders' supporting and separating planes (seed 004).
+    LargeOccluders,
 }
 
 impl DriverKind {
-    pub const ALL: [DriverKind; 5] = [
+    pub const ALL: [DriverKind; 7] = [
         DriverKind::Frustum,
         DriverKind::Hierarchical,
         DriverKind::LazyGrid,
         DriverKind::BusyGrid,
         DriverKind::Collision,
+        DriverKind::Hom,
+        DriverKind::LargeOccluders,
     ];
+
+    /// Every driver's name, for messages.
+    pub fn names() -> String {
+        let names: Vec<&str> = DriverKind::ALL.iter().map(|k| k.name()).collect();
+        names.join(", ")
+    }
 
     pub fn name(self) -> &'static str {
         match self {
@@ -311,6 +336,8 @@ impl DriverKind {
             DriverKind::LazyGrid => "lazy-grid",
             DriverKind::BusyGrid => "busy-grid",
             DriverKind::Collision => "collision",
+            DriverKind::Hom => "hom",
+            DriverKind::LargeOccluders => "large-occluders",
         }
     }
 }
@@ -393,6 +420,14 @@ pub struct DriverOptions {
     /// the box, then read the framebuffer back over the box's rectangle and search it for
     /// changed pixels on the host, instead of reading the Occlusion Unit's record.
     pub virtual_occlusion_buffer: bool,
+    /// Hom: side of an occlusion-map pixel in screen pixels (the paper's 256x256 map of a
+    /// 1024x1024 image: 4).
+    pub occlusion_map_cell_pixels: u32,
+    /// Hom: the opacity threshold T (level k of the pyramid: T^k); 1 is conservative
+    /// culling, below 1 approximate culling.
+    pub opacity_threshold: f32,
+    /// Hom: the occluders' triangle budget a frame (None: a sixteenth of the scene's).
+    pub occluder_triangles: Option<u64>,
 }
 
 impl DriverOptions {
@@ -408,6 +443,9 @@ impl DriverOptions {
             collision_tiles: 2,
             collision_step: None,
             virtual_occlusion_buffer: false,
+            occlusion_map_cell_pixels: 4,
+            opacity_threshold: 1.0,
+            occluder_triangles: None,
         }
     }
 
@@ -431,6 +469,17 @@ impl DriverOptions {
         }
         if self.grid_variant == GridVariant::OcclusionBuffer {
             label += "/obuf";
+        }
+        if self.kind == DriverKind::Hom {
+            if self.opacity_threshold < 1.0 {
+                label += &format!("/o{}", self.opacity_threshold);
+            }
+            if self.occlusion_map_cell_pixels != 4 {
+                label += &format!("/c{}", self.occlusion_map_cell_pixels);
+            }
+            if let Some(l) = self.occluder_triangles {
+                label += &format!("/l{l}");
+            }
         }
         label
     }
@@ -501,6 +550,7 @@ impl DriverOptions {
                 "applies to the hierarchical driver without quadtree levels (the host reads the box's whole rectangle)".into(),
             );
         }
+        self.validate_seed_drivers()?;
         if !(4..=1024).contains(&self.grid_cell_pixels) {
             return fail(
                 WorkloadOption::GridCellPixels,
@@ -525,6 +575,56 @@ impl DriverOptions {
             return fail(
                 WorkloadOption::GridVariant,
                 "applies to the lazy-grid and busy-grid drivers only".into(),
+            );
+        }
+        Ok(())
+    }
+}
+
+impl DriverOptions {
+    /// The options of the drivers of seeds 002 to 004.
+    fn validate_seed_drivers(&self) -> Result<(), WorkloadError> {
+        let fail = |option, detail: String| Err(WorkloadError::Option { option, detail });
+        let hom = self.kind == DriverKind::Hom;
+        if !(1..=64).contains(&self.occlusion_map_cell_pixels) {
+            return fail(
+                WorkloadOption::OcclusionMapCellPixels,
+                format!(
+                    "{} out of range: expected 1 to 64",
+                    self.occlusion_map_cell_pixels
+                ),
+            );
+        }
+        let t = self.opacity_threshold;
+        if !(t > 0.0 && t <= 1.0) {
+            return fail(
+                WorkloadOption::OpacityThreshold,
+                format!("{t} out of range: expected above 0 and at most 1"),
+            );
+        }
+        if !hom && (t < 1.0 || self.occlusion_map_cell_pixels != 4) {
+            let option = if t < 1.0 {
+                WorkloadOption::OpacityThreshold
+            } else {
+                WorkloadOption::OcclusionMapCellPixels
+            };
+            return fail(option, "applies to the hom driver only".into());
+        }
+        if self.occluder_triangles.is_some() && !hom {
+            return fail(
+                WorkloadOption::OccluderTriangles,
+                "applies to the hom driver only".into(),
+            );
+        }
+        if matches!(self.kind, DriverKind::Hom | DriverKind::LargeOccluders)
+            && self.query_delay_frames > 0
+        {
+            return fail(
+                WorkloadOption::QueryDelay,
+                format!(
+                    "applies to the frustum and hierarchical drivers: the {} driver decides at once",
+                    self.kind.name()
+                ),
             );
         }
         Ok(())
@@ -556,6 +656,9 @@ pub struct FrameStats {
     pub collision: Option<CollisionTest>,
     /// Hierarchical: nodes culled by their parent's quadtree tiles, without a query.
     pub culled_by_parent_tiles: u64,
+    /// Comparisons the host makes without a query: occlusion-map pixels and depth-estimation
+    /// entries (hom), plane tests (large-occluders), cell marks (dynamic-grid).
+    pub host_tests: u64,
 }
 
 /// Wall time of one frame; not deterministic, kept apart from [`FrameStats`].

@@ -116,6 +116,14 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         self.host_work.pixels = self.host_work.pixels.saturating_add(pixels);
     }
 
+    /// The host makes `tests` comparisons of its own, without a query (occlusion-map pixels,
+    /// depth-estimation entries, plane tests), each charged as a decision.
+    pub(crate) fn host_tests(&mut self, tests: u64) {
+        self.stats.host_tests += tests;
+        let tests = u32::try_from(tests).unwrap_or(u32::MAX);
+        self.host_work.decisions = self.host_work.decisions.saturating_add(tests);
+    }
+
     /// Decisions use an earlier frame's answers: the host never blocks on a query.
     pub(crate) fn set_waits_for_answers(&mut self, waits: bool) {
         self.waits_for_answers = waits;
@@ -206,6 +214,22 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         self.host_work.decisions = self.host_work.decisions.saturating_add(1);
         self.stats.query_fragments += self.sink.fragments - fragments_before;
         self.golden_time += started.elapsed();
+        Ok(result)
+    }
+
+    /// A brief query over `tiles` (inside `band`) drawing one screen-aligned quad over `band`
+    /// at window depth `depth` with depth writes off: a tile's hits are its pixels whose
+    /// stored depth is at least the quad's, and the depth buffer is left as it was.
+    pub(crate) fn band_probe(
+        &mut self,
+        tiles: Vec<Rect>,
+        band: Rect,
+        depth: u32,
+    ) -> Result<Option<QueryResult>, S::Error> {
+        self.execute(&Command::DepthMask(false))?;
+        let quad = screen_quad(band, depth, self.width, self.height);
+        let result = self.brief_query(tiles, quad)?;
+        self.execute(&Command::DepthMask(true))?;
         Ok(result)
     }
 
