@@ -302,14 +302,16 @@ fn analytic_reaches_the_minimum_latency_on_an_idle_pipe() {
 
 #[test]
 fn analytic_reaches_the_minimum_latency_on_an_idle_ir() {
-    // ir4: a query over no fragments. Every Image Engine's report is ready 3 cycles after
-    // the end token; the local tree over 80 Image Engines is ceil(log2 80) = 7 hops of 2
-    // cycles, the global tree over 4 boards 2 hops of 8: 3 + 14 + 16 = 33.
+    // ir4: a one-tile query over no fragments. Every Image Engine's report (8 words) is
+    // ready 3 cycles after the end token; the local tree over 80 Image Engines is
+    // ceil(log2 80) = 7 hops, each 8 words over a 32-bit link (8 cycles) and 2 of latency;
+    // the global tree over 4 boards 2 hops of 8 words over 64 bits (4) and 8 of latency; the
+    // DMA of the final 8 words at 16 bits a cycle 16: 3 + 7 * 10 + 2 * 12 + 16 = 113.
     let arch = Arch::builtin("ir4").unwrap();
     let events = one_empty_query();
     for level in [Fidelity::Analytic, Fidelity::Cycle] {
         let result = run_level(level, &arch, 16, 16, EffectsChoice::Auto, &events).unwrap();
-        assert_eq!(result.queries[0].latency_cycles, Some(33), "{level}");
+        assert_eq!(result.queries[0].latency_cycles, Some(113), "{level}");
     }
 }
 
@@ -320,7 +322,8 @@ fn analytic_ir_sees_the_busiest_image_engine() {
     // 20 · 45 = 900 cycles, 8 · 45 = 360 of them hidden behind its FIFO while the generator
     // goes on: the window costs 900 - 360 = 540 (the generator alone: setup 4 + 10).
     // The query's latency: that engine's FIFO and the fragment in it, 9 · 45 = 405, + 3,
-    // + one hop of 2 in the local tree: 410.
+    // + one hop in the local tree (its 8 words over a 32-bit link, 8, and 2 of latency),
+    // no global hop for one board, and the DMA of 8 words at 16 bits a cycle, 16: 434.
     let mut arch = Arch::builtin("ir1").unwrap();
     arch.set("image_engines_per_board=2").unwrap();
     let spec = QuerySpec {
@@ -341,8 +344,8 @@ fn analytic_ir_sees_the_busiest_image_engine() {
         &events,
     )
     .unwrap();
-    assert_eq!(analytic.queries[0].latency_cycles, Some(410));
-    assert_eq!(analytic.total_cycles, Some(540 + 410));
+    assert_eq!(analytic.queries[0].latency_cycles, Some(434));
+    assert_eq!(analytic.total_cycles, Some(540 + 434));
 }
 
 #[test]

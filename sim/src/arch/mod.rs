@@ -348,6 +348,12 @@ parameters! {
             I [4, 32] "a backplane crossing between boards, several board clocks";
         global_merge_read_latency_cycles: u64 = 100, [0, 1 << 20], "cycles", "software: cycles for the host to read one board's report over the bus",
             I [50, 500] "a PIO read over the system bus, 0.5-5 us";
+        local_merge_link_bits_per_cycle: u64 = 32, [0, 1 << 20], "bits", "tree or chain: width of one link between a board's Image Engines; a partial report (8 words a tile, and verbose hits) crosses it word by word (0: unlimited)",
+            I [16, 128] "not published; a 32-bit word a cycle between neighbouring Image Engine chips, as their memory buses move pixels";
+        global_merge_link_bits_per_cycle: u64 = 64, [0, 1 << 20], "bits", "tree or chain: width of one board-to-board link the boards' merged reports cross word by word (0: unlimited)",
+            I [32, 256] "not published; a backplane path of 400-3200 MB/s at the 100 MHz clock";
+        report_dma_bits_per_cycle: u64 = 16, [0, 1 << 20], "bits", "after a hardware global merge: the final report written to host memory by DMA, this many bits a cycle (0: unlimited)",
+            I [16, 32] "the host bus: 200 MB/s (Onyx, V2) to 400 MB/s (Onyx2, V2) at the 100 MHz clock";
         host_clock_mhz: f64 = 195.0, [0.001, 100_000.0], "MHz", "host CPU clock: an Onyx2's R10000",
             V2 "195 MHz R10000 Onyx2 systems";
         host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited",
@@ -886,12 +892,16 @@ impl MergeKind {
     }
 }
 
-/// One merge stage's network and latencies.
+/// One merge stage's network, latencies and link width.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MergeNetwork {
     pub kind: MergeKind,
     pub hop_latency_cycles: u64,
     pub read_latency_cycles: u64,
+    /// Tree or chain: bits one link moves a cycle (0: unlimited).
+    pub link_bits_per_cycle: u64,
+    /// Software: cycles the host takes to read one word of a report over the bus.
+    pub read_cycles_per_word: u64,
 }
 
 impl IrArch {
@@ -922,6 +932,8 @@ impl IrArch {
             kind: self.local_merge,
             hop_latency_cycles: self.local_merge_hop_latency_cycles,
             read_latency_cycles: self.local_merge_read_latency_cycles,
+            link_bits_per_cycle: self.local_merge_link_bits_per_cycle,
+            read_cycles_per_word: self.result_read_cycles_per_word,
         }
     }
 
@@ -931,6 +943,8 @@ impl IrArch {
             kind: self.global_merge,
             hop_latency_cycles: self.global_merge_hop_latency_cycles,
             read_latency_cycles: self.global_merge_read_latency_cycles,
+            link_bits_per_cycle: self.global_merge_link_bits_per_cycle,
+            read_cycles_per_word: self.result_read_cycles_per_word,
         }
     }
 }

@@ -35,15 +35,16 @@
 //! the work still queued at the end token: the fragment in the depth stage and a full FIFO
 //! when the engine had that much to do in the window (the demo's Image Engines are its
 //! bottleneck, so their FIFOs are full at every query end). The two
-//! merge stages then run on the `r_i` exactly as the machine runs them
-//! ([`crate::blocks::merge_network::merged_ready`]; the host of software merges is carried from query
-//! to query), and latency = available − `t_end`. Hit words per Image Engine are not capped by
-//! the verbose buffers' room: a query whose buffers overflow is predicted slower than it is.
+//! merge stages then run on the `r_i` exactly as the machine runs them, moving the same
+//! words (8 a tile from every Image Engine; [`crate::blocks::merge_network::merged_ready`], then
+//! the DMA to host memory; the host of software merges is carried from query to query), and
+//! latency = available − `t_end`. Hit words per Image Engine are not capped by the verbose
+//! buffers' room: a query whose buffers overflow is predicted slower than it is.
 
 use super::{service_cycles, WindowEnd};
 use crate::arch::IrArch;
 use crate::blocks::interleave::FramebufferInterleave;
-use crate::blocks::merge_network::merged_ready;
+use crate::blocks::merge_network::{delivered, merged_ready, Partial, ReportShape};
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect};
 
@@ -269,7 +270,7 @@ impl IrBottleneck {
 
     /// The query ended; the window that began in cycle `start` closes: its cycles and the
     /// query's latency.
-    pub(super) fn end_query(&mut self, _spec: &QuerySpec, start: f64) -> WindowEnd {
+    pub(super) fn end_query(&mut self, spec: &QuerySpec, start: f64) -> WindowEnd {
         self.open = None;
         let bottleneck = self.window.cycles(&self.arch);
         let end_cycle = (start + bottleneck.cycles).round() as u64;
@@ -277,15 +278,35 @@ impl IrBottleneck {
             .report_delays()
             .map(|delay| end_cycle + delay)
             .collect();
-        let board_ready: Vec<u64> = ready
-            .chunks(self.arch.image_engines_per_board)
-            .map(|board| merged_ready(&self.arch.local_merge_network(), board, &mut self.host))
+        // Words as the machine moves them: 8 a tile from every Image Engine, and its hit
+        // words as one bucket, not capped by the buffers' room.
+        let shape = ReportShape {
+            tiles: spec.tiles.len() as u64,
+            room: u64::MAX,
+        };
+        let verbose = spec.mode == QueryMode::Verbose;
+        let reports: Vec<Partial> = ready
+            .iter()
+            .zip(&self.window.hit_words)
+            .map(|(&ready, &hits)| Partial {
+                ready,
+                hits: if verbose { vec![hits] } else { Vec::new() },
+            })
             .collect();
-        let available = merged_ready(
-            &self.arch.global_merge_network(),
-            &board_ready,
-            &mut self.host,
-        );
+        let board_reports: Vec<Partial> = reports
+            .chunks(self.arch.image_engines_per_board)
+            .map(|board| {
+                merged_ready(
+                    &self.arch.local_merge_network(),
+                    board,
+                    shape,
+                    &mut self.host,
+                )
+            })
+            .collect();
+        let global = self.arch.global_merge_network();
+        let merged = merged_ready(&global, &board_reports, shape, &mut self.host);
+        let available = delivered(&global, &merged, shape, self.arch.report_dma_bits_per_cycle);
         self.window.clear();
         WindowEnd {
             cycles: bottleneck.cycles,
