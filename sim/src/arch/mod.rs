@@ -283,8 +283,26 @@ parameters! {
             I [2, 32] "the paper's OccU sits after the depth test without a stated buffer; a short FIFO absorbs its k-cycle engines";
     }
     group occu: OccuArch; {
-        memory_port_bits_per_cycle: u32 = 256, [32, 1 << 14], "bits", "the one main-memory port shared by depth reads, depth writes and OccU Control",
+        memory_port_bits_per_cycle: u32 = 256, [32, 1 << 14], "bits", "the one main-memory port shared by depth reads and writes, colour writes, clears, OccU Control, the display refresh and the host",
             V "SGI O2 documents: a 256-bit word per 66 MHz cycle, up to 2.13 GB/s";
+        memory_banks: u32 = 2, [1, 64], "banks", "memory banks, each with one open row; 64 KB tile p lies in bank p mod banks, and a depth read is a page hit when its bank's open row is its tile (1: one open row, the last read's)",
+            I [1, 4] "SDRAM parts of the era had 2 (16 Mbit) or 4 (64 Mbit) internal banks; how the O2 spread its tiles over them is not published";
+        colour_bits_per_pixel: u32 = 32, [0, 256], "bits", "colour written per drawn fragment (one that passes outside an occlusion render mode) and per cleared pixel (0: no colour traffic)",
+            V "Linux gbefb.c: 32 bpp framebuffer tiles";
+        blending: bool = false, "bool", "every drawn fragment blends: its colour is read (a read-modify-write) before it is written",
+            I [false, true] "traces carry no blend state; opaque drawing is the common case, transparency blends";
+        clear_writes_memory: bool = true, "bool", "a clear writes every depth and colour word of the viewport through the port (false: a free fast clear)",
+            I [false, true] "no fast-clear tag memory is documented for the O2's rendering engine; unified memory is cleared by writing it";
+        display_width_pixels: u32 = 1280, [0, 1 << 14], "pixels", "scanned-out display width; the display engine reads the framebuffer continuously (0: no refresh traffic)",
+            V2 "O2 displays at 1280x1024";
+        display_height_pixels: u32 = 1024, [0, 1 << 14], "pixels", "scanned-out display height",
+            V2 "O2 displays at 1280x1024";
+        display_bits_per_pixel: u32 = 32, [0, 256], "bits", "bits the display engine reads per displayed pixel",
+            V2 "32 bpp true colour";
+        display_refresh_hz: f64 = 75.0, [0.0, 1000.0], "Hz", "display refresh rate: the whole display is read this many times a second",
+            V2 "O2 monitors at 72-76 Hz";
+        host_memory_share: f64 = 0.05, [0.0, 0.9], "share", "fraction of the port's cycles the host CPU's own memory traffic takes (cache misses, I/O DMA)",
+            I [0.0, 0.15] "not published; a CPU moving 100-300 MB/s of the 2.13 GB/s is 5-14 %";
         host_clock_mhz: f64 = 180.0, [0.001, 100_000.0], "MHz", "host CPU clock: the O2's R5000",
             V2 "O2 configurations: R5000 at 180-350 MHz, R10000 at 150-400 MHz";
         host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited",
@@ -813,6 +831,21 @@ impl O2Arch {
                 "memory_port_bits_per_cycle ({port}) must be a multiple of the {OCCU_WORD_BITS}-bit OccU word"
             )));
         }
+        let reserved = self.reserved_port_share();
+        if reserved > 0.9 {
+            return Err(ArchError::Impossible(format!(
+                "the display refresh ({:.1} % of the memory port) and host_memory_share ({:.1} %) leave the pixel pipeline {:.1} %; at most 90 % may be reserved (a display_refresh_hz of 0 turns the refresh off)",
+                100.0 * self.refresh_share(),
+                100.0 * self.host_memory_share,
+                100.0 * (1.0 - reserved)
+            )));
+        }
+        if self.depth_bits_per_pixel + self.colour_bits_per_pixel > port {
+            return Err(ArchError::Impossible(format!(
+                "depth_bits_per_pixel + colour_bits_per_pixel ({}) must fit the memory port ({port} bits)",
+                self.depth_bits_per_pixel + self.colour_bits_per_pixel
+            )));
+        }
         if !self
             .framebuffer_tile_width_pixels
             .is_multiple_of(self.pixels_per_word())
@@ -824,6 +857,22 @@ impl O2Arch {
             )));
         }
         Ok(())
+    }
+
+    /// The share of port cycles the display refresh takes: the bits it reads a second over
+    /// the bits the port moves a second.
+    pub fn refresh_share(&self) -> f64 {
+        let bits_per_second = self.display_width_pixels as f64
+            * self.display_height_pixels as f64
+            * self.display_bits_per_pixel as f64
+            * self.display_refresh_hz;
+        bits_per_second / (self.memory_port_bits_per_cycle as f64 * self.clock_mhz * 1e6)
+    }
+
+    /// The share of port cycles taken before the pixel pipeline's requests: the display
+    /// refresh's and the host's ([`crate::blocks::memory_port`]).
+    pub fn reserved_port_share(&self) -> f64 {
+        self.refresh_share() + self.host_memory_share
     }
 
     /// Depth pixels in one memory word.
