@@ -338,6 +338,9 @@ fn analytic_ir_sees_the_busiest_image_engine() {
     // no global hop for one board, and the DMA of 8 words at 16 bits a cycle, 16: 434.
     let mut arch = Arch::builtin("ir1").unwrap();
     arch.set("image_engines_per_board=2").unwrap();
+    // An unpipelined 45-cycle depth stage: interval = latency = 45.
+    arch.set("image_engine_cycles_per_fragment=45").unwrap();
+    arch.set("image_engine_latency_cycles=45").unwrap();
     let spec = QuerySpec {
         id: 1,
         mode: QueryMode::Samples,

@@ -1,12 +1,15 @@
 //! The InfiniteReality-like machine's timing, worked by hand on tiny streams, the latency
 //! split, and the rejection of bad parameters.
 
+mod support;
+
 use occsim_sim::arch::{Arch, ArchError, IR_PARAMS};
 use occsim_sim::{IrMachine, Report};
 use occsim_traces::{Event, Fragment, QueryMode, QuerySpec, Rect};
 
 /// One board of two Image Engines, columns interleave, one fragment per cycle, setup 2,
-/// 3 cycles per fragment, one-entry FIFOs, one engine; merge links and the report's DMA
+/// an unpipelined 3-cycle depth stage (interval = latency = 3), one-entry FIFOs, one
+/// engine; merge links and the report's DMA
 /// unlimited and host reads of report words free (what the words cost is worked out in
 /// `merge_latency_grows_with_the_words_moved`).
 fn tiny(sets: &[&str]) -> Arch {
@@ -16,6 +19,7 @@ fn tiny(sets: &[&str]) -> Arch {
         "fragment_generator_fragments_per_cycle=1",
         "fragment_generator_setup_cycles=2",
         "image_engine_cycles_per_fragment=3",
+        "image_engine_latency_cycles=3",
         "image_engine_fifo_entries=1",
         "engines=1",
         "local_merge_hop_latency_cycles=5",
@@ -188,6 +192,34 @@ fn merge_latency_grows_with_the_words_moved() {
 }
 
 #[test]
+fn a_pipelined_depth_stage_starts_a_fragment_every_interval() {
+    // Interval 2, latency 6: 3 fragments in flight. All four to IE0 (even x). f0 emitted 2,
+    // starts 3, result 9, accepted 9. f1 emitted 3 (f0 left the one-entry FIFO in 3),
+    // starts max(4, 3 + 2) = 5, accepted 11. f2 emitted 5, starts 7, accepted 13. f3
+    // emitted 7, starts max(8, 9, o_0 = 9) = 9, accepted 15. t_end = 8; the end passes the
+    // depth stage in max(9, 11, 15) = 15, the OccU in 16, the report is ready in 17: drain 9.
+    let pipelined = tiny(&[
+        "image_engine_cycles_per_fragment=2",
+        "image_engine_latency_cycles=6",
+        "local_merge_hop_latency_cycles=0",
+    ]);
+    let report = run(&pipelined, &query(&[0, 2, 0, 2]));
+    let q = &report.queries[0];
+    assert_eq!((q.end_cycle, q.drain_cycles), (8, 9));
+    assert_eq!(report.stages[1].busy_cycles, 4 * 2);
+    // Unpipelined at 6 (interval = latency): f0 starts 3, accepted 9; f1 emitted 3, starts
+    // 9, accepted 15; f2 emitted 9, starts 15, accepted 21; f3 emitted 15, starts 21,
+    // accepted 27. t_end = 16; depth 27, OccU 28, ready 29: drain 13.
+    let unpipelined = tiny(&[
+        "image_engine_cycles_per_fragment=6",
+        "image_engine_latency_cycles=6",
+        "local_merge_hop_latency_cycles=0",
+    ]);
+    let q = &run(&unpipelined, &query(&[0, 2, 0, 2])).queries[0];
+    assert_eq!((q.end_cycle, q.drain_cycles), (16, 13));
+}
+
+#[test]
 fn the_fragment_generator_blocks_on_a_full_image_engine_fifo() {
     // All to IE0: f0 emitted 2, tested 3..5, OccU 6. f1 emitted 3 (f0 left the FIFO in 3),
     // tested 6, OccU 9. f2 waits for f1 to leave the FIFO: emitted 6 (earliest 4: 2 cycles
@@ -308,4 +340,41 @@ fn bad_set_keys_and_values_are_rejected_clearly() {
     );
     let err = Arch::from_toml("machine = \"ir\"\n[ir]\nboards = 8\n").unwrap_err();
     assert!(err.to_string().contains("line 3"), "{err}");
+}
+
+#[test]
+fn an_unpipelined_45_cycle_stage_is_the_image_engine_before_calibration() {
+    // The built-in hardcases scene on ir4 with interval = latency = 45: the one-stage Image
+    // Engine of commit 19fdaf8 (`occsim replay hc.occt --arch ir4`: 78215 cycles, query
+    // latency p50 509, max 830); the calibrated defaults (interval 11, latency 16) halve
+    // the run, the depth stage no longer the bottleneck.
+    let (width, height, events) = support::scene_events(occsim_traces::builtin::HARDCASES);
+    let replay = |sets: &[&str]| {
+        let mut arch = Arch::builtin("ir4").unwrap();
+        for set in sets {
+            arch.set(set).unwrap();
+        }
+        let mut machine = occsim_sim::MachineBuilder::new(&arch)
+            .build(width, height)
+            .unwrap();
+        for event in &events {
+            machine.event(event).unwrap();
+        }
+        machine.finish().unwrap()
+    };
+    let before = replay(&[
+        "image_engine_cycles_per_fragment=45",
+        "image_engine_latency_cycles=45",
+    ]);
+    let s = &before.summary;
+    assert_eq!(
+        (s.cycles, s.latency_p50_cycles, s.latency_max_cycles),
+        (78215, 509, 830)
+    );
+    let calibrated = replay(&[]);
+    assert!(
+        calibrated.summary.cycles < 78215 / 2 + 1000,
+        "{}",
+        calibrated.summary.cycles
+    );
 }

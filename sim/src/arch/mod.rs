@@ -348,8 +348,10 @@ parameters! {
             I [1, 4] "710 Mpixel/s over 4 boards at 100 MHz is 1.8 a board a cycle (V: Montrym 1997)";
         fragment_generator_setup_cycles: u64 = 4, [0, 1 << 20], "cycles", "cycles every Fragment Generator spends setting up each primitive",
             I [2, 16] "not published; edge and parameter slopes of one triangle";
-        image_engine_cycles_per_fragment: u64 = 45, [1, 1 << 16], "cycles", "cycles one Image Engine spends on a fragment's depth test",
-            I [30, 60] "~2.2 Mpixel/s an Image Engine at 100 MHz: 710 Mpixel/s textured and antialiased over 320 Image Engines (V: Montrym 1997)";
+        image_engine_cycles_per_fragment: u64 = 11, [1, 1 << 16], "cycles", "initiation interval of an Image Engine's pipelined depth stage: cycles between two fragments entering it",
+            I [6, 23] "710 Mpixel/s textured and multisample-antialiased with 4 boards (V: Montrym 1997) is 177.5 Mpixel/s a board (1 board 177.5, 2 boards 355: the boards split the screen), 2.22 Mpixel/s an Image Engine, 45 cycles a pixel at 100 MHz; texturing is done before the Image Engines, and a depth test is one a sample, so at 4 samples a pixel a single-sample depth-only fragment takes 45 / 4 = 11; 8 to 2 samples give 6..23";
+        image_engine_latency_cycles: u64 = 16, [1, 1 << 16], "cycles", "latency of an Image Engine's depth stage: from a fragment entering it to its result at the Occlusion Unit (fragments in flight: ceil(latency / interval))",
+            I [11, 45] "a read, compare and write of the Image Engine's own SDRAM: at least one interval, at most the 45 cycles of a whole antialiased pixel";
         image_engine_fifo_entries: usize = 8, [1, 1 << 16], "fragments", "FIFO in front of each Image Engine; the Fragment Generator blocks while it is full",
             I [2, 32] "not published; a short on-chip FIFO";
     }
@@ -963,6 +965,14 @@ impl IrArch {
             )));
         }
         Ok(())
+    }
+
+    /// Fragments in flight in an Image Engine's depth stage: `ceil(latency / interval)`, at
+    /// least one (a latency below the interval is one unpipelined fragment at a time).
+    pub fn image_engine_in_flight(&self) -> usize {
+        self.image_engine_latency_cycles
+            .div_ceil(self.image_engine_cycles_per_fragment)
+            .max(1) as usize
     }
 
     /// Image Engines on all boards.

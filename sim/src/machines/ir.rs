@@ -19,8 +19,9 @@
 //!    primitive (`fragment_generator_setup_cycles`) and emits only its own pixels'
 //!    fragments, at most `fragment_generator_fragments_per_cycle` a cycle, in order, blocking
 //!    while the target Image Engine's FIFO is full.
-//! 3. Image Engines ([`crate::blocks::image_engine`]): each tests one fragment every
-//!    `image_engine_cycles_per_fragment` cycles, then its own Occlusion Unit (`engines`
+//! 3. Image Engines ([`crate::blocks::image_engine`]): each starts a fragment's depth test
+//!    every `image_engine_cycles_per_fragment` cycles in a pipelined stage of
+//!    `image_engine_latency_cycles`, then its own Occlusion Unit (`engines`
 //!    engines, the query's tiles dealt round-robin, one tile per engine per cycle) counts it;
 //!    hit words drain through a per-engine write buffer, one word per cycle.
 //! 4. Query end: the end token enters every board in `t_end`, the first cycle after every
