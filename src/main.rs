@@ -53,6 +53,9 @@ enum Command {
     Culling(CullingCommand),
     /// Replay a trace over the cartesian product of parameter values (`--set k=v1,v2`).
     Sweep(Box<commands::sweep::SweepArgs>),
+    /// Vary every inferred (I) parameter over its plausible range and report each headline
+    /// result as a band, with the parameters that move it most first.
+    Sensitivity(commands::sensitivity::SensitivityArgs),
 }
 
 #[derive(Subcommand)]
@@ -73,6 +76,7 @@ fn main() -> std::process::ExitCode {
         Command::Latency(args) => commands::latency::run(args),
         Command::Arch(args) => commands::arch::run(args),
         Command::Sweep(args) => commands::sweep::run(*args),
+        Command::Sensitivity(args) => commands::sensitivity::run(args),
         Command::Culling(CullingCommand::Compare(args)) => commands::culling::run(*args),
         Command::Fidelity(args) => commands::fidelity::run(args),
     };

@@ -20,6 +20,8 @@
 //!   in the common [`LevelResult`]; [`LevelModel`] is the entry point at any level.
 //! - [`replay`]: a trace and options in (level, effects choice, retiling, waveform), a
 //!   level's result out: replaying from Rust without the command line.
+//! - [`sensitivity`]: the bands of the headline results over the plausible ranges of the
+//!   parameters we inferred (which architectures to replay, and the bands their results give).
 //!
 //! The model is an exact event-timestamp formulation of an in-order pipeline: each block
 //! computes the cycle a fragment leaves from the cycle it arrives and the cycle the block is
@@ -43,6 +45,7 @@ pub mod levels;
 pub mod machines;
 pub mod replay;
 pub mod report;
+pub mod sensitivity;
 pub mod timeline;
 
 pub use arch::{Arch, ArchError, IrArch, O2Arch};

@@ -178,6 +178,13 @@ pub struct PortReport {
     pub depth_read_page_hits: u64,
     pub depth_read_page_misses: u64,
     pub depth_writes: u64,
+    /// Drawn fragments' colour writes, and the colour reads of those that blend.
+    pub colour_writes: u64,
+    pub colour_reads: u64,
+    /// Port words the clears wrote.
+    pub clear_words: u64,
+    /// Port cycles taken by the display refresh and the host.
+    pub reserved_cycles: u64,
     pub occu_words: u64,
 }
 
@@ -389,5 +396,12 @@ impl Report {
             "  depth reads {} words ({} word hits, {} page hits, {} page misses), depth writes {}, OccU words {}",
             p.depth_read_words, p.depth_read_word_hits, p.depth_read_page_hits, p.depth_read_page_misses, p.depth_writes, p.occu_words
         );
+        if p.colour_writes + p.clear_words + p.reserved_cycles > 0 {
+            let _ = writeln!(
+                out,
+                "  colour writes {} (blend reads {}), clear words {}, cycles reserved for the display refresh and the host {}",
+                p.colour_writes, p.colour_reads, p.clear_words, p.reserved_cycles
+            );
+        }
     }
 }

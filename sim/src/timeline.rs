@@ -59,8 +59,11 @@ pub enum Track {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum PortLane {
     DepthReads,
+    /// Drawn fragments' depth and colour writes (and blends' colour reads).
     DepthWrites,
     OccuControl,
+    /// Clears' depth and colour words.
+    Clears,
 }
 
 /// A query's life on the machine: begun, ended and answered (cycles).

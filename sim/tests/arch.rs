@@ -1,6 +1,6 @@
 //! Architecture files: defaults, overrides, documented output, and clear rejections.
 
-use occsim_sim::arch::{Arch, ArchError, Value, O2_PARAMS};
+use occsim_sim::arch::{Arch, ArchError, Mark, Value, IR_PARAMS, O2_PARAMS};
 
 #[test]
 fn the_builtin_o2_has_the_documented_defaults() {
@@ -34,6 +34,46 @@ fn every_parameter_has_a_unit_and_a_meaning() {
 }
 
 #[test]
+fn every_parameter_of_both_machines_has_a_mark_and_every_inference_a_range() {
+    for p in O2_PARAMS.iter().chain(IR_PARAMS.iter()) {
+        assert_eq!(p.check_provenance(), Ok(()), "{}", p.key);
+        assert_eq!(
+            p.plausible().is_some(),
+            p.provenance.mark == Mark::I,
+            "{}",
+            p.key
+        );
+        assert!(p.is_plausible(p.default), "{}", p.key);
+    }
+}
+
+#[test]
+fn the_marks_the_issue_named_are_fixed() {
+    let mark = |key: &str| {
+        O2_PARAMS
+            .iter()
+            .find(|p| p.key == key)
+            .unwrap()
+            .provenance
+            .mark
+    };
+    // A DRAM CAS figure is not the end-to-end latency it stood for.
+    assert_eq!(mark("page_hit_latency_cycles"), Mark::I);
+    for buffer in [
+        "fifo_raster_to_depth_entries",
+        "prefetch_depth_fragments",
+        "depth_write_buffer_entries",
+        "fifo_depth_to_occu_entries",
+        "occu_write_buffer_words",
+        "engines",
+    ] {
+        assert_eq!(mark(buffer), Mark::I, "{buffer}");
+    }
+    assert_eq!(mark("clock_mhz"), Mark::V);
+    assert_eq!(mark("depth_bits_per_pixel"), Mark::V2);
+}
+
+#[test]
 fn arch_show_prints_every_key_with_its_meaning_and_reads_back() {
     let mut arch = Arch::builtin("o2").unwrap();
     arch.set("engines=9").unwrap();
@@ -45,8 +85,13 @@ fn arch_show_prints_every_key_with_its_meaning_and_reads_back() {
             .find(|l| l.starts_with(p.key))
             .unwrap_or_else(|| panic!("{} missing", p.key));
         assert!(line.contains(p.meaning), "{line}");
+        assert!(line.contains(&p.provenance.to_string()), "{line}");
     }
     assert!(text.contains("clock_mhz = 66.67 "));
+    assert!(
+        text.contains("(I 2..6: CAS 2 (V, SGI O2 documents) is the DRAM's column access alone"),
+        "an inference shows its range and reason:\n{text}"
+    );
     assert_eq!(Arch::from_toml(&text).unwrap(), arch);
 }
 

@@ -283,7 +283,11 @@ fn one_empty_query() -> [Event; 2] {
 
 #[test]
 fn analytic_reaches_the_minimum_latency_on_an_idle_pipe() {
-    // One samples query over no fragments: the records (8 words) fit one port cycle.
+    // One samples query over no fragments: the records (8 words) fit one port cycle. The
+    // display refresh and the host reserve f = 1280 * 1024 * 32 * 75 / (256 * 66.67e6) + 0.05
+    // = 0.2343 of the port's cycles; cycle 4, the records' first chance (end 0, depth 1,
+    // OccU 2, ready 3, asking from 4), is reserved (floor(5 f) = 1 > floor(4 f) = 0): they
+    // go in 5, available 6; the formulas' ceil(1 / (1 - f)) = 2 port cycles give 6 too.
     let arch = Arch::builtin("o2").unwrap();
     let events = one_empty_query();
     let analytic = run_level(
@@ -296,20 +300,30 @@ fn analytic_reaches_the_minimum_latency_on_an_idle_pipe() {
     )
     .unwrap();
     let cycle = run_level(Fidelity::Cycle, &arch, 16, 16, EffectsChoice::Auto, &events).unwrap();
-    assert_eq!(analytic.queries[0].latency_cycles, Some(5));
-    assert_eq!(cycle.queries[0].latency_cycles, Some(5));
+    assert_eq!(analytic.queries[0].latency_cycles, Some(6));
+    assert_eq!(cycle.queries[0].latency_cycles, Some(6));
+    // Without the reserved share, the machine's minimum.
+    let mut free = arch.clone();
+    free.set("display_refresh_hz=0").unwrap();
+    free.set("host_memory_share=0").unwrap();
+    for level in [Fidelity::Analytic, Fidelity::Cycle] {
+        let result = run_level(level, &free, 16, 16, EffectsChoice::Auto, &events).unwrap();
+        assert_eq!(result.queries[0].latency_cycles, Some(5), "{level}");
+    }
 }
 
 #[test]
 fn analytic_reaches_the_minimum_latency_on_an_idle_ir() {
-    // ir4: a query over no fragments. Every Image Engine's report is ready 3 cycles after
-    // the end token; the local tree over 80 Image Engines is ceil(log2 80) = 7 hops of 2
-    // cycles, the global tree over 4 boards 2 hops of 8: 3 + 14 + 16 = 33.
+    // ir4: a one-tile query over no fragments. Every Image Engine's report (8 words) is
+    // ready 3 cycles after the end token; the local tree over 80 Image Engines is
+    // ceil(log2 80) = 7 hops, each 8 words over a 32-bit link (8 cycles) and 2 of latency;
+    // the global tree over 4 boards 2 hops of 8 words over 64 bits (4) and 8 of latency; the
+    // DMA of the final 8 words at 16 bits a cycle 16: 3 + 7 * 10 + 2 * 12 + 16 = 113.
     let arch = Arch::builtin("ir4").unwrap();
     let events = one_empty_query();
     for level in [Fidelity::Analytic, Fidelity::Cycle] {
         let result = run_level(level, &arch, 16, 16, EffectsChoice::Auto, &events).unwrap();
-        assert_eq!(result.queries[0].latency_cycles, Some(33), "{level}");
+        assert_eq!(result.queries[0].latency_cycles, Some(113), "{level}");
     }
 }
 
@@ -320,9 +334,13 @@ fn analytic_ir_sees_the_busiest_image_engine() {
     // 20 · 45 = 900 cycles, 8 · 45 = 360 of them hidden behind its FIFO while the generator
     // goes on: the window costs 900 - 360 = 540 (the generator alone: setup 4 + 10).
     // The query's latency: that engine's FIFO and the fragment in it, 9 · 45 = 405, + 3,
-    // + one hop of 2 in the local tree: 410.
+    // + one hop in the local tree (its 8 words over a 32-bit link, 8, and 2 of latency),
+    // no global hop for one board, and the DMA of 8 words at 16 bits a cycle, 16: 434.
     let mut arch = Arch::builtin("ir1").unwrap();
     arch.set("image_engines_per_board=2").unwrap();
+    // An unpipelined 45-cycle depth stage: interval = latency = 45.
+    arch.set("image_engine_cycles_per_fragment=45").unwrap();
+    arch.set("image_engine_latency_cycles=45").unwrap();
     let spec = QuerySpec {
         id: 1,
         mode: QueryMode::Samples,
@@ -341,8 +359,8 @@ fn analytic_ir_sees_the_busiest_image_engine() {
         &events,
     )
     .unwrap();
-    assert_eq!(analytic.queries[0].latency_cycles, Some(410));
-    assert_eq!(analytic.total_cycles, Some(540 + 410));
+    assert_eq!(analytic.queries[0].latency_cycles, Some(434));
+    assert_eq!(analytic.total_cycles, Some(540 + 434));
 }
 
 #[test]

@@ -1,6 +1,8 @@
 //! Hand-worked timings of tiny traces on the O2-like machine. Every expected cycle count is
 //! derived in the comments from the rules in `sim/src/machines/o2.rs`, not computed by the model.
 
+mod support;
+
 use occsim_sim::machines::o2::MIN_QUERY_LATENCY_CYCLES;
 use occsim_sim::{Arch, O2Machine, Report};
 use occsim_traces::{Event, Fragment, QueryMode, QuerySpec, Rect};
@@ -26,12 +28,138 @@ fn run(arch: &Arch, events: &[Event]) -> Report {
     machine.finish().unwrap()
 }
 
+/// The memory's clients outside rules 1-8 of `machines/o2.rs`, all off: no colour, no
+/// clear writes, no display refresh, no host share, one bank.
+const CLIENTS_OFF: [&str; 5] = [
+    "colour_bits_per_pixel=0",
+    "clear_writes_memory=false",
+    "display_refresh_hz=0",
+    "host_memory_share=0",
+    "memory_banks=1",
+];
+
+/// The O2 with its pipeline's defaults and the other memory clients off (the tests of
+/// those clients turn them on), then `sets`.
 fn o2(sets: &[&str]) -> Arch {
     let mut arch = Arch::builtin("o2").unwrap();
-    for set in sets {
+    for set in CLIENTS_OFF.iter().chain(sets) {
         arch.set(set).unwrap();
     }
     arch
+}
+
+/// The stream of `samples_query_of_three_fragments_in_one_word`.
+fn three_fragments() -> Vec<Event> {
+    vec![
+        query(1, QueryMode::Samples, 8, vec![Rect::new(0, 0, 64, 64)]),
+        Event::Primitive,
+        fragment(0, 0, 100),
+        fragment(1, 0, 100),
+        fragment(2, 0, 100),
+        Event::QueryEnd,
+    ]
+}
+
+#[test]
+fn a_host_share_takes_whole_port_cycles() {
+    // A quarter of the port's cycles reserved: c with floor((c+1)/4) > floor(c/4), i.e. 3,
+    // 7, 11, 15, 19, ... As in `samples_query_of_three_fragments_in_one_word`: F0's read
+    // granted 5, data 13, tested 13, its write granted 14; F1 tested 14, its write ready in
+    // 15, reserved: granted 16; F2 tested 15, its write ready 16, packed into 16. End in 7;
+    // through depth 16, OccU 17, records ready 18, asking from 19, reserved: granted 20;
+    // available 21: latency 14 (13 without the share).
+    let report = run(&o2(&["host_memory_share=0.25"]), &three_fragments());
+    let q = &report.queries[0];
+    assert_eq!(
+        (q.end_cycle, q.available_cycle, q.latency_cycles),
+        (7, 21, 14)
+    );
+    // Cycles 0..21 hold floor(21 / 4) = 5 reserved ones; the pipeline's grants: 5, 14, 16, 20.
+    assert_eq!(report.memory_port.reserved_cycles, 5);
+    assert_eq!(report.memory_port.busy_cycles, 4);
+}
+
+#[test]
+fn drawn_fragments_write_colour_and_blending_reads_it_first() {
+    // Colour rides with the depth write: 32 + 32 bits in one entry, the same grants (14, 15,
+    // 16) and latency 13 as without colour.
+    let colour = run(&o2(&["colour_bits_per_pixel=32"]), &three_fragments());
+    assert_eq!(colour.queries[0].latency_cycles, 13);
+    assert_eq!(
+        (
+            colour.memory_port.colour_writes,
+            colour.memory_port.colour_reads
+        ),
+        (3, 0)
+    );
+    assert_eq!(colour.memory_port.bits_transferred, 256 + 3 * 64 + 8 * 32);
+    assert_eq!(colour.memory_port.busy_cycles, 5);
+    // Blending: F0 tested 13, its colour read granted 14, its write from 15; F1 tested 14,
+    // read packed into 15, write 16; F2 tested 15, read 16, write 17; the records still go
+    // in 19: latency 13, one more busy port cycle (5, 14, 15, 16, 17, 19).
+    let blend = run(
+        &o2(&["colour_bits_per_pixel=32", "blending=true"]),
+        &three_fragments(),
+    );
+    assert_eq!(blend.queries[0].latency_cycles, 13);
+    assert_eq!(blend.memory_port.colour_reads, 3);
+    assert_eq!(blend.memory_port.busy_cycles, 6);
+    // A brief query draws nothing: no colour (nor depth) written.
+    let mut brief = three_fragments();
+    brief[0] = query(1, QueryMode::Brief, 8, vec![Rect::new(0, 0, 64, 64)]);
+    let brief = run(&o2(&["colour_bits_per_pixel=32"]), &brief);
+    assert_eq!(
+        (
+            brief.memory_port.colour_writes,
+            brief.memory_port.depth_writes
+        ),
+        (0, 0)
+    );
+}
+
+#[test]
+fn a_clear_writes_the_viewport_and_the_depth_test_waits_for_it() {
+    // 64 x 64 pixels of 32-bit depth and 32-bit colour are 64 * 64 * 64 / 256 = 1024 port
+    // words, granted in 0..=1023 (the depth test is free from 0). An empty query after it:
+    // the end enters in 0, passes the depth pipeline in 1024, the OccU in 1025; its record
+    // is ready in 1026 and granted in 1027: available 1028 (the empty pipe's 5 plus 1023).
+    let events = [
+        Event::Clear,
+        query(1, QueryMode::Samples, 8, vec![Rect::new(0, 0, 64, 64)]),
+        Event::QueryEnd,
+    ];
+    let report = run(
+        &o2(&["clear_writes_memory=true", "colour_bits_per_pixel=32"]),
+        &events,
+    );
+    assert_eq!(report.memory_port.clear_words, 1024);
+    assert_eq!(report.queries[0].latency_cycles, 1028);
+    // A fast clear costs nothing.
+    let fast = run(&o2(&[]), &events);
+    assert_eq!(fast.queries[0].latency_cycles, MIN_QUERY_LATENCY_CYCLES);
+}
+
+#[test]
+fn a_read_hits_the_open_row_of_its_bank() {
+    // 128-pixel tiles: (0,0) and (8,0) lie in tile 0 (different words), (128,0) in tile 1.
+    // One bank: every change of tile is a miss (3 misses). Two banks (tile p in bank p mod
+    // 2): tile 0's row stays open in bank 0 while bank 1 reads tile 1: the third read hits.
+    let events = [
+        Event::Primitive,
+        fragment(0, 0, 100),
+        fragment(128, 0, 100),
+        fragment(8, 0, 100),
+    ];
+    let reads = |banks: &str| {
+        let mut machine = O2Machine::new(&o2(&[banks]), 256, 16).unwrap();
+        for event in &events {
+            machine.event(event).unwrap();
+        }
+        let port = machine.finish().unwrap().memory_port;
+        (port.depth_read_page_hits, port.depth_read_page_misses)
+    };
+    assert_eq!(reads("memory_banks=1"), (0, 3));
+    assert_eq!(reads("memory_banks=2"), (1, 2));
 }
 
 #[test]
@@ -235,4 +363,54 @@ fn full_fifos_hold_back_the_rasterizer_and_the_depth_test() {
     assert_eq!(report.stages[1].stall_cycles, 6, "depth test");
     assert_eq!(report.stages[2].busy_cycles, 15, "OccU");
     assert_eq!(report.engines[0].busy_cycles, 15);
+}
+
+#[test]
+fn with_every_new_memory_client_off_the_cycles_are_the_machine_before_them() {
+    // The built-in hardcases scene (as `occsim trace gen hardcases` makes it), replayed in
+    // the closed loop. Its figures before colour writes, clears, the display refresh, the
+    // host share and banks were modelled (commit 8186b99, `occsim replay hc.occt --arch o2
+    // --json`): 68751 cycles, one frame of 68751, query latencies summing to 605 with the
+    // longest 56, the port busy 16047 cycles.
+    let (width, height, events) = support::scene_events(occsim_traces::builtin::HARDCASES);
+    let replay = |arch: &Arch| {
+        let mut machine = occsim_sim::MachineBuilder::new(arch)
+            .build(width, height)
+            .unwrap();
+        for event in &events {
+            machine.event(event).unwrap();
+        }
+        machine.finish().unwrap()
+    };
+    let off = replay(&o2(&[]));
+    let latencies: Vec<u64> = off.queries.iter().map(|q| q.latency_cycles).collect();
+    assert_eq!(off.summary.cycles, 68751);
+    assert_eq!(
+        off.frames.iter().map(|f| f.cycles).collect::<Vec<_>>(),
+        [68751]
+    );
+    assert_eq!(latencies.iter().sum::<u64>(), 605);
+    assert_eq!(latencies.iter().max(), Some(&56));
+    assert_eq!(off.memory_port.busy_cycles, 16047);
+    // Each client on alone costs time (the defaults have them all on): cycles, or query
+    // latency where the host's work hides the pipeline's (this trace is host-bound); colour
+    // rides in the depth write's port cycle here, adding bits, not cycles.
+    for client in [
+        "clear_writes_memory=true",
+        "display_refresh_hz=75",
+        "host_memory_share=0.05",
+    ] {
+        let on = replay(&o2(&[client]));
+        let latency: u64 = on.queries.iter().map(|q| q.latency_cycles).sum();
+        assert!(
+            on.summary.cycles > 68751 || latency > 605,
+            "{client}: {} cycles, latencies {latency}",
+            on.summary.cycles
+        );
+    }
+    let colour = replay(&o2(&["colour_bits_per_pixel=32"]));
+    assert!(colour.memory_port.colour_writes > 0);
+    assert!(colour.memory_port.bits_transferred > off.memory_port.bits_transferred);
+    let defaults = replay(&Arch::builtin("o2").unwrap());
+    assert!(defaults.summary.cycles > 68751);
 }

@@ -6,9 +6,11 @@
 
 use super::arch::ArchSelection;
 use super::replay::replay_trace;
+use super::sensitivity::{CornerBands, FigureBands, Replayer};
 use anyhow::{bail, Context};
 use occsim_sim::levels::LevelResult;
 use occsim_sim::report::nearest_rank;
+use occsim_sim::sensitivity::Headlines;
 use occsim_sim::Fidelity;
 use occsim_sim::Report;
 use occsim_sweep::plot::{LineChart, Scale, Series};
@@ -46,6 +48,14 @@ pub struct LatencyArgs {
     /// Also draw the table as an SVG line chart.
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
+    /// Print a sensitivity band beside each row's figures: the row replayed at the corners
+    /// a sensitivity study around the base architecture finds (engines left as the row has
+    /// them; see `occsim sensitivity`).
+    #[arg(long)]
+    pub bands: bool,
+    /// Replays run at once.
+    #[arg(long, default_value_t = super::sensitivity::default_jobs())]
+    pub jobs: usize,
 }
 
 /// One engine count's figures.
@@ -71,6 +81,9 @@ pub struct LatencyRow {
     pub frames: u64,
     pub frame_mean_cycles: Option<f64>,
     pub frames_per_second: Option<f64>,
+    /// With `--bands`: each headline figure's band over the study's corners.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bands: Option<FigureBands>,
 }
 
 impl LatencyRow {
@@ -116,6 +129,7 @@ impl LatencyRow {
             frames: result.frame_cycles.len() as u64,
             frame_mean_cycles: result.frame_mean_cycles(),
             frames_per_second: result.frames_per_second,
+            bands: None,
         }
     }
 }
@@ -146,9 +160,20 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
         key: "engines".into(),
         values: args.engines.iter().map(u64::to_string).collect(),
     }])?;
+    anyhow::ensure!(args.jobs >= 1, "--jobs: give at least 1");
+    let replayer = Replayer {
+        trace: &args.trace,
+        retile: args.retile,
+        fidelity: args.fidelity,
+        jobs: args.jobs,
+    };
+    let corners = match args.bands {
+        true => Some(CornerBands::find(&replayer, &base, &["engines"])?),
+        false => None,
+    };
     let pool = Pool {
         grid: &grid,
-        jobs: std::thread::available_parallelism().map_or(1, usize::from),
+        jobs: args.jobs,
         show_progress: true,
         failure: &|point: &Point| format!("--engines {}", point.values[0].1),
     };
@@ -157,7 +182,12 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
         let mut arch = base.clone();
         arch.set_value("engines", engines)?;
         let result = replay_trace(&args.trace, &arch, args.retile, args.fidelity)?;
-        Ok(LatencyRow::of(engines.parse()?, &result, clock_mhz))
+        let mut row = LatencyRow::of(engines.parse()?, &result, clock_mhz);
+        if let Some(corners) = &corners {
+            let default = Headlines::of(&result, clock_mhz);
+            row.bands = Some(corners.at(&replayer, &arch, &default)?);
+        }
+        Ok(row)
     })?;
     if args.json {
         outln!("{}", serde_json::to_string_pretty(&rows)?);
@@ -216,11 +246,20 @@ fn table(rows: &[LatencyRow]) -> String {
             r.frames_per_second
                 .map_or("-".to_string(), |f| format!("{f:.2}"))
         );
+        if let Some(bands) = &r.bands {
+            let _ = writeln!(out, "{:>7} band: {}", "", bands.text());
+        }
     }
     let _ = writeln!(
         out,
         "latency in cycles; drain, local and global are mean cycles per query (they add up to the mean latency; - where the level predicts latency whole); frame cyc is the mean frame time of a closed-loop trace (- for an open loop or a level that does not time frames)"
     );
+    if rows.iter().any(|r| r.bands.is_some()) {
+        let _ = writeln!(
+            out,
+            "band: low..high of each figure over the parameters marked I at the corners of their plausible ranges (occsim sensitivity)"
+        );
+    }
     out
 }
 

@@ -8,6 +8,7 @@ pub mod fidelity;
 pub mod latency;
 pub mod raster_args;
 pub mod replay;
+pub mod sensitivity;
 pub mod sweep;
 pub mod timeline;
 pub mod trace;

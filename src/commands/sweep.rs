@@ -88,6 +88,11 @@ pub struct SweepRunArgs {
     /// Level of detail of every point: functional, analytic, sampled:K, cycle or rtl.
     #[arg(long, value_name = "LEVEL", default_value = "cycle")]
     pub fidelity: occsim_sim::Fidelity,
+    /// Record a sensitivity band beside each point's headline metrics (`*_band_low`,
+    /// `*_band_high`): the point replayed at the corners a sensitivity study around the base
+    /// architecture finds, the swept parameters left as the point has them.
+    #[arg(long)]
+    pub bands: bool,
     /// Results file (one JSON line per point); the CSV view is written beside it.
     #[arg(long, value_name = "FILE.jsonl", required = true)]
     pub out: Option<PathBuf>,
@@ -359,10 +364,39 @@ pub fn run(args: SweepArgs) -> Result<()> {
     if level != occsim_sim::Fidelity::Cycle {
         digest += &format!(":fidelity={level}");
     }
+    if args.run.bands {
+        digest += ":bands";
+    }
     let validate = |key: &str, value: &str| {
         base.clone()
             .set_value(key, value)
             .map_err(|e| e.to_string())
+    };
+    let replayer = super::sensitivity::Replayer {
+        trace: &trace,
+        retile: args.run.retile,
+        fidelity: level,
+        jobs: args
+            .run
+            .jobs
+            .map_or_else(super::sensitivity::default_jobs, NonZeroUsize::get),
+    };
+    let corners = match args.run.bands {
+        true => {
+            let axes: Vec<&str> = args
+                .run
+                .set
+                .iter()
+                .map(|spec| {
+                    spec.split_once('=')
+                        .map_or(spec.as_str(), |(k, _)| k.trim())
+                })
+                .collect();
+            Some(super::sensitivity::CornerBands::find(
+                &replayer, &base, &axes,
+            )?)
+        }
+        false => None,
     };
     let evaluate = |point: &Point| -> Result<PointRecord> {
         let mut arch = base.clone();
@@ -371,9 +405,25 @@ pub fn run(args: SweepArgs) -> Result<()> {
                 .with_context(|| format!("{key}={value}"))?;
         }
         let result = super::replay::replay_trace(&trace, &arch, args.run.retile, level)?;
+        let mut metrics = point_metrics(&result);
+        if let Some(corners) = &corners {
+            let default = occsim_sim::sensitivity::Headlines::of(&result, arch.clock_mhz()?);
+            let bands = corners.at(&replayer, &arch, &default)?;
+            for (name, band) in [
+                ("total_cycles", Some(bands.cycles)),
+                ("frame_ms", bands.frame_ms),
+                ("latency_p50_cycles", Some(bands.latency_p50_cycles)),
+                ("latency_p95_cycles", Some(bands.latency_p95_cycles)),
+            ] {
+                if let Some((low, high)) = band {
+                    metrics.insert(format!("{name}_band_low"), serde_json::json!(low));
+                    metrics.insert(format!("{name}_band_high"), serde_json::json!(high));
+                }
+            }
+        }
         Ok(PointRecord {
             resolved_arch: serde_json::to_value(arch.report_entries())?,
-            metrics: point_metrics(&result),
+            metrics,
         })
     };
     run_with(&args, &evaluate, &digest, &validate)

@@ -32,6 +32,7 @@ fn track_id(track: Track) -> (u32, String) {
                 PortLane::DepthReads => (1, "depth reads"),
                 PortLane::DepthWrites => (2, "depth writes"),
                 PortLane::OccuControl => (3, "OccU Control writes"),
+                PortLane::Clears => (4, "clears"),
             };
             (400 + offset, format!("memory port: {client}"))
         }

@@ -10,7 +10,7 @@
 //!
 //! Code map: `grid` (axes, points, shards), `record` (JSONL line schema, CSV view), `runner`
 //! (parallel evaluation, append, resume), `merge` (joining shard outputs), `chart` (metric vs
-//! parameter chart), `plot` (SVG line charts through plotters), `output` (atomic file
+//! parameter chart), `plot` (SVG line charts and tornado charts through plotters), `output` (atomic file
 //! writes), `error` (what can go wrong).
 
 mod chart;

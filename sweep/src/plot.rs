@@ -280,6 +280,205 @@ impl LineChart {
     }
 }
 
+/// One bar of a tornado chart: a parameter and the result at each end of its range.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TornadoBar {
+    pub label: String,
+    pub at_low: f64,
+    pub at_high: f64,
+}
+
+/// One panel of a tornado chart: a result, its default, and its bars, the widest first.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TornadoPanel {
+    pub title: String,
+    pub default: f64,
+    /// The band over everything tried (corners included), drawn as a grey strip.
+    pub band: (f64, f64),
+    pub bars: Vec<TornadoBar>,
+}
+
+/// A tornado chart: panels stacked top to bottom, each bar running from the default to the
+/// result at the parameter's low end (one colour) and at its high end (another).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TornadoChart {
+    pub title: String,
+    pub panels: Vec<TornadoPanel>,
+}
+
+/// Room for the parameter names left of a tornado panel.
+const TORNADO_LABELS: u32 = 300;
+const TORNADO_ROW: u32 = 22;
+
+impl TornadoChart {
+    /// Renders the chart as an SVG document; errors on no panels or a non-finite value.
+    pub fn to_svg(&self) -> Result<String, PlotError> {
+        if self.panels.is_empty() {
+            return Err(PlotError::NoPoints {
+                title: self.title.clone(),
+            });
+        }
+        for panel in &self.panels {
+            let values = panel
+                .bars
+                .iter()
+                .flat_map(|b| [b.at_low, b.at_high])
+                .chain([panel.default, panel.band.0, panel.band.1]);
+            for value in values {
+                if !value.is_finite() {
+                    return Err(PlotError::NotFinite {
+                        series: panel.title.clone(),
+                        axis: "x",
+                        value,
+                    });
+                }
+            }
+        }
+        let heights: Vec<u32> = self
+            .panels
+            .iter()
+            .map(|p| TOP + BOTTOM + TORNADO_ROW * p.bars.len().max(1) as u32)
+            .collect();
+        let width = TORNADO_LABELS + PLOT_WIDTH + RIGHT_MARGIN + 20;
+        let size = (width, TOP + heights.iter().sum::<u32>());
+        let mut svg = String::new();
+        {
+            let root = SVGBackend::with_string(&mut svg, size).into_drawing_area();
+            root.fill(&WHITE).map_err(draw_error)?;
+            let (title, mut rest) = root.split_vertically(TOP);
+            title
+                .draw(&Text::new(
+                    plain(&self.title),
+                    (10, TOP as i32 / 2),
+                    TextStyle::from(("sans-serif", TITLE_FONT).into_font())
+                        .pos(Pos::new(HPos::Left, VPos::Center)),
+                ))
+                .map_err(draw_error)?;
+            let legend = TextStyle::from(("sans-serif", FONT).into_font())
+                .pos(Pos::new(HPos::Left, VPos::Center));
+            let x = width as i32 - 330;
+            for (i, (colour, what)) in [
+                (COLOURS[0], "parameter at the low end"),
+                (COLOURS[1], "parameter at the high end"),
+            ]
+            .into_iter()
+            .enumerate()
+            {
+                let y = 14 + 20 * i as i32;
+                title
+                    .draw(&Rectangle::new(
+                        [(x, y - 6), (x + 24, y + 6)],
+                        colour.filled(),
+                    ))
+                    .map_err(draw_error)?;
+                title
+                    .draw(&Text::new(what, (x + 32, y), legend.clone()))
+                    .map_err(draw_error)?;
+            }
+            for (panel, height) in self.panels.iter().zip(&heights) {
+                let (area, below) = rest.split_vertically(*height);
+                draw_tornado_panel(&area, panel)?;
+                rest = below;
+            }
+            root.present().map_err(draw_error)?;
+        }
+        Ok(svg)
+    }
+
+    /// Renders and writes the chart to `path` atomically.
+    pub fn write_svg(&self, path: &Path) -> Result<(), PlotError> {
+        let svg = self.to_svg()?;
+        Ok(write_atomically(path, svg.as_bytes())?)
+    }
+}
+
+/// One panel: the band strip, a line at the default, a bar per parameter with its name.
+fn draw_tornado_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    panel: &TornadoPanel,
+) -> Result<(), PlotError> {
+    let values = panel
+        .bars
+        .iter()
+        .flat_map(|b| [b.at_low, b.at_high])
+        .chain([panel.default, panel.band.0, panel.band.1]);
+    let x_axis = AxisMap::fit(Scale::Linear, values);
+    let rows = panel.bars.len().max(1) as f64;
+    let y_axis = Ticked {
+        range: (0.0..rows).into(),
+        ticks: Vec::new(),
+    };
+    let mut chart = ChartBuilder::on(area)
+        .caption(plain(&panel.title), ("sans-serif", FONT * 1.2))
+        .margin_right(RIGHT_MARGIN + 20)
+        .x_label_area_size(BOTTOM - 20)
+        .y_label_area_size(TORNADO_LABELS)
+        .build_cartesian_2d(x_axis.coordinates(), y_axis)
+        .map_err(draw_error)?;
+    let x_label = |at: &f64| x_axis.label_at(*at);
+    let names: Vec<String> = panel.bars.iter().map(|b| plain(&b.label)).collect();
+    // Rows top to bottom: bar i is centred at rows - i - 1/2.
+    let centres: Vec<f64> = (0..panel.bars.len())
+        .map(|i| rows - i as f64 - 0.5)
+        .collect();
+    chart
+        .configure_mesh()
+        .bold_line_style(GRID_GREY)
+        .light_line_style(TRANSPARENT)
+        .axis_style(BLACK)
+        .label_style(("sans-serif", FONT))
+        .x_label_formatter(&x_label)
+        .y_labels(0)
+        .disable_y_mesh()
+        .draw()
+        .map_err(draw_error)?;
+    let (x_low, x_high) = (x_axis.low, x_axis.high);
+    let strip = Rectangle::new(
+        [(panel.band.0, 0.0), (panel.band.1, rows)],
+        RGBColor(0xee, 0xee, 0xee).filled(),
+    );
+    chart
+        .draw_series(std::iter::once(strip))
+        .map_err(draw_error)?;
+    let (low_colour, high_colour) = (COLOURS[0], COLOURS[1]);
+    for (bar, centre) in panel.bars.iter().zip(&centres) {
+        for (at, colour) in [(bar.at_low, low_colour), (bar.at_high, high_colour)] {
+            let (from, to) = (panel.default.min(at), panel.default.max(at));
+            let rect = Rectangle::new(
+                [(from, centre - 0.35), (to, centre + 0.35)],
+                colour.mix(0.8).filled(),
+            );
+            chart
+                .draw_series(std::iter::once(rect))
+                .map_err(draw_error)?;
+        }
+    }
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            vec![(panel.default, 0.0), (panel.default, rows)],
+            BLACK.stroke_width(2),
+        )))
+        .map_err(draw_error)?;
+    let frame = [(x_low, 0.0), (x_high, rows)];
+    chart
+        .draw_series(std::iter::once(Rectangle::new(frame, BLACK)))
+        .map_err(draw_error)?;
+    // Parameter names, right-aligned against the plot, one a row.
+    let text =
+        TextStyle::from(("sans-serif", FONT).into_font()).pos(Pos::new(HPos::Right, VPos::Center));
+    for (name, centre) in names.iter().zip(&centres) {
+        let (x, y) = chart.backend_coord(&(x_low, *centre));
+        let (origin_x, origin_y) = area.get_base_pixel();
+        area.draw(&Text::new(
+            name.clone(),
+            (x - origin_x - 6, y - origin_y),
+            text.clone(),
+        ))
+        .map_err(draw_error)?;
+    }
+    Ok(())
+}
+
 /// Draws `marker` centred at `at` (in `area`'s coordinates), filled with `colour`.
 fn draw_marker<DB: DrawingBackend, CT: CoordTranslate>(
     area: &DrawingArea<DB, CT>,

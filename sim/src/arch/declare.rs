@@ -2,15 +2,20 @@
 //! default, range, unit and one-line meaning, into the typed struct the models read, the
 //! documented table (`arch show`, TOML and `--set` validation, reports) and the conversion
 //! from the table's values to the struct. A group of parameters two machines share (the
-//! Occlusion Unit's) is declared once and composed into both.
+//! Occlusion Unit's) is declared once and composed into both. Every parameter carries its
+//! provenance: `V "source"` (read in a primary source), `V2 "source"` (a secondary source) or
+//! `I [low, high] "reason"` (our inference, with the plausible range the sensitivity
+//! analysis varies it over, in the parameter's unit).
 
-use super::{Param, ParamKind, Value};
+use super::{Mark, Param, ParamKind, Provenance, Value};
 
 /// A Rust type a parameter can have: how its default and range become a table entry, and
 /// how a table value becomes the type again.
 pub trait ParamType: Sized + Copy {
     /// The table's value and kind for a default and an optional inclusive range.
     fn declare(default: Self, range: Option<(Self, Self)>) -> (Value, ParamKind);
+    /// The table value of one value of this type.
+    fn to_value(self) -> Value;
     /// The typed value of a table value of the kind [`ParamType::declare`] gave.
     fn from_value(value: Value) -> Self;
 }
@@ -25,6 +30,9 @@ macro_rules! integer_param_type {
             fn declare(default: $t, range: Option<($t, $t)>) -> (Value, ParamKind) {
                 let (min, max) = range.unwrap_or((<$t>::MIN, <$t>::MAX));
                 (Value::Int(default as u64), ParamKind::Int { min: min as u64, max: max as u64 })
+            }
+            fn to_value(self) -> Value {
+                Value::Int(self as u64)
             }
             fn from_value(value: Value) -> $t {
                 match value {
@@ -43,6 +51,9 @@ impl ParamType for f64 {
         let (min, max) = range.unwrap_or((f64::MIN, f64::MAX));
         (Value::Float(default), ParamKind::Float { min, max })
     }
+    fn to_value(self) -> Value {
+        Value::Float(self)
+    }
     fn from_value(value: Value) -> f64 {
         match value {
             Value::Float(v) => v,
@@ -54,6 +65,9 @@ impl ParamType for f64 {
 impl ParamType for bool {
     fn declare(default: bool, _: Option<(bool, bool)>) -> (Value, ParamKind) {
         (Value::Bool(default), ParamKind::Bool)
+    }
+    fn to_value(self) -> Value {
+        Value::Bool(self)
     }
     fn from_value(value: Value) -> bool {
         match value {
@@ -78,6 +92,10 @@ impl<T: Named + PartialEq> ParamType for T {
             ParamKind::Choice { choices: T::NAMES },
         )
     }
+    fn to_value(self) -> Value {
+        let index = T::ALL.iter().position(|v| *v == self).unwrap_or(0);
+        Value::Choice(T::NAMES[index])
+    }
     fn from_value(value: Value) -> T {
         match value {
             Value::Choice(name) => {
@@ -90,21 +108,37 @@ impl<T: Named + PartialEq> ParamType for T {
 }
 
 /// One table entry from a field's declaration.
+///
+/// # Panics
+/// On a declaration that breaks the provenance rules (a programming error, found by every
+/// test that builds a table): an inference without a plausible range, a sourced value with
+/// one, or a plausible range that is reversed, outside the legal range or without the default.
 pub fn param<T: ParamType>(
     key: &'static str,
     unit: &'static str,
     default: T,
     range: Option<(T, T)>,
     meaning: &'static str,
+    (mark, plausible, source): (Mark, Option<(T, T)>, &'static str),
 ) -> Param {
     let (default, kind) = T::declare(default, range);
-    Param {
+    let plausible = plausible.map(|(low, high)| (low.to_value(), high.to_value()));
+    let param = Param {
         key,
         unit,
         default,
         kind,
         meaning,
+        provenance: Provenance {
+            mark,
+            plausible,
+            source,
+        },
+    };
+    if let Err(why) = param.check_provenance() {
+        panic!("parameter {key}: {why}");
     }
+    param
 }
 
 /// Reads a table's values in order into typed fields.
@@ -130,18 +164,22 @@ impl<'v> Cursor<'v> {
     }
 }
 
-/// Declare a struct of parameters: `key: type = default, [min, max], "unit", "meaning";`
-/// (the range only for numbers), optionally followed by `group name: Type;` and more fields.
-/// Generates the struct, `fn table() -> Vec<Param>` in declaration order (a group's entries
-/// where it stands) and `fn from_cursor`.
+/// Declare a struct of parameters:
+/// `key: type = default, [min, max], "unit", "meaning", MARK [low, high] "source";`
+/// (the legal range only for numbers; MARK is `V`, `V2` or `I`, and the plausible range
+/// `[low, high]` is given for `I` alone), optionally followed by `group name: Type;` and more
+/// fields. Generates the struct, `fn table() -> Vec<Param>` in declaration order (a group's
+/// entries where it stands) and `fn from_cursor`.
 macro_rules! parameters {
     (
         $(#[$doc:meta])*
         pub struct $name:ident {
-            $( $field:ident : $ty:ty = $default:expr, $([$min:expr, $max:expr],)? $unit:literal, $meaning:literal; )*
+            $( $field:ident : $ty:ty = $default:expr, $([$min:expr, $max:expr],)? $unit:literal, $meaning:literal,
+               $mark:ident $([$low:expr, $high:expr])? $source:literal; )*
         }
         $( group $group:ident : $group_ty:ty; {
-            $( $after:ident : $after_ty:ty = $after_default:expr, $([$after_min:expr, $after_max:expr],)? $after_unit:literal, $after_meaning:literal; )*
+            $( $after:ident : $after_ty:ty = $after_default:expr, $([$after_min:expr, $after_max:expr],)? $after_unit:literal, $after_meaning:literal,
+               $after_mark:ident $([$after_low:expr, $after_high:expr])? $after_source:literal; )*
         } )?
     ) => {
         $(#[$doc])*
@@ -163,6 +201,7 @@ macro_rules! parameters {
                     $( $crate::arch::declare::param::<$ty>(
                         stringify!($field), $unit, $default,
                         None $(.or(Some(($min, $max))))?, $meaning,
+                        ($crate::arch::Mark::$mark, None $(.or(Some(($low, $high))))?, $source),
                     ), )*
                 ];
                 $(
@@ -170,6 +209,7 @@ macro_rules! parameters {
                     $( table.push($crate::arch::declare::param::<$after_ty>(
                         stringify!($after), $after_unit, $after_default,
                         None $(.or(Some(($after_min, $after_max))))?, $after_meaning,
+                        ($crate::arch::Mark::$after_mark, None $(.or(Some(($after_low, $after_high))))?, $after_source),
                     )); )*
                 )?
                 table
@@ -193,24 +233,24 @@ pub(crate) use parameters;
 
 #[cfg(test)]
 mod tests {
-    use super::super::{ParamKind, Value};
+    use super::super::{Mark, ParamKind, Value};
     use super::*;
 
     parameters! {
         /// A group.
         pub struct Inner {
-            b: bool = true, "bool", "inner flag";
+            b: bool = true, "bool", "inner flag", V "a source";
         }
     }
 
     parameters! {
         /// Fields, a group, more fields.
         pub struct Outer {
-            a: u32 = 7, [1, 9], "things", "first";
-            x: f64 = 0.5, [0.0, 1.0], "share", "second";
+            a: u32 = 7, [1, 9], "things", "first", I [2, 8] "a guess";
+            x: f64 = 0.5, [0.0, 1.0], "share", "second", V2 "a book";
         }
         group inner: Inner; {
-            z: usize = 3, "slots", "last, unbounded";
+            z: usize = 3, "slots", "last, unbounded", I [1, 5] "another guess";
         }
     }
 
@@ -230,6 +270,16 @@ mod tests {
             }
         );
         assert_eq!((table[0].unit, table[0].meaning), ("things", "first"));
+        assert_eq!(table[0].provenance.mark, Mark::I);
+        assert_eq!(
+            table[0].provenance.plausible,
+            Some((Value::Int(2), Value::Int(8)))
+        );
+        assert_eq!(
+            (table[1].provenance.mark, table[1].provenance.source),
+            (Mark::V2, "a book")
+        );
+        assert_eq!(table[2].provenance.plausible, None);
         let values = [
             Value::Int(2),
             Value::Float(0.25),
@@ -245,6 +295,58 @@ mod tests {
                 inner: Inner { b: false },
                 z: 5
             }
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "parameter a: an inference needs a plausible range")]
+    fn an_inference_without_a_range_is_refused() {
+        param::<u32>(
+            "a",
+            "things",
+            7,
+            Some((1, 9)),
+            "first",
+            (Mark::I, None, "a guess"),
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "does not hold the default")]
+    fn a_plausible_range_must_hold_the_default() {
+        param::<u32>(
+            "a",
+            "things",
+            7,
+            Some((1, 9)),
+            "first",
+            (Mark::I, Some((1, 5)), "a guess"),
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "outside the legal range")]
+    fn a_plausible_range_must_be_legal() {
+        param::<u32>(
+            "a",
+            "things",
+            7,
+            Some((1, 9)),
+            "first",
+            (Mark::I, Some((2, 10)), "a guess"),
+        );
+    }
+
+    #[test]
+    #[should_panic(expected = "only an inference has a plausible range")]
+    fn a_sourced_value_has_no_range() {
+        param::<u32>(
+            "a",
+            "things",
+            7,
+            Some((1, 9)),
+            "first",
+            (Mark::V, Some((2, 8)), "a paper"),
         );
     }
 }

@@ -87,7 +87,8 @@ impl std::fmt::Display for Value {
     }
 }
 
-/// A parameter's declaration: name (with unit suffix), unit, default, range and meaning.
+/// A parameter's declaration: name (with unit suffix), unit, default, range, meaning and
+/// provenance.
 #[derive(Clone, Copy, Debug)]
 pub struct Param {
     pub key: &'static str,
@@ -95,6 +96,132 @@ pub struct Param {
     pub default: Value,
     pub kind: ParamKind,
     pub meaning: &'static str,
+    pub provenance: Provenance,
+}
+
+/// Where a parameter's default comes from (see `shared/reference/occlusion-unit.md`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Mark {
+    /// Read in a primary source (a datasheet, the paper, the vendor's documents or code).
+    V,
+    /// Read in a secondary source (a review, a textbook, a summary of the vendor's figures).
+    V2,
+    /// Our inference: a plausible range and the reason come with it.
+    I,
+}
+
+impl Mark {
+    pub fn name(self) -> &'static str {
+        match self {
+            Mark::V => "V",
+            Mark::V2 => "V2",
+            Mark::I => "I",
+        }
+    }
+}
+
+/// A parameter's provenance: its mark, the source (V, V2) or reason (I), and for an inference
+/// the plausible range `low..=high` in the parameter's unit (for a named choice, two
+/// alternatives), which the sensitivity analysis varies it over.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Provenance {
+    pub mark: Mark,
+    pub plausible: Option<(Value, Value)>,
+    pub source: &'static str,
+}
+
+impl std::fmt::Display for Provenance {
+    /// `V: source`, `V2: source` or `I 100..1000: reason`.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.plausible {
+            Some((low, high)) => write!(
+                f,
+                "{} {}..{}: {}",
+                self.mark.name(),
+                plain(low),
+                plain(high),
+                self.source
+            ),
+            None => write!(f, "{}: {}", self.mark.name(), self.source),
+        }
+    }
+}
+
+/// A value as a reader writes it in prose: choices without quotes.
+fn plain(value: Value) -> String {
+    match value {
+        Value::Choice(name) => name.to_string(),
+        other => other.to_string(),
+    }
+}
+
+impl Param {
+    /// The plausible range of an inference (`None` for a sourced value).
+    pub fn plausible(&self) -> Option<(Value, Value)> {
+        self.provenance.plausible
+    }
+
+    /// Whether `value` lies in the plausible range (a sourced value has none: any legal
+    /// value is as good as another).
+    pub fn is_plausible(&self, value: Value) -> bool {
+        match self.provenance.plausible {
+            None => true,
+            Some((low, high)) => within(value, low, high),
+        }
+    }
+
+    /// The rules every declaration keeps: an inference has a plausible range and a sourced
+    /// value none; the range is ordered, legal, and holds the default.
+    pub fn check_provenance(&self) -> Result<(), String> {
+        let p = &self.provenance;
+        if p.source.is_empty() {
+            return Err("no source or reason".to_string());
+        }
+        match (p.mark, p.plausible) {
+            (Mark::I, None) => Err("an inference needs a plausible range".to_string()),
+            (Mark::V | Mark::V2, Some(_)) => {
+                Err("only an inference has a plausible range".to_string())
+            }
+            (_, None) => Ok(()),
+            (Mark::I, Some((low, high))) => {
+                let legal = |v: Value| match self.kind {
+                    ParamKind::Float { min, max } => {
+                        within(v, Value::Float(min), Value::Float(max))
+                    }
+                    ParamKind::Int { min, max } => within(v, Value::Int(min), Value::Int(max)),
+                    ParamKind::Bool => matches!(v, Value::Bool(_)),
+                    ParamKind::Choice { choices } => {
+                        matches!(v, Value::Choice(name) if choices.contains(&name))
+                    }
+                };
+                if !legal(low) || !legal(high) {
+                    return Err(format!(
+                        "plausible range {}..{} outside the legal range",
+                        plain(low),
+                        plain(high)
+                    ));
+                }
+                if !within(self.default, low, high) {
+                    return Err(format!(
+                        "plausible range {}..{} does not hold the default {}",
+                        plain(low),
+                        plain(high),
+                        plain(self.default)
+                    ));
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// `low <= value <= high` for numbers; for a flag or a choice, `value` is one of the two.
+fn within(value: Value, low: Value, high: Value) -> bool {
+    match (value, low, high) {
+        (Value::Int(v), Value::Int(l), Value::Int(h)) => l <= v && v <= h,
+        (Value::Float(v), Value::Float(l), Value::Float(h)) => l <= v && v <= h,
+        _ => value == low || value == high,
+    }
 }
 
 impl ParamKind {
@@ -117,83 +244,166 @@ parameters! {
     /// The Occlusion Unit's parameters: the same on both machines, declared once and
     /// composed into each (the O2's one unit, every InfiniteReality Image Engine's own).
     pub struct OccuArch {
-        engines: usize = 4, [1, 1024], "engines", "occlusion engines in the Occlusion Unit (at the IR, in every Image Engine's); tiles are dealt to them round-robin";
-        counter_bits: u32 = 32, [1, 64], "bits", "width of the NOHC and PHC counters; they saturate at 2^bits - 1 (V: >= 32)";
-        all_tiles_one_cycle: bool = false, "bool", "what-if: an engine tests all its tiles in one cycle instead of one tile per cycle";
-        occu_write_buffer_words: usize = 32, [1, 1 << 20], "words", "OccU Control's write buffer in 32-bit words (O2: records and hits; IR: hit words, drained one a cycle at each Image Engine); full stalls the engines";
+        engines: usize = 4, [1, 1024], "engines", "occlusion engines in the Occlusion Unit (at the IR, in every Image Engine's); tiles are dealt to them round-robin",
+            I [1, 16] "the paper replicates engines inside one unit without giving a count; 1 is the least, 16 tiles a query the most its examples use";
+        counter_bits: u32 = 32, [1, 64], "bits", "width of the NOHC and PHC counters; they saturate at 2^bits - 1",
+            V "OpenGL 4.6: SAMPLES_PASSED counters of at least 32 bits";
+        all_tiles_one_cycle: bool = false, "bool", "what-if: an engine tests all its tiles in one cycle instead of one tile per cycle",
+            V "the paper: an engine that holds k tiles spends k cycles per fragment (false)";
+        occu_write_buffer_words: usize = 32, [1, 1 << 20], "words", "OccU Control's write buffer in 32-bit words (O2: records and hits; IR: hit words, drained one a cycle at each Image Engine); full stalls the engines",
+            I [8, 128] "not published; a few 256-bit memory words (one is 8 record words), the size of the era's write buffers";
     }
 }
 
 parameters! {
-    /// The O2-like machine's parameters, typed. Marks in the meanings: (V) read in a primary
-    /// source, (I) inferred; see `shared/reference/occlusion-unit.md`.
+    /// The O2-like machine's parameters, typed, each with its provenance (see
+    /// `shared/reference/occlusion-unit.md`).
     pub struct O2Arch {
-        clock_mhz: f64 = 66.67, [0.001, 100_000.0], "MHz", "rendering engine clock; one pipeline cycle (V)";
-        primitive_setup_cycles: u64 = 4, [0, 1 << 20], "cycles", "rasterizer cycles spent setting up each primitive before its first fragment (I)";
-        fifo_raster_to_depth_entries: usize = 16, [1, 1 << 16], "fragments", "FIFO between rasterizer and depth/stencil pipeline";
-        prefetch_depth_fragments: usize = 16, [1, 1 << 16], "fragments", "how many fragments ahead of the depth test the prefetch buffer may issue depth reads";
-        page_hit_latency_cycles: u64 = 2, [1, 1 << 16], "cycles", "depth read latency when the word lies in the same 64 KB tile as the previous read (V: CAS 2)";
-        page_miss_latency_cycles: u64 = 8, [1, 1 << 16], "cycles", "depth read latency when the word lies in another 64 KB tile (I: 6-10)";
-        framebuffer_tile_width_pixels: u32 = 128, [1, 1 << 14], "pixels", "width of one depth buffer tile (one memory page) (V)";
-        framebuffer_tile_height_pixels: u32 = 128, [1, 1 << 14], "pixels", "height of one depth buffer tile (one memory page) (V)";
-        depth_bits_per_pixel: u32 = 32, [8, 256], "bits", "depth+stencil bits stored per pixel (V: 24 + 8)";
-        depth_write_buffer_entries: usize = 16, [1, 1 << 16], "writes", "depth writes buffered between depth test and memory port";
-        fifo_depth_to_occu_entries: usize = 8, [1, 1 << 16], "fragments", "FIFO between depth test and Occlusion Unit";
+        clock_mhz: f64 = 66.67, [0.001, 100_000.0], "MHz", "rendering engine clock; one pipeline cycle",
+            V "Linux crime.h: the CRIME rendering engine at 66.67 MHz";
+        primitive_setup_cycles: u64 = 4, [0, 1 << 20], "cycles", "rasterizer cycles spent setting up each primitive before its first fragment",
+            I [2, 16] "not published; edge and depth slopes of one triangle, a few cycles in a fixed-function setup unit";
+        fifo_raster_to_depth_entries: usize = 16, [1, 1 << 16], "fragments", "FIFO between rasterizer and depth/stencil pipeline",
+            I [4, 64] "not published; enough to cover the page-miss latency at one fragment a cycle, at most what an on-chip FIFO of the era held";
+        prefetch_depth_fragments: usize = 16, [1, 1 << 16], "fragments", "how many fragments ahead of the depth test the prefetch buffer may issue depth reads",
+            I [4, 64] "the O2 prefetches depth to hide memory latency (V: the paper), how far ahead is not published; at least the miss latency, at most the FIFO ahead of it";
+        page_hit_latency_cycles: u64 = 2, [1, 1 << 16], "cycles", "depth read latency, request to data, when the word lies in the same 64 KB tile as the previous read",
+            I [2, 6] "CAS 2 (V, SGI O2 documents) is the DRAM's column access alone; the port's request and the data's return add an unpublished 0-4 cycles";
+        page_miss_latency_cycles: u64 = 8, [1, 1 << 16], "cycles", "depth read latency when the word lies in another 64 KB tile",
+            I [6, 10] "precharge and row activation of SDRAM of the era (2-3 cycles each) on top of the page hit";
+        framebuffer_tile_width_pixels: u32 = 128, [1, 1 << 14], "pixels", "width of one depth buffer tile (one memory page)",
+            V "Linux gbefb.c: 64 KB tiles, 128x128 pixels at 32 bpp";
+        framebuffer_tile_height_pixels: u32 = 128, [1, 1 << 14], "pixels", "height of one depth buffer tile (one memory page)",
+            V "Linux gbefb.c: 64 KB tiles, 128x128 pixels at 32 bpp";
+        depth_bits_per_pixel: u32 = 32, [8, 256], "bits", "depth+stencil bits stored per pixel",
+            V2 "24-bit depth and 8-bit stencil in one 32-bit word";
+        depth_write_buffer_entries: usize = 16, [1, 1 << 16], "writes", "depth writes buffered between depth test and memory port",
+            I [4, 64] "not published; sized like the prefetch buffer it mirrors";
+        fifo_depth_to_occu_entries: usize = 8, [1, 1 << 16], "fragments", "FIFO between depth test and Occlusion Unit",
+            I [2, 32] "the paper's OccU sits after the depth test without a stated buffer; a short FIFO absorbs its k-cycle engines";
     }
     group occu: OccuArch; {
-        memory_port_bits_per_cycle: u32 = 256, [32, 1 << 14], "bits", "the one main-memory port shared by depth reads, depth writes and OccU Control (V)";
-        host_clock_mhz: f64 = 180.0, [0.001, 100_000.0], "MHz", "host CPU clock: the O2's R5000 (V2: R5000 at 180-350 MHz, R10000 at 150-400 MHz)";
-        host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited (I: 100-1000; a pointer chase and a loop over children, cache misses dominate)";
-        host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles", "one bounding box tested against the view frustum (I: 60-300; six planes against the box's nearest corner)";
-        host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles", "one visibility decision taken from a query answer (I: 10-100)";
-        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call: state validation and command setup (I: 500-10000)";
-        host_cycles_per_state_change: u64 = 150, [0, 1 << 24], "host cycles", "the GL driver's work per state change, clear, or query begin or end (I: 50-500)";
-        host_cycles_per_readback_pixel: u64 = 12, [0, 1 << 24], "host cycles", "reading back one framebuffer pixel from main memory and testing it for a change, the software occlusion test (I: 5-40; a 32-bit read at the CPU's 100-300 MB/s from unified memory and a compare)";
-        geometry_host_cycles_per_vertex: u64 = 80, [0, 1 << 24], "host cycles", "software transform of one vertex on the host CPU: 4x4 transform, clip codes, divide, viewport (V2: the O2's CPU does all vertex processing; I: 40-200 at about one multiply-add a cycle)";
-        geometry_host_cycles_per_triangle: u64 = 120, [0, 1 << 24], "host cycles", "software setup of one submitted triangle on the host CPU before the rendering engine takes it (I: 60-300)";
-        result_notify_latency_cycles: u64 = 8, [0, 1 << 24], "cycles", "from a query's last record word in memory to the host seeing it: one uncached poll read (I: 5-20)";
-        result_read_cycles_per_word: u64 = 1, [0, 1 << 24], "cycles", "the host reading one result record word from main memory (I: 1-4; cache-line reads at 2.13 GB/s)";
+        memory_port_bits_per_cycle: u32 = 256, [32, 1 << 14], "bits", "the one main-memory port shared by depth reads and writes, colour writes, clears, OccU Control, the display refresh and the host",
+            V "SGI O2 documents: a 256-bit word per 66 MHz cycle, up to 2.13 GB/s";
+        memory_banks: u32 = 2, [1, 64], "banks", "memory banks, each with one open row; 64 KB tile p lies in bank p mod banks, and a depth read is a page hit when its bank's open row is its tile (1: one open row, the last read's)",
+            I [1, 4] "SDRAM parts of the era had 2 (16 Mbit) or 4 (64 Mbit) internal banks; how the O2 spread its tiles over them is not published";
+        colour_bits_per_pixel: u32 = 32, [0, 256], "bits", "colour written per drawn fragment (one that passes outside an occlusion render mode) and per cleared pixel (0: no colour traffic)",
+            V "Linux gbefb.c: 32 bpp framebuffer tiles";
+        blending: bool = false, "bool", "every drawn fragment blends: its colour is read (a read-modify-write) before it is written",
+            I [false, true] "traces carry no blend state; opaque drawing is the common case, transparency blends";
+        clear_writes_memory: bool = true, "bool", "a clear writes every depth and colour word of the viewport through the port (false: a free fast clear)",
+            I [false, true] "no fast-clear tag memory is documented for the O2's rendering engine; unified memory is cleared by writing it";
+        display_width_pixels: u32 = 1280, [0, 1 << 14], "pixels", "scanned-out display width; the display engine reads the framebuffer continuously (0: no refresh traffic)",
+            V2 "O2 displays at 1280x1024";
+        display_height_pixels: u32 = 1024, [0, 1 << 14], "pixels", "scanned-out display height",
+            V2 "O2 displays at 1280x1024";
+        display_bits_per_pixel: u32 = 32, [0, 256], "bits", "bits the display engine reads per displayed pixel",
+            V2 "32 bpp true colour";
+        display_refresh_hz: f64 = 75.0, [0.0, 1000.0], "Hz", "display refresh rate: the whole display is read this many times a second",
+            V2 "O2 monitors at 72-76 Hz";
+        host_memory_share: f64 = 0.05, [0.0, 0.9], "share", "fraction of the port's cycles the host CPU's own memory traffic takes (cache misses, I/O DMA)",
+            I [0.0, 0.15] "not published; a CPU moving 100-300 MB/s of the 2.13 GB/s is 5-14 %";
+        host_clock_mhz: f64 = 180.0, [0.001, 100_000.0], "MHz", "host CPU clock: the O2's R5000",
+            V2 "O2 configurations: R5000 at 180-350 MHz, R10000 at 150-400 MHz";
+        host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited",
+            I [100, 1000] "a pointer chase and a loop over children, cache misses dominate";
+        host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles", "one bounding box tested against the view frustum",
+            I [60, 300] "six planes against the box's nearest corner";
+        host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles", "one visibility decision taken from a query answer",
+            I [10, 100] "a compare and a branch, a cache miss at most";
+        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call: state validation and command setup",
+            I [500, 10000] "GL drivers of the era spent a few to tens of microseconds a draw";
+        host_cycles_per_state_change: u64 = 150, [0, 1 << 24], "host cycles", "the GL driver's work per state change, clear, or query begin or end",
+            I [50, 500] "one register write through the driver and its validation";
+        host_cycles_per_readback_pixel: u64 = 12, [0, 1 << 24], "host cycles", "reading back one framebuffer pixel from main memory and testing it for a change, the software occlusion test",
+            I [5, 40] "a 32-bit read at the CPU's 100-300 MB/s from unified memory and a compare";
+        geometry_host_cycles_per_vertex: u64 = 80, [0, 1 << 24], "host cycles", "software transform of one vertex on the host CPU: 4x4 transform, clip codes, divide, viewport",
+            I [40, 200] "the O2's CPU does all vertex processing (V2); about one multiply-add a cycle";
+        geometry_host_cycles_per_triangle: u64 = 120, [0, 1 << 24], "host cycles", "software setup of one submitted triangle on the host CPU before the rendering engine takes it",
+            I [60, 300] "slopes and command packing, like a few vertices' work";
+        result_notify_latency_cycles: u64 = 8, [0, 1 << 24], "cycles", "from a query's last record word in memory to the host seeing it: one uncached poll read",
+            I [5, 20] "one uncached read of unified memory";
+        result_read_cycles_per_word: u64 = 1, [0, 1 << 24], "cycles", "the host reading one result record word from main memory",
+            I [1, 4] "cache-line reads at 2.13 GB/s";
     }
 }
 
 parameters! {
-    /// The InfiniteReality-like machine's parameters, typed. Marks: (V) primary source, (V2)
-    /// secondary source, (I) inferred; see `shared/reference/occlusion-unit.md`. Timing
-    /// rules: [`crate::machines::ir`].
+    /// The InfiniteReality-like machine's parameters, typed, each with its provenance (see
+    /// `shared/reference/occlusion-unit.md`). Timing rules: [`crate::machines::ir`].
     pub struct IrArch {
-        clock_mhz: f64 = 100.0, [0.001, 100_000.0], "MHz", "Raster Memory clock: one Fragment Generator / Image Engine cycle (I)";
-        boards: usize = 4, [1, 4], "boards", "Raster Memory boards, each with one Fragment Generator (V2: 1, 2 or 4)";
-        image_engines_per_board: usize = 80, [1, 1024], "Image Engines", "Image Engines per board, each owning its interleaved pixels' depth (V2: 20 chips x 4)";
-        interleave: Interleave = Interleave::Columns, "name", "pixel -> Image Engine map: columns (x mod B*N, as SGI's VGX; I), blocks (skewed 2D blocks) or morton";
-        block_width_pixels: u32 = 4, [1, 1 << 12], "pixels", "block width of the blocks and morton interleaves";
-        block_height_pixels: u32 = 4, [1, 1 << 12], "pixels", "block height of the blocks and morton interleaves";
-        fragment_generator_fragments_per_cycle: u32 = 2, [1, 1024], "fragments", "fragments one board's Fragment Generator emits per cycle (I: 710 Mpixel/s over 4 boards at 100 MHz)";
-        fragment_generator_setup_cycles: u64 = 4, [0, 1 << 20], "cycles", "cycles every Fragment Generator spends setting up each primitive (I)";
-        image_engine_cycles_per_fragment: u64 = 45, [1, 1 << 16], "cycles", "cycles one Image Engine spends on a fragment's depth test (I: ~2.2 Mpixel/s at 100 MHz)";
-        image_engine_fifo_entries: usize = 8, [1, 1 << 16], "fragments", "FIFO in front of each Image Engine; the Fragment Generator blocks while it is full (I)";
+        clock_mhz: f64 = 100.0, [0.001, 100_000.0], "MHz", "Raster Memory clock: one Fragment Generator / Image Engine cycle",
+            I [75.0, 150.0] "not published per board; the Geometry Engines run at 90 MHz (V2), the raster chips of the era at 66-150 MHz";
+        boards: usize = 4, [1, 4], "boards", "Raster Memory boards, each with one Fragment Generator",
+            V2 "InfiniteReality configurations: 1, 2 or 4 Raster Memory boards";
+        image_engines_per_board: usize = 80, [1, 1024], "Image Engines", "Image Engines per board, each owning its interleaved pixels' depth",
+            V2 "20 Image Engine chips of 4 engines each per Raster Memory board";
+        interleave: Interleave = Interleave::Columns, "name", "pixel -> Image Engine map: columns (x mod B*N), blocks (skewed 2D blocks) or morton",
+            I [Interleave::Columns, Interleave::Morton] "the InfiniteReality's is not published; SGI's VGX interleaved columns (V), Morton order is the alternative ATTILA uses";
+        block_width_pixels: u32 = 4, [1, 1 << 12], "pixels", "block width of the blocks and morton interleaves",
+            I [2, 8] "not published; only the blocks and morton interleaves read it";
+        block_height_pixels: u32 = 4, [1, 1 << 12], "pixels", "block height of the blocks and morton interleaves",
+            I [2, 8] "not published; only the blocks and morton interleaves read it";
+        fragment_generator_fragments_per_cycle: u32 = 2, [1, 1024], "fragments", "fragments one board's Fragment Generator emits per cycle",
+            I [1, 4] "710 Mpixel/s over 4 boards at 100 MHz is 1.8 a board a cycle (V: Montrym 1997)";
+        fragment_generator_setup_cycles: u64 = 4, [0, 1 << 20], "cycles", "cycles every Fragment Generator spends setting up each primitive",
+            I [2, 16] "not published; edge and parameter slopes of one triangle";
+        image_engine_cycles_per_fragment: u64 = 11, [1, 1 << 16], "cycles", "initiation interval of an Image Engine's pipelined depth stage: cycles between two fragments entering it",
+            I [6, 23] "710 Mpixel/s textured and multisample-antialiased with 4 boards (V: Montrym 1997) is 177.5 Mpixel/s a board (1 board 177.5, 2 boards 355: the boards split the screen), 2.22 Mpixel/s an Image Engine, 45 cycles a pixel at 100 MHz; texturing is done before the Image Engines, and a depth test is one a sample, so at 4 samples a pixel a single-sample depth-only fragment takes 45 / 4 = 11; 8 to 2 samples give 6..23";
+        image_engine_latency_cycles: u64 = 16, [1, 1 << 16], "cycles", "latency of an Image Engine's depth stage: from a fragment entering it to its result at the Occlusion Unit (fragments in flight: ceil(latency / interval))",
+            I [11, 45] "a read, compare and write of the Image Engine's own SDRAM: at least one interval, at most the 45 cycles of a whole antialiased pixel";
+        image_engine_fifo_entries: usize = 8, [1, 1 << 16], "fragments", "FIFO in front of each Image Engine; the Fragment Generator blocks while it is full",
+            I [2, 32] "not published; a short on-chip FIFO";
     }
     group occu: OccuArch; {
-        local_merge: MergeKind = MergeKind::Tree, "name", "stage one, the Image Engines of a board: reduction tree, daisy chain, or host reads";
-        local_merge_hop_latency_cycles: u64 = 2, [0, 1 << 20], "cycles", "tree or chain: cycles for one report to cross one hop (I)";
-        local_merge_read_latency_cycles: u64 = 40, [0, 1 << 20], "cycles", "software: cycles for the host to read one Image Engine's report (I)";
-        global_merge: MergeKind = MergeKind::Tree, "name", "stage two, the boards: reduction tree, daisy chain, or host reads";
-        global_merge_hop_latency_cycles: u64 = 8, [0, 1 << 20], "cycles", "tree or chain: cycles for one report to cross one board-to-board hop (I)";
-        global_merge_read_latency_cycles: u64 = 100, [0, 1 << 20], "cycles", "software: cycles for the host to read one board's report over the bus (I)";
-        host_clock_mhz: f64 = 195.0, [0.001, 100_000.0], "MHz", "host CPU clock: an Onyx2's R10000 (V2: 195 MHz R10000 Onyx2 systems)";
-        host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited (I: 100-1000; a pointer chase and a loop over children)";
-        host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles", "one bounding box tested against the view frustum (I: 60-300)";
-        host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles", "one visibility decision taken from a query answer (I: 10-100)";
-        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call (I: 500-10000)";
-        host_cycles_per_state_change: u64 = 150, [0, 1 << 24], "host cycles", "the GL driver's work per state change, clear, or query begin or end (I: 50-500)";
-        host_cycles_per_readback_pixel: u64 = 40, [0, 1 << 24], "host cycles", "reading back one framebuffer pixel over the bus and testing it for a change, the software occlusion test (I: 20-100; PIO reads from the raster boards)";
-        bus_megabytes_per_second: f64 = 200.0, [0.001, 1_000_000.0], "MB/s", "host-to-graphics bus the host writes vertices over (V2: Onyx POWERpath-2 200 MB/s, Onyx2 400 MB/s)";
-        bus_bytes_per_vertex: u64 = 24, [0, 1 << 16], "bytes", "one vertex over the bus: position and normal as 32-bit floats (I: 12-48)";
-        geometry_engines: usize = 4, [1, 64], "engines", "Geometry Engines on the Geometry board, each taking whole batches (V2: up to four, MIMD)";
-        geometry_engine_clock_mhz: f64 = 90.0, [0.001, 100_000.0], "MHz", "Geometry Engine clock (V2: 90 MHz)";
-        geometry_engine_cycles_per_vertex: u64 = 51, [0, 1 << 24], "GE cycles", "one Geometry Engine transforming and lighting one vertex (I: four engines at 90 MHz giving the 7 M lighted triangles/s of Montrym 1997, V, at one new vertex a strip triangle)";
-        geometry_engine_cycles_per_triangle: u64 = 10, [0, 1 << 24], "GE cycles", "one Geometry Engine assembling, clipping and setting up one submitted triangle (I: 5-40)";
-        result_notify_latency_cycles: u64 = 100, [0, 1 << 24], "cycles", "from a query's result at the global merge to the host seeing it: an interrupt or a poll over the bus (I: 50-500, about 1 us)";
-        result_read_cycles_per_word: u64 = 10, [0, 1 << 24], "cycles", "the host reading one result record word over the bus (I: 5-50; 50-500 ns PIO reads)";
+        local_merge: MergeKind = MergeKind::Tree, "name", "stage one, the Image Engines of a board: reduction tree, daisy chain, or host reads",
+            I [MergeKind::Tree, MergeKind::Chain] "the paper leaves hardware or software open; a tree is the fastest hardware, a chain the cheapest";
+        local_merge_hop_latency_cycles: u64 = 2, [0, 1 << 20], "cycles", "tree or chain: cycles for one report to cross one hop",
+            I [1, 8] "a register stage between neighbouring chips on one board";
+        local_merge_read_latency_cycles: u64 = 40, [0, 1 << 20], "cycles", "software: cycles for the host to read one Image Engine's report",
+            I [20, 100] "a PIO read on the board, 200-1000 ns";
+        global_merge: MergeKind = MergeKind::Tree, "name", "stage two, the boards: reduction tree, daisy chain, or host reads",
+            I [MergeKind::Tree, MergeKind::Chain] "the paper leaves hardware or software open; a tree is the fastest hardware, a chain the cheapest";
+        global_merge_hop_latency_cycles: u64 = 8, [0, 1 << 20], "cycles", "tree or chain: cycles for one report to cross one board-to-board hop",
+            I [4, 32] "a backplane crossing between boards, several board clocks";
+        global_merge_read_latency_cycles: u64 = 100, [0, 1 << 20], "cycles", "software: cycles for the host to read one board's report over the bus",
+            I [50, 500] "a PIO read over the system bus, 0.5-5 us";
+        local_merge_link_bits_per_cycle: u64 = 32, [0, 1 << 20], "bits", "tree or chain: width of one link between a board's Image Engines; a partial report (8 words a tile, and verbose hits) crosses it word by word (0: unlimited)",
+            I [16, 128] "not published; a 32-bit word a cycle between neighbouring Image Engine chips, as their memory buses move pixels";
+        global_merge_link_bits_per_cycle: u64 = 64, [0, 1 << 20], "bits", "tree or chain: width of one board-to-board link the boards' merged reports cross word by word (0: unlimited)",
+            I [32, 256] "not published; a backplane path of 400-3200 MB/s at the 100 MHz clock";
+        report_dma_bits_per_cycle: u64 = 16, [0, 1 << 20], "bits", "after a hardware global merge: the final report written to host memory by DMA, this many bits a cycle (0: unlimited)",
+            I [16, 32] "the host bus: 200 MB/s (Onyx, V2) to 400 MB/s (Onyx2, V2) at the 100 MHz clock";
+        host_clock_mhz: f64 = 195.0, [0.001, 100_000.0], "MHz", "host CPU clock: an Onyx2's R10000",
+            V2 "195 MHz R10000 Onyx2 systems";
+        host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited",
+            I [100, 1000] "a pointer chase and a loop over children";
+        host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles", "one bounding box tested against the view frustum",
+            I [60, 300] "six planes against the box's nearest corner";
+        host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles", "one visibility decision taken from a query answer",
+            I [10, 100] "a compare and a branch, a cache miss at most";
+        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call",
+            I [500, 10000] "GL drivers of the era spent a few to tens of microseconds a draw";
+        host_cycles_per_state_change: u64 = 150, [0, 1 << 24], "host cycles", "the GL driver's work per state change, clear, or query begin or end",
+            I [50, 500] "one command through the driver and its validation";
+        host_cycles_per_readback_pixel: u64 = 40, [0, 1 << 24], "host cycles", "reading back one framebuffer pixel over the bus and testing it for a change, the software occlusion test",
+            I [20, 100] "PIO reads from the raster boards";
+        bus_megabytes_per_second: f64 = 200.0, [0.001, 1_000_000.0], "MB/s", "host-to-graphics bus the host writes vertices over",
+            V2 "Onyx POWERpath-2 200 MB/s, Onyx2 400 MB/s";
+        bus_bytes_per_vertex: u64 = 24, [0, 1 << 16], "bytes", "one vertex over the bus: position and normal as 32-bit floats",
+            I [12, 48] "position alone to position, normal, colour and texture coordinates";
+        geometry_engines: usize = 4, [1, 64], "engines", "Geometry Engines on the Geometry board, each taking whole batches",
+            V2 "up to four Geometry Engines, MIMD";
+        geometry_engine_clock_mhz: f64 = 90.0, [0.001, 100_000.0], "MHz", "Geometry Engine clock",
+            V2 "Geometry Engines at 90 MHz";
+        geometry_engine_cycles_per_vertex: u64 = 51, [0, 1 << 24], "GE cycles", "one Geometry Engine transforming and lighting one vertex",
+            I [40, 80] "four engines at 90 MHz giving the 7 M lighted triangles/s of Montrym 1997 (V) at one new vertex a strip triangle; fewer lights or longer strips move it";
+        geometry_engine_cycles_per_triangle: u64 = 10, [0, 1 << 24], "GE cycles", "one Geometry Engine assembling, clipping and setting up one submitted triangle",
+            I [5, 40] "not published; a few instructions a triangle beside the vertices' work";
+        result_notify_latency_cycles: u64 = 100, [0, 1 << 24], "cycles", "from a query's result at the global merge to the host seeing it: an interrupt or a poll over the bus",
+            I [50, 500] "about 1 us, 0.5-5 us for an interrupt or a poll";
+        result_read_cycles_per_word: u64 = 10, [0, 1 << 24], "cycles", "the host reading one result record word over the bus",
+            I [5, 50] "50-500 ns PIO reads";
     }
 }
 
@@ -433,9 +643,10 @@ impl Arch {
             let assignment = format!("{} = {}", param.key, value);
             let _ = writeln!(
                 out,
-                "{assignment:<w$}  # [{}] {}",
+                "{assignment:<w$}  # [{}] {} ({})",
                 param.unit,
                 param.meaning,
+                param.provenance,
                 w = width + 3
             );
         }
@@ -622,6 +833,21 @@ impl O2Arch {
                 "memory_port_bits_per_cycle ({port}) must be a multiple of the {OCCU_WORD_BITS}-bit OccU word"
             )));
         }
+        let reserved = self.reserved_port_share();
+        if reserved > 0.9 {
+            return Err(ArchError::Impossible(format!(
+                "the display refresh ({:.1} % of the memory port) and host_memory_share ({:.1} %) leave the pixel pipeline {:.1} %; at most 90 % may be reserved (a display_refresh_hz of 0 turns the refresh off)",
+                100.0 * self.refresh_share(),
+                100.0 * self.host_memory_share,
+                100.0 * (1.0 - reserved)
+            )));
+        }
+        if self.depth_bits_per_pixel + self.colour_bits_per_pixel > port {
+            return Err(ArchError::Impossible(format!(
+                "depth_bits_per_pixel + colour_bits_per_pixel ({}) must fit the memory port ({port} bits)",
+                self.depth_bits_per_pixel + self.colour_bits_per_pixel
+            )));
+        }
         if !self
             .framebuffer_tile_width_pixels
             .is_multiple_of(self.pixels_per_word())
@@ -633,6 +859,22 @@ impl O2Arch {
             )));
         }
         Ok(())
+    }
+
+    /// The share of port cycles the display refresh takes: the bits it reads a second over
+    /// the bits the port moves a second.
+    pub fn refresh_share(&self) -> f64 {
+        let bits_per_second = self.display_width_pixels as f64
+            * self.display_height_pixels as f64
+            * self.display_bits_per_pixel as f64
+            * self.display_refresh_hz;
+        bits_per_second / (self.memory_port_bits_per_cycle as f64 * self.clock_mhz * 1e6)
+    }
+
+    /// The share of port cycles taken before the pixel pipeline's requests: the display
+    /// refresh's and the host's ([`crate::blocks::memory_port`]).
+    pub fn reserved_port_share(&self) -> f64 {
+        self.refresh_share() + self.host_memory_share
     }
 
     /// Depth pixels in one memory word.
@@ -701,12 +943,16 @@ impl MergeKind {
     }
 }
 
-/// One merge stage's network and latencies.
+/// One merge stage's network, latencies and link width.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MergeNetwork {
     pub kind: MergeKind,
     pub hop_latency_cycles: u64,
     pub read_latency_cycles: u64,
+    /// Tree or chain: bits one link moves a cycle (0: unlimited).
+    pub link_bits_per_cycle: u64,
+    /// Software: cycles the host takes to read one word of a report over the bus.
+    pub read_cycles_per_word: u64,
 }
 
 impl IrArch {
@@ -719,6 +965,14 @@ impl IrArch {
             )));
         }
         Ok(())
+    }
+
+    /// Fragments in flight in an Image Engine's depth stage: `ceil(latency / interval)`, at
+    /// least one (a latency below the interval is one unpipelined fragment at a time).
+    pub fn image_engine_in_flight(&self) -> usize {
+        self.image_engine_latency_cycles
+            .div_ceil(self.image_engine_cycles_per_fragment)
+            .max(1) as usize
     }
 
     /// Image Engines on all boards.
@@ -737,6 +991,8 @@ impl IrArch {
             kind: self.local_merge,
             hop_latency_cycles: self.local_merge_hop_latency_cycles,
             read_latency_cycles: self.local_merge_read_latency_cycles,
+            link_bits_per_cycle: self.local_merge_link_bits_per_cycle,
+            read_cycles_per_word: self.result_read_cycles_per_word,
         }
     }
 
@@ -746,6 +1002,8 @@ impl IrArch {
             kind: self.global_merge,
             hop_latency_cycles: self.global_merge_hop_latency_cycles,
             read_latency_cycles: self.global_merge_read_latency_cycles,
+            link_bits_per_cycle: self.global_merge_link_bits_per_cycle,
+            read_cycles_per_word: self.result_read_cycles_per_word,
         }
     }
 }

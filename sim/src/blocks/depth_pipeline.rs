@@ -11,7 +11,17 @@
 //! - it writes depth when the depth test is on, the fragment passed, the depth mask is on and
 //!   no occlusion render mode (brief, verbose) is active; the write enters the
 //!   [`WriteBuffer`] in cycle `d_i` and drains one `depth_bits_per_pixel` transfer;
+//! - a drawn fragment (it passed, no occlusion render mode) also writes
+//!   `colour_bits_per_pixel` of colour: with its depth write one entry of both; under
+//!   `blending` its colour is read first (one port request of the colour bits from `d_i + 1`,
+//!   in order), and the entry is written from the cycle after the read's grant (the port is
+//!   pipelined: the read's latency overlaps the requests after it);
+//! - a clear with `clear_writes_memory` writes every depth and colour word of the viewport,
+//!   `ceil(W H (depth_bits + colour_bits) / port_bits)` full port words from the first cycle
+//!   the depth test is free, in order, and the depth test resumes after the last one;
 //! - the pass signal is the functional depth test ([`DepthBuffer`]) under the current state.
+//!
+//! Writes and clears leave the banks' open rows as they are: only depth reads open rows.
 //!
 //! Stall accounting: cycles between `max(arrive_i, d_{i-1} + 1)` and `d_i` count as memory
 //! stall while waiting for `r_i`, the rest as back-pressure stall.
@@ -37,6 +47,16 @@ pub struct DepthPipeline {
     pub stall_backpressure_cycles: u64,
     /// Effect hook: false when a scan proved no fragment can write depth.
     depth_write_traffic: bool,
+    depth_bits: u32,
+    colour_bits: u32,
+    blending: bool,
+    /// Port words one clear writes (0: a fast clear).
+    clear_words: u64,
+    port_bits: u32,
+    pub depth_writes: u64,
+    pub colour_writes: u64,
+    pub colour_reads: u64,
+    pub clear_words_written: u64,
 }
 
 /// What the depth test decided for one fragment.
@@ -71,6 +91,22 @@ impl DepthPipeline {
             stall_memory_cycles: 0,
             stall_backpressure_cycles: 0,
             depth_write_traffic: effects.depth_write_traffic,
+            depth_bits: arch.depth_bits_per_pixel,
+            colour_bits: arch.colour_bits_per_pixel,
+            blending: arch.blending,
+            clear_words: if arch.clear_writes_memory {
+                (width as u64
+                    * height as u64
+                    * (arch.depth_bits_per_pixel + arch.colour_bits_per_pixel) as u64)
+                    .div_ceil(arch.memory_port_bits_per_cycle as u64)
+            } else {
+                0
+            },
+            port_bits: arch.memory_port_bits_per_cycle,
+            depth_writes: 0,
+            colour_writes: 0,
+            colour_reads: 0,
+            clear_words_written: 0,
         }
     }
 
@@ -85,9 +121,19 @@ impl DepthPipeline {
         std::mem::replace(&mut self.depth, DepthBuffer::new(0, 0))
     }
 
-    /// Depth := 1.0 everywhere. Modelled as free (a fast clear); its traffic is not simulated.
-    pub fn clear(&mut self) {
+    /// Depth := 1.0 everywhere; with `clear_writes_memory` its words go through the port
+    /// in order from the first cycle the depth test is free, which then waits for the last.
+    pub fn clear(&mut self, port: &mut MemoryPort) {
         self.depth.clear();
+        if self.clear_words == 0 {
+            return;
+        }
+        let mut last = self.free;
+        for _ in 0..self.clear_words {
+            last = port.claim(self.free, self.port_bits, PortClient::Clear);
+        }
+        self.clear_words_written += self.clear_words;
+        self.free = self.free.max(last + 1);
     }
 
     /// Front end: fetch the depth of fragment number `index`, readable from `arrive`; returns the cycle
@@ -131,9 +177,22 @@ impl DepthPipeline {
         let in_order = arrive.max(self.free);
         let after_memory = in_order.max(data_ready);
         let mut cycle = after_memory.max(out_slot);
-        if writes {
+        let draws = passed && !occlusion_mode && self.colour_bits > 0;
+        if writes || draws {
             cycle = cycle.max(self.write_buffer.slot_free_cycle());
-            self.write_buffer.push(cycle, port);
+            let bits =
+                if writes { self.depth_bits } else { 0 } + if draws { self.colour_bits } else { 0 };
+            let mut ready = cycle + 1;
+            self.depth_writes += writes as u64;
+            if draws {
+                self.colour_writes += 1;
+                if self.blending {
+                    self.colour_reads += 1;
+                    let read = port.claim(ready, self.colour_bits, PortClient::DepthWrite);
+                    ready = read + 1;
+                }
+            }
+            self.write_buffer.push_entry(cycle, ready, bits, port);
         }
         self.stall_memory_cycles += after_memory - in_order;
         self.stall_backpressure_cycles += cycle - after_memory;

@@ -14,10 +14,11 @@
 //! - with the depth test off nothing is read: the data is ready at once;
 //! - if the fragment's word is the word of the last read, it is a hit: its data is ready
 //!   when that read's data is;
-//! - otherwise it is a miss: one word is read on the port, granted in cycle `g` at or after
-//!   `q_i`, and the data is ready in cycle `g + page_hit_latency_cycles` when the word lies
-//!   in the same page as the last read, `g + page_miss_latency_cycles` otherwise (also for
-//!   the first read).
+//! - otherwise one word is read on the port, granted in cycle `g` at or after `q_i`, and
+//!   the data is ready in cycle `g + page_hit_latency_cycles` when the word's page is the
+//!   open row of its bank (page `p` lies in bank `p mod memory_banks`; each bank keeps the
+//!   row of its last read open), `g + page_miss_latency_cycles` otherwise (also for a
+//!   bank's first read). With one bank, a hit is a read in the page of the last read.
 
 use crate::arch::O2Arch;
 use crate::blocks::fifo::Fifo;
@@ -84,24 +85,41 @@ pub(crate) enum DepthRead {
     PageMiss,
 }
 
-/// The word and page of the last depth read: decides [`DepthRead`].
-#[derive(Clone, Copy, Debug, Default)]
+/// The word of the last depth read and the open row (page) of every memory bank: decides
+/// [`DepthRead`]. Page `p` lies in bank `p mod banks`; a read opens its page's row in its bank.
+#[derive(Clone, Debug)]
 pub(crate) struct LastRead {
     word: Option<u64>,
-    page: Option<u64>,
+    open_rows: Vec<Option<u64>>,
 }
 
 impl LastRead {
-    /// Read `word` of `page`: what it costs (a new read becomes the last one).
+    /// No read yet, `banks` banks (at least one).
+    pub(crate) fn new(banks: u32) -> LastRead {
+        LastRead {
+            word: None,
+            open_rows: vec![None; banks.max(1) as usize],
+        }
+    }
+
+    /// Read `word` of `page`: what it costs (a new read becomes the last one and opens its
+    /// page's row).
     #[inline(always)]
     pub(crate) fn read(&mut self, word: u64, page: u64) -> DepthRead {
         if self.word == Some(word) {
             return DepthRead::SameWord;
         }
-        let same_page = self.page == Some(page);
         self.word = Some(word);
-        self.page = Some(page);
-        if same_page {
+        let banks = self.open_rows.len() as u64;
+        let bank = if banks == 1 {
+            0
+        } else {
+            (page % banks) as usize
+        };
+        let row = &mut self.open_rows[bank];
+        let hit = *row == Some(page);
+        *row = Some(page);
+        if hit {
             DepthRead::PageHit
         } else {
             DepthRead::PageMiss
@@ -131,7 +149,7 @@ impl DepthPrefetch {
         DepthPrefetch {
             slots: Fifo::new(arch.prefetch_depth_fragments),
             last_request: None,
-            last_read: LastRead::default(),
+            last_read: LastRead::new(arch.memory_banks),
             last_data_ready: 0,
             page_hit_latency: arch.page_hit_latency_cycles,
             page_miss_latency: arch.page_miss_latency_cycles,

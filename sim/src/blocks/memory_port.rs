@@ -7,6 +7,12 @@
 //! cycle and in which its bits fit next to the bits already granted in that cycle. A request
 //! never splits across cycles.
 //!
+//! Reserved cycles: the clients outside the pixel pipeline (the O2's display refresh and the
+//! host) take a share `f` of the port's cycles, whole cycles in a fixed pattern: cycle `c`
+//! is theirs when `floor((c + 1) f) > floor(c f)`, so every prefix of `n` cycles holds
+//! `floor(n f)` of them, spread evenly. No request is granted in a reserved cycle; it goes
+//! to the next free one. With `f = 0` no cycle is reserved.
+//!
 //! In-order service keeps the machine monotone: a request made earlier can never make a
 //! later one wait longer, so speeding up any block never slows a query down.
 
@@ -16,8 +22,11 @@ use crate::timeline::{note, PortLane, State, Timeline, Track};
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PortClient {
     DepthRead,
+    /// A drawn fragment's depth and colour writes (and a blend's colour read).
     DepthWrite,
     OccuControl,
+    /// A clear's depth and colour words.
+    Clear,
 }
 
 impl PortClient {
@@ -26,6 +35,7 @@ impl PortClient {
             PortClient::DepthRead => PortLane::DepthReads,
             PortClient::DepthWrite => PortLane::DepthWrites,
             PortClient::OccuControl => PortLane::OccuControl,
+            PortClient::Clear => PortLane::Clears,
         }
     }
 }
@@ -41,12 +51,17 @@ pub struct PortStats {
     pub depth_read_transfers: u64,
     pub depth_write_transfers: u64,
     pub occu_transfers: u64,
+    pub clear_transfers: u64,
     /// One past the last cycle with a transfer.
     pub end_cycle: u64,
+    /// Cycles before `end_cycle` reserved for the display refresh and the host.
+    pub reserved_cycles: u64,
 }
 
 pub struct MemoryPort {
     bits_per_cycle: u32,
+    /// The share of cycles reserved for clients outside the pipeline (0: none).
+    reserved_share: f64,
     /// The cycle of the last grant.
     cycle: u64,
     /// Bits granted so far in `cycle`.
@@ -58,13 +73,43 @@ pub struct MemoryPort {
 
 impl MemoryPort {
     pub fn new(bits_per_cycle: u32) -> MemoryPort {
-        MemoryPort {
+        MemoryPort::with_reserved_share(bits_per_cycle, 0.0)
+    }
+
+    /// A port whose cycles are a share `reserved_share` (in `0.0..1.0`) reserved.
+    pub fn with_reserved_share(bits_per_cycle: u32, reserved_share: f64) -> MemoryPort {
+        debug_assert!((0.0..1.0).contains(&reserved_share));
+        let mut port = MemoryPort {
             bits_per_cycle,
+            reserved_share,
             cycle: 0,
             cycle_bits: 0,
             stats: PortStats::default(),
             timeline: None,
+        };
+        port.cycle = port.first_free(0);
+        port
+    }
+
+    /// Whether cycle `c` belongs to the reserved clients.
+    #[inline(always)]
+    fn is_reserved(&self, c: u64) -> bool {
+        self.reserved_share > 0.0 && self.reserved_before(c + 1) > self.reserved_before(c)
+    }
+
+    /// Reserved cycles among `0..n`: `floor(n f)`.
+    #[inline(always)]
+    fn reserved_before(&self, n: u64) -> u64 {
+        (n as f64 * self.reserved_share).floor() as u64
+    }
+
+    /// The first cycle at or after `c` that is not reserved.
+    #[inline(always)]
+    fn first_free(&self, mut c: u64) -> u64 {
+        while self.is_reserved(c) {
+            c += 1;
         }
+        c
     }
 
     /// Report every grant's cycle to `timeline`, on its client's lane.
@@ -83,7 +128,7 @@ impl MemoryPort {
         debug_assert!(bits <= self.bits_per_cycle);
         if ready > self.cycle || self.cycle_bits + bits > self.bits_per_cycle {
             self.close_cycle();
-            self.cycle = ready.max(self.cycle + 1);
+            self.cycle = self.first_free(ready.max(self.cycle + 1));
         }
         self.cycle_bits += bits;
         self.stats.bits_transferred += bits as u64;
@@ -91,6 +136,7 @@ impl MemoryPort {
             PortClient::DepthRead => self.stats.depth_read_transfers += 1,
             PortClient::DepthWrite => self.stats.depth_write_transfers += 1,
             PortClient::OccuControl => self.stats.occu_transfers += 1,
+            PortClient::Clear => self.stats.clear_transfers += 1,
         }
         let lane = Track::MemoryPort(client.lane());
         note(
@@ -125,6 +171,7 @@ impl MemoryPort {
     /// Close the last cycle and return the statistics.
     pub fn finish(mut self) -> PortStats {
         self.close_cycle();
+        self.stats.reserved_cycles = self.reserved_before(self.stats.end_cycle);
         self.stats
     }
 }
@@ -132,6 +179,28 @@ impl MemoryPort {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn reserved_cycles_carry_nothing_else_and_spread_evenly() {
+        // A quarter reserved: floor((c + 1) / 4) > floor(c / 4) for c = 3, 7, 11, ...
+        let mut port = MemoryPort::with_reserved_share(256, 0.25);
+        let grants: Vec<u64> = (0..9)
+            .map(|_| port.claim(0, 256, PortClient::DepthRead))
+            .collect();
+        assert_eq!(grants, [0, 1, 2, 4, 5, 6, 8, 9, 10]);
+        // Ready in a reserved cycle: the next free one. Smaller words still pack.
+        assert_eq!(port.claim(15, 128, PortClient::DepthWrite), 16);
+        assert_eq!(port.claim(15, 128, PortClient::DepthWrite), 16);
+        let stats = port.finish();
+        assert!(stats.max_bits_in_one_cycle <= 256);
+        // Cycles 0..17 hold floor(17 / 4) = 4 reserved ones (3, 7, 11, 15).
+        assert_eq!((stats.end_cycle, stats.reserved_cycles), (17, 4));
+        assert_eq!(stats.busy_cycles + stats.reserved_cycles, 10 + 4);
+        // No share: the plain port.
+        let mut plain = MemoryPort::with_reserved_share(256, 0.0);
+        assert_eq!(plain.claim(3, 256, PortClient::Clear), 3);
+        assert_eq!(plain.claim(0, 256, PortClient::Clear), 4);
+    }
 
     #[test]
     fn packs_requests_in_order_and_never_goes_back() {

@@ -7,17 +7,31 @@
 //! longer list marks the buffer overflowed). Truncating at every node keeps a prefix of the
 //! whole concatenation, so the merged report does not depend on the network's shape.
 //!
-//! Timing, inputs ready in `r_0 .. r_{n-1}` (hop latency `h`, read latency `L`):
+//! Traffic: a report is `W = 8 T + H` 32-bit words (`T` tiles, a brief record of 8 words
+//! each, every Image Engine sending every tile; `H` the verbose hits it holds, per tile at most
+//! the buffer's hit room). It crosses a link of `w` bits a cycle in `x(W) = ceil(32 W / w)`
+//! cycles (`x = 0` for an unlimited link, `w = 0`). A merged report holds, per tile, the sum
+//! of its inputs' hits up to the room.
+//!
+//! Timing, inputs ready in `r_0 .. r_{n-1}` with `W_0 .. W_{n-1}` words (hop latency `h`,
+//! read latency `L`, host read cycles per word `c`):
 //! - tree: inputs pair up level by level, `(0, 1), (2, 3), ...`; a pair's merged report is
-//!   ready in `max(left, right) + h`; an unpaired last input moves up unchanged; the root's
-//!   time is the stage's output (one input: no hop);
-//! - chain: `c_0 = r_0`, `c_i = max(r_i, c_{i-1} + h)`; the output is `c_{n-1}`;
-//! - software: the host reads the inputs one at a time in order:
-//!   `host = max(host, r_i) + L`; the output is the host's time after the last read. The
-//!   host is one reader for both stages and all queries, so its reads never overlap.
+//!   ready in `max(left + x(W_left), right + x(W_right)) + h` (each child's report crosses its
+//!   own link); an unpaired last input moves up unchanged; the root's time is the stage's
+//!   output (one input: no hop);
+//! - chain: `c_0 = r_0`, `c_i = max(r_i, c_{i-1} + x(W of c_{i-1}) + h)`: the carried report
+//!   crosses one link to the next input; the output is `c_{n-1}`;
+//! - software: the host reads the inputs one at a time in order, word by word:
+//!   `host = max(host, r_i) + L + c W_i`; the output is the host's time after the last read.
+//!   The host is one reader for both stages and all queries, so its reads never overlap.
+//!
+//! After a hardware global merge the final report goes to host memory by DMA, `x(W)` cycles
+//! at the DMA's width ([`delivered`]); a software merge has it in the host already. With
+//! unlimited links (`x = 0`), the rules are those of a merge that moves no words.
 
-use crate::arch::{MergeKind, MergeNetwork};
+use crate::arch::{MergeKind, MergeNetwork, OCCU_WORD_BITS};
 use occsim_traces::hit_list::listed_hits_per_tile;
+use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::TileResult;
 
 /// Fold `part` into `total`: counters saturate at `counter_max`, hit lists keep `hit_room`.
@@ -39,9 +53,70 @@ pub fn merge_partial(
     }
 }
 
-/// The cycle a stage's merged report is ready, given its inputs' ready cycles in order.
-/// `host` is the host's first free cycle (software merges advance it).
-pub fn merged_ready(network: &MergeNetwork, inputs: &[u64], host: &mut u64) -> u64 {
+/// A partial report on its way through a merge: the cycle it is ready and the hits it holds
+/// per tile (empty without verbose hits; one bucket for a whole-report count).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Partial {
+    pub ready: u64,
+    pub hits: Vec<u64>,
+}
+
+impl Partial {
+    /// A report without hits (a brief, samples or any query's).
+    pub fn brief(ready: u64) -> Partial {
+        Partial {
+            ready,
+            hits: Vec::new(),
+        }
+    }
+
+    /// Its 32-bit words: a brief record for each of `tiles` tiles and the hits.
+    pub fn words(&self, tiles: u64) -> u64 {
+        tiles * BRIEF_RECORD_ENTRIES as u64 + self.hits.iter().sum::<u64>()
+    }
+
+    /// The hits of two reports merged: per tile the sum, kept within `room`.
+    fn merged_hits(&self, other: &Partial, room: u64) -> Vec<u64> {
+        let (long, short) = if self.hits.len() >= other.hits.len() {
+            (&self.hits, &other.hits)
+        } else {
+            (&other.hits, &self.hits)
+        };
+        let mut hits = long.clone();
+        for (h, s) in hits.iter_mut().zip(short) {
+            *h = (*h + s).min(room);
+        }
+        hits
+    }
+}
+
+/// The shape of the reports a stage merges: tiles and the verbose buffers' hit room.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ReportShape {
+    pub tiles: u64,
+    /// Hits a tile's merged report keeps (`u64::MAX`: no limit).
+    pub room: u64,
+}
+
+/// Cycles `words` 32-bit words take over a link of `bits_per_cycle` (0: unlimited).
+pub fn transfer_cycles(words: u64, bits_per_cycle: u64) -> u64 {
+    if bits_per_cycle == 0 {
+        0
+    } else {
+        (words * OCCU_WORD_BITS as u64).div_ceil(bits_per_cycle)
+    }
+}
+
+/// A stage's merged report (ready cycle and hits), given its inputs in order. `host` is the
+/// host's first free cycle (software merges advance it).
+pub fn merged_ready(
+    network: &MergeNetwork,
+    inputs: &[Partial],
+    shape: ReportShape,
+    host: &mut u64,
+) -> Partial {
+    let crossed =
+        |p: &Partial| p.ready + transfer_cycles(p.words(shape.tiles), network.link_bits_per_cycle);
     match network.kind {
         MergeKind::Tree => {
             let mut level = inputs.to_vec();
@@ -49,24 +124,54 @@ pub fn merged_ready(network: &MergeNetwork, inputs: &[u64], host: &mut u64) -> u
                 level = level
                     .chunks(2)
                     .map(|pair| match pair {
-                        [left, right] => (*left).max(*right) + network.hop_latency_cycles,
-                        [single] => *single,
+                        [left, right] => Partial {
+                            ready: crossed(left).max(crossed(right)) + network.hop_latency_cycles,
+                            hits: left.merged_hits(right, shape.room),
+                        },
+                        [single] => single.clone(),
                         _ => unreachable!("chunks of two"),
                     })
                     .collect();
             }
-            level.first().copied().unwrap_or(0)
+            level.pop().unwrap_or(Partial::brief(0))
         }
         MergeKind::Chain => inputs
             .iter()
-            .copied()
-            .reduce(|carried, ready| ready.max(carried + network.hop_latency_cycles))
-            .unwrap_or(0),
+            .cloned()
+            .reduce(|carried, input| Partial {
+                ready: input
+                    .ready
+                    .max(crossed(&carried) + network.hop_latency_cycles),
+                hits: carried.merged_hits(&input, shape.room),
+            })
+            .unwrap_or(Partial::brief(0)),
         MergeKind::Software => {
-            for &ready in inputs {
-                *host = (*host).max(ready) + network.read_latency_cycles;
+            let mut merged = Partial::brief(0);
+            for input in inputs {
+                *host = (*host).max(input.ready)
+                    + network.read_latency_cycles
+                    + network.read_cycles_per_word * input.words(shape.tiles);
+                merged.hits = merged.merged_hits(input, shape.room);
             }
-            *host
+            merged.ready = *host;
+            merged
+        }
+    }
+}
+
+/// The cycle the final report is in host memory: after a hardware global merge, its output
+/// written by DMA in `x(W)` cycles at `dma_bits_per_cycle`; a software merge's is the host's
+/// already.
+pub fn delivered(
+    global: &MergeNetwork,
+    merged: &Partial,
+    shape: ReportShape,
+    dma_bits_per_cycle: u64,
+) -> u64 {
+    match global.kind {
+        MergeKind::Software => merged.ready,
+        MergeKind::Tree | MergeKind::Chain => {
+            merged.ready + transfer_cycles(merged.words(shape.tiles), dma_bits_per_cycle)
         }
     }
 }
@@ -81,33 +186,120 @@ mod tests {
             kind,
             hop_latency_cycles: 10,
             read_latency_cycles: 100,
+            link_bits_per_cycle: 0,
+            read_cycles_per_word: 0,
         }
     }
 
+    fn ready(cycles: &[u64]) -> Vec<Partial> {
+        cycles.iter().map(|&r| Partial::brief(r)).collect()
+    }
+
+    const ONE_TILE: ReportShape = ReportShape {
+        tiles: 1,
+        room: u64::MAX,
+    };
+
     #[test]
     fn hand_worked_merge_times() {
-        let inputs = [5, 30, 7, 8, 9];
+        let inputs = ready(&[5, 30, 7, 8, 9]);
         let mut host = 0;
+        let at = |kind, host: &mut u64| merged_ready(&network(kind), &inputs, ONE_TILE, host).ready;
         // Tree: (5,30)->40, (7,8)->18, 9 -> [40, 18, 9] -> (40,18)->50, 9 -> 60.
-        assert_eq!(
-            merged_ready(&network(MergeKind::Tree), &inputs, &mut host),
-            60
-        );
+        assert_eq!(at(MergeKind::Tree, &mut host), 60);
         // Chain: 5, max(30, 15)=30, max(7, 40)=40, 50, 60.
-        assert_eq!(
-            merged_ready(&network(MergeKind::Chain), &inputs, &mut host),
-            60
-        );
+        assert_eq!(at(MergeKind::Chain, &mut host), 60);
         assert_eq!(host, 0, "hardware merges leave the host alone");
         // Software: 105, 205, 305, 405, 505.
-        assert_eq!(
-            merged_ready(&network(MergeKind::Software), &inputs, &mut host),
-            505
-        );
+        assert_eq!(at(MergeKind::Software, &mut host), 505);
         assert_eq!(host, 505);
+        let single = merged_ready(
+            &network(MergeKind::Tree),
+            &ready(&[17]),
+            ONE_TILE,
+            &mut host,
+        );
+        assert_eq!(single.ready, 17);
+    }
+
+    #[test]
+    fn merge_latency_grows_with_the_words_moved() {
+        // Four inputs ready in 0, 2 tiles (16 words each), 64-bit links, hop 10:
+        // every link crossing takes ceil(16 * 32 / 64) = 8 cycles.
+        let links = |kind| MergeNetwork {
+            link_bits_per_cycle: 64,
+            read_cycles_per_word: 3,
+            ..network(kind)
+        };
+        let two_tiles = ReportShape {
+            tiles: 2,
+            room: u64::MAX,
+        };
+        let inputs = ready(&[0, 0, 0, 0]);
+        let mut host = 0;
+        // Tree: two levels of (8 + 10): 18, then 36.
+        let tree = merged_ready(&links(MergeKind::Tree), &inputs, two_tiles, &mut host);
+        assert_eq!(tree.ready, 36);
+        // Chain: 0, 0+8+10=18, 36, 54.
+        let chain = merged_ready(&links(MergeKind::Chain), &inputs, two_tiles, &mut host);
+        assert_eq!(chain.ready, 54);
+        // Software: each read 100 + 3 * 16 = 148: 148, 296, 444, 592.
+        let software = merged_ready(&links(MergeKind::Software), &inputs, two_tiles, &mut host);
+        assert_eq!(software.ready, 592);
+        // Twice the tiles, twice the words: 16 cycles a crossing, the tree 2 * (16 + 10) = 52.
+        let four_tiles = ReportShape {
+            tiles: 4,
+            ..two_tiles
+        };
+        let mut host = 0;
+        let tree = merged_ready(&links(MergeKind::Tree), &inputs, four_tiles, &mut host);
+        assert_eq!(tree.ready, 52);
+        // Verbose hits add words: one tile with 24 hits in each of two inputs, room 40:
+        // each input 8 + 24 = 32 words (16 cycles on 64 bits); the merged holds min(48, 40).
+        let verbose: Vec<Partial> = (0..2)
+            .map(|_| Partial {
+                ready: 0,
+                hits: vec![24],
+            })
+            .collect();
+        let shape = ReportShape { tiles: 1, room: 40 };
+        let merged = merged_ready(&links(MergeKind::Tree), &verbose, shape, &mut host);
+        assert_eq!((merged.ready, merged.hits.clone()), (16 + 10, vec![40]));
+        assert_eq!(merged.words(1), 48);
+        // On a 32-bit link a word a cycle: 32 + 10.
+        let narrow = MergeNetwork {
+            link_bits_per_cycle: 32,
+            ..links(MergeKind::Tree)
+        };
+        assert_eq!(merged_ready(&narrow, &verbose, shape, &mut host).ready, 42);
+    }
+
+    #[test]
+    fn unlimited_links_and_no_latency_merge_in_no_time() {
+        let free = |kind| MergeNetwork {
+            kind,
+            hop_latency_cycles: 0,
+            read_latency_cycles: 0,
+            link_bits_per_cycle: 0,
+            read_cycles_per_word: 0,
+        };
+        let shape = ReportShape {
+            tiles: 1024,
+            room: u64::MAX,
+        };
+        let inputs = ready(&[5, 30, 7, 8, 9]);
+        for kind in [MergeKind::Tree, MergeKind::Chain, MergeKind::Software] {
+            let mut host = 0;
+            assert_eq!(
+                merged_ready(&free(kind), &inputs, shape, &mut host).ready,
+                30
+            );
+        }
+        assert_eq!(transfer_cycles(1 << 20, 0), 0);
         assert_eq!(
-            merged_ready(&network(MergeKind::Tree), &[17], &mut host),
-            17
+            transfer_cycles(3, 64),
+            2,
+            "96 bits on a 64-bit link: two cycles"
         );
     }
 

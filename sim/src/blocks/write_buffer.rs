@@ -42,12 +42,15 @@ impl WriteBuffer {
     /// Returns its grant cycle on the port.
     #[inline]
     pub fn push(&mut self, enter: u64, port: &mut MemoryPort) -> u64 {
-        debug_assert!(enter >= self.slot_free_cycle());
-        let grant = port.claim(
-            (enter + 1).max(self.last_grant),
-            self.bits_per_entry,
-            self.client,
-        );
+        self.push_entry(enter, enter + 1, self.bits_per_entry, port)
+    }
+
+    /// The next entry, of `bits`, enters in cycle `enter` and may be written from `ready`
+    /// (at least `enter + 1`; later when its data comes from a read). Returns its grant.
+    #[inline]
+    pub fn push_entry(&mut self, enter: u64, ready: u64, bits: u32, port: &mut MemoryPort) -> u64 {
+        debug_assert!(enter >= self.slot_free_cycle() && ready > enter);
+        let grant = port.claim(ready.max(self.last_grant), bits, self.client);
         if grant != self.last_grant || self.entries_written == 0 {
             self.grant_cycles += 1;
         }

@@ -170,7 +170,7 @@ impl SampledModel {
             all_tiles_one_cycle,
             cooldown_fragments,
             core: FunctionalCore::new(width, height)?,
-            formulas: Formulas::new(arch, width)?,
+            formulas: Formulas::new(arch, width, height)?,
             open: None,
             predicted: PredictedLoop::new(arch)?,
             window: Window::empty(),

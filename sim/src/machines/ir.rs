@@ -19,8 +19,9 @@
 //!    primitive (`fragment_generator_setup_cycles`) and emits only its own pixels'
 //!    fragments, at most `fragment_generator_fragments_per_cycle` a cycle, in order, blocking
 //!    while the target Image Engine's FIFO is full.
-//! 3. Image Engines ([`crate::blocks::image_engine`]): each tests one fragment every
-//!    `image_engine_cycles_per_fragment` cycles, then its own Occlusion Unit (`engines`
+//! 3. Image Engines ([`crate::blocks::image_engine`]): each starts a fragment's depth test
+//!    every `image_engine_cycles_per_fragment` cycles in a pipelined stage of
+//!    `image_engine_latency_cycles`, then its own Occlusion Unit (`engines`
 //!    engines, the query's tiles dealt round-robin, one tile per engine per cycle) counts it;
 //!    hit words drain through a per-engine write buffer, one word per cycle.
 //! 4. Query end: the end token enters every board in `t_end`, the first cycle after every
@@ -28,10 +29,14 @@
 //!    partial report is ready in `r` (rule in [`crate::blocks::image_engine`]).
 //! 5. Stage one merges each board's Image Engines' reports in Image Engine order, stage two
 //!    the boards' merged reports in board order ([`crate::blocks::merge_network`]: tree, chain or
-//!    software, with the per-hop or per-read latency). The result is available in the
-//!    cycle stage two outputs it. Latency = available - `t_end` = drain + local + global,
-//!    with drain = `max r - t_end`, local = `max_b board_b - max r`, global = available -
-//!    `max_b board_b`.
+//!    software, with the per-hop or per-read latency). Every report moves word by word: 8
+//!    words a tile from every Image Engine (and a verbose query's hits), over links of
+//!    `local_merge_link_bits_per_cycle` and `global_merge_link_bits_per_cycle`, or read by
+//!    the host at `result_read_cycles_per_word` a word in a software merge. After a
+//!    hardware stage two the final report goes to host memory by DMA at
+//!    `report_dma_bits_per_cycle`; the result is available when it is there. Latency =
+//!    available - `t_end` = drain + local + global, with drain = `max r - t_end`, local =
+//!    `max_b board_b - max r`, global = available - `max_b board_b` (the DMA included).
 //! 6. State changes, `begin` and `clear` take no cycles; every Image Engine sees them (the
 //!    depth state is broadcast); a fast clear.
 //!
@@ -59,7 +64,7 @@ use crate::arch::{Arch, IrArch};
 use crate::blocks::fragment_generator::FragmentGenerator;
 use crate::blocks::image_engine::ImageEngine;
 use crate::blocks::interleave::FramebufferInterleave;
-use crate::blocks::merge_network::{merge_partial, merged_ready};
+use crate::blocks::merge_network::{delivered, merge_partial, merged_ready, Partial, ReportShape};
 use crate::blocks::occlusion_engine::hit_room;
 use crate::blocks::occlusion_unit::OccuStats;
 use crate::blocks::occu_stage::OccuModel;
@@ -328,30 +333,52 @@ impl IrMachine {
         };
         let per_board = self.arch.image_engines_per_board;
         let mut tiles = vec![TileResult::default(); spec.tiles.len()];
-        let mut board_ready = Vec::with_capacity(self.generators.len());
+        let mut board_reports = Vec::with_capacity(self.generators.len());
         let mut last_drained = end_cycle;
+        let shape = ReportShape {
+            tiles: spec.tiles.len() as u64,
+            room: room as u64,
+        };
+        let verbose = spec.mode == QueryMode::Verbose;
         for board in self.image_engines.chunks_mut(per_board) {
-            let mut ready = Vec::with_capacity(per_board);
+            let mut reports = Vec::with_capacity(per_board);
             for engine in board {
                 let (r, partial) = engine.end(end_cycle, query.generation, spec.tiles.len());
-                ready.push(r);
+                // Every Image Engine sends a record a tile; a verbose one its hits too (one
+                // per passing fragment, up to the room).
+                let hits = match (&partial, verbose) {
+                    (Some(partial), true) => {
+                        partial.iter().map(|t| t.nohc.min(shape.room)).collect()
+                    }
+                    _ => Vec::new(),
+                };
+                reports.push(Partial { ready: r, hits });
                 if let Some(partial) = partial {
                     merge_partial(&mut tiles, &partial, counter_max, room);
                 }
             }
-            let board_drained = ready.iter().copied().max().unwrap_or(0);
+            let board_drained = reports.iter().map(|p| p.ready).max().unwrap_or(0);
             last_drained = last_drained.max(board_drained);
-            let merged = merged_ready(&self.arch.local_merge_network(), &ready, &mut self.host);
-            let lane = Track::LocalMerge(board_ready.len() as u32);
-            note(&self.timeline, lane, State::Busy, board_drained, merged);
-            board_ready.push(merged);
+            let local = self.arch.local_merge_network();
+            let merged = merged_ready(&local, &reports, shape, &mut self.host);
+            let lane = Track::LocalMerge(board_reports.len() as u32);
+            note(
+                &self.timeline,
+                lane,
+                State::Busy,
+                board_drained,
+                merged.ready,
+            );
+            board_reports.push(merged);
         }
-        let boards_merged = board_ready.iter().copied().max().unwrap_or(last_drained);
-        let available = merged_ready(
-            &self.arch.global_merge_network(),
-            &board_ready,
-            &mut self.host,
-        );
+        let boards_merged = board_reports
+            .iter()
+            .map(|p| p.ready)
+            .max()
+            .unwrap_or(last_drained);
+        let global = self.arch.global_merge_network();
+        let merged = merged_ready(&global, &board_reports, shape, &mut self.host);
+        let available = delivered(&global, &merged, shape, self.arch.report_dma_bits_per_cycle);
         let overflowed_buffers = finish_verbose(spec, &mut tiles);
         self.last_available = self.last_available.max(available);
         if let Some(timeline) = &self.timeline {

@@ -43,8 +43,21 @@
 //!    releases a command or primitive later than the rasterizer's first free cycle, the
 //!    rasterizer idles until then, and the items already past it are finished first (their
 //!    port requests precede the later fragments' in rule 5's order).
-//! 8. State changes, `begin`, and `clear` take no cycles (clear is a fast clear; colour and
-//!    stencil traffic and blending are not modelled).
+//! 8. State changes and `begin` take no cycles. A `clear` reaches the depth pipeline in order
+//!    and, with `clear_writes_memory`, writes the viewport's depth and colour words through
+//!    the port from the cycle the depth test is free; the depth test waits for the last
+//!    ([`crate::blocks::depth_pipeline`]); without it, it is a free fast clear.
+//! 9. The port's other clients ([`crate::blocks::memory_port`]). Arbitration: the display
+//!    refresh (`display_*`: W x H x bits x Hz a second over the port's bits a second) and the
+//!    host (`host_memory_share`) come first: together they own a fixed, evenly spread share
+//!    of whole port cycles, and no pipeline request is granted in one; the pixel pipeline's
+//!    requests share the other cycles in rule 5's order, a drawn fragment's colour write
+//!    (`colour_bits_per_pixel`; under `blending` after a colour read) travelling with its
+//!    depth write (b), a clear's words where the clear stands. Occlusion render modes draw
+//!    nothing, so they write no colour. Depth reads hit the open row of their bank
+//!    (`memory_banks`, [`crate::blocks::depth_prefetch`]). Stencil traffic is not modelled.
+//!    With colour bits 0, no refresh (a display size or rate of 0), no host share, no clear
+//!    writes and one bank, the machine is the one of rules 1-8 before these clients.
 
 use crate::arch::{Arch, O2Arch};
 use crate::blocks::depth_pipeline::DepthPipeline;
@@ -172,7 +185,10 @@ impl O2Machine {
             depth: DepthPipeline::new(&o2, width, height, effects, depth),
             depth_to_occu: Fifo::new(o2.fifo_depth_to_occu_entries),
             occu: OccuStage::new(&o2, model),
-            port: MemoryPort::new(o2.memory_port_bits_per_cycle),
+            port: MemoryPort::with_reserved_share(
+                o2.memory_port_bits_per_cycle,
+                o2.reserved_port_share(),
+            ),
             arch_entries,
             width,
             height,
@@ -319,7 +335,7 @@ impl O2Machine {
             return Ok(());
         }
         match event {
-            Event::Clear => self.depth.clear(),
+            Event::Clear => self.depth.clear(&mut self.port),
             Event::QueryResult(golden) => return self.check(golden, index),
             _ => {}
         }
@@ -537,7 +553,7 @@ impl O2Machine {
         let prefetch = &self.depth.prefetch;
         let (word_hits, page_hits, page_misses) =
             (prefetch.word_hits, prefetch.page_hits, prefetch.page_misses);
-        let depth_writes = self.depth.write_buffer.entries_written;
+        let depth_writes = self.depth.depth_writes;
         let occu = self.occu.finish()?;
         let occu_words = occu.words_written;
         let occu_port_cycles = occu.port_cycles;
@@ -610,6 +626,10 @@ impl O2Machine {
                 depth_read_page_hits: page_hits,
                 depth_read_page_misses: page_misses,
                 depth_writes,
+                colour_writes: depth.colour_writes,
+                colour_reads: depth.colour_reads,
+                clear_words: depth.clear_words_written,
+                reserved_cycles: port.reserved_cycles,
                 occu_words,
             },
             engines,

@@ -8,7 +8,7 @@
 //! | `F_b` | fragments board `b`'s Fragment Generator emits (its own pixels) |
 //! | `P` | primitives (every board sets every one up) |
 //! | `F_i` | fragments Image Engine `i` tests |
-//! | `D_i` | `Σ max(C, s)` over its fragments: the depth stage (`C` = `image_engine_cycles_per_fragment`) and the OccU (`s` = cycles a fragment under the open query, [`super::service_cycles`]) are pipelined, so the slower paces the engine |
+//! | `D_i` | `Σ max(C, s)` over its fragments: the depth stage (`C` = `image_engine_cycles_per_fragment`, its initiation interval) and the OccU (`s` = cycles a fragment under the open query, [`super::service_cycles`]) are pipelined, so the slower paces the engine |
 //! | `H_i` | hit words: over its passing fragments under a verbose query, the query's tiles holding each |
 //!
 //! The counts are kept per window and, for the busiest Image Engine, per primitive too
@@ -29,21 +29,23 @@
 //! its depth stage, its OccU and the report; the machine's idle path), with
 //!
 //! ```text
-//! backlog_i = min(D_i, (E + 1) · C)
+//! backlog_i = min(D_i, round(E · C · min(1, D_i / T_w)) + L)
 //! ```
 //!
-//! the work still queued at the end token: the fragment in the depth stage and a full FIFO
-//! when the engine had that much to do in the window (the demo's Image Engines are its
-//! bottleneck, so their FIFOs are full at every query end). The two
-//! merge stages then run on the `r_i` exactly as the machine runs them
-//! ([`crate::blocks::merge_network::merged_ready`]; the host of software merges is carried from query
-//! to query), and latency = available − `t_end`. Hit words per Image Engine are not capped by
-//! the verbose buffers' room: a query whose buffers overflow is predicted slower than it is.
+//! (`L` = `image_engine_latency_cycles`) the work still queued at the end token: the last
+//! fragment through the depth stage's latency and the FIFO, as full as the engine was busy
+//! over the window (full for a bottleneck engine: with the calibrated Image Engines the
+//! demo's bottleneck is the Fragment Generators, and their FIFOs are part full). The two
+//! merge stages then run on the `r_i` exactly as the machine runs them, moving the same
+//! words (8 a tile from every Image Engine; [`crate::blocks::merge_network::merged_ready`], then
+//! the DMA to host memory; the host of software merges is carried from query to query), and
+//! latency = available − `t_end`. Hit words per Image Engine are not capped by the verbose
+//! buffers' room: a query whose buffers overflow is predicted slower than it is.
 
 use super::{service_cycles, WindowEnd};
 use crate::arch::IrArch;
 use crate::blocks::interleave::FramebufferInterleave;
-use crate::blocks::merge_network::merged_ready;
+use crate::blocks::merge_network::{delivered, merged_ready, Partial, ReportShape};
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect};
 
@@ -269,7 +271,7 @@ impl IrBottleneck {
 
     /// The query ended; the window that began in cycle `start` closes: its cycles and the
     /// query's latency.
-    pub(super) fn end_query(&mut self, _spec: &QuerySpec, start: f64) -> WindowEnd {
+    pub(super) fn end_query(&mut self, spec: &QuerySpec, start: f64) -> WindowEnd {
         self.open = None;
         let bottleneck = self.window.cycles(&self.arch);
         let end_cycle = (start + bottleneck.cycles).round() as u64;
@@ -277,15 +279,35 @@ impl IrBottleneck {
             .report_delays()
             .map(|delay| end_cycle + delay)
             .collect();
-        let board_ready: Vec<u64> = ready
-            .chunks(self.arch.image_engines_per_board)
-            .map(|board| merged_ready(&self.arch.local_merge_network(), board, &mut self.host))
+        // Words as the machine moves them: 8 a tile from every Image Engine, and its hit
+        // words as one bucket, not capped by the buffers' room.
+        let shape = ReportShape {
+            tiles: spec.tiles.len() as u64,
+            room: u64::MAX,
+        };
+        let verbose = spec.mode == QueryMode::Verbose;
+        let reports: Vec<Partial> = ready
+            .iter()
+            .zip(&self.window.hit_words)
+            .map(|(&ready, &hits)| Partial {
+                ready,
+                hits: if verbose { vec![hits] } else { Vec::new() },
+            })
             .collect();
-        let available = merged_ready(
-            &self.arch.global_merge_network(),
-            &board_ready,
-            &mut self.host,
-        );
+        let board_reports: Vec<Partial> = reports
+            .chunks(self.arch.image_engines_per_board)
+            .map(|board| {
+                merged_ready(
+                    &self.arch.local_merge_network(),
+                    board,
+                    shape,
+                    &mut self.host,
+                )
+            })
+            .collect();
+        let global = self.arch.global_merge_network();
+        let merged = merged_ready(&global, &board_reports, shape, &mut self.host);
+        let available = delivered(&global, &merged, shape, self.arch.report_dma_bits_per_cycle);
         self.window.clear();
         WindowEnd {
             cycles: bottleneck.cycles,
@@ -295,12 +317,15 @@ impl IrBottleneck {
 
     /// Per Image Engine, the cycles from the end token to its partial report: `3 + backlog_i`.
     fn report_delays(&self) -> impl Iterator<Item = u64> + '_ {
-        let queued = self.arch.image_engine_fifo_entries as u64 + 1;
-        let pace = self.arch.image_engine_cycles_per_fragment;
-        self.window
-            .image_engine_cycles
-            .iter()
-            .map(move |&cycles| 3 + cycles.min(queued * pace))
+        let fifo = self.arch.image_engine_fifo_entries as f64
+            * self.arch.image_engine_cycles_per_fragment as f64;
+        let latency = self.arch.image_engine_latency_cycles;
+        let window = self.window.cycles(&self.arch).cycles.max(1.0);
+        self.window.image_engine_cycles.iter().map(move |&cycles| {
+            // The FIFO is as full as the engine is busy over the window.
+            let busy = (cycles as f64 / window).min(1.0);
+            3 + cycles.min((fifo * busy).round() as u64 + latency)
+        })
     }
 
     /// Start the window again with no work (a frame ended inside it).

@@ -46,9 +46,11 @@ pub(crate) enum Formulas {
 }
 
 impl Formulas {
-    pub(crate) fn new(arch: &Arch, width: u32) -> Result<Formulas, SimError> {
+    pub(crate) fn new(arch: &Arch, width: u32, height: u32) -> Result<Formulas, SimError> {
         Ok(match arch.machine() {
-            Machine::O2 => Formulas::O2(Box::new(o2::O2Bottleneck::new(&arch.o2()?, width))),
+            Machine::O2 => {
+                Formulas::O2(Box::new(o2::O2Bottleneck::new(&arch.o2()?, width, height)))
+            }
             Machine::Ir => Formulas::Ir(Box::new(ir::IrBottleneck::new(&arch.ir()?))),
         })
     }
@@ -63,12 +65,14 @@ impl Formulas {
         }
     }
 
-    /// Count the other events that matter to the formulas (primitives, query begins).
+    /// Count the other events that matter to the formulas (primitives, query begins, the
+    /// O2's clears).
     pub(crate) fn event(&mut self, event: &Event) {
         match (self, event) {
             (Formulas::O2(o2), Event::Primitive) => o2.primitive(),
             (Formulas::Ir(ir), Event::Primitive) => ir.primitive(),
             (Formulas::O2(o2), Event::QueryBegin(spec)) => o2.begin(spec),
+            (Formulas::O2(o2), Event::Clear) => o2.clear(),
             (Formulas::Ir(ir), Event::QueryBegin(spec)) => ir.begin(spec),
             _ => {}
         }
@@ -123,7 +127,7 @@ impl AnalyticModel {
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<AnalyticModel, SimError> {
         Ok(AnalyticModel {
             core: FunctionalCore::new(width, height)?,
-            formulas: Formulas::new(arch, width)?,
+            formulas: Formulas::new(arch, width, height)?,
             open: None,
             frames: PredictedLoop::new(arch)?,
             latencies: Vec::new(),

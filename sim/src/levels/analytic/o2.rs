@@ -9,6 +9,8 @@
 //! | `R`, `M` | depth reads (fragments, depth test on, whose memory word differs from the last read's: the prefetch's exact rule) and of them page misses (a different 64 KB page) |
 //! | `W` | depth writes (passing fragments with depth test and mask on, outside brief/verbose queries) |
 //! | `O` | OccU Control words: verbose hit words `Σ_tiles min(NOHC, entries - 8)` plus records `8 · tiles` (+1 terminator per overflowed buffer with room) |
+//! | `K`, `B` | colour writes (passing fragments outside brief/verbose queries, with colour bits) and, under `blending`, as many colour reads |
+//! | `Z` | clears (each `ceil(W H (depth_bits + colour_bits) / V)` port words with `clear_writes_memory`) |
 //!
 //! Throughput of each block over the window, in cycles (`setup` = `primitive_setup_cycles`,
 //! `V` = `memory_port_bits_per_cycle`, `L = min(prefetch_depth_fragments,
@@ -18,10 +20,14 @@
 //! raster   = F + setup · P
 //! depth    = F
 //! occu     = S
-//! port     = R + ceil((W · depth_bits_per_pixel + 32 · O) / V)
+//! port     = (R + ceil((W · depth_bits + (K + B) · colour_bits + 32 · O) / V)) / (1 - f)
 //! prefetch = R · (λ̄ + 1) / L          (Little's law: L reads in flight, each λ̄ + 1 cycles)
-//! T_w      = max(raster, depth, occu, port, prefetch)
+//! clears   = Z · clear_words / (1 - f)   (the depth test waits for a clear's last word)
+//! T_w      = max(raster, depth, occu, port, prefetch) + clears
 //! ```
+//!
+//! with `f` the port share the display refresh and the host reserve
+//! ([`crate::arch::O2Arch::reserved_port_share`]).
 //!
 //! Total cycles = `Σ_w T_w` + the last window's tail (the last query's latency, or its
 //! drain + 3 when the stream ends without a query end).
@@ -36,8 +42,12 @@
 //!                                    average, a heuristic)
 //! drain   = max(backlog · β, λ_last)  (λ_last: the last fragment's read latency, 0 when
 //!                                      it read nothing new)
-//! latency = 4 + ceil(records / (V / 32)) + drain
+//! latency = 4 + ceil(ceil(records / (V / 32)) / (1 - f)) + drain
 //! ```
+//!
+//! Clears with fewer than `L` fragments after them, in this window or earlier ones since the
+//! last frame end, also hold the drain: at least their `clear_words / (1 - f)` cycles plus
+//! those fragments' (the rasterizer ran past them, up to `L` fragments ahead).
 //!
 //! The 4 is the empty pipe's path (depth pipeline, OccU, OccU Control, the grant after the
 //! last word): with one record group that fits one port cycle, latency is the machine's
@@ -61,6 +71,14 @@ pub struct WindowCounts {
     pub page_misses: u64,
     pub depth_writes: u64,
     pub occu_words: u64,
+    pub colour_writes: u64,
+    pub colour_reads: u64,
+    pub clears: u64,
+    /// Clears with fewer than `L` fragments after them (the rasterizer ran past them, so the
+    /// end token waits for their words), and the fragments after the last; carried from
+    /// window to window (a frame end drains them).
+    pub recent_clears: u64,
+    pub fragments_after_clear: u64,
     /// Read latency of the window's last fragment (0 when it read nothing new).
     pub last_read_latency: u64,
 }
@@ -77,11 +95,25 @@ pub struct WindowPrediction {
 /// The O2 formulas over window counts.
 pub struct O2Formulas {
     arch: O2Arch,
+    /// Port words one clear writes (0: a fast clear).
+    clear_words: u64,
 }
 
 impl O2Formulas {
-    pub fn new(arch: &O2Arch) -> O2Formulas {
-        O2Formulas { arch: arch.clone() }
+    /// The formulas for `arch` on a `width` x `height` viewport.
+    pub fn new(arch: &O2Arch, width: u32, height: u32) -> O2Formulas {
+        let clear_words = if arch.clear_writes_memory {
+            (width as u64
+                * height as u64
+                * (arch.depth_bits_per_pixel + arch.colour_bits_per_pixel) as u64)
+                .div_ceil(arch.memory_port_bits_per_cycle as u64)
+        } else {
+            0
+        };
+        O2Formulas {
+            arch: arch.clone(),
+            clear_words,
+        }
     }
 
     /// Lookahead `L`: fragments whose reads may be in flight.
@@ -107,9 +139,14 @@ impl O2Formulas {
         let raster = fragments + (a.primitive_setup_cycles * w.primitives) as f64;
         let depth = fragments;
         let occu = w.occu_cycles as f64;
-        let write_bits = w.depth_writes * a.depth_bits_per_pixel as u64 + 32 * w.occu_words;
-        let port =
-            w.depth_reads as f64 + write_bits.div_ceil(a.memory_port_bits_per_cycle as u64) as f64;
+        let write_bits = w.depth_writes * a.depth_bits_per_pixel as u64
+            + (w.colour_writes + w.colour_reads) * a.colour_bits_per_pixel as u64
+            + 32 * w.occu_words;
+        let free_share = 1.0 - a.reserved_port_share();
+        let port = (w.depth_reads as f64
+            + write_bits.div_ceil(a.memory_port_bits_per_cycle as u64) as f64)
+            / free_share;
+        let clears = (w.clears * self.clear_words) as f64 / free_share;
         let prefetch = if w.depth_reads == 0 {
             0.0
         } else {
@@ -121,7 +158,7 @@ impl O2Formulas {
             reads * (mean_latency + 1.0) / self.lookahead()
         };
         let downstream = depth.max(occu).max(port).max(prefetch);
-        let cycles = raster.max(downstream);
+        let cycles = raster.max(downstream) + clears;
         // Fragments ahead of the end token: the downstream blocks never run faster than one
         // fragment a cycle, the rasterizer's own rate, so FIFO entries that a stall filled
         // stay filled; we take them half full on average.
@@ -131,9 +168,17 @@ impl O2Formulas {
         } else {
             0.0
         };
+        // A clear the rasterizer ran past (fewer than L fragments after it) is still being
+        // written when the end token enters: the drain waits for its words.
+        let behind_clears = if w.recent_clears > 0 {
+            (w.recent_clears * self.clear_words) as f64 / free_share
+                + w.fragments_after_clear as f64
+        } else {
+            0.0
+        };
         WindowPrediction {
             cycles,
-            drain: backlog.max(w.last_read_latency as f64),
+            drain: backlog.max(w.last_read_latency as f64).max(behind_clears),
         }
     }
 
@@ -141,7 +186,8 @@ impl O2Formulas {
     /// drains in `drain` cycles.
     pub fn latency(&self, record_words: u64, drain: f64) -> f64 {
         let words_per_cycle = (self.arch.memory_port_bits_per_cycle / 32) as u64;
-        4.0 + record_words.div_ceil(words_per_cycle) as f64 + drain
+        let port_cycles = record_words.div_ceil(words_per_cycle) as f64;
+        4.0 + (port_cycles / (1.0 - self.arch.reserved_port_share())).ceil() + drain
     }
 }
 
@@ -173,11 +219,11 @@ pub(crate) struct O2Bottleneck {
 }
 
 impl O2Bottleneck {
-    pub(super) fn new(arch: &O2Arch, width: u32) -> O2Bottleneck {
+    pub(super) fn new(arch: &O2Arch, width: u32, height: u32) -> O2Bottleneck {
         O2Bottleneck {
-            formulas: O2Formulas::new(arch),
+            formulas: O2Formulas::new(arch, width, height),
             address: DepthAddress::new(arch, width),
-            last_read: LastRead::default(),
+            last_read: LastRead::new(arch.memory_banks),
             window: WindowCounts::default(),
             open: None,
         }
@@ -196,15 +242,28 @@ impl O2Bottleneck {
     #[inline]
     pub(super) fn fragment(&mut self, fragment: Fragment, functional: &FunctionalModel) {
         let state = functional.state();
+        let lookahead = self.formulas.lookahead() as u64;
         let w = &mut self.window;
         w.fragments += 1;
+        if w.recent_clears > 0 {
+            w.fragments_after_clear += 1;
+            if w.fragments_after_clear >= lookahead {
+                w.recent_clears = 0;
+            }
+        }
         w.occu_cycles += self.open.map_or(1, |(service, _)| service);
         w.last_read_latency = 0;
+        let arch = &self.formulas.arch;
+        let occlusion_mode = self.open.is_some_and(|(_, mode)| mode);
         if !state.depth_test {
+            // Every fragment passes: it draws outside an occlusion render mode.
+            if !occlusion_mode && arch.colour_bits_per_pixel > 0 {
+                w.colour_writes += 1;
+                w.colour_reads += arch.blending as u64;
+            }
             return;
         }
         let (word, page) = self.address.locate(fragment.x, fragment.y);
-        let arch = &self.formulas.arch;
         match self.last_read.read(word, page) {
             DepthRead::SameWord => {}
             DepthRead::PageHit => {
@@ -217,12 +276,25 @@ impl O2Bottleneck {
                 w.last_read_latency = arch.page_miss_latency_cycles;
             }
         }
-        let occlusion_mode = self.open.is_some_and(|(_, mode)| mode);
-        if state.depth_mask && !occlusion_mode {
+        if !occlusion_mode {
             let stored = functional.depth_buffer().get(fragment.x, fragment.y);
             if state.depth_func.passes(fragment.z, stored) {
-                w.depth_writes += 1;
+                w.depth_writes += state.depth_mask as u64;
+                if arch.colour_bits_per_pixel > 0 {
+                    w.colour_writes += 1;
+                    w.colour_reads += arch.blending as u64;
+                }
             }
+        }
+    }
+
+    /// A clear: its words through the port (when clears write memory).
+    pub(super) fn clear(&mut self) {
+        let w = &mut self.window;
+        w.clears += 1;
+        if self.formulas.clear_words > 0 {
+            w.recent_clears += 1;
+            w.fragments_after_clear = 0;
         }
     }
 
@@ -232,7 +304,12 @@ impl O2Bottleneck {
         let (records, hits) = query_words(spec, result);
         self.window.occu_words += records + hits;
         let prediction = self.formulas.window(&self.window);
-        self.window = WindowCounts::default();
+        // The clears the rasterizer ran past stay behind it into the next window.
+        self.window = WindowCounts {
+            recent_clears: self.window.recent_clears,
+            fragments_after_clear: self.window.fragments_after_clear,
+            ..WindowCounts::default()
+        };
         WindowEnd {
             cycles: prediction.cycles,
             latency: self.formulas.latency(records, prediction.drain),
