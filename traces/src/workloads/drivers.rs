@@ -128,13 +128,7 @@ fn frustum_frame<S: EventSink, O: CommandObserver>(
         }
         match node.content {
             NodeContent::Leaf { first, count } => {
-                for &object in bvh.leaf_objects(first, count) {
-                    renderer.draw_object(
-                        object,
-                        &scene.objects[object as usize],
-                        &view.view_projection,
-                    )?;
-                }
+                renderer.draw_leaf(scene, first, count, &view.view_projection)?;
             }
             NodeContent::Inner { children } => {
                 for child in children {

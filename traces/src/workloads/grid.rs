@@ -337,9 +337,7 @@ impl GridDriver {
                 };
             match node.content {
                 NodeContent::Leaf { first, count } => {
-                    for &object in bvh.leaf_objects(first, count) {
-                        renderer.draw_object(object, &scene.objects[object as usize], vp)?;
-                    }
+                    renderer.draw_leaf(scene, first, count, vp)?;
                     self.after_draw(rect, z_upper, renderer)?;
                 }
                 NodeContent::Inner { children } => {

@@ -136,9 +136,7 @@ impl HierarchicalDriver {
             }
             match node.content {
                 NodeContent::Leaf { first, count } => {
-                    for &object in bvh.leaf_objects(first, count) {
-                        renderer.draw_object(object, &scene.objects[object as usize], vp)?;
-                    }
+                    renderer.draw_leaf(scene, first, count, vp)?;
                 }
                 NodeContent::Inner { children } => {
                     for child in children {

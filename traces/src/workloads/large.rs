@@ -389,9 +389,7 @@ impl LargeOccluderDriver {
             self.occluded_by[index as usize] = None;
             match node.content {
                 NodeContent::Leaf { first, count } => {
-                    for &object in bvh.leaf_objects(first, count) {
-                        renderer.draw_object(object, &scene.objects[object as usize], vp)?;
-                    }
+                    renderer.draw_leaf(scene, first, count, vp)?;
                 }
                 NodeContent::Inner { children } => {
                     // Front to back: the nearer child last on the stack.

@@ -254,9 +254,7 @@ impl OcclusionBufferGrid {
                 let NodeContent::Leaf { first, count } = bvh.nodes[node as usize].content else {
                     unreachable!("only leaves are drawn");
                 };
-                for &object in bvh.leaf_objects(first, count) {
-                    renderer.draw_object(object, &scene.objects[object as usize], vp)?;
-                }
+                renderer.draw_leaf(scene, first, count, vp)?;
                 let (rect, _) = places[node as usize].expect("a drawn leaf was placed");
                 self.after_draw(rect, renderer)?;
                 continue;

@@ -1,7 +1,7 @@
 //! The drivers' side of the graphics API: commands go to the golden model, its events to
 //! the caller's sink, and every command is accounted in the frame's statistics.
 
-use super::{FrameStats, FrameTiming, SceneObject};
+use super::{FrameStats, FrameTiming, SceneObject, WorkloadScene};
 use crate::event::{Event, HostWork, DEPTH_ONE};
 use crate::geometry::to_clip;
 use crate::golden::{EventSink, GoldenModel};
@@ -180,6 +180,20 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         self.stats.triangles_drawn += object.triangles.len() as u64;
         self.stats.objects_drawn.push(index);
         self.golden_time += started.elapsed();
+        Ok(())
+    }
+
+    /// Draw the objects of the hierarchy leaf `first..first + count`, in its order.
+    pub(crate) fn draw_leaf(
+        &mut self,
+        scene: &WorkloadScene,
+        first: u32,
+        count: u32,
+        view_projection: &Mat4,
+    ) -> Result<(), S::Error> {
+        for &object in scene.bvh.leaf_objects(first, count) {
+            self.draw_object(object, &scene.objects[object as usize], view_projection)?;
+        }
         Ok(())
     }
 
