@@ -117,3 +117,66 @@ fn culling_compare_takes_arch_and_set() {
         "{wrong}"
     );
 }
+
+/// `--bands`: every frame time gets a band that holds it, over corners that are the same for
+/// every driver; the scratch trace the study replays is gone afterwards.
+#[test]
+fn culling_compare_bands_hold_every_frame_time_and_leave_nothing_behind() {
+    let scratch = tempfile::tempdir().unwrap();
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
+        .args([
+            "culling",
+            "compare",
+            "--scene",
+            "city",
+            "--blocks",
+            "2",
+            "--detail",
+            "0",
+            "--frames",
+            "2",
+            "--width",
+            "80",
+            "--height",
+            "60",
+            "--quadtree-levels",
+            "0",
+            "--adaptive-threshold",
+            "0.2",
+            "--arch",
+            "o2",
+            "--bands",
+            "--json",
+            "--jobs",
+            "2",
+        ])
+        .env("TMPDIR", scratch.path())
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let mut corners = None;
+    for driver in report["drivers"].as_array().unwrap() {
+        let time = &driver["frame_time"][0];
+        let ms = time["ms_per_frame"].as_f64().unwrap();
+        let low = time["ms_per_frame_band"][0].as_f64().unwrap();
+        let high = time["ms_per_frame_band"][1].as_f64().unwrap();
+        assert!(low <= ms && ms <= high && low < high, "{driver}");
+        let at = time["ms_per_frame_at_variants"].as_array().unwrap().len();
+        assert_eq!(
+            *corners.get_or_insert(at),
+            at,
+            "the same corners for every driver"
+        );
+    }
+    assert!(
+        corners.unwrap() >= 2,
+        "a study finds at least a low and a high corner"
+    );
+    let left: Vec<_> = std::fs::read_dir(scratch.path()).unwrap().collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}

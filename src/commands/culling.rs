@@ -2,13 +2,17 @@
 //! what each draws, what its queries cost, and (when timing models are supplied) the
 //! simulated cycles per frame on each machine.
 
+use super::sensitivity::{CornerBands, Replayer};
 use super::workload_args::SceneArgs;
 use anyhow::Context;
+use occsim_sim::sensitivity::Study;
+use occsim_sweep::output::AtomicFile;
+use occsim_traces::trace::{TraceHeader, TraceWriter};
 use occsim_traces::workloads::compare::{
     compare as compare_drivers, CompareError, CompareReport, DriverReport, FrameCost,
     FrameCycleModel, ModelError,
 };
-use occsim_traces::workloads::{DriverKind, DriverOptions, GridVariant};
+use occsim_traces::workloads::{generate, DriverKind, DriverOptions, GenerateError, GridVariant};
 use occsim_traces::Event;
 use std::io::Write;
 
@@ -44,6 +48,14 @@ pub struct CompareArgs {
     /// Override one parameter of every machine (repeatable), e.g. --set engines=8.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Print a sensitivity band beside each frame time: every driver's frames also timed at
+    /// the corners a sensitivity study around each machine finds on the hierarchical
+    /// driver's walk (see `occsim sensitivity`).
+    #[arg(long)]
+    pub bands: bool,
+    /// Replays run at once while the --bands study looks for its corners.
+    #[arg(long, default_value_t = super::sensitivity::default_jobs())]
+    pub jobs: usize,
 }
 
 impl CompareArgs {
@@ -119,16 +131,27 @@ fn seed_drivers(args: &CompareArgs, list: &mut Vec<DriverOptions>) {
     list.push(DriverOptions::new(DriverKind::LargeOccluders));
 }
 
-/// `culling compare` without timing models: the cycle columns are left out.
+/// `culling compare` timed on the machines its flags name (with `--bands`, each machine with
+/// its corners).
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
-    // One step a frame a machine a driver (on a terminal).
+    anyhow::ensure!(args.jobs >= 1, "--jobs: give at least 1");
     let machines = args.machines()?;
+    let variants = match args.bands {
+        true => band_corners(&args, &machines)?,
+        false => vec![Vec::new(); machines.len()],
+    };
+    // One step a frame a machine a driver (on a terminal).
     let steps = drivers_to_compare(&args).len() * args.scene.frames as usize * machines.len();
     let bar = occsim_sweep::progress::bar(steps as u64, "frames timed");
     bar.set_message("culling compare");
     let mut models: Vec<Box<dyn FrameCycleModel>> = Vec::new();
-    for (name, arch) in machines {
-        models.push(Box::new(MachineFrames::new(name, arch, bar.clone())));
+    for ((name, arch), variants) in machines.into_iter().zip(variants) {
+        models.push(Box::new(MachineFrames::new(
+            name,
+            arch,
+            variants,
+            bar.clone(),
+        )));
     }
     let stdout = std::io::stdout();
     let outcome = run_with(&args, &mut models, &mut stdout.lock());
@@ -136,15 +159,81 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     outcome
 }
 
+/// The driver whose walk the `--bands` study replays: the paper's own (seed 001).
+const BAND_REFERENCE_DRIVER: DriverKind = DriverKind::Hierarchical;
+
+/// Per machine, the architectures at the corners of a sensitivity study around it, replayed
+/// on the reference driver's walk (written to a scratch trace that is removed afterwards).
+/// One study a machine, not one a driver: the corners are where the inferred parameters push
+/// frame time furthest, and every driver's frames are then timed there.
+fn band_corners(
+    args: &CompareArgs,
+    machines: &[(String, occsim_sim::Arch)],
+) -> anyhow::Result<Vec<Vec<occsim_sim::Arch>>> {
+    let scratch_name = format!("occsim-bands-{}.occt", std::process::id());
+    let scratch = AtomicFile::create(&std::env::temp_dir().join(scratch_name))?;
+    write_reference_walk(args, &scratch)?;
+    let replayer = Replayer {
+        trace: scratch.temporary_path(),
+        retile: None,
+        fidelity: occsim_sim::Fidelity::Cycle,
+        jobs: args.jobs,
+    };
+    machines
+        .iter()
+        .map(|(name, arch)| {
+            let corners = CornerBands::find(&replayer, arch, &[])
+                .with_context(|| format!("--bands on {name}"))?;
+            corners
+                .corners
+                .iter()
+                .map(|changes| Ok(Study::apply(arch, changes)?))
+                .collect()
+        })
+        .collect()
+}
+
+/// The reference driver's walk of the compared scene, as a trace in `file`.
+fn write_reference_walk(args: &CompareArgs, file: &AtomicFile) -> anyhow::Result<()> {
+    let scene = args.scene.load_scene()?;
+    let walk = args.scene.walk();
+    let driver = DriverOptions::new(BAND_REFERENCE_DRIVER);
+    let header = TraceHeader::new(walk.width, walk.height)
+        .with_scene(format!(
+            "{} driver {}",
+            args.scene.describe(&scene),
+            driver.label()
+        ))
+        .with_raster(walk.raster);
+    let cannot = || {
+        format!(
+            "{}: cannot write the --bands walk",
+            file.temporary_path().display()
+        )
+    };
+    let mut out = std::io::BufWriter::new(file.handle()?);
+    let mut writer = TraceWriter::new(&mut out, &header).with_context(cannot)?;
+    generate(&scene, &driver, &walk, &mut writer).map_err(|e| match e {
+        GenerateError::Workload(e) => super::workload_args::flagged(e),
+        GenerateError::Sink(e) => anyhow::Error::new(e).context(cannot()),
+    })?;
+    writer.finish_seekable().with_context(cannot)?;
+    out.flush().with_context(cannot)?;
+    Ok(())
+}
+
 /// The machines `culling compare` times every frame on by default.
 const CYCLE_MACHINES: [&str; 2] = ["o2", "ir4"];
 
 /// A sim machine as a per-frame timing model: each frame replays on a fresh machine (frames
-/// are self-contained: each begins with a clear and the whole render state).
+/// are self-contained: each begins with a clear and the whole render state), and on a fresh
+/// machine for each of its variants (the corners of `--bands`).
 struct MachineFrames {
     name: String,
     arch: occsim_sim::Arch,
-    machine: Option<occsim_sim::MachineModel>,
+    variants: Vec<occsim_sim::Arch>,
+    /// During a frame: the machine, then one a variant.
+    machines: Vec<occsim_sim::MachineModel>,
     /// Moves a step each frame timed.
     progress: occsim_sweep::progress::ProgressBar,
 }
@@ -153,12 +242,14 @@ impl MachineFrames {
     fn new(
         name: String,
         arch: occsim_sim::Arch,
+        variants: Vec<occsim_sim::Arch>,
         progress: occsim_sweep::progress::ProgressBar,
     ) -> MachineFrames {
         MachineFrames {
             name,
             arch,
-            machine: None,
+            variants,
+            machines: Vec::new(),
             progress,
         }
     }
@@ -202,29 +293,33 @@ impl FrameCycleModel for MachineFrames {
     }
 
     fn begin_frame(&mut self, width: u32, height: u32) -> Result<(), ModelError> {
-        let machine = occsim_sim::MachineModel::new(&self.arch, width, height)
+        self.machines = std::iter::once(&self.arch)
+            .chain(&self.variants)
+            .map(|arch| occsim_sim::MachineModel::new(arch, width, height))
+            .collect::<Result<_, _>>()
             .map_err(|e| self.failed(Some(e)))?;
-        self.machine = Some(machine);
         Ok(())
     }
 
     fn event(&mut self, event: &Event) -> Result<(), ModelError> {
-        if let Some(machine) = &mut self.machine {
-            let name = &self.name;
-            machine.event(event).map_err(|e| -> ModelError {
-                Box::new(FrameError {
-                    machine: name.clone(),
-                    source: Some(e),
-                })
-            })?;
+        for machine in &mut self.machines {
+            if let Err(e) = machine.event(event) {
+                return Err(self.failed(Some(e)));
+            }
         }
         Ok(())
     }
 
     fn end_frame(&mut self) -> Result<FrameCost, ModelError> {
-        let machine = self.machine.take().ok_or_else(|| self.failed(None))?;
-        let report = machine.finish().map_err(|e| self.failed(Some(e)))?;
+        if self.machines.is_empty() {
+            return Err(self.failed(None));
+        }
+        let mut reports = Vec::with_capacity(self.machines.len());
+        for machine in std::mem::take(&mut self.machines) {
+            reports.push(machine.finish().map_err(|e| self.failed(Some(e)))?);
+        }
         self.progress.inc(1);
+        let report = &reports[0];
         // A driver's frame is one closed-loop frame (it ends in `swap`); its split sums the
         // report's frames should there be more.
         let sum = |f: &dyn Fn(&occsim_sim::report::FrameReport) -> u64| {
@@ -237,6 +332,10 @@ impl FrameCycleModel for MachineFrames {
             geometry_busy: sum(&|f| f.geometry_busy),
             pixel_busy: sum(&|f| f.pixel_busy),
             waiting: sum(&|f| f.waiting),
+            variant_seconds: reports[1..]
+                .iter()
+                .map(|r| r.summary.simulated_seconds)
+                .collect(),
         })
     }
 }
@@ -336,13 +435,20 @@ fn print_table(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<(
          driver's traversal and in the golden model (rasterizing and answering the queries)"
     )?;
     print_frame_time(report, out)?;
+    print_fastest(report, &machines, out)?;
     print_accuracy(report, &machines, out)
 }
 
 /// Each driver's frame time on each machine: frames per second, and where the frame's time
-/// went (the host busy and waiting on answers, the geometry stage and rasterizer busy).
+/// went (the host busy and waiting on answers, the geometry stage and rasterizer busy); with
+/// `--bands`, the band of the frame time.
 fn print_frame_time(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<()> {
-    writeln!(
+    let banded = report
+        .drivers
+        .iter()
+        .flat_map(|d| &d.frame_time)
+        .any(|m| m.ms_per_frame_band.is_some());
+    write!(
         out,
         "\n{:<24} {:<8} {:>9} {:>10} {:>12} {:>12} {:>12} {:>12}",
         "frame time",
@@ -354,9 +460,10 @@ fn print_frame_time(report: &CompareReport, out: &mut dyn Write) -> std::io::Res
         "geometry",
         "pixel busy"
     )?;
+    writeln!(out, "{}", if banded { "  ms/frame band" } else { "" })?;
     for d in &report.drivers {
         for m in &d.frame_time {
-            writeln!(
+            write!(
                 out,
                 "{:<24} {:<8} {:>9.2} {:>10.2} {:>12.0} {:>12.0} {:>12.0} {:>12.0}",
                 d.driver,
@@ -368,14 +475,78 @@ fn print_frame_time(report: &CompareReport, out: &mut dyn Write) -> std::io::Res
                 m.geometry_busy_cycles,
                 m.pixel_busy_cycles
             )?;
+            match m.ms_per_frame_band {
+                Some((low, high)) => writeln!(out, "  {low:.2}..{high:.2}")?,
+                None => writeln!(out)?,
+            }
         }
     }
     writeln!(
         out,
         "  on the simulated machine, per frame: host busy (traversal, driver, result reads), \
          waiting (the host blocked on answers), geometry (the geometry stage busy), pixel busy \
-         (the rasterizer busy), in the machine's pipeline cycles"
+         (the rasterizer busy), in the machine's pipeline cycles{}",
+        if banded {
+            "; ms/frame band: the frame time at the corners of a sensitivity study around the \
+             machine (found on the hierarchical driver's walk), lowest..highest"
+        } else {
+            ""
+        }
     )?;
+    Ok(())
+}
+
+/// Per machine, the conservative driver with the shortest frame; with `--bands`, whether it
+/// stays the fastest at every corner (the same architectures time every driver, so the
+/// drivers compare corner by corner).
+fn print_fastest(
+    report: &CompareReport,
+    machines: &[String],
+    out: &mut dyn Write,
+) -> std::io::Result<()> {
+    let conservative: Vec<&DriverReport> =
+        report.drivers.iter().filter(|d| d.conservative).collect();
+    for (index, machine) in machines.iter().enumerate() {
+        let ms = |d: &DriverReport, variant: Option<usize>| {
+            let time = &d.frame_time[index];
+            variant.map_or(time.ms_per_frame, |v| time.ms_per_frame_at_variants[v])
+        };
+        let fastest = |variant| {
+            conservative
+                .iter()
+                .min_by(|a, b| ms(a, variant).total_cmp(&ms(b, variant)))
+                .map(|d| d.driver.as_str())
+        };
+        let Some(winner) = fastest(None) else {
+            return Ok(());
+        };
+        let winner_report = conservative.iter().find(|d| d.driver == winner);
+        let winner_ms = winner_report.map_or(0.0, |d| ms(d, None));
+        write!(
+            out,
+            "fastest conservative driver on {machine}: {winner} ({winner_ms:.2} ms/frame)"
+        )?;
+        let variants =
+            winner_report.map_or(0, |d| d.frame_time[index].ms_per_frame_at_variants.len());
+        if variants > 0 {
+            let others: Vec<&str> = (0..variants)
+                .filter_map(|v| fastest(Some(v)))
+                .filter(|&d| d != winner)
+                .collect();
+            write!(
+                out,
+                ", the fastest at {} of {variants} corners",
+                variants - others.len()
+            )?;
+            if !others.is_empty() {
+                let mut names = others.clone();
+                names.sort_unstable();
+                names.dedup();
+                write!(out, " ({} at the others)", names.join(", "))?;
+            }
+        }
+        writeln!(out)?;
+    }
     Ok(())
 }
 
@@ -541,7 +712,9 @@ mod tests {
                 "{}",
                 d.driver
             );
-            if !d.driver.contains("/t") && !d.driver.contains("/o") {
+            let approximate = d.driver.contains("/t") || d.driver.starts_with("hom/o");
+            assert_eq!(d.conservative, !approximate, "{}", d.driver);
+            if d.conservative {
                 assert_eq!(d.pixels_lost_per_frame, 0.0, "{} is conservative", d.driver);
             }
         }
@@ -558,6 +731,37 @@ mod tests {
         assert!(text.contains("frames/s"), "{text}");
         assert!(text.contains("cycles saved frag"), "{text}");
         assert!(text.contains("approximate culling against hom"), "{text}");
+    }
+
+    /// A machine's variants are timed on the same frames: a variant equal to the machine
+    /// gives its frame time exactly, a slower host a longer one, and the band spans both.
+    #[test]
+    fn variants_time_the_same_frames_as_the_machine() {
+        let o2 = crate::commands::arch::resolve("o2", None, &[]).unwrap();
+        let mut slow_host = o2.clone();
+        // The default is 80 host cycles a vertex (I 40..200); every driver draws vertices.
+        slow_host
+            .set_value("geometry_host_cycles_per_vertex", "200")
+            .unwrap();
+        let machine = MachineFrames::new(
+            "o2".into(),
+            o2.clone(),
+            vec![o2, slow_host],
+            occsim_sweep::progress::ProgressBar::hidden(),
+        );
+        let mut models: Vec<Box<dyn FrameCycleModel>> = vec![Box::new(machine)];
+        let report = compare(
+            &args(&["--quadtree-levels", "0", "--adaptive-threshold", "0.2"]),
+            &mut models,
+        )
+        .unwrap();
+        for d in &report.drivers {
+            let time = &d.frame_time[0];
+            let at = &time.ms_per_frame_at_variants;
+            assert_eq!(at[0], time.ms_per_frame, "{}", d.driver);
+            assert!(at[1] > time.ms_per_frame, "{}: {at:?}", d.driver);
+            assert_eq!(time.ms_per_frame_band, Some((at[0], at[1])), "{}", d.driver);
+        }
     }
 
     #[test]

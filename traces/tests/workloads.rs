@@ -50,6 +50,7 @@ fn conservative_drivers() -> Vec<DriverOptions> {
         occlusion_buffer.grid_variant = GridVariant::OcclusionBuffer;
         all.push(occlusion_buffer);
     }
+    assert!(all.iter().all(DriverOptions::is_conservative));
     all
 }
 

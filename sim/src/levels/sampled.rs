@@ -30,8 +30,12 @@
 //!   host and geometry stage release it) and `r_c` the ratio of measured cycles to work over the sampled
 //!   (non-final) windows of its class `c` = (its query's mode, `s` = OccU cycles per fragment
 //!   of its query), or over all sampled windows when none is of its class: the cycle model
-//!   calibrates the formulas where they are off. Its query's latency is the mean over
-//!   sampled queries of its class, else of its mode, else of all.
+//!   calibrates the formulas where they are off. Its query's latency comes from the
+//!   formulas' latency for it by a regression on the sampled queries of its class, else of
+//!   its mode, else of all, with one slope fitted within the classes
+//!   ([`LatencySample::extrapolate`], [`common_slope`]): a query waiting behind a
+//!   clear keeps the wait the formulas see, which a mean over a few sampled queries would
+//!   lose, and where the formulas' variation from query to query is noise, the mean stands.
 //! - Bias: a machine started at a warm-up window misses whatever backlog the pipe carried
 //!   into that window; one window of warm-up absorbs it unless the warm-up window is shorter
 //!   than the FIFOs. `sampled:1` runs one machine over the whole stream, so it equals `cycle`
@@ -87,6 +91,79 @@ struct Closed {
     frame_ended: bool,
 }
 
+/// Sampled queries' latencies, measured (m) beside the formulas' prediction (p) for each:
+/// the sums a regression estimator needs.
+#[derive(Clone, Copy, Debug, Default)]
+struct LatencySample {
+    count: f64,
+    m: f64,
+    p: f64,
+    pp: f64,
+    pm: f64,
+}
+
+impl LatencySample {
+    fn of(measured: u64, predicted: u64) -> LatencySample {
+        let (m, p) = (measured as f64, predicted as f64);
+        LatencySample {
+            count: 1.0,
+            m,
+            p,
+            pp: p * p,
+            pm: p * m,
+        }
+    }
+
+    fn add(&mut self, other: LatencySample) {
+        self.count += other.count;
+        self.m += other.m;
+        self.p += other.p;
+        self.pp += other.pp;
+        self.pm += other.pm;
+    }
+
+    /// Σ (p - mean p)² and Σ (p - mean p)(m - mean m) over these samples.
+    fn spread(&self) -> (f64, f64) {
+        if self.count == 0.0 {
+            return (0.0, 0.0);
+        }
+        let (mean_m, mean_p) = (self.m / self.count, self.p / self.count);
+        (
+            self.pp - self.count * mean_p * mean_p,
+            self.pm - self.count * mean_p * mean_m,
+        )
+    }
+
+    /// A query's latency from the formulas' prediction for it, by survey sampling's
+    /// regression estimator: these samples' mean, moved by `slope` times how far the
+    /// prediction lies from their mean prediction. Never below zero; None without samples.
+    fn extrapolate(&self, predicted: u64, slope: f64) -> Option<f64> {
+        (self.count > 0.0).then(|| {
+            let (mean_m, mean_p) = (self.m / self.count, self.p / self.count);
+            (mean_m + slope * (predicted as f64 - mean_p)).max(0.0)
+        })
+    }
+}
+
+/// How far the formulas' latency tracks the measured one within a class, pooled over the
+/// classes (the least-squares slope of measured on predicted with an intercept a class,
+/// held to 0..=1): near 1 where the formulas see what makes one query wait longer than
+/// another (a clear ahead of it), near 0 where their variation from query to query is noise
+/// (the IR's merge-dominated latency). Between classes the formulas' differences are not
+/// evidence of it: each class has its own mean. Where no class's sampled predictions vary,
+/// the samples cannot tell a slope, and the formulas' own (1) is taken.
+fn common_slope<'a>(classes: impl Iterator<Item = &'a LatencySample>) -> f64 {
+    let (variance, covariance) = classes
+        .map(LatencySample::spread)
+        .fold((0.0, 0.0), |(v, c), (dv, dc)| (v + dv, c + dc));
+    // Sums of squares of integers below 2^53: a spread under one is rounding, not spread.
+    if variance >= 1.0 {
+        (covariance / variance).clamp(0.0, 1.0)
+    } else {
+        1.0
+    }
+}
+
 /// One cycle-model machine over consecutive simulated windows.
 struct Run {
     machine: MachineModel,
@@ -123,8 +200,8 @@ pub struct SampledModel {
     sampled: u64,
     /// Σ measured cycles and Σ work of the sampled, non-final windows, per class.
     measured_by_class: BTreeMap<Class, (u64, u64)>,
-    /// Per class: Σ latency and count of its sampled queries.
-    latency_by_class: BTreeMap<Class, (u64, u64)>,
+    /// Per class: the latency its sampled queries measured and the formulas predicted.
+    latency_by_class: BTreeMap<Class, LatencySample>,
     /// Σ cost of the sampled windows (final included).
     sampled_cycles: u64,
     /// Windows to extrapolate.
@@ -399,9 +476,13 @@ impl SampledModel {
                 }
                 if let (Some(q), Some((index, _))) = (query, window.query) {
                     self.latencies[index] = Some(q.latency_cycles);
-                    let entry = self.latency_by_class.entry(window.class).or_default();
-                    entry.0 += q.latency_cycles;
-                    entry.1 += 1;
+                    self.latency_by_class
+                        .entry(window.class)
+                        .or_default()
+                        .add(LatencySample::of(
+                            q.latency_cycles,
+                            self.predicted_latencies[index],
+                        ));
                 }
             } else {
                 self.extrapolated.push(window);
@@ -430,16 +511,22 @@ impl SampledModel {
         let modes: Vec<QueryMode> = (0..self.latencies.len())
             .map(|index| self.core.query_mode(index))
             .collect();
-        let mean_of_mode = |mode: Option<QueryMode>| {
-            let pick: Vec<u64> = self
-                .latencies
-                .iter()
-                .zip(&modes)
-                .filter(|(_, m)| mode.is_none_or(|mode| **m == mode))
-                .filter_map(|(l, _)| *l)
-                .collect();
-            (!pick.is_empty()).then(|| pick.iter().sum::<u64>() as f64 / pick.len() as f64)
+        // The sampled queries of one mode (or of all), pooled.
+        let sample_of_mode = |mode: Option<QueryMode>| {
+            let mut pooled = LatencySample::default();
+            for (index, latency) in self.latencies.iter().enumerate() {
+                if let (Some(measured), true) =
+                    (latency, mode.is_none_or(|mode| modes[index] == mode))
+                {
+                    pooled.add(LatencySample::of(
+                        *measured,
+                        self.predicted_latencies[index],
+                    ));
+                }
+            }
+            pooled
         };
+        let slope = common_slope(self.latency_by_class.values());
         let mut total = self.sampled_cycles as f64;
         let mut filled = self.latencies.clone();
         // Each frame's cycles: its windows' costs (the final window's drain in the last).
@@ -452,13 +539,14 @@ impl SampledModel {
             total += cost;
             frame_cycles[window.frame as usize] += cost;
             if let Some((index, mode)) = window.query {
-                let latency = match self.latency_by_class.get(&window.class) {
-                    Some(&(sum, count)) if count > 0 => Some(sum as f64 / count as f64),
-                    _ => None,
-                }
-                .or_else(|| mean_of_mode(Some(mode)))
-                .or_else(|| mean_of_mode(None))
-                .unwrap_or(self.predicted_latencies[index] as f64);
+                let predicted = self.predicted_latencies[index];
+                let latency = self
+                    .latency_by_class
+                    .get(&window.class)
+                    .and_then(|sample| sample.extrapolate(predicted, slope))
+                    .or_else(|| sample_of_mode(Some(mode)).extrapolate(predicted, slope))
+                    .or_else(|| sample_of_mode(None).extrapolate(predicted, slope))
+                    .unwrap_or(predicted as f64);
                 filled[index] = Some(latency.round() as u64);
                 // The final window's drain: its query's latency.
                 if window.last {
@@ -488,5 +576,67 @@ impl SampledModel {
             result.set_frames(frame_cycles, self.arch.clock_mhz()?);
         }
         Ok(result)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn samples(pairs: &[(u64, u64)]) -> LatencySample {
+        let mut sample = LatencySample::default();
+        for &(measured, predicted) in pairs {
+            sample.add(LatencySample::of(measured, predicted));
+        }
+        sample
+    }
+
+    #[test]
+    fn without_spread_in_the_predictions_the_formulas_slope_is_kept() {
+        // Three samples predicted 18 each, measured 19, 21, 20: mean 20, mean prediction
+        // 18. A query predicted 1,344 gets 20 + 1 * (1344 - 18) = 1346.
+        let class = samples(&[(19, 18), (21, 18), (20, 18)]);
+        let slope = common_slope([class].iter());
+        assert_eq!(slope, 1.0);
+        assert_eq!(class.extrapolate(1344, slope), Some(1346.0));
+    }
+
+    #[test]
+    fn predictions_that_do_not_track_the_measurements_leave_the_mean() {
+        // Predicted 150 and 200, both measured 215: covariance 0, slope 0, so any
+        // prediction gets the mean, 215.
+        let class = samples(&[(215, 150), (215, 200)]);
+        let slope = common_slope([class].iter());
+        assert_eq!(slope, 0.0);
+        assert_eq!(class.extrapolate(6797, slope), Some(215.0));
+    }
+
+    #[test]
+    fn the_slope_is_fitted_within_classes_not_between_them() {
+        // Class a: predicted 100, 110 measured 200, 205: Σ(p - p̄)² = 2 * 5² = 50,
+        // Σ(p - p̄)(m - m̄) = (-5)(-2.5) + (5)(2.5) = 25. Class b: predicted 400, 420
+        // measured 450, 450: Σ(p - p̄)² = 200, covariance 0. Pooled: 25 / 250 = 0.1, though
+        // between the classes prediction and measurement rise together.
+        let a = samples(&[(200, 100), (205, 110)]);
+        let b = samples(&[(450, 400), (450, 420)]);
+        let slope = common_slope([a, b].iter());
+        assert!((slope - 0.1).abs() < 1e-12, "{slope}");
+        // Class b's mean 450 and mean prediction 410: a query predicted 510 gets
+        // 450 + 0.1 * 100 = 460.
+        let latency = b.extrapolate(510, slope).unwrap();
+        assert!((latency - 460.0).abs() < 1e-9, "{latency}");
+    }
+
+    #[test]
+    fn a_slope_outside_zero_to_one_is_held_and_a_latency_never_goes_below_zero() {
+        // Predicted 10, 20 measured 0, 100: slope 10, held to 1. Mean 50, mean prediction
+        // 15: a query predicted 0 gets 50 - 15 = 35; with samples measured 0 and 10 (mean 5)
+        // a prediction of 0 would be 5 - 15 < 0, so 0.
+        let steep = samples(&[(0, 10), (100, 20)]);
+        assert_eq!(common_slope([steep].iter()), 1.0);
+        assert_eq!(steep.extrapolate(0, 1.0), Some(35.0));
+        let low = samples(&[(0, 10), (10, 20)]);
+        assert_eq!(low.extrapolate(0, 1.0), Some(0.0));
+        assert_eq!(LatencySample::default().extrapolate(5, 1.0), None);
     }
 }

@@ -42,7 +42,7 @@ pub trait FrameCycleModel {
 
 /// What one frame cost on a machine: its cycles and seconds, and where the host's time went
 /// (busy, waiting on answers) beside the geometry stage's and the rasterizer's busy cycles.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct FrameCost {
     pub cycles: u64,
     pub seconds: f64,
@@ -50,6 +50,9 @@ pub struct FrameCost {
     pub geometry_busy: u64,
     pub pixel_busy: u64,
     pub waiting: u64,
+    /// The frame's seconds on each of the machine's variants a sensitivity band is taken
+    /// over (the corners of a study), in the same order every frame; empty without bands.
+    pub variant_seconds: Vec<f64>,
 }
 
 /// A driver's frames on one machine, as means per frame.
@@ -62,6 +65,14 @@ pub struct MachineFrameTime {
     pub geometry_busy_cycles: f64,
     pub pixel_busy_cycles: f64,
     pub waiting_cycles: f64,
+    /// With variants: the band of `ms_per_frame` over the machine and its variants,
+    /// `(low, high)`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ms_per_frame_band: Option<(f64, f64)>,
+    /// The mean frame time on each of the machine's variants, in their order (the same
+    /// architectures for every driver, so drivers compare variant by variant).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub ms_per_frame_at_variants: Vec<f64>,
 }
 
 impl MachineFrameTime {
@@ -81,8 +92,39 @@ impl MachineFrameTime {
             geometry_busy_cycles: mean(&|f| f.geometry_busy),
             pixel_busy_cycles: mean(&|f| f.pixel_busy),
             waiting_cycles: mean(&|f| f.waiting),
+            ms_per_frame_band: None,
+            ms_per_frame_at_variants: mean_ms_at_variants(frames),
         }
+        .with_band()
     }
+
+    /// The band of the mean frame time over the machine and each of its variants (each
+    /// variant's mean over the frames, not each frame's extremes).
+    fn with_band(mut self) -> MachineFrameTime {
+        if !self.ms_per_frame_at_variants.is_empty() {
+            let mut band = (self.ms_per_frame, self.ms_per_frame);
+            for &ms in &self.ms_per_frame_at_variants {
+                band = (band.0.min(ms), band.1.max(ms));
+            }
+            self.ms_per_frame_band = Some(band);
+        }
+        self
+    }
+}
+
+/// Each variant's mean frame time in ms over `frames` (every frame names the same variants).
+fn mean_ms_at_variants(frames: &[FrameCost]) -> Vec<f64> {
+    let variants = frames.first().map_or(0, |f| f.variant_seconds.len());
+    let n = frames.len() as f64;
+    (0..variants)
+        .map(|variant| {
+            let seconds: f64 = frames
+                .iter()
+                .map(|f| f.variant_seconds.get(variant).copied().unwrap_or(f.seconds))
+                .sum();
+            seconds * 1e3 / n
+        })
+        .collect()
 }
 
 /// Splits the event stream into frames at `Clear` and feeds the timing models.
@@ -133,6 +175,8 @@ impl EventSink for FrameSplitter<'_> {
 #[derive(Clone, Debug, Serialize)]
 pub struct DriverReport {
     pub driver: String,
+    /// Whether the driver draws every object with a visible pixel by construction.
+    pub conservative: bool,
     /// Share of the scene's triangles drawn, over all frames.
     pub triangles_drawn_share: f64,
     pub triangles_per_frame: f64,
@@ -272,6 +316,7 @@ fn driver_report(
     let triangles = mean(&|f| f.triangles_drawn);
     DriverReport {
         driver: options.label(),
+        conservative: options.is_conservative(),
         triangles_drawn_share: triangles / scene.triangle_count().max(1) as f64,
         triangles_per_frame: triangles,
         objects_per_frame: mean(&|f| f.objects_drawn.len() as u64),
@@ -285,5 +330,47 @@ fn driver_report(
         frame_time: Vec::new(),
         traversal_ms_per_frame: ms(&|t| t.traversal()),
         golden_model_ms_per_frame: ms(&|t| t.golden_model),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(seconds: f64, variant_seconds: Vec<f64>) -> FrameCost {
+        FrameCost {
+            seconds,
+            variant_seconds,
+            ..FrameCost::default()
+        }
+    }
+
+    #[test]
+    fn the_band_is_over_each_variants_mean_not_each_frames_extremes() {
+        // Two frames, two variants. Means in ms: machine (10 + 30) / 2 = 20; variant 0
+        // (5 + 45) / 2 = 25; variant 1 (20 + 10) / 2 = 15. The band is 15..25, though single
+        // frames reach 5 and 45.
+        let frames = [
+            frame(0.010, vec![0.005, 0.020]),
+            frame(0.030, vec![0.045, 0.010]),
+        ];
+        let time = MachineFrameTime::of("m".into(), &frames);
+        let (low, high) = time.ms_per_frame_band.unwrap();
+        assert!(
+            (low - 15.0).abs() < 1e-9 && (high - 25.0).abs() < 1e-9,
+            "{low}..{high}"
+        );
+        let at = &time.ms_per_frame_at_variants;
+        assert!(
+            (at[0] - 25.0).abs() < 1e-9 && (at[1] - 15.0).abs() < 1e-9,
+            "{at:?}"
+        );
+        assert!((time.ms_per_frame - 20.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn without_variants_there_is_no_band() {
+        let time = MachineFrameTime::of("m".into(), &[frame(0.010, Vec::new())]);
+        assert_eq!(time.ms_per_frame_band, None);
     }
 }

@@ -488,6 +488,15 @@ impl DriverOptions {
         matches!(self.kind, DriverKind::LazyGrid | DriverKind::BusyGrid)
     }
 
+    /// Whether the driver draws every object with a visible pixel (tests/workloads.rs
+    /// checks the ones that say so): all but an adaptive threshold, a query delay and
+    /// hom's approximate culling (an opacity threshold below 1).
+    pub fn is_conservative(&self) -> bool {
+        self.adaptive_threshold.is_none()
+            && self.query_delay_frames == 0
+            && self.opacity_threshold >= 1.0
+    }
+
     pub fn validate(&self) -> Result<(), WorkloadError> {
         let fail = |option, detail: String| Err(WorkloadError::Option { option, detail });
         let hierarchical = self.kind == DriverKind::Hierarchical;
