@@ -227,3 +227,146 @@ fn the_report_says_when_engines_outnumber_the_tiles() {
         assert!(!five.contains("note: "), "{level}: {five}");
     }
 }
+
+/// `--retile` and `--engines` as `replay` takes them: the same cycles as `replay` with the
+/// same flags, and the table names the retiling.
+#[test]
+fn fidelity_takes_retile_and_engines_as_replay_does() {
+    let (_dir, trace) = hardcases_trace("retile");
+    let flags = ["--retile", "4x4", "--engines", "2"];
+    let mut args = vec!["fidelity", trace.as_str(), "--no-rtl", "--json"];
+    args.extend(flags);
+    let rows: serde_json::Value = serde_json::from_str(&stdout_of(&args)).unwrap();
+    let mut args = vec!["replay", trace.as_str(), "--json"];
+    args.extend(flags);
+    let replay: serde_json::Value = serde_json::from_str(&stdout_of(&args)).unwrap();
+    assert_eq!(rows[3]["level"], "cycle");
+    assert_eq!(rows[3]["total_cycles"], replay["summary"]["cycles"]);
+    let plain: serde_json::Value =
+        serde_json::from_str(&stdout_of(&["fidelity", &trace, "--no-rtl", "--json"])).unwrap();
+    assert_ne!(rows[3]["total_cycles"], plain[3]["total_cycles"]);
+    let text = stdout_of(&["fidelity", &trace, "--no-rtl", "--retile", "4x4"]);
+    assert!(
+        text.starts_with(&format!("{trace} (retiled 4x4) on o2")),
+        "{text}"
+    );
+    // Every timed level has a distribution of per-query errors, the reference's all 0.
+    assert_eq!(rows[3]["query_latency_error"]["max"], 0.0);
+    assert!(rows[1]["query_latency_error"]["p95"].as_f64().is_some());
+    assert!(
+        rows[0]["query_latency_error"].is_null(),
+        "functional has no time"
+    );
+}
+
+/// `--corpus` makes every trace of the recipes it is given, runs the ladder on each machine
+/// and engine count, and reports per class and level; its scratch traces are removed.
+#[test]
+fn fidelity_corpus_reports_every_class_and_level() {
+    let dir = support::cli::scratch_dir("corpus");
+    let recipes = dir.join("corpus.toml");
+    std::fs::write(
+        &recipes,
+        r#"
+machines = ["o2", "ir1"]
+engines = [1, 4]
+
+[[trace]]
+name = "hc"
+class = "hard"
+scene = "hardcases"
+
+[[trace]]
+name = "rand"
+class = "random"
+scene = "random"
+small = { width = 64, height = 48 }
+
+[[trace]]
+name = "rand-big"
+class = "random"
+scene = "random"
+small = { width = 96, height = 64 }
+
+[[trace]]
+name = "walk"
+class = "walk"
+walk = "--scene city --blocks 2 --detail 0 --driver hierarchical --quadtree-levels 1"
+small = { width = 64, height = 48, frames = 1 }
+"#,
+    )
+    .unwrap();
+    let scratch = support::cli::scratch_dir("corpus-tmp");
+    let output = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
+        .args(["fidelity", "--corpus", "--corpus-file"])
+        .arg(&recipes)
+        .args(["--scale", "small", "--no-rtl", "--json", "--machines", "o2"])
+        .env("TMPDIR", &*scratch)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let rows: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let rows = rows.as_array().unwrap();
+    // 3 classes x 4 levels; --machines o2 leaves 2 engine counts: a random row holds
+    // 2 traces x 2 engine counts.
+    assert_eq!(rows.len(), 12, "{rows:?}");
+    let classes: Vec<&str> = rows.iter().map(|r| r["class"].as_str().unwrap()).collect();
+    assert_eq!(classes[0], "hard");
+    assert_eq!(classes[4], "random");
+    assert_eq!(classes[8], "walk");
+    assert_eq!(rows[4]["runs"], 4);
+    for row in rows {
+        assert_eq!(row["results_exact"], true, "{row}");
+        if row["level"] == "cycle" {
+            assert_eq!(row["cycles_error"], 0.0);
+            assert_eq!(row["speed_vs_cycle"], 1.0);
+        }
+    }
+    let left: Vec<_> = std::fs::read_dir(&*scratch).unwrap().collect();
+    assert!(left.is_empty(), "scratch traces left: {left:?}");
+}
+
+/// A recipe file that says nothing runnable fails naming the file and the recipe.
+#[test]
+fn a_bad_corpus_file_is_refused_with_its_name() {
+    let dir = support::cli::scratch_dir("bad-corpus");
+    let recipes = dir.join("bad.toml");
+    std::fs::write(
+        &recipes,
+        "machines = [\"o2\"]\nengines = [1]\n[[trace]]\nname = \"x\"\nclass = \"c\"\n",
+    )
+    .unwrap();
+    let recipes = recipes.to_str().unwrap();
+    let error =
+        support::cli::stderr_of_failure(&["fidelity", "--corpus", "--corpus-file", recipes]);
+    assert!(
+        error.contains(recipes)
+            && error.contains("trace `x` needs exactly one of `scene` and `walk`"),
+        "{error}"
+    );
+    std::fs::write(
+        dir.join("typo.toml"),
+        "machines = [\"o2\"]\nengine = [1]\ntrace = []\n",
+    )
+    .unwrap();
+    let typo = dir.join("typo.toml");
+    let error = support::cli::stderr_of_failure(&[
+        "fidelity",
+        "--corpus",
+        "--corpus-file",
+        typo.to_str().unwrap(),
+    ]);
+    assert!(
+        error.contains("typo.toml") && error.contains("engine"),
+        "{error}"
+    );
+    let neither = support::cli::stderr_of_failure(&["fidelity"]);
+    assert!(
+        neither.contains("--corpus") || neither.contains("TRACE"),
+        "{neither}"
+    );
+}

@@ -14,6 +14,7 @@ use occsim_sim::levels::{Fidelity, LevelResult};
 use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::Arch;
 use occsim_sweep::plot::{LineChart, Scale, Series};
+use occsim_traces::retile::TileGrid;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -33,10 +34,20 @@ pub struct FidelityArg {
 
 #[derive(clap::Args)]
 pub struct FidelityArgs {
-    /// The fragment trace (.occt).
-    pub trace: PathBuf,
+    /// The fragment trace (.occt); leave it out with --corpus.
+    #[arg(required_unless_present = "corpus")]
+    pub trace: Option<PathBuf>,
     #[command(flatten)]
     pub arch: ArchSelection,
+    /// Occlusion engines (shorthand for --set engines=E).
+    #[arg(long, value_name = "E")]
+    pub engines: Option<u64>,
+    /// Replace every brief query's tiles by a G by H grid over the viewport (the golden
+    /// results are recomputed), e.g. --retile 8x8.
+    #[arg(long, value_name = "GxH")]
+    pub retile: Option<TileGrid>,
+    #[command(flatten)]
+    pub corpus: super::corpus::CorpusArgs,
     /// K of the sampled level: the cycle model runs on every K-th query window.
     #[arg(long, value_name = "K", default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
     pub sample_every: u32,
@@ -55,23 +66,69 @@ pub struct FidelityArgs {
 }
 
 /// One row of the table.
-#[derive(Serialize)]
-struct LevelRow {
-    level: String,
-    wall_seconds: Option<f64>,
-    fragments_per_second: Option<f64>,
-    total_cycles: Option<u64>,
-    latency_mean_cycles: Option<f64>,
-    latency_p95_cycles: Option<u64>,
-    /// |predicted - reference| / reference, of the total cycles and the mean latency.
-    cycles_error: Option<f64>,
-    latency_error: Option<f64>,
+#[derive(Clone, Serialize)]
+pub struct LevelRow {
+    pub level: String,
+    pub wall_seconds: Option<f64>,
+    pub fragments_per_second: Option<f64>,
+    pub total_cycles: Option<u64>,
+    pub latency_mean_cycles: Option<f64>,
+    pub latency_p95_cycles: Option<u64>,
+    /// |predicted - reference| / reference, of the total cycles, the mean latency and the
+    /// p95 latency.
+    pub cycles_error: Option<f64>,
+    pub latency_error: Option<f64>,
+    pub latency_p95_error: Option<f64>,
+    /// Every query's own latency error, |predicted - reference| / reference (a reference
+    /// of 0 counts as 1): the distribution's p50, p95 and max.
+    pub query_latency_error: Option<ErrorDistribution>,
     /// The mean frame time of a closed-loop trace, and its error against the reference's.
-    frame_mean_cycles: Option<f64>,
-    frame_error: Option<f64>,
+    pub frame_mean_cycles: Option<f64>,
+    pub frame_error: Option<f64>,
     /// Every query's value equals the reference level's.
-    results_exact: Option<bool>,
-    note: Option<String>,
+    pub results_exact: Option<bool>,
+    pub note: Option<String>,
+    /// Every query's latency error, in order (for the corpus's pooled distribution).
+    #[serde(skip)]
+    pub query_errors: Vec<f64>,
+}
+
+/// Nearest-rank p50 and p95 and the max of a set of relative errors.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct ErrorDistribution {
+    pub p50: f64,
+    pub p95: f64,
+    pub max: f64,
+}
+
+impl ErrorDistribution {
+    /// None for an empty set.
+    pub fn of(mut errors: Vec<f64>) -> Option<ErrorDistribution> {
+        if errors.is_empty() {
+            return None;
+        }
+        errors.sort_by(f64::total_cmp);
+        let rank = |p: usize| errors[(errors.len() * p).div_ceil(100).max(1) - 1];
+        Some(ErrorDistribution {
+            p50: rank(50),
+            p95: rank(95),
+            max: errors[errors.len() - 1],
+        })
+    }
+}
+
+/// Each query's latency error against the reference's, in order (queries without a
+/// latency on either side are left out).
+pub fn query_latency_errors(result: &LevelResult, reference: &LevelResult) -> Vec<f64> {
+    result
+        .queries
+        .iter()
+        .zip(&reference.queries)
+        .filter_map(|(q, r)| {
+            let (q, r) = (q.latency_cycles? as f64, r.latency_cycles? as f64);
+            Some((q - r).abs() / r.max(1.0))
+        })
+        .collect()
 }
 
 /// Replay the trace at `path` at `level`, streaming it from the file (a demo trace holds
@@ -80,11 +137,13 @@ pub fn replay_level(
     level: Fidelity,
     arch: &Arch,
     path: &Path,
+    retile: Option<TileGrid>,
     effects: EffectsChoice,
 ) -> anyhow::Result<LevelResult> {
     let name = path.display().to_string();
     let options = ReplayOptions {
         effects,
+        retile,
         ..ReplayOptions::at(level)
     };
     replay(opener(path), arch, options)
@@ -98,6 +157,7 @@ fn timed(
     level: Fidelity,
     arch: &Arch,
     path: &Path,
+    retile: Option<TileGrid>,
     effects: EffectsChoice,
 ) -> anyhow::Result<(LevelResult, f64)> {
     let mut best = f64::INFINITY;
@@ -105,7 +165,7 @@ fn timed(
     let mut result = None;
     for _ in 0..20 {
         let start = Instant::now();
-        let run = replay_level(level, arch, path, effects)?;
+        let run = replay_level(level, arch, path, retile, effects)?;
         let seconds = start.elapsed().as_secs_f64();
         best = best.min(seconds);
         spent += seconds;
@@ -125,78 +185,142 @@ fn relative_error(value: Option<f64>, reference: Option<f64>) -> Option<f64> {
     }
 }
 
-pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
-    let arch = args.arch.resolve()?;
-    let path = args.trace.display().to_string();
-    let summary = open_trace(&args.trace)?
-        .skip_to_summary()
-        .with_context(|| format!("{path}: cannot read trace"))?;
-    let fragments = summary.fragments as f64;
-    let mut levels = vec![
-        Fidelity::Functional,
-        Fidelity::Analytic,
-        Fidelity::Sampled {
-            every: args.sample_every,
-        },
-        Fidelity::Cycle,
-    ];
-    if !args.no_rtl {
-        levels.push(Fidelity::Rtl);
+/// How to run the ladder on one trace.
+#[derive(Clone, Copy)]
+pub struct Ladder {
+    pub sample_every: u32,
+    pub effects: EffectsChoice,
+    pub retile: Option<TileGrid>,
+    pub rtl: bool,
+}
+
+impl Ladder {
+    /// The levels, cheapest first; the last is the reference.
+    fn levels(&self) -> Vec<Fidelity> {
+        let mut levels = vec![
+            Fidelity::Functional,
+            Fidelity::Analytic,
+            Fidelity::Sampled {
+                every: self.sample_every,
+            },
+            Fidelity::Cycle,
+        ];
+        if self.rtl {
+            levels.push(Fidelity::Rtl);
+        }
+        levels
     }
-    let mut runs = Vec::new();
-    // One step a level (not a bar over bytes: drawing one would be timed with the level).
-    let bar = occsim_sweep::progress::bar(levels.len() as u64, "levels");
-    for level in levels {
-        bar.set_message(format!("fidelity: {level}"));
-        runs.push((level, timed(level, &arch, &args.trace, args.effects)?));
-        bar.inc(1);
+
+    /// Every level on the trace at `path`, timed, with its errors against the most detailed
+    /// level that ran (rtl, else cycle), in the table's rows; and that reference level.
+    pub fn run(
+        &self,
+        arch: &Arch,
+        path: &Path,
+        progress: &occsim_sweep::progress::ProgressBar,
+    ) -> anyhow::Result<(Vec<LevelRow>, Fidelity)> {
+        let name = path.display().to_string();
+        let summary = open_trace(path)?
+            .skip_to_summary()
+            .with_context(|| format!("{name}: cannot read trace"))?;
+        let fragments = summary.fragments as f64;
+        let mut runs = Vec::new();
+        for level in self.levels() {
+            progress.set_message(format!("fidelity: {level}"));
+            runs.push((level, timed(level, arch, path, self.retile, self.effects)?));
+            progress.inc(1);
+        }
+        let (reference_level, (reference, _)) = runs.last().context("no level ran")?;
+        let rows = runs
+            .iter()
+            .map(|(level, (result, seconds))| {
+                let mut row = compare_with(result, reference, *seconds, fragments);
+                row.level = level.to_string();
+                row.note = (level == reference_level).then(|| "reference".to_string());
+                row
+            })
+            .collect();
+        Ok((rows, *reference_level))
     }
-    bar.finish_and_clear();
-    // The reference is the most detailed level that ran: rtl, else cycle.
-    let (reference_level, (reference, _)) = runs.last().context("no level ran")?;
-    let reference_level = *reference_level;
+}
+
+/// A level's row: its figures and errors against the reference's.
+fn compare_with(
+    result: &LevelResult,
+    reference: &LevelResult,
+    seconds: f64,
+    fragments: f64,
+) -> LevelRow {
+    let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
     let reference_values: Vec<u64> = reference.queries.iter().map(|q| q.value).collect();
-    let rows: Vec<LevelRow> = runs
-        .iter()
-        .map(|(level, (result, seconds))| {
-            let values: Vec<u64> = result.queries.iter().map(|q| q.value).collect();
-            LevelRow {
-                level: level.to_string(),
-                wall_seconds: Some(*seconds),
-                fragments_per_second: Some(fragments / seconds.max(1e-9)),
-                total_cycles: result.total_cycles,
-                latency_mean_cycles: result.latency_mean_cycles,
-                latency_p95_cycles: result.latency_p95_cycles,
-                cycles_error: relative_error(
-                    result.total_cycles.map(|c| c as f64),
-                    reference.total_cycles.map(|c| c as f64),
-                ),
-                latency_error: relative_error(
-                    result.latency_mean_cycles,
-                    reference.latency_mean_cycles,
-                ),
-                frame_mean_cycles: result.frame_mean_cycles(),
-                frame_error: relative_error(
-                    result.frame_mean_cycles(),
-                    reference.frame_mean_cycles(),
-                ),
-                results_exact: Some(values == reference_values),
-                note: (*level == reference_level).then(|| "reference".to_string()),
-            }
-        })
-        .collect();
+    let timed = result.total_cycles.is_some();
+    let query_errors = match timed {
+        true => query_latency_errors(result, reference),
+        false => Vec::new(),
+    };
+    LevelRow {
+        level: String::new(),
+        wall_seconds: Some(seconds),
+        fragments_per_second: Some(fragments / seconds.max(1e-9)),
+        total_cycles: result.total_cycles,
+        latency_mean_cycles: result.latency_mean_cycles,
+        latency_p95_cycles: result.latency_p95_cycles,
+        cycles_error: relative_error(
+            result.total_cycles.map(|c| c as f64),
+            reference.total_cycles.map(|c| c as f64),
+        ),
+        latency_error: relative_error(result.latency_mean_cycles, reference.latency_mean_cycles),
+        latency_p95_error: relative_error(
+            result.latency_p95_cycles.map(|c| c as f64),
+            reference.latency_p95_cycles.map(|c| c as f64),
+        ),
+        query_latency_error: ErrorDistribution::of(query_errors.clone()),
+        frame_mean_cycles: result.frame_mean_cycles(),
+        frame_error: relative_error(result.frame_mean_cycles(), reference.frame_mean_cycles()),
+        results_exact: Some(values == reference_values),
+        note: None,
+        query_errors,
+    }
+}
+
+pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
+    let ladder = Ladder {
+        sample_every: args.sample_every,
+        effects: args.effects,
+        retile: args.retile,
+        rtl: !args.no_rtl,
+    };
+    let Some(trace) = &args.trace else {
+        return super::corpus::run(&args.corpus, &ladder, args.engines, args.json);
+    };
+    anyhow::ensure!(!args.corpus.corpus, "give a TRACE or --corpus, not both");
+    let mut arch = args.arch.resolve()?;
+    if let Some(engines) = args.engines {
+        arch.set_value("engines", &engines.to_string())
+            .context("--engines")?;
+    }
+    let path = trace.display().to_string();
+    // One step a level (not a bar over bytes: drawing one would be timed with the level).
+    let bar = occsim_sweep::progress::bar(ladder.levels().len() as u64, "levels");
+    let (rows, reference_level) = ladder.run(&arch, trace, &bar)?;
+    bar.finish_and_clear();
+    let fragments = open_trace(trace)?
+        .skip_to_summary()
+        .with_context(|| format!("{path}: cannot read trace"))?
+        .fragments;
+    let what = match args.retile {
+        Some(grid) => format!("{path} (retiled {grid})"),
+        None => path.clone(),
+    };
     if let Some(plot) = &args.plot {
-        error_chart(&rows, &path, &args.arch.describe(), reference_level)?
+        error_chart(&rows, &what, &args.arch.describe(), reference_level)?
             .write_svg(plot)
             .with_context(|| format!("cannot write {}", plot.display()))?;
     }
     if args.json {
         outln!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
-        out!(
-            "{}",
-            table(&rows, &path, &arch, fragments as u64, reference_level)
-        );
+        out!("{}", table(&rows, &what, &arch, fragments, reference_level));
     }
     Ok(())
 }
@@ -217,7 +341,7 @@ fn table(
     );
     let _ = writeln!(
         out,
-        "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>12} {:>10} {:>8}",
+        "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>9} {:>22} {:>12} {:>10} {:>8}",
         "level",
         "wall s",
         "fragments/s",
@@ -226,6 +350,8 @@ fn table(
         "p95 lat",
         "cycles err",
         "lat err",
+        "p95 err",
+        "query err p50/p95/max",
         "frame cycles",
         "frame err",
         "results"
@@ -237,7 +363,7 @@ fn table(
     for row in rows {
         let _ = writeln!(
             out,
-            "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>12} {:>10} {:>8}",
+            "{:<12} {:>10} {:>12} {:>13} {:>10} {:>9} {:>10} {:>10} {:>9} {:>22} {:>12} {:>10} {:>8}",
             row.level,
             float(row.wall_seconds, 4),
             row.fragments_per_second
@@ -247,6 +373,8 @@ fn table(
             int(row.latency_p95_cycles),
             percent(row.cycles_error),
             percent(row.latency_error),
+            percent(row.latency_p95_error),
+            distribution(row.query_latency_error),
             float(row.frame_mean_cycles, 0),
             percent(row.frame_error),
             match row.results_exact {
@@ -260,11 +388,24 @@ fn table(
         out,
         "  wall s: seconds on this computer, decoding the trace included; fragments/s: fragments \
          over wall s; cycles: the run's simulated cycles; mean lat, p95 lat: query latency in \
-         cycles; frame cycles: the mean frame in cycles; cycles err, lat err, frame err: \
-         |level - {reference}| / {reference} of cycles, mean latency and frame cycles; results: \
+         cycles; frame cycles: the mean frame in cycles; cycles err, lat err, p95 err, frame \
+         err: |level - {reference}| / {reference} of cycles, mean latency, p95 latency and frame \
+         cycles; query err: each query's own latency error, its p50, p95 and max; results: \
          every query's counts equal the golden ones (exact); -: the level has no such figure"
     );
     out
+}
+
+/// `p50/p95/max` in percent, or `-`.
+pub fn distribution(errors: Option<ErrorDistribution>) -> String {
+    errors.map_or("-".to_string(), |e| {
+        format!(
+            "{:.1}/{:.1}/{:.1}%",
+            100.0 * e.p50,
+            100.0 * e.p95,
+            100.0 * e.max
+        )
+    })
 }
 
 /// The error drawn for a level whose error is 0 (the reference), so a log axis can show it,
@@ -309,4 +450,26 @@ fn error_chart(
         x_ticks: None,
         series,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_distribution_is_nearest_rank() {
+        // Sorted: 0.1, 0.2, 0.3, 0.5. p50: rank ceil(4 * 0.50) = 2, so 0.2; p95: rank
+        // ceil(4 * 0.95) = 4, so 0.5; max 0.5.
+        let errors = ErrorDistribution::of(vec![0.3, 0.1, 0.5, 0.2]).unwrap();
+        assert_eq!(
+            errors,
+            ErrorDistribution {
+                p50: 0.2,
+                p95: 0.5,
+                max: 0.5
+            }
+        );
+        assert_eq!(ErrorDistribution::of(Vec::new()), None);
+        assert_eq!(distribution(Some(errors)), "20.0/50.0/50.0%");
+    }
 }

@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod arch;
+pub mod corpus;
 pub mod count;
 pub mod culling;
 pub mod demo;

@@ -127,7 +127,7 @@ fn print_collisions(frames: &[occsim_traces::workloads::FrameStats]) -> anyhow::
 }
 
 /// A scene file or built-in scene through the rasterizer and golden model into a trace.
-fn generate_scene(
+pub(crate) fn generate_scene(
     scene_file: &str,
     raster: RasterProfile,
     output: &Path,

@@ -1,0 +1,441 @@
+//! `occsim fidelity --corpus`: the fidelity ladder on every kind of trace. The corpus is a
+//! file of recipes (`examples/fidelity-corpus.toml`, built in): each makes one trace (a
+//! built-in scene at a size, or a walkthrough), which runs on every machine and engine count
+//! the file names; the errors of every level against the reference are gathered per trace
+//! class (the worst run of the class, and every query's latency error pooled) with each
+//! level's speed against cycle.
+
+use super::fidelity::{distribution, ErrorDistribution, Ladder, LevelRow};
+use super::workload_args::{write_workload_trace, WorkloadArgs};
+use anyhow::Context;
+use occsim_sim::Arch;
+use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
+use occsim_traces::raster::RasterProfile;
+use occsim_traces::retile::TileGrid;
+use occsim_traces::rng::Fnv1a;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The recipes built in: `examples/fidelity-corpus.toml`.
+const BUILT_IN: &str = include_str!("../../examples/fidelity-corpus.toml");
+
+#[derive(clap::Args, Clone, Debug, Default)]
+pub struct CorpusArgs {
+    /// Run the ladder on the corpus instead of one trace: every recipe of the corpus file, on
+    /// every machine and engine count it names; one row per trace class and level.
+    #[arg(long)]
+    pub corpus: bool,
+    /// The recipes [default: the built-in corpus, examples/fidelity-corpus.toml].
+    #[arg(long, value_name = "FILE.toml", requires = "corpus")]
+    pub corpus_file: Option<PathBuf>,
+    /// Make every trace at its `small` size (seconds to minutes) or its `full` size.
+    #[arg(
+        long,
+        value_name = "small|full",
+        default_value = "full",
+        requires = "corpus"
+    )]
+    pub scale: Scale,
+    /// Keep the traces in DIR, and reuse those already there (a file's name carries a digest
+    /// of its recipe) [default: a scratch directory, removed afterwards].
+    #[arg(long, value_name = "DIR", requires = "corpus")]
+    pub traces_dir: Option<PathBuf>,
+    /// Run on these built-in machines only (comma separated) instead of the corpus's.
+    #[arg(long, value_delimiter = ',', value_name = "NAME", requires = "corpus")]
+    pub machines: Vec<String>,
+    /// Run only the recipes of these classes (comma separated).
+    #[arg(long, value_delimiter = ',', value_name = "CLASS", requires = "corpus")]
+    pub classes: Vec<String>,
+}
+
+/// Which size a recipe is made at.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum Scale {
+    Small,
+    #[default]
+    Full,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CorpusFile {
+    machines: Vec<String>,
+    engines: Vec<u64>,
+    trace: Vec<Recipe>,
+}
+
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct Recipe {
+    name: String,
+    class: String,
+    /// A built-in scene: demo, random or hardcases.
+    scene: Option<String>,
+    /// `trace gen` flags of a walkthrough.
+    walk: Option<String>,
+    retile: Option<String>,
+    #[serde(default)]
+    full: Size,
+    #[serde(default)]
+    small: Size,
+}
+
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct Size {
+    width: Option<u32>,
+    height: Option<u32>,
+    frames: Option<u32>,
+}
+
+/// One class and level over the corpus.
+#[derive(Serialize)]
+struct ClassRow {
+    class: String,
+    level: String,
+    /// Traces times machines times engine counts.
+    runs: usize,
+    /// The worst run's errors.
+    cycles_error: Option<f64>,
+    latency_error: Option<f64>,
+    latency_p95_error: Option<f64>,
+    frame_error: Option<f64>,
+    /// Every query of every run, pooled.
+    query_latency_error: Option<ErrorDistribution>,
+    /// The cycle level's wall time over this level's, summed over the runs.
+    speed_vs_cycle: Option<f64>,
+    results_exact: bool,
+}
+
+/// Parse the corpus file (the built-in one without a path), naming the file in errors.
+fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
+    let (name, text) = match path {
+        Some(path) => (
+            path.display().to_string(),
+            std::fs::read_to_string(path)
+                .with_context(|| format!("cannot read {}", path.display()))?,
+        ),
+        None => ("the built-in corpus".to_string(), BUILT_IN.to_string()),
+    };
+    let file: CorpusFile = toml::from_str(&text).with_context(|| format!("{name}"))?;
+    for recipe in &file.trace {
+        anyhow::ensure!(
+            recipe.scene.is_some() != recipe.walk.is_some(),
+            "{name}: trace `{}` needs exactly one of `scene` and `walk`",
+            recipe.name
+        );
+        if let Some(grid) = &recipe.retile {
+            grid.parse::<TileGrid>()
+                .map_err(|e| anyhow::anyhow!("{name}: trace `{}`: retile: {e}", recipe.name))?;
+        }
+    }
+    Ok(file)
+}
+
+impl Recipe {
+    fn size(&self, scale: Scale) -> Size {
+        match scale {
+            Scale::Small => self.small,
+            Scale::Full => self.full,
+        }
+    }
+
+    /// The trace's file in `dir`: its name, scale and a digest of the recipe, so a changed
+    /// recipe makes a new trace.
+    fn file_in(&self, dir: &Path, scale: Scale) -> PathBuf {
+        let recipe = serde_json::to_string(self).unwrap_or_default();
+        let digest = Fnv1a::of(format!("{recipe}{scale:?}").as_bytes());
+        let scale = match scale {
+            Scale::Small => "small",
+            Scale::Full => "full",
+        };
+        dir.join(format!("{}-{scale}-{digest:016x}.occt", self.name))
+    }
+
+    /// Make the trace at `output` (atomically).
+    fn make(&self, scale: Scale, output: &Path) -> anyhow::Result<()> {
+        let size = self.size(scale);
+        let context = || format!("corpus trace `{}`", self.name);
+        if let Some(walk) = &self.walk {
+            let mut flags: Vec<String> = walk.split_whitespace().map(str::to_owned).collect();
+            for (flag, value) in [
+                ("--width", size.width),
+                ("--height", size.height),
+                ("--frames", size.frames),
+            ] {
+                if let Some(value) = value {
+                    flags.extend([flag.to_owned(), value.to_string()]);
+                }
+            }
+            let args = <WalkFlags as clap::Parser>::try_parse_from(&flags)
+                .map_err(|e| anyhow::anyhow!("walk `{walk}`: {e}"))
+                .with_context(context)?;
+            write_workload_trace(&args.workload, output).with_context(context)?;
+            return Ok(());
+        }
+        let text = match self.scene.as_deref() {
+            Some("demo") => {
+                let defaults = DemoOptions::default();
+                demo_scene(&DemoOptions {
+                    width: size.width.unwrap_or(defaults.width),
+                    height: size.height.unwrap_or(defaults.height),
+                    frames: size.frames.unwrap_or(defaults.frames),
+                    ..defaults
+                })
+            }
+            Some("random") => {
+                let defaults = RandomOptions::default();
+                random_scene(&RandomOptions {
+                    width: size.width.unwrap_or(defaults.width),
+                    height: size.height.unwrap_or(defaults.height),
+                    ..defaults
+                })
+            }
+            Some("hardcases") => HARDCASES.to_owned(),
+            other => anyhow::bail!(
+                "corpus trace `{}`: unknown scene {other:?} (demo, random or hardcases)",
+                self.name
+            ),
+        };
+        let scene = output.with_extension("scene");
+        occsim_sweep::output::write_atomically(&scene, text.as_bytes())?;
+        let made = super::trace::generate_scene(
+            &scene.display().to_string(),
+            RasterProfile::Llvmpipe,
+            output,
+        );
+        let _ = std::fs::remove_file(&scene);
+        made.with_context(context).map(|_| ())
+    }
+}
+
+/// A walk recipe's flags, parsed as `trace gen` parses them.
+#[derive(clap::Parser)]
+#[command(no_binary_name = true)]
+struct WalkFlags {
+    #[command(flatten)]
+    workload: WorkloadArgs,
+}
+
+/// Where the traces go: the caller's directory, or a scratch one removed when dropped.
+enum TraceDir {
+    Kept(PathBuf),
+    Scratch(PathBuf),
+}
+
+impl TraceDir {
+    fn path(&self) -> &Path {
+        match self {
+            TraceDir::Kept(path) | TraceDir::Scratch(path) => path,
+        }
+    }
+}
+
+impl Drop for TraceDir {
+    fn drop(&mut self) {
+        if let TraceDir::Scratch(path) = self {
+            let _ = std::fs::remove_dir_all(path);
+        }
+    }
+}
+
+pub fn run(
+    args: &CorpusArgs,
+    ladder: &Ladder,
+    engines: Option<u64>,
+    json: bool,
+) -> anyhow::Result<()> {
+    anyhow::ensure!(args.corpus, "give a TRACE, or --corpus");
+    let corpus = load(args.corpus_file.as_deref())?;
+    let machines = if args.machines.is_empty() {
+        &corpus.machines
+    } else {
+        &args.machines
+    };
+    let engine_counts = engines.map_or(corpus.engines.clone(), |e| vec![e]);
+    let recipes: Vec<&Recipe> = corpus
+        .trace
+        .iter()
+        .filter(|r| args.classes.is_empty() || args.classes.contains(&r.class))
+        .collect();
+    anyhow::ensure!(
+        !recipes.is_empty(),
+        "--classes: no recipe of the corpus is of these classes"
+    );
+    let dir = match &args.traces_dir {
+        Some(dir) => {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            TraceDir::Kept(dir.clone())
+        }
+        None => {
+            let scratch =
+                std::env::temp_dir().join(format!("occsim-corpus-{}", std::process::id()));
+            std::fs::create_dir_all(&scratch)
+                .with_context(|| format!("cannot create {}", scratch.display()))?;
+            TraceDir::Scratch(scratch)
+        }
+    };
+    let mut runs: Vec<(String, Vec<LevelRow>)> = Vec::new();
+    let steps = recipes.len() * machines.len() * engine_counts.len();
+    let bar = occsim_sweep::progress::bar(steps as u64, "runs");
+    for recipe in recipes {
+        let trace = recipe.file_in(dir.path(), args.scale);
+        if !trace.exists() {
+            bar.set_message(format!("making {}", recipe.name));
+            recipe.make(args.scale, &trace)?;
+        }
+        let mut ladder = Ladder { ..*ladder };
+        if let Some(grid) = &recipe.retile {
+            ladder.retile = Some(grid.parse().map_err(|e| anyhow::anyhow!("{e}"))?);
+        }
+        for machine in machines {
+            for &engines in &engine_counts {
+                let arch = machine_with(machine, engines)?;
+                let hidden = occsim_sweep::progress::ProgressBar::hidden();
+                bar.set_message(format!("{} on {machine}, {engines} engines", recipe.name));
+                let (rows, _) = ladder.run(&arch, &trace, &hidden).with_context(|| {
+                    format!("{} on {machine} with {engines} engines", recipe.name)
+                })?;
+                runs.push((recipe.class.clone(), rows));
+                bar.inc(1);
+            }
+        }
+    }
+    bar.finish_and_clear();
+    let rows = by_class(&runs);
+    if json {
+        outln!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        let reference = if ladder.rtl { "rtl" } else { "cycle" };
+        out!(
+            "{}",
+            table(&rows, machines, &engine_counts, args.scale, reference)
+        );
+    }
+    Ok(())
+}
+
+/// A built-in machine with `engines` occlusion engines.
+fn machine_with(name: &str, engines: u64) -> anyhow::Result<Arch> {
+    let mut arch =
+        super::arch::resolve(name, None, &[]).with_context(|| format!("--machines {name}"))?;
+    arch.set_value("engines", &engines.to_string())
+        .with_context(|| format!("{name} with {engines} engines"))?;
+    Ok(arch)
+}
+
+/// Per class (in first-seen order) and level: the worst run's errors, every query's
+/// latency error pooled, and the speed against cycle over the runs.
+fn by_class(runs: &[(String, Vec<LevelRow>)]) -> Vec<ClassRow> {
+    let mut classes: Vec<&str> = Vec::new();
+    for (class, _) in runs {
+        if !classes.contains(&class.as_str()) {
+            classes.push(class);
+        }
+    }
+    let mut rows = Vec::new();
+    for class in classes {
+        let members: Vec<&Vec<LevelRow>> = runs
+            .iter()
+            .filter(|(c, _)| c == class)
+            .map(|(_, rows)| rows)
+            .collect();
+        let cycle_seconds: f64 = members
+            .iter()
+            .flat_map(|rows| rows.iter().filter(|r| r.level == "cycle"))
+            .filter_map(|r| r.wall_seconds)
+            .sum();
+        for level in members[0].iter().map(|r| r.level.clone()) {
+            let of_level: Vec<&LevelRow> = members
+                .iter()
+                .filter_map(|rows| rows.iter().find(|r| r.level == level))
+                .collect();
+            let worst = |f: &dyn Fn(&LevelRow) -> Option<f64>| {
+                of_level.iter().filter_map(|r| f(r)).reduce(f64::max)
+            };
+            let seconds: f64 = of_level.iter().filter_map(|r| r.wall_seconds).sum();
+            let pooled = of_level
+                .iter()
+                .flat_map(|r| r.query_errors.iter().copied())
+                .collect();
+            rows.push(ClassRow {
+                class: class.to_string(),
+                level: level.clone(),
+                runs: of_level.len(),
+                cycles_error: worst(&|r| r.cycles_error),
+                latency_error: worst(&|r| r.latency_error),
+                latency_p95_error: worst(&|r| r.latency_p95_error),
+                frame_error: worst(&|r| r.frame_error),
+                query_latency_error: ErrorDistribution::of(pooled),
+                speed_vs_cycle: (seconds > 0.0).then(|| cycle_seconds / seconds),
+                results_exact: of_level.iter().all(|r| r.results_exact == Some(true)),
+            });
+        }
+    }
+    rows
+}
+
+fn table(
+    rows: &[ClassRow],
+    machines: &[String],
+    engines: &[u64],
+    scale: Scale,
+    reference: &str,
+) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let engines: Vec<String> = engines.iter().map(u64::to_string).collect();
+    let _ = writeln!(
+        out,
+        "fidelity corpus ({} scale) on {} with {} engines; errors relative to {reference}",
+        match scale {
+            Scale::Small => "small",
+            Scale::Full => "full",
+        },
+        machines.join(", "),
+        engines.join(", "),
+    );
+    let _ = writeln!(
+        out,
+        "{:<18} {:<11} {:>5} {:>10} {:>9} {:>9} {:>22} {:>9} {:>9} {:>8}",
+        "class",
+        "level",
+        "runs",
+        "cycles err",
+        "lat err",
+        "p95 err",
+        "query err p50/p95/max",
+        "frame err",
+        "speed",
+        "results"
+    );
+    let percent = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.2}%", 100.0 * v));
+    for row in rows {
+        let _ = writeln!(
+            out,
+            "{:<18} {:<11} {:>5} {:>10} {:>9} {:>9} {:>22} {:>9} {:>9} {:>8}",
+            row.class,
+            row.level,
+            row.runs,
+            percent(row.cycles_error),
+            percent(row.latency_error),
+            percent(row.latency_p95_error),
+            distribution(row.query_latency_error),
+            percent(row.frame_error),
+            row.speed_vs_cycle
+                .map_or("-".to_string(), |s| format!("{s:.2}x")),
+            if row.results_exact { "exact" } else { "DIFFER" }
+        );
+    }
+    let _ = writeln!(
+        out,
+        "  runs: traces x machines x engine counts of the class; cycles err, lat err, p95 err, \
+         frame err: the worst run's |level - reference| / reference of total cycles, mean and \
+         p95 query latency and mean frame cycles; query err: every query's own latency error, \
+         pooled over the runs, its p50, p95 and max; speed: the cycle level's wall time over \
+         this level's, summed over the runs (decoding the trace included); results: every \
+         query's counts equal the reference's in every run"
+    );
+    out
+}
