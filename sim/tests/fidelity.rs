@@ -642,3 +642,40 @@ fn sampled_latency_keeps_the_waits_behind_clears() {
         );
     }
 }
+
+/// A query whose end token the host releases long after the pipe finished its fragments
+/// drains an empty pipe: the analytic level must not add the window's FIFO backlog or last
+/// read to its latency. The triangle's 2,080 fragments take the O2 about 2,100 cycles; the
+/// host's 20,000 nodes before `end` take far longer, so the token finds the pipe idle. Its
+/// one brief record (8 words, one 256-bit port cycle, rounded up over the port's reserved
+/// share to 2) gives the O2's analytic latency 4 + 2 = 6, where the cycle level measures 5;
+/// on ir2 both give the Image Engines' and merges' fixed path.
+#[test]
+fn analytic_latency_of_a_token_the_host_releases_late_has_no_backlog() {
+    let (events, width, height) = scene_events(
+        "viewport 64 64\nclear\nbegin 1 brief\n\
+         tri -1 -1 0.5 1  1 -1 0.5 1  -1 1 0.5 1\nhost nodes=20000\nend\nwait 1\nswap\n",
+    );
+    for arch in [Arch::builtin("o2").unwrap(), Arch::builtin("ir2").unwrap()] {
+        let name = arch.machine().name();
+        let latency = |level: &str| {
+            run_level(
+                level.parse().unwrap(),
+                &arch,
+                width,
+                height,
+                EffectsChoice::Auto,
+                &events,
+            )
+            .unwrap()
+            .queries[0]
+                .latency_cycles
+                .unwrap()
+        };
+        let (analytic, cycle) = (latency("analytic"), latency("cycle"));
+        assert!(
+            analytic.abs_diff(cycle) <= 1,
+            "{name}: analytic {analytic} against cycle {cycle}"
+        );
+    }
+}

@@ -6,8 +6,10 @@
 //! # Rules
 //! - Window `w`'s work starts at `s_w = max(e_{w-1}, r_w)`, with `r_w` the release of its
 //!   first primitive (the closed loop's rule 3; `e_{w-1}` when it has none), and ends at
-//!   `e_w = s_w + T_w`; its query's answer is available at `e_w + L_w`. Releases after a
-//!   window's first primitive do not stretch it: the prediction is for the window whole.
+//!   `e_w = s_w + T_w`; its query's answer is available at `max(e_w, r_end) + L_w`, with
+//!   `r_end` the release of its end token, and `L_w` the formulas' latency counting only the
+//!   backlog still ahead of the token at `r_end`. Releases after a window's first primitive
+//!   do not stretch it: the prediction is for the window whole.
 //! - `wait`, `begin_conditional`: as in the closed loop, against those predicted answers (a
 //!   query that never ended counts as answered at 0).
 //! - `swap` closes the window it falls in (its work so far predicted as if the stream ended
@@ -80,6 +82,11 @@ impl PredictedLoop {
         self.pipe_end
     }
 
+    /// Where the host releases the last command it issued (a query's end token) to the pipe.
+    pub(crate) fn command_release(&self) -> f64 {
+        self.front.command_release() as f64
+    }
+
     /// `s` of the window open (where its work starts).
     pub(crate) fn window_start(&self) -> f64 {
         self.window_start.unwrap_or(self.pipe_end)
@@ -97,7 +104,8 @@ impl PredictedLoop {
         let hits: u64 = result.tiles.iter().map(|t| t.hits.len()).sum();
         let words =
             result.tiles.len() as u64 * occsim_traces::query::BRIEF_RECORD_ENTRIES as u64 + hits;
-        let available = (self.pipe_end + end.latency).ceil() as u64;
+        let token = self.pipe_end.max(self.front.command_release() as f64);
+        let available = (token + end.latency).ceil() as u64;
         self.answers.insert(result.id, (available, words));
     }
 

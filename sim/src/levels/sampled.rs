@@ -356,8 +356,9 @@ impl SampledModel {
             // The core ended a query, so it began here: `open` holds it.
             let predicted = self.open.take().map_or(0, |spec| {
                 let start = self.predicted.window_start();
+                let release = self.predicted.command_release();
                 let before = self.predicted.pipe_end();
-                let end = self.formulas.end_query(&spec, &result, start);
+                let end = self.formulas.end_query(&spec, &result, start, release);
                 self.predicted.end_query(end, &result);
                 // The window's work: its time on the predicted timeline, host gaps and all.
                 self.window.work = (self.predicted.pipe_end() - before).ceil() as u64;

@@ -271,12 +271,16 @@ impl IrBottleneck {
 
     /// The query ended; the window that began in cycle `start` closes: its cycles and the
     /// query's latency.
-    pub(super) fn end_query(&mut self, spec: &QuerySpec, start: f64) -> WindowEnd {
+    pub(super) fn end_query(&mut self, spec: &QuerySpec, start: f64, release: f64) -> WindowEnd {
         self.open = None;
         let bottleneck = self.window.cycles(&self.arch);
-        let end_cycle = (start + bottleneck.cycles).round() as u64;
+        let pipe_done = start + bottleneck.cycles;
+        // The end token enters at its release; the pipe's work left by then is all the
+        // Image Engines' backlog can hold ahead of it.
+        let ahead = (pipe_done - release).max(0.0).round() as u64;
+        let end_cycle = pipe_done.max(release).round() as u64;
         let ready: Vec<u64> = self
-            .report_delays()
+            .report_delays(ahead)
             .map(|delay| end_cycle + delay)
             .collect();
         // Words as the machine moves them: 8 a tile from every Image Engine, and its hit
@@ -315,8 +319,9 @@ impl IrBottleneck {
         }
     }
 
-    /// Per Image Engine, the cycles from the end token to its partial report: `3 + backlog_i`.
-    fn report_delays(&self) -> impl Iterator<Item = u64> + '_ {
+    /// Per Image Engine, the cycles from the end token to its partial report: `3 + backlog_i`,
+    /// the backlog no more than the `ahead` cycles of work left when the token came.
+    fn report_delays(&self, ahead: u64) -> impl Iterator<Item = u64> + '_ {
         let fifo = self.arch.image_engine_fifo_entries as f64
             * self.arch.image_engine_cycles_per_fragment as f64;
         let latency = self.arch.image_engine_latency_cycles;
@@ -324,7 +329,9 @@ impl IrBottleneck {
         self.window.image_engine_cycles.iter().map(move |&cycles| {
             // The FIFO is as full as the engine is busy over the window.
             let busy = (cycles as f64 / window).min(1.0);
-            3 + cycles.min((fifo * busy).round() as u64 + latency)
+            3 + cycles
+                .min((fifo * busy).round() as u64 + latency)
+                .min(ahead)
         })
     }
 
@@ -339,7 +346,7 @@ impl IrBottleneck {
         if self.window.is_empty() {
             return None;
         }
-        let drain = self.report_delays().max().unwrap_or(3);
+        let drain = self.report_delays(u64::MAX).max().unwrap_or(3);
         Some(WindowEnd {
             cycles: self.window.cycles(&self.arch).cycles,
             latency: drain as f64,

@@ -79,16 +79,19 @@ impl Formulas {
     }
 
     /// The query `spec` ended with `result`, closing the window that began in the predicted
-    /// cycle `start`.
+    /// cycle `start`; its end token entered the pipe no earlier than `release` (the host's
+    /// release in a closed loop, 0 in an open one). Work the pipe finished before the token
+    /// came is no backlog ahead of it: a host-bound window's query drains an empty pipe.
     pub(crate) fn end_query(
         &mut self,
         spec: &QuerySpec,
         result: &QueryResult,
         start: f64,
+        release: f64,
     ) -> WindowEnd {
         match self {
-            Formulas::O2(o2) => o2.end_query(spec, result),
-            Formulas::Ir(ir) => ir.end_query(spec, start),
+            Formulas::O2(o2) => o2.end_query(spec, result, start, release),
+            Formulas::Ir(ir) => ir.end_query(spec, start, release),
         }
     }
 
@@ -157,7 +160,8 @@ impl AnalyticModel {
                 return Ok(());
             };
             let start = self.frames.window_start();
-            let end = self.formulas.end_query(&spec, &result, start);
+            let release = self.frames.command_release();
+            let end = self.formulas.end_query(&spec, &result, start, release);
             self.frames.end_query(end, &result);
             self.latencies.push(end.latency.ceil() as u64);
         }

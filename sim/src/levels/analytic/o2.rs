@@ -42,8 +42,12 @@
 //!                                    average, a heuristic)
 //! drain   = max(backlog · β, λ_last)  (λ_last: the last fragment's read latency, 0 when
 //!                                      it read nothing new)
-//! latency = 4 + ceil(ceil(records / (V / 32)) / (1 - f)) + drain
+//! latency = 4 + ceil(ceil(records / (V / 32)) / (1 - f)) + min(drain, ahead)
 //! ```
+//!
+//! with `ahead = max(0, s_w + T_w - r_end)`: in a closed loop the end token enters at its
+//! release `r_end`, and only the work the pipe has not finished by then is ahead of it (a
+//! host-bound window's token finds the pipe empty); in an open loop `r_end = 0`.
 //!
 //! Clears with fewer than `L` fragments after them, in this window or earlier ones since the
 //! last frame end, also hold the drain: at least their `clear_words / (1 - f)` cycles plus
@@ -298,8 +302,15 @@ impl O2Bottleneck {
         }
     }
 
-    /// The query `spec` ended with `result`: the window's cycles and the query's latency.
-    pub(super) fn end_query(&mut self, spec: &QuerySpec, result: &QueryResult) -> WindowEnd {
+    /// The query `spec` ended with `result`, its window begun at `start` and its end token
+    /// released at `release`: the window's cycles and the query's latency.
+    pub(super) fn end_query(
+        &mut self,
+        spec: &QuerySpec,
+        result: &QueryResult,
+        start: f64,
+        release: f64,
+    ) -> WindowEnd {
         self.open = None;
         let (records, hits) = query_words(spec, result);
         self.window.occu_words += records + hits;
@@ -310,9 +321,11 @@ impl O2Bottleneck {
             fragments_after_clear: self.window.fragments_after_clear,
             ..WindowCounts::default()
         };
+        // What the pipe has still to do when the token comes is all it can wait behind.
+        let ahead = (start + prediction.cycles - release).max(0.0);
         WindowEnd {
             cycles: prediction.cycles,
-            latency: self.formulas.latency(records, prediction.drain),
+            latency: self.formulas.latency(records, prediction.drain.min(ahead)),
         }
     }
 
