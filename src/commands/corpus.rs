@@ -117,7 +117,7 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
         ),
         None => ("the built-in corpus".to_string(), BUILT_IN.to_string()),
     };
-    let file: CorpusFile = toml::from_str(&text).with_context(|| format!("{name}"))?;
+    let file: CorpusFile = toml::from_str(&text).with_context(|| name.clone())?;
     for recipe in &file.trace {
         anyhow::ensure!(
             recipe.scene.is_some() != recipe.walk.is_some(),
