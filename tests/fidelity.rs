@@ -297,19 +297,22 @@ small = { width = 64, height = 48, frames = 1 }
     )
     .unwrap();
     let scratch = support::cli::scratch_dir("corpus-tmp");
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
-        .args(["fidelity", "--corpus", "--corpus-file"])
-        .arg(&recipes)
-        .args(["--scale", "small", "--no-rtl", "--json", "--machines", "o2"])
-        .env("TMPDIR", &*scratch)
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
+    let stdout = support::cli::stdout_with_temp_dir(
+        &[
+            "fidelity",
+            "--corpus",
+            "--corpus-file",
+            recipes.to_str().unwrap(),
+            "--scale",
+            "small",
+            "--no-rtl",
+            "--json",
+            "--machines",
+            "o2",
+        ],
+        &scratch,
     );
-    let rows: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let rows: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
     let rows = rows.as_array().unwrap();
     // 3 classes x 4 levels; --machines o2 leaves 2 engine counts: a random row holds
     // 2 traces x 2 engine counts.

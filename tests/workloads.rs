@@ -123,8 +123,8 @@ fn culling_compare_takes_arch_and_set() {
 #[test]
 fn culling_compare_bands_hold_every_frame_time_and_leave_nothing_behind() {
     let scratch = tempfile::tempdir().unwrap();
-    let output = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
-        .args([
+    let stdout = support::cli::stdout_with_temp_dir(
+        &[
             "culling",
             "compare",
             "--scene",
@@ -149,16 +149,10 @@ fn culling_compare_bands_hold_every_frame_time_and_leave_nothing_behind() {
             "--json",
             "--jobs",
             "2",
-        ])
-        .env("TMPDIR", scratch.path())
-        .output()
-        .unwrap();
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
+        ],
+        scratch.path(),
     );
-    let report: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    let report: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
     let mut corners = None;
     for driver in report["drivers"].as_array().unwrap() {
         let time = &driver["frame_time"][0];

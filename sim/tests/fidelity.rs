@@ -4,7 +4,7 @@
 use occsim_sim::effects::{
     effects_of_features, observe, EffectScan, Effects, EffectsChoice, TraceFacts,
 };
-use occsim_sim::levels::{run_level, Fidelity};
+use occsim_sim::levels::{run_level, Fidelity, LevelResult};
 use occsim_sim::{Arch, MachineBuilder, Report};
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
 use occsim_traces::golden::{EventSink, FunctionalModel};
@@ -49,6 +49,19 @@ fn builtin_traces() -> Vec<(&'static str, Stream)> {
         ("demo", small_demo()),
         ("random", small_random()),
     ]
+}
+
+/// `level` on `arch` over a stream, with the automatic effects choice.
+fn run_at(level: &str, arch: &Arch, (events, width, height): &Stream) -> LevelResult {
+    run_level(
+        level.parse().unwrap(),
+        arch,
+        *width,
+        *height,
+        EffectsChoice::Auto,
+        events,
+    )
+    .unwrap()
 }
 
 fn replay(arch: &Arch, width: u32, height: u32, effects: Effects, events: &[Event]) -> Report {
@@ -561,20 +574,10 @@ fn closed_loop_demo() -> (Vec<Event>, u32, u32) {
 
 #[test]
 fn every_timed_level_times_the_frames_of_a_closed_loop_trace() {
-    let (events, width, height) = closed_loop_demo();
+    let stream = closed_loop_demo();
     for arch in [Arch::builtin("o2").unwrap(), small_ir()] {
         let name = arch.machine().name();
-        let run = |level: &str| {
-            run_level(
-                level.parse().unwrap(),
-                &arch,
-                width,
-                height,
-                EffectsChoice::Auto,
-                &events,
-            )
-            .unwrap()
-        };
+        let run = |level: &str| run_at(level, &arch, &stream);
         let cycle = run("cycle");
         assert_eq!(cycle.frame_cycles.len(), 3, "{name}");
         // One machine over the whole stream: sampled:1 measures every frame as cycle does.
@@ -613,19 +616,11 @@ fn every_timed_level_times_the_frames_of_a_closed_loop_trace() {
 /// whole `trace gen hardcases` trace (`occsim fidelity hc.occt --no-rtl`); bounded here at 10%.
 #[test]
 fn sampled_latency_keeps_the_waits_behind_clears() {
-    let (events, width, height) = scene_events(HARDCASES);
+    let stream = scene_events(HARDCASES);
     for arch in [Arch::builtin("o2").unwrap(), Arch::builtin("ir4").unwrap()] {
         let name = arch.machine().name();
         let mean_latency = |level: &str| {
-            let result = run_level(
-                level.parse().unwrap(),
-                &arch,
-                width,
-                height,
-                EffectsChoice::Auto,
-                &events,
-            )
-            .unwrap();
+            let result = run_at(level, &arch, &stream);
             let latencies: Vec<u64> = result
                 .queries
                 .iter()
@@ -652,23 +647,14 @@ fn sampled_latency_keeps_the_waits_behind_clears() {
 /// on ir2 both give the Image Engines' and merges' fixed path.
 #[test]
 fn analytic_latency_of_a_token_the_host_releases_late_has_no_backlog() {
-    let (events, width, height) = scene_events(
+    let stream = scene_events(
         "viewport 64 64\nclear\nbegin 1 brief\n\
          tri -1 -1 0.5 1  1 -1 0.5 1  -1 1 0.5 1\nhost nodes=20000\nend\nwait 1\nswap\n",
     );
     for arch in [Arch::builtin("o2").unwrap(), Arch::builtin("ir2").unwrap()] {
         let name = arch.machine().name();
         let latency = |level: &str| {
-            run_level(
-                level.parse().unwrap(),
-                &arch,
-                width,
-                height,
-                EffectsChoice::Auto,
-                &events,
-            )
-            .unwrap()
-            .queries[0]
+            run_at(level, &arch, &stream).queries[0]
                 .latency_cycles
                 .unwrap()
         };

@@ -22,6 +22,23 @@ pub fn stdout_of(args: &[&str]) -> String {
     String::from_utf8(output.stdout).expect("utf-8 output")
 }
 
+/// Run `occsim` with its temporary directory (`TMPDIR`) set to `temp`, require success,
+/// return its standard output: for checking what a command leaves in the temporary
+/// directory.
+pub fn stdout_with_temp_dir(args: &[&str], temp: &Path) -> Vec<u8> {
+    let output = Command::new(env!("CARGO_BIN_EXE_occsim"))
+        .args(args)
+        .env("TMPDIR", temp)
+        .output()
+        .expect("occsim runs");
+    assert!(
+        output.status.success(),
+        "occsim {args:?} failed: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output.stdout
+}
+
 /// Run `occsim`, require failure, return its standard error.
 pub fn stderr_of_failure(args: &[&str]) -> String {
     let output = occsim(args);
