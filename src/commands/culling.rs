@@ -108,7 +108,8 @@ fn drivers_to_compare(args: &CompareArgs) -> Vec<DriverOptions> {
     list
 }
 
-/// The drivers of seeds 002 to 004, each conservative, then each approximate variant.
+/// The drivers of seeds 002 to 004, each conservative, then each approximate variant; the
+/// dynamic grid in 3D and 2D; the raycast.
 fn seed_drivers(args: &CompareArgs, list: &mut Vec<DriverOptions>) {
     list.push(DriverOptions::new(DriverKind::Hom));
     for &threshold in &args.opacity_threshold {
@@ -117,6 +118,11 @@ fn seed_drivers(args: &CompareArgs, list: &mut Vec<DriverOptions>) {
         list.push(approximate);
     }
     list.push(DriverOptions::new(DriverKind::LargeOccluders));
+    list.push(DriverOptions::new(DriverKind::DynamicGrid));
+    let mut flat = DriverOptions::new(DriverKind::DynamicGrid);
+    flat.flat_grid = true;
+    list.push(flat);
+    list.push(DriverOptions::new(DriverKind::Raycast));
 }
 
 /// `culling compare` without timing models: the cycle columns are left out.
@@ -335,8 +341,25 @@ fn print_table(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<(
          frame on machine M; trav ms, golden ms: wall-clock milliseconds on this computer in the \
          driver's traversal and in the golden model (rasterizing and answering the queries)"
     )?;
+    print_rays(report, out)?;
     print_frame_time(report, out)?;
     print_accuracy(report, &machines, out)
+}
+
+/// The raycast rows' rays under the table: cast, against a cast through every pixel.
+fn print_rays(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<()> {
+    for d in report.drivers.iter().filter(|d| d.rays_full_screen_per_frame > 0.0) {
+        writeln!(
+            out,
+            "{}: {:.0} rays cast a frame of {:.0} for the full screen ({:.1}% saved); {:.1} bricks a frame overflowed their verbose buffers and cast through the box of their hits",
+            d.driver,
+            d.rays_cast_per_frame,
+            d.rays_full_screen_per_frame,
+            100.0 * (1.0 - d.rays_cast_per_frame / d.rays_full_screen_per_frame),
+            d.overflowed_buffers_per_frame
+        )?;
+    }
+    Ok(())
 }
 
 /// Each driver's frame time on each machine: frames per second, and where the frame's time

@@ -305,6 +305,96 @@ pub(crate) fn in_shadow(eye: Vec3, occluder: &Aabb, cell: &Aabb) -> bool {
         .all(|c| segment_meets_box(eye, c.as_dvec3(), occluder))
 }
 
+/// Bins a side the screen is cut into to find the occluders that may hide a cell.
+const SCREEN_BINS: usize = 16;
+
+/// A box's rectangle on screen in normalised device coordinates (x0, y0, x1, y1); None
+/// when a corner is not in front of the eye.
+type ScreenRect = Option<[f32; 4]>;
+
+/// The frame's occluders, indexed by where they fall on screen: a cell's points are hidden
+/// only along rays through the occluder, so only an occluder whose screen rectangle holds
+/// the cell's can hide it.
+struct Occluders {
+    boxes: Vec<Aabb>,
+    rects: Vec<ScreenRect>,
+    /// Per bin, the occluders whose rectangles meet it, in order.
+    bins: Vec<Vec<u32>>,
+    /// Occluders without a rectangle (reaching behind the eye), in order.
+    everywhere: Vec<u32>,
+    view_projection: glam::Mat4,
+}
+
+impl Occluders {
+    fn new(view_projection: glam::Mat4) -> Occluders {
+        Occluders {
+            boxes: Vec::new(),
+            rects: Vec::new(),
+            bins: vec![Vec::new(); SCREEN_BINS * SCREEN_BINS],
+            everywhere: Vec::new(),
+            view_projection,
+        }
+    }
+
+    fn screen_rect(&self, b: &Aabb) -> ScreenRect {
+        let mut rect = [f32::MAX, f32::MAX, f32::MIN, f32::MIN];
+        for corner in b.corners() {
+            let clip = self.view_projection * corner.extend(1.0);
+            if clip.w <= 1e-6 {
+                return None;
+            }
+            let (x, y) = (clip.x / clip.w, clip.y / clip.w);
+            rect = [rect[0].min(x), rect[1].min(y), rect[2].max(x), rect[3].max(y)];
+        }
+        Some(rect)
+    }
+
+    fn bin(ndc: f32) -> usize {
+        (((ndc + 1.0) * 0.5 * SCREEN_BINS as f32).floor()).clamp(0.0, SCREEN_BINS as f32 - 1.0)
+            as usize
+    }
+
+    fn push(&mut self, occluder: Aabb) {
+        let index = self.boxes.len() as u32;
+        let rect = self.screen_rect(&occluder);
+        match rect {
+            None => self.everywhere.push(index),
+            Some([x0, y0, x1, y1]) => {
+                for by in Occluders::bin(y0)..=Occluders::bin(y1) {
+                    for bx in Occluders::bin(x0)..=Occluders::bin(x1) {
+                        self.bins[by * SCREEN_BINS + bx].push(index);
+                    }
+                }
+            }
+        }
+        self.boxes.push(occluder);
+        self.rects.push(rect);
+    }
+
+    /// Occluders from index `first` on that may hide a box with screen rectangle `rect`.
+    fn candidates(&self, first: u32, rect: ScreenRect) -> Box<dyn Iterator<Item = u32> + '_> {
+        fn from(list: &[u32], first: u32) -> &[u32] {
+            &list[list.partition_point(|&o| o < first)..]
+        }
+        let Some(r) = rect else {
+            return Box::new(first..self.boxes.len() as u32);
+        };
+        let (cx, cy) = ((r[0] + r[2]) * 0.5, (r[1] + r[3]) * 0.5);
+        let bin = &self.bins[Occluders::bin(cy) * SCREEN_BINS + Occluders::bin(cx)];
+        let holds = move |o: &u32| match self.rects[*o as usize] {
+            None => true,
+            Some(h) => h[0] <= r[0] && h[1] <= r[1] && h[2] >= r[2] && h[3] >= r[3],
+        };
+        Box::new(
+            from(bin, first)
+                .iter()
+                .chain(from(&self.everywhere, first))
+                .copied()
+                .filter(holds),
+        )
+    }
+}
+
 /// A temporal bounding volume: the object stays within `radius` of `centre` until `expires`.
 #[derive(Clone, Debug)]
 struct Tbv {
@@ -321,7 +411,7 @@ struct FrameState {
     shadow_tests: Vec<u32>,
     /// Cells the traversal found visible.
     visible: Vec<bool>,
-    occluders: Vec<Aabb>,
+    occluders: Occluders,
     pvs: Vec<u32>,
     in_pvs: Vec<bool>,
     /// Moving objects' y intervals of solids per column, added this frame.
@@ -460,7 +550,7 @@ impl DynamicGridDriver {
             opaque: self.static_opaque.clone(),
             shadow_tests: vec![0; self.grid.cells()],
             visible: vec![false; self.grid.cells()],
-            occluders: Vec::new(),
+            occluders: Occluders::new(view.view_projection),
             pvs: Vec::new(),
             in_pvs: vec![false; objects],
             column_solids: Vec::new(),
@@ -617,10 +707,11 @@ impl DynamicGridDriver {
         for k in 0..=farthest {
             let mut any_visible = false;
             for cell in shell(eye_cell, k, self.grid.dims) {
-                state.host_tests += 1;
+                // The paper's walk from seed cells meets only cells in the frustum.
                 if !frustum.may_see(&self.grid.cell_box(cell)) {
                     continue;
                 }
+                state.host_tests += 1;
                 if self.visit(cell, eye_cell, posed, view, state) {
                     any_visible = true;
                 }
@@ -675,15 +766,21 @@ impl DynamicGridDriver {
             return true;
         }
         let cell_box = self.grid.cell_box(cell);
-        for occluder in &state.occluders[tested as usize..] {
-            state.host_tests += 1;
-            if in_shadow(eye, occluder, &cell_box) {
-                state.shadow_tests[index] = u32::MAX;
-                return true;
-            }
-        }
-        state.shadow_tests[index] = state.occluders.len() as u32;
-        false
+        let rect = state.occluders.screen_rect(&cell_box);
+        state.host_tests += 1;
+        let occluders = &state.occluders;
+        let mut tests = 0;
+        let hidden = occluders.candidates(tested, rect).any(|o| {
+            tests += 1;
+            in_shadow(eye, &occluders.boxes[o as usize], &cell_box)
+        });
+        state.host_tests += tests;
+        state.shadow_tests[index] = if hidden {
+            u32::MAX
+        } else {
+            occluders.boxes.len() as u32
+        };
+        hidden
     }
 
     /// Grow the visible opaque cell into a rectangle of opaque or occluded cells across its
