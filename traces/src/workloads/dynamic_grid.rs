@@ -971,10 +971,11 @@ mod tests {
         assert!(cut.opaque.is_empty());
     }
 
-    /// An occluder box [4, 6] x [-1, 1] x [-1, 1] seen from the origin: the unit cube at
-    /// x 8..9, |y|, |z| <= 0.5 is hidden (every corner's ray crosses x = 4..6 within |y| <=
-    /// 0.5 * 6/8 < 1); the same cube moved up to y 1.5..2.5 is not (its corner (8, 2.5, 0)
-    /// crosses x = 6 at y = 1.875 > 1).
+    /// An occluder box [4, 6] x [-1, 1] x [-1, 1] seen from the origin; a ray to (x, y, z)
+    /// enters it at x = 4 where its height is 4y/x. The unit cube at x 8..9, |y|, |z| <= 0.5
+    /// is hidden (every corner's ray enters at |y|, |z| <= 0.25). Raised to y 1.5..2.5 it
+    /// straddles the shadow's edge: corner (9, 1.5, -0.5) enters at y 0.67 (hidden), corner
+    /// (8, 2.5, 0.5) at y 1.25 and stays above 1 (not): not occluded.
     #[test]
     fn a_cell_is_in_shadow_only_when_all_its_corners_are() {
         let occluder = Aabb {
