@@ -348,7 +348,11 @@ fn print_table(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<(
 
 /// The raycast rows' rays under the table: cast, against a cast through every pixel.
 fn print_rays(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<()> {
-    for d in report.drivers.iter().filter(|d| d.rays_full_screen_per_frame > 0.0) {
+    for d in report
+        .drivers
+        .iter()
+        .filter(|d| d.rays_full_screen_per_frame > 0.0)
+    {
         writeln!(
             out,
             "{}: {:.0} rays cast a frame of {:.0} for the full screen ({:.1}% saved); {:.1} bricks a frame overflowed their verbose buffers and cast through the box of their hits",
@@ -552,7 +556,10 @@ mod tests {
                 "hierarchical/t0.3",
                 "hom",
                 "hom/o0.9",
-                "large-occluders"
+                "large-occluders",
+                "dynamic-grid",
+                "dynamic-grid/2d",
+                "raycast"
             ]
         );
         for d in &report.drivers {
@@ -581,6 +588,11 @@ mod tests {
         assert!(text.contains("frames/s"), "{text}");
         assert!(text.contains("cycles saved frag"), "{text}");
         assert!(text.contains("approximate culling against hom"), "{text}");
+        let raycast = report.drivers.last().unwrap();
+        assert!(raycast.rays_cast_per_frame > 0.0);
+        assert!(raycast.rays_cast_per_frame < raycast.rays_full_screen_per_frame);
+        assert!(text.contains("raycast: "), "{text}");
+        assert!(text.contains("rays cast a frame of"), "{text}");
     }
 
     #[test]
@@ -600,8 +612,9 @@ mod tests {
         .unwrap();
         let value: serde_json::Value = serde_json::from_slice(&out).unwrap();
         // frustum, hierarchical, hierarchical/vob, collision, the two grids in both
-        // variants, one adaptive threshold, hom, hom/o0.9 and large-occluders.
-        assert_eq!(value["drivers"].as_array().unwrap().len(), 12);
+        // variants, one adaptive threshold, hom, hom/o0.9, large-occluders, the dynamic grid
+        // in 3D and 2D, and raycast.
+        assert_eq!(value["drivers"].as_array().unwrap().len(), 15);
         assert_eq!(value["frames"], 2);
     }
 }

@@ -6,9 +6,9 @@ use anyhow::Context;
 use occsim_sweep::output::write_atomically_with;
 use occsim_traces::trace::{TraceHeader, TraceSummary, TraceWriter};
 use occsim_traces::workloads::{
-    city, forest, generate_observed, load_obj, traffic, CameraPath, CityOptions,
-    CommandObserver, DriverKind, DriverOptions, ForestOptions, GenerateError, ObjOptions,
-    TrafficOptions, Walk, WorkloadError, WorkloadOption, WorkloadScene, WorkloadStats,
+    city, forest, generate_observed, load_obj, traffic, CameraPath, CityOptions, CommandObserver,
+    DriverKind, DriverOptions, ForestOptions, GenerateError, ObjOptions, TrafficOptions, Walk,
+    WorkloadError, WorkloadOption, WorkloadScene, WorkloadStats,
 };
 use std::io::Read;
 use std::path::Path;
@@ -510,14 +510,29 @@ mod tests {
         let delayed = resolve_error(&["--driver", "busy-grid", "--query-delay", "1"]);
         assert!(delayed.contains("--query-delay applies to"), "{delayed}");
         let cars = resolve_error(&["--scene", "city", "--cars-per-block", "2"]);
-        assert!(cars.contains("--cars-per-block applies to the traffic"), "{cars}");
+        assert!(
+            cars.contains("--cars-per-block applies to the traffic"),
+            "{cars}"
+        );
         let flat = resolve_error(&["--driver", "hom", "--flat-grid"]);
-        assert!(flat.contains("--flat-grid applies to the dynamic-grid"), "{flat}");
+        assert!(
+            flat.contains("--flat-grid applies to the dynamic-grid"),
+            "{flat}"
+        );
         let coarse = resolve_error(&["--driver", "dynamic-grid", "--grid-resolution", "1"]);
-        assert!(coarse.contains("--grid-resolution 1 out of range"), "{coarse}");
+        assert!(
+            coarse.contains("--grid-resolution 1 out of range"),
+            "{coarse}"
+        );
         let buffer = resolve_error(&["--driver", "raycast", "--verbose-buffer", "7"]);
-        assert!(buffer.contains("--verbose-buffer 7 out of range"), "{buffer}");
+        assert!(
+            buffer.contains("--verbose-buffer 7 out of range"),
+            "{buffer}"
+        );
         let bricks = resolve_error(&["--driver", "hierarchical", "--volume-bricks", "2"]);
-        assert!(bricks.contains("--volume-bricks applies to the raycast"), "{bricks}");
+        assert!(
+            bricks.contains("--volume-bricks applies to the raycast"),
+            "{bricks}"
+        );
     }
 }

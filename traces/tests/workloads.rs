@@ -197,9 +197,17 @@ fn the_dynamic_grid_follows_cars_and_culls_them_without_queries() {
         .iter()
         .map(|f| f[first_car..].iter().filter(|&&p| p > 0).count())
         .sum();
-    assert!(visible_cars > 0, "no car is ever seen: the test shows nothing");
-    let frustum = generate(&scene, &DriverOptions::new(DriverKind::Frustum), &walk, &mut Discard)
-        .unwrap();
+    assert!(
+        visible_cars > 0,
+        "no car is ever seen: the test shows nothing"
+    );
+    let frustum = generate(
+        &scene,
+        &DriverOptions::new(DriverKind::Frustum),
+        &walk,
+        &mut Discard,
+    )
+    .unwrap();
     let grid = generate(
         &scene,
         &DriverOptions::new(DriverKind::DynamicGrid),
@@ -209,9 +217,16 @@ fn the_dynamic_grid_follows_cars_and_culls_them_without_queries() {
     .unwrap();
     // A query is asked only of the grid's potentially visible set: far fewer objects than
     // frustum culling draws, the rest culled on the grid alone.
-    let in_view: u64 = frustum.frames.iter().map(|f| f.objects_drawn.len() as u64).sum();
+    let in_view: u64 = frustum
+        .frames
+        .iter()
+        .map(|f| f.objects_drawn.len() as u64)
+        .sum();
     let queries: u64 = grid.frames.iter().map(|f| f.queries).sum();
-    assert!(queries * 2 < in_view, "{queries} queries for {in_view} objects in view");
+    assert!(
+        queries * 2 < in_view,
+        "{queries} queries for {in_view} objects in view"
+    );
 }
 
 #[test]
@@ -234,7 +249,10 @@ fn raycast_rays_are_saved_and_an_overflow_casts_a_superset() {
     assert!(exact > 0 && exact < full, "{exact} rays of {full}");
     let (boxed, _, overflows) = rays(8 + 16);
     assert!(overflows > 0);
-    assert!(boxed >= exact, "the fallback casts {boxed}, fewer than the hits' {exact}");
+    assert!(
+        boxed >= exact,
+        "the fallback casts {boxed}, fewer than the hits' {exact}"
+    );
 }
 
 #[test]

@@ -90,8 +90,8 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     let mut renderer = Renderer::new(walk.width, walk.height, walk.raster, sink, observer);
     renderer.set_waits_for_answers(options.query_delay_frames == 0);
     let mut states = DriverStates::new(options, scene, walk);
-    let mut dynamic_grid = (options.kind == DriverKind::DynamicGrid)
-        .then(|| DynamicGridDriver::new(options, scene));
+    let mut dynamic_grid =
+        (options.kind == DriverKind::DynamicGrid).then(|| DynamicGridDriver::new(options, scene));
     let raycast = RaycastDriver::new(options);
     let mut stats = WorkloadStats {
         scene_triangles: scene.triangle_count(),
@@ -108,10 +108,14 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
         let s = &mut states;
         match options.kind {
             DriverKind::Frustum => frustum_frame(&posed, &view, &mut renderer)?,
-            DriverKind::Hierarchical => s.hierarchical.frame(frame, &posed, &view, &mut renderer)?,
+            DriverKind::Hierarchical => {
+                s.hierarchical.frame(frame, &posed, &view, &mut renderer)?
+            }
             DriverKind::Collision => {
                 s.hierarchical.frame(frame, &posed, &view, &mut renderer)?;
-                let test = s.collision.test(frame, &posed, walk, &view, &mut renderer)?;
+                let test = s
+                    .collision
+                    .test(frame, &posed, walk, &view, &mut renderer)?;
                 renderer.stats.collision = test;
             }
             DriverKind::LazyGrid | DriverKind::BusyGrid => match options.grid_variant {

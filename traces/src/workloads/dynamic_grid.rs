@@ -138,7 +138,11 @@ impl Grid {
     /// The cell holding `p`, clamped into the grid, and whether `p` lies inside it.
     fn locate(&self, p: Vec3) -> (Cell, bool) {
         let local = p - self.origin;
-        let steps = [local.x / self.side, local.y / self.layer, local.z / self.side];
+        let steps = [
+            local.x / self.side,
+            local.y / self.layer,
+            local.z / self.side,
+        ];
         let mut inside = true;
         let cell = std::array::from_fn(|axis| {
             let step = steps[axis].floor();
@@ -242,8 +246,12 @@ pub(crate) fn discretise_polygon(
             })
             .fold(f64::INFINITY, f64::min)
     };
-    let lo = polygon.iter().fold((f64::MAX, f64::MAX), |m, p| (m.0.min(p.0), m.1.min(p.1)));
-    let hi = polygon.iter().fold((f64::MIN, f64::MIN), |m, p| (m.0.max(p.0), m.1.max(p.1)));
+    let lo = polygon
+        .iter()
+        .fold((f64::MAX, f64::MAX), |m, p| (m.0.min(p.0), m.1.min(p.1)));
+    let hi = polygon
+        .iter()
+        .fold((f64::MIN, f64::MIN), |m, p| (m.0.max(p.0), m.1.max(p.1)));
     let cells = |low: f64, high: f64, start: f64, count: u32| {
         let first = ((low - epsilon - start) / side).floor().max(0.0);
         let last = ((high + epsilon - start) / side).ceil().min(count as f64);
@@ -269,7 +277,12 @@ pub(crate) fn discretise_polygon(
 
 /// A box's footprint on the ground plane, counter-clockwise seen from above.
 fn ground_rectangle(b: &Aabb) -> [(f64, f64); 4] {
-    let (x0, z0, x1, z1) = (b.min.x as f64, b.min.z as f64, b.max.x as f64, b.max.z as f64);
+    let (x0, z0, x1, z1) = (
+        b.min.x as f64,
+        b.min.z as f64,
+        b.max.x as f64,
+        b.max.z as f64,
+    );
     [(x0, z0), (x0, z1), (x1, z1), (x1, z0)]
 }
 
@@ -344,7 +357,12 @@ impl Occluders {
                 return None;
             }
             let (x, y) = (clip.x / clip.w, clip.y / clip.w);
-            rect = [rect[0].min(x), rect[1].min(y), rect[2].max(x), rect[3].max(y)];
+            rect = [
+                rect[0].min(x),
+                rect[1].min(y),
+                rect[2].max(x),
+                rect[3].max(y),
+            ];
         }
         Some(rect)
     }
@@ -439,7 +457,11 @@ pub(crate) struct DynamicGridDriver {
 
 impl DynamicGridDriver {
     pub(crate) fn new(options: &DriverOptions, scene: &WorkloadScene) -> DynamicGridDriver {
-        let grid = Grid::new(&scene.bounds, options.dynamic_grid_resolution, options.flat_grid);
+        let grid = Grid::new(
+            &scene.bounds,
+            options.dynamic_grid_resolution,
+            options.flat_grid,
+        );
         let objects = scene.objects.len();
         let mut driver = DynamicGridDriver {
             static_solids: vec![Vec::new(); grid.columns()],
@@ -583,7 +605,10 @@ impl DynamicGridDriver {
             };
             let object = &posed.objects[index];
             match &self.tbvs[index] {
-                Some(tbv) if !eye_inside || self.grid.distance(view.eye, tbv.centre) <= tbv.radius + guard => {
+                Some(tbv)
+                    if !eye_inside
+                        || self.grid.distance(view.eye, tbv.centre) <= tbv.radius + guard =>
+                {
                     self.remove_tbv(index);
                     self.periods[index] = (self.periods[index] / 2).max(1);
                     self.discretise(index, object, state);
@@ -671,7 +696,12 @@ impl DynamicGridDriver {
     }
 
     /// A moving object into I and (its solids) O for this frame; its cells.
-    fn discretise(&mut self, index: usize, object: &SceneObject, state: &mut FrameState) -> Vec<usize> {
+    fn discretise(
+        &mut self,
+        index: usize,
+        object: &SceneObject,
+        state: &mut FrameState,
+    ) -> Vec<usize> {
         let cells = self.spanned_cells(object);
         for &cell in &cells {
             self.dynamic_ids[cell].push(index as u32);
@@ -697,7 +727,13 @@ impl DynamicGridDriver {
     }
 
     /// Steps 2 to 4: shells of equal chess distance from the eye's cell, nearest first.
-    fn traverse(&mut self, posed: &WorkloadScene, view: &FrameView, eye_inside: bool, state: &mut FrameState) {
+    fn traverse(
+        &mut self,
+        posed: &WorkloadScene,
+        view: &FrameView,
+        eye_inside: bool,
+        state: &mut FrameState,
+    ) {
         let frustum = Frustum::without_near(&view.view_projection);
         let (eye_cell, _) = self.grid.locate(view.eye);
         let farthest = (0..3)
@@ -724,7 +760,14 @@ impl DynamicGridDriver {
     }
 
     /// Visit a cell in the view frustum; whether it is visible.
-    fn visit(&mut self, cell: Cell, eye_cell: Cell, posed: &WorkloadScene, view: &FrameView, state: &mut FrameState) -> bool {
+    fn visit(
+        &mut self,
+        cell: Cell,
+        eye_cell: Cell,
+        posed: &WorkloadScene,
+        view: &FrameView,
+        state: &mut FrameState,
+    ) -> bool {
         let index = self.grid.index(cell);
         if self.occluded(cell, view.eye, state) {
             return false;
@@ -816,8 +859,20 @@ impl DynamicGridDriver {
 
     /// Move the rectangle's side along `axis` one cell in direction `step` if the whole new
     /// row is opaque or occluded.
-    fn grow(&self, lo: &mut Cell, hi: &mut Cell, axis: usize, step: i64, eye: Vec3, state: &mut FrameState) -> bool {
-        let edge = if step < 0 { lo[axis] as i64 - 1 } else { hi[axis] as i64 + 1 };
+    fn grow(
+        &self,
+        lo: &mut Cell,
+        hi: &mut Cell,
+        axis: usize,
+        step: i64,
+        eye: Vec3,
+        state: &mut FrameState,
+    ) -> bool {
+        let edge = if step < 0 {
+            lo[axis] as i64 - 1
+        } else {
+            hi[axis] as i64 + 1
+        };
         if edge < 0 || edge >= self.grid.dims[axis] as i64 {
             return false;
         }
@@ -860,7 +915,10 @@ impl DynamicGridDriver {
                 BoxView::Outside => false,
                 BoxView::Near { .. } => true,
                 BoxView::OnScreen { rect, .. } => {
-                    let triangles = query_box.triangles().into_iter().map(|t| t.map(|p| to_clip(vp, p)));
+                    let triangles = query_box
+                        .triangles()
+                        .into_iter()
+                        .map(|t| t.map(|p| to_clip(vp, p)));
                     renderer
                         .brief_query(vec![rect], triangles)?
                         .is_none_or(|answer| answer.tiles[0].nohc > 0)
@@ -934,7 +992,10 @@ mod tests {
         // The other winding gives the same cells.
         let mut reversed = rectangle;
         reversed.reverse();
-        assert_eq!(discretise_polygon(&reversed, (0.0, 0.0), 1.0, (6, 5)), footprint);
+        assert_eq!(
+            discretise_polygon(&reversed, (0.0, 0.0), 1.0, (6, 5)),
+            footprint
+        );
     }
 
     /// A diamond |x - 2| + |z - 2| <= 2.4 on cells of side 1 from (-1, -1), 6 x 6 cells. Its
@@ -949,7 +1010,14 @@ mod tests {
         // rows 0 and 5 (2.5): columns with 0.5 -> 2, 3;
         // rows 1 and 4 (1.5): columns with <= 1.5 -> 1, 2, 3, 4;
         // rows 2 and 3 (0.5): every column (2.5 + 0.5 = 3) -> 0 to 5.
-        let rows: [&[u32]; 6] = [&[2, 3], &[1, 2, 3, 4], &[0, 1, 2, 3, 4, 5], &[0, 1, 2, 3, 4, 5], &[1, 2, 3, 4], &[2, 3]];
+        let rows: [&[u32]; 6] = [
+            &[2, 3],
+            &[1, 2, 3, 4],
+            &[0, 1, 2, 3, 4, 5],
+            &[0, 1, 2, 3, 4, 5],
+            &[1, 2, 3, 4],
+            &[2, 3],
+        ];
         let spanned: Vec<(u32, u32)> = rows
             .iter()
             .enumerate()
@@ -963,7 +1031,10 @@ mod tests {
     fn cells_outside_the_grid_are_left_out() {
         // A square beyond the grid's far corner touches nothing; one over its edge is cut.
         let far = [(10.0, 10.0), (12.0, 10.0), (12.0, 12.0), (10.0, 12.0)];
-        assert_eq!(discretise_polygon(&far, (0.0, 0.0), 1.0, (4, 4)), Footprint::default());
+        assert_eq!(
+            discretise_polygon(&far, (0.0, 0.0), 1.0, (4, 4)),
+            Footprint::default()
+        );
         let edge = [(3.2, 3.2), (5.0, 3.2), (5.0, 5.0), (3.2, 5.0)];
         let cut = discretise_polygon(&edge, (0.0, 0.0), 1.0, (4, 4));
         // Grown from 3.2 - 0.707 = 2.49: centres 2.5 and 3.5 -> columns and rows 2, 3.

@@ -134,7 +134,10 @@ impl RaycastDriver {
             for j in 0..n {
                 for i in 0..n {
                     let min = volume.min + size * Vec3::new(i as f32, j as f32, k as f32);
-                    let brick = Aabb { min, max: min + size };
+                    let brick = Aabb {
+                        min,
+                        max: min + size,
+                    };
                     let distance = brick.distance_squared(eye).to_bits();
                     bricks.push((distance, bricks.len(), brick));
                 }

@@ -52,14 +52,7 @@ fn box_triangles(min: Vec3, max: Vec3) -> Vec<[Vec3; 3]> {
 
 /// A building on the lot [x0, x1] x [z0, z1]: its triangles, and its body and setback
 /// storey, the boxes inside its surface.
-fn building(
-    rng: &mut SplitMix64,
-    detail: u32,
-    x0: f32,
-    x1: f32,
-    z0: f32,
-    z1: f32,
-) -> SceneObject {
+fn building(rng: &mut SplitMix64, detail: u32, x0: f32, x1: f32, z0: f32, z1: f32) -> SceneObject {
     let floors = rng.range(2.0, 16.0) as u32;
     let height = floors as f32 * STOREY;
     let body = Aabb {

@@ -31,6 +31,9 @@ impl Default for TrafficOptions {
 /// Distance from a street's centre line to the middle of the lane cars drive in, metres:
 /// clear of the walk's eye (1.5 m off the avenue's centre) and of the building lots.
 const LANE_OFFSET: f32 = 5.0;
+// The lane lies in the street, short of the lots (half a metre at least beyond its kerb).
+const _: () = assert!(LANE_OFFSET < StreetLayout::STREET_WIDTH * 0.5 + 0.5);
+
 /// Slowest and fastest car, metres per frame (a frame is a tenth of a second: 29 to 50 km/h).
 const SPEED_RANGE: (f32, f32) = (0.8, 1.4);
 /// Most cars a block (bounds memory).
@@ -45,7 +48,10 @@ fn car_shape() -> (Vec<[Vec3; 3]>, Aabb) {
     let mut triangles = body.triangles();
     triangles.extend(cabin.triangles());
     for (x, z) in [(-1.5, -0.75), (-1.5, 0.75), (1.5, -0.75), (1.5, 0.75)] {
-        let wheel = part(Vec3::new(x - 0.3, 0.0, z - 0.15), Vec3::new(x + 0.3, 0.6, z + 0.15));
+        let wheel = part(
+            Vec3::new(x - 0.3, 0.0, z - 0.15),
+            Vec3::new(x + 0.3, 0.6, z + 0.15),
+        );
         triangles.extend(wheel.triangles());
     }
     (triangles, body)
@@ -91,7 +97,13 @@ impl Motion {
     pub(crate) fn pose(&self, frame: u32) -> SceneObject {
         let (at, along_z) = self.place(frame);
         // A quarter turn about y (x' = z, z' = -x) keeps the winding counter-clockwise.
-        let turn = |p: Vec3| if along_z { Vec3::new(p.z, p.y, -p.x) } else { p };
+        let turn = |p: Vec3| {
+            if along_z {
+                Vec3::new(p.z, p.y, -p.x)
+            } else {
+                p
+            }
+        };
         let moved = |p: Vec3| turn(p) + at;
         let triangles = self.shape.iter().map(|t| t.map(moved)).collect();
         let solid = Aabb::around(self.solid.corners().map(moved)).expect("eight corners");
@@ -106,8 +118,9 @@ impl Motion {
 pub fn traffic(options: &TrafficOptions) -> WorkloadScene {
     let (mut objects, camera, layout) = city_parts(&options.city);
     let cars = options.cars_per_block.min(MAX_CARS_PER_BLOCK);
-    // A generator of its own, so the buildings are the city's with the same seed.
-    let mut rng = SplitMix64(options.city.seed ^ 0x7472_6166_6669_63);
+    // A generator of its own (the seed mixed with "traffic" in ASCII), so the buildings are
+    // the city's with the same seed.
+    let mut rng = SplitMix64(options.city.seed ^ 0x0074_7261_6666_6963);
     let mut motions: Vec<Option<Motion>> = vec![None; objects.len()];
     let (shape, solid) = car_shape();
     for j in 0..layout.blocks {
@@ -134,7 +147,6 @@ fn block_loop(
     solid: Aabb,
 ) -> Motion {
     let pitch = StreetLayout::PITCH;
-    debug_assert!(LANE_OFFSET < StreetLayout::STREET_WIDTH * 0.5 + 0.5);
     let west = layout.west + i as f32 * pitch;
     let north = layout.first_street_z - j as f32 * pitch;
     let mut motion = Motion {
@@ -192,7 +204,9 @@ mod tests {
         assert!(extent.z > extent.x);
         // Each box part is twelve triangles; each faces away from its part's centre.
         for part in turned.triangles.chunks(12) {
-            let centre = Aabb::around(part.iter().flatten().copied()).unwrap().centre();
+            let centre = Aabb::around(part.iter().flatten().copied())
+                .unwrap()
+                .centre();
             for [a, b, c] in part {
                 let normal = (*b - *a).cross(*c - *a);
                 let middle = (*a + *b + *c) / 3.0;
