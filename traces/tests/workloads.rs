@@ -201,20 +201,9 @@ fn the_dynamic_grid_follows_cars_and_culls_them_without_queries() {
         visible_cars > 0,
         "no car is ever seen: the test shows nothing"
     );
-    let frustum = generate(
-        &scene,
-        &DriverOptions::new(DriverKind::Frustum),
-        &walk,
-        &mut Discard,
-    )
-    .unwrap();
-    let grid = generate(
-        &scene,
-        &DriverOptions::new(DriverKind::DynamicGrid),
-        &walk,
-        &mut Discard,
-    )
-    .unwrap();
+    let walk_with = |kind| generate(&scene, &DriverOptions::new(kind), &walk, &mut Discard);
+    let frustum = walk_with(DriverKind::Frustum).unwrap();
+    let grid = walk_with(DriverKind::DynamicGrid).unwrap();
     // A query is asked only of the grid's potentially visible set: far fewer objects than
     // frustum culling draws, the rest culled on the grid alone.
     let in_view: u64 = frustum

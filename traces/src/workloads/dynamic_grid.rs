@@ -424,6 +424,12 @@ struct Tbv {
 
 /// The grid's per-frame state.
 struct FrameState {
+    frame: u32,
+    eye: Vec3,
+    /// The near clip distance plus a cell's diagonal: how close a TBV may come to the eye.
+    eye_guard: f32,
+    /// TBVs are used only with the eye inside the grid.
+    eye_inside: bool,
     opaque: Vec<bool>,
     /// Per cell: occluders it was tested against, `u32::MAX` once found occluded (H).
     shadow_tests: Vec<u32>,
@@ -488,11 +494,9 @@ impl DynamicGridDriver {
         }
         for column in 0..driver.grid.columns() {
             let mut solids = driver.static_solids[column].clone();
-            driver.mark_column(column, &mut solids, &mut |cell, opaque| {
-                if opaque {
-                    cell.1.static_opaque[cell.0] = true;
-                }
-            });
+            for (cell, opaque) in driver.column_cover(column, &mut solids) {
+                driver.static_opaque[cell] = opaque;
+            }
         }
         driver
     }
@@ -532,31 +536,27 @@ impl DynamicGridDriver {
         columns
     }
 
-    /// Call `mark` with each layer's cell of `column` and whether the union of `solids`
-    /// (y ranges) covers it.
-    fn mark_column(
-        &mut self,
-        column: usize,
-        solids: &mut [(f32, f32)],
-        mark: &mut dyn FnMut((usize, &mut DynamicGridDriver), bool),
-    ) {
+    /// Each layer's cell of `column` and whether the union of `solids` (y ranges) covers it.
+    fn column_cover(&self, column: usize, solids: &mut [(f32, f32)]) -> Vec<(usize, bool)> {
         solids.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
         let (x, z) = (
             (column % self.grid.dims[0] as usize) as u32,
             (column / self.grid.dims[0] as usize) as u32,
         );
-        for y in 0..self.grid.dims[1] {
-            let b = self.grid.cell_box([x, y, z]);
-            // Walk the sorted ranges, extending the covered span from the layer's bottom.
-            let mut reach = b.min.y;
-            for &(y0, y1) in solids.iter() {
-                if y0 <= reach {
-                    reach = reach.max(y1);
+        (0..self.grid.dims[1])
+            .map(|y| {
+                let b = self.grid.cell_box([x, y, z]);
+                // Walk the ranges by their starts, extending the span covered from the
+                // layer's bottom.
+                let mut reach = b.min.y;
+                for &(y0, y1) in solids.iter() {
+                    if y0 <= reach {
+                        reach = reach.max(y1);
+                    }
                 }
-            }
-            let index = self.grid.index([x, y, z]);
-            mark((index, self), reach >= b.max.y);
-        }
+                (self.grid.index([x, y, z]), reach >= b.max.y)
+            })
+            .collect()
     }
 
     pub(crate) fn frame<S: EventSink, O: CommandObserver>(
@@ -568,7 +568,12 @@ impl DynamicGridDriver {
         renderer: &mut Renderer<S, O>,
     ) -> Result<(), S::Error> {
         let objects = posed.objects.len();
+        let (_, eye_inside) = self.grid.locate(view.eye);
         let mut state = FrameState {
+            frame,
+            eye: view.eye,
+            eye_guard: view.near + self.grid.diagonal(),
+            eye_inside,
             opaque: self.static_opaque.clone(),
             shadow_tests: vec![0; self.grid.cells()],
             visible: vec![false; self.grid.cells()],
@@ -581,9 +586,8 @@ impl DynamicGridDriver {
         for cell in self.dynamic_touched.drain(..) {
             self.dynamic_ids[cell].clear();
         }
-        let (_, eye_inside) = self.grid.locate(view.eye);
-        self.discretise_scene(frame, scene, posed, view, eye_inside, &mut state);
-        self.traverse(posed, view, eye_inside, &mut state);
+        self.discretise_scene(scene, posed, &mut state);
+        self.traverse(posed, view, &mut state);
         renderer.host_tests(state.host_tests);
         self.draw(posed, view, &state.pvs, renderer)
     }
@@ -591,14 +595,10 @@ impl DynamicGridDriver {
     /// Step 1: moving objects into O and I, or into T.
     fn discretise_scene(
         &mut self,
-        frame: u32,
         scene: &WorkloadScene,
         posed: &WorkloadScene,
-        view: &FrameView,
-        eye_inside: bool,
         state: &mut FrameState,
     ) {
-        let guard = view.near + self.grid.diagonal();
         for index in 0..posed.objects.len() {
             let Some(motion) = scene.motion(index as u32) else {
                 continue;
@@ -606,49 +606,40 @@ impl DynamicGridDriver {
             let object = &posed.objects[index];
             match &self.tbvs[index] {
                 Some(tbv)
-                    if !eye_inside
-                        || self.grid.distance(view.eye, tbv.centre) <= tbv.radius + guard =>
+                    if !state.eye_inside
+                        || self.grid.distance(state.eye, tbv.centre)
+                            <= tbv.radius + state.eye_guard =>
                 {
                     self.remove_tbv(index);
                     self.periods[index] = (self.periods[index] / 2).max(1);
                     self.discretise(index, object, state);
                 }
-                Some(tbv) if frame > tbv.expires => {
+                Some(tbv) if state.frame > tbv.expires => {
                     self.remove_tbv(index);
                     self.periods[index] = (self.periods[index] * 2).min(MAX_PERIOD);
-                    self.hide(index, object, motion.speed, frame, view, eye_inside, state);
+                    self.hide(index, object, motion.speed, state);
                 }
                 Some(_) => {}
                 None if self.drawn_last[index] => {
                     self.discretise(index, object, state);
                 }
-                None => self.hide(index, object, motion.speed, frame, view, eye_inside, state),
+                None => self.hide(index, object, motion.speed, state),
             }
         }
         self.refresh_columns(state);
     }
 
     /// Give a hidden moving object a TBV that keeps clear of the eye, or discretise it.
-    #[allow(clippy::too_many_arguments)]
-    fn hide(
-        &mut self,
-        index: usize,
-        object: &SceneObject,
-        speed: f32,
-        frame: u32,
-        view: &FrameView,
-        eye_inside: bool,
-        state: &mut FrameState,
-    ) {
+    fn hide(&mut self, index: usize, object: &SceneObject, speed: f32, state: &mut FrameState) {
         let centre = object.bounds.centre();
         let half = self.grid.distance(object.bounds.max, centre);
-        let clearance = self.grid.distance(view.eye, centre) - view.near - self.grid.diagonal();
+        let clearance = self.grid.distance(state.eye, centre) - state.eye_guard;
         let limit = clearance.min(MAX_TBV_CELLS * self.grid.side);
         let mut period = self.periods[index];
         while period > 0 && half + speed * period as f32 >= limit {
             period /= 2;
         }
-        if period == 0 || !eye_inside {
+        if period == 0 || !state.eye_inside {
             self.discretise(index, object, state);
             return;
         }
@@ -662,7 +653,7 @@ impl DynamicGridDriver {
         self.tbvs[index] = Some(Tbv {
             centre,
             radius,
-            expires: frame + period,
+            expires: state.frame + period,
             cells,
         });
     }
@@ -720,20 +711,14 @@ impl DynamicGridDriver {
             let column = run[0].0;
             let mut solids = self.static_solids[column].clone();
             solids.extend(run.iter().map(|&(_, y0, y1)| (y0, y1)));
-            self.mark_column(column, &mut solids, &mut |(cell, _), opaque| {
+            for (cell, opaque) in self.column_cover(column, &mut solids) {
                 state.opaque[cell] |= opaque;
-            });
+            }
         }
     }
 
     /// Steps 2 to 4: shells of equal chess distance from the eye's cell, nearest first.
-    fn traverse(
-        &mut self,
-        posed: &WorkloadScene,
-        view: &FrameView,
-        eye_inside: bool,
-        state: &mut FrameState,
-    ) {
+    fn traverse(&mut self, posed: &WorkloadScene, view: &FrameView, state: &mut FrameState) {
         let frustum = Frustum::without_near(&view.view_projection);
         let (eye_cell, _) = self.grid.locate(view.eye);
         let farthest = (0..3)
@@ -748,12 +733,12 @@ impl DynamicGridDriver {
                     continue;
                 }
                 state.host_tests += 1;
-                if self.visit(cell, eye_cell, posed, view, state) {
+                if self.visit(cell, eye_cell, posed, state) {
                     any_visible = true;
                 }
             }
             // Every ray from the eye crosses every shell: none visible, nothing beyond is.
-            if eye_inside && !any_visible {
+            if state.eye_inside && !any_visible {
                 break;
             }
         }
@@ -765,11 +750,10 @@ impl DynamicGridDriver {
         cell: Cell,
         eye_cell: Cell,
         posed: &WorkloadScene,
-        view: &FrameView,
         state: &mut FrameState,
     ) -> bool {
         let index = self.grid.index(cell);
-        if self.occluded(cell, view.eye, state) {
+        if self.occluded(cell, state.eye, state) {
             return false;
         }
         state.visible[index] = true;
@@ -784,7 +768,7 @@ impl DynamicGridDriver {
             self.reveal(object as usize, posed, state);
         }
         if state.opaque[index] {
-            self.extend_occluder(cell, eye_cell, view.eye, state);
+            self.extend_occluder(cell, eye_cell, state.eye, state);
         }
         true
     }
