@@ -355,7 +355,7 @@ fn print_rays(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<()
     {
         writeln!(
             out,
-            "{}: {:.0} rays cast a frame of {:.0} for the full screen ({:.1}% saved); {:.1} bricks a frame overflowed their verbose buffers and cast through the box of their hits",
+            "{}: {:.0} rays cast a frame of {:.0} for the full screen ({:.1}% saved); verbose buffers overflowed a frame: {:.1} (those bricks cast through the box of their hits)",
             d.driver,
             d.rays_cast_per_frame,
             d.rays_full_screen_per_frame,

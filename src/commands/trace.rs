@@ -135,7 +135,7 @@ fn print_rays(frames: &[occsim_traces::workloads::FrameStats]) -> anyhow::Result
             continue;
         }
         outln!(
-            "frame {frame}: {} rays cast of {} for the full screen ({:.1}% saved); {} bricks overflowed their verbose buffers and cast through the box of their hits",
+            "frame {frame}: {} rays cast of {} for the full screen ({:.1}% saved); verbose buffers overflowed: {} (those bricks cast through the box of their hits)",
             stats.rays_cast,
             stats.rays_full_screen,
             100.0 * (1.0 - stats.rays_cast as f64 / stats.rays_full_screen as f64),
