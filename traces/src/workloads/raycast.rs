@@ -78,13 +78,16 @@ pub(crate) enum RayChoice {
     Hits(u64),
     /// Its buffer overflowed: every pixel of the box of its hits, this many.
     HitBox(u64),
+    /// No answer to choose by (the brick reaches the near plane): every pixel of this
+    /// many it may cover.
+    Everywhere(u64),
 }
 
 impl RayChoice {
     fn rays(self) -> u64 {
         match self {
             RayChoice::Hidden => 0,
-            RayChoice::Hits(n) | RayChoice::HitBox(n) => n,
+            RayChoice::Hits(n) | RayChoice::HitBox(n) | RayChoice::Everywhere(n) => n,
         }
     }
 }
@@ -169,7 +172,7 @@ impl RaycastDriver {
                 BoxView::Near { .. } => {
                     let screen = Rect::new(0, 0, view.width, view.height);
                     rays.set_rect(screen);
-                    RayChoice::HitBox(screen.area())
+                    RayChoice::Everywhere(screen.area())
                 }
                 BoxView::OnScreen { rect, .. } => {
                     let triangles = query_box
@@ -181,7 +184,7 @@ impl RaycastDriver {
                         // No answer to read: every pixel of the rectangle may see the brick.
                         None => {
                             rays.set_rect(rect);
-                            RayChoice::HitBox(rect.area())
+                            RayChoice::Everywhere(rect.area())
                         }
                     }
                 }
