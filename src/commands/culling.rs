@@ -120,7 +120,8 @@ fn drivers_to_compare(args: &CompareArgs) -> Vec<DriverOptions> {
     list
 }
 
-/// The drivers of seeds 002 to 004, each conservative, then each approximate variant.
+/// The drivers of seeds 002 to 004, each conservative, then each approximate variant; the
+/// dynamic grid in 3D and 2D; the raycast.
 fn seed_drivers(args: &CompareArgs, list: &mut Vec<DriverOptions>) {
     list.push(DriverOptions::new(DriverKind::Hom));
     for &threshold in &args.opacity_threshold {
@@ -129,6 +130,11 @@ fn seed_drivers(args: &CompareArgs, list: &mut Vec<DriverOptions>) {
         list.push(approximate);
     }
     list.push(DriverOptions::new(DriverKind::LargeOccluders));
+    list.push(DriverOptions::new(DriverKind::DynamicGrid));
+    let mut flat = DriverOptions::new(DriverKind::DynamicGrid);
+    flat.flat_grid = true;
+    list.push(flat);
+    list.push(DriverOptions::new(DriverKind::Raycast));
 }
 
 /// `culling compare` timed on the machines its flags name (with `--bands`, each machine with
@@ -434,9 +440,30 @@ fn print_table(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<(
          frame on machine M; trav ms, golden ms: wall-clock milliseconds on this computer in the \
          driver's traversal and in the golden model (rasterizing and answering the queries)"
     )?;
+    print_rays(report, out)?;
     print_frame_time(report, out)?;
     print_fastest(report, &machines, out)?;
     print_accuracy(report, &machines, out)
+}
+
+/// The raycast rows' rays under the table: cast, against a cast through every pixel.
+fn print_rays(report: &CompareReport, out: &mut dyn Write) -> std::io::Result<()> {
+    for d in report
+        .drivers
+        .iter()
+        .filter(|d| d.rays_full_screen_per_frame > 0.0)
+    {
+        writeln!(
+            out,
+            "{}: {:.0} rays cast a frame of {:.0} for the full screen ({:.1}% saved); verbose buffers overflowed a frame: {:.1} (those bricks cast through the box of their hits)",
+            d.driver,
+            d.rays_cast_per_frame,
+            d.rays_full_screen_per_frame,
+            100.0 * (1.0 - d.rays_cast_per_frame / d.rays_full_screen_per_frame),
+            d.overflowed_buffers_per_frame
+        )?;
+    }
+    Ok(())
 }
 
 /// Each driver's frame time on each machine: frames per second, and where the frame's time
@@ -700,7 +727,10 @@ mod tests {
                 "hierarchical/t0.3",
                 "hom",
                 "hom/o0.9",
-                "large-occluders"
+                "large-occluders",
+                "dynamic-grid",
+                "dynamic-grid/2d",
+                "raycast"
             ]
         );
         for d in &report.drivers {
@@ -731,6 +761,11 @@ mod tests {
         assert!(text.contains("frames/s"), "{text}");
         assert!(text.contains("cycles saved frag"), "{text}");
         assert!(text.contains("approximate culling against hom"), "{text}");
+        let raycast = report.drivers.last().unwrap();
+        assert!(raycast.rays_cast_per_frame > 0.0);
+        assert!(raycast.rays_cast_per_frame < raycast.rays_full_screen_per_frame);
+        assert!(text.contains("raycast: "), "{text}");
+        assert!(text.contains("rays cast a frame of"), "{text}");
     }
 
     /// A machine's variants are timed on the same frames: a variant equal to the machine
@@ -781,8 +816,9 @@ mod tests {
         .unwrap();
         let value: serde_json::Value = serde_json::from_slice(&out).unwrap();
         // frustum, hierarchical, hierarchical/vob, collision, the two grids in both
-        // variants, one adaptive threshold, hom, hom/o0.9 and large-occluders.
-        assert_eq!(value["drivers"].as_array().unwrap().len(), 12);
+        // variants, one adaptive threshold, hom, hom/o0.9, large-occluders, the dynamic grid
+        // in 3D and 2D, and raycast.
+        assert_eq!(value["drivers"].as_array().unwrap().len(), 15);
         assert_eq!(value["frames"], 2);
     }
 }

@@ -77,6 +77,7 @@ fn generate(args: GenArgs) -> anyhow::Result<()> {
             let (summary, stats) =
                 super::workload_args::write_workload_trace(&args.workload, &args.output)?;
             print_collisions(&stats.frames)?;
+            print_rays(&stats.frames)?;
             (summary, format!("{} frames, ", stats.frames.len()))
         }
     };
@@ -121,6 +122,24 @@ fn print_collisions(frames: &[occsim_traces::workloads::FrameStats]) -> anyhow::
                     test.tiles.len()
                 )
             }
+        );
+    }
+    Ok(())
+}
+
+/// The raycast driver's rays, a line a frame: cast, against a cast through every pixel,
+/// and the bricks whose verbose buffers overflowed (nothing for other drivers).
+fn print_rays(frames: &[occsim_traces::workloads::FrameStats]) -> anyhow::Result<()> {
+    for (frame, stats) in frames.iter().enumerate() {
+        if stats.rays_full_screen == 0 {
+            continue;
+        }
+        outln!(
+            "frame {frame}: {} rays cast of {} for the full screen ({:.1}% saved); verbose buffers overflowed: {} (those bricks cast through the box of their hits)",
+            stats.rays_cast,
+            stats.rays_full_screen,
+            100.0 * (1.0 - stats.rays_cast as f64 / stats.rays_full_screen as f64),
+            stats.overflowed_buffers
         );
     }
     Ok(())

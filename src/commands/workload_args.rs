@@ -6,9 +6,9 @@ use anyhow::Context;
 use occsim_sweep::output::write_atomically_with;
 use occsim_traces::trace::{TraceHeader, TraceSummary, TraceWriter};
 use occsim_traces::workloads::{
-    city, forest, generate_observed, load_obj, CameraPath, CityOptions, CommandObserver,
-    DriverKind, DriverOptions, ForestOptions, GenerateError, ObjOptions, Walk, WorkloadError,
-    WorkloadOption, WorkloadScene, WorkloadStats,
+    city, forest, generate_observed, load_obj, traffic, CameraPath, CityOptions, CommandObserver,
+    DriverKind, DriverOptions, ForestOptions, GenerateError, ObjOptions, TrafficOptions, Walk,
+    WorkloadError, WorkloadOption, WorkloadScene, WorkloadStats,
 };
 use std::io::Read;
 use std::path::Path;
@@ -16,7 +16,8 @@ use std::path::Path;
 /// The scene, its camera and the walk.
 #[derive(clap::Args, Clone, Debug)]
 pub struct SceneArgs {
-    /// The scene: `city`, `forest`, or `obj:PATH` for a Wavefront OBJ model.
+    /// The scene: `city`, `traffic` (the city with cars that move every frame), `forest`,
+    /// or `obj:PATH` for a Wavefront OBJ model.
     #[arg(long, default_value = "city")]
     pub scene: String,
     /// Frames of the walkthrough.
@@ -31,14 +32,17 @@ pub struct SceneArgs {
     /// Seed of the city's or forest's layout.
     #[arg(long, default_value_t = 1998)]
     pub seed: u64,
-    /// City: blocks along each side (default 6; triangles grow with its square).
+    /// City and traffic: blocks along each side (default 6; triangles grow with its square).
     #[arg(long)]
     pub blocks: Option<u32>,
+    /// Traffic: cars circling each block (default 3).
+    #[arg(long)]
+    pub cars_per_block: Option<u32>,
     /// Forest: trees in all (default 3000).
     #[arg(long)]
     pub trees: Option<u32>,
-    /// Detail: window sills per facade per floor (city, default 2) or sides per crown cone
-    /// (forest, default 10).
+    /// Detail: window sills per facade per floor (city and traffic, default 2) or sides per
+    /// crown cone (forest, default 10).
     #[arg(long)]
     pub detail: Option<u32>,
     /// Camera path start X,Y,Z in metres (with --camera-to); replaces the scene's walk.
@@ -62,8 +66,8 @@ pub struct SceneArgs {
 /// The culling driver and its options.
 #[derive(clap::Args, Clone, Debug)]
 pub struct DriverArgs {
-    /// The culling driver: frustum, hierarchical, lazy-grid, busy-grid, collision, hom or
-    /// large-occluders.
+    /// The culling driver: frustum, hierarchical, lazy-grid, busy-grid, collision, hom,
+    /// large-occluders, dynamic-grid or raycast.
     #[arg(long, default_value = "hierarchical")]
     pub driver: String,
     /// Frames before a query's answer is used: 0 (at once) or 1 (frustum, hierarchical).
@@ -105,6 +109,20 @@ pub struct DriverArgs {
     /// Hom: the occluders' triangle budget a frame (default: a sixteenth of the scene's).
     #[arg(long)]
     pub occluder_triangles: Option<u64>,
+    /// Dynamic grid: cells along the scene's longer horizontal side (4 to 256).
+    #[arg(long, default_value_t = occsim_traces::workloads::DEFAULT_GRID_RESOLUTION)]
+    pub grid_resolution: u32,
+    /// Dynamic grid: the paper's 2D case, columns through the scene's whole height, instead
+    /// of its 3D extension's cubes.
+    #[arg(long)]
+    pub flat_grid: bool,
+    /// Raycast: bricks along each side of the volume (1 to 16).
+    #[arg(long, default_value_t = occsim_traces::workloads::DEFAULT_VOLUME_BRICKS)]
+    pub volume_bricks: u32,
+    /// Raycast: entries of each brick's verbose buffer: 8 for the brief record, then one a
+    /// hit; a brick with more hits overflows (its rays go through the box of its hits).
+    #[arg(long, default_value_t = occsim_traces::workloads::DEFAULT_VERBOSE_BUFFER)]
+    pub verbose_buffer: u32,
 }
 
 /// Everything `trace gen` needs to make a workload trace.
@@ -144,8 +162,11 @@ impl SceneArgs {
     /// Build (or load) the scene and put the camera on its path.
     pub fn load_scene(&self) -> anyhow::Result<WorkloadScene> {
         let name = self.scene.as_str();
-        if self.blocks.is_some() && name != "city" {
-            anyhow::bail!("--blocks applies to the city scene only, not `{name}`");
+        if self.blocks.is_some() && !matches!(name, "city" | "traffic") {
+            anyhow::bail!("--blocks applies to the city and traffic scenes only, not `{name}`");
+        }
+        if self.cars_per_block.is_some() && name != "traffic" {
+            anyhow::bail!("--cars-per-block applies to the traffic scene only, not `{name}`");
         }
         if self.trees.is_some() && name != "forest" {
             anyhow::bail!("--trees applies to the forest scene only, not `{name}`");
@@ -153,15 +174,22 @@ impl SceneArgs {
         if self.detail.is_some() && name.starts_with("obj:") {
             anyhow::bail!("--detail applies to the city and forest scenes, not to OBJ models");
         }
-        let scene = match name {
-            "city" => {
-                let defaults = CityOptions::default();
-                city(&CityOptions {
-                    blocks: self.blocks.unwrap_or(defaults.blocks),
-                    detail: self.detail.unwrap_or(defaults.detail),
-                    seed: self.seed,
-                })
+        let city_options = || {
+            let defaults = CityOptions::default();
+            CityOptions {
+                blocks: self.blocks.unwrap_or(defaults.blocks),
+                detail: self.detail.unwrap_or(defaults.detail),
+                seed: self.seed,
             }
+        };
+        let scene = match name {
+            "city" => city(&city_options()),
+            "traffic" => traffic(&TrafficOptions {
+                city: city_options(),
+                cars_per_block: self
+                    .cars_per_block
+                    .unwrap_or(TrafficOptions::default().cars_per_block),
+            }),
             "forest" => {
                 let defaults = ForestOptions::default();
                 forest(&ForestOptions {
@@ -172,7 +200,9 @@ impl SceneArgs {
             }
             other => match other.strip_prefix("obj:") {
                 Some(path) => load_obj_file(Path::new(path))?,
-                None => anyhow::bail!("unknown scene `{other}`: expected city, forest or obj:PATH"),
+                None => anyhow::bail!(
+                    "unknown scene `{other}`: expected city, traffic, forest or obj:PATH"
+                ),
             },
         };
         match self.camera_path(&scene)? {
@@ -242,6 +272,10 @@ impl DriverArgs {
             occlusion_map_cell_pixels: self.occlusion_map_cell_pixels,
             opacity_threshold: self.opacity_threshold,
             occluder_triangles: self.occluder_triangles,
+            dynamic_grid_resolution: self.grid_resolution,
+            flat_grid: self.flat_grid,
+            volume_bricks: self.volume_bricks,
+            verbose_buffer_entries: self.verbose_buffer,
         };
         options.validate().map_err(flagged)?;
         Ok(options)
@@ -267,6 +301,10 @@ pub fn flagged(error: WorkloadError) -> anyhow::Error {
                 WorkloadOption::OcclusionMapCellPixels => "--occlusion-map-cell-pixels",
                 WorkloadOption::OpacityThreshold => "--opacity-threshold",
                 WorkloadOption::OccluderTriangles => "--occluder-triangles",
+                WorkloadOption::GridResolution => "--grid-resolution",
+                WorkloadOption::FlatGrid => "--flat-grid",
+                WorkloadOption::VolumeBricks => "--volume-bricks",
+                WorkloadOption::VerboseBuffer => "--verbose-buffer",
             };
             anyhow::anyhow!("{flag} {detail}")
         }
@@ -471,5 +509,30 @@ mod tests {
         );
         let delayed = resolve_error(&["--driver", "busy-grid", "--query-delay", "1"]);
         assert!(delayed.contains("--query-delay applies to"), "{delayed}");
+        let cars = resolve_error(&["--scene", "city", "--cars-per-block", "2"]);
+        assert!(
+            cars.contains("--cars-per-block applies to the traffic"),
+            "{cars}"
+        );
+        let flat = resolve_error(&["--driver", "hom", "--flat-grid"]);
+        assert!(
+            flat.contains("--flat-grid applies to the dynamic-grid"),
+            "{flat}"
+        );
+        let coarse = resolve_error(&["--driver", "dynamic-grid", "--grid-resolution", "1"]);
+        assert!(
+            coarse.contains("--grid-resolution 1 out of range"),
+            "{coarse}"
+        );
+        let buffer = resolve_error(&["--driver", "raycast", "--verbose-buffer", "7"]);
+        assert!(
+            buffer.contains("--verbose-buffer 7 out of range"),
+            "{buffer}"
+        );
+        let bricks = resolve_error(&["--driver", "hierarchical", "--volume-bricks", "2"]);
+        assert!(
+            bricks.contains("--volume-bricks applies to the raycast"),
+            "{bricks}"
+        );
     }
 }

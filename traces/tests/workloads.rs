@@ -4,9 +4,9 @@
 use occsim_traces::golden::Discard;
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::workloads::{
-    city, collision_oracle, forest, full_render_visible_pixels, generate, load_obj, CameraPath,
-    CityOptions, DriverKind, DriverOptions, ForestOptions, GridVariant, ObjOptions, Walk,
-    WorkloadScene,
+    city, collision_oracle, forest, full_render_visible_pixels, generate, load_obj, traffic,
+    CameraPath, CityOptions, DriverKind, DriverOptions, ForestOptions, GridVariant, ObjOptions,
+    TrafficOptions, Walk, WorkloadScene,
 };
 use occsim_traces::Event;
 
@@ -15,6 +15,18 @@ fn small_city() -> WorkloadScene {
         blocks: 4,
         detail: 1,
         seed: 5,
+    })
+}
+
+/// The small city with two cars round each block, moving every frame.
+fn small_traffic() -> WorkloadScene {
+    traffic(&TrafficOptions {
+        city: CityOptions {
+            blocks: 4,
+            detail: 1,
+            seed: 5,
+        },
+        cars_per_block: 2,
     })
 }
 
@@ -50,25 +62,39 @@ fn conservative_drivers() -> Vec<DriverOptions> {
         occlusion_buffer.grid_variant = GridVariant::OcclusionBuffer;
         all.push(occlusion_buffer);
     }
+    let mut flat = DriverOptions::new(DriverKind::DynamicGrid);
+    flat.flat_grid = true;
+    all.push(flat);
+    let mut fine = DriverOptions::new(DriverKind::DynamicGrid);
+    fine.dynamic_grid_resolution = 128;
+    all.push(fine);
     assert!(all.iter().all(DriverOptions::is_conservative));
     all
 }
 
+/// Two walks of scenes built alike with `driver` give the same events and statistics.
+fn check_reproducible(make_scene: fn() -> WorkloadScene, driver: &DriverOptions) {
+    let mut first: Vec<Event> = Vec::new();
+    let mut second: Vec<Event> = Vec::new();
+    let a = generate(&make_scene(), driver, &WALK, &mut first).unwrap();
+    let b = generate(&make_scene(), driver, &WALK, &mut second).unwrap();
+    assert!(first == second, "{}: event streams differ", driver.label());
+    assert_eq!(a.frames, b.frames, "{}", driver.label());
+    assert!(
+        first.iter().any(|e| matches!(e, Event::Fragment(_))),
+        "{}: no fragments",
+        driver.label()
+    );
+}
+
 #[test]
 fn the_same_options_give_the_same_events() {
-    let scene = small_city();
     for driver in conservative_drivers() {
-        let mut first: Vec<Event> = Vec::new();
-        let mut second: Vec<Event> = Vec::new();
-        let a = generate(&scene, &driver, &WALK, &mut first).unwrap();
-        let b = generate(&small_city(), &driver, &WALK, &mut second).unwrap();
-        assert!(first == second, "{}: event streams differ", driver.label());
-        assert_eq!(a.frames, b.frames, "{}", driver.label());
-        assert!(
-            first.iter().any(|e| matches!(e, Event::Fragment(_))),
-            "{}: no fragments",
-            driver.label()
-        );
+        check_reproducible(small_city, &driver);
+    }
+    // Moving cars too: their poses depend on the seed and the frame alone.
+    for kind in [DriverKind::Frustum, DriverKind::DynamicGrid] {
+        check_reproducible(small_traffic, &DriverOptions::new(kind));
     }
 }
 
@@ -159,6 +185,72 @@ fn conservative_drivers_draw_every_visible_object_in_the_city() {
 #[test]
 fn conservative_drivers_draw_every_visible_object_in_the_forest() {
     check_conservative(&small_forest(), &WALK);
+}
+
+#[test]
+fn conservative_drivers_draw_every_visible_object_in_moving_traffic() {
+    // Long enough for hidden cars' TBVs to expire and be renewed (the first lasts 4 frames).
+    let walk = Walk { frames: 12, ..WALK };
+    check_conservative(&small_traffic(), &walk);
+}
+
+#[test]
+fn the_dynamic_grid_follows_cars_and_culls_them_without_queries() {
+    let scene = small_traffic();
+    let walk = Walk { frames: 8, ..WALK };
+    let full = full_renders(&scene, &walk);
+    // The cars are the objects after the city's buildings and ground.
+    let cars = scene.object_count() - small_city().object_count();
+    let first_car = scene.object_count() - cars;
+    let visible_cars: usize = full
+        .iter()
+        .map(|f| f[first_car..].iter().filter(|&&p| p > 0).count())
+        .sum();
+    assert!(
+        visible_cars > 0,
+        "no car is ever seen: the test shows nothing"
+    );
+    let walk_with = |kind| generate(&scene, &DriverOptions::new(kind), &walk, &mut Discard);
+    let frustum = walk_with(DriverKind::Frustum).unwrap();
+    let grid = walk_with(DriverKind::DynamicGrid).unwrap();
+    // A query is asked only of the grid's potentially visible set: far fewer objects than
+    // frustum culling draws, the rest culled on the grid alone.
+    let in_view: u64 = frustum
+        .frames
+        .iter()
+        .map(|f| f.objects_drawn.len() as u64)
+        .sum();
+    let queries: u64 = grid.frames.iter().map(|f| f.queries).sum();
+    assert!(
+        queries * 2 < in_view,
+        "{queries} queries for {in_view} objects in view"
+    );
+}
+
+#[test]
+fn raycast_rays_are_saved_and_an_overflow_casts_a_superset() {
+    let scene = small_city();
+    let rays = |entries: u32| {
+        let mut driver = DriverOptions::new(DriverKind::Raycast);
+        driver.verbose_buffer_entries = entries;
+        let stats = generate(&scene, &driver, &WALK, &mut Discard).unwrap();
+        let cast: u64 = stats.frames.iter().map(|f| f.rays_cast).sum();
+        let full: u64 = stats.frames.iter().map(|f| f.rays_full_screen).sum();
+        let overflows: u64 = stats.frames.iter().map(|f| f.overflowed_buffers).sum();
+        (cast, full, overflows)
+    };
+    // A buffer large enough for every brick's hits (160 x 120 pixels at most) never
+    // overflows; one of 8 + 16 entries does, and its bricks cast through their hit boxes.
+    let (exact, full, none) = rays(8 + 160 * 120);
+    assert_eq!(none, 0);
+    assert_eq!(full, WALK.frames as u64 * 160 * 120);
+    assert!(exact > 0 && exact < full, "{exact} rays of {full}");
+    let (boxed, _, overflows) = rays(8 + 16);
+    assert!(overflows > 0);
+    assert!(
+        boxed >= exact,
+        "the fallback casts {boxed}, fewer than the hits' {exact}"
+    );
 }
 
 #[test]
@@ -389,7 +481,7 @@ fn bad_options_are_refused_clearly() {
     let unknown = "z-pyramid".parse::<DriverKind>().unwrap_err().to_string();
     assert_eq!(
         unknown,
-        "unknown driver `z-pyramid`: expected one of frustum, hierarchical, lazy-grid, busy-grid, collision, hom, large-occluders"
+        "unknown driver `z-pyramid`: expected one of frustum, hierarchical, lazy-grid, busy-grid, collision, hom, large-occluders, dynamic-grid, raycast"
     );
     let mut opaque = DriverOptions::new(DriverKind::Hom);
     opaque.opacity_threshold = 1.5;
@@ -397,6 +489,12 @@ fn bad_options_are_refused_clearly() {
     let mut not_hom = DriverOptions::new(DriverKind::Hierarchical);
     not_hom.opacity_threshold = 0.5;
     assert!(error(&not_hom, &WALK).contains("opacity threshold applies to the hom driver only"));
+    let mut flat_hom = DriverOptions::new(DriverKind::Hom);
+    flat_hom.flat_grid = true;
+    assert!(error(&flat_hom, &WALK).contains("flat grid applies to the dynamic-grid driver only"));
+    let mut tiny = DriverOptions::new(DriverKind::Raycast);
+    tiny.verbose_buffer_entries = 7;
+    assert!(error(&tiny, &WALK).contains("verbose buffer 7 out of range"));
     let obj = load_obj(
         "v 0 0 0\nf 1 1\n".as_bytes(),
         "model.obj",

@@ -20,6 +20,7 @@ pub(crate) struct BvhNode {
 }
 
 /// Node 0 is the root.
+#[derive(Clone)]
 pub(crate) struct Bvh {
     pub(crate) nodes: Vec<BvhNode>,
     /// Object indices, leaf by leaf.

@@ -207,7 +207,7 @@ pub fn collision_oracle(
     let view = scene.frame_view(frame, walk);
     let frustum = Frustum::new(&view.view_projection);
     let (mut surely, mut possibly) = (false, false);
-    for object in &scene.objects {
+    for object in &scene.posed(frame).objects {
         if !frustum.may_see(&object.bounds) {
             continue;
         }

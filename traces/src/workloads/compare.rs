@@ -188,6 +188,11 @@ pub struct DriverReport {
     pub cells_refreshed_per_frame: f64,
     /// Visible pixels of the full render whose objects were not drawn, per frame.
     pub pixels_lost_per_frame: f64,
+    /// Raycast: rays cast, rays a cast through every pixel needs, and bricks whose verbose
+    /// buffers overflowed, per frame (0 for other drivers).
+    pub rays_cast_per_frame: f64,
+    pub rays_full_screen_per_frame: f64,
+    pub overflowed_buffers_per_frame: f64,
     /// Per machine: simulated cycles per frame (in JSON an object, machine -> cycles, in
     /// the machines' order).
     #[serde(serialize_with = "pairs_as_object")]
@@ -326,6 +331,9 @@ fn driver_report(
         query_fragments_per_frame: mean(&|f| f.query_fragments),
         cells_refreshed_per_frame: mean(&|f| f.cells_refreshed),
         pixels_lost_per_frame: pixels_lost as f64 / frames,
+        rays_cast_per_frame: mean(&|f| f.rays_cast),
+        rays_full_screen_per_frame: mean(&|f| f.rays_full_screen),
+        overflowed_buffers_per_frame: mean(&|f| f.overflowed_buffers),
         cycles_per_frame,
         frame_time: Vec::new(),
         traversal_ms_per_frame: ms(&|t| t.traversal()),

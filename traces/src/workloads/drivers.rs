@@ -3,12 +3,14 @@
 
 use super::bvh::{Bvh, NodeContent};
 use super::collision::CollisionDriver;
+use super::dynamic_grid::DynamicGridDriver;
 use super::grid::GridDriver;
 use super::hierarchical::HierarchicalDriver;
 use super::hom::HomDriver;
 use super::large::LargeOccluderDriver;
 use super::occlusion_buffer_grid::OcclusionBufferGrid;
 use super::project::Frustum;
+use super::raycast::RaycastDriver;
 use super::render::{CommandObserver, Renderer};
 use super::{
     DriverKind, DriverOptions, FrameView, GridVariant, Walk, WorkloadScene, WorkloadStats,
@@ -52,6 +54,32 @@ impl<T> FrontToBack<T> {
     }
 }
 
+/// The drivers' state between frames. A dynamic scene's hierarchy is rebuilt every frame,
+/// so there each frame starts afresh (node indices and cached planes would name other
+/// boxes); the dynamic grid keeps its own state, made for moving objects.
+struct DriverStates {
+    hierarchical: HierarchicalDriver,
+    grid: GridDriver,
+    obuffer_grid: OcclusionBufferGrid,
+    collision: CollisionDriver,
+    hom: Option<HomDriver>,
+    large: Option<LargeOccluderDriver>,
+}
+
+impl DriverStates {
+    fn new(options: &DriverOptions, scene: &WorkloadScene, walk: &Walk) -> DriverStates {
+        DriverStates {
+            hierarchical: HierarchicalDriver::new(options, scene.bvh.nodes.len()),
+            grid: GridDriver::new(options, walk.width, walk.height),
+            obuffer_grid: OcclusionBufferGrid::new(options, walk.width, walk.height),
+            collision: CollisionDriver::new(options),
+            hom: (options.kind == DriverKind::Hom).then(|| HomDriver::new(options, scene)),
+            large: (options.kind == DriverKind::LargeOccluders)
+                .then(|| LargeOccluderDriver::new(scene)),
+        }
+    }
+}
+
 pub(crate) fn run<S: EventSink, O: CommandObserver>(
     scene: &WorkloadScene,
     options: &DriverOptions,
@@ -61,13 +89,10 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
 ) -> Result<WorkloadStats, S::Error> {
     let mut renderer = Renderer::new(walk.width, walk.height, walk.raster, sink, observer);
     renderer.set_waits_for_answers(options.query_delay_frames == 0);
-    let mut hierarchical = HierarchicalDriver::new(options, scene.bvh.nodes.len());
-    let mut grid = GridDriver::new(options, walk.width, walk.height);
-    let mut obuffer_grid = OcclusionBufferGrid::new(options, walk.width, walk.height);
-    let collision = CollisionDriver::new(options);
-    let mut hom = (options.kind == DriverKind::Hom).then(|| HomDriver::new(options, scene));
-    let mut large =
-        (options.kind == DriverKind::LargeOccluders).then(|| LargeOccluderDriver::new(scene));
+    let mut states = DriverStates::new(options, scene, walk);
+    let mut dynamic_grid =
+        (options.kind == DriverKind::DynamicGrid).then(|| DynamicGridDriver::new(options, scene));
+    let raycast = RaycastDriver::new(options);
     let mut stats = WorkloadStats {
         scene_triangles: scene.triangle_count(),
         ..WorkloadStats::default()
@@ -75,28 +100,48 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     for frame in 0..walk.frames {
         let started = Instant::now();
         let view = scene.frame_view(frame, walk);
+        let posed = scene.posed(frame);
+        if scene.is_dynamic() && frame > 0 {
+            states = DriverStates::new(options, &posed, walk);
+        }
         renderer.start_frame()?;
+        let s = &mut states;
         match options.kind {
-            DriverKind::Frustum => frustum_frame(scene, &view, &mut renderer)?,
-            DriverKind::Hierarchical => hierarchical.frame(frame, scene, &view, &mut renderer)?,
+            DriverKind::Frustum => frustum_frame(&posed, &view, &mut renderer)?,
+            DriverKind::Hierarchical => {
+                s.hierarchical.frame(frame, &posed, &view, &mut renderer)?
+            }
             DriverKind::Collision => {
-                hierarchical.frame(frame, scene, &view, &mut renderer)?;
-                let test = collision.test(frame, scene, walk, &view, &mut renderer)?;
+                s.hierarchical.frame(frame, &posed, &view, &mut renderer)?;
+                let test = s
+                    .collision
+                    .test(frame, &posed, walk, &view, &mut renderer)?;
                 renderer.stats.collision = test;
             }
             DriverKind::LazyGrid | DriverKind::BusyGrid => match options.grid_variant {
-                GridVariant::ZBuffer => grid.frame(scene, &view, &mut renderer)?,
-                GridVariant::OcclusionBuffer => obuffer_grid.frame(scene, &view, &mut renderer)?,
+                GridVariant::ZBuffer => s.grid.frame(&posed, &view, &mut renderer)?,
+                GridVariant::OcclusionBuffer => {
+                    s.obuffer_grid.frame(&posed, &view, &mut renderer)?
+                }
             },
             DriverKind::Hom => {
-                if let Some(hom) = hom.as_mut() {
-                    hom.frame(scene, &view, &mut renderer)?
+                if let Some(hom) = s.hom.as_mut() {
+                    hom.frame(&posed, &view, &mut renderer)?
                 }
             }
             DriverKind::LargeOccluders => {
-                if let Some(large) = large.as_mut() {
-                    large.frame(scene, &view, &mut renderer)?
+                if let Some(large) = s.large.as_mut() {
+                    large.frame(&posed, &view, &mut renderer)?
                 }
+            }
+            DriverKind::DynamicGrid => {
+                if let Some(grid) = dynamic_grid.as_mut() {
+                    grid.frame(frame, scene, &posed, &view, &mut renderer)?
+                }
+            }
+            DriverKind::Raycast => {
+                s.hierarchical.frame(frame, &posed, &view, &mut renderer)?;
+                raycast.frame(&posed, &view, &mut renderer)?;
             }
         }
         renderer.swap()?;

@@ -23,12 +23,18 @@
 //! - `hom`: hierarchical occlusion maps (Zhang et al.), the map read by queries (`hom.rs`).
 //! - `large-occluders`: supporting and separating planes of large occluders (Coorg and
 //!   Teller), object space on the host, no queries (`large.rs`).
+//! - `dynamic-grid`: a regular grid for dynamic scenes (Batagelo and Wu), its potentially
+//!   visible set confirmed by brief box queries (`dynamic_grid.rs`); the `traffic` scene's
+//!   cars move every frame (`traffic.rs`).
+//! - `raycast`: the raycasting support of seed 001 section 5: verbose hit lists of a
+//!   volume's bricks choose the pixels rays are cast through (`raycast.rs`).
 
 mod bvh;
 mod camera;
 mod collision;
 pub mod compare;
 mod drivers;
+mod dynamic_grid;
 mod grid;
 mod hierarchical;
 mod hom;
@@ -37,8 +43,10 @@ mod obj;
 mod occlusion_buffer_grid;
 mod oracle;
 mod project;
+mod raycast;
 mod render;
 mod scenes;
+mod traffic;
 
 pub use camera::{CameraKeyframe, CameraPath};
 pub use collision::{collision_oracle, CollisionTest};
@@ -46,15 +54,19 @@ pub use obj::{load_obj, ObjOptions};
 pub use oracle::full_render_visible_pixels;
 pub use render::CommandObserver;
 pub use scenes::{city, forest, CityOptions, ForestOptions};
+pub use traffic::{traffic, TrafficOptions};
 
 use crate::geometry::{look_at, perspective_gl, Aabb};
 use crate::golden::EventSink;
-use crate::query::MAX_TILES;
+use crate::hit_list::LISTED_HITS_PER_QUERY;
+use crate::query::{BRIEF_RECORD_ENTRIES, MAX_TILES};
 use crate::raster::RasterProfile;
 use crate::state::MAX_VIEWPORT_SIDE;
 use bvh::Bvh;
 use glam::{Mat4, Vec3};
+use std::borrow::Cow;
 use std::time::Duration;
+pub(crate) use traffic::Motion;
 
 /// A workload that cannot be made, with what to change.
 #[derive(Debug, thiserror::Error)]
@@ -95,6 +107,10 @@ pub enum WorkloadOption {
     OcclusionMapCellPixels,
     OpacityThreshold,
     OccluderTriangles,
+    GridResolution,
+    FlatGrid,
+    VolumeBricks,
+    VerboseBuffer,
 }
 
 impl WorkloadOption {
@@ -115,26 +131,45 @@ impl WorkloadOption {
             WorkloadOption::OcclusionMapCellPixels => "occlusion map cell pixels",
             WorkloadOption::OpacityThreshold => "opacity threshold",
             WorkloadOption::OccluderTriangles => "occluder triangles",
+            WorkloadOption::GridResolution => "grid resolution",
+            WorkloadOption::FlatGrid => "flat grid",
+            WorkloadOption::VolumeBricks => "volume bricks",
+            WorkloadOption::VerboseBuffer => "verbose buffer",
         }
     }
 }
 
 /// One object of a scene: its triangles (counter-clockwise seen from outside, world space,
-/// metres) and their bounding box.
+/// metres), their bounding box, and boxes known to lie inside its solid interior.
+#[derive(Clone)]
 pub(crate) struct SceneObject {
     pub(crate) triangles: Vec<[Vec3; 3]>,
     pub(crate) bounds: Aabb,
+    /// Axis-aligned boxes wholly inside the object's closed surface (a building's body, a
+    /// car's body): what the dynamic grid may call opaque. Empty when not known.
+    pub(crate) solids: Vec<Aabb>,
 }
 
 impl SceneObject {
     /// None when there are no triangles.
     pub(crate) fn new(triangles: Vec<[Vec3; 3]>) -> Option<SceneObject> {
         let bounds = Aabb::around(triangles.iter().flatten().copied())?;
-        Some(SceneObject { triangles, bounds })
+        Some(SceneObject {
+            triangles,
+            bounds,
+            solids: Vec::new(),
+        })
+    }
+
+    /// The object with `solids` (each inside its closed surface) declared.
+    pub(crate) fn with_solids(mut self, solids: Vec<Aabb>) -> SceneObject {
+        self.solids = solids;
+        self
     }
 }
 
 /// A scene ready to walk through: objects, their hierarchy and a camera path.
+#[derive(Clone)]
 pub struct WorkloadScene {
     /// The scene's name, for reports (`city`, `forest`, or the OBJ file).
     pub name: String,
@@ -148,6 +183,10 @@ pub struct WorkloadScene {
     /// depth in front of its contents' by more than depth rounding, so box tests stay
     /// conservative.
     pub box_margin: f32,
+    /// Per object, how it moves (empty for a static scene): the objects hold frame 0.
+    motions: Vec<Option<Motion>>,
+    /// The volume a ray caster renders among the polygons (the raycast driver).
+    volume: Aabb,
 }
 
 /// Fraction of the scene's diagonal query boxes grow by (see `box_margin`).
@@ -164,6 +203,8 @@ impl WorkloadScene {
     ) -> Option<WorkloadScene> {
         let bounds = objects.iter().map(|o| o.bounds).reduce(Aabb::union)?;
         let bvh = Bvh::build(&objects);
+        // The volume: the middle of the scene, half its extent along each axis.
+        let quarter = (bounds.max - bounds.min) * 0.25;
         Some(WorkloadScene {
             name: name.into(),
             objects,
@@ -172,6 +213,57 @@ impl WorkloadScene {
             camera,
             fov_y_degrees: 60.0,
             box_margin: (bounds.max - bounds.min).length() * BOX_MARGIN_PER_DIAGONAL,
+            motions: Vec::new(),
+            volume: Aabb {
+                min: bounds.centre() - quarter,
+                max: bounds.centre() + quarter,
+            },
+        })
+    }
+
+    /// The same scene with objects that move: `motions[i]` for object `i` (None: static).
+    /// The objects must hold their frame-0 poses, and every pose must stay inside the
+    /// scene's bounds.
+    pub(crate) fn with_motions(mut self, motions: Vec<Option<Motion>>) -> WorkloadScene {
+        self.motions = motions;
+        self
+    }
+
+    /// Does any object move?
+    pub fn is_dynamic(&self) -> bool {
+        self.motions.iter().any(Option::is_some)
+    }
+
+    /// How object `object` moves (None: it stands still).
+    pub(crate) fn motion(&self, object: u32) -> Option<&Motion> {
+        self.motions.get(object as usize)?.as_ref()
+    }
+
+    /// The scene as it stands at `frame`: itself when nothing moves; otherwise every moving
+    /// object in its pose of that frame and the hierarchy rebuilt over them.
+    pub(crate) fn posed(&self, frame: u32) -> Cow<'_, WorkloadScene> {
+        if !self.is_dynamic() {
+            return Cow::Borrowed(self);
+        }
+        let objects: Vec<SceneObject> = self
+            .objects
+            .iter()
+            .zip(&self.motions)
+            .map(|(object, motion)| match motion {
+                Some(motion) => motion.pose(frame),
+                None => object.clone(),
+            })
+            .collect();
+        Cow::Owned(WorkloadScene {
+            name: self.name.clone(),
+            bvh: Bvh::build(&objects),
+            objects,
+            bounds: self.bounds,
+            camera: self.camera.clone(),
+            fov_y_degrees: self.fov_y_degrees,
+            box_margin: self.box_margin,
+            motions: Vec::new(),
+            volume: self.volume,
         })
     }
 
@@ -310,10 +402,15 @@ pub enum DriverKind {
     Hom,
     /// Large occluders' supporting and separating planes (seed 004).
     LargeOccluders,
+    /// A regular grid for dynamic scenes (seed 002), its PVS confirmed by box queries.
+    DynamicGrid,
+    /// Occlusion-driven rendering, then a volume's bricks in verbose mode choose the pixels
+    /// rays are cast through (seed 001, section 5).
+    Raycast,
 }
 
 impl DriverKind {
-    pub const ALL: [DriverKind; 7] = [
+    pub const ALL: [DriverKind; 9] = [
         DriverKind::Frustum,
         DriverKind::Hierarchical,
         DriverKind::LazyGrid,
@@ -321,6 +418,8 @@ impl DriverKind {
         DriverKind::Collision,
         DriverKind::Hom,
         DriverKind::LargeOccluders,
+        DriverKind::DynamicGrid,
+        DriverKind::Raycast,
     ];
 
     /// Every driver's name, for messages.
@@ -338,6 +437,8 @@ impl DriverKind {
             DriverKind::Collision => "collision",
             DriverKind::Hom => "hom",
             DriverKind::LargeOccluders => "large-occluders",
+            DriverKind::DynamicGrid => "dynamic-grid",
+            DriverKind::Raycast => "raycast",
         }
     }
 }
@@ -428,7 +529,26 @@ pub struct DriverOptions {
     pub opacity_threshold: f32,
     /// Hom: the occluders' triangle budget a frame (None: a sixteenth of the scene's).
     pub occluder_triangles: Option<u64>,
+    /// Dynamic grid: cells along the scene's longer horizontal side.
+    pub dynamic_grid_resolution: u32,
+    /// Dynamic grid: the paper's 2D case (columns through the scene's height) instead of
+    /// its 3D extension (cubes).
+    pub flat_grid: bool,
+    /// Raycast: bricks along each side of the volume (its subdivision entities).
+    pub volume_bricks: u32,
+    /// Raycast: entries of each brick's verbose buffer (8 for the brief record, then one a
+    /// hit; an overflowing buffer ends with -1).
+    pub verbose_buffer_entries: u32,
 }
+
+/// The dynamic grid's default resolution, and its range.
+pub const DEFAULT_GRID_RESOLUTION: u32 = 64;
+const GRID_RESOLUTION_RANGE: std::ops::RangeInclusive<u32> = 4..=256;
+/// The raycast's default bricks a side and verbose buffer (the brief record and 1,024 hits).
+pub const DEFAULT_VOLUME_BRICKS: u32 = 4;
+pub const DEFAULT_VERBOSE_BUFFER: u32 = BRIEF_RECORD_ENTRIES + 1024;
+/// The largest verbose buffer a brick may have: every hit it holds is listed.
+const MAX_VERBOSE_BUFFER: u32 = BRIEF_RECORD_ENTRIES + LISTED_HITS_PER_QUERY as u32;
 
 impl DriverOptions {
     /// The driver's defaults: no delay, one tile, no threshold, 32-pixel cells.
@@ -446,6 +566,10 @@ impl DriverOptions {
             occlusion_map_cell_pixels: 4,
             opacity_threshold: 1.0,
             occluder_triangles: None,
+            dynamic_grid_resolution: DEFAULT_GRID_RESOLUTION,
+            flat_grid: false,
+            volume_bricks: DEFAULT_VOLUME_BRICKS,
+            verbose_buffer_entries: DEFAULT_VERBOSE_BUFFER,
         }
     }
 
@@ -480,6 +604,18 @@ impl DriverOptions {
             if let Some(l) = self.occluder_triangles {
                 label += &format!("/l{l}");
             }
+        }
+        if self.dynamic_grid_resolution != DEFAULT_GRID_RESOLUTION {
+            label += &format!("/r{}", self.dynamic_grid_resolution);
+        }
+        if self.flat_grid {
+            label += "/2d";
+        }
+        if self.volume_bricks != DEFAULT_VOLUME_BRICKS {
+            label += &format!("/b{}", self.volume_bricks);
+        }
+        if self.verbose_buffer_entries != DEFAULT_VERBOSE_BUFFER {
+            label += &format!("/v{}", self.verbose_buffer_entries);
         }
         label
     }
@@ -625,8 +761,14 @@ impl DriverOptions {
                 "applies to the hom driver only".into(),
             );
         }
-        if matches!(self.kind, DriverKind::Hom | DriverKind::LargeOccluders)
-            && self.query_delay_frames > 0
+        self.validate_dynamic_and_raycast()?;
+        if matches!(
+            self.kind,
+            DriverKind::Hom
+                | DriverKind::LargeOccluders
+                | DriverKind::DynamicGrid
+                | DriverKind::Raycast
+        ) && self.query_delay_frames > 0
         {
             return fail(
                 WorkloadOption::QueryDelay,
@@ -635,6 +777,55 @@ impl DriverOptions {
                     self.kind.name()
                 ),
             );
+        }
+        Ok(())
+    }
+}
+
+impl DriverOptions {
+    /// The options of the dynamic-grid and raycast drivers.
+    fn validate_dynamic_and_raycast(&self) -> Result<(), WorkloadError> {
+        let fail = |option, detail: String| Err(WorkloadError::Option { option, detail });
+        let grid = self.kind == DriverKind::DynamicGrid;
+        let raycast = self.kind == DriverKind::Raycast;
+        let r = self.dynamic_grid_resolution;
+        if !GRID_RESOLUTION_RANGE.contains(&r) {
+            return fail(
+                WorkloadOption::GridResolution,
+                format!("{r} out of range: expected 4 to 256 cells"),
+            );
+        }
+        if !grid && (r != DEFAULT_GRID_RESOLUTION || self.flat_grid) {
+            let option = if self.flat_grid {
+                WorkloadOption::FlatGrid
+            } else {
+                WorkloadOption::GridResolution
+            };
+            return fail(option, "applies to the dynamic-grid driver only".into());
+        }
+        let b = self.volume_bricks;
+        if !(1..=16).contains(&b) {
+            return fail(
+                WorkloadOption::VolumeBricks,
+                format!("{b} out of range: expected 1 to 16 a side"),
+            );
+        }
+        let v = self.verbose_buffer_entries;
+        if !(BRIEF_RECORD_ENTRIES..=MAX_VERBOSE_BUFFER).contains(&v) {
+            return fail(
+                WorkloadOption::VerboseBuffer,
+                format!(
+                    "{v} out of range: expected {BRIEF_RECORD_ENTRIES} (the brief record) to {MAX_VERBOSE_BUFFER} entries"
+                ),
+            );
+        }
+        if !raycast && (b != DEFAULT_VOLUME_BRICKS || v != DEFAULT_VERBOSE_BUFFER) {
+            let option = if b != DEFAULT_VOLUME_BRICKS {
+                WorkloadOption::VolumeBricks
+            } else {
+                WorkloadOption::VerboseBuffer
+            };
+            return fail(option, "applies to the raycast driver only".into());
         }
         Ok(())
     }
@@ -668,6 +859,13 @@ pub struct FrameStats {
     /// Comparisons the host makes without a query: occlusion-map pixels and depth-estimation
     /// entries (hom), plane tests (large-occluders), cell marks (dynamic-grid).
     pub host_tests: u64,
+    /// Raycast: rays cast (distinct pixels), and the rays a cast through every pixel of the
+    /// viewport needs.
+    pub rays_cast: u64,
+    pub rays_full_screen: u64,
+    /// Raycast: bricks whose verbose buffer overflowed (their rays cast through the box of
+    /// their hits instead).
+    pub overflowed_buffers: u64,
 }
 
 /// Wall time of one frame; not deterministic, kept apart from [`FrameStats`].

@@ -8,7 +8,7 @@ use crate::query::{QueryMode, QuerySpec, BRIEF_RECORD_ENTRIES};
 use crate::scene::Command;
 use crate::state::{DepthFunc, Rect};
 
-/// For frame `frame` of `walk`: per object, the pixels where it is visible in a render of
+/// For frame `frame` of `walk` (moving objects in that frame's poses): per object, the pixels where it is visible in a render of
 /// the whole scene without culling. Every object is drawn (back faces culled, LEQUAL, as the
 /// drivers draw), then each object is drawn again inside a samples query with depth writes
 /// off: a fragment passes exactly where the object's depth equals the final depth.
@@ -19,6 +19,7 @@ pub fn full_render_visible_pixels(
 ) -> Result<Vec<u64>, WorkloadError> {
     walk.validate()?;
     let view = scene.frame_view(frame, walk);
+    let scene = scene.posed(frame);
     let mut golden = GoldenModel::with_profile(walk.width, walk.height, walk.raster);
     for command in [
         Command::Clear,

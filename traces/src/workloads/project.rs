@@ -105,6 +105,15 @@ impl Frustum {
         }
     }
 
+    /// The frustum without its near plane: everything ahead of the eye within the side
+    /// and far planes, so a ray is followed from the eye itself.
+    pub(crate) fn without_near(view_projection: &Mat4) -> Frustum {
+        let mut frustum = Frustum::new(view_projection);
+        // 0 x + 0 y + 0 z + 1 >= 0 holds everywhere.
+        frustum.planes[4] = Vec4::W;
+        frustum
+    }
+
     /// False only when the box lies wholly outside one plane (conservative).
     pub(crate) fn may_see(&self, bounds: &Aabb) -> bool {
         self.planes.iter().all(|plane| {

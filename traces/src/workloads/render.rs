@@ -204,6 +204,27 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         tiles: Vec<Rect>,
         triangles: impl IntoIterator<Item = [[f32; 4]; 3]>,
     ) -> Result<Option<QueryResult>, S::Error> {
+        self.occlusion_query(QueryMode::Brief, BRIEF_RECORD_ENTRIES, tiles, triangles)
+    }
+
+    /// One verbose occlusion query: a brief query whose tiles also list their hits, up to
+    /// `buffer_entries` entries a tile (the record's 8 included; -1 ends an overflow).
+    pub(crate) fn verbose_query(
+        &mut self,
+        tiles: Vec<Rect>,
+        buffer_entries: u32,
+        triangles: impl IntoIterator<Item = [[f32; 4]; 3]>,
+    ) -> Result<Option<QueryResult>, S::Error> {
+        self.occlusion_query(QueryMode::Verbose, buffer_entries, tiles, triangles)
+    }
+
+    fn occlusion_query(
+        &mut self,
+        mode: QueryMode,
+        buffer_entries: u32,
+        tiles: Vec<Rect>,
+        triangles: impl IntoIterator<Item = [[f32; 4]; 3]>,
+    ) -> Result<Option<QueryResult>, S::Error> {
         let started = Instant::now();
         let fragments_before = self.sink.fragments;
         self.stats.queries += 1;
@@ -212,8 +233,8 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         self.next_query_id = self.next_query_id.wrapping_add(1);
         self.execute(&Command::Begin(QuerySpec {
             id,
-            mode: QueryMode::Brief,
-            buffer_entries: BRIEF_RECORD_ENTRIES,
+            mode,
+            buffer_entries,
             tiles,
         }))?;
         for triangle in triangles {
@@ -264,7 +285,7 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
 
 /// Two counter-clockwise triangles covering exactly the pixels of `tile` at window depth
 /// `depth` (24-bit units), in clip coordinates with w = 1.
-fn screen_quad(tile: Rect, depth: u32, width: u32, height: u32) -> [[[f32; 4]; 3]; 2] {
+pub(crate) fn screen_quad(tile: Rect, depth: u32, width: u32, height: u32) -> [[[f32; 4]; 3]; 2] {
     let ndc = |pixel: u32, size: u32| (2.0 * pixel as f64 / size as f64 - 1.0) as f32;
     let (x0, x1) = (ndc(tile.x, width), ndc(tile.x + tile.width, width));
     let (y0, y1) = (ndc(tile.y, height), ndc(tile.y + tile.height, height));

@@ -50,18 +50,16 @@ fn box_triangles(min: Vec3, max: Vec3) -> Vec<[Vec3; 3]> {
     Aabb { min, max }.triangles()
 }
 
-/// A building on the lot [x0, x1] x [z0, z1].
-fn building(
-    rng: &mut SplitMix64,
-    detail: u32,
-    x0: f32,
-    x1: f32,
-    z0: f32,
-    z1: f32,
-) -> Vec<[Vec3; 3]> {
+/// A building on the lot [x0, x1] x [z0, z1]: its triangles, and its body and setback
+/// storey, the boxes inside its surface.
+fn building(rng: &mut SplitMix64, detail: u32, x0: f32, x1: f32, z0: f32, z1: f32) -> SceneObject {
     let floors = rng.range(2.0, 16.0) as u32;
     let height = floors as f32 * STOREY;
-    let mut triangles = box_triangles(Vec3::new(x0, 0.0, z0), Vec3::new(x1, height, z1));
+    let body = Aabb {
+        min: Vec3::new(x0, 0.0, z0),
+        max: Vec3::new(x1, height, z1),
+    };
+    let mut triangles = body.triangles();
     for floor in 1..floors {
         let y = floor as f32 * STOREY;
         // A ledge round the floor, and sills sticking out of each facade.
@@ -98,19 +96,43 @@ fn building(
     // A setback storey and a rooftop machine room.
     let inset = (x1 - x0).min(z1 - z0) * 0.2;
     let top = height + rng.range(2.0, 6.0);
-    triangles.extend(box_triangles(
-        Vec3::new(x0 + inset, height, z0 + inset),
-        Vec3::new(x1 - inset, top, z1 - inset),
-    ));
+    let setback = Aabb {
+        min: Vec3::new(x0 + inset, height, z0 + inset),
+        max: Vec3::new(x1 - inset, top, z1 - inset),
+    };
+    triangles.extend(setback.triangles());
     triangles.extend(box_triangles(
         Vec3::new(x0 + 2.0 * inset, top, z0 + 2.0 * inset),
         Vec3::new(x0 + 2.8 * inset, top + 2.5, z0 + 2.8 * inset),
     ));
-    triangles
+    SceneObject::new(triangles)
+        .expect("a building has faces")
+        .with_solids(vec![body, setback])
 }
 
 /// The `city` scene.
 pub fn city(options: &CityOptions) -> WorkloadScene {
+    let (objects, camera, _) = city_parts(options);
+    WorkloadScene::new("city", objects, camera).expect("a city has buildings")
+}
+
+/// Where the city's streets run: block `(i, j)` spans x from `west + i * BLOCK_PITCH` and z
+/// from `north_of_start - j * BLOCK_PITCH` (towards -z), between street centre lines.
+pub(crate) struct StreetLayout {
+    pub(crate) blocks: u32,
+    /// X of the westmost street's centre line.
+    pub(crate) west: f32,
+    /// Z of the first street's centre line (the blocks run towards -z from it).
+    pub(crate) first_street_z: f32,
+}
+
+impl StreetLayout {
+    pub(crate) const PITCH: f32 = BLOCK_PITCH;
+    pub(crate) const STREET_WIDTH: f32 = STREET;
+}
+
+/// The city's objects (buildings, then the ground), its walk and its streets.
+pub(crate) fn city_parts(options: &CityOptions) -> (Vec<SceneObject>, CameraPath, StreetLayout) {
     let blocks = options.blocks.clamp(1, MAX_CITY_BLOCKS);
     let detail = options.detail.min(MAX_CITY_DETAIL);
     let mut rng = SplitMix64(options.seed);
@@ -129,23 +151,32 @@ pub fn city(options: &CityOptions) -> WorkloadScene {
                 let x1 = bx + (lx + 0.5) * inner - gap;
                 let z1 = bz - lz * inner - gap;
                 let z0 = bz - (lz + 0.5) * inner + gap;
-                let triangles = building(&mut rng, detail, x0, x1, z0, z1);
-                objects.extend(SceneObject::new(triangles));
+                objects.push(building(&mut rng, detail, x0, x1, z0, z1));
             }
         }
     }
     let length = blocks as f32 * BLOCK_PITCH;
-    objects.extend(SceneObject::new(box_triangles(
-        Vec3::new(-half - 20.0, -1.0, -length - 20.0),
-        Vec3::new(half + 20.0, 0.0, 40.0),
-    )));
+    let ground = Aabb {
+        min: Vec3::new(-half - 20.0, -1.0, -length - 20.0),
+        max: Vec3::new(half + 20.0, 0.0, 40.0),
+    };
+    objects.push(
+        SceneObject::new(ground.triangles())
+            .expect("the ground has faces")
+            .with_solids(vec![ground]),
+    );
     let avenue_x = if blocks.is_multiple_of(2) {
         0.0
     } else {
         -BLOCK_PITCH * 0.5
     };
     let camera = street_walk(avenue_x, 10.0, -length + 10.0, 50.0, 2.0);
-    WorkloadScene::new("city", objects, camera).expect("a city has buildings")
+    let layout = StreetLayout {
+        blocks,
+        west: -half,
+        first_street_z: 0.0,
+    };
+    (objects, camera, layout)
 }
 
 /// A walk down the street at `x` from `z_start` to `z_end`, glancing left and right every
