@@ -373,3 +373,40 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
         "{neither}"
     );
 }
+
+/// `--corpus` interrupted while it works leaves no scratch directory behind.
+#[test]
+fn an_interrupted_corpus_leaves_no_scratch_behind() {
+    use std::os::unix::process::ExitStatusExt;
+    let temp = support::cli::scratch_dir("corpus-interrupt");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
+        .args(["fidelity", "--corpus", "--scale", "small", "--no-rtl"])
+        .env("TMPDIR", &*temp)
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    // Signal once the scratch directory holds a trace (the first takes well under a second).
+    let started = std::time::Instant::now();
+    let holds_a_file = || {
+        std::fs::read_dir(&*temp)
+            .unwrap()
+            .flatten()
+            .any(|dir| std::fs::read_dir(dir.path()).is_ok_and(|mut files| files.next().is_some()))
+    };
+    while !holds_a_file() {
+        assert!(
+            started.elapsed().as_secs() < 60,
+            "no scratch trace appeared"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let killed = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let status = child.wait().unwrap();
+    assert_eq!(status.signal(), Some(2), "{status:?}");
+    let left: Vec<_> = std::fs::read_dir(&*temp).unwrap().collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}

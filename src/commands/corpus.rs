@@ -9,6 +9,7 @@ use super::fidelity::{distribution, ErrorDistribution, Ladder, LevelRow};
 use super::workload_args::{write_workload_trace, WorkloadArgs};
 use anyhow::Context;
 use occsim_sim::Arch;
+use occsim_sweep::output::ScratchDir;
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::retile::TileGrid;
@@ -217,24 +218,18 @@ struct WalkFlags {
     workload: WorkloadArgs,
 }
 
-/// Where the traces go: the caller's directory, or a scratch one removed when dropped.
+/// Where the traces go: the caller's directory, or a scratch one removed when dropped (or
+/// when the command is interrupted).
 enum TraceDir {
     Kept(PathBuf),
-    Scratch(PathBuf),
+    Scratch(ScratchDir),
 }
 
 impl TraceDir {
     fn path(&self) -> &Path {
         match self {
-            TraceDir::Kept(path) | TraceDir::Scratch(path) => path,
-        }
-    }
-}
-
-impl Drop for TraceDir {
-    fn drop(&mut self) {
-        if let TraceDir::Scratch(path) = self {
-            let _ = std::fs::remove_dir_all(path);
+            TraceDir::Kept(path) => path,
+            TraceDir::Scratch(scratch) => scratch.path(),
         }
     }
 }
@@ -268,13 +263,10 @@ pub fn run(
                 .with_context(|| format!("cannot create {}", dir.display()))?;
             TraceDir::Kept(dir.clone())
         }
-        None => {
-            let scratch =
-                std::env::temp_dir().join(format!("occsim-corpus-{}", std::process::id()));
-            std::fs::create_dir_all(&scratch)
-                .with_context(|| format!("cannot create {}", scratch.display()))?;
-            TraceDir::Scratch(scratch)
-        }
+        None => TraceDir::Scratch(ScratchDir::create(&format!(
+            "occsim-corpus-{}",
+            std::process::id()
+        ))?),
     };
     let mut runs: Vec<(String, Vec<LevelRow>)> = Vec::new();
     let steps = recipes.len() * machines.len() * engine_counts.len();

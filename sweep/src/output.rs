@@ -37,15 +37,56 @@ pub enum OutputError {
 /// is interrupted (the binary calls it from its signal handler).
 static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
-/// Remove every temporary file this process is writing (for a signal handler, just before
-/// the process exits: the writes they belong to will never finish).
+/// Scratch directories alive now, removed with the temporary files.
+static LIVE_DIRS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// Remove every temporary file this process is writing, and its scratch directories (for a
+/// signal handler, just before the process exits: the work they belong to will never
+/// finish).
 pub fn remove_temporaries() {
-    let live = match LIVE.lock() {
+    let take = |list: &Mutex<Vec<PathBuf>>| match list.lock() {
         Ok(mut live) => std::mem::take(&mut *live),
         Err(poisoned) => std::mem::take(&mut *poisoned.into_inner()),
     };
-    for path in live {
+    for path in take(&LIVE) {
         let _ = std::fs::remove_file(path);
+    }
+    for path in take(&LIVE_DIRS) {
+        let _ = std::fs::remove_dir_all(path);
+    }
+}
+
+/// A directory for intermediate files, removed with everything in it when dropped, or by
+/// [`remove_temporaries`] when the process is interrupted.
+pub struct ScratchDir {
+    path: PathBuf,
+}
+
+impl ScratchDir {
+    /// A new directory `name` under the system's temporary directory.
+    pub fn create(name: &str) -> Result<ScratchDir, OutputError> {
+        let path = std::env::temp_dir().join(name);
+        std::fs::create_dir_all(&path).map_err(|source| OutputError::Create {
+            path: path.clone(),
+            source,
+        })?;
+        if let Ok(mut live) = LIVE_DIRS.lock() {
+            live.push(path.clone());
+        }
+        Ok(ScratchDir { path })
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+impl Drop for ScratchDir {
+    fn drop(&mut self) {
+        if let Ok(mut live) = LIVE_DIRS.lock() {
+            live.retain(|p| p != &self.path);
+        }
+        let _ = std::fs::remove_dir_all(&self.path);
     }
 }
 
