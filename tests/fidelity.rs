@@ -410,3 +410,77 @@ fn an_interrupted_corpus_leaves_no_scratch_behind() {
     let left: Vec<_> = std::fs::read_dir(&*temp).unwrap().collect();
     assert!(left.is_empty(), "left behind: {left:?}");
 }
+
+/// The fidelity ladder's errors on every class of the built-in corpus (small scale, o2 and
+/// ir2 with 4 engines), each bounded. Issue 15's targets are analytic within 5% on cycles
+/// and 10% on p95 latency, sampled:K within 1% and 3%. A row marked `target` holds its
+/// target; a row marked `today` does not meet it yet and is bounded at the error measured
+/// on 2026-12-02 (`occsim fidelity --corpus --scale small --machines o2,ir2 --engines 4
+/// --no-rtl`), rounded up by a fifth, so that a model change that makes it worse fails
+/// here. Raise a bound only with a reason; lower it when a model gets better.
+#[test]
+fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
+    let temp = support::cli::scratch_dir("bounds");
+    let stdout = support::cli::stdout_with_temp_dir(
+        &[
+            "fidelity",
+            "--corpus",
+            "--scale",
+            "small",
+            "--machines",
+            "o2,ir2",
+            "--engines",
+            "4",
+            "--no-rtl",
+            "--json",
+        ],
+        &temp,
+    );
+    let rows: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
+    // (class, analytic cycles, analytic p95, sampled:10 cycles, sampled:10 p95), as fractions:
+    // 0.05, 0.10, 0.01 and 0.03 are the targets; any other value is today's bound, with the
+    // error measured in the comment.
+    #[rustfmt::skip]
+    let bounds: [(&str, f64, f64, f64, f64); 10] = [
+        ("demo",              0.05,  0.10, 0.019, 0.52), // sampled 1.52%, p95 42.9%
+        ("retiled-1x1-4x4",   0.05,  0.49, 0.021, 0.51), // p95 40.2%; sampled 1.69%, 42.1%
+        ("retiled-32x32",     0.05,  0.52, 0.25,  0.03), // p95 43.0%; sampled 20.9%
+        ("hardcases",         0.05,  0.10, 0.064, 0.03), // sampled 5.27%
+        ("random",            0.064, 0.27, 0.01,  0.11), // 5.30%, p95 21.7%; sampled p95 8.70%
+        ("walk-frustum",      0.05,  0.10, 0.01,  0.03), // every target
+        ("walk-hierarchical", 0.05,  0.77, 0.084, 0.64), // p95 63.6%; sampled 7.00%, 52.6%
+        ("walk-quadtree",     0.05,  0.51, 0.029, 0.03), // p95 41.9%; sampled 2.35%
+        ("walk-adaptive",     0.05,  0.21, 0.142, 0.54), // p95 17.2%; sampled 11.8%, 45.0%
+        ("walk-grids",        0.05,  0.84, 0.03,  0.39), // p95 69.2%; sampled 2.47%, 31.8%
+    ];
+    let error = |class: &str, level: &str, metric: &str| -> f64 {
+        let row = rows
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["class"] == class && r["level"] == level)
+            .unwrap_or_else(|| panic!("no {class} {level} row"));
+        assert_eq!(row["results_exact"], true, "{class} {level}");
+        row[metric].as_f64().unwrap()
+    };
+    let mut over = Vec::new();
+    for (class, analytic_cycles, analytic_p95, sampled_cycles, sampled_p95) in bounds {
+        for (level, metric, bound) in [
+            ("analytic", "cycles_error", analytic_cycles),
+            ("analytic", "frame_error", analytic_cycles),
+            ("analytic", "latency_p95_error", analytic_p95),
+            ("sampled:10", "cycles_error", sampled_cycles),
+            ("sampled:10", "latency_p95_error", sampled_p95),
+        ] {
+            let value = error(class, level, metric);
+            if value > bound {
+                over.push(format!("{class} {level} {metric}: {value:.4} > {bound}"));
+            }
+        }
+    }
+    assert!(
+        over.is_empty(),
+        "errors over their bounds:\n{}",
+        over.join("\n")
+    );
+}
