@@ -367,6 +367,22 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
         error.contains("typo.toml") && error.contains("engine"),
         "{error}"
     );
+    // Every --set applies to each machine, and a bad one is named.
+    std::fs::write(
+        dir.join("one.toml"),
+        "machines = [\"o2\"]\nengines = [1]\n[[trace]]\nname = \"h\"\nclass = \"h\"\nscene = \"hardcases\"\n",
+    )
+    .unwrap();
+    let one = dir.join("one.toml");
+    let error = support::cli::stderr_of_failure(&[
+        "fidelity",
+        "--corpus",
+        "--corpus-file",
+        one.to_str().unwrap(),
+        "--set",
+        "no_such_key=1",
+    ]);
+    assert!(error.contains("no_such_key"), "{error}");
     let neither = support::cli::stderr_of_failure(&["fidelity"]);
     assert!(
         neither.contains("--corpus") || neither.contains("TRACE"),

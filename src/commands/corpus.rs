@@ -234,10 +234,12 @@ impl TraceDir {
     }
 }
 
+/// Run the corpus: every recipe on every machine (each with `sets` applied) and engine count.
 pub fn run(
     args: &CorpusArgs,
     ladder: &Ladder,
     engines: Option<u64>,
+    sets: &[String],
     json: bool,
 ) -> anyhow::Result<()> {
     anyhow::ensure!(args.corpus, "give a TRACE, or --corpus");
@@ -277,13 +279,13 @@ pub fn run(
             bar.set_message(format!("making {}", recipe.name));
             recipe.make(args.scale, &trace)?;
         }
-        let mut ladder = Ladder { ..*ladder };
+        let mut ladder = *ladder;
         if let Some(grid) = &recipe.retile {
             ladder.retile = Some(grid.parse().map_err(|e| anyhow::anyhow!("{e}"))?);
         }
         for machine in machines {
             for &engines in &engine_counts {
-                let arch = machine_with(machine, engines)?;
+                let arch = machine_with(machine, engines, sets)?;
                 let hidden = occsim_sweep::progress::ProgressBar::hidden();
                 bar.set_message(format!("{} on {machine}, {engines} engines", recipe.name));
                 let (rows, _) = ladder.run(&arch, &trace, &hidden).with_context(|| {
@@ -308,10 +310,10 @@ pub fn run(
     Ok(())
 }
 
-/// A built-in machine with `engines` occlusion engines.
-fn machine_with(name: &str, engines: u64) -> anyhow::Result<Arch> {
+/// A built-in machine with `sets` applied and `engines` occlusion engines.
+fn machine_with(name: &str, engines: u64, sets: &[String]) -> anyhow::Result<Arch> {
     let mut arch =
-        super::arch::resolve(name, None, &[]).with_context(|| format!("--machines {name}"))?;
+        super::arch::resolve(name, None, sets).with_context(|| format!("--machines {name}"))?;
     arch.set_value("engines", &engines.to_string())
         .with_context(|| format!("{name} with {engines} engines"))?;
     Ok(arch)

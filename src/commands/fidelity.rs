@@ -291,7 +291,13 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
         rtl: !args.no_rtl,
     };
     let Some(trace) = &args.trace else {
-        return super::corpus::run(&args.corpus, &ladder, args.engines, args.json);
+        return super::corpus::run(
+            &args.corpus,
+            &ladder,
+            args.engines,
+            &args.arch.set,
+            args.json,
+        );
     };
     anyhow::ensure!(!args.corpus.corpus, "give a TRACE or --corpus, not both");
     let mut arch = args.arch.resolve()?;
