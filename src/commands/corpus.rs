@@ -5,9 +5,10 @@
 //! class (the worst run of the class, and every query's latency error pooled) with each
 //! level's speed against cycle.
 
-use super::fidelity::{distribution, ErrorDistribution, Ladder, LevelRow};
-use super::workload_args::{write_workload_trace, WorkloadArgs};
+use super::fidelity::{distribution, percent, ErrorDistribution, Ladder, LevelRow};
+use super::workload_args::{parse_workload_flags, write_workload_trace};
 use anyhow::Context;
+use occsim_sim::levels::Fidelity;
 use occsim_sim::Arch;
 use occsim_sweep::output::ScratchDir;
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
@@ -168,10 +169,10 @@ impl Recipe {
                     flags.extend([flag.to_owned(), value.to_string()]);
                 }
             }
-            let args = <WalkFlags as clap::Parser>::try_parse_from(&flags)
+            let args = parse_workload_flags(&flags)
                 .map_err(|e| anyhow::anyhow!("walk `{walk}`: {e}"))
                 .with_context(context)?;
-            write_workload_trace(&args.workload, output).with_context(context)?;
+            write_workload_trace(&args, output).with_context(context)?;
             return Ok(());
         }
         let text = match self.scene.as_deref() {
@@ -208,14 +209,6 @@ impl Recipe {
         let _ = std::fs::remove_file(&scene);
         made.with_context(context).map(|_| ())
     }
-}
-
-/// A walk recipe's flags, parsed as `trace gen` parses them.
-#[derive(clap::Parser)]
-#[command(no_binary_name = true)]
-struct WalkFlags {
-    #[command(flatten)]
-    workload: WorkloadArgs,
 }
 
 /// Where the traces go: the caller's directory, or a scratch one removed when dropped (or
@@ -301,10 +294,15 @@ pub fn run(
     if json {
         outln!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
-        let reference = if ladder.rtl { "rtl" } else { "cycle" };
         out!(
             "{}",
-            table(&rows, machines, &engine_counts, args.scale, reference)
+            table(
+                &rows,
+                machines,
+                &engine_counts,
+                args.scale,
+                ladder.reference()
+            )
         );
     }
     Ok(())
@@ -375,7 +373,7 @@ fn table(
     machines: &[String],
     engines: &[u64],
     scale: Scale,
-    reference: &str,
+    reference: Fidelity,
 ) -> String {
     use std::fmt::Write as _;
     let mut out = String::new();
@@ -404,7 +402,6 @@ fn table(
         "speed",
         "results"
     );
-    let percent = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.2}%", 100.0 * v));
     for row in rows {
         let _ = writeln!(
             out,

@@ -3,16 +3,15 @@
 //! simulated cycles per frame on each machine.
 
 use super::sensitivity::{CornerBands, Replayer};
-use super::workload_args::SceneArgs;
+use super::workload_args::{parse_workload_flags, write_workload_trace, SceneArgs};
 use anyhow::Context;
 use occsim_sim::sensitivity::Study;
-use occsim_sweep::output::AtomicFile;
-use occsim_traces::trace::{TraceHeader, TraceWriter};
+use occsim_sweep::output::ScratchDir;
 use occsim_traces::workloads::compare::{
     compare as compare_drivers, CompareError, CompareReport, DriverReport, FrameCost,
     FrameCycleModel, ModelError,
 };
-use occsim_traces::workloads::{generate, DriverKind, DriverOptions, GenerateError, GridVariant};
+use occsim_traces::workloads::{DriverKind, DriverOptions, GridVariant};
 use occsim_traces::Event;
 use std::io::Write;
 
@@ -166,21 +165,24 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
 }
 
 /// The driver whose walk the `--bands` study replays: the paper's own (seed 001).
-const BAND_REFERENCE_DRIVER: DriverKind = DriverKind::Hierarchical;
+const BAND_REFERENCE_DRIVER: &str = "hierarchical";
 
 /// Per machine, the architectures at the corners of a sensitivity study around it, replayed
-/// on the reference driver's walk (written to a scratch trace that is removed afterwards).
-/// One study a machine, not one a driver: the corners are where the inferred parameters push
-/// frame time furthest, and every driver's frames are then timed there.
+/// on the reference driver's walk of the compared scene (written to a scratch directory
+/// that is removed afterwards, or when the command is interrupted). One study a machine,
+/// not one a driver: the corners are where the inferred parameters push frame time
+/// furthest, and every driver's frames are then timed there.
 fn band_corners(
     args: &CompareArgs,
     machines: &[(String, occsim_sim::Arch)],
 ) -> anyhow::Result<Vec<Vec<occsim_sim::Arch>>> {
-    let scratch_name = format!("occsim-bands-{}.occt", std::process::id());
-    let scratch = AtomicFile::create(&std::env::temp_dir().join(scratch_name))?;
-    write_reference_walk(args, &scratch)?;
+    let scratch = ScratchDir::create(&format!("occsim-bands-{}", std::process::id()))?;
+    let trace = scratch.path().join("reference-walk.occt");
+    let mut walk = parse_workload_flags(["--driver", BAND_REFERENCE_DRIVER])?;
+    walk.scene = args.scene.clone();
+    write_workload_trace(&walk, &trace)?;
     let replayer = Replayer {
-        trace: scratch.temporary_path(),
+        trace: &trace,
         retile: None,
         fidelity: occsim_sim::Fidelity::Cycle,
         jobs: args.jobs,
@@ -197,35 +199,6 @@ fn band_corners(
                 .collect()
         })
         .collect()
-}
-
-/// The reference driver's walk of the compared scene, as a trace in `file`.
-fn write_reference_walk(args: &CompareArgs, file: &AtomicFile) -> anyhow::Result<()> {
-    let scene = args.scene.load_scene()?;
-    let walk = args.scene.walk();
-    let driver = DriverOptions::new(BAND_REFERENCE_DRIVER);
-    let header = TraceHeader::new(walk.width, walk.height)
-        .with_scene(format!(
-            "{} driver {}",
-            args.scene.describe(&scene),
-            driver.label()
-        ))
-        .with_raster(walk.raster);
-    let cannot = || {
-        format!(
-            "{}: cannot write the --bands walk",
-            file.temporary_path().display()
-        )
-    };
-    let mut out = std::io::BufWriter::new(file.handle()?);
-    let mut writer = TraceWriter::new(&mut out, &header).with_context(cannot)?;
-    generate(&scene, &driver, &walk, &mut writer).map_err(|e| match e {
-        GenerateError::Workload(e) => super::workload_args::flagged(e),
-        GenerateError::Sink(e) => anyhow::Error::new(e).context(cannot()),
-    })?;
-    writer.finish_seekable().with_context(cannot)?;
-    out.flush().with_context(cannot)?;
-    Ok(())
 }
 
 /// The machines `culling compare` times every frame on by default.

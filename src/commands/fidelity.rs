@@ -211,14 +211,23 @@ impl Ladder {
         levels
     }
 
-    /// Every level on the trace at `path`, timed, with its errors against the most detailed
-    /// level that ran (rtl, else cycle), in the table's rows; and that reference level.
+    /// The level the others' errors are against: the most detailed that runs.
+    pub fn reference(&self) -> Fidelity {
+        if self.rtl {
+            Fidelity::Rtl
+        } else {
+            Fidelity::Cycle
+        }
+    }
+
+    /// Every level on the trace at `path`, timed, with its errors against the reference
+    /// level, in the table's rows; and the trace's fragments.
     pub fn run(
         &self,
         arch: &Arch,
         path: &Path,
         progress: &occsim_sweep::progress::ProgressBar,
-    ) -> anyhow::Result<(Vec<LevelRow>, Fidelity)> {
+    ) -> anyhow::Result<(Vec<LevelRow>, u64)> {
         let name = path.display().to_string();
         let summary = open_trace(path)?
             .skip_to_summary()
@@ -230,17 +239,21 @@ impl Ladder {
             runs.push((level, timed(level, arch, path, self.retile, self.effects)?));
             progress.inc(1);
         }
-        let (reference_level, (reference, _)) = runs.last().context("no level ran")?;
+        let reference_level = self.reference();
+        let (_, (reference, _)) = runs
+            .iter()
+            .find(|(level, _)| *level == reference_level)
+            .context("the reference level did not run")?;
         let rows = runs
             .iter()
             .map(|(level, (result, seconds))| {
                 let mut row = compare_with(result, reference, *seconds, fragments);
                 row.level = level.to_string();
-                row.note = (level == reference_level).then(|| "reference".to_string());
+                row.note = (*level == reference_level).then(|| "reference".to_string());
                 row
             })
             .collect();
-        Ok((rows, *reference_level))
+        Ok((rows, summary.fragments))
     }
 }
 
@@ -308,12 +321,9 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
     let path = trace.display().to_string();
     // One step a level (not a bar over bytes: drawing one would be timed with the level).
     let bar = occsim_sweep::progress::bar(ladder.levels().len() as u64, "levels");
-    let (rows, reference_level) = ladder.run(&arch, trace, &bar)?;
+    let (rows, fragments) = ladder.run(&arch, trace, &bar)?;
     bar.finish_and_clear();
-    let fragments = open_trace(trace)?
-        .skip_to_summary()
-        .with_context(|| format!("{path}: cannot read trace"))?
-        .fragments;
+    let reference_level = ladder.reference();
     let what = match args.retile {
         Some(grid) => format!("{path} (retiled {grid})"),
         None => path.clone(),
@@ -365,7 +375,6 @@ fn table(
     let float =
         |v: Option<f64>, digits: usize| v.map_or("-".to_string(), |v| format!("{v:.digits$}"));
     let int = |v: Option<u64>| v.map_or("-".to_string(), |v| v.to_string());
-    let percent = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{:.2}%", 100.0 * v));
     for row in rows {
         let _ = writeln!(
             out,
@@ -400,6 +409,11 @@ fn table(
          every query's counts equal the golden ones (exact); -: the level has no such figure"
     );
     out
+}
+
+/// A fraction in percent with two decimals, or `-`.
+pub fn percent(fraction: Option<f64>) -> String {
+    fraction.map_or("-".to_string(), |v| format!("{:.2}%", 100.0 * v))
 }
 
 /// `p50/p95/max` in percent, or `-`.

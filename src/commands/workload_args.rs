@@ -326,6 +326,22 @@ impl WorkloadArgs {
     }
 }
 
+/// Workload flags as `trace gen` takes them, parsed from `flags` (no command name): for
+/// walks a command makes itself (`fidelity --corpus`, `culling compare --bands`).
+pub fn parse_workload_flags<I, T>(flags: I) -> Result<WorkloadArgs, clap::Error>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    #[derive(clap::Parser)]
+    #[command(no_binary_name = true)]
+    struct Flags {
+        #[command(flatten)]
+        workload: WorkloadArgs,
+    }
+    <Flags as clap::Parser>::try_parse_from(flags).map(|f| f.workload)
+}
+
 /// `trace gen` for a workload: walk the scene with the driver, writing the golden model's
 /// events to `output` (atomically). The header's scene field describes the workload.
 pub fn write_workload_trace(

@@ -146,13 +146,6 @@ impl AtomicFile {
         })
     }
 
-    /// The temporary file, where what has been written can be read back before the commit.
-    /// An `AtomicFile` never committed is a scratch file: removed when dropped, or by
-    /// [`remove_temporaries`] when the process is interrupted.
-    pub fn temporary_path(&self) -> &Path {
-        &self.temp
-    }
-
     /// Flush the file to disk and rename it over the target (the writers through
     /// [`AtomicFile::handle`] must have flushed).
     pub fn commit(mut self) -> Result<(), OutputError> {
