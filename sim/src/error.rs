@@ -27,6 +27,8 @@ pub enum SimError {
     EndWithoutBegin { event: u64 },
     #[error("event {event}: golden result for query {id}, but no query just ended")]
     ResultWithoutQuery { event: u64, id: u32 },
+    #[error("the stream ends after a query's end without its golden result, which a replay from the window index takes as the query's result")]
+    MissingGolden,
     #[error("event {event}: query {id} has {entries}-entry occlusion buffers; the minimum is 8")]
     BufferTooSmall { event: u64, id: u32, entries: u32 },
     #[error("event {event}: query {id} has {count} tiles; allowed 1..={max}")]

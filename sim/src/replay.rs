@@ -21,6 +21,7 @@ use crate::arch::Arch;
 use crate::blocks::waveform::WaveformOptions;
 use crate::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
+use crate::levels::analytic::AnalyticModel;
 use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use crate::timeline::Timeline;
 use occsim_traces::golden::EventSink;
@@ -41,6 +42,9 @@ pub struct ReplayOptions {
     pub waveform: Option<WaveformOptions>,
     /// At the cycle and rtl levels, where the blocks' intervals go ([`crate::timeline`]).
     pub timeline: Option<Timeline>,
+    /// Read the trace's window index instead of its fragments where the level can
+    /// ([`AnalyticModel::reads_window_index`]): the same result, without decoding a fragment.
+    pub window_index: bool,
 }
 
 impl ReplayOptions {
@@ -52,6 +56,7 @@ impl ReplayOptions {
             retile: None,
             waveform: None,
             timeline: None,
+            window_index: true,
         }
     }
 
@@ -63,6 +68,7 @@ impl ReplayOptions {
             retile,
             waveform: None,
             timeline: None,
+            window_index: true,
         }
     }
 }
@@ -127,6 +133,24 @@ pub fn replay<R: Read>(
     )?;
     let mut reader = open()?;
     let (width, height) = (reader.header().width, reader.header().height);
+    let model_error = |source| ReplayError::Model {
+        machine: arch.machine().name(),
+        source,
+    };
+    if options.level == Fidelity::Analytic
+        && options.window_index
+        && options.retile.is_none()
+        && AnalyticModel::reads_window_index(arch, reader.header())
+    {
+        let mut model =
+            AnalyticModel::from_window_index(arch, width, height).map_err(ReplayError::Setup)?;
+        while let Some(item) = reader.next_index_item()? {
+            model.index_item(&item).map_err(model_error)?;
+        }
+        return LevelModel::Analytic(Box::new(model))
+            .finish(arch)
+            .map_err(model_error);
+    }
     let model = LevelModel::with_outputs(
         options.level,
         arch,
@@ -137,10 +161,6 @@ pub fn replay<R: Read>(
         options.timeline,
     )
     .map_err(ReplayError::Setup)?;
-    let model_error = |source| ReplayError::Model {
-        machine: arch.machine().name(),
-        source,
-    };
     let sink = LevelSink::new(model);
     let sink = match options.retile {
         None => feed(&mut reader, sink, model_error)?,

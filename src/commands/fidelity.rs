@@ -30,6 +30,10 @@ pub struct FidelityArg {
     /// all.
     #[arg(long, value_name = "auto|all", default_value = "auto")]
     pub effects: EffectsChoice,
+    /// At the analytic level, decode the fragments even where the trace's window index would
+    /// do (the same result, slower: for checking and timing the index).
+    #[arg(long)]
+    pub no_index: bool,
 }
 
 #[derive(clap::Args)]

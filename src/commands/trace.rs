@@ -5,7 +5,10 @@ use anyhow::Context;
 use occsim_sweep::output::write_atomically_with;
 use occsim_traces::golden::{EventSink, GoldenModel};
 use occsim_traces::raster::RasterProfile;
-use occsim_traces::trace::{ReadError, TraceHeader, TraceReader, TraceSummary, TraceWriter};
+use occsim_sim::arch::Arch;
+use occsim_traces::trace::{
+    ReadError, TraceHeader, TraceReader, TraceSummary, TraceWriter, WriterOptions,
+};
 use occsim_traces::{Event, QueryResult, QuerySpec};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -145,6 +148,20 @@ fn print_rays(frames: &[occsim_traces::workloads::FrameStats]) -> anyhow::Result
     Ok(())
 }
 
+/// The writer of every trace file occsim makes: with a window index counted at the O2's
+/// default depth layout, so that the analytic level on the O2 reads no fragment.
+pub(crate) fn indexed_writer<W: Write>(
+    out: W,
+    header: &TraceHeader,
+) -> anyhow::Result<TraceWriter<W>> {
+    let layout = Arch::builtin("o2")?.o2()?.depth_layout();
+    let options = WriterOptions {
+        window_index: Some(layout),
+        ..WriterOptions::default()
+    };
+    Ok(TraceWriter::with_options(out, header, options)?)
+}
+
 /// A scene file or built-in scene through the rasterizer and golden model into a trace.
 pub(crate) fn generate_scene(
     scene_file: &str,
@@ -156,7 +173,7 @@ pub(crate) fn generate_scene(
         .with_scene(scene.name.clone())
         .with_raster(raster);
     write_atomically_with(output, |file| {
-        let mut writer = TraceWriter::new(file, &header)?;
+        let mut writer = indexed_writer(file, &header)?;
         let mut golden = GoldenModel::with_profile(scene.width, scene.height, raster);
         let cannot_write = || format!("{}: cannot write trace", output.display());
         for line in &mut scene.reader {
@@ -269,6 +286,19 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
         "bytes       {bytes} in {} blocks ({} before compression), {bytes_per_fragment:.3} bytes/fragment",
         summary.blocks, summary.payload_bytes
     );
+    match (header.window_index, summary.window_index) {
+        (Some(layout), Some(index)) => outln!(
+            "index       window index in {} blocks, {} bytes stored ({} before compression), at depth tiles {}x{} pixels, {} pixels a word, {} banks",
+            index.blocks,
+            index.stored_bytes,
+            index.payload_bytes,
+            layout.tile_width_pixels,
+            layout.tile_height_pixels,
+            layout.pixels_per_word,
+            layout.banks
+        ),
+        _ => outln!("index       none (the analytic level decodes the fragments)"),
+    }
     Ok(())
 }
 

@@ -4,7 +4,7 @@
 
 use anyhow::Context;
 use occsim_sweep::output::write_atomically_with;
-use occsim_traces::trace::{TraceHeader, TraceSummary, TraceWriter};
+use occsim_traces::trace::{TraceHeader, TraceSummary};
 use occsim_traces::workloads::{
     city, forest, generate_observed, load_obj, traffic, CameraPath, CityOptions, CommandObserver,
     DriverKind, DriverOptions, ForestOptions, GenerateError, ObjOptions, TrafficOptions, Walk,
@@ -357,7 +357,7 @@ pub fn write_workload_trace(
         .0
         .set_message(format!("{} walkthrough", driver.label()));
     let written = write_atomically_with(output, |file| {
-        let mut writer = TraceWriter::new(file, &header)?;
+        let mut writer = super::trace::indexed_writer(file, &header)?;
         let stats = generate_observed(&scene, &driver, &walk, &mut writer, &mut frames).map_err(
             |e| match e {
                 GenerateError::Workload(e) => flagged(e),

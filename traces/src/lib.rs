@@ -11,6 +11,7 @@
 //!   drivers that issue occlusion queries while the golden model answers them.
 
 pub mod builtin;
+pub mod depth_layout;
 pub mod event;
 mod geometry;
 pub mod golden;

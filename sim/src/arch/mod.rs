@@ -20,6 +20,7 @@
 //! built-ins `ir1`, `ir2`, `ir4` are its defaults with 1, 2 or 4 boards. Named choices
 //! (`interleave = "morton"`) are TOML strings, and bare names with `--set`.
 
+use occsim_traces::depth_layout::DepthLayout;
 use std::fmt::Write as _;
 use thiserror::Error;
 
@@ -880,6 +881,16 @@ impl O2Arch {
     /// Depth pixels in one memory word.
     pub fn pixels_per_word(&self) -> u32 {
         self.memory_port_bits_per_cycle / self.depth_bits_per_pixel
+    }
+
+    /// Where a depth pixel lives: the framebuffer tiles, words and banks of the depth buffer.
+    pub fn depth_layout(&self) -> DepthLayout {
+        DepthLayout {
+            tile_width_pixels: self.framebuffer_tile_width_pixels,
+            tile_height_pixels: self.framebuffer_tile_height_pixels,
+            pixels_per_word: self.pixels_per_word(),
+            banks: self.memory_banks,
+        }
     }
 
     /// Largest counter value: 2^counter_bits - 1.

@@ -23,109 +23,7 @@
 use crate::arch::O2Arch;
 use crate::blocks::fifo::Fifo;
 use crate::blocks::memory_port::{MemoryPort, PortClient};
-
-/// The word and page of a depth pixel in the layout above.
-#[derive(Clone, Debug)]
-pub(crate) struct DepthAddress {
-    tile_width: Divider,
-    tile_height: Divider,
-    tiles_per_row: u64,
-    pixels_per_word: Divider,
-    words_per_tile_row: u64,
-    words_per_tile: u64,
-}
-
-impl DepthAddress {
-    pub(crate) fn new(arch: &O2Arch, viewport_width: u32) -> DepthAddress {
-        let tile_width = arch.framebuffer_tile_width_pixels;
-        let words_per_tile_row = (tile_width / arch.pixels_per_word()) as u64;
-        DepthAddress {
-            tile_width: Divider::new(tile_width),
-            tile_height: Divider::new(arch.framebuffer_tile_height_pixels),
-            tiles_per_row: viewport_width.div_ceil(tile_width) as u64,
-            pixels_per_word: Divider::new(arch.pixels_per_word()),
-            words_per_tile_row,
-            words_per_tile: words_per_tile_row * arch.framebuffer_tile_height_pixels as u64,
-        }
-    }
-
-    /// `(word, page)` of pixel (x, y).
-    #[inline(always)]
-    pub(crate) fn locate(&self, x: u16, y: u16) -> (u64, u64) {
-        let (tile_x, in_tile_x) = self.tile_width.divide(x as u32);
-        let (tile_y, in_tile_y) = self.tile_height.divide(y as u32);
-        let page = tile_y as u64 * self.tiles_per_row + tile_x as u64;
-        (self.word(page, in_tile_x, in_tile_y), page)
-    }
-
-    /// `(word, 0)` of pixel (x, y) of a viewport inside one page (page 0): no tile division.
-    #[inline(always)]
-    pub(crate) fn locate_in_first_page(&self, x: u16, y: u16) -> (u64, u64) {
-        debug_assert_eq!(self.tile_width.divide(x as u32).0, 0);
-        debug_assert_eq!(self.tile_height.divide(y as u32).0, 0);
-        (self.word(0, x as u32, y as u32), 0)
-    }
-
-    #[inline(always)]
-    fn word(&self, page: u64, in_tile_x: u32, in_tile_y: u32) -> u64 {
-        page * self.words_per_tile
-            + in_tile_y as u64 * self.words_per_tile_row
-            + self.pixels_per_word.divide(in_tile_x).0 as u64
-    }
-}
-
-/// What a depth read of a word costs, by the prefetch's rule.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum DepthRead {
-    /// The word of the last read: no new read.
-    SameWord,
-    /// A new word in the page of the last read.
-    PageHit,
-    /// A new word in another page (or the first read).
-    PageMiss,
-}
-
-/// The word of the last depth read and the open row (page) of every memory bank: decides
-/// [`DepthRead`]. Page `p` lies in bank `p mod banks`; a read opens its page's row in its bank.
-#[derive(Clone, Debug)]
-pub(crate) struct LastRead {
-    word: Option<u64>,
-    open_rows: Vec<Option<u64>>,
-}
-
-impl LastRead {
-    /// No read yet, `banks` banks (at least one).
-    pub(crate) fn new(banks: u32) -> LastRead {
-        LastRead {
-            word: None,
-            open_rows: vec![None; banks.max(1) as usize],
-        }
-    }
-
-    /// Read `word` of `page`: what it costs (a new read becomes the last one and opens its
-    /// page's row).
-    #[inline(always)]
-    pub(crate) fn read(&mut self, word: u64, page: u64) -> DepthRead {
-        if self.word == Some(word) {
-            return DepthRead::SameWord;
-        }
-        self.word = Some(word);
-        let banks = self.open_rows.len() as u64;
-        let bank = if banks == 1 {
-            0
-        } else {
-            (page % banks) as usize
-        };
-        let row = &mut self.open_rows[bank];
-        let hit = *row == Some(page);
-        *row = Some(page);
-        if hit {
-            DepthRead::PageHit
-        } else {
-            DepthRead::PageMiss
-        }
-    }
-}
+use occsim_traces::depth_layout::{DepthAddress, DepthRead, LastRead};
 
 pub struct DepthPrefetch {
     slots: Fifo,
@@ -154,7 +52,7 @@ impl DepthPrefetch {
             page_hit_latency: arch.page_hit_latency_cycles,
             page_miss_latency: arch.page_miss_latency_cycles,
             word_bits: arch.memory_port_bits_per_cycle,
-            address: DepthAddress::new(arch, viewport_width),
+            address: DepthAddress::new(&arch.depth_layout(), viewport_width),
             word_hits: 0,
             page_hits: 0,
             page_misses: 0,
@@ -211,31 +109,5 @@ impl DepthPrefetch {
     #[inline(always)]
     pub fn retire(&mut self, cycle: u64) {
         self.slots.depart(cycle);
-    }
-}
-
-/// Division by a constant that takes a shift when the divisor is a power of two (the usual
-/// case: 128-pixel tiles, 8 pixels a word), which keeps divisions off the per-fragment path.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Divider {
-    divisor: u32,
-    shift: Option<u32>,
-}
-
-impl Divider {
-    pub(crate) fn new(divisor: u32) -> Divider {
-        Divider {
-            divisor,
-            shift: divisor.is_power_of_two().then(|| divisor.trailing_zeros()),
-        }
-    }
-
-    /// (quotient, remainder)
-    #[inline(always)]
-    pub(crate) fn divide(self, value: u32) -> (u32, u32) {
-        match self.shift {
-            Some(shift) => (value >> shift, value & (self.divisor - 1)),
-            None => (value / self.divisor, value % self.divisor),
-        }
     }
 }

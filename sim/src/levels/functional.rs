@@ -24,6 +24,10 @@ pub struct FunctionalCore {
     queries: Vec<QueryOutcome>,
     fragments: u64,
     primitives: u64,
+    /// Results come from the stream's golden results, not from fragments (a window-index
+    /// replay, which sees no fragment): the fragments counted when the query ended, until
+    /// its golden result arrives.
+    trusting_golden: Option<Option<u64>>,
 }
 
 impl FunctionalCore {
@@ -41,7 +45,26 @@ impl FunctionalCore {
             queries: Vec::new(),
             fragments: 0,
             primitives: 0,
+            trusting_golden: None,
         })
+    }
+
+    /// A core for a stream without fragments (a window index): fragments are counted by
+    /// [`Self::count_fragments`], render state and queries follow the events, and each
+    /// query's result is the golden result the stream carries right after its end.
+    pub fn trusting_golden(width: u32, height: u32) -> Result<FunctionalCore, SimError> {
+        Ok(FunctionalCore {
+            trusting_golden: Some(None),
+            ..FunctionalCore::new(width, height)?
+        })
+    }
+
+    /// `count` fragments passed, whose effects on the depth buffer the caller does not need.
+    pub(crate) fn count_fragments(&mut self, count: u64) {
+        debug_assert!(self.trusting_golden.is_some());
+        self.events += count;
+        self.fragments += count;
+        self.open_fragments += count;
     }
 
     /// Reject a fragment outside the viewport (the next event's index).
@@ -123,6 +146,18 @@ impl FunctionalCore {
                     id: *id,
                 });
             }
+            Event::QueryResult(golden) if self.trusting_golden.is_some() => {
+                self.events += 1;
+                let fragments = self.trusting_golden.and_then(|ended| ended).ok_or(
+                    SimError::ResultWithoutQuery {
+                        event: index,
+                        id: golden.id,
+                    },
+                )?;
+                self.trusting_golden = Some(None);
+                self.queries.push(QueryOutcome::of(golden, fragments));
+                return Ok(Some(golden.clone()));
+            }
             Event::QueryResult(golden) => {
                 self.events += 1;
                 self.golden.check(golden, index, |simulated, golden| {
@@ -134,6 +169,13 @@ impl FunctionalCore {
         }
         self.events += 1;
         let ended = self.functional.event(event);
+        if let (Some(awaiting), Some(_)) = (&mut self.trusting_golden, &ended) {
+            // Without fragments the model's result is empty: the golden one stands for it.
+            if awaiting.replace(self.open_fragments).is_some() {
+                return Err(SimError::MissingGolden);
+            }
+            return Ok(None);
+        }
         if let Some(result) = &ended {
             self.queries
                 .push(QueryOutcome::of(result, self.open_fragments));
@@ -152,6 +194,9 @@ impl FunctionalCore {
         if let Some(id) = self.open {
             return Err(SimError::OpenAtEnd { id });
         }
+        if let Some(Some(_)) = self.trusting_golden {
+            return Err(SimError::MissingGolden);
+        }
         Ok(LevelResult {
             level: Fidelity::Functional,
             machine: String::new(),
@@ -168,6 +213,7 @@ impl FunctionalCore {
             latency_max_cycles: None,
             effects: None,
             sampled_windows: None,
+            from_window_index: self.trusting_golden.is_some(),
             queries: self.queries,
             frame_cycles: Vec::new(),
             frames_per_second: None,

@@ -4,6 +4,8 @@
 //! block start, so each block decodes on its own.
 
 use super::header::StreamTally;
+use super::index::{FragmentStretch, IndexItem};
+use crate::depth_layout::DepthRead;
 use crate::event::{Event, Fragment, GeometryBatch, HostWork, Span, DEPTH_ONE};
 use crate::golden::EventSink;
 use crate::hit_list::{
@@ -50,6 +52,9 @@ pub(crate) mod tag {
     /// A query result whose verbose tiles store their hit lists as `HitList` holds them:
     /// count, the listed hits, digests, bounds and the last hit. Version 3 on.
     pub const QUERY_RESULT: u8 = 0x15;
+    /// In window-index blocks only, in place of fragments: a [`FragmentStretch`]'s counts.
+    /// Version 4 on.
+    pub const STRETCH: u8 = 0x16;
 }
 
 /// Most fragments in one span: a row of the widest viewport.
@@ -573,6 +578,32 @@ fn query_spec(c: &mut Cursor) -> Result<QuerySpec, PayloadError> {
     })
 }
 
+fn stretch(c: &mut Cursor) -> Result<FragmentStretch, PayloadError> {
+    let start = c.pos - 1;
+    let fragments = c.uv()?;
+    let depth_reads = c.uv()?;
+    let page_misses = c.uv()?;
+    let passed = c.uv()?;
+    let pos = c.pos;
+    let last_read = match c.byte()? {
+        0 => DepthRead::SameWord,
+        1 => DepthRead::PageHit,
+        2 => DepthRead::PageMiss,
+        code => return Err(bad(pos, format!("unknown last-read code {code}"))),
+    };
+    let stretch = FragmentStretch {
+        fragments,
+        depth_reads,
+        page_misses,
+        passed,
+        last_read,
+    };
+    match stretch.problem() {
+        Some(problem) => Err(bad(start, problem)),
+        None => Ok(stretch),
+    }
+}
+
 /// How a query result record stores its hit lists.
 #[derive(Clone, Copy)]
 enum HitCoding {
@@ -769,6 +800,33 @@ impl BlockDecoder {
             }
             match self.record(payload, ctx)? {
                 Record::Event(event) => return Ok(Some(event)),
+                Record::Span | Record::Part => {}
+            }
+        }
+    }
+
+    /// The next item of a window-index payload, or None at its end: stretches in place of
+    /// spans, which an index block must not hold.
+    pub(crate) fn next_index_item(
+        &mut self,
+        payload: &[u8],
+        ctx: &mut DecodeContext,
+    ) -> Result<Option<IndexItem>, PayloadError> {
+        loop {
+            match payload.get(self.pos) {
+                None => return Ok(None),
+                Some(&tag::STRETCH) => {
+                    let mut c = Cursor::new(payload, self.pos + 1);
+                    let stretch = stretch(&mut c)?;
+                    self.pos = c.pos;
+                    self.events += 1;
+                    return Ok(Some(IndexItem::Stretch(stretch)));
+                }
+                Some(&tag::SPAN) => return Err(bad(self.pos, "a span in a window-index block")),
+                Some(_) => {}
+            }
+            match self.record(payload, ctx)? {
+                Record::Event(event) => return Ok(Some(IndexItem::Event(event))),
                 Record::Span | Record::Part => {}
             }
         }

@@ -6,6 +6,7 @@ use crate::event::Event;
 use crate::query::{QueryMode, QueryResult, MAX_BUFFER_ENTRIES, MAX_TILES};
 use crate::raster::RasterProfile;
 use crate::state::{DepthFunc, MAX_VIEWPORT_SIDE};
+use crate::depth_layout::DepthLayout;
 use serde::{Deserialize, Serialize};
 
 /// How a trace was made. Stored as JSON in the file header.
@@ -34,6 +35,11 @@ pub struct TraceHeader {
     /// ([`crate::trace::TraceWriter::finish_seekable`]); otherwise only the summary has them.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub features: Option<TraceFeatures>,
+    /// The depth layout the window index was counted at, when the trace has one
+    /// ([`crate::trace::index`]; set by the writer from
+    /// [`crate::trace::WriterOptions::window_index`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub window_index: Option<DepthLayout>,
 }
 
 impl TraceHeader {
@@ -49,6 +55,7 @@ impl TraceHeader {
             generator: crate::GENERATOR_VERSION.to_owned(),
             scene: String::new(),
             features: None,
+            window_index: None,
         }
     }
 
@@ -76,7 +83,9 @@ impl TraceHeader {
                 self.width, self.height
             ));
         }
-        None
+        self.window_index
+            .and_then(|layout| layout.problem())
+            .map(|problem| format!("window index layout: {problem}"))
     }
 }
 
@@ -157,6 +166,19 @@ pub struct TraceSummary {
     /// Event payload bytes before compression.
     pub payload_bytes: u64,
     /// Event payload bytes as stored (after compression), block headers not counted.
+    pub stored_bytes: u64,
+    /// The window index's blocks, when the trace has one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub window_index: Option<IndexCounts>,
+}
+
+/// What the window index takes ([`crate::trace::index`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct IndexCounts {
+    pub blocks: u64,
+    /// Payload bytes before compression.
+    pub payload_bytes: u64,
+    /// Payload bytes as stored, block headers not counted.
     pub stored_bytes: u64,
 }
 

@@ -1,17 +1,19 @@
 //! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
 //!
-//! # Layout (version 3; all integers little-endian; versions 1, without the closed loop's
-//! records, and 2, with verbose hits stored one by one, still read)
+//! # Layout (version 4; all integers little-endian; versions 1, without the closed loop's
+//! records, 2, with verbose hits stored one by one, and 3, without window-index blocks,
+//! still read)
 //!
 //! ```text
 //! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 3 | flags u16 = 0
 //!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
 //!               (the CRC covers version .. end of JSON)
-//! event blocks  block header (20) | stored payload (stored_len)
+//! event blocks  block header (20) | stored payload (stored_len), with window-index blocks
+//!               (kind 3) among them when the header names a `window_index` layout
 //! summary block block header (20, kind 2, stored) | summary JSON
 //! trailer       summary block offset u64 | "OCCTEND\n" (8)
 //!
-//! block header  kind u8 (1 events, 2 summary) | codec u8 (0 stored, 1 zstd) | reserved u16 = 0
+//! block header  kind u8 (1 events, 2 summary, 3 window index) | codec u8 (0 stored, 1 zstd) | reserved u16 = 0
 //!               | events u32 | raw_len u32 (<= 1 MiB) | stored_len u32 | CRC32 u32
 //!               (the CRC covers the first 16 header bytes and the stored payload)
 //! ```
@@ -24,12 +26,14 @@
 //! per row from the last row step); each further depth relative to the one before plus the
 //! previous span's x slope. All prediction state resets at each block start, so blocks
 //! decode independently; only a query begin or result too large for one block is split
-//! into `PART` records across consecutive blocks. See `codec.rs` for the record tags.
+//! into `PART` records across consecutive blocks. See `codec.rs` for the record tags, and
+//! [`index`] for the window index, the stream a model that needs no fragment reads.
 
 mod block;
 mod codec;
 mod error;
 mod header;
+pub mod index;
 mod reader;
 pub mod synthetic;
 mod writer;
@@ -43,6 +47,9 @@ pub use block::{
 };
 pub use codec::MAX_EVENT_BYTES;
 pub use error::{ReadError, TraceError};
-pub use header::{ClosedLoopCounts, QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary};
+pub use header::{
+    ClosedLoopCounts, IndexCounts, QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary,
+};
+pub use index::{FragmentStretch, IndexItem};
 pub use reader::TraceReader;
 pub use writer::{TraceWriter, WriterOptions};

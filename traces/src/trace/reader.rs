@@ -2,7 +2,8 @@
 
 use super::block::*;
 use super::codec::{BlockDecoder, DecodeContext, DrainError, PayloadError};
-use super::header::{StreamTally, TraceHeader, TraceSummary};
+use super::header::{IndexCounts, StreamTally, TraceHeader, TraceSummary};
+use super::index::IndexItem;
 use super::{ReadError, TraceError};
 use crate::event::Event;
 use crate::golden::EventSink;
@@ -33,10 +34,22 @@ pub struct TraceReader<R: Read> {
     claimed_events: u64,
     /// Some blocks were skipped, not decoded: the event tally is incomplete.
     skipped: bool,
+    /// The window-index blocks passed so far.
+    index: IndexCounts,
+    /// The block loaded is a window-index block (read by [`TraceReader::next_index_item`]).
+    in_index_block: bool,
     summary: Option<TraceSummary>,
     failed: bool,
     /// The file's format version.
     version: u16,
+}
+
+/// Which blocks [`TraceReader::load_block`] decodes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Wanted {
+    Events,
+    Index,
+    Nothing,
 }
 
 impl<R: Read> TraceReader<R> {
@@ -63,6 +76,8 @@ impl<R: Read> TraceReader<R> {
             stored_bytes: 0,
             claimed_events: 0,
             skipped: false,
+            index: IndexCounts::default(),
+            in_index_block: false,
             summary: None,
             failed: false,
             version: FORMAT_VERSION,
@@ -208,22 +223,42 @@ impl<R: Read> TraceReader<R> {
         Ok(header)
     }
 
-    /// Load the next block for decoding. Returns false at the summary (the end).
-    fn load_block(&mut self, decode: bool) -> Result<bool, TraceError> {
-        let header = self.read_block()?;
-        if header.kind == KIND_SUMMARY {
-            self.finish_at_summary()?;
-            return Ok(false);
-        }
-        self.blocks += 1;
-        self.payload_bytes += header.raw_len as u64;
-        self.stored_bytes += header.stored_len as u64;
-        self.claimed_events += header.events as u64;
+    /// Load the next block of the kind `wanted` for decoding, passing the others (their
+    /// checksums checked); with `Wanted::Nothing`, pass one block. Returns false at the
+    /// summary (the end).
+    fn load_block(&mut self, wanted: Wanted) -> Result<bool, TraceError> {
+        let header = loop {
+            let header = self.read_block()?;
+            match header.kind {
+                KIND_SUMMARY => {
+                    self.finish_at_summary()?;
+                    return Ok(false);
+                }
+                KIND_INDEX => {
+                    self.index.blocks += 1;
+                    self.index.payload_bytes += header.raw_len as u64;
+                    self.index.stored_bytes += header.stored_len as u64;
+                    if wanted == Wanted::Index {
+                        break header;
+                    }
+                }
+                _ => {
+                    self.blocks += 1;
+                    self.payload_bytes += header.raw_len as u64;
+                    self.stored_bytes += header.stored_len as u64;
+                    self.claimed_events += header.events as u64;
+                    if wanted == Wanted::Events {
+                        break header;
+                    }
+                    self.skipped = true;
+                }
+            }
+            if wanted == Wanted::Nothing {
+                return Ok(true);
+            }
+        };
         self.block_events = header.events;
-        if !decode {
-            self.skipped = true;
-            return Ok(true);
-        }
+        self.in_index_block = header.kind == KIND_INDEX;
         if header.codec == CODEC_ZSTD {
             self.payload.clear();
             self.payload.reserve(header.raw_len as usize);
@@ -324,6 +359,7 @@ impl<R: Read> TraceReader<R> {
         found.blocks = self.blocks;
         found.payload_bytes = self.payload_bytes;
         found.stored_bytes = self.stored_bytes;
+        found.window_index = self.header.window_index.map(|_| self.index);
         if found != stored || self.claimed_events != stored.events {
             return Err(bad(format!(
                 "it disagrees with the trace on {}",
@@ -365,6 +401,10 @@ impl<R: Read> TraceReader<R> {
         if self.at_end() {
             return Ok(None);
         }
+        if self.in_block && self.in_index_block {
+            self.failed = true;
+            return Err(self.mixed_reading());
+        }
         if self.in_block {
             match self.decoder.next_fragment_in_span(&self.payload) {
                 Some(Ok(fragment)) => return Ok(Some(Event::Fragment(fragment))),
@@ -377,7 +417,7 @@ impl<R: Read> TraceReader<R> {
         }
         self.guarded(|reader| loop {
             if !reader.in_block {
-                if !reader.load_block(true)? {
+                if !reader.load_block(Wanted::Events)? {
                     return Ok(None);
                 }
                 continue;
@@ -403,9 +443,13 @@ impl<R: Read> TraceReader<R> {
         if self.at_end() {
             return Ok(false);
         }
+        if self.in_block && self.in_index_block {
+            self.failed = true;
+            return Err(ReadError::Trace(self.mixed_reading()));
+        }
         let mut sink_error = None;
         let result = self.guarded(|reader| {
-            if !reader.in_block && !reader.load_block(true)? {
+            if !reader.in_block && !reader.load_block(Wanted::Events)? {
                 return Ok(false);
             }
             let mut ctx = DecodeContext {
@@ -433,6 +477,47 @@ impl<R: Read> TraceReader<R> {
         result.map_err(ReadError::Trace)
     }
 
+    /// The next item of the window index, or None at the end of the trace: the trace's
+    /// events other than fragments, and in place of its fragments their
+    /// [`crate::trace::FragmentStretch`]es, read from the index blocks alone (the event
+    /// blocks' checksums are checked, their payloads not decompressed). A trace whose header
+    /// names no `window_index` has no items. Read a trace either this way or by events.
+    pub fn next_index_item(&mut self) -> Result<Option<IndexItem>, TraceError> {
+        if self.at_end() {
+            return Ok(None);
+        }
+        if self.in_block && !self.in_index_block {
+            self.failed = true;
+            return Err(self.mixed_reading());
+        }
+        self.guarded(|reader| loop {
+            if !reader.in_block {
+                if !reader.load_block(Wanted::Index)? {
+                    return Ok(None);
+                }
+                continue;
+            }
+            let mut ctx = DecodeContext {
+                width: reader.header.width,
+                height: reader.header.height,
+                tally: &mut reader.tally,
+                assembly: &mut reader.assembly,
+            };
+            match reader.decoder.next_index_item(&reader.payload, &mut ctx) {
+                Ok(Some(item)) => return Ok(Some(item)),
+                Ok(None) => reader.end_block()?,
+                Err(e) => return Err(reader.corrupt(e)),
+            }
+        })
+    }
+
+    fn mixed_reading(&self) -> TraceError {
+        TraceError::BadBlock {
+            offset: self.block_offset,
+            reason: "a trace is read either by events or by its window index, not both".to_owned(),
+        }
+    }
+
     /// Hand every remaining event to `sink`; returns the (checked) summary.
     pub fn read_into<S: EventSink>(
         &mut self,
@@ -451,7 +536,7 @@ impl<R: Read> TraceReader<R> {
                     reader.in_block = false;
                     reader.skipped = true;
                 }
-                while reader.load_block(false)? {}
+                while reader.load_block(Wanted::Nothing)? {}
                 Ok(())
             })?;
         }

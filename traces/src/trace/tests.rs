@@ -160,6 +160,7 @@ fn every_event_kind_round_trips_through_both_read_paths() {
         WriterOptions {
             block_bytes: 4096,
             zstd_level: 1,
+            window_index: None,
         },
     ] {
         let (bytes, written) = write(&header, options, &events);
@@ -534,7 +535,7 @@ proptest! {
         flips in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
         cut in any::<prop::sample::Index>(),
     ) {
-        let mut bytes = write(&TraceHeader::new(SIDE, SIDE), WriterOptions { block_bytes: 4096, zstd_level: 1 }, &every_kind()).0;
+        let mut bytes = write(&TraceHeader::new(SIDE, SIDE), WriterOptions { block_bytes: 4096, zstd_level: 1, window_index: None }, &every_kind()).0;
         for (at, value) in flips {
             let at = at.index(bytes.len());
             bytes[at] = value;
@@ -550,7 +551,7 @@ proptest! {
         // Corrupt the decoded payload itself and store it uncompressed with a valid checksum,
         // so the event decoder (not the checksum) meets the damage.
         let events = every_kind();
-        let clean = write(&TraceHeader::new(SIDE, SIDE), WriterOptions { block_bytes: 4096, zstd_level: 1 }, &events).0;
+        let clean = write(&TraceHeader::new(SIDE, SIDE), WriterOptions { block_bytes: 4096, zstd_level: 1, window_index: None }, &events).0;
         let block = first_block_offset(&clean);
         let fields: [u8; BLOCK_HEADER_BYTES] = clean[block..block + BLOCK_HEADER_BYTES].try_into().unwrap();
         let (header, _) = BlockHeader::parse(&fields).unwrap();

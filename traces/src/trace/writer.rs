@@ -5,8 +5,10 @@ use super::codec::{
     encode_large_event, encode_small_event, encode_span, put_uv, span_bytes_bound, tag,
     SpanPredictor, MAX_EVENT_BYTES, MAX_SPAN_FRAGMENTS,
 };
-use super::header::{StreamTally, TraceHeader, TraceSummary};
+use super::header::{IndexCounts, StreamTally, TraceHeader, TraceSummary};
+use super::index::{FragmentStretch, WindowIndexer};
 use super::TraceError;
+use crate::depth_layout::DepthLayout;
 use crate::event::Event;
 use crate::golden::EventSink;
 use std::io::Write;
@@ -18,6 +20,8 @@ pub struct WriterOptions {
     pub block_bytes: usize,
     /// zstd compression level (1..=22); decoding speed hardly depends on it.
     pub zstd_level: i32,
+    /// Write a window index counted at this depth layout ([`crate::trace::index`]).
+    pub window_index: Option<DepthLayout>,
 }
 
 impl Default for WriterOptions {
@@ -25,8 +29,42 @@ impl Default for WriterOptions {
         WriterOptions {
             block_bytes: MAX_BLOCK_BYTES,
             zstd_level: 3,
+            window_index: None,
         }
     }
+}
+
+/// A block being filled, and what the blocks of its kind took so far.
+struct OpenBlock {
+    kind: u8,
+    payload: Vec<u8>,
+    /// Items completed in the payload (events; for the index, its items).
+    items: u32,
+    written: IndexCounts,
+}
+
+impl OpenBlock {
+    fn new(kind: u8) -> OpenBlock {
+        OpenBlock {
+            kind,
+            payload: Vec::new(),
+            items: 0,
+            written: IndexCounts::default(),
+        }
+    }
+}
+
+/// The two streams a writer fills: the events, and the window index.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Lane {
+    Events,
+    Index,
+}
+
+/// The window index being written: its counting state and its open block.
+struct IndexLane {
+    indexer: Box<WindowIndexer>,
+    block: OpenBlock,
 }
 
 /// Most bytes a small (state) event record takes: a tag and four 5-byte varints.
@@ -46,9 +84,8 @@ pub struct TraceWriter<W: Write> {
     offset: u64,
     options: WriterOptions,
     compressor: zstd::bulk::Compressor<'static>,
-    /// The open block's payload.
-    block: Vec<u8>,
-    block_events: u32,
+    /// The open event block.
+    events: OpenBlock,
     predictor: SpanPredictor,
     /// The span being gathered: its start and its depths.
     span_x: u16,
@@ -62,9 +99,7 @@ pub struct TraceWriter<W: Write> {
     width: u32,
     height: u32,
     events_seen: u64,
-    blocks: u64,
-    payload_bytes: u64,
-    stored_bytes: u64,
+    index: Option<IndexLane>,
     failed: bool,
 }
 
@@ -107,16 +142,20 @@ impl<W: Write> TraceWriter<W> {
         options: WriterOptions,
     ) -> Result<TraceWriter<W>, TraceError> {
         let bad_header = |reason: String| TraceError::BadHeader { offset: 0, reason };
-        if let Some(problem) = header.problem() {
-            return Err(bad_header(problem));
-        }
         if !(4096..=MAX_BLOCK_BYTES).contains(&options.block_bytes) {
             return Err(bad_header(format!(
                 "block size {} outside 4096..={MAX_BLOCK_BYTES}",
                 options.block_bytes
             )));
         }
-        let mut json = serde_json::to_vec(header).map_err(|e| bad_header(e.to_string()))?;
+        let header = TraceHeader {
+            window_index: options.window_index,
+            ..header.clone()
+        };
+        if let Some(problem) = header.problem() {
+            return Err(bad_header(problem));
+        }
+        let mut json = serde_json::to_vec(&header).map_err(|e| bad_header(e.to_string()))?;
         json.resize(json.len() + FEATURES_RESERVE_BYTES, b' ');
         if json.len() > MAX_HEADER_JSON_BYTES as usize {
             return Err(bad_header(format!(
@@ -131,13 +170,16 @@ impl<W: Write> TraceWriter<W> {
             .map_err(|e| bad_header(format!("zstd level {}: {e}", options.zstd_level)))?;
         Ok(TraceWriter {
             out,
+            index: options.window_index.map(|layout| IndexLane {
+                indexer: Box::new(WindowIndexer::new(&layout, header.width, header.height)),
+                block: OpenBlock::new(KIND_INDEX),
+            }),
             header: header.clone(),
             header_json_bytes: json.len(),
             offset,
             options,
             compressor,
-            block: Vec::with_capacity(options.block_bytes),
-            block_events: 0,
+            events: OpenBlock::new(KIND_EVENTS),
             predictor: SpanPredictor::default(),
             span_x: 0,
             span_y: 0,
@@ -145,13 +187,10 @@ impl<W: Write> TraceWriter<W> {
             max_span: MAX_SPAN_FRAGMENTS.min((options.block_bytes - span_bytes_bound(1)) / 10),
             large: Vec::new(),
             stored: Vec::new(),
-            tally: StreamTally::new(header),
+            tally: StreamTally::new(&header),
             width: header.width,
             height: header.height,
             events_seen: 0,
-            blocks: 0,
-            payload_bytes: 0,
-            stored_bytes: 0,
             failed: false,
         })
     }
@@ -184,6 +223,9 @@ impl<W: Write> TraceWriter<W> {
                 return Err(self.invalid(reason));
             }
             self.tally.checked_fragments(1);
+            if let Some(index) = &mut self.index {
+                index.indexer.fragment(*f);
+            }
             let len = self.span_depths.len();
             let continues = len > 0
                 && len < self.max_span
@@ -200,21 +242,60 @@ impl<W: Write> TraceWriter<W> {
         self.tally
             .event(event)
             .map_err(|reason| self.invalid(reason))?;
+        self.flush_stretch()?;
         match event {
-            Event::QueryBegin(_) | Event::QueryResult(_) => self.append_large(event),
+            Event::QueryBegin(_) | Event::QueryResult(_) => self.append_large(event)?,
             _ => {
-                self.make_room(SMALL_EVENT_BYTES)?;
-                encode_small_event(&mut self.block, event);
-                self.block_events += 1;
-                Ok(())
+                for lane in self.lanes() {
+                    self.make_room(lane, SMALL_EVENT_BYTES)?;
+                    if let Some(block) = self.open_block(lane) {
+                        encode_small_event(&mut block.payload, event);
+                        block.items += 1;
+                    }
+                }
             }
+        }
+        if let Some(index) = &mut self.index {
+            index.indexer.event(event);
+        }
+        Ok(())
+    }
+
+    /// Into the index: the stretch of fragments since its last item, if any.
+    fn flush_stretch(&mut self) -> Result<(), TraceError> {
+        let Some(stretch) = self.index.as_mut().and_then(|index| index.indexer.take_stretch())
+        else {
+            return Ok(());
+        };
+        self.make_room(Lane::Index, FragmentStretch::MAX_BYTES)?;
+        if let Some(block) = self.open_block(Lane::Index) {
+            stretch.encode(&mut block.payload);
+            block.items += 1;
+        }
+        Ok(())
+    }
+
+    /// The lanes this writer fills.
+    fn lanes(&self) -> impl Iterator<Item = Lane> {
+        let index = self.index.is_some().then_some(Lane::Index);
+        std::iter::once(Lane::Events).chain(index)
+    }
+
+    fn open_block(&mut self, lane: Lane) -> Option<&mut OpenBlock> {
+        match lane {
+            Lane::Events => Some(&mut self.events),
+            Lane::Index => self.index.as_mut().map(|index| &mut index.block),
         }
     }
 
-    /// Close the open block if `bytes` more would not fit.
-    fn make_room(&mut self, bytes: usize) -> Result<(), TraceError> {
-        if self.block.len() + bytes > self.options.block_bytes {
-            self.flush_block()?;
+    /// Close `lane`'s open block if `bytes` more would not fit.
+    fn make_room(&mut self, lane: Lane, bytes: usize) -> Result<(), TraceError> {
+        let limit = self.options.block_bytes;
+        if self
+            .open_block(lane)
+            .is_some_and(|block| block.payload.len() + bytes > limit)
+        {
+            self.flush_block(lane)?;
         }
         Ok(())
     }
@@ -223,90 +304,111 @@ impl<W: Write> TraceWriter<W> {
         if self.span_depths.is_empty() {
             return Ok(());
         }
-        self.make_room(span_bytes_bound(self.span_depths.len()))?;
+        self.make_room(Lane::Events, span_bytes_bound(self.span_depths.len()))?;
         encode_span(
-            &mut self.block,
+            &mut self.events.payload,
             &mut self.predictor,
             self.span_x,
             self.span_y,
             &self.span_depths,
         );
-        self.block_events += self.span_depths.len() as u32;
+        self.events.items += self.span_depths.len() as u32;
         self.span_depths.clear();
         Ok(())
     }
 
-    /// A query begin or result: inline if it fits a block, else in parts over several blocks.
+    /// A query begin or result, into every lane.
     fn append_large(&mut self, event: &Event) -> Result<(), TraceError> {
-        self.large.clear();
-        encode_large_event(&mut self.large, event);
-        let total = self.large.len();
-        if total > MAX_EVENT_BYTES {
-            return Err(self.invalid(format!("event of {total} bytes exceeds {MAX_EVENT_BYTES}")));
-        }
-        if total <= self.options.block_bytes {
-            self.make_room(total)?;
-            self.block.extend_from_slice(&self.large);
-            self.block_events += 1;
-            return Ok(());
+        let mut large = std::mem::take(&mut self.large);
+        large.clear();
+        encode_large_event(&mut large, event);
+        let total = large.len();
+        let result = if total > MAX_EVENT_BYTES {
+            Err(self.invalid(format!("event of {total} bytes exceeds {MAX_EVENT_BYTES}")))
+        } else {
+            self.lanes()
+                .try_for_each(|lane| self.put_large(lane, &large))
+        };
+        self.large = large;
+        result
+    }
+
+    /// An encoded large event into `lane`: inline if it fits a block, else in parts over
+    /// several blocks.
+    fn put_large(&mut self, lane: Lane, large: &[u8]) -> Result<(), TraceError> {
+        let (total, limit) = (large.len(), self.options.block_bytes);
+        if total <= limit {
+            self.make_room(lane, total)?;
         }
         let mut done = 0;
-        while done < total {
-            let room = self
-                .options
-                .block_bytes
-                .saturating_sub(self.block.len() + PART_OVERHEAD);
+        while let Some(block) = self.open_block(lane) {
+            if total <= limit {
+                block.payload.extend_from_slice(large);
+                block.items += 1;
+                break;
+            }
+            let room = limit.saturating_sub(block.payload.len() + PART_OVERHEAD);
             if room < 256 {
-                self.flush_block()?;
+                self.flush_block(lane)?;
                 continue;
             }
             let chunk = room.min(total - done);
             let last = done + chunk == total;
-            self.block
-                .push(if last { tag::PART_END } else { tag::PART });
-            put_uv(&mut self.block, chunk as u64);
-            self.block
-                .extend_from_slice(&self.large[done..done + chunk]);
+            block.payload.push(if last { tag::PART_END } else { tag::PART });
+            put_uv(&mut block.payload, chunk as u64);
+            block.payload.extend_from_slice(&large[done..done + chunk]);
             done += chunk;
+            if last {
+                block.items += 1;
+                break;
+            }
         }
-        self.block_events += 1;
         Ok(())
     }
 
-    /// Compress and write the open block; the next block starts with fresh prediction state.
-    fn flush_block(&mut self) -> Result<(), TraceError> {
-        if self.block.is_empty() {
+    /// Compress and write `lane`'s open block; the next event block starts with fresh
+    /// prediction state.
+    fn flush_block(&mut self, lane: Lane) -> Result<(), TraceError> {
+        let Some(block) = self.open_block(lane) else {
+            return Ok(());
+        };
+        if block.payload.is_empty() {
             return Ok(());
         }
+        let payload = std::mem::take(&mut block.payload);
+        let (kind, items) = (block.kind, std::mem::take(&mut block.items));
         self.stored.clear();
         self.stored
-            .reserve(zstd::zstd_safe::compress_bound(self.block.len()));
-        let compressed = self
-            .compressor
-            .compress_to_buffer(&self.block, &mut self.stored);
-        let zstd_wins = compressed.is_ok() && self.stored.len() < self.block.len();
+            .reserve(zstd::zstd_safe::compress_bound(payload.len()));
+        let compressed = self.compressor.compress_to_buffer(&payload, &mut self.stored);
+        let zstd_wins = compressed.is_ok() && self.stored.len() < payload.len();
         let (codec, stored) = if zstd_wins {
             (CODEC_ZSTD, &self.stored)
         } else {
-            (CODEC_STORED, &self.block)
+            (CODEC_STORED, &payload)
         };
         let header = BlockHeader {
-            kind: KIND_EVENTS,
+            kind,
             codec,
-            events: self.block_events,
-            raw_len: self.block.len() as u32,
+            events: items,
+            raw_len: payload.len() as u32,
             stored_len: stored.len() as u32,
         };
         let crc = header.checksum(stored);
         write_at(&mut self.out, &mut self.offset, &header.fields())?;
         write_at(&mut self.out, &mut self.offset, &crc.to_le_bytes())?;
         write_at(&mut self.out, &mut self.offset, stored)?;
-        self.blocks += 1;
-        self.payload_bytes += self.block.len() as u64;
-        self.stored_bytes += stored.len() as u64;
-        self.block.clear();
-        self.block_events = 0;
-        self.predictor = SpanPredictor::default();
+        let stored_len = stored.len() as u64;
+        if lane == Lane::Events {
+            self.predictor = SpanPredictor::default();
+        }
+        if let Some(block) = self.open_block(lane) {
+            block.written.blocks += 1;
+            block.written.payload_bytes += payload.len() as u64;
+            block.written.stored_bytes += stored_len;
+            block.payload = payload;
+            block.payload.clear();
+        }
         Ok(())
     }
 
@@ -321,11 +423,14 @@ impl<W: Write> TraceWriter<W> {
             return Err(self.invalid("the writer stopped at an earlier error".to_owned()));
         }
         self.flush_span()?;
-        self.flush_block()?;
+        self.flush_stretch()?;
+        self.flush_block(Lane::Events)?;
+        self.flush_block(Lane::Index)?;
         let mut summary = self.tally.summary();
-        summary.blocks = self.blocks;
-        summary.payload_bytes = self.payload_bytes;
-        summary.stored_bytes = self.stored_bytes;
+        summary.blocks = self.events.written.blocks;
+        summary.payload_bytes = self.events.written.payload_bytes;
+        summary.stored_bytes = self.events.written.stored_bytes;
+        summary.window_index = self.index.as_ref().map(|index| index.block.written);
         let json = serde_json::to_vec(&summary).map_err(|e| self.invalid(e.to_string()))?;
         let header = BlockHeader {
             kind: KIND_SUMMARY,

@@ -24,6 +24,8 @@ use crate::levels::functional::FunctionalCore;
 use crate::levels::level::{Fidelity, LevelResult};
 use crate::levels::predicted_loop::PredictedLoop;
 use occsim_traces::golden::FunctionalModel;
+use occsim_traces::state::RenderState;
+use occsim_traces::trace::{FragmentStretch, IndexItem, TraceHeader};
 use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, Span};
 
 pub use crate::levels::level::WindowEnd;
@@ -62,6 +64,15 @@ impl Formulas {
         match self {
             Formulas::O2(o2) => o2.fragment(fragment, functional),
             Formulas::Ir(ir) => ir.fragment(fragment, functional),
+        }
+    }
+
+    /// Count a stretch of fragments from a trace's window index. Only the O2 formulas count
+    /// from stretches ([`AnalyticModel::reads_window_index`]).
+    fn stretch(&mut self, stretch: &FragmentStretch, state: &RenderState) {
+        match self {
+            Formulas::O2(o2) => o2.stretch(stretch, state),
+            Formulas::Ir(_) => unreachable!("the IR formulas count Image Engines' fragments"),
         }
     }
 
@@ -128,8 +139,43 @@ pub struct AnalyticModel {
 
 impl AnalyticModel {
     pub fn new(arch: &Arch, width: u32, height: u32) -> Result<AnalyticModel, SimError> {
+        AnalyticModel::with_core(arch, width, height, FunctionalCore::new(width, height)?)
+    }
+
+    /// Whether the analytic level of `arch` can replay a trace with `header` from its window
+    /// index alone ([`occsim_traces::trace::index`]): the O2 formulas, whose counts a
+    /// stretch holds, at the depth layout the index was counted at. (The IR's count each
+    /// Image Engine's fragments, which depend on its interleave: they decode the events.)
+    pub fn reads_window_index(arch: &Arch, header: &TraceHeader) -> bool {
+        let Some(layout) = header.window_index else {
+            return false;
+        };
+        let golden = header
+            .features
+            .as_ref()
+            .is_some_and(|features| features.query_results || features.query_modes.is_empty());
+        golden && arch.o2().is_ok_and(|o2| o2.depth_layout() == layout)
+    }
+
+    /// The model for a replay from the window index (see [`Self::reads_window_index`]):
+    /// results are the stream's golden ones.
+    pub fn from_window_index(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+    ) -> Result<AnalyticModel, SimError> {
+        let core = FunctionalCore::trusting_golden(width, height)?;
+        AnalyticModel::with_core(arch, width, height, core)
+    }
+
+    fn with_core(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        core: FunctionalCore,
+    ) -> Result<AnalyticModel, SimError> {
         Ok(AnalyticModel {
-            core: FunctionalCore::new(width, height)?,
+            core,
             formulas: Formulas::new(arch, width, height)?,
             open: None,
             frames: PredictedLoop::new(arch)?,
@@ -166,6 +212,19 @@ impl AnalyticModel {
             self.latencies.push(end.latency.ceil() as u64);
         }
         Ok(())
+    }
+
+    /// One item of a window index: a stretch of fragments counted whole, or an event.
+    pub fn index_item(&mut self, item: &IndexItem) -> Result<(), SimError> {
+        match item {
+            IndexItem::Event(event) => self.event(event),
+            IndexItem::Stretch(stretch) => {
+                let state = self.core.functional.state();
+                self.formulas.stretch(stretch, state);
+                self.core.count_fragments(stretch.fragments);
+                Ok(())
+            }
+        }
     }
 
     /// A span of fragments: the formulas count each (its pixels are distinct, so the depths

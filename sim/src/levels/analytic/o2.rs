@@ -60,8 +60,10 @@
 
 use super::{service_cycles, WindowEnd};
 use crate::arch::O2Arch;
-use crate::blocks::depth_prefetch::{DepthAddress, DepthRead, LastRead};
+use occsim_traces::depth_layout::{DepthAddress, DepthRead, LastRead};
 use occsim_traces::golden::FunctionalModel;
+use occsim_traces::state::RenderState;
+use occsim_traces::trace::FragmentStretch;
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::{Fragment, QueryMode, QueryResult, QuerySpec};
 
@@ -226,7 +228,7 @@ impl O2Bottleneck {
     pub(super) fn new(arch: &O2Arch, width: u32, height: u32) -> O2Bottleneck {
         O2Bottleneck {
             formulas: O2Formulas::new(arch, width, height),
-            address: DepthAddress::new(arch, width),
+            address: DepthAddress::new(&arch.depth_layout(), width),
             last_read: LastRead::new(arch.memory_banks),
             window: WindowCounts::default(),
             open: None,
@@ -289,6 +291,45 @@ impl O2Bottleneck {
                     w.colour_reads += arch.blending as u64;
                 }
             }
+        }
+    }
+
+    /// Count a stretch of fragments from a trace's window index, as their fragments one by
+    /// one would be counted (`state` the render state they were drawn in; the stretch was
+    /// counted at this machine's depth layout).
+    pub(super) fn stretch(&mut self, stretch: &FragmentStretch, state: &RenderState) {
+        let lookahead = self.formulas.lookahead() as u64;
+        let arch = &self.formulas.arch;
+        let w = &mut self.window;
+        let n = stretch.fragments;
+        w.fragments += n;
+        if w.recent_clears > 0 {
+            // One by one, the count stops at L, where the clears stop holding the drain.
+            w.fragments_after_clear = (w.fragments_after_clear + n).min(lookahead);
+            if w.fragments_after_clear >= lookahead {
+                w.recent_clears = 0;
+            }
+        }
+        w.occu_cycles += n * self.open.map_or(1, |(service, _)| service);
+        w.last_read_latency = match stretch.last_read {
+            DepthRead::SameWord => 0,
+            DepthRead::PageHit => arch.page_hit_latency_cycles,
+            DepthRead::PageMiss => arch.page_miss_latency_cycles,
+        };
+        w.depth_reads += stretch.depth_reads;
+        w.page_misses += stretch.page_misses;
+        if self.open.is_some_and(|(_, mode)| mode) {
+            return;
+        }
+        // Outside an occlusion render mode: with the depth test off every fragment draws,
+        // with it on those that pass.
+        let drawn = if state.depth_test { stretch.passed } else { n };
+        if state.depth_test && state.depth_mask {
+            w.depth_writes += drawn;
+        }
+        if arch.colour_bits_per_pixel > 0 {
+            w.colour_writes += drawn;
+            w.colour_reads += arch.blending as u64 * drawn;
         }
     }
 

@@ -1,0 +1,126 @@
+//! The analytic level read from a trace's window index equals the analytic level read from
+//! its fragments, bit for bit, wherever it is used; and where the index cannot serve (another
+//! depth layout, the InfiniteReality-like machine, a retiling) the fragments are read.
+
+use occsim_sim::levels::{Fidelity, LevelResult};
+use occsim_sim::replay::{replay, ReplayOptions};
+use occsim_sim::Arch;
+use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
+use occsim_traces::retile::TileGrid;
+use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter, WriterOptions};
+use occsim_traces::Event;
+use std::io::Cursor;
+
+mod support;
+
+/// A trace file's bytes, as `occsim trace gen` writes them: with the window index at the
+/// default O2's depth layout, and the features written back into the header.
+fn indexed_trace(width: u32, height: u32, events: &[Event]) -> Vec<u8> {
+    let layout = Arch::builtin("o2").unwrap().o2().unwrap().depth_layout();
+    let options = WriterOptions {
+        window_index: Some(layout),
+        ..WriterOptions::default()
+    };
+    let mut file = Cursor::new(Vec::new());
+    let header = TraceHeader::new(width, height);
+    let mut writer = TraceWriter::with_options(&mut file, &header, options).unwrap();
+    for event in events {
+        writer.write_event(event).unwrap();
+    }
+    writer.finish_seekable().unwrap();
+    file.into_inner()
+}
+
+fn analytic(trace: &[u8], arch: &Arch, window_index: bool, retile: Option<TileGrid>) -> LevelResult {
+    let options = ReplayOptions {
+        window_index,
+        retile,
+        ..ReplayOptions::at(Fidelity::Analytic)
+    };
+    replay(|| Ok(TraceReader::new(trace)?), arch, options).unwrap()
+}
+
+fn traces() -> Vec<(&'static str, Vec<u8>)> {
+    let scenes = [
+        ("hardcases", HARDCASES.to_owned()),
+        (
+            // Two frames: waits, conditionals and frame ends (the closed loop).
+            "demo",
+            demo_scene(&DemoOptions {
+                width: 320,
+                height: 256,
+                frames: 2,
+                lots_per_side: 8,
+                ..DemoOptions::default()
+            }),
+        ),
+        (
+            "random",
+            random_scene(&RandomOptions {
+                width: 256,
+                height: 192,
+                triangles: 600,
+                queries: 60,
+                ..RandomOptions::default()
+            }),
+        ),
+    ];
+    scenes
+        .into_iter()
+        .map(|(name, text)| {
+            let (width, height, events) = support::scene_events(&text);
+            (name, indexed_trace(width, height, &events))
+        })
+        .collect()
+}
+
+fn o2_with(sets: &[&str]) -> Arch {
+    let mut arch = Arch::builtin("o2").unwrap();
+    for set in sets {
+        arch.set(set).unwrap();
+    }
+    arch
+}
+
+#[test]
+fn the_index_gives_the_analytic_result_of_the_fragments_bit_for_bit() {
+    let archs = [
+        o2_with(&[]),
+        o2_with(&["engines=1"]),
+        o2_with(&["all_tiles_one_cycle=true"]),
+        // Blending, slow pages, no colour, fast clears, a short prefetch: each moves a formula.
+        o2_with(&["blending=true", "page_miss_latency_cycles=40"]),
+        o2_with(&["colour_bits_per_pixel=0"]),
+        o2_with(&["clear_writes_memory=false", "prefetch_depth_fragments=2"]),
+    ];
+    for (name, trace) in traces() {
+        for arch in &archs {
+            let mut indexed = analytic(&trace, arch, true, None);
+            let decoded = analytic(&trace, arch, false, None);
+            assert!(indexed.from_window_index, "{name}: the index was not read");
+            assert!(!decoded.from_window_index);
+            assert!(decoded.checked_queries > 0, "{name}: nothing checked");
+            // The index takes the golden results; the fragments' run checked them.
+            assert_eq!(indexed.checked_queries, 0);
+            indexed.checked_queries = decoded.checked_queries;
+            indexed.from_window_index = false;
+            assert_eq!(indexed, decoded, "{name} on {:?}", arch.report_entries());
+        }
+    }
+}
+
+#[test]
+fn where_the_index_cannot_serve_the_fragments_are_read() {
+    let (_, trace) = traces().remove(0);
+    // Another depth layout: its reads and page misses are not the index's.
+    for arch in [
+        o2_with(&["memory_banks=4"]),
+        o2_with(&["framebuffer_tile_width_pixels=64"]),
+        Arch::builtin("ir2").unwrap(),
+    ] {
+        assert!(!analytic(&trace, &arch, true, None).from_window_index);
+    }
+    // Retiled queries are not the trace's.
+    let grid: TileGrid = "2x2".parse().unwrap();
+    assert!(!analytic(&trace, &o2_with(&[]), true, Some(grid)).from_window_index);
+}

@@ -1,0 +1,346 @@
+//! The window index: a second stream, beside the events, of everything in the trace but its
+//! fragments, each run of fragments between two other events summarised as one
+//! [`FragmentStretch`] of the counts the O2-like machine's analytic formulas take from them.
+//!
+//! A model that predicts from counts (the analytic level) reads the index blocks alone and
+//! skips the event blocks without decompressing them, so its cost follows the windows and
+//! the primitives, not the fragments. The counts that depend on where depth lives in memory
+//! (new words read, page misses) are made for one [`DepthLayout`], the one the header names;
+//! a model of another layout decodes the events instead.
+//!
+//! The writer makes the index as the events pass, with a functional model of its own (so a
+//! stretch knows which fragments pass the depth test), and cuts index blocks as it cuts event
+//! blocks: one block buffer of memory each, whatever the trace's length. An index block's
+//! payload is coded as an event payload ([`super::codec`]), with `STRETCH` records in place
+//! of spans: `STRETCH fragments depth_reads page_misses passed last_read` (four varints and
+//! a byte: 0 when the stretch's last fragment read no new word, 1 a page hit, 2 a page miss).
+
+use super::codec::{put_uv, tag};
+use crate::depth_layout::{DepthAddress, DepthLayout, DepthRead, LastRead};
+use crate::event::{Event, Fragment};
+use crate::golden::FunctionalModel;
+
+/// What a run of fragments between two other events asks of the O2-like machine's blocks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FragmentStretch {
+    /// Fragments (at least one).
+    pub fragments: u64,
+    /// Fragments with the depth test on whose depth word differs from the last read's.
+    pub depth_reads: u64,
+    /// Of those, reads whose page is not the open row of its bank.
+    pub page_misses: u64,
+    /// Fragments with the depth test on that pass it, outside an occlusion-render-mode query
+    /// (brief or verbose): those that draw, and write depth when the depth mask is on.
+    pub passed: u64,
+    /// What the last fragment read: `SameWord` when it read no new word (or tested no depth).
+    pub last_read: DepthRead,
+}
+
+impl FragmentStretch {
+    const EMPTY: FragmentStretch = FragmentStretch {
+        fragments: 0,
+        depth_reads: 0,
+        page_misses: 0,
+        passed: 0,
+        last_read: DepthRead::SameWord,
+    };
+
+    /// Bytes a stretch record takes at most: a tag, four 10-byte varints and a byte.
+    pub(crate) const MAX_BYTES: usize = 42;
+
+    pub(crate) fn encode(&self, out: &mut Vec<u8>) {
+        out.push(tag::STRETCH);
+        put_uv(out, self.fragments);
+        put_uv(out, self.depth_reads);
+        put_uv(out, self.page_misses);
+        put_uv(out, self.passed);
+        out.push(match self.last_read {
+            DepthRead::SameWord => 0,
+            DepthRead::PageHit => 1,
+            DepthRead::PageMiss => 2,
+        });
+    }
+
+    /// The counts' own consistency, as a decoder checks them.
+    pub(crate) fn problem(&self) -> Option<&'static str> {
+        if self.fragments == 0 {
+            Some("a stretch of no fragments")
+        } else if self.depth_reads > self.fragments || self.passed > self.fragments {
+            Some("a stretch with more reads or passes than fragments")
+        } else if self.page_misses > self.depth_reads {
+            Some("a stretch with more page misses than reads")
+        } else if self.depth_reads == 0 && self.last_read != DepthRead::SameWord {
+            Some("a stretch whose last fragment read a word though none was read")
+        } else {
+            None
+        }
+    }
+}
+
+/// One item of the index: an event of the trace other than a fragment, or a stretch.
+#[derive(Clone, Debug, PartialEq)]
+pub enum IndexItem {
+    Event(Event),
+    Stretch(FragmentStretch),
+}
+
+/// The writer's counting state: the functional model (render state, depth buffer, open
+/// query) and the depth layout's last read, with the stretch being gathered.
+pub(crate) struct WindowIndexer {
+    functional: FunctionalModel,
+    address: DepthAddress,
+    last_read: LastRead,
+    /// An occlusion-render-mode query (brief, verbose) is open: nothing draws.
+    occlusion_mode: bool,
+    stretch: FragmentStretch,
+}
+
+impl WindowIndexer {
+    pub(crate) fn new(layout: &DepthLayout, width: u32, height: u32) -> WindowIndexer {
+        WindowIndexer {
+            functional: FunctionalModel::new(width, height),
+            address: DepthAddress::new(layout, width),
+            last_read: LastRead::new(layout.banks),
+            occlusion_mode: false,
+            stretch: FragmentStretch::EMPTY,
+        }
+    }
+
+    /// Count a fragment (inside the viewport) and apply it.
+    #[inline]
+    pub(crate) fn fragment(&mut self, fragment: Fragment) {
+        let state = self.functional.state();
+        let stretch = &mut self.stretch;
+        stretch.fragments += 1;
+        stretch.last_read = DepthRead::SameWord;
+        if state.depth_test {
+            let (word, page) = self.address.locate(fragment.x, fragment.y);
+            let read = self.last_read.read(word, page);
+            stretch.depth_reads += (read != DepthRead::SameWord) as u64;
+            stretch.page_misses += (read == DepthRead::PageMiss) as u64;
+            stretch.last_read = read;
+            if !self.occlusion_mode {
+                let stored = self.functional.depth_buffer().get(fragment.x, fragment.y);
+                stretch.passed += state.depth_func.passes(fragment.z, stored) as u64;
+            }
+        }
+        self.functional.fragment(fragment);
+    }
+
+    /// The stretch gathered since the last other event, if it holds a fragment.
+    pub(crate) fn take_stretch(&mut self) -> Option<FragmentStretch> {
+        let stretch = std::mem::replace(&mut self.stretch, FragmentStretch::EMPTY);
+        (stretch.fragments > 0).then_some(stretch)
+    }
+
+    /// Apply an event other than a fragment (after its stretch was taken).
+    pub(crate) fn event(&mut self, event: &Event) {
+        debug_assert_eq!(self.stretch.fragments, 0);
+        match event {
+            Event::QueryBegin(spec) => self.occlusion_mode = spec.mode.is_occlusion_render_mode(),
+            Event::QueryEnd => self.occlusion_mode = false,
+            _ => {}
+        }
+        self.functional.event(event);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::event::DEPTH_ONE;
+    use crate::query::{QueryMode, QuerySpec};
+    use crate::state::Rect;
+    use crate::trace::{TraceError, TraceHeader, TraceReader, TraceWriter, WriterOptions};
+
+    /// Tiles of 8x8 pixels, 4 pixels a word, one bank.
+    const LAYOUT: DepthLayout = DepthLayout {
+        tile_width_pixels: 8,
+        tile_height_pixels: 8,
+        pixels_per_word: 4,
+        banks: 1,
+    };
+
+    fn frag(x: u16, y: u16, z: u32) -> Event {
+        Event::Fragment(Fragment { x, y, z })
+    }
+
+    fn brief(id: u32) -> Event {
+        Event::QueryBegin(QuerySpec {
+            id,
+            mode: QueryMode::Brief,
+            buffer_entries: 8,
+            tiles: vec![Rect::new(0, 0, 16, 16)],
+        })
+    }
+
+    fn indexed(events: &[Event]) -> Vec<u8> {
+        let options = WriterOptions {
+            window_index: Some(LAYOUT),
+            ..WriterOptions::default()
+        };
+        let mut bytes = Vec::new();
+        let mut writer =
+            TraceWriter::with_options(&mut bytes, &TraceHeader::new(16, 16), options).unwrap();
+        for event in events {
+            writer.write_event(event).unwrap();
+        }
+        writer.finish().unwrap();
+        bytes
+    }
+
+    fn index_of(bytes: &[u8]) -> Result<Vec<IndexItem>, TraceError> {
+        let mut reader = TraceReader::new(bytes)?;
+        let mut items = Vec::new();
+        while let Some(item) = reader.next_index_item()? {
+            items.push(item);
+        }
+        Ok(items)
+    }
+
+    /// A stream and its index worked by hand.
+    fn worked_example() -> (Vec<Event>, Vec<IndexItem>) {
+        let mut events = vec![Event::DepthTest(true), Event::Primitive];
+        // Row 0, x = 0..8 at depth 100 into the cleared buffer: all pass. Words x / 4: two
+        // reads (x = 0, 4); both in page 0, the first a miss (the bank's first read), the
+        // second a hit. The last fragment (x = 7) shares x = 4's word: no new read.
+        events.extend((0..8).map(|x| frag(x, 0, 100)));
+        // Under a brief query (nothing draws): x = 8, 9 of row 0 lie in page 1, one word:
+        // one read, a miss (the one bank's open row was page 0); the last read nothing new.
+        events.push(brief(7));
+        events.extend([frag(8, 0, 100), frag(9, 0, 100)]);
+        events.push(Event::QueryEnd);
+        // The depth test off: one fragment, no read; then on again, (0, 0) at 200 fails
+        // against the 100 stored (LESS) and re-reads word 0 of page 0, after page 1's word:
+        // a miss, the last fragment's own read.
+        events.extend([Event::DepthTest(false), frag(3, 1, 5), Event::DepthTest(true)]);
+        events.push(frag(0, 0, 200));
+        let stretch = |fragments, depth_reads, page_misses, passed, last_read| {
+            IndexItem::Stretch(FragmentStretch {
+                fragments,
+                depth_reads,
+                page_misses,
+                passed,
+                last_read,
+            })
+        };
+        let index = vec![
+            IndexItem::Event(Event::DepthTest(true)),
+            IndexItem::Event(Event::Primitive),
+            stretch(8, 2, 1, 8, DepthRead::SameWord),
+            IndexItem::Event(brief(7)),
+            stretch(2, 1, 1, 0, DepthRead::SameWord),
+            IndexItem::Event(Event::QueryEnd),
+            IndexItem::Event(Event::DepthTest(false)),
+            stretch(1, 0, 0, 0, DepthRead::SameWord),
+            IndexItem::Event(Event::DepthTest(true)),
+            stretch(1, 1, 1, 0, DepthRead::PageMiss),
+        ];
+        (events, index)
+    }
+
+    #[test]
+    fn the_index_holds_the_events_and_the_worked_stretches() {
+        let (events, index) = worked_example();
+        let bytes = indexed(&events);
+        assert_eq!(index_of(&bytes).unwrap(), index);
+        let reader = TraceReader::new(&bytes[..]).unwrap();
+        assert_eq!(reader.header().window_index, Some(LAYOUT));
+    }
+
+    #[test]
+    fn an_indexed_trace_reads_by_events_as_one_without_an_index() {
+        let (events, _) = worked_example();
+        let mut read = Vec::new();
+        let bytes = indexed(&events);
+        let mut reader = TraceReader::new(&bytes[..]).unwrap();
+        let summary = reader.read_into(&mut read).unwrap();
+        assert_eq!(read, events);
+        let index = summary.window_index.expect("the summary counts the index");
+        assert_eq!(index.blocks, 1);
+        assert_eq!(summary.blocks, 1);
+    }
+
+    #[test]
+    fn a_trace_without_an_index_has_no_items() {
+        let (events, _) = worked_example();
+        let mut bytes = Vec::new();
+        let mut writer = TraceWriter::new(&mut bytes, &TraceHeader::new(16, 16)).unwrap();
+        events.iter().for_each(|e| writer.write_event(e).unwrap());
+        writer.finish().unwrap();
+        assert_eq!(index_of(&bytes).unwrap(), vec![]);
+    }
+
+    #[test]
+    fn index_blocks_are_cut_like_event_blocks_and_stay_in_order() {
+        // 4096-byte blocks: 3000 primitives of one fragment each need several index blocks.
+        let mut events = vec![Event::DepthTest(true)];
+        for i in 0..3000u32 {
+            events.push(Event::Primitive);
+            events.push(frag((i % 16) as u16, (i / 16 % 16) as u16, DEPTH_ONE - i));
+        }
+        let options = WriterOptions {
+            block_bytes: 4096,
+            zstd_level: 1,
+            window_index: Some(LAYOUT),
+        };
+        let mut bytes = Vec::new();
+        let mut writer =
+            TraceWriter::with_options(&mut bytes, &TraceHeader::new(16, 16), options).unwrap();
+        events.iter().for_each(|e| writer.write_event(e).unwrap());
+        let summary = writer.finish().unwrap();
+        assert!(summary.window_index.unwrap().blocks > 1, "{summary:?}");
+        let items = index_of(&bytes).unwrap();
+        // Every primitive is followed by its one fragment's stretch.
+        assert_eq!(items.len(), 1 + 2 * 3000);
+        assert!(items[1..].chunks(2).all(|pair| pair[0]
+            == IndexItem::Event(Event::Primitive)
+            && matches!(pair[1], IndexItem::Stretch(s) if s.fragments == 1)));
+    }
+
+    #[test]
+    fn a_corrupt_stretch_is_refused_with_its_offset() {
+        let (events, _) = worked_example();
+        let mut bytes = indexed(&events);
+        // Make the index block's payload stored (not compressed) to edit it: rewrite with a
+        // stretch whose misses exceed its reads, and fix the block checksum.
+        let bad = FragmentStretch {
+            fragments: 2,
+            depth_reads: 1,
+            page_misses: 2,
+            passed: 0,
+            last_read: DepthRead::SameWord,
+        };
+        assert_eq!(
+            bad.problem(),
+            Some("a stretch with more page misses than reads")
+        );
+        let mut payload = Vec::new();
+        bad.encode(&mut payload);
+        let block = crate::trace::block::BlockHeader {
+            kind: crate::trace::block::KIND_INDEX,
+            codec: crate::trace::block::CODEC_STORED,
+            events: 1,
+            raw_len: payload.len() as u32,
+            stored_len: payload.len() as u32,
+        };
+        // Put the bad block right after the file header, ahead of every other block.
+        let at = first_block_offset(&bytes);
+        let mut inserted = block.fields().to_vec();
+        inserted.extend_from_slice(&block.checksum(&payload).to_le_bytes());
+        inserted.extend_from_slice(&payload);
+        bytes.splice(at..at, inserted);
+        let error = index_of(&bytes).unwrap_err().to_string();
+        assert!(
+            error.contains("more page misses than reads") && error.contains(&at.to_string()),
+            "{error}"
+        );
+    }
+
+    /// Where the first block starts: after the magic, version, flags, JSON length, JSON and
+    /// its CRC.
+    fn first_block_offset(bytes: &[u8]) -> usize {
+        let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        16 + json_len + 4
+    }
+}
