@@ -1,17 +1,29 @@
-//! What each fidelity level costs on one trace of about 1.5 million fragments (three frames
-//! of the replay benchmark's scene, each with a clear and 120 queries of every mode, encoded
-//! as a trace in memory and decoded by every run, as `occsim replay` does from a file), on
-//! the O2 and on ir4: fragments per second per level, as ratios to `cycle`; and what the
-//! automatic effects choice saves over `--effects all` at the cycle level.
+//! What each fidelity level costs, on three traces encoded in memory as `occsim trace gen`
+//! writes them (with the window index) and read by every run as `occsim replay` reads a file:
+//! - `synthetic`: three frames of the replay benchmark's scene (about 1.5 M fragments, a
+//!   clear and 120 queries of every mode a frame);
+//! - `demo`: `occsim trace gen demo` (27 M fragments, 609 queries, 4 frames);
+//! - `lazy-grid`: `occsim trace gen --scene city --driver lazy-grid --frames 2` (20 M
+//!   fragments, 156 queries of up to hundreds of tiles).
 //!
-//! Run: `cargo bench -p occsim-sim --bench fidelity`
+//! On the O2 and on ir4: fragments per second per level, as ratios to `cycle`, and the
+//! analytic level decoding the fragments beside it reading the window index (what the index
+//! saves); then, on the synthetic stream, what the automatic effects choice saves over
+//! `--effects all` at the cycle level.
+//!
+//! Run: `cargo bench -p occsim-sim --bench fidelity` (several minutes: the large traces'
+//! rtl runs dominate).
 
 use occsim_sim::effects::{effects_of_features, observe, Effects};
-use occsim_sim::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
+use occsim_sim::levels::Fidelity;
+use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::{Arch, MachineBuilder};
-use occsim_traces::golden::{EventSink, FunctionalModel};
+use occsim_traces::builtin::{demo_scene, DemoOptions};
+use occsim_traces::golden::{EventSink, FunctionalModel, GoldenModel};
 use occsim_traces::rounds::fastest_of_rounds;
-use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
+use occsim_traces::scene::SceneReader;
+use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter, WriterOptions};
+use occsim_traces::workloads::{city, generate, CityOptions, DriverKind, DriverOptions, Walk};
 use occsim_traces::{Event, QueryMode, QuerySpec, Rect};
 use std::time::Instant;
 
@@ -29,16 +41,65 @@ const REPEATS: usize = 5;
 /// long.
 const MIN_SECONDS: f64 = 0.2;
 
-/// The stream encoded as a trace, as `occsim trace gen` writes a file (the header's
-/// features written back).
-fn encode(events: &[Event]) -> Vec<u8> {
+type Writer<'a> = TraceWriter<&'a mut std::io::Cursor<Vec<u8>>>;
+
+/// A trace file's bytes, as `occsim trace gen` writes them: the window index at the O2's
+/// depth layout, the header's features written back; `fill` writes the events.
+fn write_trace(width: u32, height: u32, fill: impl FnOnce(&mut Writer)) -> Vec<u8> {
+    let layout = Arch::builtin("o2").expect("o2").o2().expect("o2").depth_layout();
+    let options = WriterOptions {
+        window_index: Some(layout),
+        ..WriterOptions::default()
+    };
     let mut file = std::io::Cursor::new(Vec::new());
-    let mut writer = TraceWriter::new(&mut file, &TraceHeader::new(WIDTH, HEIGHT)).expect("header");
-    for event in events {
-        writer.event(event).expect("encodes");
-    }
+    let mut writer =
+        TraceWriter::with_options(&mut file, &TraceHeader::new(width, height), options)
+            .expect("header");
+    fill(&mut writer);
     writer.finish_seekable().expect("trace");
     file.into_inner()
+}
+
+/// The stream encoded as a trace.
+fn encode(events: &[Event]) -> Vec<u8> {
+    write_trace(WIDTH, HEIGHT, |writer| {
+        for event in events {
+            writer.event(event).expect("encodes");
+        }
+    })
+}
+
+/// `occsim trace gen demo`.
+fn demo_trace() -> Vec<u8> {
+    let options = DemoOptions::default();
+    let text = demo_scene(&options);
+    write_trace(options.width, options.height, |writer| {
+        let mut golden = GoldenModel::new(options.width, options.height);
+        for line in SceneReader::new(text.as_bytes(), "demo") {
+            golden
+                .execute(&line.expect("the demo parses").command, writer)
+                .expect("encodes");
+        }
+        golden.finish(writer).expect("encodes");
+    })
+}
+
+/// `occsim trace gen --scene city --driver lazy-grid --frames 2` (its default 1280x1024).
+fn lazy_grid_trace() -> Vec<u8> {
+    let walk = Walk {
+        frames: 2,
+        width: 1280,
+        height: 1024,
+        raster: Default::default(),
+    };
+    let scene = city(&CityOptions {
+        seed: 1998,
+        ..CityOptions::default()
+    });
+    write_trace(walk.width, walk.height, |writer| {
+        generate(&scene, &DriverOptions::new(DriverKind::LazyGrid), &walk, writer)
+            .expect("walks");
+    })
 }
 
 /// The effects the automatic choice builds for `trace` on `arch`: from its header, as
@@ -50,41 +111,51 @@ fn effects_from_header(arch: &Arch, trace: &[u8]) -> Effects {
         .expect("the header has the facts")
 }
 
-/// Decode `trace` into the model of `level`, as `occsim replay` does.
-fn replay(level: Fidelity, arch: &Arch, trace: &[u8], effects: Effects) -> LevelResult {
-    let mut reader = TraceReader::new(trace).expect("header");
-    let model = LevelModel::new(level, arch, WIDTH, HEIGHT, effects).expect("model");
-    let mut sink = LevelSink::new(model);
-    reader.read_into(&mut sink).expect("decodes and replays");
-    sink.model.finish(arch).expect("replays")
+/// One run of `level` on `trace` as `occsim replay` makes it: its predicted cycles.
+fn run_level(level: Fidelity, arch: &Arch, trace: &[u8], window_index: bool) -> Option<u64> {
+    let options = ReplayOptions {
+        window_index,
+        ..ReplayOptions::at(level)
+    };
+    replay(|| Ok(TraceReader::new(trace)?), arch, options)
+        .expect("replays")
+        .total_cycles
 }
 
-/// One run of `level` (the effects choice included where the level builds effects): its
-/// predicted cycles.
-fn run_level(level: Fidelity, arch: &Arch, trace: &[u8]) -> Option<u64> {
-    let effects = if level.builds_effects() {
-        effects_from_header(arch, trace)
-    } else {
-        Effects::every_model_of(arch.machine())
-    };
-    replay(level, arch, trace, effects).total_cycles
+fn fragments_of(trace: &[u8]) -> f64 {
+    let (_, summary) = TraceReader::read_summary(std::io::Cursor::new(trace)).expect("summary");
+    summary.fragments as f64
 }
 
 fn main() {
     let events: Vec<Event> = (0..FRAMES).flat_map(|f| frame(42 + f)).collect();
+    let traces = [
+        ("synthetic", encode(&events), REPEATS),
+        // The large traces take seconds a run at the cycle level and more at rtl: fewer
+        // rounds.
+        ("demo", demo_trace(), 2),
+        ("lazy-grid", lazy_grid_trace(), 1),
+    ];
+    for (name, trace, rounds) in &traces {
+        println!(
+            "{name}: {} fragments, {} bytes",
+            fragments_of(trace),
+            trace.len()
+        );
+        for arch in ["o2", "ir4"] {
+            println!("  {arch}:");
+            levels(&Arch::builtin(arch).expect("built-in arch"), trace, *rounds);
+        }
+    }
     let fragments = events
         .iter()
         .filter(|e| matches!(e, Event::Fragment(_)))
         .count() as f64;
-    println!("stream: {fragments} fragments, {WIDTH}x{HEIGHT}, {FRAMES} frames");
-    let trace = encode(&events);
-    println!("trace: {} bytes", trace.len());
     let plain = samples_only_without_depth_writes(&events);
     for name in ["o2", "ir4"] {
         let arch = Arch::builtin(name).expect("built-in arch");
-        println!("{name}:");
-        levels(&arch, &trace, fragments);
-        compare_effects(&arch, &events, fragments, "the stream above");
+        println!("effects on {name}:");
+        compare_effects(&arch, &events, fragments, "the synthetic stream");
         compare_effects(
             &arch,
             &plain,
@@ -94,30 +165,32 @@ fn main() {
     }
 }
 
-/// Every level's rate on `trace` (the encoded `events`), as a ratio to `cycle`.
-fn levels(arch: &Arch, trace: &[u8], fragments: f64) {
+/// Every level's rate on `trace`, as a ratio to `cycle`; the analytic level also decoding
+/// the fragments (`analytic/decode`) beside reading the window index.
+fn levels(arch: &Arch, trace: &[u8], rounds: usize) {
+    let fragments = fragments_of(trace);
     let levels = [
-        Fidelity::Functional,
-        Fidelity::Analytic,
-        Fidelity::Sampled { every: 10 },
-        Fidelity::Sampled { every: 100 },
-        Fidelity::Cycle,
-        Fidelity::Rtl,
+        (Fidelity::Functional, true),
+        (Fidelity::Analytic, true),
+        (Fidelity::Analytic, false),
+        (Fidelity::Sampled { every: 10 }, true),
+        (Fidelity::Sampled { every: 100 }, true),
+        (Fidelity::Cycle, true),
+        (Fidelity::Rtl, true),
     ];
-    let mut jobs = levels.map(|level| move || run_level(level, arch, trace));
-    let timings: Vec<(Fidelity, f64, Option<u64>)> = levels
-        .iter()
-        .zip(fastest_of_rounds(REPEATS, MIN_SECONDS, &mut jobs))
-        .map(|(&level, figure)| (level, figure.seconds, figure.output))
-        .collect();
-    let cycle_seconds = timings[4].1;
-    for (level, seconds, cycles) in &timings {
+    let mut jobs = levels.map(|(level, index)| move || run_level(level, arch, trace, index));
+    let figures = fastest_of_rounds(rounds, MIN_SECONDS, &mut jobs);
+    let cycle_seconds = figures[5].seconds;
+    for ((level, index), figure) in levels.iter().zip(&figures) {
+        let name = match (level, index) {
+            (Fidelity::Analytic, false) => "analytic/decode".to_string(),
+            _ => level.to_string(),
+        };
         println!(
-            "  {:<12} {:>8.1} M fragments/s  {:>6.2}x cycle  cycles {}",
-            level.to_string(),
-            fragments / seconds / 1e6,
-            cycle_seconds / seconds,
-            cycles.map_or("-".to_string(), |c| c.to_string())
+            "    {name:<16} {:>9.1} M fragments/s  {:>8.2}x cycle  cycles {}",
+            fragments / figure.seconds / 1e6,
+            cycle_seconds / figure.seconds,
+            figure.output.map_or("-".to_string(), |c| c.to_string())
         );
     }
 }
