@@ -1,8 +1,10 @@
 //! The analytic level read from a trace's window index equals the analytic level read from
-//! its fragments, bit for bit, wherever it is used; and where the index cannot serve (another
-//! depth layout, the InfiniteReality-like machine, a retiling) the fragments are read.
+//! its fragments' spans, which equals it fed fragment by fragment, bit for bit, wherever the
+//! index is used; and where the index cannot serve (another depth layout, the
+//! InfiniteReality-like machine, a retiling) the fragments are read.
 
-use occsim_sim::levels::{Fidelity, LevelResult};
+use occsim_sim::effects::EffectsChoice;
+use occsim_sim::levels::{run_level, Fidelity, LevelResult};
 use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::Arch;
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
@@ -40,7 +42,10 @@ fn analytic(trace: &[u8], arch: &Arch, window_index: bool, retile: Option<TileGr
     replay(|| Ok(TraceReader::new(trace)?), arch, options).unwrap()
 }
 
-fn traces() -> Vec<(&'static str, Vec<u8>)> {
+/// A scene's name, trace bytes, viewport and events.
+type Trace = (&'static str, Vec<u8>, (u32, u32), Vec<Event>);
+
+fn traces() -> Vec<Trace> {
     let scenes = [
         ("hardcases", HARDCASES.to_owned()),
         (
@@ -69,7 +74,8 @@ fn traces() -> Vec<(&'static str, Vec<u8>)> {
         .into_iter()
         .map(|(name, text)| {
             let (width, height, events) = support::scene_events(&text);
-            (name, indexed_trace(width, height, &events))
+            let trace = indexed_trace(width, height, &events);
+            (name, trace, (width, height), events)
         })
         .collect()
 }
@@ -93,10 +99,25 @@ fn the_index_gives_the_analytic_result_of_the_fragments_bit_for_bit() {
         o2_with(&["colour_bits_per_pixel=0"]),
         o2_with(&["clear_writes_memory=false", "prefetch_depth_fragments=2"]),
     ];
-    for (name, trace) in traces() {
+    for (name, trace, (width, height), events) in traces() {
         for arch in &archs {
             let mut indexed = analytic(&trace, arch, true, None);
             let decoded = analytic(&trace, arch, false, None);
+            let one_by_one = run_level(
+                Fidelity::Analytic,
+                arch,
+                width,
+                height,
+                EffectsChoice::Auto,
+                &events,
+            )
+            .unwrap();
+            assert_eq!(
+                one_by_one.queries, decoded.queries,
+                "{name}: spans and fragments differ"
+            );
+            assert_eq!(one_by_one.total_cycles, decoded.total_cycles, "{name}");
+            assert_eq!(one_by_one.frame_cycles, decoded.frame_cycles, "{name}");
             assert!(indexed.from_window_index, "{name}: the index was not read");
             assert!(!decoded.from_window_index);
             assert!(decoded.checked_queries > 0, "{name}: nothing checked");
@@ -111,7 +132,7 @@ fn the_index_gives_the_analytic_result_of_the_fragments_bit_for_bit() {
 
 #[test]
 fn where_the_index_cannot_serve_the_fragments_are_read() {
-    let (_, trace) = traces().remove(0);
+    let (_, trace, _, _) = traces().remove(0);
     // Another depth layout: its reads and page misses are not the index's.
     for arch in [
         o2_with(&["memory_banks=4"]),

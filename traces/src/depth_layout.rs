@@ -78,6 +78,14 @@ impl DepthAddress {
         (self.word(page, in_tile_x, in_tile_y), page)
     }
 
+    /// The first column past pixel column `x`'s word: words never straddle a multiple of
+    /// `pixels_per_word` (tiles are whole words wide), so a row run changes word only there.
+    #[inline(always)]
+    pub fn word_end(&self, x: u16) -> u32 {
+        let (quotient, _) = self.pixels_per_word.divide(x as u32);
+        (quotient + 1) * self.pixels_per_word.divisor
+    }
+
     /// `(word, 0)` of pixel (x, y) of a viewport inside one page (page 0): no tile division.
     #[inline(always)]
     pub fn locate_in_first_page(&self, x: u16, y: u16) -> (u64, u64) {

@@ -39,6 +39,30 @@ impl DepthBuffer {
         self.depths[y as usize * self.width as usize + x as usize]
     }
 
+    /// How many fragments of `span` (inside the buffer) pass a depth test by `func` against
+    /// the depths stored now (a span's pixels are distinct: what testing them one by one,
+    /// writing none, gives). One loop per function, so the comparison vectorises.
+    #[inline]
+    pub fn count_passing(&self, func: DepthFunc, span: Span) -> u64 {
+        let start = span.y as usize * self.width as usize + span.x as usize;
+        let row = &self.depths[start..start + span.depths.len()];
+        macro_rules! count_with {
+            ($($func:ident),*) => {
+                match func {
+                    $(
+                        DepthFunc::$func => span
+                            .depths
+                            .iter()
+                            .zip(row)
+                            .map(|(&z, &s)| DepthFunc::$func.passes(z, s) as u64)
+                            .sum(),
+                    )*
+                }
+            };
+        }
+        count_with!(Never, Less, Equal, Lequal, Greater, Notequal, Gequal, Always)
+    }
+
     /// Start fetching the depths of pixels `first..=last` of row `y` into the cache: a span
     /// of a mid-sized triangle is a few cache lines a row apart, cold in a large buffer, and
     /// waiting for each row's first miss would dominate the depth test's cost.

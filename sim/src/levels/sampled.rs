@@ -374,9 +374,7 @@ impl SampledModel {
     pub fn span(&mut self, span: Span) -> Result<(), SimError> {
         self.close_ended_window()?;
         self.core.check_span(span)?;
-        for fragment in span.fragments() {
-            self.formulas.fragment(fragment, &self.core.functional);
-        }
+        self.formulas.span(span, &self.core.functional);
         for fragment in span.fragments() {
             let Some(run) = &mut self.run else {
                 break;

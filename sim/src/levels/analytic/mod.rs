@@ -67,6 +67,19 @@ impl Formulas {
         }
     }
 
+    /// Count a span's fragments (inside the viewport) before `functional` applies it: the
+    /// O2's formulas count it whole, the IR's fragment by fragment.
+    pub(crate) fn span(&mut self, span: Span, functional: &FunctionalModel) {
+        match self {
+            Formulas::O2(o2) => o2.span(span, functional),
+            Formulas::Ir(ir) => {
+                for fragment in span.fragments() {
+                    ir.fragment(fragment, functional);
+                }
+            }
+        }
+    }
+
     /// Count a stretch of fragments from a trace's window index. Only the O2 formulas count
     /// from stretches ([`AnalyticModel::reads_window_index`]).
     fn stretch(&mut self, stretch: &FragmentStretch, state: &RenderState) {
@@ -227,13 +240,11 @@ impl AnalyticModel {
         }
     }
 
-    /// A span of fragments: the formulas count each (its pixels are distinct, so the depths
+    /// A span of fragments: the formulas count it (its pixels are distinct, so the depths
     /// they read are those before the span), then the functional model takes it whole.
     pub fn span(&mut self, span: Span) -> Result<(), SimError> {
         self.core.check_span(span)?;
-        for fragment in span.fragments() {
-            self.formulas.fragment(fragment, &self.core.functional);
-        }
+        self.formulas.span(span, &self.core.functional);
         self.core.apply_span(span);
         Ok(())
     }

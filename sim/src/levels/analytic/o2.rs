@@ -65,7 +65,7 @@ use occsim_traces::golden::FunctionalModel;
 use occsim_traces::state::RenderState;
 use occsim_traces::trace::FragmentStretch;
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
-use occsim_traces::{Fragment, QueryMode, QueryResult, QuerySpec};
+use occsim_traces::{Fragment, QueryMode, QueryResult, QuerySpec, Span};
 
 /// Counts of one window (see the module table).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -294,6 +294,46 @@ impl O2Bottleneck {
         }
     }
 
+    /// Count a span's fragments (inside the viewport, before `functional` applies it), as
+    /// one by one: one read decision a memory word the row run crosses (the words after the
+    /// first of a run are the last read's), and its passing fragments counted in one loop.
+    pub(super) fn span(&mut self, span: Span, functional: &FunctionalModel) {
+        let Some(last) = span.depths.len().checked_sub(1) else {
+            return;
+        };
+        let state = functional.state();
+        let end = span.x as u32 + span.depths.len() as u32;
+        let mut stretch = FragmentStretch {
+            fragments: span.depths.len() as u64,
+            depth_reads: 0,
+            page_misses: 0,
+            passed: 0,
+            last_read: DepthRead::SameWord,
+        };
+        if state.depth_test {
+            let last_x = span.x as u32 + last as u32;
+            let mut x = span.x as u32;
+            while x < end {
+                let (word, page) = self.address.locate(x as u16, span.y);
+                let read = self.last_read.read(word, page);
+                stretch.depth_reads += (read != DepthRead::SameWord) as u64;
+                stretch.page_misses += (read == DepthRead::PageMiss) as u64;
+                let next = self.address.word_end(x as u16).min(end);
+                // The last fragment reads anew only when it starts its word's run.
+                if x == last_x {
+                    stretch.last_read = read;
+                }
+                x = next;
+            }
+            if !self.open.is_some_and(|(_, mode)| mode) {
+                stretch.passed = functional
+                    .depth_buffer()
+                    .count_passing(state.depth_func, span);
+            }
+        }
+        self.stretch(&stretch, state);
+    }
+
     /// Count a stretch of fragments from a trace's window index, as their fragments one by
     /// one would be counted (`state` the render state they were drawn in; the stretch was
     /// counted at this machine's depth layout).
@@ -386,5 +426,77 @@ impl O2Bottleneck {
                 latency: prediction.drain + 3.0,
             }
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::arch::Arch;
+    use occsim_traces::rng::SplitMix64;
+    use occsim_traces::{DepthFunc, Event, Rect};
+
+    /// Random row runs (some crossing words and 16-pixel pages, some of one fragment)
+    /// under random render state, inside and outside a brief query: the counts after each
+    /// span given whole equal those after its fragments one by one.
+    #[test]
+    fn a_span_counts_as_its_fragments_one_by_one() {
+        let mut arch = Arch::builtin("o2").unwrap();
+        // Small pages and two banks, so runs cross pages and rows reopen.
+        arch.set("framebuffer_tile_width_pixels=16").unwrap();
+        arch.set("framebuffer_tile_height_pixels=4").unwrap();
+        arch.set("blending=true").unwrap();
+        let o2 = arch.o2().unwrap();
+        let (width, height) = (64u32, 16u32);
+        let mut rng = SplitMix64(7);
+        let mut whole = O2Bottleneck::new(&o2, width, height);
+        let mut single = O2Bottleneck::new(&o2, width, height);
+        let mut functional = FunctionalModel::new(width, height);
+        let mut last_reads = 0;
+        for step in 0..4000 {
+            if rng.below(8) == 0 {
+                let event = match rng.below(5) {
+                    0 => Event::DepthTest(rng.below(4) != 0),
+                    1 => Event::DepthMask(rng.below(2) == 0),
+                    2 => Event::DepthFunc(DepthFunc::ALL[rng.below(8) as usize]),
+                    3 => Event::Clear,
+                    _ => Event::Primitive,
+                };
+                if event == Event::Clear {
+                    whole.clear();
+                    single.clear();
+                }
+                functional.event(&event);
+                continue;
+            }
+            if step % 500 == 0 {
+                let spec = QuerySpec {
+                    id: step as u32,
+                    mode: QueryMode::Brief,
+                    buffer_entries: 8,
+                    tiles: vec![Rect::new(0, 0, width, height)],
+                };
+                whole.begin(&spec);
+                single.begin(&spec);
+            }
+            let len = 1 + rng.below(24) as usize;
+            let x = rng.below(width as u64 - len as u64 + 1) as u16;
+            let y = rng.below(height as u64) as u16;
+            let depths: Vec<u32> = (0..len).map(|_| rng.below(1 << 24) as u32).collect();
+            let span = Span {
+                x,
+                y,
+                depths: &depths,
+            };
+            whole.span(span, &functional);
+            for fragment in span.fragments() {
+                single.fragment(fragment, &functional);
+            }
+            assert_eq!(whole.window, single.window, "step {step}");
+            last_reads += (whole.window.last_read_latency > 0) as u32;
+            functional.span(span);
+        }
+        // The runs did end on a new word, so the last read's latency was compared.
+        assert!(last_reads > 100, "{last_reads}");
     }
 }
