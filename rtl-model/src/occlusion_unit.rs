@@ -15,6 +15,12 @@
 //! the unit's [`ResultPath`]: into a record bank whose words (records, terminators) are
 //! eligible from the next cycle on and go to memory, or out of the partial-report port
 //! ([`OccuRtl::take_partial_report`]) to a merge network, writing no word at all.
+//!
+//! Quiet cycles (a simulation shortcut, not hardware): with an empty port and no grant, a
+//! cycle in which no latch would change anything but the tile step (a test step short of
+//! done whose comparators all miss the fragment; drain or idle while OccU Control can
+//! write nothing) is counted ahead by [`OccuRtl::quiet_cycles`] and jumped by
+//! [`OccuRtl::skip_quiet_cycles`], leaving the registers ticking would leave.
 
 use crate::bits::{bits_for, mask};
 use crate::occlusion_engine::{

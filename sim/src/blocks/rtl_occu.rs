@@ -15,10 +15,12 @@
 //!   priority over hits, so nothing the engines do changes when record words enter): its
 //!   words are claimed on the port then, and the real RTL, entering the same words later
 //!   cycle by cycle, is checked against those entry cycles;
-//! - cycles are skipped in bulk only while the RTL is quiescent (sequencer idle, no record
-//!   bank) and no grant falls in them: then no register changes. With a waveform, the
-//!   window's first cycle and one idle cycle after any activity are always ticked, so the
-//!   dump sees every change;
+//! - cycles are skipped in bulk only when no grant falls in them and the RTL proves them
+//!   quiet: quiescent (sequencer idle, no record bank: no register changes), or
+//!   [`OccuRtl::quiet_cycles`] (only the tile step changes: test steps whose comparators
+//!   all miss, drain or idle behind a full write buffer). With a waveform, the latter are
+//!   skipped only outside its window, and the window's first cycle and one idle cycle
+//!   after any activity are always ticked, so the dump sees every change;
 //! - the memory image: hit words are stored per tile as they enter, record words are
 //!   decoded into the tile's result, the terminator cuts the hit list at its entry.
 //!
