@@ -132,6 +132,9 @@ pub struct Wires {
     pub engines: Vec<EngineWires>,
     pub available: Vec<u32>,
     pub control: ControlWires,
+    /// Engines whose entries in `engines` and `available` the last eval wrote; the
+    /// entries after them hold idle wires already.
+    written: usize,
 }
 
 #[derive(Clone, Debug)]
@@ -146,6 +149,10 @@ pub struct OccuRtl {
     pub fragment: FragmentWires,
     pub query_open: bool,
     pub service: u32,
+    /// Engines holding tiles of the open query: round-robin dealing gives tiles to engines
+    /// `0..holding`, so the others test nothing, queue no word and latch nothing, and eval
+    /// and latch visit only these (a shortcut of the model, not hardware, like `loads`).
+    holding: usize,
     /// The partial-report port: the tile slots (query order) of the last end token, with
     /// [`ResultPath::PartialReport`], until the merge network takes them.
     partial_report: Vec<TileSlot>,
@@ -179,6 +186,7 @@ impl OccuRtl {
             fragment: FragmentWires::default(),
             query_open: false,
             service: 1,
+            holding: 0,
             partial_report: Vec::new(),
             wires: Wires::default(),
             busy_cycles: 0,
@@ -216,6 +224,10 @@ impl OccuRtl {
             service = service.max(cycles);
         }
         self.service = service;
+        self.holding = self.engines.len().min(tiles.len());
+        debug_assert!(self.engines[self.holding..]
+            .iter()
+            .all(|e| e.tile_count() == 0));
         self.query_open = true;
     }
 
@@ -248,6 +260,7 @@ impl OccuRtl {
         }
         self.query_open = false;
         self.service = 1;
+        self.holding = 0;
         true
     }
 
@@ -296,7 +309,7 @@ impl OccuRtl {
         if self.query_open {
             // Each engine searches only up to the earliest hit found so far.
             let all = self.params.all_tiles_one_cycle;
-            for engine in &self.engines {
+            for engine in &self.engines[..self.holding] {
                 end = engine.first_holding_step(self.step..end, all, self.fragment);
             }
         }
@@ -313,7 +326,7 @@ impl OccuRtl {
                 self.busy_cycles += n;
                 if self.query_open {
                     let all = self.params.all_tiles_one_cycle;
-                    for engine in &mut self.engines {
+                    for engine in &mut self.engines[..self.holding] {
                         engine.busy_cycles += engine.testing_steps(steps.clone(), all);
                     }
                 }
@@ -322,8 +335,8 @@ impl OccuRtl {
             DRAIN => {
                 self.stall_cycles += n;
                 if self.query_open {
-                    for engine in &mut self.engines {
-                        engine.stall_cycles += n * (engine.tile_count() > 0) as u64;
+                    for engine in &mut self.engines[..self.holding] {
+                        engine.stall_cycles += n;
                     }
                 }
             }
@@ -363,8 +376,15 @@ impl OccuRtl {
         let n = self.engines.len();
         wires.engines.resize(n, EngineWires::default());
         wires.available.resize(n, 0);
+        // Engines holding no tile test nothing and offer no word (their queues fill only
+        // from their slots): idle their entries, unless they are idle already.
+        if wires.written > self.holding {
+            wires.engines[self.holding..wires.written].fill(EngineWires::default());
+            wires.available[self.holding..wires.written].fill(0);
+        }
+        wires.written = self.holding;
         let mut offered = 0u64;
-        for (e, engine) in self.engines.iter().enumerate() {
+        for (e, engine) in self.engines[..self.holding].iter().enumerate() {
             let w = if testing && self.query_open {
                 engine.eval(step, self.params.all_tiles_one_cycle, fragment)
             } else {
@@ -401,7 +421,7 @@ impl OccuRtl {
         outputs.left = u.leave;
         outputs.entered.clear();
         if u.testing && self.query_open {
-            for engine in &mut self.engines {
+            for engine in &mut self.engines[..self.holding] {
                 engine.latch(u.step, self.params.all_tiles_one_cycle, u.fragment);
             }
         }
@@ -411,13 +431,14 @@ impl OccuRtl {
         if self.state == DRAIN {
             self.stall_cycles += 1;
             if self.query_open {
-                for engine in &mut self.engines {
-                    engine.stall_cycles += (engine.tile_count() > 0) as u64;
+                for engine in &mut self.engines[..self.holding] {
+                    engine.stall_cycles += 1;
                 }
             }
         }
         if self.query_open {
-            for (engine, w) in self.engines.iter_mut().zip(&wires.engines) {
+            let holding = self.engines[..self.holding].iter_mut();
+            for (engine, w) in holding.zip(&wires.engines) {
                 engine.busy_cycles += w.testing as u64;
             }
         }
