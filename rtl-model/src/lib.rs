@@ -8,7 +8,9 @@
 //! - every register has a fixed width; values are stored in `u64`/`u32` and masked to it;
 //! - two-phase discipline: each cycle [`OccuRtl::step`] first evaluates every wire from the
 //!   current registers and inputs ([`OccuRtl::eval`], `&self`), then latches the registers
-//!   from those wires ([`OccuRtl::latch`]); a waveform probe sees both in between;
+//!   from those wires ([`OccuRtl::latch`]); a waveform probe sees both in between; cycles
+//!   that [`OccuRtl::quiet_cycles`] proves would latch nothing but the tile step may be
+//!   jumped in bulk ([`OccuRtl::skip_quiet_cycles`]), with the same registers after;
 //! - the crate knows nothing of the simulator (`occsim-sim` depends on it, not the reverse);
 //! - no IO besides the waveform encoders' `std::io::Write` (and, for [`fst`], `Seek`).
 //!

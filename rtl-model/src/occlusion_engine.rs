@@ -94,7 +94,7 @@ pub struct EngineWires {
     pub words: u32,
 }
 
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct OcclusionEngine {
     /// This engine's number and the engine count (slot `j` holds tile `j * engines + index`).
     index: u32,
@@ -168,6 +168,41 @@ impl OcclusionEngine {
             step as usize..step as usize + 1
         } else {
             0..0
+        }
+    }
+
+    /// The first of the sequencer steps `steps` whose tested slots hold the fragment
+    /// (`steps.end` if none): the steps before it latch nothing in this engine.
+    #[inline]
+    pub fn first_holding_step(
+        &self,
+        steps: std::ops::Range<u32>,
+        all_tiles_one_cycle: bool,
+        f: FragmentWires,
+    ) -> u32 {
+        let holds = |slot: &TileSlot| slot.contains(f.x, f.y);
+        if all_tiles_one_cycle {
+            let at_zero = steps.contains(&0) && self.slots.iter().any(holds);
+            return if at_zero { 0 } else { steps.end };
+        }
+        let tested = steps.start as usize..(steps.end as usize).min(self.slots.len());
+        if tested.is_empty() {
+            return steps.end;
+        }
+        self.slots[tested]
+            .iter()
+            .position(holds)
+            .map_or(steps.end, |j| steps.start + j as u32)
+    }
+
+    /// Of the sequencer steps `steps`, those in which this engine tests a slot (each a
+    /// busy cycle).
+    pub fn testing_steps(&self, steps: std::ops::Range<u32>, all_tiles_one_cycle: bool) -> u64 {
+        let k = self.tile_count();
+        if all_tiles_one_cycle {
+            (steps.contains(&0) && k > 0) as u64
+        } else {
+            steps.end.min(k).saturating_sub(steps.start) as u64
         }
     }
 

@@ -43,7 +43,7 @@ pub struct Word {
 /// The terminator's value: -1 as a 32-bit word.
 pub const TERMINATOR: u64 = 0xFFFF_FFFF;
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct RecordBank {
     slots: Vec<TileSlot>,
     verbose: bool,
@@ -145,7 +145,7 @@ pub struct ControlWires {
     taken: Vec<u32>,
 }
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct OccuControl {
     capacity: u32,
     engines: u32,
@@ -186,6 +186,16 @@ impl OccuControl {
 
     pub fn pointer_bits(&self) -> u32 {
         bits_for(self.engines as u64 - 1)
+    }
+
+    /// With no grant this cycle, the latch changes nothing: every record bank is eligible
+    /// already (a new bank's flag is set by its first latch) and no word can enter, the
+    /// write buffer being full or nothing asking for it (no record bank, and no hit word
+    /// offered when `hits_offered` is false).
+    pub fn still_without_grants(&self, hits_offered: bool) -> bool {
+        let full = self.fifo.len() as u32 == self.capacity;
+        let nothing_to_write = self.banks.is_empty() && !hits_offered;
+        self.banks.iter().all(|bank| bank.eligible) && (full || nothing_to_write)
     }
 
     /// Evaluate: `grants` head words leave for the port this cycle; `available[e]` hit

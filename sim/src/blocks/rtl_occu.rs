@@ -15,10 +15,12 @@
 //!   priority over hits, so nothing the engines do changes when record words enter): its
 //!   words are claimed on the port then, and the real RTL, entering the same words later
 //!   cycle by cycle, is checked against those entry cycles;
-//! - cycles are skipped in bulk only while the RTL is quiescent (sequencer idle, no record
-//!   bank) and no grant falls in them: then no register changes. With a waveform, the
-//!   window's first cycle and one idle cycle after any activity are always ticked, so the
-//!   dump sees every change;
+//! - cycles are skipped in bulk only when no grant falls in them and the RTL proves them
+//!   quiet: quiescent (sequencer idle, no record bank: no register changes), or
+//!   [`OccuRtl::quiet_cycles`] (only the tile step changes: test steps whose comparators
+//!   all miss, drain or idle behind a full write buffer). With a waveform, the latter are
+//!   skipped only outside its window, and the window's first cycle and one idle cycle
+//!   after any activity are always ticked, so the dump sees every change;
 //! - the memory image: hit words are stored per tile as they enter, record words are
 //!   decoded into the tile's result, the terminator cuts the hit list at its entry.
 //!
@@ -140,14 +142,11 @@ impl RtlOccu {
         }
         let quiescent = self.rtl.quiescent();
         let inputs = CycleInputs { fragment, grants };
-        match &mut self.waveform {
-            Some(waveform) if waveform.covers(t) => {
-                self.rtl.eval(&inputs, &mut self.wires);
-                waveform.dump(t, &self.rtl, &self.wires);
-                self.rtl.latch(&self.wires, &mut self.outputs);
-            }
-            _ => self.rtl.step(&inputs, &mut self.outputs),
+        self.rtl.eval(&inputs, &mut self.wires);
+        if let Some(waveform) = self.waveform.as_mut().filter(|w| w.covers(t)) {
+            waveform.dump(t, &self.rtl, &self.wires);
         }
+        self.rtl.latch(&self.wires, &mut self.outputs);
         self.last_tick_idle = quiescent && !fragment.valid && grants == 0;
         for i in 0..self.outputs.entered.len() {
             let word = self.outputs.entered[i];
@@ -174,9 +173,35 @@ impl RtlOccu {
         }
     }
 
+    /// Jump over the quiet cycles ahead ([`OccuRtl::quiet_cycles`]) before cycle `target`,
+    /// the next grant and any cycle the waveform dumps (its window shows every step).
+    /// Returns whether the clock moved.
+    fn skip_quiet(&mut self, target: u64) -> bool {
+        let now = self.rtl.cycle;
+        let mut until = target.min(self.grants.front().copied().unwrap_or(u64::MAX));
+        if let Some(waveform) = &self.waveform {
+            if waveform.covers(now) {
+                return false;
+            } else if now < waveform.start() {
+                until = until.min(waveform.start());
+            }
+        }
+        let quiet = self.rtl.quiet_cycles(until.saturating_sub(now));
+        if quiet == 0 {
+            return false;
+        }
+        self.rtl.skip_quiet_cycles(quiet);
+        // Ticking is always exact: let the next one inside a window dump.
+        self.last_tick_idle = false;
+        true
+    }
+
     /// Run the clock with an empty fragment port up to cycle `target`.
     fn advance_to(&mut self, target: u64, port: &mut MemoryPort) {
         while self.rtl.cycle < target {
+            if !self.rtl.quiescent() && self.skip_quiet(target) {
+                continue;
+            }
             if self.rtl.quiescent() {
                 let mut until = target.min(self.grants.front().copied().unwrap_or(u64::MAX));
                 if let Some(waveform) = &self.waveform {
@@ -236,6 +261,8 @@ impl RtlOccu {
         self.tick(offered, port);
         assert!(self.outputs.accepted, "the unit is idle between fragments");
         while !self.outputs.left {
+            // The leaving cycle is never quiet: the skip stops short of it.
+            self.skip_quiet(u64::MAX);
             self.tick(FragmentPort::default(), port);
         }
         self.free = self.rtl.cycle;
@@ -340,6 +367,13 @@ impl RtlOccu {
                 grants.pop_front();
                 granted += 1;
             }
+            if granted == 0 && control.still_without_grants(false) {
+                // A full write buffer: nothing enters before its next grant.
+                t = *grants
+                    .front()
+                    .expect("a full write buffer's words await grants");
+                continue;
+            }
             control.eval(granted, &nothing, &mut wires);
             entered.clear();
             control.latch(&wires, &mut [], &mut entered);
@@ -365,7 +399,9 @@ impl RtlOccu {
         let mut scratch = MemoryPort::new(OCCU_WORD_BITS);
         while !(self.rtl.quiescent() && self.grants.is_empty()) {
             // No word is claimed here: records were claimed ahead and no query is open.
-            self.tick(FragmentPort::default(), &mut scratch);
+            if !self.skip_quiet(u64::MAX) {
+                self.tick(FragmentPort::default(), &mut scratch);
+            }
         }
         // One idle cycle more, so that the waveform shows the state the run ends in.
         if self
