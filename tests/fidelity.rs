@@ -106,8 +106,14 @@ fn replay_reports_its_level_and_the_active_effects() {
         "{decoded}"
     );
     assert_eq!(
-        analytic.lines().nth(1).map(|l| l.split(", 28 queries").next()),
-        decoded.lines().nth(1).map(|l| l.split(", 28 queries").next())
+        analytic
+            .lines()
+            .nth(1)
+            .map(|l| l.split(", 28 queries").next()),
+        decoded
+            .lines()
+            .nth(1)
+            .map(|l| l.split(", 28 queries").next())
     );
     let sampled: serde_json::Value = serde_json::from_str(&stdout_of(&[
         "replay",

@@ -46,7 +46,11 @@ type Writer<'a> = TraceWriter<&'a mut std::io::Cursor<Vec<u8>>>;
 /// A trace file's bytes, as `occsim trace gen` writes them: the window index at the O2's
 /// depth layout, the header's features written back; `fill` writes the events.
 fn write_trace(width: u32, height: u32, fill: impl FnOnce(&mut Writer)) -> Vec<u8> {
-    let layout = Arch::builtin("o2").expect("o2").o2().expect("o2").depth_layout();
+    let layout = Arch::builtin("o2")
+        .expect("o2")
+        .o2()
+        .expect("o2")
+        .depth_layout();
     let options = WriterOptions {
         window_index: Some(layout),
         ..WriterOptions::default()
@@ -97,8 +101,13 @@ fn lazy_grid_trace() -> Vec<u8> {
         ..CityOptions::default()
     });
     write_trace(walk.width, walk.height, |writer| {
-        generate(&scene, &DriverOptions::new(DriverKind::LazyGrid), &walk, writer)
-            .expect("walks");
+        generate(
+            &scene,
+            &DriverOptions::new(DriverKind::LazyGrid),
+            &walk,
+            writer,
+        )
+        .expect("walks");
     })
 }
 

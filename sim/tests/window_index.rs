@@ -33,7 +33,12 @@ fn indexed_trace(width: u32, height: u32, events: &[Event]) -> Vec<u8> {
     file.into_inner()
 }
 
-fn analytic(trace: &[u8], arch: &Arch, window_index: bool, retile: Option<TileGrid>) -> LevelResult {
+fn analytic(
+    trace: &[u8],
+    arch: &Arch,
+    window_index: bool,
+    retile: Option<TileGrid>,
+) -> LevelResult {
     let options = ReplayOptions {
         window_index,
         retile,

@@ -2,10 +2,10 @@
 
 use crate::scene_input::open_scene;
 use anyhow::Context;
+use occsim_sim::arch::Arch;
 use occsim_sweep::output::write_atomically_with;
 use occsim_traces::golden::{EventSink, GoldenModel};
 use occsim_traces::raster::RasterProfile;
-use occsim_sim::arch::Arch;
 use occsim_traces::trace::{
     ReadError, TraceHeader, TraceReader, TraceSummary, TraceWriter, WriterOptions,
 };

@@ -2,11 +2,11 @@
 //! summary (what it holds, written last), plus the tally both the writer and the reader keep
 //! of an event stream to produce and to check the summary.
 
+use crate::depth_layout::DepthLayout;
 use crate::event::Event;
 use crate::query::{QueryMode, QueryResult, MAX_BUFFER_ENTRIES, MAX_TILES};
 use crate::raster::RasterProfile;
 use crate::state::{DepthFunc, MAX_VIEWPORT_SIDE};
-use crate::depth_layout::DepthLayout;
 use serde::{Deserialize, Serialize};
 
 /// How a trace was made. Stored as JSON in the file header.

@@ -213,7 +213,11 @@ mod tests {
         // The depth test off: one fragment, no read; then on again, (0, 0) at 200 fails
         // against the 100 stored (LESS) and re-reads word 0 of page 0, after page 1's word:
         // a miss, the last fragment's own read.
-        events.extend([Event::DepthTest(false), frag(3, 1, 5), Event::DepthTest(true)]);
+        events.extend([
+            Event::DepthTest(false),
+            frag(3, 1, 5),
+            Event::DepthTest(true),
+        ]);
         events.push(frag(0, 0, 200));
         let stretch = |fragments, depth_reads, page_misses, passed, last_read| {
             IndexItem::Stretch(FragmentStretch {
@@ -293,9 +297,10 @@ mod tests {
         let items = index_of(&bytes).unwrap();
         // Every primitive is followed by its one fragment's stretch.
         assert_eq!(items.len(), 1 + 2 * 3000);
-        assert!(items[1..].chunks(2).all(|pair| pair[0]
-            == IndexItem::Event(Event::Primitive)
-            && matches!(pair[1], IndexItem::Stretch(s) if s.fragments == 1)));
+        assert!(items[1..]
+            .chunks(2)
+            .all(|pair| pair[0] == IndexItem::Event(Event::Primitive)
+                && matches!(pair[1], IndexItem::Stretch(s) if s.fragments == 1)));
     }
 
     #[test]

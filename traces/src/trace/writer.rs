@@ -263,7 +263,10 @@ impl<W: Write> TraceWriter<W> {
 
     /// Into the index: the stretch of fragments since its last item, if any.
     fn flush_stretch(&mut self) -> Result<(), TraceError> {
-        let Some(stretch) = self.index.as_mut().and_then(|index| index.indexer.take_stretch())
+        let Some(stretch) = self
+            .index
+            .as_mut()
+            .and_then(|index| index.indexer.take_stretch())
         else {
             return Ok(());
         };
@@ -354,7 +357,9 @@ impl<W: Write> TraceWriter<W> {
             }
             let chunk = room.min(total - done);
             let last = done + chunk == total;
-            block.payload.push(if last { tag::PART_END } else { tag::PART });
+            block
+                .payload
+                .push(if last { tag::PART_END } else { tag::PART });
             put_uv(&mut block.payload, chunk as u64);
             block.payload.extend_from_slice(&large[done..done + chunk]);
             done += chunk;
@@ -380,7 +385,9 @@ impl<W: Write> TraceWriter<W> {
         self.stored.clear();
         self.stored
             .reserve(zstd::zstd_safe::compress_bound(payload.len()));
-        let compressed = self.compressor.compress_to_buffer(&payload, &mut self.stored);
+        let compressed = self
+            .compressor
+            .compress_to_buffer(&payload, &mut self.stored);
         let zstd_wins = compressed.is_ok() && self.stored.len() < payload.len();
         let (codec, stored) = if zstd_wins {
             (CODEC_ZSTD, &self.stored)

@@ -62,9 +62,9 @@ use super::{service_cycles, WindowEnd};
 use crate::arch::O2Arch;
 use occsim_traces::depth_layout::{DepthAddress, DepthRead, LastRead};
 use occsim_traces::golden::FunctionalModel;
+use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::state::RenderState;
 use occsim_traces::trace::FragmentStretch;
-use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::{Fragment, QueryMode, QueryResult, QuerySpec, Span};
 
 /// Counts of one window (see the module table).
