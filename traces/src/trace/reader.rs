@@ -415,9 +415,19 @@ impl<R: Read> TraceReader<R> {
                 None => {}
             }
         }
+        self.next_record(Wanted::Events, BlockDecoder::next_event)
+    }
+
+    /// The next record `decode` finds in blocks of the kind `wanted`, loading them as the
+    /// current one is used up; None at the end of the trace.
+    fn next_record<T>(
+        &mut self,
+        wanted: Wanted,
+        decode: impl Fn(&mut BlockDecoder, &[u8], &mut DecodeContext) -> Result<Option<T>, PayloadError>,
+    ) -> Result<Option<T>, TraceError> {
         self.guarded(|reader| loop {
             if !reader.in_block {
-                if !reader.load_block(Wanted::Events)? {
+                if !reader.load_block(wanted)? {
                     return Ok(None);
                 }
                 continue;
@@ -428,8 +438,8 @@ impl<R: Read> TraceReader<R> {
                 tally: &mut reader.tally,
                 assembly: &mut reader.assembly,
             };
-            match reader.decoder.next_event(&reader.payload, &mut ctx) {
-                Ok(Some(event)) => return Ok(Some(event)),
+            match decode(&mut reader.decoder, &reader.payload, &mut ctx) {
+                Ok(Some(record)) => return Ok(Some(record)),
                 Ok(None) => reader.end_block()?,
                 Err(e) => return Err(reader.corrupt(e)),
             }
@@ -490,25 +500,7 @@ impl<R: Read> TraceReader<R> {
             self.failed = true;
             return Err(self.mixed_reading());
         }
-        self.guarded(|reader| loop {
-            if !reader.in_block {
-                if !reader.load_block(Wanted::Index)? {
-                    return Ok(None);
-                }
-                continue;
-            }
-            let mut ctx = DecodeContext {
-                width: reader.header.width,
-                height: reader.header.height,
-                tally: &mut reader.tally,
-                assembly: &mut reader.assembly,
-            };
-            match reader.decoder.next_index_item(&reader.payload, &mut ctx) {
-                Ok(Some(item)) => return Ok(Some(item)),
-                Ok(None) => reader.end_block()?,
-                Err(e) => return Err(reader.corrupt(e)),
-            }
-        })
+        self.next_record(Wanted::Index, BlockDecoder::next_index_item)
     }
 
     fn mixed_reading(&self) -> TraceError {
