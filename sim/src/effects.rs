@@ -46,6 +46,11 @@ pub struct Effects {
     pub depth_write_traffic: bool,
     /// The prefetch's page-hit / page-miss latency distinction.
     pub page_model: bool,
+    /// Spans of fragments may be fast-forwarded in bulk where the fast-forward rule (module
+    /// docs) proves it exact. Not an effect model but a shortcut: off under `--effects all`,
+    /// the exact reference, and not listed among the active effects.
+    #[serde(skip)]
+    pub fast_forward: bool,
 }
 
 impl Effects {
@@ -55,6 +60,7 @@ impl Effects {
         multi_tile_serialisation: true,
         depth_write_traffic: true,
         page_model: true,
+        fast_forward: false,
     };
 
     /// Every effect model `machine` has (`--effects all`): the InfiniteReality-like machine
@@ -78,6 +84,7 @@ impl Effects {
                 && other.multi_tile_serialisation,
             depth_write_traffic: self.depth_write_traffic && other.depth_write_traffic,
             page_model: self.page_model && other.page_model,
+            fast_forward: self.fast_forward && other.fast_forward,
         }
     }
 
@@ -194,16 +201,20 @@ impl EffectRules {
         })
     }
 
-    /// The effects a trace with these facts can observe.
+    /// The effects a trace with these facts can observe, fast-forward allowed.
     pub fn effects(&self, facts: TraceFacts) -> Effects {
-        Effects {
+        let observed = Effects {
             verbose_hit_writes: facts.verbose,
             multi_tile_serialisation: !self.all_tiles_one_cycle
                 && facts.max_query_tiles > self.engines as u64,
             depth_write_traffic: facts.depth_writes,
             page_model: !self.one_page,
+            fast_forward: true,
+        };
+        Effects {
+            fast_forward: true,
+            ..observed.and(self.models)
         }
-        .and(self.models)
     }
 }
 
@@ -325,6 +336,7 @@ mod tests {
                 multi_tile_serialisation: false,
                 depth_write_traffic: true,
                 page_model: true,
+                fast_forward: true,
             }
         );
     }
@@ -382,9 +394,16 @@ mod tests {
                 multi_tile_serialisation: true,
                 depth_write_traffic: false,
                 page_model: false,
+                fast_forward: true,
             }
         );
-        assert_eq!(effects, Effects::every_model_of(Machine::Ir));
+        assert_eq!(
+            effects,
+            Effects {
+                fast_forward: true,
+                ..Effects::every_model_of(Machine::Ir)
+            }
+        );
         let plain = observe(&arch, 2048, 2048, &events[..1]).unwrap();
         assert_eq!(plain.active_names(), "none");
     }

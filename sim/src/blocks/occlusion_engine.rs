@@ -8,7 +8,7 @@
 //! Counters are `counter_bits` wide and saturate at `2^counter_bits - 1`.
 
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
-use occsim_traces::{Fragment, Tile, TileResult};
+use occsim_traces::{Fragment, Span, Tile, TileResult};
 
 /// One tile's registers inside an engine.
 #[derive(Clone, Debug)]
@@ -97,6 +97,45 @@ impl OcclusionEngine {
             }
         }
         hit_words
+    }
+
+    /// Count a span's fragments (`passed[i]` for its fragment `i`) in every tile at once, as
+    /// a fast-forward does ([`crate::effects`]): only without a verbose query, so no hit is
+    /// sent, and then the counters, boxes and depth ranges do not depend on the order the
+    /// fragments come in (saturating at `counter_max` after `m` steps is saturating once).
+    pub fn count_span(&mut self, span: Span, passed: &[bool]) {
+        debug_assert!(!self.verbose, "a verbose query's hits are sent one by one");
+        let counter_max = self.counter_max;
+        let (span_x, y) = (span.x as u64, span.y as u32);
+        let span_end = span_x + span.depths.len() as u64;
+        for tile in &mut self.tiles {
+            let rect = tile.rect;
+            if y.wrapping_sub(rect.y) >= rect.height {
+                continue;
+            }
+            let from = span_x.max(rect.x as u64);
+            let to = span_end.min(rect.x as u64 + rect.width as u64);
+            if from >= to {
+                continue;
+            }
+            let r = &mut tile.result;
+            r.phc = (r.phc + (to - from)).min(counter_max);
+            let (first, last) = ((from - span_x) as usize, (to - span_x) as usize);
+            let mut passes = 0u64;
+            for i in (first..last).filter(|&i| passed[i]) {
+                let (x, z) = (span_x as u32 + i as u32, span.depths[i]);
+                passes += 1;
+                r.xmin = r.xmin.min(x);
+                r.xmax = r.xmax.max(x);
+                r.zmin = r.zmin.min(z);
+                r.zmax = r.zmax.max(z);
+            }
+            if passes > 0 {
+                r.nohc = (r.nohc + passes).min(counter_max);
+                r.ymin = r.ymin.min(y);
+                r.ymax = r.ymax.max(y);
+            }
+        }
     }
 
     /// Hand the tiles' results to OccU Control: `(index in the query, result)`.

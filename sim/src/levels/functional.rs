@@ -167,6 +167,7 @@ impl FunctionalCore {
             latency_p95_cycles: None,
             latency_max_cycles: None,
             effects: None,
+            fast_forwarded_fragments: None,
             sampled_windows: None,
             queries: self.queries,
             frame_cycles: Vec::new(),

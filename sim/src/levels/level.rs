@@ -152,6 +152,9 @@ pub struct LevelResult {
     pub latency_max_cycles: Option<u64>,
     /// The effect models the cycle model built (cycle and sampled levels).
     pub effects: Option<Effects>,
+    /// Fragments the cycle model fast-forwarded ([`crate::effects`]; cycle and rtl levels).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fast_forwarded_fragments: Option<u64>,
     pub sampled_windows: Option<SampledWindows>,
     pub queries: Vec<QueryOutcome>,
     /// Each frame's cycles, for a closed-loop stream at a level that times frames (empty
@@ -226,6 +229,7 @@ impl LevelResult {
             latency_p95_cycles: None,
             latency_max_cycles: None,
             effects: Some(effects),
+            fast_forwarded_fragments: None,
             sampled_windows: None,
             queries,
             frame_cycles: report.frames.iter().map(|f| f.cycles).collect(),
@@ -301,6 +305,14 @@ impl LevelResult {
                     self.level
                 );
             }
+        }
+        if let Some(fast_forwarded) = self.fast_forwarded_fragments {
+            let _ = writeln!(
+                out,
+                "fast-forwarded: {fast_forwarded} of {} fragments ({:.1}%)",
+                self.fragments,
+                crate::report::percent(fast_forwarded, self.fragments)
+            );
         }
         if with_queries {
             self.write_query_table(&mut out);
