@@ -494,7 +494,9 @@ impl O2Machine {
                 true => self.depth.prefetch.pixels_left_in_word(x) as usize,
                 false => most,
             };
-            let word = word.min(most - units);
+            // A unit tests the fragment that entered `lookahead` units before it: at most
+            // that many units' fragments can enter before the first is tested.
+            let word = word.min(most - units).min(self.lookahead);
             let in_lockstep = |machine: &mut O2Machine, unit: usize| {
                 let cycle = d + unit as u64;
                 machine.lockstep_back(back + unit, from_queue, cycle, occlusion_mode)
