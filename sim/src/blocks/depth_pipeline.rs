@@ -230,6 +230,12 @@ impl DepthPipeline {
         self.write_buffer.push_entry(cycle, ready, bits, port);
     }
 
+    /// Whether a fragment that passes writes depth or colour (under the current state).
+    pub fn writes_if_passed(&self, occlusion_mode: bool) -> bool {
+        let (writes, draws) = self.port_writes(true, occlusion_mode);
+        writes || draws
+    }
+
     /// In a lockstep run ([`crate::effects`]), the writes of a fragment whose test `passed`
     /// and that is tested in `cycle` with nothing else waited for: false, and nothing
     /// written, when it would wait for a write-buffer slot (the run stops before it).

@@ -119,10 +119,11 @@ impl LastRead {
         }
         self.word = Some(word);
         let banks = self.open_rows.len() as u64;
-        let bank = if banks == 1 {
-            0
-        } else {
-            (page % banks) as usize
+        let bank = match banks {
+            1 => 0,
+            // A mask when it can be: no division on every read.
+            _ if banks.is_power_of_two() => (page & (banks - 1)) as usize,
+            _ => (page % banks) as usize,
         };
         let row = &mut self.open_rows[bank];
         let hit = *row == Some(page);

@@ -102,11 +102,12 @@ impl Fifo {
     #[inline]
     pub fn depart_run(&mut self, first: u64, count: usize) {
         // Grow first as `depart` would on the way (only before the ring wraps), then write
-        // the run straight into it: a ring of its final size only ever holds the last ones.
+        // the run's last `capacity` straight into it: a writer reads no departure from
+        // further back (see `slot_free_cycle_for`).
         while self.departures.len() < self.full_size && self.count + count > self.departures.len() {
             self.grow();
         }
-        let kept = count.min(self.departures.len());
+        let kept = count.min(self.capacity);
         let skipped = count - kept;
         let (start, mask) = (self.count + skipped, self.mask);
         for (n, cycle) in (first + skipped as u64..).take(kept).enumerate() {

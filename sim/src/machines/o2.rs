@@ -151,11 +151,28 @@ pub struct O2Machine {
     timeline: Option<Timeline>,
     /// Fragments taken by a fast-forward ([`Self::span`]).
     fast_forwarded: u64,
-    /// A fast-forward's scratch: each fragment's times through the front end, the depth
-    /// test's outcomes, and the queued fragments it takes first (kept to reuse their memory).
-    span_fronts: Vec<FrontTimes>,
+    /// A fast-forward's scratch (kept to reuse its memory): the fragments the back end tests,
+    /// in order (the queued ones it takes, then the span's as they enter), and the span's
+    /// depth tests' outcomes.
+    span_backs: Vec<Entered>,
     span_passed: Vec<bool>,
-    span_queued: Vec<(FrontTimes, bool)>,
+}
+
+/// A fragment a fast-forward let in: its times through the front end and its depth test's
+/// outcome.
+#[derive(Clone, Copy, Debug)]
+struct Entered {
+    times: FrontTimes,
+    passed: bool,
+}
+
+/// What holds over a fast-forward's span.
+#[derive(Clone, Copy, Debug)]
+struct SpanModes {
+    occlusion_mode: bool,
+    query_open: bool,
+    /// A fragment that passes writes depth or colour.
+    passing_writes: bool,
 }
 
 /// When a fragment is readable from the rasterizer FIFO and its depth data is ready.
@@ -224,9 +241,8 @@ impl O2Machine {
             effects,
             timeline: build.timeline,
             fast_forwarded: 0,
-            span_fronts: Vec::new(),
+            span_backs: Vec::new(),
             span_passed: Vec::new(),
-            span_queued: Vec::new(),
         };
         machine.port.set_timeline(machine.timeline.clone());
         if let Some(state) = state {
@@ -380,7 +396,11 @@ impl O2Machine {
             .open
             .as_ref()
             .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
-        let query_open = self.open.is_some();
+        let modes = SpanModes {
+            occlusion_mode,
+            query_open: self.open.is_some(),
+            passing_writes: self.depth.writes_if_passed(occlusion_mode),
+        };
         // Unit k tests a fragment once `lookahead` wait: from unit `first_back` on. The
         // queued ones go first, then the span's own first `own`; the rest stay queued.
         let queued = self.pending_fragments;
@@ -388,9 +408,56 @@ impl O2Machine {
         let backs = n.saturating_sub(first_back);
         let from_queue = backs.min(queued);
         let own = backs - from_queue;
-        self.test_all(span, occlusion_mode, query_open);
-        self.span_queued.clear();
-        for _ in 0..from_queue {
+        self.test_all(span, occlusion_mode, modes.query_open);
+        self.take_queued(from_queue);
+        let mut k = 0;
+        while k < n {
+            if k >= first_back {
+                let units = self.run_lockstep(span, k, k - first_back, modes);
+                if units > 0 {
+                    k += units;
+                    continue;
+                }
+                let entered = self.span_backs[k - first_back];
+                self.time_back(
+                    entered.times,
+                    entered.passed,
+                    occlusion_mode,
+                    modes.query_open,
+                );
+            }
+            let x = span.x.wrapping_add(k as u16);
+            let times = self.front_times(Fragment {
+                x,
+                y: span.y,
+                z: span.depths[k],
+            });
+            let passed = self.span_passed[k];
+            self.span_backs.push(Entered { times, passed });
+            k += 1;
+        }
+        for (fragment, entered) in span
+            .fragments()
+            .zip(&self.span_backs[from_queue..])
+            .skip(own)
+        {
+            self.pending.push_back(Pending::Fragment {
+                fragment,
+                arrive: entered.times.arrive,
+                data_ready: entered.times.data_ready,
+                tested: Some(entered.passed),
+            });
+        }
+        self.pending_fragments = queued - from_queue + (n - own);
+        if let Some(query) = &mut self.open {
+            query.fragments += backs as u64;
+        }
+    }
+
+    /// The first `count` queued fragments, taken from the queue to be tested first.
+    fn take_queued(&mut self, count: usize) {
+        self.span_backs.clear();
+        for _ in 0..count {
             let Some(Pending::Fragment {
                 arrive,
                 data_ready,
@@ -400,57 +467,8 @@ impl O2Machine {
             else {
                 unreachable!("the fast-forward rule: the lookahead window holds fragments only");
             };
-            self.span_queued
-                .push((FrontTimes { arrive, data_ready }, passed));
-        }
-        self.span_fronts.clear();
-        let mut k = 0;
-        while k < n {
-            if k >= first_back {
-                let back = k - first_back;
-                let modes = (occlusion_mode, query_open);
-                let units = self.run_lockstep(span, k, back, from_queue, modes);
-                if units > 0 {
-                    k += units;
-                    continue;
-                }
-                let (times, passed) = self.back_item(back, from_queue);
-                self.time_back(times, passed, occlusion_mode, query_open);
-            }
-            let x = span.x.wrapping_add(k as u16);
-            let times = self.front_times(Fragment {
-                x,
-                y: span.y,
-                z: span.depths[k],
-            });
-            self.span_fronts.push(times);
-            k += 1;
-        }
-        let fronts = span
-            .fragments()
-            .zip(&self.span_fronts)
-            .zip(&self.span_passed);
-        for ((fragment, times), &passed) in fronts.skip(own) {
-            self.pending.push_back(Pending::Fragment {
-                fragment,
-                arrive: times.arrive,
-                data_ready: times.data_ready,
-                tested: Some(passed),
-            });
-        }
-        self.pending_fragments = queued - from_queue + (n - own);
-        if let Some(query) = &mut self.open {
-            query.fragments += backs as u64;
-        }
-    }
-
-    /// The fragment the back end tests `back`-th in a fast-forward: its front-end times and
-    /// its depth test's outcome (the queued ones first, then the span's own).
-    #[inline(always)]
-    fn back_item(&self, back: usize, from_queue: usize) -> (FrontTimes, bool) {
-        match back.checked_sub(from_queue) {
-            None => self.span_queued[back],
-            Some(own) => (self.span_fronts[own], self.span_passed[own]),
+            let times = FrontTimes { arrive, data_ready };
+            self.span_backs.push(Entered { times, passed });
         }
     }
 
@@ -464,14 +482,7 @@ impl O2Machine {
     /// first) or are the run's own, in closed form (a bound on the run's start); each unit's
     /// tested fragment is checked before any of the unit's requests is made, so the run
     /// stops with every block's state that of the units run.
-    fn run_lockstep(
-        &mut self,
-        span: Span,
-        k: usize,
-        back: usize,
-        from_queue: usize,
-        (occlusion_mode, query_open): (bool, bool),
-    ) -> usize {
+    fn run_lockstep(&mut self, span: Span, k: usize, back: usize, modes: SpanModes) -> usize {
         let occu_free = match self.occu.cycle_unit() {
             Some(unit) if unit.service_cycles() == 1 => unit.free_cycle(),
             _ => return 0,
@@ -497,11 +508,7 @@ impl O2Machine {
             // A unit tests the fragment that entered `lookahead` units before it: at most
             // that many units' fragments can enter before the first is tested.
             let word = word.min(most - units).min(self.lookahead);
-            let in_lockstep = |machine: &mut O2Machine, unit: usize| {
-                let cycle = d + unit as u64;
-                machine.lockstep_back(back + unit, from_queue, cycle, occlusion_mode)
-            };
-            if !in_lockstep(self, units) {
+            if !self.lockstep_back(back + units, d + units as u64, modes) {
                 break;
             }
             let port = &mut self.port;
@@ -510,25 +517,28 @@ impl O2Machine {
                 .prefetch
                 .fetch_at(q + units as u64, x, span.y, read, port);
             let taken = (units + 1..units + word)
-                .find(|&unit| !in_lockstep(self, unit))
+                .find(|&unit| !self.lockstep_back(back + unit, d + unit as u64, modes))
                 .unwrap_or(units + word)
                 - units;
             let last_request = q + (units + taken) as u64 - 1;
-            let hits = taken as u64 - 1;
             self.depth
                 .prefetch
-                .fetch_word_hits(hits, last_request, read);
-            self.span_fronts
-                .extend((units..units + taken).map(|unit| FrontTimes {
-                    arrive: a + unit as u64 + 1,
-                    data_ready,
+                .fetch_word_hits(taken as u64 - 1, last_request, read);
+            let passed = &self.span_passed[k + units..k + units + taken];
+            self.span_backs
+                .extend(passed.iter().enumerate().map(|(i, &passed)| Entered {
+                    times: FrontTimes {
+                        arrive: a + (units + i) as u64 + 1,
+                        data_ready,
+                    },
+                    passed,
                 }));
             units += taken;
             if taken < word {
                 break;
             }
         }
-        self.advance_lockstep(units, query_open);
+        self.advance_lockstep(units, modes.query_open);
         units
     }
 
@@ -552,19 +562,15 @@ impl O2Machine {
     /// `cycle`: false, with nothing changed, unless it is readable with its depth data by
     /// then and has a write-buffer slot if it writes; true once its writes are made.
     #[inline(always)]
-    fn lockstep_back(
-        &mut self,
-        back: usize,
-        from_queue: usize,
-        cycle: u64,
-        occlusion_mode: bool,
-    ) -> bool {
-        let (times, passed) = self.back_item(back, from_queue);
-        times.arrive <= cycle
-            && times.data_ready <= cycle
-            && self
+    fn lockstep_back(&mut self, back: usize, cycle: u64, modes: SpanModes) -> bool {
+        let Entered { times, passed } = self.span_backs[back];
+        if times.arrive > cycle || times.data_ready > cycle {
+            return false;
+        }
+        !(passed && modes.passing_writes)
+            || self
                 .depth
-                .write_in_lockstep(passed, occlusion_mode, cycle, &mut self.port)
+                .write_in_lockstep(passed, modes.occlusion_mode, cycle, &mut self.port)
     }
 
     /// The most units (of `most`) a lockstep run from emission cycle `a`, test cycle `d` and
