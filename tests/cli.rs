@@ -802,3 +802,38 @@ fn demo_json_is_the_replay_report() {
     assert_eq!(report["viewport_width"], 1280);
     assert!(report["summary"]["frames_per_second"].as_f64().unwrap() > 0.0);
 }
+
+/// Fast-forward ([`occsim_sim::effects`]) changes no report on a lazy-grid walk, and `replay`
+/// says how many fragments it took, in its text and in `--json`.
+#[test]
+fn replay_fast_forwards_a_lazy_grid_walk_to_the_exact_report() {
+    let dir = scratch_dir("fast-forward");
+    let trace = dir.join("lazy.occt");
+    let trace_arg = trace.to_str().unwrap();
+    let walk = ["--scene", "city", "--driver", "lazy-grid", "--frames", "1"];
+    stdout_of(&[&["trace", "gen"][..], &walk, &["-o", trace_arg]].concat());
+    let json = |text: String| -> serde_json::Value { serde_json::from_str(&text).unwrap() };
+    for arch in ["o2", "ir4"] {
+        let replay = ["replay", trace_arg, "--arch", arch, "--json", "--effects"];
+        let mut all = json(stdout_of(&[&replay[..], &["all"]].concat()));
+        let mut auto = json(stdout_of(&[&replay[..], &["auto"]].concat()));
+        assert_eq!(all["fast_forwarded_fragments"], 0, "{arch}: all is exact");
+        let fast_forwarded = auto["fast_forwarded_fragments"].as_u64().unwrap();
+        if arch == "o2" {
+            assert!(fast_forwarded > 0, "the rule never held on the walk");
+        }
+        for report in [&mut all, &mut auto] {
+            report["fast_forwarded_fragments"] = serde_json::Value::Null;
+            report["effects"] = serde_json::Value::Null;
+        }
+        assert_eq!(all, auto, "{arch}: fast-forward changed the report");
+        let text = stdout_of(&["replay", trace_arg, "--arch", arch]);
+        let fragments = &all["summary"]["fragments"];
+        assert!(
+            text.contains(&format!(
+                "fast-forwarded: {fast_forwarded} of {fragments} fragments"
+            )),
+            "{text}"
+        );
+    }
+}

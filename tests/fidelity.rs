@@ -71,14 +71,20 @@ fn replay_reports_its_level_and_the_active_effects() {
     let (_dir, trace) = hardcases_trace("replay");
     let automatic = stdout_of(&["replay", &trace]);
     let forced = stdout_of(&["replay", &trace, "--effects", "all"]);
-    // Same report, different effects line: hard cases fit one 128x128 page.
+    // Same report, different effects and fast-forward lines: hard cases fit one 128x128
+    // page, and all takes every fragment one by one.
     let strip = |text: &str| {
         text.lines()
-            .filter(|l| !l.starts_with("active effects"))
+            .filter(|l| !l.starts_with("active effects") && !l.starts_with("fast-forwarded"))
             .collect::<Vec<_>>()
             .join("\n")
     };
     assert_eq!(strip(&automatic), strip(&forced));
+    assert!(
+        forced.contains("fast-forwarded: 0 of 63404 fragments"),
+        "{forced}"
+    );
+    assert!(!automatic.contains("fast-forwarded: 0 of"), "{automatic}");
     assert!(automatic.contains(
         "active effects: verbose_hit_writes, multi_tile_serialisation, depth_write_traffic\n"
     ));

@@ -7,9 +7,10 @@
 //!
 //! An effect is switched off only when a rule proves that its model cannot change any
 //! result, any cycle, or any statistic of the report on this trace; everything else stays on.
-//! So `--effects all` and the automatic choice give the same report, bit for bit (the tests
-//! check this on every built-in trace and on random streams, and debug builds assert each
-//! rule at the hook that relies on it).
+//! Fast-forward (below) takes bulk paths only where its rule holds. So `--effects all` and
+//! the automatic choice give the same report, bit for bit (the tests check this on every
+//! built-in trace and on random streams, `sim/tests/fast_forward.rs` with and without
+//! fast-forward, and debug builds assert each rule at the hook that relies on it).
 //!
 //! Rules (a trace is scanned in order, with the render state it sets):
 //! - `verbose_hit_writes`: on iff some query is verbose. Without one the engines send no hit
@@ -28,6 +29,60 @@
 //!   Image Engine's OccU Control skips its hit path) and `multi_tile_serialisation`; that
 //!   machine has no depth-write traffic or page model, so they are never active there. Its
 //!   tile merges are always observable: every query's latency runs through them.
+//!
+//! # Fast-forward
+//! `fast_forward` is no effect model but a shortcut the automatic choice takes (on a
+//! retiled trace too) and `--effects all`, the exact reference, does not: the O2's cycle
+//! model takes a span of fragments (a row run, as traces hand them on) in bulk where a rule,
+//! checked as the replay goes, proves the bulk path gives what the fragments one by one give
+//! ([`crate::machines::o2::O2Machine::span`]; `replay` reports how many fragments it took).
+//! The InfiniteReality-like machine, the sampled level and a replay with a timeline or at
+//! the rtl fidelity (which clock or record every fragment) take fragments one by one.
+//!
+//! A span is fast-forwarded when nothing records the blocks' intervals, the Occlusion Unit is
+//! the event-timestamp one, the lookahead window (the fragments the front end let in that the
+//! back end has not tested) holds fragments only, no verbose query is open and the span lies
+//! inside the viewport. Then, with the rules of [`crate::machines::o2`]:
+//! 1. Depth tests and counts. The span's depth tests are taken at once as it enters, after
+//!    those of the queued fragments not yet taken. Nothing but fragments is queued, so each
+//!    fragment meets the render state and the query it would meet when the back end reached
+//!    it, in the same order; a span's pixels are distinct, so testing them all before
+//!    writing any gives the one-by-one outcomes ([`occsim_traces::golden::DepthBuffer`]).
+//!    Without a verbose query no hit word is sent, and a tile's counters, box and depth range
+//!    do not depend on the order of its fragments (a counter saturating at `max` after `m`
+//!    steps is `min(c + m, max)`), so the span is counted in every tile at once.
+//! 2. Timing. The units of work are those of the one-by-one path, in its order: the back
+//!    end's oldest fragment, then the front end's next. A unit is timed by the rules one by
+//!    one, except in a *lockstep run*: from a unit where the rasterizer is free from `a`, the
+//!    depth test from `d`, the Occlusion Unit from `o` with a one-cycle service (`s = 1`), and
+//!    the last depth request was in `r` (`q = max(a + 1, r + 1)`), unit `u` of the run emits
+//!    in `a + u`, requests in `q + u`, tests in `d + u` and starts in the unit in
+//!    `max(d + 1, o) + u`, when
+//!    - (L1) the fragment it tests was readable, with its depth data, by `d + u`, and, if it
+//!      writes, the write buffer has a slot by `d + u`;
+//!    - (L2) the depth-to-OccU FIFO (`C2` entries) has a slot by `d + u`: for `u < C2` from the
+//!      departures recorded before the run, after that when `o <= d + C2`;
+//!    - (L3) the rasterizer FIFO (`C`) has a slot by `a + u`: for `u < C - L` (`L` the
+//!      lookahead) from the departures recorded, after that when `d <= a + C - L`;
+//!    - (L4) the prefetch slots (`P`) free one by `q + u`: for `u < P - L` recorded, after
+//!      that when `d <= q + P - L`.
+//!
+//!    Proof, by induction on `u`: the slot a unit waits for is the departure of the fragment
+//!    `capacity` places earlier, recorded before the run (checked) or the run's own unit
+//!    `u - (capacity - L)` (for the depth-to-OccU FIFO `u - C2`), whose departure the
+//!    induction gives in closed form, so (L2)-(L4) bound every slot. Then every `max` of
+//!    rules 1-4 takes its "one cycle after the last" term: `a_u = a + u`, `q_u = q + u`,
+//!    `d_u = d + u`, `o_u = max(d + 1, o) + u`, and each fragment leaves the unit as it is
+//!    done counting (no hit word). No cycle is a stall, so the blocks' busy counts grow by
+//!    the run's units and their stall counts by nothing, and the FIFOs record consecutive
+//!    departures (only their last `capacity` can be read again). The port's requests (the
+//!    tested fragment's writes, then the entering fragment's depth read if its word is not
+//!    the last read's; the others are word hits) are made exactly, in the one-by-one order,
+//!    with the same ready cycles, so the port, the prefetch's page state and every statistic
+//!    come out the same. Each unit is checked before any of its requests is made, so a run
+//!    stops where the rule fails with every block's state that of the units it took, and the
+//!    next unit is timed one by one. The checks cost the FIFOs' capacities a run and a few
+//!    comparisons a unit.
 
 use crate::arch::{Arch, IrArch, Machine, O2Arch};
 use crate::error::SimError;
@@ -46,6 +101,11 @@ pub struct Effects {
     pub depth_write_traffic: bool,
     /// The prefetch's page-hit / page-miss latency distinction.
     pub page_model: bool,
+    /// Spans of fragments may be fast-forwarded in bulk where the fast-forward rule (module
+    /// docs) proves it exact. Not an effect model but a shortcut: off under `--effects all`,
+    /// the exact reference, and not listed among the active effects.
+    #[serde(skip)]
+    pub fast_forward: bool,
 }
 
 impl Effects {
@@ -55,6 +115,7 @@ impl Effects {
         multi_tile_serialisation: true,
         depth_write_traffic: true,
         page_model: true,
+        fast_forward: false,
     };
 
     /// Every effect model `machine` has (`--effects all`): the InfiniteReality-like machine
@@ -78,6 +139,7 @@ impl Effects {
                 && other.multi_tile_serialisation,
             depth_write_traffic: self.depth_write_traffic && other.depth_write_traffic,
             page_model: self.page_model && other.page_model,
+            fast_forward: self.fast_forward && other.fast_forward,
         }
     }
 
@@ -194,16 +256,20 @@ impl EffectRules {
         })
     }
 
-    /// The effects a trace with these facts can observe.
+    /// The effects a trace with these facts can observe, fast-forward allowed.
     pub fn effects(&self, facts: TraceFacts) -> Effects {
-        Effects {
+        let observed = Effects {
             verbose_hit_writes: facts.verbose,
             multi_tile_serialisation: !self.all_tiles_one_cycle
                 && facts.max_query_tiles > self.engines as u64,
             depth_write_traffic: facts.depth_writes,
             page_model: !self.one_page,
+            fast_forward: true,
+        };
+        Effects {
+            fast_forward: true,
+            ..observed.and(self.models)
         }
-        .and(self.models)
     }
 }
 
@@ -325,6 +391,7 @@ mod tests {
                 multi_tile_serialisation: false,
                 depth_write_traffic: true,
                 page_model: true,
+                fast_forward: true,
             }
         );
     }
@@ -382,9 +449,16 @@ mod tests {
                 multi_tile_serialisation: true,
                 depth_write_traffic: false,
                 page_model: false,
+                fast_forward: true,
             }
         );
-        assert_eq!(effects, Effects::every_model_of(Machine::Ir));
+        assert_eq!(
+            effects,
+            Effects {
+                fast_forward: true,
+                ..Effects::every_model_of(Machine::Ir)
+            }
+        );
         let plain = observe(&arch, 2048, 2048, &events[..1]).unwrap();
         assert_eq!(plain.active_names(), "none");
     }

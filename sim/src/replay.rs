@@ -189,7 +189,8 @@ fn feed<R: Read, S: EventSink<Error = SimError>>(
 /// The effect models `level` builds for the trace: at the levels that build effects
 /// ([`Fidelity::builds_effects`]) with `Auto`, those its header's features show it can
 /// observe (or, when the header lacks them, a scan of its events); every model otherwise and
-/// on a retiled trace (its queries are not those the trace holds).
+/// on a retiled trace (its queries are not those the trace holds), there with fast-forward
+/// under `Auto` still (its rule is checked as the replay goes, [`crate::effects`]).
 pub fn effects_for<R: Read>(
     mut open: impl OpenTrace<R>,
     level: Fidelity,
@@ -197,8 +198,15 @@ pub fn effects_for<R: Read>(
     arch: &Arch,
     retiled: bool,
 ) -> Result<Effects, ReplayError> {
-    if choice == EffectsChoice::All || retiled || !level.builds_effects() {
-        return Ok(Effects::every_model_of(arch.machine()));
+    let every_model = Effects::every_model_of(arch.machine());
+    if choice == EffectsChoice::All || !level.builds_effects() {
+        return Ok(every_model);
+    }
+    if retiled {
+        return Ok(Effects {
+            fast_forward: true,
+            ..every_model
+        });
     }
     let mut reader = open()?;
     let header = reader.header();

@@ -155,13 +155,17 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
 }
 
 /// A result as `--json` prints it: at the cycle and rtl levels the machine's report with its
-/// level and the effect models that were built; below, the level's own result.
+/// level, the effect models that were built and the fragments fast-forwarded; below, the
+/// level's own result.
 pub fn result_json(result: &LevelResult) -> anyhow::Result<String> {
     Ok(match &result.report {
         Some(report) => {
             let mut json = serde_json::to_value(report)?;
             json["level"] = serde_json::to_value(result.level)?;
             json["effects"] = serde_json::to_value(result.effects)?;
+            if let Some(fast_forwarded) = result.fast_forwarded_fragments {
+                json["fast_forwarded_fragments"] = fast_forwarded.into();
+            }
             serde_json::to_string_pretty(&json)?
         }
         // In its fields' order.

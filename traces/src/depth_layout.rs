@@ -78,12 +78,13 @@ impl DepthAddress {
         (self.word(page, in_tile_x, in_tile_y), page)
     }
 
-    /// The first column past pixel column `x`'s word: words never straddle a multiple of
-    /// `pixels_per_word` (tiles are whole words wide), so a row run changes word only there.
-    #[inline(always)]
-    pub fn word_end(&self, x: u16) -> u32 {
-        let (quotient, _) = self.pixels_per_word.divide(x as u32);
-        (quotient + 1) * self.pixels_per_word.divisor
+    /// Pixels from x on, along its row, in x's word (x's included): a row run changes word
+    /// only after them.
+    #[inline]
+    pub fn pixels_left_in_word(&self, x: u16) -> u32 {
+        let (_, in_tile_x) = self.tile_width.divide(x as u32);
+        let (_, in_word) = self.pixels_per_word.divide(in_tile_x);
+        (self.pixels_per_word.divisor - in_word).min(self.tile_width.divisor - in_tile_x)
     }
 
     /// `(word, 0)` of pixel (x, y) of a viewport inside one page (page 0): no tile division.
@@ -139,10 +140,11 @@ impl LastRead {
         }
         self.word = Some(word);
         let banks = self.open_rows.len() as u64;
-        let bank = if banks == 1 {
-            0
-        } else {
-            (page % banks) as usize
+        let bank = match banks {
+            1 => 0,
+            // A mask when it can be: no division on every read.
+            _ if banks.is_power_of_two() => (page & (banks - 1)) as usize,
+            _ => (page % banks) as usize,
         };
         let row = &mut self.open_rows[bank];
         let hit = *row == Some(page);

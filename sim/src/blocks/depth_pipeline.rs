@@ -33,7 +33,7 @@ use crate::blocks::write_buffer::WriteBuffer;
 use crate::effects::Effects;
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;
-use occsim_traces::Fragment;
+use occsim_traces::{Fragment, Span};
 
 pub struct DepthPipeline {
     pub state: RenderState,
@@ -163,8 +163,106 @@ impl DepthPipeline {
         occlusion_mode: bool,
         port: &mut MemoryPort,
     ) -> DepthOutcome {
+        let passed = self.depth.test(&self.state, fragment, !occlusion_mode);
+        let cycle = self.time(passed, arrive, data_ready, out_slot, occlusion_mode, port);
+        DepthOutcome { cycle, passed }
+    }
+
+    /// The functional depth test of one fragment under the current state, before it is
+    /// timed (a fast-forward, [`crate::effects`]).
+    #[inline]
+    pub fn test_fragment(&mut self, fragment: Fragment, occlusion_mode: bool) -> bool {
+        self.depth.test(&self.state, fragment, !occlusion_mode)
+    }
+
+    /// The functional depth test of a whole span under the current state, before any of it
+    /// is timed: `passed[i]` for its fragment `i` (a fast-forward, [`crate::effects`]).
+    #[inline]
+    pub fn test_span(&mut self, span: Span, occlusion_mode: bool, passed: &mut Vec<bool>) {
+        self.depth
+            .test_span(&self.state, span, !occlusion_mode, passed);
+    }
+
+    /// The timing of the depth test of a fragment whose functional test `passed` (the rules
+    /// above): returns the cycle of the test.
+    #[inline]
+    pub fn time(
+        &mut self,
+        passed: bool,
+        arrive: u64,
+        data_ready: u64,
+        out_slot: u64,
+        occlusion_mode: bool,
+        port: &mut MemoryPort,
+    ) -> u64 {
+        let (writes, draws) = self.port_writes(passed, occlusion_mode);
+        let in_order = arrive.max(self.free);
+        let after_memory = in_order.max(data_ready);
+        let mut cycle = after_memory.max(out_slot);
+        if writes || draws {
+            cycle = cycle.max(self.write_buffer.slot_free_cycle());
+            self.write_entry(cycle, writes, draws, port);
+        }
+        self.stall_memory_cycles += after_memory - in_order;
+        self.stall_backpressure_cycles += cycle - after_memory;
+        self.busy_cycles += 1;
+        self.free = cycle + 1;
+        self.prefetch.retire(cycle);
+        cycle
+    }
+
+    /// The write-buffer entry of a fragment tested in `cycle` that `writes` depth or `draws`
+    /// colour (under `blending` after its colour read), and its port requests.
+    #[inline]
+    fn write_entry(&mut self, cycle: u64, writes: bool, draws: bool, port: &mut MemoryPort) {
+        let bits =
+            if writes { self.depth_bits } else { 0 } + if draws { self.colour_bits } else { 0 };
+        let mut ready = cycle + 1;
+        self.depth_writes += writes as u64;
+        if draws {
+            self.colour_writes += 1;
+            if self.blending {
+                self.colour_reads += 1;
+                let read = port.claim(ready, self.colour_bits, PortClient::DepthWrite);
+                ready = read + 1;
+            }
+        }
+        self.write_buffer.push_entry(cycle, ready, bits, port);
+    }
+
+    /// Whether a fragment that passes writes depth or colour (under the current state).
+    pub fn writes_if_passed(&self, occlusion_mode: bool) -> bool {
+        let (writes, draws) = self.port_writes(true, occlusion_mode);
+        writes || draws
+    }
+
+    /// In a lockstep run ([`crate::effects`]), the writes of a fragment whose test `passed`
+    /// and that is tested in `cycle` with nothing else waited for: false, and nothing
+    /// written, when it would wait for a write-buffer slot (the run stops before it).
+    #[inline]
+    pub fn write_in_lockstep(
+        &mut self,
+        passed: bool,
+        occlusion_mode: bool,
+        cycle: u64,
+        port: &mut MemoryPort,
+    ) -> bool {
+        let (writes, draws) = self.port_writes(passed, occlusion_mode);
+        if !(writes || draws) {
+            return true;
+        }
+        if self.write_buffer.slot_free_cycle() > cycle {
+            return false;
+        }
+        self.write_entry(cycle, writes, draws, port);
+        true
+    }
+
+    /// Whether a fragment whose test `passed` writes depth and whether it draws colour
+    /// (either is an entry of the write buffer and a port request).
+    #[inline(always)]
+    fn port_writes(&self, passed: bool, occlusion_mode: bool) -> (bool, bool) {
         let state = &self.state;
-        let passed = self.depth.test(state, fragment, !occlusion_mode);
         let writes = if self.depth_write_traffic {
             passed && state.depth_test && state.depth_mask && !occlusion_mode
         } else {
@@ -174,32 +272,21 @@ impl DepthPipeline {
             );
             false
         };
-        let in_order = arrive.max(self.free);
-        let after_memory = in_order.max(data_ready);
-        let mut cycle = after_memory.max(out_slot);
         let draws = passed && !occlusion_mode && self.colour_bits > 0;
-        if writes || draws {
-            cycle = cycle.max(self.write_buffer.slot_free_cycle());
-            let bits =
-                if writes { self.depth_bits } else { 0 } + if draws { self.colour_bits } else { 0 };
-            let mut ready = cycle + 1;
-            self.depth_writes += writes as u64;
-            if draws {
-                self.colour_writes += 1;
-                if self.blending {
-                    self.colour_reads += 1;
-                    let read = port.claim(ready, self.colour_bits, PortClient::DepthWrite);
-                    ready = read + 1;
-                }
-            }
-            self.write_buffer.push_entry(cycle, ready, bits, port);
-        }
-        self.stall_memory_cycles += after_memory - in_order;
-        self.stall_backpressure_cycles += cycle - after_memory;
-        self.busy_cycles += 1;
-        self.free = cycle + 1;
-        self.prefetch.retire(cycle);
-        DepthOutcome { cycle, passed }
+        (writes, draws)
+    }
+
+    /// Time `count` fragments tested in consecutive cycles from the first free one, none
+    /// waiting, their writes made by [`Self::write_in_lockstep`] (a fast-forward proved it,
+    /// [`crate::effects`]): what `count` calls of [`Self::time`] give. Returns the first
+    /// one's cycle.
+    #[inline]
+    pub fn time_run(&mut self, count: usize) -> u64 {
+        let first = self.free;
+        self.busy_cycles += count as u64;
+        self.free += count as u64;
+        self.prefetch.retire_run(first, count);
+        first
     }
 
     /// First cycle the depth test is free.

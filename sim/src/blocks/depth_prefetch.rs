@@ -76,6 +76,19 @@ impl DepthPrefetch {
         if let Some(last) = self.last_request {
             request = request.max(last + 1);
         }
+        self.fetch_at(request, x, y, read, port)
+    }
+
+    /// [`Self::fetch`] of a fragment whose request cycle is known (a fast-forward proved it).
+    #[inline]
+    pub fn fetch_at(
+        &mut self,
+        request: u64,
+        x: u16,
+        y: u16,
+        read: bool,
+        port: &mut MemoryPort,
+    ) -> u64 {
         self.last_request = Some(request);
         if !read {
             return 0;
@@ -103,6 +116,48 @@ impl DepthPrefetch {
         let grant = port.claim(request, self.word_bits, PortClient::DepthRead);
         self.last_data_ready = grant + latency;
         self.last_data_ready
+    }
+
+    /// `count` fetches of fragments in the word of the last read (or with nothing read):
+    /// word hits, the last requested in `last_request` (a fast-forward proved their
+    /// request cycles).
+    #[inline]
+    pub fn fetch_word_hits(&mut self, count: u64, last_request: u64, read: bool) {
+        if count == 0 {
+            return;
+        }
+        self.last_request = Some(last_request);
+        if read {
+            self.word_hits += count;
+        }
+    }
+
+    /// Pixels from x on, along its row, in x's word (x's included): the fetches after x's
+    /// that are word hits.
+    #[inline]
+    pub fn pixels_left_in_word(&self, x: u16) -> u32 {
+        self.address.pixels_left_in_word(x)
+    }
+
+    /// The cycle of the last request (None before any).
+    pub fn last_request(&self) -> Option<u64> {
+        self.last_request
+    }
+
+    /// The slots: when fragment `index` may be requested at the earliest.
+    #[inline]
+    pub fn slot_free_cycle_for(&self, index: usize) -> u64 {
+        self.slots.slot_free_cycle_for(index)
+    }
+
+    pub fn slots(&self) -> usize {
+        self.slots.capacity()
+    }
+
+    /// `count` fragments entered the depth test in consecutive cycles from `first`.
+    #[inline]
+    pub fn retire_run(&mut self, first: u64, count: usize) {
+        self.slots.depart_run(first, count);
     }
 
     /// The fragment fetched longest ago entered the depth test in `cycle`.

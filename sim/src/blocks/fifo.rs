@@ -86,6 +86,36 @@ impl Fifo {
         self.count += 1;
     }
 
+    /// The earliest cycle the entry `ahead` places after the next may be written, from the
+    /// departures recorded so far (`ahead` < capacity).
+    #[inline(always)]
+    pub fn slot_free_cycle_ahead(&self, ahead: usize) -> u64 {
+        debug_assert!(ahead < self.capacity);
+        match (self.count + ahead).checked_sub(self.capacity) {
+            Some(entry) => self.departures[entry & self.mask],
+            None => 0,
+        }
+    }
+
+    /// Record `count` departures in cycles `first`, `first + 1`, ... (a fast-forward): what
+    /// `count` calls of [`Self::depart`] leave in the ring.
+    #[inline]
+    pub fn depart_run(&mut self, first: u64, count: usize) {
+        // Grow first as `depart` would on the way (only before the ring wraps), then write
+        // the run's last `capacity` straight into it: a writer reads no departure from
+        // further back (see `slot_free_cycle_for`).
+        while self.departures.len() < self.full_size && self.count + count > self.departures.len() {
+            self.grow();
+        }
+        let kept = count.min(self.capacity);
+        let skipped = count - kept;
+        let (start, mask) = (self.count + skipped, self.mask);
+        for (n, cycle) in (first + skipped as u64..).take(kept).enumerate() {
+            self.departures[(start + n) & mask] = cycle;
+        }
+        self.count += count;
+    }
+
     /// Double the ring. Called only before any departure wrapped around it, so entry `n`
     /// sits at index `n` and stays there.
     #[cold]
@@ -155,6 +185,35 @@ mod tests {
                 fifo.depart(cycle);
             }
             assert!(fifo.allocated_entries() <= (2 * capacity + 1).next_power_of_two());
+        }
+    }
+
+    #[test]
+    fn a_run_of_departures_leaves_what_they_one_by_one_leave() {
+        for (capacity, before, run) in [
+            (1, 0, 5),
+            (3, 2, 1),
+            (16, 10, 200),
+            (40, 0, 30),
+            (40, 70, 3),
+        ] {
+            let (mut one_by_one, mut at_once) = (Fifo::new(capacity), Fifo::new(capacity));
+            for cycle in 0..before as u64 {
+                one_by_one.depart(cycle * 2);
+                at_once.depart(cycle * 2);
+            }
+            for n in 0..run as u64 {
+                one_by_one.depart(1000 + n);
+            }
+            at_once.depart_run(1000, run);
+            for ahead in 0..capacity {
+                assert_eq!(
+                    at_once.slot_free_cycle_ahead(ahead),
+                    one_by_one.slot_free_cycle_ahead(ahead),
+                    "capacity {capacity}, {before} then {run}, {ahead} ahead"
+                );
+            }
+            assert_eq!(at_once.allocated_entries(), one_by_one.allocated_entries());
         }
     }
 

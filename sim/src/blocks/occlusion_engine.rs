@@ -8,7 +8,7 @@
 //! Counters are `counter_bits` wide and saturate at `2^counter_bits - 1`.
 
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
-use occsim_traces::{Fragment, Tile, TileResult};
+use occsim_traces::{Fragment, Span, Tile, TileResult};
 
 /// One tile's registers inside an engine.
 #[derive(Clone, Debug)]
@@ -97,6 +97,56 @@ impl OcclusionEngine {
             }
         }
         hit_words
+    }
+
+    /// Count a span's fragments (`passed[i]` for its fragment `i`) in every tile at once, as
+    /// a fast-forward does ([`crate::effects`]): only without a verbose query, so no hit is
+    /// sent, and then the counters, boxes and depth ranges do not depend on the order the
+    /// fragments come in (saturating at `counter_max` after `m` steps is saturating once).
+    pub fn count_span(&mut self, span: Span, passed: &[bool]) {
+        debug_assert!(!self.verbose, "a verbose query's hits are sent one by one");
+        let counter_max = self.counter_max;
+        let (span_x, y) = (span.x as u64, span.y as u32);
+        let span_end = span_x + span.depths.len() as u64;
+        for tile in &mut self.tiles {
+            let rect = tile.rect;
+            if y.wrapping_sub(rect.y) >= rect.height {
+                continue;
+            }
+            let from = span_x.max(rect.x as u64);
+            let to = span_end.min(rect.x as u64 + rect.width as u64);
+            if from >= to {
+                continue;
+            }
+            let r = &mut tile.result;
+            r.phc = (r.phc + (to - from)).min(counter_max);
+            let (first, last) = ((from - span_x) as usize, (to - span_x) as usize);
+            let (passed, depths) = (&passed[first..last], &span.depths[first..last]);
+            // x grows along the span: the box's x ends are the first and last passing.
+            let (Some(first_pass), Some(last_pass)) = (
+                passed.iter().position(|&p| p),
+                passed.iter().rposition(|&p| p),
+            ) else {
+                continue;
+            };
+            let passes = passed.iter().filter(|&&p| p).count() as u64;
+            let (zmin, zmax) =
+                depths
+                    .iter()
+                    .zip(passed)
+                    .fold((u32::MAX, 0), |(lo, hi), (&z, &p)| match p {
+                        true => (lo.min(z), hi.max(z)),
+                        false => (lo, hi),
+                    });
+            let x = from as u32;
+            r.nohc = (r.nohc + passes).min(counter_max);
+            r.xmin = r.xmin.min(x + first_pass as u32);
+            r.xmax = r.xmax.max(x + last_pass as u32);
+            r.ymin = r.ymin.min(y);
+            r.ymax = r.ymax.max(y);
+            r.zmin = r.zmin.min(zmin);
+            r.zmax = r.zmax.max(zmax);
+        }
     }
 
     /// Hand the tiles' results to OccU Control: `(index in the query, result)`.

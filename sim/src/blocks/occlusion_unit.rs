@@ -12,7 +12,7 @@
 
 use crate::arch::O2Arch;
 use crate::blocks::occlusion_engine::{hit_room, OcclusionEngine};
-use occsim_traces::{Fragment, QueryMode, QuerySpec, TileResult};
+use occsim_traces::{Fragment, QueryMode, QuerySpec, Span, TileResult};
 
 pub struct OcclusionUnit {
     pub engines: Vec<OcclusionEngine>,
@@ -110,14 +110,55 @@ impl OcclusionUnit {
         query_open: bool,
     ) -> (u64, u32) {
         let start = ready.max(self.free);
-        let mut hit_words = 0;
-        if query_open {
-            // Round-robin dealing gives tiles to engines 0..active only.
-            for engine in &mut self.engines[..self.active] {
-                hit_words += engine.fragment(fragment, passed);
-            }
-        }
+        let hit_words = if query_open {
+            self.count(fragment, passed)
+        } else {
+            0
+        };
         (start, hit_words)
+    }
+
+    /// Count one fragment in the open query's tiles; returns the hit words it sends.
+    #[inline]
+    pub fn count(&mut self, fragment: Fragment, passed: bool) -> u32 {
+        // Round-robin dealing gives tiles to engines 0..active only.
+        self.engines[..self.active]
+            .iter_mut()
+            .map(|engine| engine.fragment(fragment, passed))
+            .sum()
+    }
+
+    /// Count a span's fragments (`passed[i]` for its fragment `i`) in the open query's
+    /// tiles at once (a fast-forward; no verbose query open, so no hit words).
+    pub fn count_span(&mut self, span: Span, passed: &[bool]) {
+        for engine in &mut self.engines[..self.active] {
+            engine.count_span(span, passed);
+        }
+    }
+
+    /// Time one fragment that sends no hit word, readable from `ready`: it starts in
+    /// `max(ready, free)` and leaves when done counting. Returns its start cycle.
+    #[inline]
+    pub fn time_without_hits(&mut self, ready: u64, query_open: bool) -> u64 {
+        let start = ready.max(self.free);
+        self.complete(start, start + self.service_cycles - 1, query_open);
+        start
+    }
+
+    /// Time `count` fragments that send no hit word, readable from `first_ready` and each one
+    /// cycle after the one before, under a one-cycle service (a fast-forward): they start in
+    /// consecutive cycles, as `count` calls of [`Self::time_without_hits`] give. Returns the
+    /// first one's start.
+    #[inline]
+    pub fn time_run_without_hits(&mut self, first_ready: u64, count: u64, query_open: bool) -> u64 {
+        debug_assert_eq!(self.service_cycles, 1, "one cycle a fragment");
+        let start = first_ready.max(self.free);
+        self.busy_cycles += count;
+        if query_open {
+            self.query_fragments += count;
+        }
+        self.free = start + count;
+        start
     }
 
     /// The fragment that started in `start` leaves in `leave` (>= start + s - 1).

@@ -102,6 +102,15 @@ impl OccuStage {
         }
     }
 
+    /// The event-timestamp Occlusion Unit, at the cycle fidelity (None at the rtl one, which
+    /// clocks every fragment): what a fast-forward counts and times in bulk.
+    pub fn cycle_unit(&mut self) -> Option<&mut OcclusionUnit> {
+        match self {
+            OccuStage::Cycle { occu, .. } => Some(occu),
+            OccuStage::Rtl(_) => None,
+        }
+    }
+
     /// First cycle the unit is free.
     pub fn free_cycle(&self) -> u64 {
         match self {

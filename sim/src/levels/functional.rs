@@ -212,6 +212,7 @@ impl FunctionalCore {
             latency_p95_cycles: None,
             latency_max_cycles: None,
             effects: None,
+            fast_forwarded_fragments: None,
             sampled_windows: None,
             from_window_index: self.trusting_golden.is_some(),
             queries: self.queries,

@@ -152,6 +152,9 @@ pub struct LevelResult {
     pub latency_max_cycles: Option<u64>,
     /// The effect models the cycle model built (cycle and sampled levels).
     pub effects: Option<Effects>,
+    /// Fragments the cycle model fast-forwarded ([`crate::effects`]; cycle and rtl levels).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fast_forwarded_fragments: Option<u64>,
     pub sampled_windows: Option<SampledWindows>,
     /// Read from the trace's window index, not its fragments: the query results are the
     /// stream's golden ones, taken, not checked (the analytic level on the O2).
@@ -230,6 +233,7 @@ impl LevelResult {
             latency_p95_cycles: None,
             latency_max_cycles: None,
             effects: Some(effects),
+            fast_forwarded_fragments: None,
             sampled_windows: None,
             from_window_index: false,
             queries,
@@ -312,6 +316,14 @@ impl LevelResult {
                     self.level
                 );
             }
+        }
+        if let Some(fast_forwarded) = self.fast_forwarded_fragments {
+            let _ = writeln!(
+                out,
+                "fast-forwarded: {fast_forwarded} of {} fragments ({:.1}%)",
+                self.fragments,
+                crate::report::percent(fast_forwarded, self.fragments)
+            );
         }
         if with_queries {
             self.write_query_table(&mut out);

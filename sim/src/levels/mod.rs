@@ -142,9 +142,7 @@ impl LevelModel {
             LevelModel::Functional(core) => core.span(span),
             LevelModel::Analytic(model) => model.span(span),
             LevelModel::Sampled(model) => model.span(span),
-            LevelModel::Cycle(machine, _, _) => span
-                .fragments()
-                .try_for_each(|fragment| machine.event(&Event::Fragment(fragment))),
+            LevelModel::Cycle(machine, _, _) => machine.span(span),
         }
     }
 
@@ -156,7 +154,9 @@ impl LevelModel {
             LevelModel::Analytic(model) => model.finish()?,
             LevelModel::Sampled(model) => model.finish()?,
             LevelModel::Cycle(machine, effects, level) => {
+                let fast_forwarded = machine.fast_forwarded_fragments();
                 let mut result = LevelResult::from_report(machine.finish()?, effects);
+                result.fast_forwarded_fragments = Some(fast_forwarded);
                 result.level = level;
                 result
             }

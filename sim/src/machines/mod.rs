@@ -18,7 +18,7 @@ use crate::machines::o2::O2Machine;
 use crate::report::Report;
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;
-use occsim_traces::Event;
+use occsim_traces::{Event, Span};
 
 /// A machine being replayed: its pixel pipeline and the closed loop that feeds it.
 pub struct MachineModel {
@@ -243,6 +243,27 @@ impl MachineModel {
         match &mut self.pipe {
             Pipe::O2(machine) => machine.event(event),
             Pipe::Ir(machine) => machine.event(event),
+        }
+    }
+
+    /// Replay a span of fragments: what its fragments one by one give, fast-forwarded
+    /// where the rule of [`crate::effects`] allows it (fragments are no closed-loop records).
+    #[inline]
+    pub fn span(&mut self, span: Span) -> Result<(), SimError> {
+        self.events += span.depths.len() as u64;
+        match &mut self.pipe {
+            Pipe::O2(machine) => machine.span(span),
+            Pipe::Ir(machine) => span
+                .fragments()
+                .try_for_each(|fragment| machine.event(&Event::Fragment(fragment))),
+        }
+    }
+
+    /// Fragments fast-forwarded so far ([`crate::effects`]).
+    pub fn fast_forwarded_fragments(&self) -> u64 {
+        match &self.pipe {
+            Pipe::O2(machine) => machine.fast_forwarded_fragments(),
+            Pipe::Ir(_) => 0,
         }
     }
 

@@ -77,7 +77,7 @@ use crate::report::{
 use crate::timeline::{note, QuerySlice, State, Timeline, Track};
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;
-use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, TileResult};
+use occsim_traces::{Event, Fragment, QueryMode, QueryResult, QuerySpec, Span, TileResult};
 use std::collections::VecDeque;
 
 /// The shortest possible query latency: the end token crosses the FIFO into the depth
@@ -103,6 +103,9 @@ enum Pending {
         arrive: u64,
         /// Cycle its depth data is ready.
         data_ready: u64,
+        /// Its depth test's outcome, when a fast-forward took the test (and counted the
+        /// fragment in the open query's tiles) as the fragment entered ([`O2Machine::span`]).
+        tested: Option<bool>,
     },
     /// A query begin that entered the pipe in `entered`.
     QueryBegin { spec: Box<QuerySpec>, entered: u64 },
@@ -146,6 +149,37 @@ pub struct O2Machine {
     effects: Effects,
     /// Where the blocks' intervals go, if anywhere.
     timeline: Option<Timeline>,
+    /// Fragments taken by a fast-forward ([`Self::span`]).
+    fast_forwarded: u64,
+    /// A fast-forward's scratch (kept to reuse its memory): the fragments the back end tests,
+    /// in order (the queued ones it takes, then the span's as they enter), and the span's
+    /// depth tests' outcomes.
+    span_backs: Vec<Entered>,
+    span_passed: Vec<bool>,
+}
+
+/// A fragment a fast-forward let in: its times through the front end and its depth test's
+/// outcome.
+#[derive(Clone, Copy, Debug)]
+struct Entered {
+    times: FrontTimes,
+    passed: bool,
+}
+
+/// What holds over a fast-forward's span.
+#[derive(Clone, Copy, Debug)]
+struct SpanModes {
+    occlusion_mode: bool,
+    query_open: bool,
+    /// A fragment that passes writes depth or colour.
+    passing_writes: bool,
+}
+
+/// When a fragment is readable from the rasterizer FIFO and its depth data is ready.
+#[derive(Clone, Copy, Debug)]
+struct FrontTimes {
+    arrive: u64,
+    data_ready: u64,
 }
 
 impl O2Machine {
@@ -206,6 +240,9 @@ impl O2Machine {
             last_available: 0,
             effects,
             timeline: build.timeline,
+            fast_forwarded: 0,
+            span_backs: Vec::new(),
+            span_passed: Vec::new(),
         };
         machine.port.set_timeline(machine.timeline.clone());
         if let Some(state) = state {
@@ -282,18 +319,32 @@ impl O2Machine {
         while self.pending_fragments >= self.lookahead {
             self.back_one()?;
         }
-        // The back end lags up to `lookahead` fragments behind: address the FIFO and the
-        // prefetch slots by this fragment's number, not by the departures recorded so far.
-        let index = self.input.fragments as usize;
         let free = self.input.free_cycle();
-        let emitted = self
-            .input
-            .emit(self.raster_to_depth.slot_free_cycle_for(index));
+        let FrontTimes { arrive, data_ready } = self.front_times(fragment);
         if self.timeline.is_some() {
-            let t = &self.timeline;
+            let (t, emitted) = (&self.timeline, arrive - 1);
             note(t, Track::Rasterizer, State::Stalled, free, emitted);
             note(t, Track::Rasterizer, State::Busy, emitted, emitted + 1);
         }
+        self.pending.push_back(Pending::Fragment {
+            fragment,
+            arrive,
+            data_ready,
+            tested: None,
+        });
+        self.pending_fragments += 1;
+        Ok(())
+    }
+
+    /// Emit the next fragment and issue its depth read (rules 1 and 2).
+    #[inline(always)]
+    fn front_times(&mut self, fragment: Fragment) -> FrontTimes {
+        // The back end lags up to `lookahead` fragments behind: address the FIFO and the
+        // prefetch slots by this fragment's number, not by the departures recorded so far.
+        let index = self.input.fragments as usize;
+        let emitted = self
+            .input
+            .emit(self.raster_to_depth.slot_free_cycle_for(index));
         let arrive = emitted + 1;
         let data_ready = self.depth.fetch(
             index,
@@ -302,13 +353,321 @@ impl O2Machine {
             self.front_depth_test,
             &mut self.port,
         );
-        self.pending.push_back(Pending::Fragment {
-            fragment,
-            arrive,
-            data_ready,
-        });
-        self.pending_fragments += 1;
-        Ok(())
+        FrontTimes { arrive, data_ready }
+    }
+
+    /// A span of fragments: fast-forwarded where the rule of [`crate::effects`] allows it,
+    /// otherwise fed one by one.
+    pub fn span(&mut self, span: Span) -> Result<(), SimError> {
+        if self.may_fast_forward(span) {
+            self.fast_forward(span);
+            return Ok(());
+        }
+        span.fragments()
+            .try_for_each(|fragment| self.event(&Event::Fragment(fragment)))
+    }
+
+    /// The fast-forward rule's conditions ([`crate::effects`]): allowed, nothing records
+    /// the blocks' intervals, the Occlusion Unit is the event-timestamp one, the lookahead
+    /// window holds fragments only (no state change or query boundary between them), no
+    /// verbose query is open and the span lies inside the viewport (a fragment outside it is
+    /// an error the fragment-by-fragment path reports).
+    fn may_fast_forward(&mut self, span: Span) -> bool {
+        self.effects.fast_forward
+            && self.timeline.is_none()
+            && self.pending.len() == self.pending_fragments
+            && !self
+                .open
+                .as_ref()
+                .is_some_and(|q| q.spec.mode == QueryMode::Verbose)
+            && span.x as u64 + span.depths.len() as u64 <= self.width as u64
+            && (span.y as u32) < self.height
+            && self.occu.cycle_unit().is_some()
+    }
+
+    /// Replay a span the way its fragments one by one would, in bulk: each unit of work is
+    /// the back end's oldest fragment then the front end's next, as one by one; the
+    /// depth tests and the Occlusion Unit's counts are taken for the whole span at once.
+    fn fast_forward(&mut self, span: Span) {
+        let n = span.depths.len();
+        self.events += n as u64;
+        self.fast_forwarded += n as u64;
+        let occlusion_mode = self
+            .open
+            .as_ref()
+            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
+        let modes = SpanModes {
+            occlusion_mode,
+            query_open: self.open.is_some(),
+            passing_writes: self.depth.writes_if_passed(occlusion_mode),
+        };
+        // Unit k tests a fragment once `lookahead` wait: from unit `first_back` on. The
+        // queued ones go first, then the span's own first `own`; the rest stay queued.
+        let queued = self.pending_fragments;
+        let first_back = self.lookahead.saturating_sub(queued);
+        let backs = n.saturating_sub(first_back);
+        let from_queue = backs.min(queued);
+        let own = backs - from_queue;
+        self.test_all(span, occlusion_mode, modes.query_open);
+        self.take_queued(from_queue);
+        let mut k = 0;
+        while k < n {
+            if k >= first_back {
+                let units = self.run_lockstep(span, k, k - first_back, modes);
+                if units > 0 {
+                    k += units;
+                    continue;
+                }
+                let entered = self.span_backs[k - first_back];
+                self.time_back(
+                    entered.times,
+                    entered.passed,
+                    occlusion_mode,
+                    modes.query_open,
+                );
+            }
+            let x = span.x.wrapping_add(k as u16);
+            let times = self.front_times(Fragment {
+                x,
+                y: span.y,
+                z: span.depths[k],
+            });
+            let passed = self.span_passed[k];
+            self.span_backs.push(Entered { times, passed });
+            k += 1;
+        }
+        for (fragment, entered) in span
+            .fragments()
+            .zip(&self.span_backs[from_queue..])
+            .skip(own)
+        {
+            self.pending.push_back(Pending::Fragment {
+                fragment,
+                arrive: entered.times.arrive,
+                data_ready: entered.times.data_ready,
+                tested: Some(entered.passed),
+            });
+        }
+        self.pending_fragments = queued - from_queue + (n - own);
+        if let Some(query) = &mut self.open {
+            query.fragments += backs as u64;
+        }
+    }
+
+    /// The first `count` queued fragments, taken from the queue to be tested first.
+    fn take_queued(&mut self, count: usize) {
+        self.span_backs.clear();
+        for _ in 0..count {
+            let Some(Pending::Fragment {
+                arrive,
+                data_ready,
+                tested: Some(passed),
+                ..
+            }) = self.pending.pop_front()
+            else {
+                unreachable!("the fast-forward rule: the lookahead window holds fragments only");
+            };
+            let times = FrontTimes { arrive, data_ready };
+            self.span_backs.push(Entered { times, passed });
+        }
+    }
+
+    /// Run units from unit `k` of a fast-forward (whose back end tests its `back`-th
+    /// fragment) in lockstep, the rule of [`crate::effects`]: every block takes one fragment
+    /// a cycle and nothing waits; the port requests (the tested fragment's writes, then the
+    /// entering one's depth read) are made in their order, exactly. Returns the units run
+    /// (0 when the rule does not hold for the first).
+    ///
+    /// The departures the run's FIFO slots depend on were recorded before it (checked here
+    /// first) or are the run's own, in closed form (a bound on the run's start); each unit's
+    /// tested fragment is checked before any of the unit's requests is made, so the run
+    /// stops with every block's state that of the units run.
+    fn run_lockstep(&mut self, span: Span, k: usize, back: usize, modes: SpanModes) -> usize {
+        let occu_free = match self.occu.cycle_unit() {
+            Some(unit) if unit.service_cycles() == 1 => unit.free_cycle(),
+            _ => return 0,
+        };
+        // Unit u emits in a + u, tests in d + u, requests its depth in q + u.
+        let (a, d) = (self.input.free_cycle(), self.depth.free_cycle());
+        let q = self
+            .depth
+            .prefetch
+            .last_request()
+            .map_or(a + 1, |last| (a + 1).max(last + 1));
+        let most = self.lockstep_bound(span.depths.len() - k, a, d, q, occu_free);
+        let read = self.front_depth_test;
+        let mut units = 0;
+        // A word at a time: its first fragment's fetch (a depth read unless it is the last
+        // read's word), its others' word hits, which request nothing of the port.
+        while units < most {
+            let x = span.x.wrapping_add((k + units) as u16);
+            let word = match read {
+                true => self.depth.prefetch.pixels_left_in_word(x) as usize,
+                false => most,
+            };
+            // A unit tests the fragment that entered `lookahead` units before it: at most
+            // that many units' fragments can enter before the first is tested.
+            let word = word.min(most - units).min(self.lookahead);
+            if !self.lockstep_back(back + units, d + units as u64, modes) {
+                break;
+            }
+            let port = &mut self.port;
+            let data_ready = self
+                .depth
+                .prefetch
+                .fetch_at(q + units as u64, x, span.y, read, port);
+            let taken = (units + 1..units + word)
+                .find(|&unit| !self.lockstep_back(back + unit, d + unit as u64, modes))
+                .unwrap_or(units + word)
+                - units;
+            let last_request = q + (units + taken) as u64 - 1;
+            self.depth
+                .prefetch
+                .fetch_word_hits(taken as u64 - 1, last_request, read);
+            let passed = &self.span_passed[k + units..k + units + taken];
+            self.span_backs
+                .extend(passed.iter().enumerate().map(|(i, &passed)| Entered {
+                    times: FrontTimes {
+                        arrive: a + (units + i) as u64 + 1,
+                        data_ready,
+                    },
+                    passed,
+                }));
+            units += taken;
+            if taken < word {
+                break;
+            }
+        }
+        self.advance_lockstep(units, modes.query_open);
+        units
+    }
+
+    /// Advance the blocks over the `units` of a lockstep run, one fragment a cycle each, in
+    /// closed form: what its units one by one give.
+    fn advance_lockstep(&mut self, units: usize, query_open: bool) {
+        if units == 0 {
+            return;
+        }
+        self.input.emit_run(units as u64);
+        let tested = self.depth.time_run(units);
+        self.raster_to_depth.depart_run(tested, units);
+        let Some(unit) = self.occu.cycle_unit() else {
+            unreachable!("the fast-forward rule: the cycle-level Occlusion Unit");
+        };
+        let start = unit.time_run_without_hits(tested + 1, units as u64, query_open);
+        self.depth_to_occu.depart_run(start, units);
+    }
+
+    /// The back end's `back`-th fragment of a fast-forward in a lockstep run, tested in
+    /// `cycle`: false, with nothing changed, unless it is readable with its depth data by
+    /// then and has a write-buffer slot if it writes; true once its writes are made.
+    #[inline(always)]
+    fn lockstep_back(&mut self, back: usize, cycle: u64, modes: SpanModes) -> bool {
+        let Entered { times, passed } = self.span_backs[back];
+        if times.arrive > cycle || times.data_ready > cycle {
+            return false;
+        }
+        !(passed && modes.passing_writes)
+            || self
+                .depth
+                .write_in_lockstep(passed, modes.occlusion_mode, cycle, &mut self.port)
+    }
+
+    /// The most units (of `most`) a lockstep run from emission cycle `a`, test cycle `d` and
+    /// request cycle `q` may take before a FIFO slot could make a block wait: the slots of
+    /// its first units come from departures recorded before it, the later ones from the
+    /// run's own, `capacity - lookahead` units (the depth-to-OccU FIFO: its capacity) back.
+    fn lockstep_bound(&self, most: usize, a: u64, d: u64, q: u64, occu_free: u64) -> usize {
+        let index = self.input.fragments as usize;
+        let within = |units: usize, recorded: usize, slot: &dyn Fn(usize) -> u64, ok: u64| {
+            let first_late = (0..units.min(recorded)).find(|&u| slot(u) > ok + u as u64);
+            first_late.unwrap_or(units)
+        };
+        // Depth-to-OccU slots: the run's own OccU starts are max(d + 1, occu_free) + u.
+        let c2 = self.depth_to_occu.capacity();
+        let mut units = within(
+            most,
+            c2,
+            &|u| self.depth_to_occu.slot_free_cycle_ahead(u),
+            d,
+        );
+        if units > c2 && occu_free > d + c2 as u64 {
+            units = c2;
+        }
+        // Rasterizer FIFO and prefetch slots: the run's own tests are in d + u.
+        let c = self.raster_to_depth.capacity() - self.lookahead;
+        let raster = |u: usize| self.raster_to_depth.slot_free_cycle_for(index + u);
+        units = within(units, c, &raster, a);
+        if units > c && d > a + c as u64 {
+            units = c;
+        }
+        let p = self.depth.prefetch.slots() - self.lookahead;
+        let prefetch = |u: usize| self.depth.prefetch.slot_free_cycle_for(index + u);
+        units = within(units, p, &prefetch, q);
+        if units > p && d > q + p as u64 {
+            units = p;
+        }
+        units
+    }
+
+    /// A fast-forward's depth tests and counts, all as the span enters: first the queued
+    /// fragments' not yet taken (they come earlier and may touch the same pixels), one by
+    /// one, then the span's at once. With no state change or query boundary queued, each
+    /// is tested under the state and counted in the query it would meet one by one.
+    fn test_all(&mut self, span: Span, occlusion_mode: bool, query_open: bool) {
+        for item in &mut self.pending {
+            let Pending::Fragment {
+                fragment, tested, ..
+            } = item
+            else {
+                unreachable!("the fast-forward rule: the lookahead window holds fragments only");
+            };
+            if tested.is_none() {
+                let passed = self.depth.test_fragment(*fragment, occlusion_mode);
+                if let (true, Some(unit)) = (query_open, self.occu.cycle_unit()) {
+                    let hit_words = unit.count(*fragment, passed);
+                    debug_assert_eq!(hit_words, 0, "no verbose query is open");
+                }
+                *tested = Some(passed);
+            }
+        }
+        self.depth
+            .test_span(span, occlusion_mode, &mut self.span_passed);
+        if let (true, Some(unit)) = (query_open, self.occu.cycle_unit()) {
+            unit.count_span(span, &self.span_passed);
+        }
+    }
+
+    /// The back end's timing of a fragment already tested and counted (rules 3 and 4
+    /// without hit words).
+    #[inline(always)]
+    fn time_back(
+        &mut self,
+        times: FrontTimes,
+        passed: bool,
+        occlusion_mode: bool,
+        query_open: bool,
+    ) {
+        let out_slot = self.depth_to_occu.slot_free_cycle();
+        let cycle = self.depth.time(
+            passed,
+            times.arrive,
+            times.data_ready,
+            out_slot,
+            occlusion_mode,
+            &mut self.port,
+        );
+        self.raster_to_depth.depart(cycle);
+        let Some(unit) = self.occu.cycle_unit() else {
+            unreachable!("the fast-forward rule: the cycle-level Occlusion Unit");
+        };
+        let start = unit.time_without_hits(cycle + 1, query_open);
+        self.depth_to_occu.depart(start);
+    }
+
+    /// Fragments fast-forwarded so far.
+    pub fn fast_forwarded_fragments(&self) -> u64 {
+        self.fast_forwarded
     }
 
     /// Back end: process the oldest pending item.
@@ -318,9 +677,14 @@ impl O2Machine {
                 fragment,
                 arrive,
                 data_ready,
+                tested,
             }) => {
                 self.pending_fragments -= 1;
-                self.back_fragment(fragment, arrive, data_ready);
+                let times = FrontTimes { arrive, data_ready };
+                match tested {
+                    None => self.back_fragment(fragment, times),
+                    Some(passed) => self.back_tested(times, passed),
+                }
             }
             Some(Pending::QueryBegin { spec, entered }) => self.begin(&spec, entered),
             Some(Pending::QueryEnd { entered, event }) => self.end(entered, event)?,
@@ -342,8 +706,22 @@ impl O2Machine {
         Ok(())
     }
 
+    /// A fragment a fast-forward tested and counted as it entered, tested now: timed only.
+    fn back_tested(&mut self, times: FrontTimes, passed: bool) {
+        let occlusion_mode = self
+            .open
+            .as_ref()
+            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
+        let query_open = self.open.is_some();
+        self.time_back(times, passed, occlusion_mode, query_open);
+        if let Some(query) = &mut self.open {
+            query.fragments += 1;
+        }
+    }
+
     #[inline]
-    fn back_fragment(&mut self, fragment: Fragment, arrive: u64, data_ready: u64) {
+    fn back_fragment(&mut self, fragment: Fragment, times: FrontTimes) {
+        let FrontTimes { arrive, data_ready } = times;
         let query_open = self.open.is_some();
         let occlusion_mode = self
             .open

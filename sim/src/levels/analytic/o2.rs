@@ -318,7 +318,7 @@ impl O2Bottleneck {
                 let read = self.last_read.read(word, page);
                 stretch.depth_reads += (read != DepthRead::SameWord) as u64;
                 stretch.page_misses += (read == DepthRead::PageMiss) as u64;
-                let next = self.address.word_end(x as u16).min(end);
+                let next = (x + self.address.pixels_left_in_word(x as u16)).min(end);
                 // The last fragment reads anew only when it starts its word's run.
                 if x == last_x {
                     stretch.last_read = read;
