@@ -33,8 +33,37 @@ pub struct FunctionalCore {
 impl FunctionalCore {
     pub fn new(width: u32, height: u32) -> Result<FunctionalCore, SimError> {
         crate::error::check_viewport(width, height)?;
-        Ok(FunctionalCore {
-            functional: FunctionalModel::new(width, height),
+        Ok(FunctionalCore::with_model(
+            FunctionalModel::new(width, height),
+            width,
+            height,
+            None,
+        ))
+    }
+
+    /// A core for a stream without fragments (a window index): fragments are counted by
+    /// [`Self::count_fragments`], render state and queries follow the events, and each
+    /// query's result is the golden result the stream carries right after its end.
+    pub fn trusting_golden(width: u32, height: u32) -> Result<FunctionalCore, SimError> {
+        crate::error::check_viewport(width, height)?;
+        // No fragment reaches the model: it keeps the render state and the open query, and
+        // a one-pixel depth buffer spares allocating and filling the viewport's.
+        Ok(FunctionalCore::with_model(
+            FunctionalModel::new(1, 1),
+            width,
+            height,
+            Some(None),
+        ))
+    }
+
+    fn with_model(
+        functional: FunctionalModel,
+        width: u32,
+        height: u32,
+        trusting_golden: Option<Option<u64>>,
+    ) -> FunctionalCore {
+        FunctionalCore {
+            functional,
             width,
             height,
             events: 0,
@@ -45,18 +74,8 @@ impl FunctionalCore {
             queries: Vec::new(),
             fragments: 0,
             primitives: 0,
-            trusting_golden: None,
-        })
-    }
-
-    /// A core for a stream without fragments (a window index): fragments are counted by
-    /// [`Self::count_fragments`], render state and queries follow the events, and each
-    /// query's result is the golden result the stream carries right after its end.
-    pub fn trusting_golden(width: u32, height: u32) -> Result<FunctionalCore, SimError> {
-        Ok(FunctionalCore {
-            trusting_golden: Some(None),
-            ..FunctionalCore::new(width, height)?
-        })
+            trusting_golden,
+        }
     }
 
     /// `count` fragments passed, whose effects on the depth buffer the caller does not need.

@@ -369,19 +369,24 @@ impl SampledModel {
         Ok(())
     }
 
-    /// A span of fragments: the formulas and the functional model take it whole, a running
-    /// machine fragment by fragment.
+    /// A span of fragments: the formulas, the functional model and a running machine take it
+    /// whole (the machine no further than its cool-down's end).
     pub fn span(&mut self, span: Span) -> Result<(), SimError> {
         self.close_ended_window()?;
         self.core.check_span(span)?;
         self.formulas.span(span, &self.core.functional);
-        for fragment in span.fragments() {
-            let Some(run) = &mut self.run else {
-                break;
-            };
-            run.machine.event(&Event::Fragment(fragment))?;
+        if let Some(run) = &mut self.run {
+            // The machine takes the span whole (it may fast-forward it), or up to the end of
+            // its cool-down.
+            let taken = run
+                .cooldown
+                .map_or(span.depths.len(), |left| left.min(span.depths.len()));
+            run.machine.span(Span {
+                depths: &span.depths[..taken],
+                ..span
+            })?;
             if let Some(left) = &mut run.cooldown {
-                *left -= 1;
+                *left -= taken;
                 if *left == 0 {
                     self.flush_run()?;
                 }
