@@ -36,7 +36,8 @@
 //! model takes a span of fragments (a row run, as traces hand them on) in bulk where a rule,
 //! checked as the replay goes, proves the bulk path gives what the fragments one by one give
 //! ([`crate::machines::o2::O2Machine::span`]; `replay` reports how many fragments it took).
-//! The InfiniteReality-like machine, the sampled level and a replay with a timeline or at
+//! The sampled level's machines fast-forward too (they take the trace's spans whole, up to
+//! a cool-down's end). The InfiniteReality-like machine and a replay with a timeline or at
 //! the rtl fidelity (which clock or record every fragment) take fragments one by one.
 //!
 //! A span is fast-forwarded when nothing records the blocks' intervals, the Occlusion Unit is

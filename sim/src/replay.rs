@@ -60,11 +60,13 @@ impl ReplayOptions {
         }
     }
 
-    /// The cycle level with every effect model: what sweeps and latency reports run.
+    /// The cycle level with the automatic effects choice (the report every effect model
+    /// gives, sooner: fast-forward included): what sweeps, latency and sensitivity reports
+    /// run.
     pub fn cycle(retile: Option<TileGrid>) -> ReplayOptions {
         ReplayOptions {
             level: Fidelity::Cycle,
-            effects: EffectsChoice::All,
+            effects: EffectsChoice::Auto,
             retile,
             waveform: None,
             timeline: None,
