@@ -342,6 +342,28 @@ mod tests {
         );
     }
 
+    #[test]
+    fn a_truncated_or_flipped_indexed_trace_is_a_clean_error_by_either_reading() {
+        let (events, _) = worked_example();
+        let bytes = indexed(&events);
+        for len in 0..bytes.len() {
+            assert!(index_of(&bytes[..len]).is_err(), "cut at {len} read fine");
+            let mut read = Vec::new();
+            let by_events = TraceReader::new(&bytes[..len]).and_then(|mut reader| {
+                reader
+                    .read_into(&mut read)
+                    .map_err(crate::trace::ReadError::into_trace)
+            });
+            assert!(by_events.is_err(), "cut at {len} read fine");
+        }
+        // A flipped bit anywhere after the file header: a checksum or a field names it.
+        for at in first_block_offset(&bytes)..bytes.len() {
+            let mut flipped = bytes.clone();
+            flipped[at] ^= 0x10;
+            assert!(index_of(&flipped).is_err(), "a flip at {at} read fine");
+        }
+    }
+
     /// Where the first block starts: after the magic, version, flags, JSON length, JSON and
     /// its CRC.
     fn first_block_offset(bytes: &[u8]) -> usize {
