@@ -157,8 +157,10 @@ impl AnalyticModel {
 
     /// Whether the analytic level of `arch` can replay a trace with `header` from its window
     /// index alone ([`occsim_traces::trace::index`]): the O2 formulas, whose counts a
-    /// stretch holds, at the depth layout the index was counted at. (The IR's count each
-    /// Image Engine's fragments, which depend on its interleave: they decode the events.)
+    /// stretch holds, at the depth layout the index was counted at, on a trace whose header
+    /// says it carries golden results (or has no query) to stand for the results fragments
+    /// would give. (The IR's formulas count each Image Engine's fragments, which depend on
+    /// its interleave: they decode the events.)
     pub fn reads_window_index(arch: &Arch, header: &TraceHeader) -> bool {
         let Some(layout) = header.window_index else {
             return false;
