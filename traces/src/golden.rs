@@ -256,31 +256,9 @@ fn record_in_tile(result: &mut TileResult, fragment: Fragment, passed: bool, hit
 /// the counters and bounds once, the hits in order.
 #[inline]
 fn record_run(result: &mut TileResult, run: Span, passed: &[bool], hits: HitRoom) {
-    result.phc += run.depths.len() as u64;
-    // One whole-run reduction without branches per fragment (it vectorises).
-    // (A passing fragment's mask is all ones, a failing one's zero; a run is at most
-    // 65,536 fragments, so the count fits 32 bits.)
-    let (mut count, mut zmin, mut zmax) = (0u32, u32::MAX, 0u32);
-    for (&z, &pass) in run.depths.iter().zip(passed) {
-        let mask = (pass as u32).wrapping_neg();
-        count += pass as u32;
-        zmin = zmin.min(z | !mask);
-        zmax = zmax.max(z & mask);
-    }
-    let count = count as u64;
-    if count == 0 {
+    let Some((first, last)) = result.record_run(run.x, run.y, run.depths, passed, u64::MAX) else {
         return;
-    }
-    let first = passed.iter().position(|&pass| pass).unwrap_or(0);
-    let last = passed.iter().rposition(|&pass| pass).unwrap_or(0);
-    result.nohc += count;
-    let (x, y) = (run.x as u32, run.y as u32);
-    result.xmin = result.xmin.min(x + first as u32);
-    result.xmax = result.xmax.max(x + last as u32);
-    result.ymin = result.ymin.min(y);
-    result.ymax = result.ymax.max(y);
-    result.zmin = result.zmin.min(zmin);
-    result.zmax = result.zmax.max(zmax);
+    };
     if result.hits.len() < hits.room {
         let room = hits.room - result.hits.len();
         (first..=last)

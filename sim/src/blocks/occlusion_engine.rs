@@ -118,34 +118,14 @@ impl OcclusionEngine {
             if from >= to {
                 continue;
             }
-            let r = &mut tile.result;
-            r.phc = (r.phc + (to - from)).min(counter_max);
             let (first, last) = ((from - span_x) as usize, (to - span_x) as usize);
-            let (passed, depths) = (&passed[first..last], &span.depths[first..last]);
-            // x grows along the span: the box's x ends are the first and last passing.
-            let (Some(first_pass), Some(last_pass)) = (
-                passed.iter().position(|&p| p),
-                passed.iter().rposition(|&p| p),
-            ) else {
-                continue;
-            };
-            let passes = passed.iter().filter(|&&p| p).count() as u64;
-            let (zmin, zmax) =
-                depths
-                    .iter()
-                    .zip(passed)
-                    .fold((u32::MAX, 0), |(lo, hi), (&z, &p)| match p {
-                        true => (lo.min(z), hi.max(z)),
-                        false => (lo, hi),
-                    });
-            let x = from as u32;
-            r.nohc = (r.nohc + passes).min(counter_max);
-            r.xmin = r.xmin.min(x + first_pass as u32);
-            r.xmax = r.xmax.max(x + last_pass as u32);
-            r.ymin = r.ymin.min(y);
-            r.ymax = r.ymax.max(y);
-            r.zmin = r.zmin.min(zmin);
-            r.zmax = r.zmax.max(zmax);
+            tile.result.record_run(
+                from as u16,
+                span.y,
+                &span.depths[first..last],
+                &passed[first..last],
+                counter_max,
+            );
         }
     }
 
