@@ -24,10 +24,18 @@ pub struct FunctionalCore {
     queries: Vec<QueryOutcome>,
     fragments: u64,
     primitives: u64,
-    /// Results come from the stream's golden results, not from fragments (a window-index
-    /// replay, which sees no fragment): the fragments counted when the query ended, until
-    /// its golden result arrives.
-    trusting_golden: Option<Option<u64>>,
+    /// Where query results come from.
+    results: ResultSource,
+}
+
+/// Where a core's query results come from.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum ResultSource {
+    /// The functional model, checked against the stream's golden results.
+    Computed,
+    /// The stream's golden results, taken (a window-index replay sees no fragment); holds
+    /// the fragments counted when a query ended, until its golden result arrives.
+    Golden { ended_with: Option<u64> },
 }
 
 impl FunctionalCore {
@@ -37,7 +45,7 @@ impl FunctionalCore {
             FunctionalModel::new(width, height),
             width,
             height,
-            None,
+            ResultSource::Computed,
         ))
     }
 
@@ -52,7 +60,7 @@ impl FunctionalCore {
             FunctionalModel::new(1, 1),
             width,
             height,
-            Some(None),
+            ResultSource::Golden { ended_with: None },
         ))
     }
 
@@ -60,7 +68,7 @@ impl FunctionalCore {
         functional: FunctionalModel,
         width: u32,
         height: u32,
-        trusting_golden: Option<Option<u64>>,
+        results: ResultSource,
     ) -> FunctionalCore {
         FunctionalCore {
             functional,
@@ -74,13 +82,13 @@ impl FunctionalCore {
             queries: Vec::new(),
             fragments: 0,
             primitives: 0,
-            trusting_golden,
+            results,
         }
     }
 
     /// `count` fragments passed, whose effects on the depth buffer the caller does not need.
     pub(crate) fn count_fragments(&mut self, count: u64) {
-        debug_assert!(self.trusting_golden.is_some());
+        debug_assert!(self.results != ResultSource::Computed);
         self.events += count;
         self.fragments += count;
         self.open_fragments += count;
@@ -165,15 +173,18 @@ impl FunctionalCore {
                     id: *id,
                 });
             }
-            Event::QueryResult(golden) if self.trusting_golden.is_some() => {
+            Event::QueryResult(golden) if self.results != ResultSource::Computed => {
                 self.events += 1;
-                let fragments = self.trusting_golden.and_then(|ended| ended).ok_or(
-                    SimError::ResultWithoutQuery {
+                let ResultSource::Golden {
+                    ended_with: Some(fragments),
+                } = self.results
+                else {
+                    return Err(SimError::ResultWithoutQuery {
                         event: index,
                         id: golden.id,
-                    },
-                )?;
-                self.trusting_golden = Some(None);
+                    });
+                };
+                self.results = ResultSource::Golden { ended_with: None };
                 self.queries.push(QueryOutcome::of(golden, fragments));
                 return Ok(Some(golden.clone()));
             }
@@ -188,9 +199,9 @@ impl FunctionalCore {
         }
         self.events += 1;
         let ended = self.functional.event(event);
-        if let (Some(awaiting), Some(_)) = (&mut self.trusting_golden, &ended) {
+        if let (ResultSource::Golden { ended_with }, Some(_)) = (&mut self.results, &ended) {
             // Without fragments the model's result is empty: the golden one stands for it.
-            if awaiting.replace(self.open_fragments).is_some() {
+            if ended_with.replace(self.open_fragments).is_some() {
                 return Err(SimError::MissingGolden);
             }
             return Ok(None);
@@ -213,7 +224,10 @@ impl FunctionalCore {
         if let Some(id) = self.open {
             return Err(SimError::OpenAtEnd { id });
         }
-        if let Some(Some(_)) = self.trusting_golden {
+        if let ResultSource::Golden {
+            ended_with: Some(_),
+        } = self.results
+        {
             return Err(SimError::MissingGolden);
         }
         Ok(LevelResult {
@@ -233,7 +247,7 @@ impl FunctionalCore {
             effects: None,
             fast_forwarded_fragments: None,
             sampled_windows: None,
-            from_window_index: self.trusting_golden.is_some(),
+            from_window_index: self.results != ResultSource::Computed,
             queries: self.queries,
             frame_cycles: Vec::new(),
             frames_per_second: None,

@@ -169,12 +169,13 @@ pub struct TraceSummary {
     pub stored_bytes: u64,
     /// The window index's blocks, when the trace has one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub window_index: Option<IndexCounts>,
+    pub window_index: Option<BlockCounts>,
 }
 
-/// What the window index takes ([`crate::trace::index`]).
+/// Blocks of one kind and their bytes (the summary's `window_index` counts the window
+/// index's, [`crate::trace::index`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub struct IndexCounts {
+pub struct BlockCounts {
     pub blocks: u64,
     /// Payload bytes before compression.
     pub payload_bytes: u64,

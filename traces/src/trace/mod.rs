@@ -48,7 +48,7 @@ pub use block::{
 pub use codec::MAX_EVENT_BYTES;
 pub use error::{ReadError, TraceError};
 pub use header::{
-    ClosedLoopCounts, IndexCounts, QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary,
+    BlockCounts, ClosedLoopCounts, QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary,
 };
 pub use index::{FragmentStretch, IndexItem};
 pub use reader::TraceReader;

@@ -2,7 +2,7 @@
 
 use super::block::*;
 use super::codec::{BlockDecoder, DecodeContext, DrainError, PayloadError};
-use super::header::{IndexCounts, StreamTally, TraceHeader, TraceSummary};
+use super::header::{BlockCounts, StreamTally, TraceHeader, TraceSummary};
 use super::index::IndexItem;
 use super::{ReadError, TraceError};
 use crate::event::Event;
@@ -35,7 +35,7 @@ pub struct TraceReader<R: Read> {
     /// Some blocks were skipped, not decoded: the event tally is incomplete.
     skipped: bool,
     /// The window-index blocks passed so far.
-    index: IndexCounts,
+    index: BlockCounts,
     /// The block loaded is a window-index block (read by [`TraceReader::next_index_item`]).
     in_index_block: bool,
     summary: Option<TraceSummary>,
@@ -76,7 +76,7 @@ impl<R: Read> TraceReader<R> {
             stored_bytes: 0,
             claimed_events: 0,
             skipped: false,
-            index: IndexCounts::default(),
+            index: BlockCounts::default(),
             in_index_block: false,
             summary: None,
             failed: false,

@@ -5,7 +5,7 @@ use super::codec::{
     encode_large_event, encode_small_event, encode_span, put_uv, span_bytes_bound, tag,
     SpanPredictor, MAX_EVENT_BYTES, MAX_SPAN_FRAGMENTS,
 };
-use super::header::{IndexCounts, StreamTally, TraceHeader, TraceSummary};
+use super::header::{BlockCounts, StreamTally, TraceHeader, TraceSummary};
 use super::index::{FragmentStretch, WindowIndexer};
 use super::TraceError;
 use crate::depth_layout::DepthLayout;
@@ -40,7 +40,7 @@ struct OpenBlock {
     payload: Vec<u8>,
     /// Items completed in the payload (events; for the index, its items).
     items: u32,
-    written: IndexCounts,
+    written: BlockCounts,
 }
 
 impl OpenBlock {
@@ -49,7 +49,7 @@ impl OpenBlock {
             kind,
             payload: Vec::new(),
             items: 0,
-            written: IndexCounts::default(),
+            written: BlockCounts::default(),
         }
     }
 }
