@@ -19,6 +19,7 @@ use super::codec::{put_uv, tag};
 use crate::depth_layout::{DepthAddress, DepthLayout, DepthRead, LastRead};
 use crate::event::{Event, Fragment};
 use crate::golden::FunctionalModel;
+use crate::state::RenderState;
 
 /// What a run of fragments between two other events asks of the O2-like machine's blocks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -37,13 +38,40 @@ pub struct FragmentStretch {
 }
 
 impl FragmentStretch {
-    const EMPTY: FragmentStretch = FragmentStretch {
+    /// No fragment yet.
+    pub const EMPTY: FragmentStretch = FragmentStretch {
         fragments: 0,
         depth_reads: 0,
         page_misses: 0,
         passed: 0,
         last_read: DepthRead::SameWord,
     };
+
+    /// Count one fragment (inside the viewport) drawn under `state`: its depth read by the
+    /// layout's `address` after `last_read`, and whether it passes against the depth
+    /// `stored` at its pixel and draws (`draws`: no occlusion-render-mode query is open).
+    #[inline]
+    pub fn count_fragment(
+        &mut self,
+        fragment: Fragment,
+        state: &RenderState,
+        stored: u32,
+        depth: (&DepthAddress, &mut LastRead),
+        draws: bool,
+    ) {
+        self.fragments += 1;
+        self.last_read = DepthRead::SameWord;
+        if !state.depth_test {
+            return;
+        }
+        let (address, last_read) = depth;
+        let (word, page) = address.locate(fragment.x, fragment.y);
+        let read = last_read.read(word, page);
+        self.depth_reads += (read != DepthRead::SameWord) as u64;
+        self.page_misses += (read == DepthRead::PageMiss) as u64;
+        self.last_read = read;
+        self.passed += (draws && state.depth_func.passes(fragment.z, stored)) as u64;
+    }
 
     /// Bytes a stretch record takes at most: a tag, four 10-byte varints and a byte.
     pub(crate) const MAX_BYTES: usize = 42;
@@ -109,21 +137,14 @@ impl WindowIndexer {
     /// Count a fragment (inside the viewport) and apply it.
     #[inline]
     pub(crate) fn fragment(&mut self, fragment: Fragment) {
-        let state = self.functional.state();
-        let stretch = &mut self.stretch;
-        stretch.fragments += 1;
-        stretch.last_read = DepthRead::SameWord;
-        if state.depth_test {
-            let (word, page) = self.address.locate(fragment.x, fragment.y);
-            let read = self.last_read.read(word, page);
-            stretch.depth_reads += (read != DepthRead::SameWord) as u64;
-            stretch.page_misses += (read == DepthRead::PageMiss) as u64;
-            stretch.last_read = read;
-            if !self.occlusion_mode {
-                let stored = self.functional.depth_buffer().get(fragment.x, fragment.y);
-                stretch.passed += state.depth_func.passes(fragment.z, stored) as u64;
-            }
-        }
+        let stored = self.functional.depth_buffer().get(fragment.x, fragment.y);
+        self.stretch.count_fragment(
+            fragment,
+            self.functional.state(),
+            stored,
+            (&self.address, &mut self.last_read),
+            !self.occlusion_mode,
+        );
         self.functional.fragment(fragment);
     }
 

@@ -247,51 +247,15 @@ impl O2Bottleneck {
     /// Count one fragment's work (before `functional` applies it).
     #[inline]
     pub(super) fn fragment(&mut self, fragment: Fragment, functional: &FunctionalModel) {
-        let state = functional.state();
-        let lookahead = self.formulas.lookahead() as u64;
-        let w = &mut self.window;
-        w.fragments += 1;
-        if w.recent_clears > 0 {
-            w.fragments_after_clear += 1;
-            if w.fragments_after_clear >= lookahead {
-                w.recent_clears = 0;
-            }
-        }
-        w.occu_cycles += self.open.map_or(1, |(service, _)| service);
-        w.last_read_latency = 0;
-        let arch = &self.formulas.arch;
-        let occlusion_mode = self.open.is_some_and(|(_, mode)| mode);
-        if !state.depth_test {
-            // Every fragment passes: it draws outside an occlusion render mode.
-            if !occlusion_mode && arch.colour_bits_per_pixel > 0 {
-                w.colour_writes += 1;
-                w.colour_reads += arch.blending as u64;
-            }
-            return;
-        }
-        let (word, page) = self.address.locate(fragment.x, fragment.y);
-        match self.last_read.read(word, page) {
-            DepthRead::SameWord => {}
-            DepthRead::PageHit => {
-                w.depth_reads += 1;
-                w.last_read_latency = arch.page_hit_latency_cycles;
-            }
-            DepthRead::PageMiss => {
-                w.depth_reads += 1;
-                w.page_misses += 1;
-                w.last_read_latency = arch.page_miss_latency_cycles;
-            }
-        }
-        if !occlusion_mode {
-            let stored = functional.depth_buffer().get(fragment.x, fragment.y);
-            if state.depth_func.passes(fragment.z, stored) {
-                w.depth_writes += state.depth_mask as u64;
-                if arch.colour_bits_per_pixel > 0 {
-                    w.colour_writes += 1;
-                    w.colour_reads += arch.blending as u64;
-                }
-            }
-        }
+        let mut stretch = FragmentStretch::EMPTY;
+        stretch.count_fragment(
+            fragment,
+            functional.state(),
+            functional.depth_buffer().get(fragment.x, fragment.y),
+            (&self.address, &mut self.last_read),
+            !self.open.is_some_and(|(_, mode)| mode),
+        );
+        self.stretch(&stretch, functional.state());
     }
 
     /// Count a span's fragments (inside the viewport, before `functional` applies it), as
