@@ -340,18 +340,12 @@ fn analytic_reaches_the_minimum_latency_on_an_idle_ir() {
     }
 }
 
-#[test]
-fn analytic_ir_sees_the_busiest_image_engine() {
-    // ir1 with 2 Image Engines (columns: even x to 0, odd x to 1), 45 cycles a fragment,
-    // FIFOs of 8: one primitive of 20 fragments, all in column 0. The busiest engine does
-    // 20 · 45 = 900 cycles, 8 · 45 = 360 of them hidden behind its FIFO while the generator
-    // goes on: the window costs 900 - 360 = 540 (the generator alone: setup 4 + 10).
-    // The query's latency: that engine's FIFO and the fragment in it, 9 · 45 = 405, + 3,
-    // + one hop in the local tree (its 8 words over a 32-bit link, 8, and 2 of latency),
-    // no global hop for one board, and the DMA of 8 words at 16 bits a cycle, 16: 434.
+/// ir1 with 2 Image Engines (columns: even x to 0, odd x to 1) and an unpipelined 45-cycle
+/// depth stage (interval = latency = 45), and a one-tile samples query over one primitive
+/// of 20 fragments for each column in `columns`, in turn.
+fn two_engine_ir_stream(columns: &[u16]) -> (Arch, Vec<Event>) {
     let mut arch = Arch::builtin("ir1").unwrap();
     arch.set("image_engines_per_board=2").unwrap();
-    // An unpipelined 45-cycle depth stage: interval = latency = 45.
     arch.set("image_engine_cycles_per_fragment=45").unwrap();
     arch.set("image_engine_latency_cycles=45").unwrap();
     let spec = QuerySpec {
@@ -360,20 +354,79 @@ fn analytic_ir_sees_the_busiest_image_engine() {
         buffer_entries: 8,
         tiles: vec![Rect::new(0, 0, 16, 32)],
     };
-    let mut events = vec![Event::QueryBegin(spec), Event::Primitive];
-    events.extend((0..20).map(|y| Event::Fragment(Fragment { x: 0, y, z: 7 })));
+    let mut events = vec![Event::QueryBegin(spec)];
+    for &x in columns {
+        events.push(Event::Primitive);
+        events.extend((0..20).map(|y| Event::Fragment(Fragment { x, y, z: 7 })));
+    }
     events.push(Event::QueryEnd);
-    let analytic = run_level(
-        Fidelity::Analytic,
-        &arch,
-        16,
-        32,
-        EffectsChoice::Auto,
-        &events,
+    (arch, events)
+}
+
+/// (total cycles, the query's latency) at `level`.
+fn cycles_and_latency(level: Fidelity, arch: &Arch, events: &[Event]) -> (u64, u64) {
+    let result = run_level(level, arch, 16, 32, EffectsChoice::Auto, events).unwrap();
+    (
+        result.total_cycles.unwrap(),
+        result.queries[0].latency_cycles.unwrap(),
     )
-    .unwrap();
-    assert_eq!(analytic.queries[0].latency_cycles, Some(434));
-    assert_eq!(analytic.total_cycles, Some(540 + 434));
+}
+
+#[test]
+fn analytic_ir_sees_the_busiest_image_engine() {
+    // ir1 with 2 Image Engines (columns: even x to 0, odd x to 1), an unpipelined 45-cycle
+    // depth stage, FIFOs of 8: one primitive of 20 fragments, all in column 0, under a
+    // one-tile query (s = 1), so pace = 45.
+    //
+    // The formulas (module docs of `levels::analytic::ir`): start = setup 4, emit = 4 +
+    // ceil(20 / 2) = 14; the engine is through its depth stage at d = max(4 + 20 · 45, 14 +
+    // 45) = 904; it holds Q = 8 + ceil(45 / 45) = 9 fragments, 405 cycles, after the
+    // generator moves on, so g = max(14, 904 - 405) = 499 = T_w. Its last result: d - 45 +
+    // L 45 + s 1 + 1 = 906, so its report is ready in 906; one hop in the local tree (its 8
+    // words over a 32-bit link, 8, and 2 of latency), no global hop for one board, and the
+    // DMA of 8 words at 16 bits a cycle, 16: available 932, latency 932 - 499 = 433.
+    //
+    // The machine (rules of `blocks::image_engine`): fragment k starts its depth test in
+    // s_k = 5 + 45 k (emitted from cycle 4, P = 1), so s_19 = 860 and its result is counted
+    // in 905; fragment 19 is emitted when fragment 11 leaves the FIFO, in s_11 = 500, so the
+    // end token enters in 501. The token passes the depth stage in 905, the OccU in 906, and
+    // the report is ready in 907: available 907 + 10 + 16 = 933, latency 432. The formulas'
+    // window is 2 cycles short of the machine's, their latency 1 long.
+    let (arch, events) = two_engine_ir_stream(&[0]);
+    assert_eq!(
+        cycles_and_latency(Fidelity::Analytic, &arch, &events),
+        (499 + 433, 433)
+    );
+    assert_eq!(
+        cycles_and_latency(Fidelity::Cycle, &arch, &events),
+        (501 + 432, 432)
+    );
+}
+
+#[test]
+fn analytic_ir_overlaps_one_primitive_with_the_next() {
+    // As above, then a second primitive of 20 fragments all in column 1. Engine 0 still has
+    // 405 cycles of the first primitive's work when the generator moves on; engine 1 takes
+    // the second primitive meanwhile. Summing each primitive's own cycles (499 + 499) would
+    // miss that overlap and the backlog the first leaves; the formulas carry both:
+    // the second starts at g = 499 + setup 4 = 503 and is emitted by 513; engine 1 is through
+    // in d = 503 + 900 = 1403 and holds 405 of it, so T_w = 998. Its last result: 1403 - 45
+    // + 47 = 1405; engine 0's, 906, is long done. Available 1405 + 10 + 16 = 1431, latency
+    // 433, total 1431.
+    //
+    // The machine: the generator is free in 501 and sets the second primitive up until 505;
+    // engine 1 starts fragment k in 506 + 45 k, so fragment 19 of it is emitted when
+    // fragment 11 leaves the FIFO, in 1001: the token enters in 1002. Fragment 19 starts in
+    // 1361 and is counted in 1406; the report is ready in 1408, available 1434, latency 432.
+    let (arch, events) = two_engine_ir_stream(&[0, 1]);
+    assert_eq!(
+        cycles_and_latency(Fidelity::Analytic, &arch, &events),
+        (998 + 433, 433)
+    );
+    assert_eq!(
+        cycles_and_latency(Fidelity::Cycle, &arch, &events),
+        (1002 + 432, 432)
+    );
 }
 
 #[test]
