@@ -459,9 +459,10 @@ fn an_interrupted_corpus_leaves_no_scratch_behind() {
 /// ir2 with 4 engines), each bounded. Issue 15's targets are analytic within 5% on cycles
 /// and 10% on p95 latency, sampled:K within 1% and 3%. A row marked `target` holds its
 /// target; a row marked `today` does not meet it yet and is bounded at the error measured
-/// on 2026-12-02 (`occsim fidelity --corpus --scale small --machines o2,ir2 --engines 4
-/// --no-rtl`), rounded up by a fifth, so that a model change that makes it worse fails
-/// here. Raise a bound only with a reason; lower it when a model gets better.
+/// on 2026-12-02 after the fluid formulas (`occsim fidelity --corpus --scale small
+/// --machines o2,ir2 --engines 4 --no-rtl`), rounded up by a fifth, so that a model change
+/// that makes it worse fails here. Raise a bound only with a reason; lower it when a model
+/// gets better.
 #[test]
 fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     let temp = support::cli::scratch_dir("bounds");
@@ -483,19 +484,22 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     let rows: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
     // (class, analytic cycles, analytic p95, sampled:10 cycles, sampled:10 p95), as fractions:
     // 0.05, 0.10, 0.01 and 0.03 are the targets; any other value is today's bound, with the
-    // error measured in the comment.
+    // error measured in the comment. (a) raised from 6.4% when the analytic formulas became
+    // fluids (issue 15): the sampled level scales its unsimulated windows by the formulas'
+    // cycles, and on the hard cases' 28 windows (3 simulated at K = 10) their new shares
+    // calibrate worse; every other bound fell.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
-        ("demo",              0.05,  0.10, 0.019, 0.52), // sampled 1.52%, p95 42.9%
-        ("retiled-1x1-4x4",   0.05,  0.49, 0.021, 0.51), // p95 40.2%; sampled 1.69%, 42.1%
-        ("retiled-32x32",     0.05,  0.52, 0.25,  0.03), // p95 43.0%; sampled 20.9%
-        ("hardcases",         0.05,  0.10, 0.064, 0.03), // sampled 5.27%
-        ("random",            0.05,  0.27, 0.01,  0.11), // p95 21.7%; sampled p95 8.70%
-        ("walk-frustum",      0.05,  0.10, 0.01,  0.03), // every target
-        ("walk-hierarchical", 0.05,  0.77, 0.084, 0.64), // p95 63.6%; sampled 7.00%, 52.6%
-        ("walk-quadtree",     0.05,  0.51, 0.029, 0.03), // p95 41.9%; sampled 2.35%
-        ("walk-adaptive",     0.05,  0.21, 0.142, 0.54), // p95 17.2%; sampled 11.8%, 45.0%
-        ("walk-grids",        0.05,  0.84, 0.03,  0.39), // p95 69.2%; sampled 2.47%, 31.8%
+        ("demo",              0.05,  0.20,  0.019, 0.20),  // p95 16.7%; sampled 1.54%, 16.7%
+        ("retiled-1x1-4x4",   0.05,  0.10,  0.019, 0.03),  // sampled 1.54%
+        ("retiled-32x32",     0.05,  0.10,  0.013, 0.03),  // sampled 1.02%
+        ("hardcases",         0.05,  0.10,  0.087, 0.03),  // sampled 7.22% (a)
+        ("random",            0.05,  0.10,  0.01,  0.105), // sampled p95 8.70%
+        ("walk-frustum",      0.05,  0.10,  0.01,  0.03),  // every target
+        ("walk-hierarchical", 0.05,  0.219, 0.083, 0.219), // p95 18.2%; sampled 6.91%, 18.2%
+        ("walk-quadtree",     0.05,  0.10,  0.026, 0.03),  // sampled 2.15%
+        ("walk-adaptive",     0.05,  0.18,  0.141, 0.12),  // p95 15.0%; sampled 11.7%, 10.0%
+        ("walk-grids",        0.05,  0.10,  0.029, 0.382), // sampled 2.37%, 31.8%
     ];
     let error = |class: &str, level: &str, metric: &str| -> f64 {
         let row = rows

@@ -1,6 +1,8 @@
-//! The O2-like machine's closed-form bottleneck model: per *window* (the events from just
-//! after one query's end to the next query's end, see [`crate::levels`]) a cheap scan
-//! counts what each block must do:
+//! The O2-like machine's closed-form bottleneck model. The work is counted per *stretch*
+//! (a primitive's fragments; the window index's stretches sum into them) and the pipe is
+//! followed stretch by stretch as a fluid, so that a *window* (the events from just after
+//! one query's end to the next query's end, see [`crate::levels`]) ends with the backlog the
+//! FIFOs really hold. Counts of a stretch:
 //!
 //! | count | meaning |
 //! |---|---|
@@ -8,26 +10,43 @@
 //! | `S` | OccU cycles: `Σ s` over fragments, `s = ceil(tiles / engines)` under an open query (1 with `all_tiles_one_cycle` or no query) |
 //! | `R`, `M` | depth reads (fragments, depth test on, whose memory word differs from the last read's: the prefetch's exact rule) and of them page misses (a different 64 KB page) |
 //! | `W` | depth writes (passing fragments with depth test and mask on, outside brief/verbose queries) |
-//! | `O` | OccU Control words: verbose hit words `Σ_tiles min(NOHC, entries - 8)` plus records `8 · tiles` (+1 terminator per overflowed buffer with room) |
 //! | `K`, `B` | colour writes (passing fragments outside brief/verbose queries, with colour bits) and, under `blending`, as many colour reads |
-//! | `Z` | clears (each `ceil(W H (depth_bits + colour_bits) / V)` port words with `clear_writes_memory`) |
 //!
-//! Throughput of each block over the window, in cycles (`setup` = `primitive_setup_cycles`,
-//! `V` = `memory_port_bits_per_cycle`, `L = min(prefetch_depth_fragments,
-//! fifo_raster_to_depth_entries)`, `λ̄ = (M · page_miss + (R - M) · page_hit) / R`):
+//! The blocks behind the rasterizer take a stretch in (`V` = `memory_port_bits_per_cycle`,
+//! `L = min(prefetch_depth_fragments, fifo_raster_to_depth_entries)`, `λ̄ = (M · page_miss +
+//! (R - M) · page_hit) / R`, `f` the port share the display refresh and the host reserve,
+//! [`crate::arch::O2Arch::reserved_port_share`]):
 //!
 //! ```text
-//! raster   = F + setup · P
-//! depth    = F
+//! depth    = F + ε · R               (ε = READ_STALL_CYCLES: see below)
 //! occu     = S
-//! port     = (R + ceil((W · depth_bits + (K + B) · colour_bits + 32 · O) / V)) / (1 - f)
+//! port     = (R + ceil((W · depth_bits + (K + B) · colour_bits) / V)) / (1 - f)
 //! prefetch = R · (λ̄ + 1) / L          (Little's law: L reads in flight, each λ̄ + 1 cycles)
-//! clears   = Z · clear_words / (1 - f)   (the depth test waits for a clear's last word)
-//! T_w      = max(raster, depth, occu, port, prefetch) + clears
+//! down     = max(depth, occu, port, prefetch),   pace = down / F
 //! ```
 //!
-//! with `f` the port share the display refresh and the host reserve
-//! ([`crate::arch::O2Arch::reserved_port_share`]).
+//! The fluid: the rasterizer's clock `g` and the cycle `d` the blocks behind it are through
+//! their work, from the window's start. A stretch's primitive is set up (`setup` =
+//! `primitive_setup_cycles`) from `start = g + setup · P`, its fragments are emitted one a
+//! cycle to `start + F`, and the blocks behind take them from `b = max(d, start)`, fragment
+//! `j` in `b + j · pace`, so `d = max(b + down, start + F)`. The rasterizer emits fragment
+//! `k` only when fragment `k - Q` has left the FIFO (`Q` = `C1`, the FIFO before the depth
+//! test, and `+ C2`, the one after it, when the OccU binds): `g = max(start + F, the cycle
+//! fragment k_last - Q starts)`, looked up in the recent stretches. A clear holds the depth
+//! test for its `clear_words / (1 - f)` port cycles: `d = max(d, g) + clear`; the
+//! rasterizer runs on until the FIFO is full.
+//!
+//! `T_w = g` when the end token is emitted; what is left, `d - T_w`, is the backlog ahead
+//! of the token, carried into the next window. A verbose query's hit words take the port
+//! cycles the window left idle, and lengthen `d` by the rest.
+//!
+//! `ε`: no block behind the rasterizer is faster than its one fragment a cycle, so a stall
+//! (a read that comes late, the port busy with writes or a reserved cycle) is never made
+//! up while fragments flow: the FIFOs keep the entries it filled until a primitive's
+//! setup leaves the rasterizer idle. The cycle model's depth test stalls 0.018 to 0.028
+//! cycles a read on the demo, the random triangles and the hierarchical walk at 640x480;
+//! `ε` = 0.02 (I: 0.01..0.03). Without it the random triangles' queries wait behind empty
+//! FIFOs (p95 latency 8 cycles against 25).
 //!
 //! Total cycles = `Σ_w T_w` + the last window's tail (the last query's latency, or its
 //! drain + 3 when the stream ends without a query end).
@@ -35,13 +54,8 @@
 //! Query latency (from the `end` token entering the pipe to its records written):
 //!
 //! ```text
-//! β       = max(depth, occu, port, prefetch) / F   (downstream cycles per fragment)
-//! backlog = min(F, (C1 + C2) / 2)   (C1, C2: the two FIFOs' entries. No downstream block
-//!                                    is faster than the rasterizer's one fragment a cycle,
-//!                                    so entries a stall filled stay filled: half full on
-//!                                    average, a heuristic)
-//! drain   = max(backlog · β, λ_last)  (λ_last: the last fragment's read latency, 0 when
-//!                                      it read nothing new)
+//! drain   = max(d - T_w, λ_last)   (λ_last: the last fragment's read latency, 0 when it read
+//!                                   nothing new)
 //! latency = 4 + ceil(ceil(records / (V / 32)) / (1 - f)) + min(drain, ahead)
 //! ```
 //!
@@ -49,14 +63,14 @@
 //! release `r_end`, and only the work the pipe has not finished by then is ahead of it (a
 //! host-bound window's token finds the pipe empty); in an open loop `r_end = 0`.
 //!
-//! Clears with fewer than `L` fragments after them, in this window or earlier ones since the
-//! last frame end, also hold the drain: at least their `clear_words / (1 - f)` cycles plus
-//! those fragments' (the rasterizer ran past them, up to `L` fragments ahead).
-//!
 //! The 4 is the empty pipe's path (depth pipeline, OccU, OccU Control, the grant after the
 //! last word): with one record group that fits one port cycle, latency is the machine's
 //! minimum, [`crate::machines::o2::MIN_QUERY_LATENCY_CYCLES`]. Costs: the functional model plus a
 //! few integer operations per fragment.
+//!
+//! The fluid replaced a per-window maximum of the blocks' throughputs with the FIFOs taken
+//! half full at every query's end: on the small corpus (o2 and ir2 at 4 engines) the worst
+//! p95 latency error went from 69% to 18%.
 
 use super::{service_cycles, WindowEnd};
 use crate::arch::O2Arch;
@@ -66,8 +80,10 @@ use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::state::RenderState;
 use occsim_traces::trace::FragmentStretch;
 use occsim_traces::{Fragment, QueryMode, QueryResult, QuerySpec, Span};
+use std::collections::VecDeque;
 
-/// Counts of one window (see the module table).
+/// Counts of one stretch of work (see the module table): a primitive's fragments, or the
+/// events before its first.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct WindowCounts {
     pub fragments: u64,
@@ -76,29 +92,30 @@ pub struct WindowCounts {
     pub depth_reads: u64,
     pub page_misses: u64,
     pub depth_writes: u64,
-    pub occu_words: u64,
     pub colour_writes: u64,
     pub colour_reads: u64,
-    pub clears: u64,
-    /// Clears with fewer than `L` fragments after them (the rasterizer ran past them, so the
-    /// end token waits for their words), and the fragments after the last; carried from
-    /// window to window (a frame end drains them).
-    pub recent_clears: u64,
-    pub fragments_after_clear: u64,
-    /// Read latency of the window's last fragment (0 when it read nothing new).
+    /// Read latency of the stretch's last fragment (0 when it read nothing new).
     pub last_read_latency: u64,
 }
 
-/// What the formulas predict for one window.
+/// How long a stretch's work takes the blocks behind the rasterizer.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct WindowPrediction {
-    /// `T_w`: the window's cycles.
+pub struct Downstream {
+    /// `max(depth, occu, port, prefetch)`, in cycles.
     pub cycles: f64,
-    /// The pipe's drain after the window's last fragment, in cycles.
-    pub drain: f64,
+    /// Of it, the port's cycles.
+    pub port: f64,
+    /// Fragments the FIFOs hold ahead of the bottleneck: `C1`, and `C2` too when the OccU
+    /// binds (behind the depth pipeline).
+    pub queued: f64,
 }
 
-/// The O2 formulas over window counts.
+/// `ε` [cycles per depth read]: the depth test's stall a read costs that the FIFOs keep
+/// (I 0.01..0.03: the cycle model's 0.018-0.028 on the demo, random triangles and a
+/// hierarchical walk; see the module docs).
+const READ_STALL_CYCLES: f64 = 0.02;
+
+/// The O2 formulas over stretch counts.
 pub struct O2Formulas {
     arch: O2Arch,
     /// Port words one clear writes (0: a fast clear).
@@ -138,21 +155,29 @@ impl O2Formulas {
         )
     }
 
-    /// `T_w` and the drain of a window.
-    pub fn window(&self, w: &WindowCounts) -> WindowPrediction {
+    /// `1 - f`: the port's share left to the pipeline.
+    fn free_share(&self) -> f64 {
+        1.0 - self.arch.reserved_port_share()
+    }
+
+    /// Port cycles for `bits` written.
+    pub fn port_cycles(&self, bits: u64) -> f64 {
+        bits.div_ceil(self.arch.memory_port_bits_per_cycle as u64) as f64 / self.free_share()
+    }
+
+    /// Cycles one clear holds the depth test (0: a fast clear).
+    pub fn clear_cycles(&self) -> f64 {
+        self.clear_words as f64 / self.free_share()
+    }
+
+    /// The blocks behind the rasterizer on a stretch (see the module docs).
+    pub fn downstream(&self, w: &WindowCounts) -> Downstream {
         let a = &self.arch;
-        let fragments = w.fragments as f64;
-        let raster = fragments + (a.primitive_setup_cycles * w.primitives) as f64;
-        let depth = fragments;
+        let depth = w.fragments as f64 + READ_STALL_CYCLES * w.depth_reads as f64;
         let occu = w.occu_cycles as f64;
         let write_bits = w.depth_writes * a.depth_bits_per_pixel as u64
-            + (w.colour_writes + w.colour_reads) * a.colour_bits_per_pixel as u64
-            + 32 * w.occu_words;
-        let free_share = 1.0 - a.reserved_port_share();
-        let port = (w.depth_reads as f64
-            + write_bits.div_ceil(a.memory_port_bits_per_cycle as u64) as f64)
-            / free_share;
-        let clears = (w.clears * self.clear_words) as f64 / free_share;
+            + (w.colour_writes + w.colour_reads) * a.colour_bits_per_pixel as u64;
+        let port = w.depth_reads as f64 / self.free_share() + self.port_cycles(write_bits);
         let prefetch = if w.depth_reads == 0 {
             0.0
         } else {
@@ -163,28 +188,18 @@ impl O2Formulas {
                 / reads;
             reads * (mean_latency + 1.0) / self.lookahead()
         };
-        let downstream = depth.max(occu).max(port).max(prefetch);
-        let cycles = raster.max(downstream) + clears;
-        // Fragments ahead of the end token: the downstream blocks never run faster than one
-        // fragment a cycle, the rasterizer's own rate, so FIFO entries that a stall filled
-        // stay filled; we take them half full on average.
-        let fifo = (a.fifo_raster_to_depth_entries + a.fifo_depth_to_occu_entries) as f64;
-        let backlog = if w.fragments > 0 {
-            fragments.min(fifo / 2.0) * (downstream / fragments)
-        } else {
-            0.0
-        };
-        // A clear the rasterizer ran past (fewer than L fragments after it) is still being
-        // written when the end token enters: the drain waits for its words.
-        let behind_clears = if w.recent_clears > 0 {
-            (w.recent_clears * self.clear_words) as f64 / free_share
-                + w.fragments_after_clear as f64
-        } else {
-            0.0
-        };
-        WindowPrediction {
+        let cycles = depth.max(occu).max(port).max(prefetch);
+        let behind_depth = occu > depth.max(port).max(prefetch);
+        let queued = a.fifo_raster_to_depth_entries
+            + if behind_depth {
+                a.fifo_depth_to_occu_entries
+            } else {
+                0
+            };
+        Downstream {
             cycles,
-            drain: backlog.max(w.last_read_latency as f64).max(behind_clears),
+            port,
+            queued: queued as f64,
         }
     }
 
@@ -193,7 +208,71 @@ impl O2Formulas {
     pub fn latency(&self, record_words: u64, drain: f64) -> f64 {
         let words_per_cycle = (self.arch.memory_port_bits_per_cycle / 32) as u64;
         let port_cycles = record_words.div_ceil(words_per_cycle) as f64;
-        4.0 + (port_cycles / (1.0 - self.arch.reserved_port_share())).ceil() + drain
+        4.0 + (port_cycles / self.free_share()).ceil() + drain
+    }
+}
+
+/// The pipe as a fluid: the rasterizer's clock and the cycle the blocks behind it are
+/// through the work they were given, from the window's start (see the module docs).
+#[derive(Clone, Debug, Default, PartialEq)]
+struct Pipe {
+    /// `g`.
+    raster: f64,
+    /// `d`.
+    downstream: f64,
+    /// `d` at the window's start: the backlog carried into it.
+    carried: f64,
+    /// The window's port cycles so far (the room verbose hit words find).
+    port: f64,
+    /// The read latency of the last fragment so far (0 when it read nothing new).
+    last_read_latency: u64,
+    /// Fragments emitted so far (in the frame).
+    emitted: u64,
+    /// The recent stretches the FIFOs may still hold fragments of, oldest first.
+    recent: VecDeque<StretchTimes>,
+}
+
+/// When the blocks behind the rasterizer take a stretch's fragments: its first fragment's
+/// number, the cycle they start on the first, and the cycles each takes after it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct StretchTimes {
+    first: u64,
+    fragments: u64,
+    begin: f64,
+    pace: f64,
+}
+
+impl Pipe {
+    /// The rasterizer emits the end token: the window's cycles `T_w` and the backlog ahead
+    /// of the token.
+    fn window_end(&self) -> (f64, f64) {
+        (self.raster, (self.downstream - self.raster).max(0.0))
+    }
+
+    /// The cycle the blocks behind the rasterizer start fragment `k`, if a recent stretch
+    /// holds it.
+    fn started(&self, k: u64) -> Option<f64> {
+        self.recent
+            .iter()
+            .find(|s| (s.first..s.first + s.fragments).contains(&k))
+            .map(|s| s.begin + (k - s.first) as f64 * s.pace)
+    }
+
+    /// The next window starts at the end token, `T_w` from this one's start, with the work
+    /// left behind it.
+    fn restart(&mut self) {
+        let end = self.raster;
+        let carried = (self.downstream - end).max(0.0);
+        for stretch in &mut self.recent {
+            stretch.begin -= end;
+        }
+        *self = Pipe {
+            downstream: carried,
+            carried,
+            emitted: self.emitted,
+            recent: std::mem::take(&mut self.recent),
+            ..Pipe::default()
+        };
     }
 }
 
@@ -214,12 +293,13 @@ pub fn query_words(spec: &QuerySpec, result: &QueryResult) -> (u64, u64) {
     (records, hits)
 }
 
-/// The O2 model's per-window counting state.
+/// The O2 model's counting state: the stretch being counted and the pipe's clocks.
 pub(crate) struct O2Bottleneck {
     formulas: O2Formulas,
     address: DepthAddress,
     last_read: LastRead,
-    window: WindowCounts,
+    stretch: WindowCounts,
+    pipe: Pipe,
     /// OccU cycles per fragment and "occlusion render mode" of the open query.
     open: Option<(u64, bool)>,
 }
@@ -230,13 +310,21 @@ impl O2Bottleneck {
             formulas: O2Formulas::new(arch, width, height),
             address: DepthAddress::new(&arch.depth_layout(), width),
             last_read: LastRead::new(arch.memory_banks),
-            window: WindowCounts::default(),
+            stretch: WindowCounts::default(),
+            pipe: Pipe::default(),
             open: None,
         }
     }
 
+    /// The stretch counted so far joins the pipe's clocks (see the module docs).
+    fn close_stretch(&mut self) {
+        close_stretch(&self.formulas, &mut self.pipe, &self.stretch);
+        self.stretch = WindowCounts::default();
+    }
+
     pub(super) fn primitive(&mut self) {
-        self.window.primitives += 1;
+        self.close_stretch();
+        self.stretch.primitives = 1;
     }
 
     pub(super) fn begin(&mut self, spec: &QuerySpec) {
@@ -302,18 +390,13 @@ impl O2Bottleneck {
     /// one would be counted (`state` the render state they were drawn in; the stretch was
     /// counted at this machine's depth layout).
     pub(super) fn stretch(&mut self, stretch: &FragmentStretch, state: &RenderState) {
-        let lookahead = self.formulas.lookahead() as u64;
         let arch = &self.formulas.arch;
-        let w = &mut self.window;
+        let w = &mut self.stretch;
         let n = stretch.fragments;
-        w.fragments += n;
-        if w.recent_clears > 0 {
-            // One by one, the count stops at L, where the clears stop holding the drain.
-            w.fragments_after_clear = (w.fragments_after_clear + n).min(lookahead);
-            if w.fragments_after_clear >= lookahead {
-                w.recent_clears = 0;
-            }
+        if n == 0 {
+            return;
         }
+        w.fragments += n;
         w.occu_cycles += n * self.open.map_or(1, |(service, _)| service);
         w.last_read_latency = match stretch.last_read {
             DepthRead::SameWord => 0,
@@ -337,14 +420,13 @@ impl O2Bottleneck {
         }
     }
 
-    /// A clear: its words through the port (when clears write memory).
+    /// A clear: the depth test waits for its words through the port (when clears write
+    /// memory), while the rasterizer runs on until the FIFO before the depth test is full.
     pub(super) fn clear(&mut self) {
-        let w = &mut self.window;
-        w.clears += 1;
-        if self.formulas.clear_words > 0 {
-            w.recent_clears += 1;
-            w.fragments_after_clear = 0;
-        }
+        self.close_stretch();
+        let pipe = &mut self.pipe;
+        pipe.downstream = pipe.downstream.max(pipe.raster) + self.formulas.clear_cycles();
+        pipe.port += self.formulas.clear_cycles();
     }
 
     /// The query `spec` ended with `result`, its window begun at `start` and its end token
@@ -357,39 +439,88 @@ impl O2Bottleneck {
         release: f64,
     ) -> WindowEnd {
         self.open = None;
+        self.close_stretch();
         let (records, hits) = query_words(spec, result);
-        self.window.occu_words += records + hits;
-        let prediction = self.formulas.window(&self.window);
-        // The clears the rasterizer ran past stay behind it into the next window.
-        self.window = WindowCounts {
-            recent_clears: self.window.recent_clears,
-            fragments_after_clear: self.window.fragments_after_clear,
-            ..WindowCounts::default()
-        };
+        // Verbose hit words went through the port beside the window's other words: what the
+        // port's idle cycles in the window could not take lengthens the drain.
+        let hit_cycles = self.formulas.port_cycles(32 * hits);
+        let pipe = &mut self.pipe;
+        let idle = (pipe.downstream - pipe.carried - pipe.port).max(0.0);
+        pipe.downstream += (hit_cycles - idle).max(0.0);
+        let (cycles, backlog) = pipe.window_end();
+        let drain = backlog.max(pipe.last_read_latency as f64);
+        pipe.restart();
         // What the pipe has still to do when the token comes is all it can wait behind.
-        let ahead = (start + prediction.cycles - release).max(0.0);
+        let ahead = (start + cycles - release).max(0.0);
         WindowEnd {
-            cycles: prediction.cycles,
-            latency: self.formulas.latency(records, prediction.drain.min(ahead)),
+            cycles,
+            latency: self.formulas.latency(records, drain.min(ahead)),
         }
     }
 
     /// Start the window again with no work (a frame ended inside it).
     pub(super) fn clear_window(&mut self) {
-        self.window = WindowCounts::default();
+        self.stretch = WindowCounts::default();
+        self.pipe = Pipe::default();
     }
 
     /// The stream ended after a window without a query end: its cycles and the pipe's drain
     /// (+ 3: through the depth pipeline, the OccU and the last write).
     pub(super) fn finish(&self) -> Option<WindowEnd> {
-        let w = &self.window;
-        (w.fragments > 0 || w.primitives > 0).then(|| {
-            let prediction = self.formulas.window(w);
+        let mut pipe = self.pipe.clone();
+        close_stretch(&self.formulas, &mut pipe, &self.stretch);
+        // Work since the window began: a primitive, a fragment or a clear.
+        let worked = pipe.raster > 0.0 || pipe.downstream > pipe.carried;
+        worked.then(|| {
+            let (cycles, backlog) = pipe.window_end();
             WindowEnd {
-                cycles: prediction.cycles,
-                latency: prediction.drain + 3.0,
+                cycles,
+                latency: backlog.max(pipe.last_read_latency as f64) + 3.0,
             }
         })
+    }
+}
+
+/// A stretch's work joins the pipe's clocks: the rasterizer sets up its primitive and emits
+/// its fragments a cycle each; the blocks behind take them at the stretch's pace, after the
+/// work before and no sooner than they come; the rasterizer emits fragment `k` only once the
+/// blocks behind have started fragment `k - Q` (`Q` fragments fit the FIFOs ahead of the
+/// bottleneck).
+fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &WindowCounts) {
+    let start = pipe.raster + (formulas.arch.primitive_setup_cycles * stretch.primitives) as f64;
+    let emitted = start + stretch.fragments as f64;
+    pipe.raster = emitted;
+    let n = stretch.fragments;
+    if n == 0 {
+        return;
+    }
+    let down = formulas.downstream(stretch);
+    let begin = pipe.downstream.max(start);
+    let pace = down.cycles / n as f64;
+    pipe.downstream = (begin + down.cycles).max(emitted);
+    pipe.port += down.port;
+    pipe.last_read_latency = stretch.last_read_latency;
+    pipe.recent.push_back(StretchTimes {
+        first: pipe.emitted,
+        fragments: n,
+        begin,
+        pace,
+    });
+    pipe.emitted += n;
+    let queued = down.queued as u64;
+    // The last fragment waits for fragment `last - Q` to leave the FIFO.
+    if let Some(blocking) = (pipe.emitted - 1).checked_sub(queued) {
+        if let Some(started) = pipe.started(blocking) {
+            pipe.raster = pipe.raster.max(started);
+        }
+        // Older stretches hold no fragment the next may wait for.
+        while pipe
+            .recent
+            .front()
+            .is_some_and(|s| s.first + s.fragments <= blocking)
+        {
+            pipe.recent.pop_front();
+        }
     }
 }
 
@@ -456,8 +587,8 @@ mod tests {
             for fragment in span.fragments() {
                 single.fragment(fragment, &functional);
             }
-            assert_eq!(whole.window, single.window, "step {step}");
-            last_reads += (whole.window.last_read_latency > 0) as u32;
+            assert_eq!(whole.stretch, single.stretch, "step {step}");
+            last_reads += (whole.stretch.last_read_latency > 0) as u32;
             functional.span(span);
         }
         // The runs did end on a new word, so the last read's latency was compared.
