@@ -436,6 +436,12 @@ impl FunctionalModel {
     /// fragments one by one.
     #[inline]
     pub fn span(&mut self, span: Span) {
+        // The next span is most likely the next row's, over about the same columns: its
+        // depths start on their way into the cache while this one is tested.
+        if let Some(more) = (span.depths.len() as u16).checked_sub(1) {
+            let last = span.x.wrapping_add(more);
+            self.depth.prefetch(span.y.wrapping_add(1), span.x, last);
+        }
         let writes_allowed = !self
             .query
             .as_ref()

@@ -13,6 +13,9 @@ use crate::hit_list::{
 };
 use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult, MAX_BUFFER_ENTRIES, MAX_TILES};
 use crate::state::{DepthFunc, Rect};
+use span_depths::span_depths;
+
+mod span_depths;
 
 /// Record tags (the first byte of every record in a payload).
 pub(crate) mod tag {
@@ -84,105 +87,6 @@ pub(crate) fn put_zz(out: &mut Vec<u8>, value: i64) {
 #[inline(always)]
 fn unzigzag(value: u64) -> i64 {
     (value >> 1) as i64 ^ -((value & 1) as i64)
-}
-
-/// [`unzigzag`] of every one-byte residual (0..0x80), as one load.
-const UNZIGZAG_BYTE: [i8; 128] = {
-    let mut table = [0i8; 128];
-    let mut b = 0;
-    while b < 128 {
-        table[b] = ((b >> 1) as i8) ^ -((b & 1) as i8);
-        b += 1;
-    }
-    table
-};
-
-/// Decode the depths of a span of `len` fragments whose first depth is `first` into `depths`
-/// (cleared first): each next one is the last + `slope` + a zigzag residual read from
-/// `payload` at `pos`. Returns the position after the residuals and the last depth.
-#[inline(always)]
-fn span_depths(
-    payload: &[u8],
-    mut pos: usize,
-    len: usize,
-    first: i64,
-    slope: i64,
-    depths: &mut Vec<u32>,
-) -> Result<(usize, i64), PayloadError> {
-    depths.clear();
-    depths.reserve(len);
-    depths.push(first as u32);
-    let start = pos;
-    let mut depth = first;
-    // Most spans' residuals are all one byte each: decode those without per-byte branches.
-    if let Some(bytes) = payload.get(pos..pos + len - 1) {
-        // (An OR of every byte, not a search that stops at the first long one: it vectorises.)
-        if bytes.iter().fold(0, |any, &b| any | b) < 0x80 {
-            // Every depth's bits ORed, checked once: a depth in 0..2^24 sets none above bit
-            // 23, one outside (negative, or too large) does. The running depth and the OR
-            // are each one dependent operation per fragment.
-            let mut bits = 0u64;
-            depths.extend(bytes.iter().map(|&b| {
-                let step = slope.wrapping_add(UNZIGZAG_BYTE[(b & 0x7F) as usize] as i64);
-                depth = depth.wrapping_add(step);
-                bits |= depth as u64;
-                depth as u32
-            }));
-            if bits > DEPTH_ONE as u64 {
-                return Err(first_depth_outside(payload, start, len, first, slope));
-            }
-            return Ok((pos + len - 1, depth));
-        }
-    }
-    // Range checked once at the end (a depth outside 0..=2^24-1 is rare: corruption), so the
-    // loop carries only the running depth.
-    let mut outside = false;
-    for _ in 1..len {
-        let residual = match payload.get(pos) {
-            Some(&b) if b < 0x80 => {
-                pos += 1;
-                unzigzag(b as u64)
-            }
-            _ => {
-                let mut c = Cursor::new(payload, pos);
-                let value = c.zz()?;
-                pos = c.pos;
-                value
-            }
-        };
-        depth = depth.wrapping_add(slope).wrapping_add(residual);
-        outside |= depth as u64 > DEPTH_ONE as u64;
-        depths.push(depth as u32);
-    }
-    if outside {
-        return Err(first_depth_outside(payload, start, len, first, slope));
-    }
-    Ok((pos, depth))
-}
-
-/// The error for the first depth of a span outside 0..=2^24-1 (the span is known to hold
-/// one and its residuals to decode).
-#[cold]
-fn first_depth_outside(
-    payload: &[u8],
-    mut pos: usize,
-    len: usize,
-    first: i64,
-    slope: i64,
-) -> PayloadError {
-    let mut depth = first;
-    for _ in 1..len {
-        let mut c = Cursor::new(payload, pos);
-        let Ok(residual) = c.zz() else {
-            break;
-        };
-        pos = c.pos;
-        depth = depth.wrapping_add(slope).wrapping_add(residual);
-        if !(0..=DEPTH_ONE as i64).contains(&depth) {
-            return bad(pos - 1, format!("depth {depth} outside 0..=2^24-1"));
-        }
-    }
-    bad(pos, "depth outside 0..=2^24-1")
 }
 
 /// A malformed payload: where (in the decoded payload) and what.
@@ -742,7 +646,8 @@ pub(crate) struct BlockDecoder {
     span: SpanProgress,
     /// Events completed in this block so far.
     pub events: u64,
-    /// The depths of the span being handed out whole (at most `MAX_SPAN_FRAGMENTS`).
+    /// The depths of the span being handed out whole (at most `MAX_SPAN_FRAGMENTS`, and
+    /// scratch past them).
     span_depths: Vec<u32>,
 }
 
@@ -1036,7 +941,7 @@ impl BlockDecoder {
         let taken = sink.span(Span {
             x,
             y,
-            depths: &depths,
+            depths: &depths[..len],
         });
         self.span_depths = depths;
         taken.map_err(DrainError::Sink)?;
@@ -1050,54 +955,6 @@ impl BlockDecoder {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_byte_table_is_unzigzag() {
-        for b in 0..0x80u8 {
-            assert_eq!(UNZIGZAG_BYTE[b as usize] as i64, unzigzag(b as u64), "{b}");
-        }
-    }
-
-    #[test]
-    fn span_depths_follow_slope_and_residuals() {
-        // Residuals +1, -2 (zigzag 2, 3), then +64 as two bytes (zigzag 128: 0x80 0x01).
-        let payload = [2, 3, 0x80, 0x01];
-        let mut depths = Vec::new();
-        let (pos, last) = span_depths(&payload, 0, 4, 100, 10, &mut depths).unwrap();
-        assert_eq!(depths, [100, 111, 119, 193]);
-        assert_eq!((pos, last), (4, 193));
-        // All one-byte residuals (the fast path).
-        let (pos, last) = span_depths(&payload, 0, 3, 100, 10, &mut depths).unwrap();
-        assert_eq!(depths, [100, 111, 119]);
-        assert_eq!((pos, last), (2, 119));
-    }
-
-    #[test]
-    fn a_depth_outside_the_range_names_its_residual() {
-        let top = DEPTH_ONE as i64 - 1;
-        // Residuals +1, +1, 0: the second leaves the range, its byte at offset 1.
-        let fast = [2, 2, 0];
-        let mut depths = Vec::new();
-        let error = span_depths(&fast, 0, 4, top, 0, &mut depths).unwrap_err();
-        assert_eq!(error.pos, 1);
-        assert!(
-            error.reason.contains("depth 16777216 outside"),
-            "{}",
-            error.reason
-        );
-        // The same with a two-byte residual first (the general path): offset 2.
-        let slow = [0x80, 0x00, 2, 2];
-        let error = span_depths(&slow, 0, 4, top, 0, &mut depths).unwrap_err();
-        assert_eq!(error.pos, 3);
-        // Below zero.
-        let error = span_depths(&[3], 0, 2, 0, 0, &mut depths).unwrap_err();
-        assert_eq!(error.pos, 0);
-        assert!(
-            error.reason.contains("depth -2 outside"),
-            "{}",
-            error.reason
-        );
-    }
 
     #[test]
     fn a_version_2_result_with_every_hit_listed_reads_as_a_hit_list() {

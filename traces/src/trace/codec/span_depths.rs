@@ -1,0 +1,413 @@
+//! A span's depths from its residuals: each depth is the one before, plus the previous
+//! span's x slope, plus a zigzag residual. Nearly every residual is one byte, and a span
+//! whose residuals all are is decoded as a prefix sum, 16 depths at a time (with SSE2 on
+//! x86_64): a running depth makes every fragment wait for the one before, one or two
+//! dependent additions each, where the prefix sum waits once per 16.
+
+use super::{bad, unzigzag, Cursor, PayloadError};
+use crate::event::DEPTH_ONE;
+
+/// Residuals the one-byte path decodes in one step.
+const CHUNK: usize = 16;
+
+/// Decode the depths of a span of `len` fragments whose first depth is `first` into
+/// `depths[..len]` (the vector may be left longer: the rest is scratch): each next one is
+/// the last + `slope` + a zigzag residual read from `payload` at `pos`. Returns the position
+/// after the residuals and the last depth.
+#[inline(always)]
+pub(super) fn span_depths(
+    payload: &[u8],
+    pos: usize,
+    len: usize,
+    first: i64,
+    slope: i64,
+    depths: &mut Vec<u32>,
+) -> Result<(usize, i64), PayloadError> {
+    // The one-byte path adds in 32 bits, exact for a first depth in range and a slope of at
+    // most 2^24 (what a decoder's predictor holds: see `one_byte_depths`).
+    let exact_in_i32 = (0..=DEPTH_ONE as i64).contains(&first) && slope.unsigned_abs() < 1 << 24;
+    if let Some(residuals) = payload.get(pos..pos + len - 1) {
+        // (An OR of every byte, not a search that stops at the first long one: it vectorises.)
+        if exact_in_i32 && residuals.iter().fold(0, |any, &b| any | b) < 0x80 {
+            one_byte_depths(payload, pos, len - 1, first as i32, slope as i32, depths);
+            // Every depth's bits ORed, checked once: a depth in 0..2^24 sets none above bit
+            // 23, one outside (negative, or too large) does.
+            if depths[..len].iter().fold(0, |bits, &depth| bits | depth) > DEPTH_ONE {
+                return Err(first_depth_outside(payload, pos, len, first, slope));
+            }
+            return Ok((pos + len - 1, depths[len - 1] as i64));
+        }
+    }
+    any_residual_depths(payload, pos, len, first, slope, depths)
+}
+
+/// [`span_depths`] for residuals of any length (the general path).
+#[inline(never)]
+fn any_residual_depths(
+    payload: &[u8],
+    mut pos: usize,
+    len: usize,
+    first: i64,
+    slope: i64,
+    depths: &mut Vec<u32>,
+) -> Result<(usize, i64), PayloadError> {
+    depths.clear();
+    depths.push(first as u32);
+    let start = pos;
+    let mut depth = first;
+    // Range checked once at the end (a depth outside 0..=2^24-1 is rare: corruption), so the
+    // loop carries only the running depth.
+    let mut outside = false;
+    for _ in 1..len {
+        let residual = match payload.get(pos) {
+            Some(&b) if b < 0x80 => {
+                pos += 1;
+                unzigzag(b as u64)
+            }
+            _ => {
+                let mut c = Cursor::new(payload, pos);
+                let value = c.zz()?;
+                pos = c.pos;
+                value
+            }
+        };
+        depth = depth.wrapping_add(slope).wrapping_add(residual);
+        outside |= depth as u64 > DEPTH_ONE as u64;
+        depths.push(depth as u32);
+    }
+    if outside {
+        return Err(first_depth_outside(payload, start, len, first, slope));
+    }
+    Ok((pos, depth))
+}
+
+/// `first` and the depths that the `residuals` one-byte residuals at `payload[pos..]` give,
+/// into `depths[..=residuals]`, the vector lengthened if it is too short (what lies past is
+/// scratch).
+///
+/// The kernels add in 32 bits, which is exact up to the first depth outside 0..2^24 (all
+/// the caller needs: it rejects the span there): that depth follows one inside the range
+/// by a step of `slope` (|slope| < 2^24) and a residual (|residual| <= 64), and a chunk's
+/// depths are its base plus at most 16 such steps (< 2^29 in size), so no sum forming it
+/// leaves the i32 range. Depths after it may wrap; nobody reads them.
+fn one_byte_depths(
+    payload: &[u8],
+    pos: usize,
+    residuals: usize,
+    first: i32,
+    slope: i32,
+    depths: &mut Vec<u32>,
+) {
+    let chunks = residuals.div_ceil(CHUNK);
+    if depths.len() < 1 + chunks * CHUNK {
+        depths.resize(1 + chunks * CHUNK, 0);
+    }
+    depths[0] = first as u32;
+    // Whole chunks straight from the payload, the last one's bytes past the residuals
+    // included where the payload has them: they only give depths past the span (a chunk's
+    // depths depend on its earlier bytes only).
+    let direct = chunks.min((payload.len() - pos) / CHUNK) * CHUNK;
+    one_byte_chunks(
+        &payload[pos..pos + direct],
+        first,
+        slope,
+        &mut depths[1..=direct],
+    );
+    if direct < residuals {
+        // Near the payload's end: the last chunk from a copy padded with zeros.
+        let mut padded = [0u8; CHUNK];
+        padded[..residuals - direct].copy_from_slice(&payload[pos + direct..pos + residuals]);
+        let base = depths[direct] as i32;
+        one_byte_chunks(&padded, base, slope, &mut depths[1 + direct..][..CHUNK]);
+    }
+}
+
+/// The depths after `base` that `residuals` (one-byte, a whole number of chunks) give, into
+/// `out` (as long).
+#[inline(always)]
+fn one_byte_chunks(residuals: &[u8], base: i32, slope: i32, out: &mut [u32]) {
+    debug_assert!(residuals.len().is_multiple_of(CHUNK) && out.len() == residuals.len());
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    // SAFETY: the kernel needs SSE2, which the build targets (`target_feature = "sse2"`).
+    unsafe {
+        sse2::one_byte_chunks(residuals, base, slope, out)
+    }
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+    one_byte_chunks_scalar(residuals, base, slope, out)
+}
+
+/// [`one_byte_chunks`] one depth after the other: the kernel where SSE2 is missing, and the
+/// reference the tests hold the SSE2 kernel to.
+#[cfg_attr(all(target_arch = "x86_64", target_feature = "sse2"), allow(dead_code))]
+fn one_byte_chunks_scalar(residuals: &[u8], base: i32, slope: i32, out: &mut [u32]) {
+    let mut depth = base;
+    for (&byte, out) in residuals.iter().zip(out) {
+        depth = depth
+            .wrapping_add(slope)
+            .wrapping_add(unzigzag(byte as u64) as i32);
+        *out = depth as u32;
+    }
+}
+
+#[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+mod sse2 {
+    use super::CHUNK;
+    use std::arch::x86_64::*;
+
+    /// [`super::one_byte_chunks`]: per chunk, the residuals' prefix sums in 16-bit lanes
+    /// (|sum| <= 16 * 64), widened, plus the slope's ramp and the base.
+    #[target_feature(enable = "sse2")]
+    pub(super) fn one_byte_chunks(residuals: &[u8], base: i32, slope: i32, out: &mut [u32]) {
+        // Lane k of ramp[j] is slope * (4j + k + 1): the slopes up to depth 4j + k of a chunk.
+        let first_four = _mm_setr_epi32(
+            slope,
+            slope.wrapping_mul(2),
+            slope.wrapping_mul(3),
+            slope.wrapping_mul(4),
+        );
+        let four = _mm_set1_epi32(slope.wrapping_mul(4));
+        let mut ramp = [first_four; 4];
+        for j in 1..4 {
+            ramp[j] = _mm_add_epi32(ramp[j - 1], four);
+        }
+        let mut base = _mm_set1_epi32(base);
+        for (chunk, out) in residuals
+            .chunks_exact(CHUNK)
+            .zip(out.chunks_exact_mut(CHUNK))
+        {
+            let residuals = unzigzag_bytes(load(chunk.try_into().expect("a chunk")));
+            let low = prefix_sums_i16(_mm_srai_epi16::<8>(_mm_unpacklo_epi8(residuals, residuals)));
+            let high =
+                prefix_sums_i16(_mm_srai_epi16::<8>(_mm_unpackhi_epi8(residuals, residuals)));
+            // The high half's sums start from the low half's total (its lane 7 everywhere).
+            let high = _mm_add_epi16(
+                high,
+                _mm_shuffle_epi32::<0xFF>(_mm_shufflehi_epi16::<0xFF>(low)),
+            );
+            let sums = [
+                _mm_srai_epi32::<16>(_mm_unpacklo_epi16(low, low)),
+                _mm_srai_epi32::<16>(_mm_unpackhi_epi16(low, low)),
+                _mm_srai_epi32::<16>(_mm_unpacklo_epi16(high, high)),
+                _mm_srai_epi32::<16>(_mm_unpackhi_epi16(high, high)),
+            ];
+            let mut last = base;
+            for ((sum, ramp), out) in sums.into_iter().zip(ramp).zip(out.chunks_exact_mut(4)) {
+                last = _mm_add_epi32(base, _mm_add_epi32(ramp, sum));
+                store(out.try_into().expect("four depths"), last);
+            }
+            // The next chunk's base: this one's last depth everywhere.
+            base = _mm_shuffle_epi32::<0xFF>(last);
+        }
+    }
+
+    /// Each byte (below 0x80) unzigzagged: (b >> 1) ^ -(b & 1), as i8.
+    #[target_feature(enable = "sse2")]
+    fn unzigzag_bytes(bytes: __m128i) -> __m128i {
+        // (A 16-bit shift: the bit each byte takes from the next is masked off.)
+        let half = _mm_and_si128(_mm_srli_epi16::<1>(bytes), _mm_set1_epi8(0x7F));
+        let odd = _mm_and_si128(bytes, _mm_set1_epi8(1));
+        _mm_xor_si128(half, _mm_sub_epi8(_mm_setzero_si128(), odd))
+    }
+
+    /// Inclusive prefix sums of eight i16 lanes (shift and add, three times).
+    #[target_feature(enable = "sse2")]
+    fn prefix_sums_i16(lanes: __m128i) -> __m128i {
+        let lanes = _mm_add_epi16(lanes, _mm_slli_si128::<2>(lanes));
+        let lanes = _mm_add_epi16(lanes, _mm_slli_si128::<4>(lanes));
+        _mm_add_epi16(lanes, _mm_slli_si128::<8>(lanes))
+    }
+
+    #[target_feature(enable = "sse2")]
+    fn load(bytes: &[u8; CHUNK]) -> __m128i {
+        // SAFETY: the reference holds the 16 bytes read; an unaligned load needs no more.
+        unsafe { _mm_loadu_si128(bytes.as_ptr().cast()) }
+    }
+
+    #[target_feature(enable = "sse2")]
+    fn store(out: &mut [u32; 4], lanes: __m128i) {
+        // SAFETY: the reference holds the 16 bytes written; an unaligned store needs no more.
+        unsafe { _mm_storeu_si128(out.as_mut_ptr().cast(), lanes) }
+    }
+}
+
+/// The error for the first depth of a span outside 0..=2^24-1 (the span is known to hold
+/// one and its residuals to decode).
+#[cold]
+fn first_depth_outside(
+    payload: &[u8],
+    mut pos: usize,
+    len: usize,
+    first: i64,
+    slope: i64,
+) -> PayloadError {
+    let mut depth = first;
+    for _ in 1..len {
+        let mut c = Cursor::new(payload, pos);
+        let Ok(residual) = c.zz() else {
+            break;
+        };
+        pos = c.pos;
+        depth = depth.wrapping_add(slope).wrapping_add(residual);
+        if !(0..=DEPTH_ONE as i64).contains(&depth) {
+            return bad(pos - 1, format!("depth {depth} outside 0..=2^24-1"));
+        }
+    }
+    bad(pos, "depth outside 0..=2^24-1")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+    use crate::trace::codec::put_zz;
+
+    /// The depths of a span and the position after it, decoded the plain way: one zigzag
+    /// varint after the other, in 64 bits, each depth checked as it comes.
+    fn reference(
+        payload: &[u8],
+        pos: usize,
+        len: usize,
+        first: i64,
+        slope: i64,
+    ) -> Result<(Vec<u32>, usize), usize> {
+        let mut c = Cursor::new(payload, pos);
+        let mut depths = vec![first as u32];
+        let mut depth = first;
+        for _ in 1..len {
+            depth += slope + c.zz().map_err(|e| e.pos)?;
+            if !(0..=DEPTH_ONE as i64).contains(&depth) {
+                // Named by the residual's last byte.
+                return Err(c.pos - 1);
+            }
+            depths.push(depth as u32);
+        }
+        Ok((depths, c.pos))
+    }
+
+    fn decode(payload: &[u8], len: usize, first: i64, slope: i64) -> Result<Vec<u32>, usize> {
+        let mut depths = Vec::new();
+        let (pos, last) =
+            span_depths(payload, 0, len, first, slope, &mut depths).map_err(|e| e.pos)?;
+        assert_eq!(pos, payload.len(), "the position after the residuals");
+        assert_eq!(last, depths[len - 1] as i64, "the last depth");
+        Ok(depths[..len].to_vec())
+    }
+
+    #[test]
+    fn span_depths_follow_slope_and_residuals() {
+        // Residuals +1, -2 (zigzag 2, 3), then +64 as two bytes (zigzag 128: 0x80 0x01).
+        let payload = [2, 3, 0x80, 0x01];
+        assert_eq!(decode(&payload, 4, 100, 10), Ok(vec![100, 111, 119, 193]));
+        // All one-byte residuals (the fast path).
+        assert_eq!(decode(&payload[..2], 3, 100, 10), Ok(vec![100, 111, 119]));
+    }
+
+    #[test]
+    fn one_byte_runs_cross_chunks_and_halves() {
+        // 17 residuals +1 (zigzag 2) at slope 10 from 100: depth k is 100 + 11k, the last
+        // one alone in a padded chunk.
+        let expected: Vec<u32> = (0..18).map(|k| 100 + 11 * k).collect();
+        assert_eq!(decode(&[2; 17], 18, 100, 10), Ok(expected));
+        // Eight residuals -2 (zigzag 3), then eight -1 (zigzag 1) at slope 0 from 1000: the
+        // high half of the chunk starts from the low half's total, 1000 - 16 = 984.
+        let mut payload = [3u8; 16];
+        payload[8..].fill(1);
+        let expected: Vec<u32> = (0..=8)
+            .map(|k| 1000 - 2 * k)
+            .chain((1..=8).map(|k| 984 - k))
+            .collect();
+        assert_eq!(decode(&payload, 17, 1000, 0), Ok(expected));
+        // A negative slope with residuals -64 (zigzag 127), the most negative one byte holds.
+        let expected: Vec<u32> = (0..40).map(|k| 5_000_000 - 1064 * k).collect();
+        assert_eq!(decode(&[127; 39], 40, 5_000_000, -1000), Ok(expected));
+    }
+
+    #[test]
+    fn a_depth_outside_the_range_names_its_residual() {
+        let top = DEPTH_ONE as i64 - 1;
+        // Residuals +1, +1, 0: the second leaves the range, its byte at offset 1.
+        let mut depths = Vec::new();
+        let error = span_depths(&[2, 2, 0], 0, 4, top, 0, &mut depths).unwrap_err();
+        assert_eq!(error.pos, 1);
+        assert!(
+            error.reason.contains("depth 16777216 outside"),
+            "{}",
+            error.reason
+        );
+        // The same with a two-byte residual first (the general path): offset 2.
+        let slow = [0x80, 0x00, 2, 2];
+        let error = span_depths(&slow, 0, 4, top, 0, &mut depths).unwrap_err();
+        assert_eq!(error.pos, 3);
+        // Below zero.
+        let error = span_depths(&[3], 0, 2, 0, 0, &mut depths).unwrap_err();
+        assert_eq!(error.pos, 0);
+        assert!(
+            error.reason.contains("depth -2 outside"),
+            "{}",
+            error.reason
+        );
+        // Out in a later chunk, from depth 21 on (top - 20000 + 1000 * 21 > top + 1): the
+        // first one out is named, by its residual at offset 20.
+        let error = span_depths(&[0; 40], 0, 41, top - 20 * 1000, 1000, &mut depths).unwrap_err();
+        assert_eq!(error.pos, 20);
+    }
+
+    #[test]
+    fn the_sse2_kernel_is_the_scalar_one() {
+        let mut rng = SplitMix64(17);
+        for _ in 0..2000 {
+            let residuals: Vec<u8> = (0..CHUNK * (1 + rng.below(5) as usize))
+                .map(|_| rng.below(0x80) as u8)
+                .collect();
+            let base = rng.below(1 << 24) as i32;
+            let slope = rng.below(1 << 25) as i32 - (1 << 24) + 1;
+            let mut fast = vec![0; residuals.len()];
+            let mut plain = vec![0; residuals.len()];
+            one_byte_chunks(&residuals, base, slope, &mut fast);
+            one_byte_chunks_scalar(&residuals, base, slope, &mut plain);
+            assert_eq!(
+                fast, plain,
+                "base {base} slope {slope} residuals {residuals:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn span_depths_match_a_plain_decoder() {
+        let mut rng = SplitMix64(5);
+        let mut depths = Vec::new();
+        for case in 0..20_000 {
+            let len = 1 + rng.below(70) as usize;
+            // Depths near an end of the range now and then, to leave it.
+            let first = match rng.below(4) {
+                0 => rng.below(100) as i64,
+                1 => DEPTH_ONE as i64 - rng.below(100) as i64,
+                _ => rng.below(1 << 24) as i64,
+            };
+            let slope = match rng.below(3) {
+                0 => rng.below(5) as i64 - 2,
+                1 => rng.below(1 << 25) as i64 - (1 << 24) + 1,
+                // Beyond what a predictor holds: the general path.
+                _ => rng.below(1 << 30) as i64 - (1 << 29),
+            };
+            let mut payload = Vec::new();
+            for _ in 1..len {
+                let residual = match rng.below(50) {
+                    0 => rng.below(1 << 20) as i64 - (1 << 19),
+                    _ => rng.below(128) as i64 - 64,
+                };
+                put_zz(&mut payload, residual);
+            }
+            // Bytes after the span, which the decoder must not take for residuals.
+            payload.extend([0x55, 0xFF]);
+            let expected = reference(&payload, 0, len, first, slope);
+            let got = span_depths(&payload, 0, len, first, slope, &mut depths)
+                .map(|(pos, last)| {
+                    assert_eq!(last, depths[len - 1] as i64, "case {case}");
+                    (depths[..len].to_vec(), pos)
+                })
+                .map_err(|e| e.pos);
+            assert_eq!(got, expected, "case {case}: first {first} slope {slope}");
+        }
+    }
+}
