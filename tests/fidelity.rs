@@ -494,15 +494,15 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
         ("demo",              0.05,  0.20,  0.01,  0.20),  // p95 16.7%; sampled p95 16.7%
-        ("retiled-1x1-4x4",   0.05,  0.10,  0.022, 0.03),  // sampled 1.81%
-        ("retiled-32x32",     0.05,  0.10,  0.032, 0.03),  // sampled 2.64% (b)
+        ("retiled-1x1-4x4",   0.05,  0.10,  0.023, 0.03),  // sampled 1.90%
+        ("retiled-32x32",     0.05,  0.10,  0.032, 0.03),  // sampled 2.61% (b)
         ("hardcases",         0.05,  0.10,  0.093, 0.03),  // sampled 7.69% (a)
         ("random",            0.05,  0.10,  0.01,  0.105), // sampled p95 8.70%
         ("walk-frustum",      0.05,  0.10,  0.01,  0.03),  // every target
         ("walk-hierarchical", 0.05,  0.219, 0.017, 0.219), // p95 18.2%; sampled 1.40%, 18.2%
         ("walk-quadtree",     0.05,  0.10,  0.017, 0.03),  // sampled 1.40%
         ("walk-adaptive",     0.05,  0.18,  0.041, 0.12),  // p95 15.0%; sampled 3.35%, 10.0%
-        ("walk-grids",        0.05,  0.10,  0.017, 0.382), // sampled 1.37%, 31.8%
+        ("walk-grids",        0.05,  0.10,  0.017, 0.03),  // sampled 1.37%
     ];
     let error = |class: &str, level: &str, metric: &str| -> f64 {
         let row = rows

@@ -391,6 +391,39 @@ fn analytic_reaches_the_minimum_latency_on_an_idle_ir() {
     }
 }
 
+#[test]
+fn analytic_ir_times_a_lone_fragment_as_the_machine_does() {
+    // ir2 on a 160x120 viewport, one primitive of one fragment under a one-tile query. The
+    // generators set the primitive up in cycles 0-3 and board 0's emits the fragment in 4:
+    // the end token enters in 5. Its Image Engine starts the depth test in 5, the result
+    // reaches the OccU 16 later, in 21, which counts it (s = 1); the token passes the depth
+    // stage in 21, the OccU in 22, and the report is ready in 23: a drain of 18. The local
+    // tree over 80 Image Engines, ceil(log2 80) = 7 hops of 8 words over 32 bits (8) and 2
+    // of latency, 70; the global tree over 2 boards, one hop of 8 words over 64 bits (4) and
+    // 8 of latency, and the DMA of 8 words at 16 bits a cycle (16), 28. Latency 18 + 70 + 28
+    // = 116, total 5 + 116 = 121. The formulas: d = 4 + 11 (one slot a fragment at 2 a
+    // cycle, rounded up) = 16, the last result in 16 - 11 + 16 + 1 + 1 = 23: the same. (They
+    // once capped the backlog at the window's 5 cycles of work, giving 106.)
+    let arch = Arch::builtin("ir2").unwrap();
+    let spec = QuerySpec {
+        id: 1,
+        mode: QueryMode::Samples,
+        buffer_entries: 8,
+        tiles: vec![Rect::new(0, 0, 160, 120)],
+    };
+    let events = [
+        Event::QueryBegin(spec),
+        Event::Primitive,
+        Event::Fragment(Fragment { x: 0, y: 0, z: 7 }),
+        Event::QueryEnd,
+    ];
+    for level in [Fidelity::Analytic, Fidelity::Cycle] {
+        let result = run_level(level, &arch, 160, 120, EffectsChoice::Auto, &events).unwrap();
+        assert_eq!(result.queries[0].latency_cycles, Some(116), "{level}");
+        assert_eq!(result.total_cycles, Some(121), "{level}");
+    }
+}
+
 /// ir1 with 2 Image Engines (columns: even x to 0, odd x to 1) and an unpipelined 45-cycle
 /// depth stage (interval = latency = 45), and a one-tile samples query over one primitive
 /// of 20 fragments for each column in `columns`, in turn.

@@ -592,8 +592,10 @@ impl SampledModel {
                     .latency_by_class
                     .get(&window.class)
                     .and_then(|sample| sample.extrapolate(predicted, slope))
-                    .or_else(|| sample_of_mode(Some(mode)).extrapolate(predicted, slope))
-                    .or_else(|| sample_of_mode(None).extrapolate(predicted, slope))
+                    // Another class's queries say nothing of this one's slope: the
+                    // formulas' own (1), moved by those queries' mean error.
+                    .or_else(|| sample_of_mode(Some(mode)).extrapolate(predicted, 1.0))
+                    .or_else(|| sample_of_mode(None).extrapolate(predicted, 1.0))
                     .unwrap_or(predicted as f64);
                 filled[index] = Some(latency.round() as u64);
                 // The final window's drain: its query's latency.

@@ -23,7 +23,8 @@
 //! ```text
 //! start_b = g_b + setup                           (at a primitive's first stretch: every board sets up every primitive)
 //! emit_b  = start_b + F_bp / rate                 (rate = fragment_generator_fragments_per_cycle)
-//! d_i     = max(max(d_i, start_b) + D_ip, emit_b + pace)   (each engine i of board b it touches)
+//! d_i     = max(max(d_i, start_b) + D_ip, e_i + pace)   (each engine i of board b it touches;
+//!                                                         e_i: its last fragment's emission)
 //! g_b     = max(emit_b, max_i (d_i - Q · pace))
 //! T_w     = max(ceil(max_b g_b), max_i H_i - Q · C)   (hit words drain one 32-bit word a cycle)
 //! ```
@@ -45,8 +46,9 @@
 //! depth stage, its OccU and the report; the machine's idle path), with `backlog_i` the
 //! cycles its last fragment's result still needs past `t_end + 3`: `d_i - pace + L + s + 1`
 //! (its last fragment entered the depth stage in `d_i - pace`, its result reaches the OccU
-//! `L` later, which counts it for `s` cycles and reports the cycle after), never more than
-//! the work the pipe has left when the token comes. The two merge stages then run on the
+//! `L` later, which counts it for `s` cycles and reports the cycle after), less the cycles
+//! the token came after the generators were done (in a closed loop whose host releases it
+//! late). The two merge stages then run on the
 //! `r_i` exactly as the machine runs them, moving the same words (8 a tile from every Image
 //! Engine; [`crate::blocks::merge_network::merged_ready`], then the DMA to host memory; the
 //! host of software merges is carried from query to query), and latency = available −
@@ -91,6 +93,9 @@ pub struct IrWindow {
     /// and its fragments.
     stretch_board_fragments: Vec<u64>,
     stretch_engine_slots: Vec<u64>,
+    /// Per Image Engine, its board's fragments in the stretch up to its last one: when it
+    /// was emitted.
+    stretch_engine_last: Vec<u64>,
     touched: Vec<usize>,
     stretch_fragments: u64,
     /// The current stretch starts a primitive (its setup counts).
@@ -122,6 +127,7 @@ impl IrWindow {
             pace: arch.image_engine_cycles_per_fragment,
             stretch_board_fragments: vec![0; arch.boards],
             stretch_engine_slots: vec![0; engines],
+            stretch_engine_last: vec![0; engines],
             touched: Vec::new(),
             stretch_fragments: 0,
             stretch_sets_up: false,
@@ -158,7 +164,7 @@ impl IrWindow {
         }
         for &engine in &self.touched {
             let board = engine / self.engines_per_board;
-            let emitted = starts[board] + self.stretch_board_fragments[board];
+            let emitted = starts[board] + self.stretch_engine_last[engine];
             let through = &mut self.engines_through[engine];
             *through = ((*through).max(starts[board]) + self.stretch_engine_slots[engine])
                 .max(emitted + pace);
@@ -190,6 +196,7 @@ impl IrWindow {
         self.board_fragments[board] += 1;
         self.image_engine_fragments[engine] += 1;
         self.stretch_board_fragments[board] += 1;
+        self.stretch_engine_last[engine] = self.stretch_board_fragments[board];
         let slots = &mut self.stretch_engine_slots[engine];
         if *slots == 0 {
             self.touched.push(engine);
@@ -225,7 +232,13 @@ impl IrWindow {
             .iter()
             .zip(&self.hit_words)
             .map(move |(&through, &hits)| {
-                let last_result = (through.div_ceil(self.rate) + tail).saturating_sub(self.pace);
+                // An engine given no work (or none left past the last window) has no last
+                // fragment to wait for.
+                let last_result = if through == 0 {
+                    0
+                } else {
+                    (through.div_ceil(self.rate) + tail).saturating_sub(self.pace)
+                };
                 let hits_drained = hits + 1;
                 last_result.max(hits_drained).saturating_sub(end + 3)
             })
@@ -315,14 +328,14 @@ impl IrBottleneck {
         let service = self.open.take().map_or(1, |q| q.service);
         let cycles = self.window.cycles(&self.arch);
         let pipe_done = start + cycles as f64;
-        // The end token enters at its release; the pipe's work left by then is all the
-        // Image Engines' backlog can hold ahead of it.
-        let ahead = (pipe_done - release).max(0.0).round() as u64;
+        // The end token enters at its release; the Image Engines have worked on through
+        // what came after the generators were done, so their backlog is that much shorter.
+        let late = (release - pipe_done).max(0.0).round() as u64;
         let end_cycle = pipe_done.max(release).round() as u64;
         let ready: Vec<u64> = self
             .window
             .backlogs(&self.arch, cycles, service)
-            .map(|backlog| end_cycle + 3 + backlog.min(ahead))
+            .map(|backlog| end_cycle + 3 + backlog.saturating_sub(late))
             .collect();
         // Words as the machine moves them: 8 a tile from every Image Engine, and its hit
         // words as one bucket, not capped by the buffers' room.

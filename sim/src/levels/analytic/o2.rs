@@ -56,12 +56,12 @@
 //! ```text
 //! drain   = max(d - T_w, λ_last)   (λ_last: the last fragment's read latency, 0 when it read
 //!                                   nothing new)
-//! latency = 4 + ceil(ceil(records / (V / 32)) / (1 - f)) + min(drain, ahead)
+//! latency = 4 + ceil(ceil(records / (V / 32)) / (1 - f)) + max(0, drain - late)
 //! ```
 //!
-//! with `ahead = max(0, s_w + T_w - r_end)`: in a closed loop the end token enters at its
-//! release `r_end`, and only the work the pipe has not finished by then is ahead of it (a
-//! host-bound window's token finds the pipe empty); in an open loop `r_end = 0`.
+//! with `late = max(0, r_end - (s_w + T_w))`: in a closed loop the end token enters at its
+//! release `r_end`, and the pipe drains while the host holds it (a host-bound window's
+//! token finds the pipe empty); in an open loop `r_end = 0`.
 //!
 //! The 4 is the empty pipe's path (depth pipeline, OccU, OccU Control, the grant after the
 //! last word): with one record group that fits one port cycle, latency is the machine's
@@ -450,11 +450,11 @@ impl O2Bottleneck {
         let (cycles, backlog) = pipe.window_end();
         let drain = backlog.max(pipe.last_read_latency as f64);
         pipe.restart();
-        // What the pipe has still to do when the token comes is all it can wait behind.
-        let ahead = (start + cycles - release).max(0.0);
+        // The token enters at its release: the pipe drained meanwhile.
+        let late = (release - (start + cycles)).max(0.0);
         WindowEnd {
             cycles,
-            latency: self.formulas.latency(records, drain.min(ahead)),
+            latency: self.formulas.latency(records, (drain - late).max(0.0)),
         }
     }
 
