@@ -487,22 +487,23 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // error measured in the comment. (a) raised from 6.4% when the analytic formulas became
     // fluids (issue 15): the sampled level scales its unsimulated windows by the formulas'
     // cycles, and on the hard cases' 28 windows (3 simulated at K = 10) their new shares
-    // calibrate worse. (b) raised from 1.02%, (a) again from 7.22%, when the sampled level
-    // began to calibrate the pipe's share of a window only, not the host's gaps: the walks'
-    // errors fell from 2.4-11.7% to 1.4-3.4% and the demo's to its target, while these two
-    // classes, with one simulated window in ten of a few dozen, moved the other way.
+    // calibrate worse; every other sampled cycles bound fell, to the target on seven
+    // classes. (c) raised when the fluids' carried backlog began to drain while the host
+    // holds the pipe idle (it had been kept whole, an overestimate the sampled level's cycles
+    // felt most: 1.4-3.4% on the walks, now 0.9-1.1%): the p95 of these O2 latencies, 10 to
+    // 25 cycles, moved by 2 or 3 cycles.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
         ("demo",              0.05,  0.20,  0.01,  0.20),  // p95 16.7%; sampled p95 16.7%
-        ("retiled-1x1-4x4",   0.05,  0.10,  0.023, 0.03),  // sampled 1.90%
-        ("retiled-32x32",     0.05,  0.10,  0.032, 0.03),  // sampled 2.61% (b)
+        ("retiled-1x1-4x4",   0.05,  0.19,  0.01,  0.03),  // p95 15.8% (c)
+        ("retiled-32x32",     0.05,  0.10,  0.01,  0.03),  // every target
         ("hardcases",         0.05,  0.10,  0.093, 0.03),  // sampled 7.69% (a)
         ("random",            0.05,  0.10,  0.01,  0.105), // sampled p95 8.70%
         ("walk-frustum",      0.05,  0.10,  0.01,  0.03),  // every target
-        ("walk-hierarchical", 0.05,  0.219, 0.017, 0.219), // p95 18.2%; sampled 1.40%, 18.2%
-        ("walk-quadtree",     0.05,  0.10,  0.017, 0.03),  // sampled 1.40%
-        ("walk-adaptive",     0.05,  0.18,  0.041, 0.12),  // p95 15.0%; sampled 3.35%, 10.0%
-        ("walk-grids",        0.05,  0.10,  0.017, 0.03),  // sampled 1.37%
+        ("walk-hierarchical", 0.05,  0.219, 0.01,  0.219), // p95 18.2%; sampled p95 18.2%
+        ("walk-quadtree",     0.05,  0.10,  0.013, 0.03),  // sampled 1.06%
+        ("walk-adaptive",     0.05,  0.24,  0.013, 0.18),  // p95 20.0%, sampled 1.02%, 15.0% (c)
+        ("walk-grids",        0.05,  0.10,  0.01,  0.041), // sampled p95 3.41% (c)
     ];
     let error = |class: &str, level: &str, metric: &str| -> f64 {
         let row = rows

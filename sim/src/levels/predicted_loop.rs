@@ -38,6 +38,8 @@ pub(crate) struct PredictedLoop {
     last_release: f64,
     /// The last window's latency (or drain).
     tail: f64,
+    /// Cycles the pipe stood idle before the window just opened (taken by `take_idle`).
+    idle: f64,
     /// Each query's predicted answer: available cycle and record words.
     answers: HashMap<u32, (u64, u64)>,
 }
@@ -50,6 +52,7 @@ impl PredictedLoop {
             window_start: None,
             last_release: 0.0,
             tail: 0.0,
+            idle: 0.0,
             answers: HashMap::new(),
         })
     }
@@ -65,6 +68,7 @@ impl PredictedLoop {
                 self.last_release = release;
                 if self.window_start.is_none() {
                     self.window_start = Some(self.pipe_end.max(release));
+                    self.idle = (release - self.pipe_end).max(0.0);
                 }
             }
             Event::Wait(id) => {
@@ -84,6 +88,13 @@ impl PredictedLoop {
             }
             other => self.front.command(other),
         }
+    }
+
+    /// The cycles the pipe stood idle, waiting for the host and geometry stage, before the
+    /// window the last event opened (0 when it opened none): the formulas' backlog drains
+    /// meanwhile.
+    pub(crate) fn take_idle(&mut self) -> f64 {
+        std::mem::take(&mut self.idle)
     }
 
     /// `e` of the last window closed.

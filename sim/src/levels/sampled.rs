@@ -379,6 +379,7 @@ impl SampledModel {
         if matches!(event, Event::Swap) {
             self.window.work = Work::of(self.predicted.pipe_end() - before, cut_cycles);
         }
+        self.formulas.idle(self.predicted.take_idle());
         self.closed_loop |= event.is_closed_loop_record();
         self.formulas.event(event);
         if let Some(run) = &mut self.run {

@@ -32,8 +32,8 @@
 //! The clocks count from the window's start, where the boards start together (the end token
 //! waits for the last generator); an engine's work left past the window's end (`d_i - T_w`)
 //! is carried into the next window, so a long query's backlog is neither lost nor counted
-//! twice (in a closed loop whose host leaves the pipe idle between windows, the carried
-//! backlog is not shortened by the idle time: an overestimate there). The old per-primitive
+//! twice; where the host leaves the pipe idle before a window (a closed loop), the carried
+//! work drains meanwhile. The old per-primitive
 //! maximum (`Σ_p max(generator_p, busiest engine_p - E · C)`) overlapped no primitive with
 //! the next and hid only `E · C` of an OccU-bound engine's work: on a lazy-grid walk of the
 //! city on ir4, with queries of a hundred tiles and more, it predicted 40% more cycles than
@@ -149,6 +149,13 @@ impl IrWindow {
         self.generators.fill(0);
         for through in &mut self.engines_through {
             *through = through.saturating_sub(end * self.rate);
+        }
+    }
+
+    /// `cycles` pass before the window's work starts: the engines' carried work drains.
+    pub fn idle(&mut self, cycles: u64) {
+        for through in &mut self.engines_through {
+            *through = through.saturating_sub(cycles * self.rate);
         }
     }
 
@@ -371,6 +378,12 @@ impl IrBottleneck {
             cycles: cycles as f64,
             latency: (available - end_cycle) as f64,
         }
+    }
+
+    /// The pipe stood idle `cycles` before the window: the Image Engines worked through that
+    /// much of the backlog carried into it.
+    pub(super) fn idle(&mut self, cycles: f64) {
+        self.window.idle(cycles.round() as u64);
     }
 
     /// Start the window again with no work (a frame ended inside it).

@@ -89,6 +89,17 @@ impl Formulas {
         }
     }
 
+    /// The pipe stood idle `cycles` before the next window (the host held it): the backlog
+    /// carried into it drains meanwhile.
+    pub(crate) fn idle(&mut self, cycles: f64) {
+        if cycles > 0.0 {
+            match self {
+                Formulas::O2(o2) => o2.idle(cycles),
+                Formulas::Ir(ir) => ir.idle(cycles),
+            }
+        }
+    }
+
     /// Count the other events that matter to the formulas (primitives, query begins, the
     /// O2's clears).
     pub(crate) fn event(&mut self, event: &Event) {
@@ -215,6 +226,7 @@ impl AnalyticModel {
         }
         let formulas = &mut self.formulas;
         self.frames.event(event, || formulas.cut());
+        self.formulas.idle(self.frames.take_idle());
         self.formulas.event(event);
         if let Some(result) = self.core.event(event)? {
             let Some(spec) = self.open.take() else {

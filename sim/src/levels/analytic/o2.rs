@@ -458,6 +458,17 @@ impl O2Bottleneck {
         }
     }
 
+    /// The pipe stood idle `cycles` before the window: the blocks behind the rasterizer
+    /// worked through that much of the backlog carried into it.
+    pub(super) fn idle(&mut self, cycles: f64) {
+        let pipe = &mut self.pipe;
+        pipe.downstream = (pipe.downstream - cycles).max(0.0);
+        pipe.carried = (pipe.carried - cycles).max(0.0);
+        for stretch in &mut pipe.recent {
+            stretch.begin -= cycles;
+        }
+    }
+
     /// Start the window again with no work (a frame ended inside it).
     pub(super) fn clear_window(&mut self) {
         self.stretch = WindowCounts::default();
