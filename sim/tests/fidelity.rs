@@ -370,7 +370,10 @@ fn analytic_o2_keeps_the_backlog_its_fifos_hold_at_the_end_token() {
     // 68).
     let cycle = run(Fidelity::Cycle);
     let measured = cycle.queries[0].latency_cycles.unwrap() as f64;
-    assert!((measured - 120.0).abs() <= 6.0, "the machine's latency: {measured}");
+    assert!(
+        (measured - 120.0).abs() <= 6.0,
+        "the machine's latency: {measured}"
+    );
 }
 
 #[test]
