@@ -167,15 +167,18 @@ mod sse2 {
             let lanes = tally.step::<FUNC, WRITE>(z, s.try_into().expect("four"), not_done);
             tally.note_passed(at, lanes as u64);
         } else {
+            // (Selects, not branches: an outcome is as likely as not.)
             let func = DepthFunc::ALL[FUNC as usize];
-            for (i, (&z, s)) in depths.iter().zip(stored).enumerate().skip(whole) {
+            let mut passed = 0u64;
+            for (i, (&z, s)) in depths[whole..].iter().zip(&mut stored[whole..]).enumerate() {
                 let pass = func.passes(z, *s);
-                if WRITE && pass {
-                    *s = z;
+                if WRITE {
+                    *s = if pass { z } else { *s };
                 }
                 tally.one(z, pass);
-                tally.note_passed(i, pass as u64);
+                passed |= (pass as u64) << i;
             }
+            tally.note_passed(whole, passed);
         }
         tally.finish(len)
     }
