@@ -399,6 +399,22 @@ mod tests {
         };
         assert_eq!(tally, expected);
         assert_eq!(stored, [0x8000_0000, 0x8000_0000, 3]);
+        // Lequal, not writing, six fragments (a whole step, then the last four again with
+        // fragments 2 and 3 masked off): 3 <= 5 passes, 9 <= 5 fails, 4 <= 4 passes,
+        // 4 <= 6 passes, 7 <= 7 passes, 2 <= 1 fails. Four passed (fragments 2 and 3
+        // counted once), z 3..=7, first 0, last 4.
+        let depths = [3, 9, 4, 4, 7, 2];
+        let mut stored = [5, 5, 4, 6, 7, 1];
+        let tally = test_and_tally(DepthFunc::Lequal, false, &depths, &mut stored);
+        let expected = RunTally {
+            fragments: 6,
+            passed: 4,
+            zmin: 3,
+            zmax: 7,
+            first: 0,
+            last: 4,
+        };
+        assert_eq!(tally, expected);
     }
 
     #[test]
