@@ -26,7 +26,17 @@ pub struct Span<'a> {
     pub depths: &'a [u32],
 }
 
-impl Span<'_> {
+impl<'a> Span<'a> {
+    /// The fragments `columns` (indices into the span) as a span of their own.
+    #[inline(always)]
+    pub fn part(&self, columns: std::ops::Range<usize>) -> Span<'a> {
+        Span {
+            x: self.x + columns.start as u16,
+            y: self.y,
+            depths: &self.depths[columns],
+        }
+    }
+
     /// The span's fragments, in order.
     pub fn fragments(&self) -> impl Iterator<Item = Fragment> + '_ {
         let (x, y) = (self.x, self.y);

@@ -1,12 +1,14 @@
 //! The functional golden model: a depth buffer and the query semantics, giving every query's
 //! exact result. Every timing model must reproduce its counts.
 
+use crate::depth_run::{test_and_write, with_kernel, RunKernel, WithKernel};
 use crate::event::{Event, Fragment, GeometryBatch, Span, DEPTH_ONE};
-use crate::query::{verbose_hits_kept, QueryMode, QueryResult, QuerySpec, TileResult};
+use crate::query::{verbose_hits_kept, QueryMode, QueryResult, QuerySpec, RunTally, TileResult};
 use crate::raster::{RasterProfile, RasterSink, Rasterizer};
 use crate::scene::Command;
 use crate::state::{DepthFunc, Rect, RenderState};
 use std::collections::HashMap;
+use std::ops::Range;
 
 /// The depth buffer: 24-bit depths, one per pixel, row by row from the bottom.
 #[derive(Clone)]
@@ -129,6 +131,49 @@ impl DepthBuffer {
             };
         }
         test_with!(Never, Less, Equal, Lequal, Greater, Notequal, Gequal, Always);
+    }
+
+    /// The depth test and write of a run of a row inside the buffer by `kernel`, tallied.
+    #[inline(always)]
+    fn test_run<K: RunKernel>(&mut self, kernel: K, run: Span) -> RunTally {
+        let start = run.y as usize * self.width as usize + run.x as usize;
+        let stored = &mut self.depths[start..start + run.depths.len()];
+        kernel.test_and_tally(run.depths, stored)
+    }
+
+    /// The depth test and write of a run of a row inside the buffer by `test`, where nothing
+    /// counts its outcomes.
+    #[inline]
+    fn test_run_uncounted(&mut self, test: RunTest, run: Span) {
+        if test.write {
+            let start = run.y as usize * self.width as usize + run.x as usize;
+            let stored = &mut self.depths[start..start + run.depths.len()];
+            test_and_write(test.func, run.depths, stored);
+        }
+    }
+}
+
+/// The depth test a span's fragments take under a state: its function (`Always` with the
+/// test off) and whether a passing fragment writes its depth.
+#[derive(Clone, Copy, Debug)]
+struct RunTest {
+    func: DepthFunc,
+    write: bool,
+}
+
+impl RunTest {
+    /// `writes_allowed` is false in the occlusion render modes, which never write.
+    fn new(state: &RenderState, writes_allowed: bool) -> RunTest {
+        match state.depth_test {
+            true => RunTest {
+                func: state.depth_func,
+                write: state.depth_mask && writes_allowed,
+            },
+            false => RunTest {
+                func: DepthFunc::Always,
+                write: false,
+            },
+        }
     }
 }
 
@@ -269,6 +314,74 @@ fn record_run(result: &mut TileResult, run: Span, passed: &[bool], hits: HitRoom
     }
 }
 
+/// The fragments of `span` (indices into it) in columns `from..to` that lie inside `tile`,
+/// if any do.
+#[inline(always)]
+fn tile_part(tile: &Rect, span: Span, from: u32, to: u32) -> Option<Range<usize>> {
+    if !(tile.y..tile.y + tile.height).contains(&(span.y as u32)) {
+        return None;
+    }
+    let first = tile.x.max(from);
+    let end = (tile.x + tile.width).min(to);
+    let x0 = span.x as u32;
+    (first < end).then(|| (first - x0) as usize..(end - x0) as usize)
+}
+
+/// `part(tile, fragments)` for every tile of `spec` that holds fragments of `span`, with
+/// the indices of those fragments in the span: each fragment once per tile, in order
+/// within a tile.
+#[inline(always)]
+fn for_each_tile_part(
+    spec: &QuerySpec,
+    index: Option<&TileIndex>,
+    span: Span,
+    mut part: impl FnMut(usize, Range<usize>),
+) {
+    let (x0, len) = (span.x as u32, span.depths.len() as u32);
+    let mut part_of = |tile: usize, from: u32, to: u32| {
+        if let Some(inside) = tile_part(&spec.tiles[tile], span, from, to) {
+            part(tile, inside);
+        }
+    };
+    let Some(index) = index else {
+        (0..spec.tiles.len()).for_each(|tile| part_of(tile, x0, x0 + len));
+        return;
+    };
+    // Many tiles: the span cut at the index's buckets; in each piece, the tiles of its
+    // bucket (each once per bucket, so each fragment once per tile, pieces in order).
+    let mut from = x0;
+    while from < x0 + len {
+        let to = (((from >> index.shift) + 1) << index.shift).min(x0 + len);
+        for &tile in index.candidates(from as u16, span.y) {
+            part_of(tile as usize, from, to);
+        }
+        from = to;
+    }
+}
+
+/// A span to test and account in the open query, with the kernel of its test.
+struct SpanTally<'q, 's> {
+    query: &'q mut OpenQuery,
+    depth: &'q mut DepthBuffer,
+    test: RunTest,
+    span: Span<'s>,
+}
+
+impl WithKernel for SpanTally<'_, '_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn run<K: RunKernel>(self, kernel: K) {
+        let SpanTally {
+            query,
+            depth,
+            test,
+            span,
+        } = self;
+        query.test_and_record_span(depth, (kernel, test), span);
+    }
+}
+
 /// The open query's running results.
 struct OpenQuery {
     spec: QuerySpec,
@@ -306,38 +419,57 @@ impl OpenQuery {
             index,
             hit_room,
         } = self;
-        let (x0, len) = (span.x as u32, span.depths.len() as u32);
-        let mut record_part = |tile: usize, from: u32, to: u32| {
-            let rect = &spec.tiles[tile];
-            if !(rect.y..rect.y + rect.height).contains(&(span.y as u32)) {
-                return;
-            }
-            // The part of [from, to) inside the tile.
-            let first = rect.x.max(from);
-            let end = (rect.x + rect.width).min(to);
-            if first < end {
-                let inside = (first - x0) as usize..(end - x0) as usize;
-                let run = Span {
-                    x: first as u16,
-                    y: span.y,
-                    depths: &span.depths[inside.clone()],
-                };
-                record_run(&mut tiles[tile], run, &passed[inside], *hit_room);
-            }
-        };
-        let Some(index) = index else {
-            (0..spec.tiles.len()).for_each(|tile| record_part(tile, x0, x0 + len));
+        for_each_tile_part(spec, index.as_ref(), span, |tile, inside| {
+            let run = span.part(inside.clone());
+            record_run(&mut tiles[tile], run, &passed[inside], *hit_room);
+        });
+    }
+
+    /// Whether [`Self::test_and_record_span`] may take a span under `test`: it lists no hits
+    /// (they need every fragment's outcome), and testing a fragment once per tile holding it
+    /// gives what testing it once gives (nothing is written, or one tile holds it).
+    fn tallies_spans(&self, test: RunTest) -> bool {
+        self.hit_room.room == 0 && (!test.write || self.spec.tiles.len() == 1)
+    }
+
+    /// Test a span in `depth` by `kernel` (taking `test`) and account it in every tile that
+    /// holds its fragments, each part tested and tallied in one pass (when
+    /// [`Self::tallies_spans`]).
+    #[inline(always)]
+    fn test_and_record_span<K: RunKernel>(
+        &mut self,
+        depth: &mut DepthBuffer,
+        (kernel, test): (K, RunTest),
+        span: Span,
+    ) {
+        let OpenQuery {
+            spec, tiles, index, ..
+        } = self;
+        if !K::WRITES {
+            // The fragments outside every tile change nothing: they are not tested.
+            for_each_tile_part(spec, index.as_ref(), span, |tile, inside| {
+                let run = span.part(inside);
+                let tally = depth.test_run(kernel, run);
+                tiles[tile].record_tally(run.x, run.y, tally, u64::MAX);
+            });
             return;
-        };
-        // Many tiles: the span cut at the index's buckets; in each piece, the tiles of its
-        // bucket (each once per bucket, so each fragment once per tile, pieces in order).
-        let mut from = x0;
-        while from < x0 + len {
-            let to = (((from >> index.shift) + 1) << index.shift).min(x0 + len);
-            for &tile in index.candidates(from as u16, span.y) {
-                record_part(tile as usize, from, to);
-            }
-            from = to;
+        }
+        // One tile: the span tested whole, its part inside the tile tallied.
+        let len = span.depths.len();
+        let inside = tile_part(
+            &spec.tiles[0],
+            span,
+            span.x as u32,
+            span.x as u32 + len as u32,
+        )
+        .unwrap_or(len..len);
+        for outside in [0..inside.start, inside.end..len] {
+            depth.test_run_uncounted(test, span.part(outside));
+        }
+        if !inside.is_empty() {
+            let run = span.part(inside);
+            let tally = depth.test_run(kernel, run);
+            tiles[0].record_tally(run.x, run.y, tally, u64::MAX);
         }
     }
 
@@ -446,10 +578,23 @@ impl FunctionalModel {
             .query
             .as_ref()
             .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
-        self.depth
-            .test_span(&self.state, span, writes_allowed, &mut self.passed);
-        if let Some(query) = &mut self.query {
-            query.record_span(span, &self.passed);
+        let test = RunTest::new(&self.state, writes_allowed);
+        match &mut self.query {
+            None => self.depth.test_run_uncounted(test, span),
+            Some(query) if query.tallies_spans(test) => {
+                let job = SpanTally {
+                    query,
+                    depth: &mut self.depth,
+                    test,
+                    span,
+                };
+                with_kernel(test.func, test.write, job)
+            }
+            Some(query) => {
+                self.depth
+                    .test_span(&self.state, span, writes_allowed, &mut self.passed);
+                query.record_span(span, &self.passed);
+            }
         }
     }
 

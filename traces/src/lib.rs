@@ -12,6 +12,7 @@
 
 pub mod builtin;
 pub mod depth_layout;
+mod depth_run;
 pub mod event;
 mod geometry;
 pub mod golden;
@@ -28,7 +29,7 @@ pub mod workloads;
 
 pub use event::{Event, Fragment, GeometryBatch, HostWork, Span};
 pub use hit_list::{Hit, HitList};
-pub use query::{QueryMode, QueryResult, QuerySpec, Tile, TileResult};
+pub use query::{QueryMode, QueryResult, QuerySpec, RunTally, Tile, TileResult};
 pub use scene::{Command, SceneError, SceneLine};
 pub use state::{DepthFunc, Rect};
 

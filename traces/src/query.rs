@@ -162,35 +162,40 @@ impl TileResult {
         passed: &[bool],
         counter_max: u64,
     ) -> Option<(usize, usize)> {
+        self.record_tally(x, y, RunTally::of(depths, passed), counter_max)
+    }
+
+    /// Account a run of fragments of row `y` from column `x` on, all inside this tile, by its
+    /// [`RunTally`], with both counters saturating at `counter_max`. Returns the first and
+    /// last passing fragment's index, if one passed.
+    #[inline]
+    pub fn record_tally(
+        &mut self,
+        x: u16,
+        y: u16,
+        tally: RunTally,
+        counter_max: u64,
+    ) -> Option<(usize, usize)> {
         self.phc = self
             .phc
-            .saturating_add(depths.len() as u64)
+            .saturating_add(tally.fragments as u64)
             .min(counter_max);
-        // One whole-run reduction without branches per fragment (it vectorises).
-        // (A passing fragment's mask is all ones, a failing one's zero; a run is at most
-        // 65,536 fragments, so the count fits 32 bits.)
-        let (mut count, mut zmin, mut zmax) = (0u32, u32::MAX, 0u32);
-        for (&z, &pass) in depths.iter().zip(passed) {
-            let mask = (pass as u32).wrapping_neg();
-            count += pass as u32;
-            zmin = zmin.min(z | !mask);
-            zmax = zmax.max(z & mask);
-        }
-        if count == 0 {
+        if tally.passed == 0 {
             return None;
         }
-        // x grows along the run: the box's x ends are the first and last passing.
-        let first = passed.iter().position(|&pass| pass).unwrap_or(0);
-        let last = passed.iter().rposition(|&pass| pass).unwrap_or(0);
-        self.nohc = self.nohc.saturating_add(count as u64).min(counter_max);
+        self.nohc = self
+            .nohc
+            .saturating_add(tally.passed as u64)
+            .min(counter_max);
         let (x, y) = (x as u32, y as u32);
-        self.xmin = self.xmin.min(x + first as u32);
-        self.xmax = self.xmax.max(x + last as u32);
+        // x grows along the run: the box's x ends are the first and last passing.
+        self.xmin = self.xmin.min(x + tally.first);
+        self.xmax = self.xmax.max(x + tally.last);
         self.ymin = self.ymin.min(y);
         self.ymax = self.ymax.max(y);
-        self.zmin = self.zmin.min(zmin);
-        self.zmax = self.zmax.max(zmax);
-        Some((first, last))
+        self.zmin = self.zmin.min(tally.zmin);
+        self.zmax = self.zmax.max(tally.zmax);
+        Some((tally.first as usize, tally.last as usize))
     }
 
     /// Fold another partial result for the same tile into this one (hits concatenated and
@@ -206,6 +211,51 @@ impl TileResult {
         self.zmax = self.zmax.max(other.zmax);
         self.hits.append(&other.hits, list_cap);
         self.overflowed |= other.overflowed;
+    }
+}
+
+/// What a run of fragments of one row gives its tile's record: how many there are and how
+/// many passed, the passing ones' depth range, and the first and last passing one's index
+/// in the run (meaningless when none passed). A run is at most one row, so counts fit 32
+/// bits.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RunTally {
+    pub fragments: u32,
+    pub passed: u32,
+    /// `u32::MAX` when none passed.
+    pub zmin: u32,
+    /// 0 when none passed.
+    pub zmax: u32,
+    pub first: u32,
+    pub last: u32,
+}
+
+impl RunTally {
+    /// The tally of fragments at `depths` whose tests gave `passed`.
+    #[inline]
+    pub fn of(depths: &[u32], passed: &[bool]) -> RunTally {
+        // One whole-run reduction without branches per fragment (it vectorises).
+        // (A passing fragment's mask is all ones, a failing one's zero.)
+        let (mut count, mut zmin, mut zmax) = (0u32, u32::MAX, 0u32);
+        for (&z, &pass) in depths.iter().zip(passed) {
+            let mask = (pass as u32).wrapping_neg();
+            count += pass as u32;
+            zmin = zmin.min(z | !mask);
+            zmax = zmax.max(z & mask);
+        }
+        let (mut first, mut last) = (0, 0);
+        if count > 0 {
+            first = passed.iter().position(|&pass| pass).unwrap_or(0);
+            last = passed.iter().rposition(|&pass| pass).unwrap_or(0);
+        }
+        RunTally {
+            fragments: depths.len() as u32,
+            passed: count,
+            zmin,
+            zmax,
+            first: first as u32,
+            last: last as u32,
+        }
     }
 }
 

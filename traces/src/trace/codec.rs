@@ -117,6 +117,12 @@ fn bad(pos: usize, reason: impl Into<String>) -> PayloadError {
     }
 }
 
+/// The error for a `what` of `value` above its `max` at `pos`.
+#[cold]
+fn exceeds(pos: usize, what: &str, value: u64, max: u64) -> PayloadError {
+    bad(pos, format!("{what} {value} exceeds {max}"))
+}
+
 /// Reads records from a payload slice, remembering the position for errors.
 pub(crate) struct Cursor<'a> {
     bytes: &'a [u8],
@@ -179,11 +185,12 @@ impl<'a> Cursor<'a> {
     }
 
     /// A varint that must be at most `max`.
+    #[inline(always)]
     fn uv_max(&mut self, max: u64, what: &str) -> Result<u64, PayloadError> {
         let pos = self.pos;
         let value = self.uv()?;
         if value > max {
-            return Err(bad(pos, format!("{what} {value} exceeds {max}")));
+            return Err(exceeds(pos, what, value, max));
         }
         Ok(value)
     }

@@ -31,8 +31,10 @@ pub(super) fn span_depths(
         if exact_in_i32 && residuals.iter().fold(0, |any, &b| any | b) < 0x80 {
             one_byte_depths(payload, pos, len - 1, first as i32, slope as i32, depths);
             // Every depth's bits ORed, checked once: a depth in 0..2^24 sets none above bit
-            // 23, one outside (negative, or too large) does.
-            if depths[..len].iter().fold(0, |bits, &depth| bits | depth) > DEPTH_ONE {
+            // 23, one outside (negative, or too large) does. (The first is in range; the
+            // rest are read four at a time as the kernel stored them, from index 1: a load
+            // across two of its stores would wait for both to reach the cache.)
+            if depths[1..len].iter().fold(0, |bits, &depth| bits | depth) > DEPTH_ONE {
                 return Err(first_depth_outside(payload, pos, len, first, slope));
             }
             return Ok((pos + len - 1, depths[len - 1] as i64));
