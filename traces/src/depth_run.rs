@@ -422,7 +422,7 @@ mod tests {
         let mut rng = SplitMix64(0x5eed);
         // Depths from a few values (so equal ones are common), some across the sign bit.
         let values = [0, 1, 2, 0x00FF_FFFF, 0x7FFF_FFFF, 0x8000_0000, u32::MAX];
-        let mut depth = |rng: &mut SplitMix64| match rng.below(3) {
+        let depth = |rng: &mut SplitMix64| match rng.below(3) {
             0 => values[rng.below(values.len() as u64) as usize],
             1 => rng.below(8) as u32,
             _ => rng.next_u64() as u32,

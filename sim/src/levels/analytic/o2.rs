@@ -70,7 +70,7 @@
 //!
 //! The fluid replaced a per-window maximum of the blocks' throughputs with the FIFOs taken
 //! half full at every query's end: on the small corpus (o2 and ir2 at 4 engines) the worst
-//! p95 latency error went from 69% to 18%.
+//! p95 latency error went from 69% to 20%.
 
 use super::{service_cycles, WindowEnd};
 use crate::arch::O2Arch;
