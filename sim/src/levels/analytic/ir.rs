@@ -147,9 +147,7 @@ impl IrWindow {
         self.image_engine_fragments.fill(0);
         self.hit_words.fill(0);
         self.generators.fill(0);
-        for through in &mut self.engines_through {
-            *through = through.saturating_sub(end * self.rate);
-        }
+        self.idle(end);
     }
 
     /// `cycles` pass before the window's work starts: the engines' carried work drains.

@@ -85,7 +85,7 @@ use std::collections::VecDeque;
 /// Counts of one stretch of work (see the module table): a primitive's fragments, or the
 /// events before its first.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct WindowCounts {
+pub struct StretchCounts {
     pub fragments: u64,
     pub primitives: u64,
     pub occu_cycles: u64,
@@ -171,7 +171,7 @@ impl O2Formulas {
     }
 
     /// The blocks behind the rasterizer on a stretch (see the module docs).
-    pub fn downstream(&self, w: &WindowCounts) -> Downstream {
+    pub fn downstream(&self, w: &StretchCounts) -> Downstream {
         let a = &self.arch;
         let depth = w.fragments as f64 + READ_STALL_CYCLES * w.depth_reads as f64;
         let occu = w.occu_cycles as f64;
@@ -258,21 +258,24 @@ impl Pipe {
             .map(|s| s.begin + (k - s.first) as f64 * s.pace)
     }
 
+    /// The clocks' origin moves `cycles` later: the blocks behind the rasterizer worked
+    /// through that much of their backlog.
+    fn shift(&mut self, cycles: f64) {
+        self.downstream = (self.downstream - cycles).max(0.0);
+        self.carried = (self.carried - cycles).max(0.0);
+        for stretch in &mut self.recent {
+            stretch.begin -= cycles;
+        }
+    }
+
     /// The next window starts at the end token, `T_w` from this one's start, with the work
     /// left behind it.
     fn restart(&mut self) {
-        let end = self.raster;
-        let carried = (self.downstream - end).max(0.0);
-        for stretch in &mut self.recent {
-            stretch.begin -= end;
-        }
-        *self = Pipe {
-            downstream: carried,
-            carried,
-            emitted: self.emitted,
-            recent: std::mem::take(&mut self.recent),
-            ..Pipe::default()
-        };
+        self.shift(self.raster);
+        self.carried = self.downstream;
+        self.raster = 0.0;
+        self.port = 0.0;
+        self.last_read_latency = 0;
     }
 }
 
@@ -298,7 +301,7 @@ pub(crate) struct O2Bottleneck {
     formulas: O2Formulas,
     address: DepthAddress,
     last_read: LastRead,
-    stretch: WindowCounts,
+    stretch: StretchCounts,
     pipe: Pipe,
     /// OccU cycles per fragment and "occlusion render mode" of the open query.
     open: Option<(u64, bool)>,
@@ -310,7 +313,7 @@ impl O2Bottleneck {
             formulas: O2Formulas::new(arch, width, height),
             address: DepthAddress::new(&arch.depth_layout(), width),
             last_read: LastRead::new(arch.memory_banks),
-            stretch: WindowCounts::default(),
+            stretch: StretchCounts::default(),
             pipe: Pipe::default(),
             open: None,
         }
@@ -319,7 +322,7 @@ impl O2Bottleneck {
     /// The stretch counted so far joins the pipe's clocks (see the module docs).
     fn close_stretch(&mut self) {
         close_stretch(&self.formulas, &mut self.pipe, &self.stretch);
-        self.stretch = WindowCounts::default();
+        self.stretch = StretchCounts::default();
     }
 
     pub(super) fn primitive(&mut self) {
@@ -461,17 +464,12 @@ impl O2Bottleneck {
     /// The pipe stood idle `cycles` before the window: the blocks behind the rasterizer
     /// worked through that much of the backlog carried into it.
     pub(super) fn idle(&mut self, cycles: f64) {
-        let pipe = &mut self.pipe;
-        pipe.downstream = (pipe.downstream - cycles).max(0.0);
-        pipe.carried = (pipe.carried - cycles).max(0.0);
-        for stretch in &mut pipe.recent {
-            stretch.begin -= cycles;
-        }
+        self.pipe.shift(cycles);
     }
 
     /// Start the window again with no work (a frame ended inside it).
     pub(super) fn clear_window(&mut self) {
-        self.stretch = WindowCounts::default();
+        self.stretch = StretchCounts::default();
         self.pipe = Pipe::default();
     }
 
@@ -497,7 +495,7 @@ impl O2Bottleneck {
 /// work before and no sooner than they come; the rasterizer emits fragment `k` only once the
 /// blocks behind have started fragment `k - Q` (`Q` fragments fit the FIFOs ahead of the
 /// bottleneck).
-fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &WindowCounts) {
+fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts) {
     let start = pipe.raster + (formulas.arch.primitive_setup_cycles * stretch.primitives) as f64;
     let emitted = start + stretch.fragments as f64;
     pipe.raster = emitted;
