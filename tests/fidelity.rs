@@ -199,12 +199,26 @@ fn every_level_reports_in_one_shape() {
         ] {
             assert!(summary.contains(part), "{level}: {summary}");
         }
-        // The analytic level reads the trace's window index and takes its golden results.
+        // The analytic and sampled levels read the trace's window index and take its golden
+        // results; the sampled level's machines check those of the windows they run.
         let queries = match level {
             "analytic" => "28 queries (their golden results, from the window index)",
+            "sampled:5" => "28 queries (their golden results, from the window index; ",
             _ => "28 queries (28 checked against golden results)",
         };
         assert!(summary.contains(queries), "{level}: {summary}");
+        if level == "sampled:5" {
+            // Windows 0..=28 (28 queries, then the final window): windows 0, 5, ..., 25 are
+            // sampled, 4, 9, ..., 24 their warm-ups, so the machines run 11 query windows
+            // whole (and may end more inside a cool-down): at least 11 checked, at most 28.
+            let checked: u64 = summary
+                .split("from the window index; ")
+                .nth(1)
+                .and_then(|rest| rest.split(' ').next())
+                .and_then(|n| n.parse().ok())
+                .unwrap_or_else(|| panic!("no checked count: {summary}"));
+            assert!((11..=28).contains(&checked), "{summary}");
+        }
         let heading = lines
             .iter()
             .find(|l| l.trim_start().starts_with("# ") && l.contains("latency"))

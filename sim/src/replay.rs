@@ -22,11 +22,12 @@ use crate::blocks::waveform::WaveformOptions;
 use crate::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::levels::analytic::AnalyticModel;
+use crate::levels::sampled::SampledModel;
 use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use crate::timeline::Timeline;
 use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, RetileError, TileGrid};
-use occsim_traces::trace::{ReadError, TraceError, TraceReader};
+use occsim_traces::trace::{ReadError, TestedFragments, TraceError, TraceReader};
 use occsim_traces::Event;
 use std::io::Read;
 
@@ -152,6 +153,28 @@ pub fn replay<R: Read>(
         return LevelModel::Analytic(Box::new(model))
             .finish(arch)
             .map_err(model_error);
+    }
+    if let Fidelity::Sampled { every } = options.level {
+        if options.window_index
+            && options.retile.is_none()
+            && reader.has_depth_tests()
+            && AnalyticModel::reads_window_index(arch, reader.header())
+        {
+            let mut model = SampledModel::from_window_index(arch, width, height, effects, every)
+                .map_err(ReplayError::Setup)?;
+            let mut fragments = TestedFragments::new(open()?)?;
+            while let Some(item) = reader.next_index_item()? {
+                model
+                    .index_item(&item, &mut fragments)
+                    .map_err(|e| match e {
+                        ReadError::Trace(e) => ReplayError::Read(e),
+                        ReadError::Sink(e) => model_error(e),
+                    })?;
+            }
+            return LevelModel::Sampled(Box::new(model))
+                .finish(arch)
+                .map_err(model_error);
+        }
     }
     let model = LevelModel::with_outputs(
         options.level,

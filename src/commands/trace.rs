@@ -299,6 +299,15 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
         ),
         _ => outln!("index       none (the analytic level decodes the fragments)"),
     }
+    match summary.depth_tests {
+        Some(tests) => outln!(
+            "depth tests each fragment's result in {} blocks, {} bytes stored ({} before compression): the sampled level starts its machines mid-trace",
+            tests.blocks,
+            tests.stored_bytes,
+            tests.payload_bytes
+        ),
+        None => outln!("depth tests none (the sampled level decodes every fragment)"),
+    }
     Ok(())
 }
 

@@ -41,6 +41,10 @@ impl DepthBuffer {
         self.depths[y as usize * self.width as usize + x as usize]
     }
 
+    pub fn set(&mut self, x: u16, y: u16, depth: u32) {
+        self.depths[y as usize * self.width as usize + x as usize] = depth;
+    }
+
     /// How many fragments of `span` (inside the buffer) pass a depth test by `func` against
     /// the depths stored now (a span's pixels are distinct: what testing them one by one,
     /// writing none, gives). One loop per function, so the comparison vectorises.
@@ -198,7 +202,7 @@ fn test_row<const WRITE: bool>(
 
 /// A hint to the cache that the line at `address` will be read soon; no effect on results.
 #[inline(always)]
-fn prefetch_line(address: *const u32) {
+pub fn prefetch_line<T>(address: *const T) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: prefetching is only a hint: it never faults, reads nothing into the program
     // and is defined for any address.
@@ -549,6 +553,15 @@ impl FunctionalModel {
 
     pub fn depth_buffer(&self) -> &DepthBuffer {
         &self.depth
+    }
+
+    /// Whether a passing fragment may write depth and colour now: no occlusion-render-mode
+    /// query (brief, verbose) is open.
+    pub fn writes_allowed(&self) -> bool {
+        !self
+            .query
+            .as_ref()
+            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode())
     }
 
     /// Test one fragment and account it in the open query.

@@ -116,6 +116,12 @@ impl DepthPipeline {
         self.state = *state;
     }
 
+    /// The depth buffer, for a warm start that sets a pixel's depth before its first test
+    /// (the sampled level's consistent depths).
+    pub fn depth_buffer_mut(&mut self) -> &mut DepthBuffer {
+        &mut self.depth
+    }
+
     /// Hand the depth buffer's memory back (for reuse), leaving an empty one.
     pub fn take_depth_buffer(&mut self) -> DepthBuffer {
         std::mem::replace(&mut self.depth, DepthBuffer::new(0, 0))

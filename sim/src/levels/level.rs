@@ -299,11 +299,23 @@ impl LevelResult {
                 windows.simulated, windows.total
             );
         }
-        if self.from_window_index {
-            let _ = writeln!(
-                out,
-                "read from the window index: no fragment decoded; query results are the trace's golden ones"
-            );
+        match (self.from_window_index, self.sampled_windows) {
+            (false, _) => {}
+            (true, None) => {
+                let _ = writeln!(
+                    out,
+                    "read from the window index: no fragment decoded; query results are the trace's golden ones"
+                );
+            }
+            (true, Some(_)) => {
+                let _ = writeln!(
+                    out,
+                    "read from the window index: only the simulated windows' fragments decoded, \
+                     their machines' depths made consistent with the trace's depth tests; query \
+                     results are the trace's golden ones, {} checked by those machines",
+                    self.checked_queries
+                );
+            }
         }
         match self.effects {
             Some(effects) => {
@@ -349,7 +361,12 @@ impl LevelResult {
             dash(self.total_cycles),
             self.fragments,
             self.queries.len(),
-            if self.from_window_index {
+            if self.from_window_index && self.sampled_windows.is_some() {
+                format!(
+                    "their golden results, from the window index; {} checked by the simulated windows",
+                    self.checked_queries
+                )
+            } else if self.from_window_index {
                 "their golden results, from the window index".to_owned()
             } else {
                 format!("{} checked against golden results", self.checked_queries)

@@ -14,6 +14,7 @@
 //! ([`LevelModel::event`]) and ends in a common [`LevelResult`].
 
 pub mod analytic;
+pub mod consistent_depths;
 pub mod functional;
 pub mod level;
 mod predicted_loop;

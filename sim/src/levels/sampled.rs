@@ -50,13 +50,16 @@ use crate::arch::{Arch, Machine};
 use crate::effects::Effects;
 use crate::error::SimError;
 use crate::levels::analytic::{service_cycles, Formulas};
+use crate::levels::consistent_depths::ConsistentDepths;
 use crate::levels::functional::FunctionalCore;
 use crate::levels::level::{LevelResult, SampledWindows};
 use crate::levels::predicted_loop::PredictedLoop;
 use crate::machines::{MachineBuilder, MachineModel};
 use occsim_traces::golden::DepthBuffer;
+use occsim_traces::trace::{IndexItem, ReadError, TestedFragments};
 use occsim_traces::{Event, QueryMode, QuerySpec, Span};
 use std::collections::BTreeMap;
+use std::io::Read;
 
 /// A window's time on the predicted timeline: the formulas' `T_w` (its pipe's work) and
 /// the cycles the pipe waited for the host and geometry stage before and around it. Only
@@ -255,6 +258,13 @@ pub struct SampledModel {
     closed_loop: bool,
     /// The sampled windows' measured costs, with their frames.
     sampled_costs: Vec<(u64, u64)>,
+    width: u32,
+    height: u32,
+    /// Read from a window index: the machines' depths are made consistent with the trace's
+    /// depth-test results as they go, instead of copied from the functional model's.
+    consistent: Option<ConsistentDepths>,
+    /// Queries the machines checked against the stream's golden results.
+    machine_checked: u64,
 }
 
 impl SampledModel {
@@ -264,6 +274,36 @@ impl SampledModel {
         height: u32,
         effects: Effects,
         every: u32,
+    ) -> Result<SampledModel, SimError> {
+        let core = FunctionalCore::new(width, height)?;
+        SampledModel::with_core(arch, (width, height), effects, every, core, None)
+    }
+
+    /// The model for a replay from the window index, items by
+    /// [`SampledModel::index_item`]: the formulas count stretches, results are the stream's
+    /// golden ones (each simulated window's still checked by its machine), and only the
+    /// simulated windows' fragments are read, with their depth-test results, by a second
+    /// reader ([`TestedFragments`]). The same result as [`SampledModel::new`] fed the
+    /// events, at the cost of the simulated windows alone.
+    pub fn from_window_index(
+        arch: &Arch,
+        width: u32,
+        height: u32,
+        effects: Effects,
+        every: u32,
+    ) -> Result<SampledModel, SimError> {
+        let core = FunctionalCore::trusting_golden(width, height)?;
+        let consistent = Some(ConsistentDepths::new(width, height));
+        SampledModel::with_core(arch, (width, height), effects, every, core, consistent)
+    }
+
+    fn with_core(
+        arch: &Arch,
+        (width, height): (u32, u32),
+        effects: Effects,
+        every: u32,
+        core: FunctionalCore,
+        consistent: Option<ConsistentDepths>,
     ) -> Result<SampledModel, SimError> {
         let (engines, all_tiles_one_cycle, cooldown_fragments) = match arch.machine() {
             Machine::O2 => {
@@ -285,7 +325,7 @@ impl SampledModel {
             engines,
             all_tiles_one_cycle,
             cooldown_fragments,
-            core: FunctionalCore::new(width, height)?,
+            core,
             formulas: Formulas::new(arch, width, height)?,
             open: None,
             predicted: PredictedLoop::new(arch)?,
@@ -303,6 +343,10 @@ impl SampledModel {
             frames: 0,
             closed_loop: false,
             sampled_costs: Vec::new(),
+            width,
+            height,
+            consistent,
+            machine_checked: 0,
         };
         model.start_window()?;
         Ok(model)
@@ -328,13 +372,31 @@ impl SampledModel {
         if let Some(run) = &mut self.run {
             run.cooldown = None;
         } else {
-            let machine = MachineBuilder::new(&self.arch)
-                .effects(self.effects)
-                .resume(
-                    self.core.functional.state(),
+            let builder = MachineBuilder::new(&self.arch).effects(self.effects);
+            let state = self.core.functional.state();
+            let machine = match &mut self.consistent {
+                None => builder.resume(
+                    state,
                     self.core.functional.depth_buffer(),
                     self.spare_depth.take(),
-                )?;
+                )?,
+                Some(consistent) => {
+                    // Every pixel's depth is set before its first test: the buffer's
+                    // contents do not matter. (The core's model has a one-pixel viewport.)
+                    consistent.restart();
+                    let (width, height) = (self.width, self.height);
+                    let depth = self
+                        .spare_depth
+                        .take()
+                        .unwrap_or_else(|| DepthBuffer::new(width, height));
+                    let state = occsim_traces::state::RenderState {
+                        width,
+                        height,
+                        ..*state
+                    };
+                    builder.resume_with_depths(&state, depth)?
+                }
+            };
             self.run = Some(Run {
                 machine,
                 windows: Vec::new(),
@@ -441,6 +503,51 @@ impl SampledModel {
         Ok(())
     }
 
+    /// One item of a window index (a model made by [`SampledModel::from_window_index`]):
+    /// an event, or a stretch of fragments the formulas count whole and a running machine
+    /// takes from `fragments` (the rest are passed over there, unread).
+    pub fn index_item<R: Read>(
+        &mut self,
+        item: &IndexItem,
+        fragments: &mut TestedFragments<R>,
+    ) -> Result<(), ReadError<SimError>> {
+        let stretch = match item {
+            IndexItem::Event(event) => {
+                self.event(event).map_err(ReadError::Sink)?;
+                if let (Event::Clear, Some(consistent)) = (event, &mut self.consistent) {
+                    consistent.clear();
+                }
+                return Ok(());
+            }
+            IndexItem::Stretch(stretch) => stretch,
+        };
+        self.close_ended_window().map_err(ReadError::Sink)?;
+        let state = *self.core.functional.state();
+        self.formulas.stretch(stretch, &state);
+        self.core.count_fragments(stretch.fragments);
+        let (Some(run), Some(consistent)) = (&mut self.run, &mut self.consistent) else {
+            fragments.skip(stretch.fragments);
+            return Ok(());
+        };
+        let taken = run
+            .cooldown
+            .map_or(stretch.fragments, |left| stretch.fragments.min(left as u64));
+        let writes_allowed = self.core.functional.writes_allowed();
+        fragments.take(taken, |span, results| {
+            let depth = run.machine.depth_buffer_mut();
+            consistent.span(&state, writes_allowed, span, results, depth)?;
+            run.machine.span(span)
+        })?;
+        fragments.skip(stretch.fragments - taken);
+        if let Some(left) = &mut run.cooldown {
+            *left -= taken as usize;
+            if *left == 0 {
+                self.flush_run().map_err(ReadError::Sink)?;
+            }
+        }
+        Ok(())
+    }
+
     /// After a query's end and its golden result, or a frame's end, the next event opens a
     /// new window.
     fn close_ended_window(&mut self) -> Result<(), SimError> {
@@ -497,6 +604,7 @@ impl SampledModel {
         }
         let (report, depth) = run.machine.finish_recycling()?;
         self.spare_depth = Some(depth);
+        self.machine_checked += report.summary.checked_queries;
         let mut queries = report.queries.iter();
         // The machine's frame ends, in its own cycles (its frames are its run's swaps).
         let mut frame_ends = report.frames.iter().scan(0, |end, frame| {
@@ -611,6 +719,10 @@ impl SampledModel {
             total: self.windows,
         };
         let mut result = self.core.finish()?;
+        if self.consistent.is_some() {
+            // The results are the golden ones; the simulated windows' machines checked theirs.
+            result.checked_queries = self.machine_checked;
+        }
         for (query, latency) in result.queries.iter_mut().zip(filled) {
             query.latency_cycles = latency;
         }

@@ -131,6 +131,12 @@ impl IrMachine {
     }
 
     /// [`Self::finish`], handing the depth buffer's memory back for reuse.
+    /// The depth buffer the Image Engines' depth tests read
+    /// ([`super::MachineModel::depth_buffer_mut`]).
+    pub fn depth_buffer_mut(&mut self) -> &mut DepthBuffer {
+        &mut self.depth
+    }
+
     pub fn finish_recycling(mut self) -> Result<(Report, DepthBuffer), SimError> {
         let depth = std::mem::replace(&mut self.depth, DepthBuffer::new(0, 0));
         Ok((self.finish()?, depth))

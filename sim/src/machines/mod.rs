@@ -151,8 +151,6 @@ impl<'a> MachineBuilder<'a> {
         depth: &DepthBuffer,
         storage: Option<DepthBuffer>,
     ) -> Result<MachineModel, SimError> {
-        let (width, height) = (state.width, state.height);
-        crate::error::check_viewport(width, height)?;
         let copy = match storage {
             Some(mut storage) => {
                 storage.copy_from(depth);
@@ -160,6 +158,19 @@ impl<'a> MachineBuilder<'a> {
             }
             None => depth.clone(),
         };
+        self.resume_with_depths(state, copy)
+    }
+
+    /// [`Self::resume`] with `depth` taken as the machine's depth buffer, not copied (the
+    /// sampled level's consistent depths fill it as the machine goes,
+    /// [`crate::levels::consistent_depths`]).
+    pub fn resume_with_depths(
+        self,
+        state: &RenderState,
+        copy: DepthBuffer,
+    ) -> Result<MachineModel, SimError> {
+        let (width, height) = (state.width, state.height);
+        crate::error::check_viewport(width, height)?;
         let front = closed_loop_of(self.arch)?;
         let pipe = match self.arch.machine() {
             Machine::O2 => Pipe::O2(O2Machine::assemble(self, width, height, copy, Some(state))?),
@@ -198,6 +209,17 @@ impl MachineModel {
             front,
             events: 0,
             resumed: false,
+        }
+    }
+
+    /// The depth buffer the machine's depth tests read and write. A machine started
+    /// mid-stream may have a pixel's depth set before the pixel's first test
+    /// ([`crate::levels::consistent_depths`]); the tests themselves happen as each fragment
+    /// is replayed, so a depth set before a fragment is replayed is the one it meets.
+    pub fn depth_buffer_mut(&mut self) -> &mut DepthBuffer {
+        match &mut self.pipe {
+            Pipe::O2(machine) => machine.depth_buffer_mut(),
+            Pipe::Ir(machine) => machine.depth_buffer_mut(),
         }
     }
 

@@ -190,6 +190,11 @@ impl O2Machine {
     }
 
     /// [`Self::finish`], handing the depth buffer's memory back for reuse.
+    /// The depth buffer the depth test reads ([`MachineModel::depth_buffer_mut`]).
+    pub fn depth_buffer_mut(&mut self) -> &mut DepthBuffer {
+        self.depth.depth_buffer_mut()
+    }
+
     pub fn finish_recycling(mut self) -> Result<(Report, DepthBuffer), SimError> {
         // The fragments still pending are tested first: they need the buffer.
         while self.front_open.is_none() && !self.pending.is_empty() {

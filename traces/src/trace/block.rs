@@ -8,8 +8,9 @@ pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// (geometry batches, host work, waits, conditional rendering, frame ends); version 3 stores
 /// verbose hit lists as counts, digests and the first hits listed (`HitList`), so a result's
 /// size no longer grows with its hits; version 4 may hold window-index blocks
-/// ([`crate::trace::index`]), named by the header's `window_index`.
-pub const FORMAT_VERSION: u16 = 4;
+/// ([`crate::trace::index`]), named by the header's `window_index`; version 5 pairs every
+/// event block of an indexed trace with a depth-test block ([`crate::trace::depth_tests`]).
+pub const FORMAT_VERSION: u16 = 5;
 /// The oldest version this code reads: version-1 traces replay as an open loop.
 pub const OLDEST_READABLE_VERSION: u16 = 1;
 /// Most bytes of header JSON.
@@ -31,6 +32,7 @@ pub const TRAILER_BYTES: usize = 16;
 pub(crate) const KIND_EVENTS: u8 = 1;
 pub(crate) const KIND_SUMMARY: u8 = 2;
 pub(crate) const KIND_INDEX: u8 = 3;
+pub(crate) const KIND_DEPTH_TESTS: u8 = 4;
 /// Payload codecs.
 pub(crate) const CODEC_STORED: u8 = 0;
 pub(crate) const CODEC_ZSTD: u8 = 1;
@@ -84,7 +86,7 @@ impl BlockHeader {
         let (raw, stored) = (header.raw_len as usize, header.stored_len as usize);
         match header.kind {
             KIND_EVENTS | KIND_INDEX if raw == 0 => return Err("empty event block".to_owned()),
-            KIND_EVENTS | KIND_INDEX if raw > MAX_BLOCK_BYTES => {
+            KIND_EVENTS | KIND_INDEX | KIND_DEPTH_TESTS if raw > MAX_BLOCK_BYTES => {
                 return Err(format!(
                     "block claims {raw} payload bytes (most {MAX_BLOCK_BYTES})"
                 ))
@@ -98,7 +100,13 @@ impl BlockHeader {
             KIND_SUMMARY if header.codec != CODEC_STORED => {
                 return Err("summary block is compressed".to_owned())
             }
-            KIND_EVENTS | KIND_SUMMARY | KIND_INDEX => {}
+            KIND_DEPTH_TESTS if raw != (header.events as usize).div_ceil(8) => {
+                return Err(format!(
+                    "depth-test block claims {} results in {raw} bytes",
+                    header.events
+                ))
+            }
+            KIND_EVENTS | KIND_SUMMARY | KIND_INDEX | KIND_DEPTH_TESTS => {}
             kind => return Err(format!("unknown block kind {kind}")),
         }
         if bytes[2] != 0 || bytes[3] != 0 {

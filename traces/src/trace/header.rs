@@ -170,6 +170,10 @@ pub struct TraceSummary {
     /// The window index's blocks, when the trace has one.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub window_index: Option<BlockCounts>,
+    /// The depth-test blocks, one an event block, when the trace has a window index
+    /// (version 5 on).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_tests: Option<BlockCounts>,
 }
 
 /// Blocks of one kind and their bytes (the summary's `window_index` counts the window
@@ -181,6 +185,15 @@ pub struct BlockCounts {
     pub payload_bytes: u64,
     /// Payload bytes as stored, block headers not counted.
     pub stored_bytes: u64,
+}
+
+impl BlockCounts {
+    /// Count one more block.
+    pub(crate) fn add(&mut self, header: &super::block::BlockHeader) {
+        self.blocks += 1;
+        self.payload_bytes += header.raw_len as u64;
+        self.stored_bytes += header.stored_len as u64;
+    }
 }
 
 /// What a trace holds of the closed loop: draws, host work, waits and frames.

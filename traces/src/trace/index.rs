@@ -134,10 +134,13 @@ impl WindowIndexer {
         }
     }
 
-    /// Count a fragment (inside the viewport) and apply it.
+    /// Count a fragment (inside the viewport) and apply it; returns whether it passes the
+    /// depth test (as it does when the test is off).
     #[inline]
-    pub(crate) fn fragment(&mut self, fragment: Fragment) {
+    pub(crate) fn fragment(&mut self, fragment: Fragment) -> bool {
         let stored = self.functional.depth_buffer().get(fragment.x, fragment.y);
+        let state = self.functional.state();
+        let passed = !state.depth_test || state.depth_func.passes(fragment.z, stored);
         self.stretch.count_fragment(
             fragment,
             self.functional.state(),
@@ -146,6 +149,7 @@ impl WindowIndexer {
             !self.occlusion_mode,
         );
         self.functional.fragment(fragment);
+        passed
     }
 
     /// The stretch gathered since the last other event, if it holds a fragment.

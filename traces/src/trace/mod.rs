@@ -1,21 +1,24 @@
 //! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
 //!
-//! # Layout (version 4; all integers little-endian; versions 1, without the closed loop's
-//! records, 2, with verbose hits stored one by one, and 3, without window-index blocks,
-//! still read)
+//! # Layout (version 5; all integers little-endian; versions 1, without the closed loop's
+//! records, 2, with verbose hits stored one by one, 3, without window-index blocks, and 4,
+//! without depth-test blocks, still read)
 //!
 //! ```text
-//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 3 | flags u16 = 0
+//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 5 | flags u16 = 0
 //!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
 //!               (the CRC covers version .. end of JSON)
 //! event blocks  block header (20) | stored payload (stored_len), with window-index blocks
-//!               (kind 3) among them when the header names a `window_index` layout
+//!               (kind 3) among them when the header names a `window_index` layout, and
+//!               then each event block followed at once by its depth-test block (kind 4)
 //! summary block block header (20, kind 2, stored) | summary JSON
 //! trailer       summary block offset u64 | "OCCTEND\n" (8)
 //!
-//! block header  kind u8 (1 events, 2 summary, 3 window index) | codec u8 (0 stored, 1 zstd) | reserved u16 = 0
+//! block header  kind u8 (1 events, 2 summary, 3 window index, 4 depth tests) | codec u8
+//!               (0 stored, 1 zstd) | reserved u16 = 0
 //!               | events u32 | raw_len u32 (<= 1 MiB) | stored_len u32 | CRC32 u32
-//!               (the CRC covers the first 16 header bytes and the stored payload)
+//!               (the CRC covers the first 16 header bytes and the stored payload; a
+//!               depth-test block's `events` is its event block's fragments)
 //! ```
 //!
 //! An event payload is a sequence of records, each a tag byte and fields (varints are
@@ -26,11 +29,13 @@
 //! per row from the last row step); each further depth relative to the one before plus the
 //! previous span's x slope. All prediction state resets at each block start, so blocks
 //! decode independently; only a query begin or result too large for one block is split
-//! into `PART` records across consecutive blocks. See `codec.rs` for the record tags, and
-//! [`index`] for the window index, the stream a model that needs no fragment reads.
+//! into `PART` records across consecutive blocks. See `codec.rs` for the record tags,
+//! [`index`] for the window index, the stream a model that needs no fragment reads, and
+//! [`depth_tests`] for the depth tests' results a model starting mid-trace reads.
 
 mod block;
 mod codec;
+pub mod depth_tests;
 mod error;
 mod header;
 pub mod index;
@@ -46,6 +51,7 @@ pub use block::{
     MAX_STORED_BYTES, MAX_SUMMARY_JSON_BYTES, OLDEST_READABLE_VERSION, TRAILER_BYTES,
 };
 pub use codec::MAX_EVENT_BYTES;
+pub use depth_tests::{DepthTestResults, TestedFragments};
 pub use error::{ReadError, TraceError};
 pub use header::{
     BlockCounts, ClosedLoopCounts, QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary,

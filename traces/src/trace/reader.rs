@@ -36,6 +36,8 @@ pub struct TraceReader<R: Read> {
     skipped: bool,
     /// The window-index blocks passed so far.
     index: BlockCounts,
+    /// The depth-test blocks passed so far.
+    depth_tests: BlockCounts,
     /// The block loaded is a window-index block (read by [`TraceReader::next_index_item`]).
     in_index_block: bool,
     summary: Option<TraceSummary>,
@@ -77,6 +79,7 @@ impl<R: Read> TraceReader<R> {
             claimed_events: 0,
             skipped: false,
             index: BlockCounts::default(),
+            depth_tests: BlockCounts::default(),
             in_index_block: false,
             summary: None,
             failed: false,
@@ -235,13 +238,12 @@ impl<R: Read> TraceReader<R> {
                     return Ok(false);
                 }
                 KIND_INDEX => {
-                    self.index.blocks += 1;
-                    self.index.payload_bytes += header.raw_len as u64;
-                    self.index.stored_bytes += header.stored_len as u64;
+                    self.index.add(&header);
                     if wanted == Wanted::Index {
                         break header;
                     }
                 }
+                KIND_DEPTH_TESTS => self.depth_tests.add(&header),
                 _ => {
                     self.blocks += 1;
                     self.payload_bytes += header.raw_len as u64;
@@ -260,30 +262,86 @@ impl<R: Read> TraceReader<R> {
         self.block_events = header.events;
         self.in_index_block = header.kind == KIND_INDEX;
         if header.codec == CODEC_ZSTD {
-            self.payload.clear();
-            self.payload.reserve(header.raw_len as usize);
-            let result = self
-                .decompressor
-                .decompress_to_buffer(&self.stored[..], &mut self.payload);
-            let offset = self.block_offset;
-            match result {
-                Ok(n) if n == header.raw_len as usize => {}
-                Ok(n) => {
-                    let reason =
-                        format!("decompressed to {n} bytes, header says {}", header.raw_len);
-                    return Err(TraceError::Decompress { offset, reason });
-                }
-                Err(e) => {
-                    let reason = e.to_string();
-                    return Err(TraceError::Decompress { offset, reason });
-                }
-            }
+            let stored = std::mem::take(&mut self.stored);
+            let mut payload = std::mem::take(&mut self.payload);
+            let result = self.decompress(&header, self.block_offset, &stored, &mut payload);
+            (self.stored, self.payload) = (stored, payload);
+            result?;
         } else {
             std::mem::swap(&mut self.stored, &mut self.payload);
         }
         self.decoder = BlockDecoder::new();
         self.in_block = true;
         Ok(true)
+    }
+
+    /// `stored`, the payload of the block `header` at `offset` as stored, decompressed (or
+    /// copied) into `out`.
+    pub(crate) fn decompress(
+        &mut self,
+        header: &BlockHeader,
+        offset: u64,
+        stored: &[u8],
+        out: &mut Vec<u8>,
+    ) -> Result<(), TraceError> {
+        out.clear();
+        if header.codec != CODEC_ZSTD {
+            out.extend_from_slice(stored);
+            return Ok(());
+        }
+        out.reserve(header.raw_len as usize);
+        match self.decompressor.decompress_to_buffer(stored, out) {
+            Ok(n) if n == header.raw_len as usize => Ok(()),
+            Ok(n) => {
+                let reason = format!("decompressed to {n} bytes, header says {}", header.raw_len);
+                Err(TraceError::Decompress { offset, reason })
+            }
+            Err(e) => {
+                let reason = e.to_string();
+                Err(TraceError::Decompress { offset, reason })
+            }
+        }
+    }
+
+    /// The payload of the block just read by [`Self::next_raw_block`], decompressed.
+    pub(crate) fn decompress_stored(
+        &mut self,
+        header: &BlockHeader,
+        offset: u64,
+        out: &mut Vec<u8>,
+    ) -> Result<(), TraceError> {
+        let stored = std::mem::take(&mut self.stored);
+        let result = self.decompress(header, offset, &stored, out);
+        self.stored = stored;
+        result
+    }
+
+    /// Whether every event block has a depth-test block after it
+    /// ([`crate::trace::depth_tests`]).
+    pub fn has_depth_tests(&self) -> bool {
+        self.version >= 5 && self.header.window_index.is_some()
+    }
+
+    /// The next block but the summary, read and its checksum checked (its payload, as
+    /// stored, in `self.stored`), for a reader of blocks of its own
+    /// ([`crate::trace::depth_tests::TestedFragments`]); None at the summary, which is
+    /// left unread. The reader's own decoding is over: it checks no summary after this.
+    pub(crate) fn next_raw_block(&mut self) -> Result<Option<BlockHeader>, TraceError> {
+        self.guarded(|reader| {
+            reader.skipped = true;
+            let header = reader.read_block()?;
+            Ok((header.kind != KIND_SUMMARY).then_some(header))
+        })
+    }
+
+    /// Swap the stored payload of the block just read into `into`.
+    pub(crate) fn keep_stored(&mut self, into: &mut Vec<u8>) {
+        std::mem::swap(&mut self.stored, into);
+    }
+
+    /// The file offset of the block read last.
+    pub(crate) fn block_offset(&self) -> u64 {
+        self.block_offset
     }
 
     fn corrupt(&self, error: PayloadError) -> TraceError {
@@ -360,6 +418,7 @@ impl<R: Read> TraceReader<R> {
         found.payload_bytes = self.payload_bytes;
         found.stored_bytes = self.stored_bytes;
         found.window_index = self.header.window_index.map(|_| self.index);
+        found.depth_tests = self.has_depth_tests().then_some(self.depth_tests);
         if found != stored || self.claimed_events != stored.events {
             return Err(bad(format!(
                 "it disagrees with the trace on {}",
@@ -437,6 +496,7 @@ impl<R: Read> TraceReader<R> {
                 height: reader.header.height,
                 tally: &mut reader.tally,
                 assembly: &mut reader.assembly,
+                unchecked_events: false,
             };
             match decode(&mut reader.decoder, &reader.payload, &mut ctx) {
                 Ok(Some(record)) => return Ok(Some(record)),
@@ -467,6 +527,7 @@ impl<R: Read> TraceReader<R> {
                 height: reader.header.height,
                 tally: &mut reader.tally,
                 assembly: &mut reader.assembly,
+                unchecked_events: false,
             };
             match reader.decoder.drain(&reader.payload, &mut ctx, sink) {
                 Ok(()) => {}

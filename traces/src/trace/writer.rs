@@ -5,6 +5,7 @@ use super::codec::{
     encode_large_event, encode_small_event, encode_span, put_uv, span_bytes_bound, tag,
     SpanPredictor, MAX_EVENT_BYTES, MAX_SPAN_FRAGMENTS,
 };
+use super::depth_tests::DepthTestBits;
 use super::header::{BlockCounts, StreamTally, TraceHeader, TraceSummary};
 use super::index::{FragmentStretch, WindowIndexer};
 use super::TraceError;
@@ -61,10 +62,14 @@ enum Lane {
     Index,
 }
 
-/// The window index being written: its counting state and its open block.
+/// The window index being written: its counting state and its open block, and the depth
+/// tests' results of the open event block's fragments (and of the span being gathered).
 struct IndexLane {
     indexer: Box<WindowIndexer>,
     block: OpenBlock,
+    depth_tests: DepthTestBits,
+    span_passed: Vec<bool>,
+    depth_test_blocks: BlockCounts,
 }
 
 /// Most bytes a small (state) event record takes: a tag and four 5-byte varints.
@@ -173,6 +178,9 @@ impl<W: Write> TraceWriter<W> {
             index: options.window_index.map(|layout| IndexLane {
                 indexer: Box::new(WindowIndexer::new(&layout, header.width, header.height)),
                 block: OpenBlock::new(KIND_INDEX),
+                depth_tests: DepthTestBits::default(),
+                span_passed: Vec::new(),
+                depth_test_blocks: BlockCounts::default(),
             }),
             header: header.clone(),
             header_json_bytes: json.len(),
@@ -223,9 +231,7 @@ impl<W: Write> TraceWriter<W> {
                 return Err(self.invalid(reason));
             }
             self.tally.checked_fragments(1);
-            if let Some(index) = &mut self.index {
-                index.indexer.fragment(*f);
-            }
+            let passed = self.index.as_mut().map(|index| index.indexer.fragment(*f));
             let len = self.span_depths.len();
             let continues = len > 0
                 && len < self.max_span
@@ -236,6 +242,9 @@ impl<W: Write> TraceWriter<W> {
                 (self.span_x, self.span_y) = (f.x, f.y);
             }
             self.span_depths.push(f.z);
+            if let (Some(index), Some(passed)) = (&mut self.index, passed) {
+                index.span_passed.push(passed);
+            }
             return Ok(());
         }
         self.flush_span()?;
@@ -317,6 +326,12 @@ impl<W: Write> TraceWriter<W> {
         );
         self.events.items += self.span_depths.len() as u32;
         self.span_depths.clear();
+        if let Some(index) = &mut self.index {
+            index
+                .span_passed
+                .drain(..)
+                .for_each(|passed| index.depth_tests.push(passed));
+        }
         Ok(())
     }
 
@@ -382,17 +397,52 @@ impl<W: Write> TraceWriter<W> {
         }
         let payload = std::mem::take(&mut block.payload);
         let (kind, items) = (block.kind, std::mem::take(&mut block.items));
+        let stored_len = self.write_block(kind, items, &payload)?;
+        if lane == Lane::Events {
+            self.predictor = SpanPredictor::default();
+            self.flush_depth_tests()?;
+        }
+        if let Some(block) = self.open_block(lane) {
+            block.written.blocks += 1;
+            block.written.payload_bytes += payload.len() as u64;
+            block.written.stored_bytes += stored_len;
+            block.payload = payload;
+            block.payload.clear();
+        }
+        Ok(())
+    }
+
+    /// After an event block: the depth tests' results of its fragments, in a block of their
+    /// own (so a reader that wants them finds them right after the events they belong to).
+    fn flush_depth_tests(&mut self) -> Result<(), TraceError> {
+        let Some(index) = &mut self.index else {
+            return Ok(());
+        };
+        let bits = std::mem::take(&mut index.depth_tests);
+        let stored_len = self.write_block(KIND_DEPTH_TESTS, bits.count(), bits.bytes())?;
+        if let Some(index) = &mut self.index {
+            let counts = &mut index.depth_test_blocks;
+            counts.blocks += 1;
+            counts.payload_bytes += bits.bytes().len() as u64;
+            counts.stored_bytes += stored_len;
+            index.depth_tests = bits.emptied();
+        }
+        Ok(())
+    }
+
+    /// Compress (when that saves bytes) and write one block; returns its stored bytes.
+    fn write_block(&mut self, kind: u8, items: u32, payload: &[u8]) -> Result<u64, TraceError> {
         self.stored.clear();
         self.stored
             .reserve(zstd::zstd_safe::compress_bound(payload.len()));
         let compressed = self
             .compressor
-            .compress_to_buffer(&payload, &mut self.stored);
+            .compress_to_buffer(payload, &mut self.stored);
         let zstd_wins = compressed.is_ok() && self.stored.len() < payload.len();
         let (codec, stored) = if zstd_wins {
-            (CODEC_ZSTD, &self.stored)
+            (CODEC_ZSTD, &self.stored[..])
         } else {
-            (CODEC_STORED, &payload)
+            (CODEC_STORED, payload)
         };
         let header = BlockHeader {
             kind,
@@ -405,18 +455,7 @@ impl<W: Write> TraceWriter<W> {
         write_at(&mut self.out, &mut self.offset, &header.fields())?;
         write_at(&mut self.out, &mut self.offset, &crc.to_le_bytes())?;
         write_at(&mut self.out, &mut self.offset, stored)?;
-        let stored_len = stored.len() as u64;
-        if lane == Lane::Events {
-            self.predictor = SpanPredictor::default();
-        }
-        if let Some(block) = self.open_block(lane) {
-            block.written.blocks += 1;
-            block.written.payload_bytes += payload.len() as u64;
-            block.written.stored_bytes += stored_len;
-            block.payload = payload;
-            block.payload.clear();
-        }
-        Ok(())
+        Ok(stored.len() as u64)
     }
 
     /// End the trace: write the last block, the summary and the trailer, and flush.
@@ -438,6 +477,7 @@ impl<W: Write> TraceWriter<W> {
         summary.payload_bytes = self.events.written.payload_bytes;
         summary.stored_bytes = self.events.written.stored_bytes;
         summary.window_index = self.index.as_ref().map(|index| index.block.written);
+        summary.depth_tests = self.index.as_ref().map(|index| index.depth_test_blocks);
         let json = serde_json::to_vec(&summary).map_err(|e| self.invalid(e.to_string()))?;
         let header = BlockHeader {
             kind: KIND_SUMMARY,

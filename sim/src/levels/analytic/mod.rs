@@ -82,7 +82,7 @@ impl Formulas {
 
     /// Count a stretch of fragments from a trace's window index. Only the O2 formulas count
     /// from stretches ([`AnalyticModel::reads_window_index`]).
-    fn stretch(&mut self, stretch: &FragmentStretch, state: &RenderState) {
+    pub(crate) fn stretch(&mut self, stretch: &FragmentStretch, state: &RenderState) {
         match self {
             Formulas::O2(o2) => o2.stretch(stretch, state),
             Formulas::Ir(_) => unreachable!("the IR formulas count Image Engines' fragments"),

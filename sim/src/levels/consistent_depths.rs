@@ -1,0 +1,331 @@
+//! Consistent depths: the depth buffer a machine started in the middle of a trace needs,
+//! without the fragments before it.
+//!
+//! A machine's depth tests decide which fragments pass, and so which write depth, draw,
+//! count in the Occlusion Unit and hit. The true depth buffer at a warm-up window's start is
+//! the work of every fragment before it; the trace's depth-test blocks
+//! ([`occsim_traces::trace::depth_tests`]) record instead whether each fragment passed. A
+//! depth buffer *consistent* with those results serves as well: one under which every
+//! fragment the machine replays passes exactly when it passed in the trace.
+//!
+//! The rule. Each pixel is unknown until the run writes it (a passing fragment with the
+//! depth mask on and writes allowed) or clears it; the true depth `S` of an unknown pixel is
+//! the one it held at the run's start. Each result at an unknown pixel bounds `S`: under
+//! LESS, a pass says `S > z` and a fail `S <= z`; under EQUAL, a pass says `S = z` and a fail
+//! `S != z`; and so on for every function. Before the machine replays a fragment at an
+//! unknown pixel, the pixel is given a depth within every bound so far (`low..=high`, none
+//! of the excluded values), keeping the one it has when that still is.
+//!
+//! Why it is exact. (1) The true `S` meets every bound, so a depth within them exists
+//! (else the trace contradicts itself: an error). (2) Every fragment at an unknown pixel is
+//! tested against a depth within its own bound, set before it is replayed and changed
+//! afterwards only to another within it (bounds only narrow), so however long the machine
+//! queues the fragment before testing it, it passes as it did in the trace. (3) Once a
+//! fragment writes the pixel (in the trace, so in the machine, by (2)), the pixel holds what
+//! it holds in the true buffer, and is never set again; likewise after a clear. (4) Pixels
+//! the run never tests do not matter. So every depth test the machine makes has the trace's
+//! outcome, and everything that follows from it (writes, the Occlusion Unit's counts, hits,
+//! the port's traffic) is what the true buffer gives.
+
+use crate::error::SimError;
+use occsim_traces::golden::{prefetch_line, DepthBuffer};
+use occsim_traces::state::{DepthFunc, RenderState};
+use occsim_traces::trace::DepthTestResults;
+use occsim_traces::Span;
+use std::collections::HashMap;
+
+/// What a run has learnt of one pixel's depth at the run's start.
+#[derive(Clone, Copy, Default)]
+struct PixelBounds {
+    /// `run` when `low` and `high` are this run's, `run + 1` once the pixel is known
+    /// (written or cleared in this run); anything else, unknown and unbounded.
+    stamp: u32,
+    low: u32,
+    high: u32,
+}
+
+/// The bounds on each pixel's depth at a run's start, over one run.
+pub struct ConsistentDepths {
+    width: usize,
+    /// Per pixel, side by side (a pixel's test reads all three: one cache line).
+    pixels: Vec<PixelBounds>,
+    /// The run's stamp (even).
+    run: u32,
+    /// A clear in this run: every pixel is known.
+    cleared: bool,
+    /// Depths a pixel must not hold (an EQUAL test failed there, or a NOTEQUAL passed).
+    excluded: HashMap<usize, Vec<u32>>,
+    /// Fragments seen (for errors).
+    fragments: u64,
+}
+
+impl ConsistentDepths {
+    pub fn new(width: u32, height: u32) -> ConsistentDepths {
+        let pixels = width as usize * height as usize;
+        ConsistentDepths {
+            width: width as usize,
+            pixels: vec![PixelBounds::default(); pixels],
+            run: 2,
+            cleared: false,
+            excluded: HashMap::new(),
+            fragments: 0,
+        }
+    }
+
+    /// A new machine starts: every pixel unknown again.
+    pub fn restart(&mut self) {
+        self.run = self.run.wrapping_add(2);
+        if self.run == 0 {
+            self.pixels.fill(PixelBounds::default());
+            self.run = 2;
+        }
+        self.cleared = false;
+        self.excluded.clear();
+    }
+
+    /// A clear: every pixel holds the clear depth, known.
+    pub fn clear(&mut self) {
+        self.cleared = true;
+    }
+
+    /// Before the machine replays `span` under `state` (`writes_allowed`: no
+    /// occlusion-render-mode query open), with the trace's `results` for it: give each
+    /// unknown pixel it tests a depth in `depth` that gives its result.
+    pub fn span(
+        &mut self,
+        state: &RenderState,
+        writes_allowed: bool,
+        span: Span,
+        results: DepthTestResults,
+        depth: &mut DepthBuffer,
+    ) -> Result<(), SimError> {
+        let first = self.fragments;
+        self.fragments += span.depths.len() as u64;
+        if !state.depth_test || self.cleared {
+            return Ok(());
+        }
+        let writes = state.depth_mask && writes_allowed;
+        let row = span.y as usize * self.width + span.x as usize;
+        // The next span is most likely the next row's, over about the same columns (as in
+        // the functional model): its pixels' bounds start on their way into the cache.
+        if let Some(below) = self
+            .pixels
+            .get(row + self.width..row + self.width + span.depths.len())
+        {
+            for line in below.chunks(4) {
+                prefetch_line(line.as_ptr());
+            }
+        }
+        for (i, &z) in span.depths.iter().enumerate() {
+            let pixel = row + i;
+            let bounds = &mut self.pixels[pixel];
+            if bounds.stamp == self.run + 1 {
+                continue;
+            }
+            if bounds.stamp != self.run {
+                *bounds = PixelBounds {
+                    stamp: self.run,
+                    low: 0,
+                    high: u32::MAX,
+                };
+            }
+            let passed = results.passed(i);
+            let (x, y) = (span.x + i as u16, span.y);
+            self.bound(pixel, state.depth_func, z, passed)
+                .and_then(|()| self.choose(pixel, depth.get(x, y)))
+                .map(|chosen| depth.set(x, y, chosen))
+                .ok_or_else(|| SimError::InconsistentDepthTests {
+                    fragment: first + i as u64,
+                    x,
+                    y,
+                })?;
+            if passed && writes {
+                self.pixels[pixel].stamp = self.run + 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// Narrow the pixel's bounds by a test of depth `z` under `func` that `passed`; None
+    /// when no depth passes it so.
+    fn bound(&mut self, pixel: usize, func: DepthFunc, z: u32, passed: bool) -> Option<()> {
+        // The depth `S` stored, compared with the incoming `z`: what the result says of S.
+        let PixelBounds { low, high, .. } = &mut self.pixels[pixel];
+        let excluded = &mut self.excluded;
+        match (func, passed) {
+            (DepthFunc::Less, true) | (DepthFunc::Gequal, false) => {
+                *low = (*low).max(z.checked_add(1)?)
+            }
+            (DepthFunc::Less, false) | (DepthFunc::Gequal, true) => *high = (*high).min(z),
+            (DepthFunc::Lequal, true) | (DepthFunc::Greater, false) => *low = (*low).max(z),
+            (DepthFunc::Lequal, false) | (DepthFunc::Greater, true) => {
+                *high = (*high).min(z.checked_sub(1)?)
+            }
+            (DepthFunc::Equal, true) | (DepthFunc::Notequal, false) => {
+                (*low, *high) = ((*low).max(z), (*high).min(z))
+            }
+            (DepthFunc::Equal, false) | (DepthFunc::Notequal, true) => {
+                excluded.entry(pixel).or_default().push(z)
+            }
+            (DepthFunc::Always, true) | (DepthFunc::Never, false) => {}
+            (DepthFunc::Always, false) | (DepthFunc::Never, true) => return None,
+        }
+        (*low <= *high).then_some(())
+    }
+
+    /// A depth within the pixel's bounds: `current` if it is, else the lowest.
+    fn choose(&self, pixel: usize, current: u32) -> Option<u32> {
+        let excluded = self.excluded.get(&pixel).map_or(&[][..], Vec::as_slice);
+        let PixelBounds { low, high, .. } = self.pixels[pixel];
+        if (low..=high).contains(&current) && !excluded.contains(&current) {
+            return Some(current);
+        }
+        // At most `excluded.len()` candidates are ruled out.
+        (low..=high).find(|depth| !excluded.contains(depth))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occsim_traces::rng::SplitMix64;
+    use occsim_traces::Fragment;
+
+    const SIDE: u16 = 6;
+
+    const FUNCS: [DepthFunc; 8] = [
+        DepthFunc::Never,
+        DepthFunc::Less,
+        DepthFunc::Equal,
+        DepthFunc::Lequal,
+        DepthFunc::Greater,
+        DepthFunc::Notequal,
+        DepthFunc::Gequal,
+        DepthFunc::Always,
+    ];
+
+    /// One-fragment spans with their results packed as the trace packs them.
+    fn replay(
+        consistent: &mut ConsistentDepths,
+        state: &RenderState,
+        writes_allowed: bool,
+        fragment: Fragment,
+        passed: bool,
+        depth: &mut DepthBuffer,
+    ) -> Result<(), SimError> {
+        let bits = [passed as u8];
+        let span = Span {
+            x: fragment.x,
+            y: fragment.y,
+            depths: &[fragment.z],
+        };
+        consistent.span(
+            state,
+            writes_allowed,
+            span,
+            DepthTestResults::new(&bits, 0),
+            depth,
+        )
+    }
+
+    #[test]
+    fn every_test_a_machine_makes_from_consistent_depths_has_the_traces_outcome() {
+        // A random stream's true buffer starts at random depths (the fragments before the
+        // run); a machine's buffer starts elsewhere (garbage) and is made consistent
+        // fragment by fragment. Every test on it must pass as on the true one, whatever the
+        // functions, masks, clears and occlusion-render modes.
+        for seed in 0..200 {
+            let mut rng = SplitMix64(seed);
+            let (w, h) = (SIDE as u32, SIDE as u32);
+            let mut truth = DepthBuffer::new(w, h);
+            let mut machine = DepthBuffer::new(w, h);
+            for y in 0..SIDE {
+                for x in 0..SIDE {
+                    truth.set(x, y, rng.below(6) as u32 * 10);
+                    machine.set(x, y, rng.below(100) as u32);
+                }
+            }
+            let mut state = RenderState::new(w, h);
+            state.depth_test = true;
+            let mut consistent = ConsistentDepths::new(w, h);
+            consistent.restart();
+            for _ in 0..60 {
+                if rng.chance(10) {
+                    state.depth_func = rng.pick(&FUNCS);
+                }
+                if rng.chance(5) {
+                    state.depth_mask = !state.depth_mask;
+                }
+                if rng.chance(1) {
+                    truth.clear();
+                    machine.clear();
+                    consistent.clear();
+                }
+                let writes_allowed = rng.chance(70);
+                let fragment = Fragment {
+                    x: rng.below(SIDE as u64) as u16,
+                    y: rng.below(SIDE as u64) as u16,
+                    z: rng.below(6) as u32 * 10,
+                };
+                let passed = truth.test(&state, fragment, writes_allowed);
+                replay(
+                    &mut consistent,
+                    &state,
+                    writes_allowed,
+                    fragment,
+                    passed,
+                    &mut machine,
+                )
+                .unwrap();
+                assert_eq!(
+                    machine.test(&state, fragment, writes_allowed),
+                    passed,
+                    "seed {seed}: {fragment:?} under {:?}",
+                    state.depth_func
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn results_no_depth_gives_are_an_error_naming_the_fragment() {
+        // LESS at depth 50: a pass says S > 50; a later fail of depth 70 says S <= 70, fine;
+        // a fail of depth 40 then says S <= 40: no S is both above 50 and at most 40.
+        let mut state = RenderState::new(4, 4);
+        state.depth_test = true;
+        state.depth_func = DepthFunc::Less;
+        state.depth_mask = false;
+        let mut depth = DepthBuffer::new(4, 4);
+        let mut consistent = ConsistentDepths::new(4, 4);
+        consistent.restart();
+        let at = |z| Fragment { x: 1, y: 2, z };
+        let mut run = |z, passed| replay(&mut consistent, &state, true, at(z), passed, &mut depth);
+        run(50, true).unwrap();
+        run(70, false).unwrap();
+        let error = run(40, false).unwrap_err().to_string();
+        assert!(error.contains("fragment 2 at (1, 2)"), "{error}");
+        // ALWAYS cannot fail.
+        let mut always = ConsistentDepths::new(4, 4);
+        always.restart();
+        state.depth_func = DepthFunc::Always;
+        assert!(replay(&mut always, &state, true, at(5), false, &mut depth).is_err());
+    }
+
+    #[test]
+    fn a_restart_forgets_the_last_runs_bounds() {
+        // Run 1 bounds pixel (0, 0) to S <= 10 (LESS, 10 failed); run 2 sees 20 pass there
+        // (S > 20): fine only if run 1's bound is forgotten.
+        let mut state = RenderState::new(2, 2);
+        state.depth_test = true;
+        state.depth_func = DepthFunc::Less;
+        state.depth_mask = false;
+        let mut depth = DepthBuffer::new(2, 2);
+        let mut consistent = ConsistentDepths::new(2, 2);
+        let at = |z| Fragment { x: 0, y: 0, z };
+        consistent.restart();
+        replay(&mut consistent, &state, true, at(10), false, &mut depth).unwrap();
+        consistent.restart();
+        replay(&mut consistent, &state, true, at(20), true, &mut depth).unwrap();
+        assert!(depth.get(0, 0) > 20);
+    }
+}
