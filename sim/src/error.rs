@@ -31,6 +31,8 @@ pub enum SimError {
     MissingGolden,
     #[error("fragment {fragment} at ({x}, {y}): the trace's depth-test results contradict each other (no depth the pixel could hold gives them all)")]
     InconsistentDepthTests { fragment: u64, x: u16, y: u16 },
+    #[error("reading the trace ahead for its windows' sizes: {0}")]
+    ReadAhead(String),
     #[error("event {event}: query {id} has {entries}-entry occlusion buffers; the minimum is 8")]
     BufferTooSmall { event: u64, id: u32, entries: u32 },
     #[error("event {event}: query {id} has {count} tiles; allowed 1..={max}")]

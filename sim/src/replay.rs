@@ -22,7 +22,7 @@ use crate::blocks::waveform::WaveformOptions;
 use crate::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::levels::analytic::AnalyticModel;
-use crate::levels::sampled::SampledModel;
+use crate::levels::sampled::{feed_window_sizes, SampledModel, WindowScout, WindowSizes};
 use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use crate::timeline::Timeline;
 use occsim_traces::golden::EventSink;
@@ -161,9 +161,12 @@ pub fn replay<R: Read>(
             && AnalyticModel::reads_window_index(arch, reader.header())
         {
             let mut model = SampledModel::from_window_index(arch, width, height, effects, every)
-                .map_err(ReplayError::Setup)?;
+                .map_err(ReplayError::Setup)?
+                .with_window_sizes();
             let mut fragments = TestedFragments::new(open()?)?;
+            let mut sizes = ScoutedSizes::new(open()?);
             while let Some(item) = reader.next_index_item()? {
+                feed_window_sizes(&mut model, &mut sizes).map_err(model_error)?;
                 model
                     .index_item(&item, &mut fragments)
                     .map_err(|e| match e {
@@ -175,6 +178,24 @@ pub fn replay<R: Read>(
                 .finish(arch)
                 .map_err(model_error);
         }
+        let model = SampledModel::new(arch, width, height, effects, every)
+            .map_err(ReplayError::Setup)?
+            .with_window_sizes();
+        let sink = Scouted {
+            model: Box::new(model),
+            sizes: ScoutedSizes::new(open()?),
+        };
+        let sink = match options.retile {
+            None => feed(&mut reader, sink, model_error)?,
+            Some(grid) => {
+                let retile = Retile::new(grid, width, height, sink)
+                    .map_err(|source| ReplayError::Retile { grid, source })?;
+                feed(&mut reader, retile, model_error)?.into_inner()
+            }
+        };
+        return LevelModel::Sampled(sink.model)
+            .finish(arch)
+            .map_err(model_error);
     }
     let model = LevelModel::with_outputs(
         options.level,
@@ -196,6 +217,80 @@ pub fn replay<R: Read>(
         }
     };
     sink.model.finish(arch).map_err(model_error)
+}
+
+/// The sampled level's window sizes, found by a reader of their own one window ahead: over
+/// the window index when the trace has one (retiling moves no window's end), else over the
+/// events.
+struct ScoutedSizes<R: Read> {
+    reader: TraceReader<R>,
+    scout: WindowScout,
+    done: bool,
+}
+
+impl<R: Read> ScoutedSizes<R> {
+    fn new(reader: TraceReader<R>) -> ScoutedSizes<R> {
+        ScoutedSizes {
+            reader,
+            scout: WindowScout::default(),
+            done: false,
+        }
+    }
+
+    /// Read on; false at the end of the trace.
+    fn read_on(&mut self) -> Result<bool, TraceError> {
+        if self.reader.header().window_index.is_none() {
+            return self
+                .reader
+                .next_block(&mut self.scout)
+                .map_err(ReadError::into_trace);
+        }
+        let item = self.reader.next_index_item()?;
+        if let Some(item) = &item {
+            self.scout.index_item(item);
+        }
+        Ok(item.is_some())
+    }
+}
+
+impl<R: Read> WindowSizes for ScoutedSizes<R> {
+    fn next_size(&mut self) -> Result<Option<u64>, SimError> {
+        loop {
+            if let Some(size) = self.scout.next_size() {
+                return Ok(Some(size));
+            }
+            if self.done {
+                return Ok(None);
+            }
+            if !self
+                .read_on()
+                .map_err(|e| SimError::ReadAhead(e.to_string()))?
+            {
+                self.scout.finish();
+                self.done = true;
+            }
+        }
+    }
+}
+
+/// A sampled model fed decoded events, with its window sizes read ahead.
+struct Scouted<R: Read> {
+    model: Box<SampledModel>,
+    sizes: ScoutedSizes<R>,
+}
+
+impl<R: Read> EventSink for Scouted<R> {
+    type Error = SimError;
+
+    fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        feed_window_sizes(&mut self.model, &mut self.sizes)?;
+        self.model.event(event)
+    }
+
+    fn span(&mut self, span: occsim_traces::Span) -> Result<(), SimError> {
+        feed_window_sizes(&mut self.model, &mut self.sizes)?;
+        self.model.span(span)
+    }
 }
 
 /// Read every event of `reader` into `sink`, stopping at the first error of either.

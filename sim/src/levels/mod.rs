@@ -29,7 +29,7 @@ use crate::blocks::waveform::WaveformOptions;
 use crate::effects::{Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::levels::analytic::AnalyticModel;
-use crate::levels::sampled::SampledModel;
+use crate::levels::sampled::{feed_window_sizes, SampledModel, WindowScout, WindowSizes};
 use crate::machines::{MachineBuilder, MachineModel};
 use crate::timeline::Timeline;
 use occsim_traces::golden::EventSink;
@@ -222,11 +222,47 @@ pub fn run_level(
     } else {
         Effects::every_model_of(arch.machine())
     };
+    if let Fidelity::Sampled { every } = level {
+        // Its window sizes found ahead, as a replay finds them.
+        let mut model = SampledModel::new(arch, width, height, effects, every)?.with_window_sizes();
+        let mut sizes = SliceSizes {
+            events: events.iter(),
+            scout: WindowScout::default(),
+        };
+        for event in events {
+            feed_window_sizes(&mut model, &mut sizes)?;
+            model.event(event)?;
+        }
+        return LevelModel::Sampled(Box::new(model)).finish(arch);
+    }
     let mut model = LevelModel::new(level, arch, width, height, effects)?;
     for event in events {
         model.event(event)?;
     }
     model.finish(arch)
+}
+
+/// The window sizes of a stream in memory, found ahead by a scout of their own.
+struct SliceSizes<'a> {
+    events: std::slice::Iter<'a, Event>,
+    scout: WindowScout,
+}
+
+impl WindowSizes for SliceSizes<'_> {
+    fn next_size(&mut self) -> Result<Option<u64>, SimError> {
+        loop {
+            if let Some(size) = self.scout.next_size() {
+                return Ok(Some(size));
+            }
+            match self.events.next() {
+                Some(event) => self.scout.event(event),
+                None => {
+                    self.scout.finish();
+                    return Ok(self.scout.next_size());
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]
