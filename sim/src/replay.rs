@@ -22,7 +22,9 @@ use crate::blocks::waveform::WaveformOptions;
 use crate::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::levels::analytic::AnalyticModel;
-use crate::levels::sampled::{feed_window_sizes, SampledModel, WindowScout, WindowSizes};
+use crate::levels::sampled::{
+    feed_window_sizes, SampledModel, WindowScout, WindowSizes, WARM_UP_FRAGMENTS,
+};
 use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use crate::timeline::Timeline;
 use occsim_traces::golden::EventSink;
@@ -46,6 +48,9 @@ pub struct ReplayOptions {
     /// Read the trace's window index instead of its fragments where the level can
     /// ([`AnalyticModel::reads_window_index`]): the same result, without decoding a fragment.
     pub window_index: bool,
+    /// At the sampled level, the fragments at the end of a warm-up window its machine runs
+    /// ([`crate::levels::sampled::WARM_UP_FRAGMENTS`] by default).
+    pub warm_up_fragments: u64,
 }
 
 impl ReplayOptions {
@@ -58,6 +63,7 @@ impl ReplayOptions {
             waveform: None,
             timeline: None,
             window_index: true,
+            warm_up_fragments: WARM_UP_FRAGMENTS,
         }
     }
 
@@ -72,6 +78,7 @@ impl ReplayOptions {
             waveform: None,
             timeline: None,
             window_index: true,
+            warm_up_fragments: WARM_UP_FRAGMENTS,
         }
     }
 }
@@ -162,7 +169,7 @@ pub fn replay<R: Read>(
         {
             let mut model = SampledModel::from_window_index(arch, width, height, effects, every)
                 .map_err(ReplayError::Setup)?
-                .with_window_sizes();
+                .with_window_sizes(options.warm_up_fragments);
             let mut fragments = TestedFragments::new(open()?)?;
             let mut sizes = ScoutedSizes::new(open()?);
             while let Some(item) = reader.next_index_item()? {
@@ -180,7 +187,7 @@ pub fn replay<R: Read>(
         }
         let model = SampledModel::new(arch, width, height, effects, every)
             .map_err(ReplayError::Setup)?
-            .with_window_sizes();
+            .with_window_sizes(options.warm_up_fragments);
         let sink = Scouted {
             model: Box::new(model),
             sizes: ScoutedSizes::new(open()?),

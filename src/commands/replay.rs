@@ -85,6 +85,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         waveform,
         timeline: timeline.as_ref().map(|t| t.0.clone()),
         window_index: !args.level.no_index,
+        ..ReplayOptions::at(level)
     };
     let window = args
         .waveform

@@ -4,7 +4,7 @@
 //! |---|---|---|
 //! | `functional` | the golden functional model: exact results and counts | none |
 //! | `analytic` | functional + the closed-form bottleneck model ([`crate::levels::analytic`]) | predicted |
-//! | `sampled:K` | functional on everything, the cycle model on every K-th window ([`crate::levels::sampled`]) | measured on 1/K, extrapolated |
+//! | `sampled:K` | the analytic formulas on everything, the cycle model on every K-th window and the end of the one before ([`crate::levels::sampled`]); from the window index, only those windows' fragments are read | measured on 1/K, extrapolated |
 //! | `cycle` | the cycle-level machine model ([`crate::MachineModel`]) | exact |
 //! | `rtl` | the cycle-level machine with every Occlusion Unit and OccU Control the bit-accurate RTL ([`crate::blocks::rtl_occu`]) | exact |
 //!
@@ -224,7 +224,8 @@ pub fn run_level(
     };
     if let Fidelity::Sampled { every } = level {
         // Its window sizes found ahead, as a replay finds them.
-        let mut model = SampledModel::new(arch, width, height, effects, every)?.with_window_sizes();
+        let mut model = SampledModel::new(arch, width, height, effects, every)?
+            .with_window_sizes(sampled::WARM_UP_FRAGMENTS);
         let mut sizes = SliceSizes {
             events: events.iter(),
             scout: WindowScout::default(),

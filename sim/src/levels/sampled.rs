@@ -13,12 +13,25 @@
 //!   issues those fragments' depth reads before the query's records reach the in-order port,
 //!   so the query's latency is final only then. The InfiniteReality-like machine's latency
 //!   is final at the query's end: no cool-down.
-//! - Warm-up: the cycle model also runs the window before each sampled one. A machine starts
-//!   (when none is running) with the functional model's render state and depth buffer at
-//!   that window's start, so its depth tests, writes, hits and counts are right, but with
-//!   empty FIFOs, an idle port and a cold prefetch; it keeps running while the next window
-//!   is sampled or warm-up too, and is dropped at the first window that is neither. For
-//!   K = 1 and K = 2 one machine runs the whole stream.
+//! - Warm-up: the cycle model also runs the end of the window before each sampled one: its
+//!   last [`WARM_UP_FRAGMENTS`] fragments and the events among them (the whole window when it
+//!   is shorter, or from its first clear on when it holds one: a clear's port time outlasts
+//!   any such count). The window's size comes from a second reading of the stream one window
+//!   ahead ([`WindowScout`], [`feed_window_sizes`]: the window index, else the events); a
+//!   model given no sizes runs the whole window. A machine starts (when none is running)
+//!   with the render state there and the functional model's depth buffer, or, read from
+//!   the window index, depths made consistent with the trace's depth-test results
+//!   ([`crate::levels::consistent_depths`]): either way its depth tests, writes, hits and
+//!   counts are right, but with empty FIFOs, an idle port and a cold prefetch. Started
+//!   inside the window's open query, it is told the query begins, and that query's golden
+//!   result (of which it saw only the last fragments) is not given it to check. It keeps
+//!   running while the next window is sampled or warm-up too, and is dropped at the first
+//!   window that is neither. For K = 1 and K = 2 one machine runs the whole stream.
+//! - From the window index (the O2 at the index's depth layout), the formulas count
+//!   stretches, every window's results are the stream's golden ones, and only the simulated
+//!   windows' fragments are read ([`occsim_traces::trace::TestedFragments`]): the event
+//!   blocks in between are not even decompressed. The result is the one decoding every
+//!   fragment gives, bit for bit (`sim/tests/window_index.rs`).
 //! - A sampled window's cost is the cycle its query's `end` entered the pipe minus that of
 //!   the window before it in the same machine (the final window: the machine's total cycles
 //!   minus that); its query's latency is the machine's.
@@ -41,9 +54,8 @@
 //!   ([`LatencySample::extrapolate`], [`common_slope`]): a query waiting behind a
 //!   clear keeps the wait the formulas see, which a mean over a few sampled queries would
 //!   lose, and where the formulas' variation from query to query is noise, the mean stands.
-//! - Bias: a machine started at a warm-up window misses whatever backlog the pipe carried
-//!   into that window; one window of warm-up absorbs it unless the warm-up window is shorter
-//!   than the FIFOs. `sampled:1` runs one machine over the whole stream, so it equals `cycle`
+//! - Bias: a machine started in a warm-up window misses whatever backlog the pipe carried
+//!   to that point; the warm-up absorbs it unless it is shorter than the FIFOs. `sampled:1` runs one machine over the whole stream, so it equals `cycle`
 //!   exactly (tested); `sampled:2` too, except that half its costs are extrapolated.
 
 use crate::arch::{Arch, Machine};
@@ -386,6 +398,7 @@ pub struct SampledModel {
     sizes_end: bool,
     /// The current window is a warm-up window whose machine has yet to start.
     warm_start: Option<WarmStart>,
+    warm_up_fragments: u64,
 }
 
 impl SampledModel {
@@ -473,6 +486,7 @@ impl SampledModel {
             sizes_wanted: false,
             sizes_end: false,
             warm_start: None,
+            warm_up_fragments: WARM_UP_FRAGMENTS,
         };
         model.start_window()?;
         Ok(model)
@@ -484,9 +498,11 @@ impl SampledModel {
 
     /// The model will be given each window's size ahead ([`feed_window_sizes`] before every
     /// call), so a warm-up window's machine starts near the window's end.
-    pub fn with_window_sizes(mut self) -> SampledModel {
+    /// Its machines then run the last `warm_up_fragments` of a warm-up window.
+    pub fn with_window_sizes(mut self, warm_up_fragments: u64) -> SampledModel {
         // Window 0 is sampled, so its machine has started already, as it would anyway.
         self.sizes_wanted = true;
+        self.warm_up_fragments = warm_up_fragments;
         self
     }
 
@@ -540,13 +556,13 @@ impl SampledModel {
     }
 
     /// At a warm-up window's first event its size is known: its machine starts now when the
-    /// window is short, else before its [`WARM_UP_FRAGMENTS`]-th fragment from the end.
+    /// window is short, else before its `warm_up_fragments`-th fragment from the end.
     fn resolve_warm_start(&mut self) -> Result<(), SimError> {
         if self.warm_start != Some(WarmStart::Awaiting) {
             return Ok(());
         }
         let size = self.size_of(self.windows).unwrap_or(0);
-        match size.saturating_sub(WARM_UP_FRAGMENTS) {
+        match size.saturating_sub(self.warm_up_fragments) {
             0 => self.start_machine(),
             first => {
                 self.warm_start = Some(WarmStart::AtFragment(first));
