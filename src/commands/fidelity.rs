@@ -30,8 +30,9 @@ pub struct FidelityArg {
     /// all.
     #[arg(long, value_name = "auto|all", default_value = "auto")]
     pub effects: EffectsChoice,
-    /// At the analytic level, decode the fragments even where the trace's window index would
-    /// do (the same result, slower: for checking and timing the index).
+    /// At the analytic and sampled levels, decode every fragment even where the trace's
+    /// window index (and its depth-test blocks) would do (the same result, slower: for
+    /// checking and timing the index).
     #[arg(long)]
     pub no_index: bool,
 }
