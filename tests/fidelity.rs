@@ -498,25 +498,26 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     let rows: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
     // (class, analytic cycles, analytic p95, sampled:10 cycles, sampled:10 p95), as fractions:
     // 0.05, 0.10, 0.01 and 0.03 are the targets; any other value is today's bound, with the
-    // error measured in the comment. (a) raised from 6.4% when the analytic formulas became
-    // fluids (issue 15): the sampled level scales its unsimulated windows by the formulas'
-    // cycles, and on the hard cases' 28 windows (3 simulated at K = 10) their new shares
-    // calibrate worse; every other sampled cycles bound fell, to the target on seven
-    // classes. (c) raised when the fluids' carried backlog began to drain while the host
+    // error measured in the comment. (c) raised when the fluids' carried backlog began to drain while the host
     // holds the pipe idle (it had been kept whole, an overestimate the sampled level's cycles
     // felt most: 1.4-3.4% on the walks, now 0.9-1.1%): the p95 of these O2 latencies, 10 to
-    // 25 cycles, moved by 2 or 3 cycles.
+    // 25 cycles, moved by 2 or 3 cycles. (d) raised when the sampled level's warm-up became
+    // the 16,384 fragments before each sampled window, over as many windows as that takes
+    // (it had been the window before, however short: an empty one left the machine's host
+    // and clears cold, 7.69% on the hard cases' cycles, now 0.74%): the sampled queries'
+    // measured latencies moved, and with them the regression's, by one cycle of the 1x1
+    // demo's 19 on o2 and four of the adaptive walk's 20.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
         ("demo",              0.05,  0.20,  0.01,  0.20),  // p95 16.7%; sampled p95 16.7%
-        ("retiled-1x1-4x4",   0.05,  0.19,  0.01,  0.03),  // p95 15.8% (c)
+        ("retiled-1x1-4x4",   0.05,  0.19,  0.01,  0.064), // p95 15.8% (c), sampled p95 5.26% (d)
         ("retiled-32x32",     0.05,  0.10,  0.01,  0.03),  // every target
-        ("hardcases",         0.05,  0.10,  0.093, 0.03),  // sampled 7.69% (a)
+        ("hardcases",         0.05,  0.10,  0.01,  0.03),  // every target (sampled 0.74%)
         ("random",            0.05,  0.10,  0.01,  0.105), // sampled p95 8.70%
         ("walk-frustum",      0.05,  0.10,  0.01,  0.03),  // every target
-        ("walk-hierarchical", 0.05,  0.219, 0.01,  0.219), // p95 18.2%; sampled p95 18.2%
+        ("walk-hierarchical", 0.05,  0.219, 0.012, 0.219), // p95 18.2%; sampled 1.001% (d), p95 18.2%
         ("walk-quadtree",     0.05,  0.10,  0.013, 0.03),  // sampled 1.06%
-        ("walk-adaptive",     0.05,  0.24,  0.013, 0.18),  // p95 20.0%, sampled 1.02%, 15.0% (c)
+        ("walk-adaptive",     0.05,  0.24,  0.013, 0.24),  // p95 20.0%, sampled 1.02%, 20.0% (d)
         ("walk-grids",        0.05,  0.10,  0.01,  0.041), // sampled p95 3.41% (c)
     ];
     let error = |class: &str, level: &str, metric: &str| -> f64 {

@@ -190,7 +190,9 @@ fn levels(arch: &Arch, trace: &[u8], rounds: usize) {
     ];
     let mut jobs = levels.map(|(level, index)| move || run_level(level, arch, trace, index));
     let figures = fastest_of_rounds(rounds, MIN_SECONDS, &mut jobs);
-    let cycle = levels.iter().position(|&(level, _)| level == Fidelity::Cycle);
+    let cycle = levels
+        .iter()
+        .position(|&(level, _)| level == Fidelity::Cycle);
     let cycle_seconds = figures[cycle.expect("cycle is among the levels")].seconds;
     for ((level, index), figure) in levels.iter().zip(&figures) {
         let name = match (level, index) {

@@ -13,17 +13,18 @@
 //!   issues those fragments' depth reads before the query's records reach the in-order port,
 //!   so the query's latency is final only then. The InfiniteReality-like machine's latency
 //!   is final at the query's end: no cool-down.
-//! - Warm-up: the cycle model also runs the end of the window before each sampled one: its
-//!   last [`WARM_UP_FRAGMENTS`] fragments and the events among them (the whole window when it
-//!   is shorter, or from its first clear on when it holds one: a clear's port time outlasts
-//!   any such count). The window's size comes from a second reading of the stream one window
+//! - Warm-up: the cycle model also runs the [`WARM_UP_FRAGMENTS`] fragments before each
+//!   sampled window and the events among them, over as many windows as that takes (from
+//!   the first clear among them when there is one: a clear's port time outlasts any such
+//!   count). The windows' sizes come from a second reading of the stream up to K windows
 //!   ahead ([`WindowScout`], [`feed_window_sizes`]: the window index, else the events); a
-//!   model given no sizes runs the whole window. A machine starts (when none is running)
-//!   with the render state there and the functional model's depth buffer, or, read from
+//!   model given no sizes runs the whole window before the sampled one. A machine starts
+//!   (when none is running) with the render state there and the functional model's depth
+//!   buffer, or, read from
 //!   the window index, depths made consistent with the trace's depth-test results
 //!   ([`crate::levels::consistent_depths`]): either way its depth tests, writes, hits and
 //!   counts are right, but with empty FIFOs, an idle port and a cold prefetch. Started
-//!   inside the window's open query, it is told the query begins, and that query's golden
+//!   inside an open query, it is told the query begins, and that query's golden
 //!   result (of which it saw only the last fragments) is not given it to check. It keeps
 //!   running while the next window is sampled or warm-up too, and is dropped at the first
 //!   window that is neither. For K = 1 and K = 2 one machine runs the whole stream.
@@ -121,27 +122,19 @@ impl Window {
     }
 }
 
-/// Fragments at the end of a warm-up window that a machine started for the sampled window
-/// after it replays (the whole window when it is shorter): I, plausible 4,096..65,536. The
-/// machine's state that outlives a few hundred fragments is bounded by its queues (FIFOs of
-/// tens of entries, the prefetch, the write buffer, one port), which this many fragments
-/// fill and drain many times over; a clear in the warm-up window, whose port time can
-/// outlast any such count, starts the machine at the clear instead. The sampled windows'
-/// measured costs moved by under 0.1% against whole warm-up windows on the demo and a
-/// lazy-grid walk.
+/// Fragments before a sampled window that a machine started for it replays (its warm-up:
+/// the end of the window before, and of earlier windows while that one is shorter): I,
+/// plausible 4,096..65,536. The machine's state that outlives a few hundred fragments is
+/// bounded by its queues (FIFOs of tens of entries, the prefetch, the write buffer, one
+/// port), which this many fragments fill and drain many times over; a clear in the warm-up,
+/// whose port time can outlast any such count, starts the machine at the clear instead.
+/// Measured on the small corpus at K = 10: a warm-up of the window before alone, however
+/// short, left an empty window's machine with its host and clears cold (the hard cases'
+/// cycles 7.7% off, now 0.7%); 4,096 fragments gave random triangles 17.9%.
 pub const WARM_UP_FRAGMENTS: u64 = 16_384;
 
-/// When a warm-up window's machine starts.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum WarmStart {
-    /// At the window's next event, once its size is known.
-    Awaiting,
-    /// Before the window's fragment of this number (from 0), or at a clear before it.
-    AtFragment(u64),
-}
-
 /// Each window's fragments, found ahead of the model by a second reading of the stream:
-/// a warm-up window's machine starts [`WARM_UP_FRAGMENTS`] before the window's end. Feed it
+/// a sampled window's machine starts [`WARM_UP_FRAGMENTS`] fragments before the window. Feed it
 /// the stream (or its window index) as the model sees it; it hands out the sizes of the
 /// windows it has seen end.
 #[derive(Default)]
@@ -396,8 +389,9 @@ pub struct SampledModel {
     sizes_first: u64,
     sizes_wanted: bool,
     sizes_end: bool,
-    /// The current window is a warm-up window whose machine has yet to start.
-    warm_start: Option<WarmStart>,
+    /// The current window is a warm-up window whose machine starts before its fragment of
+    /// this number (from 0), or at a clear before it.
+    warm_start: Option<u64>,
     warm_up_fragments: u64,
 }
 
@@ -507,11 +501,10 @@ impl SampledModel {
     }
 
     /// Whether the model wants the next window's size before its next call: it keeps the
-    /// sizes of the current and the next window.
+    /// sizes of the windows up to the next sampled one and one more.
     pub fn wants_window_size(&self) -> bool {
-        self.sizes_wanted
-            && !self.sizes_end
-            && self.sizes_first + (self.sizes.len() as u64) < self.windows + 2
+        let known = self.sizes_first + self.sizes.len() as u64;
+        self.sizes_wanted && !self.sizes_end && known < self.windows + self.every as u64 + 2
     }
 
     /// The next window's fragments (None: there is no next window).
@@ -522,60 +515,59 @@ impl SampledModel {
         }
     }
 
-    /// Window `w`'s size, if handed in (sizes of earlier windows are dropped).
-    fn size_of(&mut self, w: u64) -> Option<u64> {
-        while self.sizes_first < w && self.sizes.pop_front().is_some() {
-            self.sizes_first += 1;
-        }
-        (self.sizes_first == w)
-            .then(|| self.sizes.front().copied())
-            .flatten()
-    }
-
     /// The current window needs the cycle model: sampled, or the warm-up of a sampled one.
     fn start_window(&mut self) -> Result<(), SimError> {
         let w = self.windows;
         self.warm_start = None;
-        let simulate = self.is_sampled(w) || self.is_sampled(w + 1);
-        if !simulate {
-            if self.cooldown_fragments == 0 {
-                return self.flush_run();
-            }
-            if let Some(run) = &mut self.run {
+        let warm_up = if self.is_sampled(w) {
+            Some(0)
+        } else {
+            self.warm_up_start(w)
+        };
+        match (warm_up, &mut self.run) {
+            (Some(_), Some(run)) => run.cooldown = None,
+            (Some(0), None) => self.start_machine()?,
+            (Some(first), None) => self.warm_start = Some(first),
+            (None, _) if self.cooldown_fragments == 0 => self.flush_run()?,
+            (None, Some(run)) => {
                 run.cooldown.get_or_insert(self.cooldown_fragments);
             }
-            return Ok(());
-        }
-        let warm_up_only = self.sizes_wanted && !self.is_sampled(w);
-        match &mut self.run {
-            Some(run) => run.cooldown = None,
-            None if warm_up_only => self.warm_start = Some(WarmStart::Awaiting),
-            None => self.start_machine()?,
+            (None, None) => {}
         }
         Ok(())
     }
 
-    /// At a warm-up window's first event its size is known: its machine starts now when the
-    /// window is short, else before its `warm_up_fragments`-th fragment from the end.
-    fn resolve_warm_start(&mut self) -> Result<(), SimError> {
-        if self.warm_start != Some(WarmStart::Awaiting) {
-            return Ok(());
+    /// Where the warm-up of the next sampled window begins in window `w` (not sampled):
+    /// before its fragment of the number returned, so that [`Self::warm_up_fragments`]
+    /// fragments precede the sampled window, or None when the warm-up lies wholly after
+    /// `w` (or no sampled window follows). Without the windows' sizes, the warm-up is the
+    /// whole window before the sampled one.
+    fn warm_up_start(&mut self, w: u64) -> Option<u64> {
+        let every = self.every as u64;
+        let sampled = w - w % every + every;
+        while self.sizes_first < w && self.sizes.pop_front().is_some() {
+            self.sizes_first += 1;
         }
-        let size = self.size_of(self.windows).unwrap_or(0);
-        match size.saturating_sub(self.warm_up_fragments) {
-            0 => self.start_machine(),
-            first => {
-                self.warm_start = Some(WarmStart::AtFragment(first));
-                Ok(())
-            }
+        let ahead = (sampled - w) as usize;
+        let known = self.sizes_first == w && self.sizes.len() > ahead;
+        if !known {
+            // At the stream's end the sizes stop with the last window: none is sampled after.
+            let ended = self.sizes_end && self.sizes_first == w;
+            return (!ended && self.is_sampled(w + 1)).then_some(0);
         }
+        let after: u64 = self.sizes.range(1..ahead).sum();
+        let left = self
+            .warm_up_fragments
+            .checked_sub(after)
+            .filter(|&left| left > 0)?;
+        Some(self.sizes[0].saturating_sub(left))
     }
 
     /// The warm-up window's machine starts before fragment `k` of the next `count` (a span or
     /// stretch), if it does.
     fn machine_starts_within(&self, count: u64) -> Option<u64> {
         match self.warm_start {
-            Some(WarmStart::AtFragment(first)) if first < self.window.fragments + count => {
+            Some(first) if first < self.window.fragments + count => {
                 Some(first.saturating_sub(self.window.fragments))
             }
             _ => None,
@@ -630,7 +622,6 @@ impl SampledModel {
     pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
         if !matches!(event, Event::QueryResult(_)) {
             self.close_ended_window()?;
-            self.resolve_warm_start()?;
         }
         let starts = match event {
             Event::Fragment(_) => self.machine_starts_within(1).is_some(),
@@ -713,7 +704,6 @@ impl SampledModel {
     /// whole (the machine no further than its cool-down's end).
     pub fn span(&mut self, span: Span) -> Result<(), SimError> {
         self.close_ended_window()?;
-        self.resolve_warm_start()?;
         self.core.check_span(span)?;
         self.formulas.span(span, &self.core.functional);
         let len = span.depths.len();
@@ -771,7 +761,6 @@ impl SampledModel {
             IndexItem::Stretch(stretch) => stretch,
         };
         self.close_ended_window().map_err(ReadError::Sink)?;
-        self.resolve_warm_start().map_err(ReadError::Sink)?;
         let state = *self.core.functional.state();
         self.formulas.stretch(stretch, &state);
         self.core.count_fragments(stretch.fragments);
