@@ -53,10 +53,42 @@ impl FramebufferInterleave {
         g as usize
     }
 
+    /// The units owning pixels `x..x + len` of row `y`, in order: what [`Self::unit`] gives
+    /// pixel by pixel, found once a block (a column under `columns`) and stepped along.
+    #[inline]
+    pub fn for_each_unit_along(&self, x: u16, y: u16, len: usize, mut each: impl FnMut(usize)) {
+        let end = x as u32 + len as u32;
+        if self.kind == Interleave::Columns {
+            let mut g = x as u64 % self.units;
+            for _ in 0..len {
+                each(g as usize);
+                g += 1;
+                if g == self.units {
+                    g = 0;
+                }
+            }
+            return;
+        }
+        let mut at = x as u32;
+        while at < end {
+            let block_end = (at / self.block_width + 1) * self.block_width;
+            let g = self.unit(at as u16, y);
+            for _ in at..block_end.min(end) {
+                each(g);
+            }
+            at = block_end;
+        }
+    }
+
     /// The board and Image Engine owning pixel `(x, y)`.
     #[inline]
     pub fn owner(&self, x: u16, y: u16) -> PixelOwner {
-        let g = self.unit(x, y);
+        self.owner_of_unit(self.unit(x, y))
+    }
+
+    /// The board and Image Engine of unit `g`.
+    #[inline]
+    pub fn owner_of_unit(&self, g: usize) -> PixelOwner {
         PixelOwner {
             board: g % self.boards,
             image_engine: g / self.boards,
@@ -89,6 +121,27 @@ mod tests {
             units: (boards * per_board) as u64,
             block_width: 2,
             block_height: 2,
+        }
+    }
+
+    #[test]
+    fn units_along_a_row_are_each_pixels_unit() {
+        // Every kind, block sizes that do and do not divide the units, spans starting
+        // inside blocks and wrapping past the last unit.
+        for kind in [Interleave::Columns, Interleave::Blocks, Interleave::Morton] {
+            for (boards, per_board, block_width) in [(2, 3, 2), (4, 5, 3), (1, 1, 1), (4, 80, 4)] {
+                let interleave = FramebufferInterleave {
+                    block_width,
+                    ..interleave(kind, boards, per_board)
+                };
+                for (x, y, len) in [(0, 0, 17), (5, 3, 700), (1021, 77, 3), (2, 9, 0)] {
+                    let mut along = Vec::new();
+                    interleave.for_each_unit_along(x, y, len, |g| along.push(g));
+                    let each: Vec<usize> =
+                        (0..len).map(|i| interleave.unit(x + i as u16, y)).collect();
+                    assert_eq!(along, each, "{kind:?} {boards}x{per_board} at ({x}, {y})");
+                }
+            }
         }
     }
 

@@ -60,7 +60,7 @@ use crate::arch::IrArch;
 use crate::blocks::interleave::FramebufferInterleave;
 use crate::blocks::merge_network::{delivered, merged_ready, Partial, ReportShape};
 use occsim_traces::golden::FunctionalModel;
-use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect};
+use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect, Span};
 
 /// Counts and clocks of one window (see the module docs). Clocks count in slots of
 /// `1 / rate` cycles, so that a Fragment Generator's emission is exact whatever the number
@@ -265,6 +265,8 @@ struct OpenQuery {
 pub(crate) struct IrBottleneck {
     arch: IrArch,
     interleave: FramebufferInterleave,
+    /// Per interleave unit, its board and its Image Engine (board-major).
+    owners: Vec<(usize, usize)>,
     window: IrWindow,
     open: Option<OpenQuery>,
     /// The host's first free cycle (software merges).
@@ -273,8 +275,17 @@ pub(crate) struct IrBottleneck {
 
 impl IrBottleneck {
     pub(super) fn new(arch: &IrArch) -> IrBottleneck {
+        let interleave = FramebufferInterleave::new(arch);
+        let owners = (0..arch.image_engines())
+            .map(|g| {
+                let owner = interleave.owner_of_unit(g);
+                let engine = owner.board * arch.image_engines_per_board + owner.image_engine;
+                (owner.board, engine)
+            })
+            .collect();
         IrBottleneck {
-            interleave: FramebufferInterleave::new(arch),
+            interleave,
+            owners,
             window: IrWindow::new(arch),
             arch: arch.clone(),
             open: None,
@@ -300,14 +311,36 @@ impl IrBottleneck {
         });
     }
 
+    /// Count a span's work (before `functional` applies it): as its fragments one by one,
+    /// each pixel's owner stepped along the row and looked up, not divided out.
+    pub(super) fn span(&mut self, span: Span, functional: &FunctionalModel) {
+        if self
+            .open
+            .as_ref()
+            .is_some_and(|query| !query.verbose_tiles.is_empty())
+        {
+            // A verbose query's hit words need each fragment's depth test.
+            span.fragments()
+                .for_each(|fragment| self.fragment(fragment, functional));
+            return;
+        }
+        let service = self.open.as_ref().map_or(1, |q| q.service);
+        let pace = service.max(self.arch.image_engine_cycles_per_fragment);
+        let (owners, window) = (&self.owners, &mut self.window);
+        self.interleave
+            .for_each_unit_along(span.x, span.y, span.depths.len(), |unit| {
+                let (board, engine) = owners[unit];
+                window.fragment(board, engine, pace);
+            });
+    }
+
     /// Count one fragment's work (before `functional` applies it).
     #[inline]
     pub(super) fn fragment(&mut self, fragment: Fragment, functional: &FunctionalModel) {
-        let owner = self.interleave.owner(fragment.x, fragment.y);
-        let engine = owner.board * self.arch.image_engines_per_board + owner.image_engine;
+        let (board, engine) = self.owners[self.interleave.unit(fragment.x, fragment.y)];
         let service = self.open.as_ref().map_or(1, |q| q.service);
         let pace = service.max(self.arch.image_engine_cycles_per_fragment);
-        self.window.fragment(owner.board, engine, pace);
+        self.window.fragment(board, engine, pace);
         let Some(query) = &self.open else {
             return;
         };

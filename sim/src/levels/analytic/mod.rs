@@ -72,11 +72,7 @@ impl Formulas {
     pub(crate) fn span(&mut self, span: Span, functional: &FunctionalModel) {
         match self {
             Formulas::O2(o2) => o2.span(span, functional),
-            Formulas::Ir(ir) => {
-                for fragment in span.fragments() {
-                    ir.fragment(fragment, functional);
-                }
-            }
+            Formulas::Ir(ir) => ir.span(span, functional),
         }
     }
 
