@@ -26,19 +26,15 @@ pub(super) fn span_depths(
     // The one-byte path adds in 32 bits, exact for a first depth in range and a slope of at
     // most 2^24 (what a decoder's predictor holds: see `one_byte_depths`).
     let exact_in_i32 = (0..=DEPTH_ONE as i64).contains(&first) && slope.unsigned_abs() < 1 << 24;
-    if let Some(residuals) = payload.get(pos..pos + len - 1) {
-        // (An OR of every byte, not a search that stops at the first long one: it vectorises.)
-        if exact_in_i32 && residuals.iter().fold(0, |any, &b| any | b) < 0x80 {
-            one_byte_depths(payload, pos, len - 1, first as i32, slope as i32, depths);
-            // Every depth's bits ORed, checked once: a depth in 0..2^24 sets none above bit
-            // 23, one outside (negative, or too large) does. (The first is in range; the
-            // rest are read four at a time as the kernel stored them, from index 1: a load
-            // across two of its stores would wait for both to reach the cache.)
-            if depths[1..len].iter().fold(0, |bits, &depth| bits | depth) > DEPTH_ONE {
-                return Err(first_depth_outside(payload, pos, len, first, slope));
-            }
-            return Ok((pos + len - 1, depths[len - 1] as i64));
-        }
+    let end = pos + len - 1;
+    // The one-byte path checks its residuals' lengths and its depths' range as it goes; a
+    // span it cannot vouch for (a long residual, a depth outside, both rare) is decoded
+    // again the general way, which finds and names what is wrong.
+    if exact_in_i32
+        && end <= payload.len()
+        && one_byte_depths(payload, pos, len - 1, first as i32, slope as i32, depths)
+    {
+        return Ok((end, depths[len - 1] as i64));
     }
     any_residual_depths(payload, pos, len, first, slope, depths)
 }
@@ -83,15 +79,17 @@ fn any_residual_depths(
     Ok((pos, depth))
 }
 
-/// `first` and the depths that the `residuals` one-byte residuals at `payload[pos..]` give,
-/// into `depths[..=residuals]`, the vector lengthened if it is too short (what lies past is
-/// scratch).
+/// `first` and the depths that the `residuals` residuals at `payload[pos..]` give, taken
+/// for one byte each, into `depths[..=residuals]`, the vector lengthened if it is too short
+/// (what lies past is scratch). Returns whether they are what the span holds: every
+/// residual one byte long, every depth in 0..=2^24-1.
 ///
 /// The kernels add in 32 bits, which is exact up to the first depth outside 0..2^24 (all
 /// the caller needs: it rejects the span there): that depth follows one inside the range
 /// by a step of `slope` (|slope| < 2^24) and a residual (|residual| <= 64), and a chunk's
 /// depths are its base plus at most 16 such steps (< 2^29 in size), so no sum forming it
 /// leaves the i32 range. Depths after it may wrap; nobody reads them.
+#[inline(always)]
 fn one_byte_depths(
     payload: &[u8],
     pos: usize,
@@ -99,7 +97,7 @@ fn one_byte_depths(
     first: i32,
     slope: i32,
     depths: &mut Vec<u32>,
-) {
+) -> bool {
     let chunks = residuals.div_ceil(CHUNK);
     if depths.len() < 1 + chunks * CHUNK {
         depths.resize(1 + chunks * CHUNK, 0);
@@ -107,10 +105,12 @@ fn one_byte_depths(
     depths[0] = first as u32;
     // Whole chunks straight from the payload, the last one's bytes past the residuals
     // included where the payload has them: they only give depths past the span (a chunk's
-    // depths depend on its earlier bytes only).
+    // depths depend on its earlier bytes only), and the kernel looks at the first
+    // `residuals` alone.
     let direct = chunks.min((payload.len() - pos) / CHUNK) * CHUNK;
-    one_byte_chunks(
+    let mut fits = one_byte_chunks(
         &payload[pos..pos + direct],
+        residuals.min(direct),
         first,
         slope,
         &mut depths[1..=direct],
@@ -120,46 +120,71 @@ fn one_byte_depths(
         let mut padded = [0u8; CHUNK];
         padded[..residuals - direct].copy_from_slice(&payload[pos + direct..pos + residuals]);
         let base = depths[direct] as i32;
-        one_byte_chunks(&padded, base, slope, &mut depths[1 + direct..][..CHUNK]);
+        let out = &mut depths[1 + direct..][..CHUNK];
+        fits &= one_byte_chunks(&padded, residuals - direct, base, slope, out);
     }
+    fits
 }
 
-/// The depths after `base` that `residuals` (one-byte, a whole number of chunks) give, into
-/// `out` (as long).
+/// The depths after `base` that `residuals` (taken for one byte each, a whole number of
+/// chunks) give, into `out` (as long). Returns whether the first `count` residuals are each
+/// one byte long (below 0x80) and their depths all in 0..=2^24-1; past them, the bytes'
+/// depths are scratch and not looked at.
 #[inline(always)]
-fn one_byte_chunks(residuals: &[u8], base: i32, slope: i32, out: &mut [u32]) {
+fn one_byte_chunks(residuals: &[u8], count: usize, base: i32, slope: i32, out: &mut [u32]) -> bool {
     debug_assert!(residuals.len().is_multiple_of(CHUNK) && out.len() == residuals.len());
+    debug_assert!(count <= residuals.len());
     #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
     // SAFETY: the kernel needs SSE2, which the build targets (`target_feature = "sse2"`).
     unsafe {
-        sse2::one_byte_chunks(residuals, base, slope, out)
+        sse2::one_byte_chunks(residuals, count, base, slope, out)
     }
     #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-    one_byte_chunks_scalar(residuals, base, slope, out)
+    one_byte_chunks_scalar(residuals, count, base, slope, out)
 }
 
 /// [`one_byte_chunks`] one depth after the other: the kernel where SSE2 is missing, and the
 /// reference the tests hold the SSE2 kernel to.
 #[cfg_attr(all(target_arch = "x86_64", target_feature = "sse2"), allow(dead_code))]
-fn one_byte_chunks_scalar(residuals: &[u8], base: i32, slope: i32, out: &mut [u32]) {
+fn one_byte_chunks_scalar(
+    residuals: &[u8],
+    count: usize,
+    base: i32,
+    slope: i32,
+    out: &mut [u32],
+) -> bool {
     let mut depth = base;
-    for (&byte, out) in residuals.iter().zip(out) {
+    let mut fits = true;
+    for (i, (&byte, out)) in residuals.iter().zip(out).enumerate() {
         depth = depth
             .wrapping_add(slope)
             .wrapping_add(unzigzag(byte as u64) as i32);
         *out = depth as u32;
+        if i < count {
+            fits &= byte < 0x80 && (0..=DEPTH_ONE as i32).contains(&depth);
+        }
     }
+    fits
 }
 
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 mod sse2 {
     use super::CHUNK;
+    use crate::event::DEPTH_ONE;
     use std::arch::x86_64::*;
 
     /// [`super::one_byte_chunks`]: per chunk, the residuals' prefix sums in 16-bit lanes
-    /// (|sum| <= 16 * 64), widened, plus the slope's ramp and the base.
+    /// (|sum| <= 16 * 128), widened, plus the slope's ramp and the base. The checks ride
+    /// along: the bytes' top bits (a long residual's first byte has it) and every depth's
+    /// bits ORed, of the first `count` only, tested once at the end.
     #[target_feature(enable = "sse2")]
-    pub(super) fn one_byte_chunks(residuals: &[u8], base: i32, slope: i32, out: &mut [u32]) {
+    pub(super) fn one_byte_chunks(
+        residuals: &[u8],
+        count: usize,
+        base: i32,
+        slope: i32,
+        out: &mut [u32],
+    ) -> bool {
         // Lane k of ramp[j] is slope * (4j + k + 1): the slopes up to depth 4j + k of a chunk.
         let first_four = _mm_setr_epi32(
             slope,
@@ -172,12 +197,24 @@ mod sse2 {
         for j in 1..4 {
             ramp[j] = _mm_add_epi32(ramp[j - 1], four);
         }
+        // Lane k of index[j] is 4j + k: a depth's place in its chunk.
+        let mut index = [_mm_setr_epi32(0, 1, 2, 3); 4];
+        for j in 1..4 {
+            index[j] = _mm_add_epi32(index[j - 1], _mm_set1_epi32(4));
+        }
         let mut base = _mm_set1_epi32(base);
-        for (chunk, out) in residuals
+        let mut long_residuals = 0u32;
+        let mut depth_bits = _mm_setzero_si128();
+        for (c, (chunk, out)) in residuals
             .chunks_exact(CHUNK)
             .zip(out.chunks_exact_mut(CHUNK))
+            .enumerate()
         {
-            let residuals = unzigzag_bytes(load(chunk.try_into().expect("a chunk")));
+            // How many of this chunk's residuals are the span's (0..=16).
+            let counted = count.saturating_sub(c * CHUNK).min(CHUNK) as u32;
+            let bytes = load(chunk.try_into().expect("a chunk"));
+            long_residuals |= _mm_movemask_epi8(bytes) as u32 & ((1 << counted) - 1);
+            let residuals = unzigzag_bytes(bytes);
             let low = prefix_sums_i16(_mm_srai_epi16::<8>(_mm_unpacklo_epi8(residuals, residuals)));
             let high =
                 prefix_sums_i16(_mm_srai_epi16::<8>(_mm_unpackhi_epi8(residuals, residuals)));
@@ -192,14 +229,22 @@ mod sse2 {
                 _mm_srai_epi32::<16>(_mm_unpacklo_epi16(high, high)),
                 _mm_srai_epi32::<16>(_mm_unpackhi_epi16(high, high)),
             ];
+            let counted = _mm_set1_epi32(counted as i32);
             let mut last = base;
-            for ((sum, ramp), out) in sums.into_iter().zip(ramp).zip(out.chunks_exact_mut(4)) {
-                last = _mm_add_epi32(base, _mm_add_epi32(ramp, sum));
+            for (j, (sum, out)) in sums.into_iter().zip(out.chunks_exact_mut(4)).enumerate() {
+                last = _mm_add_epi32(base, _mm_add_epi32(ramp[j], sum));
                 store(out.try_into().expect("four depths"), last);
+                let in_span = _mm_cmpgt_epi32(counted, index[j]);
+                depth_bits = _mm_or_si128(depth_bits, _mm_and_si128(last, in_span));
             }
             // The next chunk's base: this one's last depth everywhere.
             base = _mm_shuffle_epi32::<0xFF>(last);
         }
+        // A depth in 0..2^24 sets no bit above bit 23; one outside (negative, or too large)
+        // does.
+        let outside = _mm_and_si128(depth_bits, _mm_set1_epi32(!(DEPTH_ONE as i32)));
+        let inside = _mm_movemask_epi8(_mm_cmpeq_epi32(outside, _mm_setzero_si128())) == 0xFFFF;
+        long_residuals == 0 && inside
     }
 
     /// Each byte (below 0x80) unzigzagged: (b >> 1) ^ -(b & 1), as i8.
@@ -357,20 +402,36 @@ mod tests {
     #[test]
     fn the_sse2_kernel_is_the_scalar_one() {
         let mut rng = SplitMix64(17);
-        for _ in 0..2000 {
-            let residuals: Vec<u8> = (0..CHUNK * (1 + rng.below(5) as usize))
-                .map(|_| rng.below(0x80) as u8)
+        for case in 0..20_000 {
+            let chunks = 1 + rng.below(5) as usize;
+            // Now and then a long residual's byte (0x80 and up), in the span or past it.
+            let long_bytes = rng.below(4) == 0;
+            let residuals: Vec<u8> = (0..CHUNK * chunks)
+                .map(|_| match long_bytes && rng.below(20) == 0 {
+                    true => 0x80 + rng.below(0x80) as u8,
+                    false => rng.below(0x80) as u8,
+                })
                 .collect();
-            let base = rng.below(1 << 24) as i32;
-            let slope = rng.below(1 << 25) as i32 - (1 << 24) + 1;
+            let count = rng.below(residuals.len() as u64 + 1) as usize;
+            // Bases near an end of the range now and then, so depths leave it.
+            let base = match rng.below(4) {
+                0 => rng.below(2000) as i32,
+                1 => DEPTH_ONE as i32 - rng.below(2000) as i32,
+                _ => rng.below(1 << 24) as i32,
+            };
+            let slope = match rng.below(3) {
+                0 => rng.below(41) as i32 - 20,
+                _ => rng.below(1 << 25) as i32 - (1 << 24) + 1,
+            };
             let mut fast = vec![0; residuals.len()];
             let mut plain = vec![0; residuals.len()];
-            one_byte_chunks(&residuals, base, slope, &mut fast);
-            one_byte_chunks_scalar(&residuals, base, slope, &mut plain);
-            assert_eq!(
-                fast, plain,
-                "base {base} slope {slope} residuals {residuals:?}"
-            );
+            let fits = one_byte_chunks(&residuals, count, base, slope, &mut fast);
+            let plain_fits = one_byte_chunks_scalar(&residuals, count, base, slope, &mut plain);
+            let context = format!("case {case}: base {base} slope {slope} count {count}");
+            assert_eq!(fits, plain_fits, "{context}: whether the span fits");
+            if residuals.iter().all(|&b| b < 0x80) {
+                assert_eq!(fast, plain, "{context}: {residuals:?}");
+            }
         }
     }
 
