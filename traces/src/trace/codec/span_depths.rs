@@ -134,6 +134,11 @@ fn one_byte_depths(
 fn one_byte_chunks(residuals: &[u8], count: usize, base: i32, slope: i32, out: &mut [u32]) -> bool {
     debug_assert!(residuals.len().is_multiple_of(CHUNK) && out.len() == residuals.len());
     debug_assert!(count <= residuals.len());
+    #[cfg(target_arch = "x86_64")]
+    if avx2::available() {
+        // SAFETY: the CPU has AVX2, checked just now.
+        return unsafe { avx2::one_byte_chunks(residuals, count, base, slope, out) };
+    }
     #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
     // SAFETY: the kernel needs SSE2, which the build targets (`target_feature = "sse2"`).
     unsafe {
@@ -144,7 +149,7 @@ fn one_byte_chunks(residuals: &[u8], count: usize, base: i32, slope: i32, out: &
 }
 
 /// [`one_byte_chunks`] one depth after the other: the kernel where SSE2 is missing, and the
-/// reference the tests hold the SSE2 kernel to.
+/// reference the tests hold the SIMD kernels to.
 #[cfg_attr(all(target_arch = "x86_64", target_feature = "sse2"), allow(dead_code))]
 fn one_byte_chunks_scalar(
     residuals: &[u8],
@@ -277,6 +282,106 @@ mod sse2 {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::CHUNK;
+    use crate::event::DEPTH_ONE;
+    use std::arch::x86_64::*;
+
+    /// Whether this CPU runs the kernel (a cached flag's load).
+    #[inline(always)]
+    pub(super) fn available() -> bool {
+        is_x86_feature_detected!("avx2")
+    }
+
+    /// [`super::one_byte_chunks`] in AVX2: the SSE2 kernel's steps, a chunk's sixteen
+    /// residuals widened to 16-bit lanes in one register and its depths in two of eight.
+    #[target_feature(enable = "avx2")]
+    pub(super) fn one_byte_chunks(
+        residuals: &[u8],
+        count: usize,
+        base: i32,
+        slope: i32,
+        out: &mut [u32],
+    ) -> bool {
+        // Lane k of ramp[j] is slope * (8j + k + 1): the slopes up to depth 8j + k of a chunk;
+        // lane k of index[j] is 8j + k, a depth's place in its chunk.
+        let index = [
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+            _mm256_setr_epi32(8, 9, 10, 11, 12, 13, 14, 15),
+        ];
+        let slopes = _mm256_set1_epi32(slope);
+        let one = _mm256_set1_epi32(1);
+        let ramp = index.map(|index| _mm256_mullo_epi32(slopes, _mm256_add_epi32(index, one)));
+        let mut base = _mm256_set1_epi32(base);
+        let mut long_residuals = 0u32;
+        let mut depth_bits = _mm256_setzero_si256();
+        for (c, (chunk, out)) in residuals
+            .chunks_exact(CHUNK)
+            .zip(out.chunks_exact_mut(CHUNK))
+            .enumerate()
+        {
+            // How many of this chunk's residuals are the span's (0..=16).
+            let counted = count.saturating_sub(c * CHUNK).min(CHUNK) as u32;
+            let bytes = load(chunk.try_into().expect("a chunk"));
+            long_residuals |= _mm_movemask_epi8(bytes) as u32 & ((1 << counted) - 1);
+            let sums = prefix_sums_i16(_mm256_cvtepi8_epi16(unzigzag_bytes(bytes)));
+            // Each half's sums are its own (byte shifts stay in their 128-bit half): the high
+            // half's start from the low half's total, its lane 7.
+            let totals = _mm256_shuffle_epi32::<0xFF>(_mm256_shufflehi_epi16::<0xFF>(sums));
+            let sums = _mm256_add_epi16(sums, _mm256_permute2x128_si256::<0x08>(totals, totals));
+            let sums = [
+                _mm256_cvtepi16_epi32(_mm256_castsi256_si128(sums)),
+                _mm256_cvtepi16_epi32(_mm256_extracti128_si256::<1>(sums)),
+            ];
+            let counted = _mm256_set1_epi32(counted as i32);
+            let mut last = base;
+            for (j, (sum, out)) in sums.into_iter().zip(out.chunks_exact_mut(8)).enumerate() {
+                last = _mm256_add_epi32(base, _mm256_add_epi32(ramp[j], sum));
+                store(out.try_into().expect("eight depths"), last);
+                let in_span = _mm256_cmpgt_epi32(counted, index[j]);
+                depth_bits = _mm256_or_si256(depth_bits, _mm256_and_si256(last, in_span));
+            }
+            // The next chunk's base: this one's last depth everywhere.
+            base = _mm256_permutevar8x32_epi32(last, _mm256_set1_epi32(7));
+        }
+        // A depth in 0..2^24 sets no bit above bit 23; one outside (negative, or too large)
+        // does.
+        let outside = _mm256_and_si256(depth_bits, _mm256_set1_epi32(!(DEPTH_ONE as i32)));
+        long_residuals == 0 && _mm256_testz_si256(outside, outside) == 1
+    }
+
+    /// Each byte (below 0x80) unzigzagged: (b >> 1) ^ -(b & 1), as i8.
+    #[target_feature(enable = "avx2")]
+    fn unzigzag_bytes(bytes: __m128i) -> __m128i {
+        // (A 16-bit shift: the bit each byte takes from the next is masked off.)
+        let half = _mm_and_si128(_mm_srli_epi16::<1>(bytes), _mm_set1_epi8(0x7F));
+        let odd = _mm_and_si128(bytes, _mm_set1_epi8(1));
+        _mm_xor_si128(half, _mm_sub_epi8(_mm_setzero_si128(), odd))
+    }
+
+    /// Inclusive prefix sums of each 128-bit half's eight i16 lanes (shift and add, three
+    /// times).
+    #[target_feature(enable = "avx2")]
+    fn prefix_sums_i16(lanes: __m256i) -> __m256i {
+        let lanes = _mm256_add_epi16(lanes, _mm256_slli_si256::<2>(lanes));
+        let lanes = _mm256_add_epi16(lanes, _mm256_slli_si256::<4>(lanes));
+        _mm256_add_epi16(lanes, _mm256_slli_si256::<8>(lanes))
+    }
+
+    #[target_feature(enable = "avx2")]
+    fn load(bytes: &[u8; CHUNK]) -> __m128i {
+        // SAFETY: the reference holds the 16 bytes read; an unaligned load needs no more.
+        unsafe { _mm_loadu_si128(bytes.as_ptr().cast()) }
+    }
+
+    #[target_feature(enable = "avx2")]
+    fn store(out: &mut [u32; 8], lanes: __m256i) {
+        // SAFETY: the reference holds the 32 bytes written; an unaligned store needs no more.
+        unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), lanes) }
+    }
+}
+
 /// The error for the first depth of a span outside 0..=2^24-1 (the span is known to hold
 /// one and its residuals to decode).
 #[cold]
@@ -399,8 +504,29 @@ mod tests {
         assert_eq!(error.pos, 20);
     }
 
+    type Kernel = fn(&[u8], usize, i32, i32, &mut [u32]) -> bool;
+
+    /// Every SIMD kernel this CPU runs, by name.
+    fn simd_kernels() -> Vec<(&'static str, Kernel)> {
+        #[allow(unused_mut)]
+        let mut kernels: Vec<(&'static str, Kernel)> = Vec::new();
+        #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+        kernels.push(("sse2", |residuals, count, base, slope, out| {
+            // SAFETY: the build targets SSE2.
+            unsafe { sse2::one_byte_chunks(residuals, count, base, slope, out) }
+        }));
+        #[cfg(target_arch = "x86_64")]
+        if avx2::available() {
+            kernels.push(("avx2", |residuals, count, base, slope, out| {
+                // SAFETY: the CPU has AVX2, checked above.
+                unsafe { avx2::one_byte_chunks(residuals, count, base, slope, out) }
+            }));
+        }
+        kernels
+    }
+
     #[test]
-    fn the_sse2_kernel_is_the_scalar_one() {
+    fn the_simd_kernels_are_the_scalar_one() {
         let mut rng = SplitMix64(17);
         for case in 0..20_000 {
             let chunks = 1 + rng.below(5) as usize;
@@ -423,14 +549,17 @@ mod tests {
                 0 => rng.below(41) as i32 - 20,
                 _ => rng.below(1 << 25) as i32 - (1 << 24) + 1,
             };
-            let mut fast = vec![0; residuals.len()];
             let mut plain = vec![0; residuals.len()];
-            let fits = one_byte_chunks(&residuals, count, base, slope, &mut fast);
             let plain_fits = one_byte_chunks_scalar(&residuals, count, base, slope, &mut plain);
-            let context = format!("case {case}: base {base} slope {slope} count {count}");
-            assert_eq!(fits, plain_fits, "{context}: whether the span fits");
-            if residuals.iter().all(|&b| b < 0x80) {
-                assert_eq!(fast, plain, "{context}: {residuals:?}");
+            for (kernel, one_byte_chunks) in simd_kernels() {
+                let mut fast = vec![0; residuals.len()];
+                let fits = one_byte_chunks(&residuals, count, base, slope, &mut fast);
+                let context =
+                    format!("{kernel} case {case}: base {base} slope {slope} count {count}");
+                assert_eq!(fits, plain_fits, "{context}: whether the span fits");
+                if residuals.iter().all(|&b| b < 0x80) {
+                    assert_eq!(fast, plain, "{context}: {residuals:?}");
+                }
             }
         }
     }
