@@ -18,9 +18,20 @@ pub(crate) trait RunKernel: Copy {
     fn test_and_tally(self, depths: &[u32], stored: &mut [u32]) -> RunTally;
 }
 
+/// The instructions a kernel runs in, one this CPU has: only [`KernelIsa::best`] makes one.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct KernelIsa(Isa);
+
+impl KernelIsa {
+    /// The best instructions this CPU runs.
+    pub(crate) fn best() -> KernelIsa {
+        KernelIsa(Isa::best())
+    }
+}
+
 /// The instructions a kernel is written in.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Isa {
+enum Isa {
     /// One fragment after the other.
     #[cfg_attr(all(target_arch = "x86_64", target_feature = "sse2"), allow(dead_code))]
     Plain,
@@ -32,9 +43,8 @@ pub(crate) enum Isa {
 }
 
 impl Isa {
-    /// The best this CPU runs (the feature check is a cached flag's load).
-    #[inline(always)]
-    pub(crate) fn best() -> Isa {
+    /// The best this CPU runs.
+    fn best() -> Isa {
         #[cfg(target_arch = "x86_64")]
         if avx2::available() {
             return Isa::Avx2;
@@ -60,7 +70,8 @@ impl<const FUNC: u8, const WRITE: bool> RunKernel for Kernel<FUNC, WRITE> {
         assert_eq!(depths.len(), stored.len(), "a stored depth per fragment");
         match self.isa {
             #[cfg(target_arch = "x86_64")]
-            // SAFETY: `Isa::Avx2` is chosen only where the CPU has AVX2 and POPCNT.
+            // SAFETY: `Isa::Avx2` reaches a kernel only where the CPU has AVX2 and POPCNT
+            // (`Isa::best`, or the tests, which check).
             Isa::Avx2 => unsafe { avx2::test_and_tally::<FUNC, WRITE>(depths, stored) },
             #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
             // SAFETY: the kernel needs SSE2, which the build targets (`target_feature = "sse2"`).
@@ -77,15 +88,14 @@ pub(crate) trait WithKernel {
     fn run<K: RunKernel>(self, kernel: K) -> Self::Output;
 }
 
-/// `job` done with the kernel of `func` and `write`, in the best instructions this CPU has.
+/// `job` done with the kernel of `func` and `write` in `isa`.
 #[inline]
-pub(crate) fn with_kernel<J: WithKernel>(func: DepthFunc, write: bool, job: J) -> J::Output {
-    with_kernel_in(Isa::best(), func, write, job)
-}
-
-/// `job` done with the kernel of `func` and `write` in `isa` (which the CPU must have).
-#[inline]
-fn with_kernel_in<J: WithKernel>(isa: Isa, func: DepthFunc, write: bool, job: J) -> J::Output {
+pub(crate) fn with_kernel_in<J: WithKernel>(
+    KernelIsa(isa): KernelIsa,
+    func: DepthFunc,
+    write: bool,
+    job: J,
+) -> J::Output {
     macro_rules! kernel_for {
         ($($func:ident),*) => {
             match (func, write) {
@@ -586,7 +596,7 @@ mod tests {
                 kernel.test_and_tally(self.0, self.1)
             }
         }
-        with_kernel_in(isa, func, write, OneRun(depths, stored))
+        with_kernel_in(KernelIsa(isa), func, write, OneRun(depths, stored))
     }
 
     /// Every kernel's instructions this CPU runs.
