@@ -34,6 +34,9 @@ fn write_default(events: &[Event]) -> Vec<u8> {
     .0
 }
 
+/// A way to read a whole trace: its events and summary.
+type ReadPath = fn(&[u8]) -> Result<(Vec<Event>, TraceSummary), TraceError>;
+
 /// Every event through `next_event`, then the summary.
 fn read_one_by_one(bytes: &[u8]) -> Result<(Vec<Event>, TraceSummary), TraceError> {
     let mut reader = TraceReader::new(bytes)?;
@@ -558,9 +561,7 @@ proptest! {
         // The bulk path decodes spans whole (checks folded into its SIMD kernels), the other
         // one fragment at a time: the same events and summary, or the same error.
         let bytes = with_payload_mutations(&flips);
-        let outcome = |read: fn(&[u8]) -> Result<(Vec<Event>, TraceSummary), TraceError>| {
-            read(&bytes).map_err(|error| error.to_string())
-        };
+        let outcome = |read: ReadPath| read(&bytes).map_err(|error| error.to_string());
         prop_assert_eq!(outcome(read_bulk), outcome(read_one_by_one));
     }
 }
