@@ -43,16 +43,19 @@ enum Isa {
 }
 
 impl Isa {
+    /// What every CPU the build targets runs.
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    const BASELINE: Isa = Isa::Sse2;
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+    const BASELINE: Isa = Isa::Plain;
+
     /// The best this CPU runs.
     fn best() -> Isa {
         #[cfg(target_arch = "x86_64")]
         if avx2::available() {
             return Isa::Avx2;
         }
-        #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-        return Isa::Sse2;
-        #[allow(unreachable_code)]
-        Isa::Plain
+        Isa::BASELINE
     }
 }
 
