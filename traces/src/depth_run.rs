@@ -1,7 +1,8 @@
 //! The depth test of a run of fragments of one row fused with the [`RunTally`] its tile
 //! keeps: one pass over the depths that tests, writes and reduces. On x86_64 it is written
-//! out with SSE2, four fragments a step: LLVM vectorises the test or the reduction alone,
-//! but not the two fused, and two passes cost a store and a reload of every outcome.
+//! out with SIMD: AVX2, eight fragments a step, where the CPU has it (checked at run time),
+//! else SSE2, four a step. LLVM vectorises the test or the reduction alone, but not the two
+//! fused, and two passes cost a store and a reload of every outcome.
 
 use crate::query::RunTally;
 use crate::state::DepthFunc;
@@ -17,9 +18,52 @@ pub(crate) trait RunKernel: Copy {
     fn test_and_tally(self, depths: &[u32], stored: &mut [u32]) -> RunTally;
 }
 
-/// The kernel of the depth function of code `FUNC`.
+/// The instructions a kernel runs in, one this CPU has: only [`KernelIsa::best`] makes one.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct KernelIsa(Isa);
+
+impl KernelIsa {
+    /// The best instructions this CPU runs.
+    pub(crate) fn best() -> KernelIsa {
+        KernelIsa(Isa::best())
+    }
+}
+
+/// The instructions a kernel is written in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Isa {
+    /// One fragment after the other.
+    #[cfg_attr(all(target_arch = "x86_64", target_feature = "sse2"), allow(dead_code))]
+    Plain,
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    Sse2,
+    /// AVX2 (with POPCNT): only where the CPU has both.
+    #[cfg(target_arch = "x86_64")]
+    Avx2,
+}
+
+impl Isa {
+    /// What every CPU the build targets runs.
+    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+    const BASELINE: Isa = Isa::Sse2;
+    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
+    const BASELINE: Isa = Isa::Plain;
+
+    /// The best this CPU runs.
+    fn best() -> Isa {
+        #[cfg(target_arch = "x86_64")]
+        if avx2::available() {
+            return Isa::Avx2;
+        }
+        Isa::BASELINE
+    }
+}
+
+/// The kernel of the depth function of code `FUNC`, in `isa`.
 #[derive(Clone, Copy)]
-struct Kernel<const FUNC: u8, const WRITE: bool>;
+struct Kernel<const FUNC: u8, const WRITE: bool> {
+    isa: Isa,
+}
 
 impl<const FUNC: u8, const WRITE: bool> RunKernel for Kernel<FUNC, WRITE> {
     const WRITES: bool = WRITE;
@@ -27,7 +71,16 @@ impl<const FUNC: u8, const WRITE: bool> RunKernel for Kernel<FUNC, WRITE> {
     #[inline(always)]
     fn test_and_tally(self, depths: &[u32], stored: &mut [u32]) -> RunTally {
         assert_eq!(depths.len(), stored.len(), "a stored depth per fragment");
-        kernel::<FUNC, WRITE>(depths, stored)
+        match self.isa {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `Isa::Avx2` reaches a kernel only where the CPU has AVX2 and POPCNT
+            // (`Isa::best`, or the tests, which check).
+            Isa::Avx2 => unsafe { avx2::test_and_tally::<FUNC, WRITE>(depths, stored) },
+            #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+            // SAFETY: the kernel needs SSE2, which the build targets (`target_feature = "sse2"`).
+            Isa::Sse2 => unsafe { sse2::test_and_tally::<FUNC, WRITE>(depths, stored) },
+            Isa::Plain => plain_kernel::<FUNC, WRITE>(depths, stored),
+        }
     }
 }
 
@@ -38,15 +91,24 @@ pub(crate) trait WithKernel {
     fn run<K: RunKernel>(self, kernel: K) -> Self::Output;
 }
 
-/// `job` done with the kernel of `func` and `write`.
+/// `job` done with the kernel of `func` and `write` in `isa`.
 #[inline]
-pub(crate) fn with_kernel<J: WithKernel>(func: DepthFunc, write: bool, job: J) -> J::Output {
+pub(crate) fn with_kernel_in<J: WithKernel>(
+    KernelIsa(isa): KernelIsa,
+    func: DepthFunc,
+    write: bool,
+    job: J,
+) -> J::Output {
     macro_rules! kernel_for {
         ($($func:ident),*) => {
             match (func, write) {
                 $(
-                    (DepthFunc::$func, false) => job.run(Kernel::<{ DepthFunc::$func as u8 }, false>),
-                    (DepthFunc::$func, true) => job.run(Kernel::<{ DepthFunc::$func as u8 }, true>),
+                    (DepthFunc::$func, false) => {
+                        job.run(Kernel::<{ DepthFunc::$func as u8 }, false> { isa })
+                    }
+                    (DepthFunc::$func, true) => {
+                        job.run(Kernel::<{ DepthFunc::$func as u8 }, true> { isa })
+                    }
                 )*
             }
         };
@@ -75,19 +137,7 @@ pub(crate) fn test_and_write(func: DepthFunc, depths: &[u32], stored: &mut [u32]
     loop_for!(Never, Less, Equal, Lequal, Greater, Notequal, Gequal, Always)
 }
 
-/// [`RunKernel::test_and_tally`] for the function of code `FUNC`.
-#[inline(always)]
-fn kernel<const FUNC: u8, const WRITE: bool>(depths: &[u32], stored: &mut [u32]) -> RunTally {
-    #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
-    // SAFETY: the kernel needs SSE2, which the build targets (`target_feature = "sse2"`).
-    unsafe {
-        sse2::test_and_tally::<FUNC, WRITE>(depths, stored)
-    }
-    #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-    plain_kernel::<FUNC, WRITE>(depths, stored)
-}
-
-/// [`kernel`] one fragment after the other, where SSE2 is missing.
+/// The kernel one fragment after the other, where SSE2 is missing.
 #[cfg_attr(all(target_arch = "x86_64", target_feature = "sse2"), allow(dead_code))]
 fn plain_kernel<const FUNC: u8, const WRITE: bool>(depths: &[u32], stored: &mut [u32]) -> RunTally {
     let func = DepthFunc::ALL[FUNC as usize];
@@ -126,7 +176,7 @@ mod sse2 {
     /// Fragments whose outcomes one word of bits holds (16 steps of four).
     const BLOCK: usize = 64;
 
-    /// [`super::kernel`]: steps of four, their outcomes gathered as bits a block at a time
+    /// The kernel in SSE2: steps of four, their outcomes gathered as bits a block at a time
     /// (the first and last passing found once a block, not once a step); then the last
     /// fragments, fewer than four. Read-only, those are the last four again with the lanes
     /// already done masked off; writing (or in a run shorter than four), one by one: a load
@@ -326,6 +376,199 @@ mod sse2 {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use crate::query::RunTally;
+    use crate::state::DepthFunc;
+    use std::arch::x86_64::*;
+
+    /// Fragments a step tests.
+    const LANES: usize = 8;
+    /// Fragments whose outcomes one word of bits holds (8 steps).
+    const BLOCK: usize = 64;
+
+    /// Whether this CPU runs the kernel (each check a cached flag's load).
+    #[inline(always)]
+    pub(super) fn available() -> bool {
+        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("popcnt")
+    }
+
+    /// The kernel in AVX2: steps of eight, their outcomes gathered as bits a block at a time
+    /// (the passing count, first and last found once a block); then the last fragments,
+    /// fewer than eight, in one step loading (and storing) only their lanes. Depths compare
+    /// unsigned: AVX2 has unsigned minimum and maximum, and signed comparisons of depths
+    /// with their sign bit flipped.
+    #[inline]
+    #[target_feature(enable = "avx2,popcnt")]
+    pub(super) fn test_and_tally<const FUNC: u8, const WRITE: bool>(
+        depths: &[u32],
+        stored: &mut [u32],
+    ) -> RunTally {
+        let len = depths.len();
+        let whole = len / LANES * LANES;
+        let mut tally = Tally::new();
+        for (block, (depths, stored)) in depths[..whole]
+            .chunks(BLOCK)
+            .zip(stored[..whole].chunks_mut(BLOCK))
+            .enumerate()
+        {
+            let mut passed = 0u64;
+            for (step, (z, s)) in depths
+                .chunks_exact(LANES)
+                .zip(stored.chunks_exact_mut(LANES))
+                .enumerate()
+            {
+                let z = load(z.try_into().expect("eight"));
+                let s: &mut [u32; LANES] = s.try_into().expect("eight");
+                let old = load(s);
+                let pass = passes::<FUNC>(z, old);
+                if WRITE {
+                    store(s, _mm256_blendv_epi8(old, z, pass));
+                }
+                passed |= (tally.add(z, pass) as u64) << (step * LANES);
+            }
+            tally.note_passed(block * BLOCK, passed);
+        }
+        if whole < len {
+            let (depths, stored) = (&depths[whole..], &mut stored[whole..]);
+            // Lane k holds fragment whole + k, for k below the fragments left.
+            let lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+            let valid = _mm256_cmpgt_epi32(_mm256_set1_epi32(depths.len() as i32), lanes);
+            // SAFETY: a masked load reads only the lanes of its mask, here the slices' own
+            // elements (fewer than eight from their starts); the others read as zero.
+            let (z, old) = unsafe {
+                (
+                    _mm256_maskload_epi32(depths.as_ptr().cast(), valid),
+                    _mm256_maskload_epi32(stored.as_ptr().cast(), valid),
+                )
+            };
+            let pass = _mm256_and_si256(passes::<FUNC>(z, old), valid);
+            if WRITE {
+                // SAFETY: a masked store writes only the lanes of its mask, passing lanes of
+                // `valid`: the slice's own elements.
+                unsafe { _mm256_maskstore_epi32(stored.as_mut_ptr().cast(), pass, z) };
+            }
+            let passed = tally.add(z, pass);
+            tally.note_passed(whole, passed as u64);
+        }
+        tally.finish(len)
+    }
+
+    /// The running tally: per lane the passing depths' range; the passing count and the
+    /// first and last passing index.
+    struct Tally {
+        zmin: __m256i,
+        zmax: __m256i,
+        passed: u32,
+        first: Option<u32>,
+        last: u32,
+    }
+
+    impl Tally {
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        fn new() -> Tally {
+            Tally {
+                zmin: _mm256_set1_epi32(-1),
+                zmax: _mm256_setzero_si256(),
+                passed: 0,
+                first: None,
+                last: 0,
+            }
+        }
+
+        /// Take the depths `z` of the lanes of `pass` into the range. Returns those lanes
+        /// as bits.
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        fn add(&mut self, z: __m256i, pass: __m256i) -> u32 {
+            // A failing lane stands in as u32::MAX for the minimum and 0 for the maximum.
+            let low = _mm256_blendv_epi8(_mm256_set1_epi32(-1), z, pass);
+            self.zmin = _mm256_min_epu32(self.zmin, low);
+            self.zmax = _mm256_max_epu32(self.zmax, _mm256_and_si256(z, pass));
+            _mm256_movemask_ps(_mm256_castsi256_ps(pass)) as u32
+        }
+
+        /// Fragments `at + i` passed for the bits `i` set in `passed` (called in order).
+        #[inline]
+        #[target_feature(enable = "avx2,popcnt")]
+        fn note_passed(&mut self, at: usize, passed: u64) {
+            if passed != 0 {
+                let at = at as u32;
+                self.passed += passed.count_ones();
+                self.first.get_or_insert(at + passed.trailing_zeros());
+                self.last = at + 63 - passed.leading_zeros();
+            }
+        }
+
+        /// The lanes folded into the run's tally (`fragments` long).
+        #[inline]
+        #[target_feature(enable = "avx2")]
+        fn finish(self, fragments: usize) -> RunTally {
+            RunTally {
+                fragments: fragments as u32,
+                passed: self.passed,
+                zmin: fold(self.zmin, |a, b| _mm_min_epu32(a, b)),
+                zmax: fold(self.zmax, |a, b| _mm_max_epu32(a, b)),
+                first: self.first.unwrap_or(0),
+                last: self.last,
+            }
+        }
+    }
+
+    /// The eight lanes of `v` folded into one by `op` (a lane-wise minimum or maximum).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn fold(v: __m256i, op: impl Fn(__m128i, __m128i) -> __m128i) -> u32 {
+        let four = op(_mm256_castsi256_si128(v), _mm256_extracti128_si256::<1>(v));
+        let two = op(four, _mm_shuffle_epi32::<0b01_00_11_10>(four));
+        let one = op(two, _mm_shuffle_epi32::<0b10_11_00_01>(two));
+        _mm_cvtsi128_si32(one) as u32
+    }
+
+    /// Lanes where a fragment at depth `z` passes against `stored` by the function of code
+    /// `FUNC` (unsigned): all ones, else zero.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn passes<const FUNC: u8>(z: __m256i, stored: __m256i) -> __m256i {
+        const NEVER: u8 = DepthFunc::Never as u8;
+        const LESS: u8 = DepthFunc::Less as u8;
+        const EQUAL: u8 = DepthFunc::Equal as u8;
+        const LEQUAL: u8 = DepthFunc::Lequal as u8;
+        const GREATER: u8 = DepthFunc::Greater as u8;
+        const NOTEQUAL: u8 = DepthFunc::Notequal as u8;
+        const GEQUAL: u8 = DepthFunc::Gequal as u8;
+        // Flipping the sign bit makes unsigned order signed order.
+        let bias = |v| _mm256_xor_si256(v, _mm256_set1_epi32(i32::MIN));
+        let not = |v| _mm256_xor_si256(v, _mm256_set1_epi32(-1));
+        match FUNC {
+            NEVER => _mm256_setzero_si256(),
+            LESS => _mm256_cmpgt_epi32(bias(stored), bias(z)),
+            EQUAL => _mm256_cmpeq_epi32(z, stored),
+            // z <= stored exactly where the larger of the two is the stored one.
+            LEQUAL => _mm256_cmpeq_epi32(_mm256_max_epu32(z, stored), stored),
+            GREATER => _mm256_cmpgt_epi32(bias(z), bias(stored)),
+            NOTEQUAL => not(_mm256_cmpeq_epi32(z, stored)),
+            GEQUAL => _mm256_cmpeq_epi32(_mm256_max_epu32(z, stored), z),
+            _ => _mm256_set1_epi32(-1),
+        }
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn load(lanes: &[u32; LANES]) -> __m256i {
+        // SAFETY: the reference holds the 32 bytes read; an unaligned load needs no more.
+        unsafe { _mm256_loadu_si256(lanes.as_ptr().cast()) }
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn store(out: &mut [u32; LANES], lanes: __m256i) {
+        // SAFETY: the reference holds the 32 bytes written; an unaligned store needs no more.
+        unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), lanes) }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -338,6 +581,17 @@ mod tests {
         depths: &[u32],
         stored: &mut [u32],
     ) -> RunTally {
+        test_and_tally_in(Isa::best(), func, write, depths, stored)
+    }
+
+    /// The kernel of `func` and `write` in `isa` on one run.
+    fn test_and_tally_in(
+        isa: Isa,
+        func: DepthFunc,
+        write: bool,
+        depths: &[u32],
+        stored: &mut [u32],
+    ) -> RunTally {
         struct OneRun<'a>(&'a [u32], &'a mut [u32]);
         impl WithKernel for OneRun<'_> {
             type Output = RunTally;
@@ -345,7 +599,19 @@ mod tests {
                 kernel.test_and_tally(self.0, self.1)
             }
         }
-        with_kernel(func, write, OneRun(depths, stored))
+        with_kernel_in(KernelIsa(isa), func, write, OneRun(depths, stored))
+    }
+
+    /// Every kernel's instructions this CPU runs.
+    fn isas() -> Vec<Isa> {
+        let mut isas = vec![Isa::Plain];
+        #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+        isas.push(Isa::Sse2);
+        #[cfg(target_arch = "x86_64")]
+        if avx2::available() {
+            isas.push(Isa::Avx2);
+        }
+        isas
     }
 
     /// The plain way: each fragment tested (and written) in turn, then the outcomes tallied.
@@ -428,18 +694,25 @@ mod tests {
             _ => rng.next_u64() as u32,
         };
         for round in 0..20_000 {
-            let len = rng.below(if round % 4 == 0 { 70 } else { 12 }) as usize;
+            let len = rng.below(if round % 4 == 0 { 140 } else { 20 }) as usize;
             let depths: Vec<u32> = (0..len).map(|_| depth(&mut rng)).collect();
             let stored: Vec<u32> = (0..len).map(|_| depth(&mut rng)).collect();
             let func = DepthFunc::ALL[rng.below(8) as usize];
             let write = rng.below(2) == 1;
-            let (mut fused, mut plain) = (stored.clone(), stored.clone());
-            assert_eq!(
-                test_and_tally(func, write, &depths, &mut fused),
-                reference(func, write, &depths, &mut plain),
-                "{func:?} write {write}: {depths:?} against {stored:?}"
-            );
-            assert_eq!(fused, plain, "{func:?} write {write}: the stored depths");
+            let mut plain = stored.clone();
+            let expected = reference(func, write, &depths, &mut plain);
+            for isa in isas() {
+                let mut fused = stored.clone();
+                assert_eq!(
+                    test_and_tally_in(isa, func, write, &depths, &mut fused),
+                    expected,
+                    "{isa:?} {func:?} write {write}: {depths:?} against {stored:?}"
+                );
+                assert_eq!(
+                    fused, plain,
+                    "{isa:?} {func:?} write {write}: the stored depths"
+                );
+            }
         }
     }
 }

@@ -1,7 +1,7 @@
 //! The functional golden model: a depth buffer and the query semantics, giving every query's
 //! exact result. Every timing model must reproduce its counts.
 
-use crate::depth_run::{test_and_write, with_kernel, RunKernel, WithKernel};
+use crate::depth_run::{test_and_write, with_kernel_in, KernelIsa, RunKernel, WithKernel};
 use crate::event::{Event, Fragment, GeometryBatch, Span, DEPTH_ONE};
 use crate::query::{verbose_hits_kept, QueryMode, QueryResult, QuerySpec, RunTally, TileResult};
 use crate::raster::{RasterProfile, RasterSink, Rasterizer};
@@ -277,6 +277,7 @@ impl TileIndex {
         })
     }
 
+    #[inline]
     fn candidates(&self, x: u16, y: u16) -> &[u32] {
         let bucket = (y as usize >> self.shift) * self.columns + (x as usize >> self.shift);
         let (start, end) = self.buckets[bucket];
@@ -527,6 +528,19 @@ impl OpenQuery {
     }
 }
 
+/// How a span is tested and accounted under the current state and query: decided when they
+/// change, not per span.
+#[derive(Clone, Copy, Debug)]
+enum SpanPlan {
+    /// No query is open: the span is tested (and written) only.
+    Uncounted(RunTest),
+    /// Each tile's part is tested and tallied in one pass ([`OpenQuery::tallies_spans`]).
+    Tallied(RunTest),
+    /// Every fragment's outcome first, then accounted (hits are listed, or a written
+    /// fragment may lie in several tiles).
+    Outcomes,
+}
+
 /// The golden model's semantics over a fragment stream: state, depth buffer, queries.
 /// It consumes [`Event`]s, so it replays a trace as readily as it follows the rasterizer.
 pub struct FunctionalModel {
@@ -535,15 +549,39 @@ pub struct FunctionalModel {
     query: Option<OpenQuery>,
     /// The last span's depth-test outcomes (reused, so spans allocate nothing).
     passed: Vec<bool>,
+    plan: SpanPlan,
+    /// The instructions the span kernels run in (the best this CPU has).
+    isa: KernelIsa,
 }
 
 impl FunctionalModel {
     pub fn new(width: u32, height: u32) -> FunctionalModel {
+        let state = RenderState::new(width, height);
         FunctionalModel {
-            state: RenderState::new(width, height),
+            state,
             depth: DepthBuffer::new(width, height),
             query: None,
             passed: Vec::new(),
+            plan: SpanPlan::Uncounted(RunTest::new(&state, true)),
+            isa: KernelIsa::best(),
+        }
+    }
+
+    /// Whether the open query (if any) forbids depth writes: the occlusion render modes.
+    fn writes_allowed(&self) -> bool {
+        !self
+            .query
+            .as_ref()
+            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode())
+    }
+
+    /// The plan for spans under the current state and query.
+    fn span_plan(&self) -> SpanPlan {
+        let test = RunTest::new(&self.state, self.writes_allowed());
+        match &self.query {
+            None => SpanPlan::Uncounted(test),
+            Some(query) if query.tallies_spans(test) => SpanPlan::Tallied(test),
+            Some(_) => SpanPlan::Outcomes,
         }
     }
 
@@ -567,10 +605,7 @@ impl FunctionalModel {
     /// Test one fragment and account it in the open query.
     #[inline(always)]
     pub fn fragment(&mut self, fragment: Fragment) {
-        let writes_allowed = !self
-            .query
-            .as_ref()
-            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
+        let writes_allowed = self.writes_allowed();
         let passed = self.depth.test(&self.state, fragment, writes_allowed);
         if let Some(query) = &mut self.query {
             query.record(fragment, passed);
@@ -587,27 +622,28 @@ impl FunctionalModel {
             let last = span.x.wrapping_add(more);
             self.depth.prefetch(span.y.wrapping_add(1), span.x, last);
         }
-        let writes_allowed = !self
-            .query
-            .as_ref()
-            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode());
-        let test = RunTest::new(&self.state, writes_allowed);
-        match &mut self.query {
-            None => self.depth.test_run_uncounted(test, span),
-            Some(query) if query.tallies_spans(test) => {
+        match (self.plan, self.query.as_mut()) {
+            (SpanPlan::Uncounted(test), _) => self.depth.test_run_uncounted(test, span),
+            (SpanPlan::Tallied(test), Some(query)) => {
                 let job = SpanTally {
                     query,
                     depth: &mut self.depth,
                     test,
                     span,
                 };
-                with_kernel(test.func, test.write, job)
+                with_kernel_in(self.isa, test.func, test.write, job)
             }
-            Some(query) => {
-                self.depth
-                    .test_span(&self.state, span, writes_allowed, &mut self.passed);
-                query.record_span(span, &self.passed);
-            }
+            _ => self.span_by_outcomes(span),
+        }
+    }
+
+    /// A span's fragments tested first, their outcomes then accounted in the open query.
+    fn span_by_outcomes(&mut self, span: Span) {
+        let writes_allowed = self.writes_allowed();
+        self.depth
+            .test_span(&self.state, span, writes_allowed, &mut self.passed);
+        if let Some(query) = &mut self.query {
+            query.record_span(span, &self.passed);
         }
     }
 
@@ -615,14 +651,20 @@ impl FunctionalModel {
     /// answers stored in a trace) are ignored: this model computes its own.
     pub fn event(&mut self, event: &Event) -> Option<QueryResult> {
         if self.state.apply(event) {
+            self.plan = self.span_plan();
             return None;
         }
         match event {
             Event::Clear => self.depth.clear(),
             Event::QueryBegin(spec) => {
                 self.query = Some(OpenQuery::new(spec.clone(), &self.state));
+                self.plan = self.span_plan();
             }
-            Event::QueryEnd => return self.query.take().map(OpenQuery::finish),
+            Event::QueryEnd => {
+                let result = self.query.take().map(OpenQuery::finish);
+                self.plan = self.span_plan();
+                return result;
+            }
             Event::Fragment(f) => self.fragment(*f),
             _ => {}
         }

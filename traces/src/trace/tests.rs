@@ -34,6 +34,9 @@ fn write_default(events: &[Event]) -> Vec<u8> {
     .0
 }
 
+/// A way to read a whole trace: its events and summary.
+type ReadPath = fn(&[u8]) -> Result<(Vec<Event>, TraceSummary), TraceError>;
+
 /// Every event through `next_event`, then the summary.
 fn read_one_by_one(bytes: &[u8]) -> Result<(Vec<Event>, TraceSummary), TraceError> {
     let mut reader = TraceReader::new(bytes)?;
@@ -548,31 +551,59 @@ proptest! {
     fn payload_mutations_with_fixed_checksums_never_panic(
         flips in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..4),
     ) {
-        // Corrupt the decoded payload itself and store it uncompressed with a valid checksum,
-        // so the event decoder (not the checksum) meets the damage.
-        let events = every_kind();
-        let clean = write(&TraceHeader::new(SIDE, SIDE), WriterOptions { block_bytes: 4096, zstd_level: 1, window_index: None }, &events).0;
-        let block = first_block_offset(&clean);
-        let fields: [u8; BLOCK_HEADER_BYTES] = clean[block..block + BLOCK_HEADER_BYTES].try_into().unwrap();
-        let (header, _) = BlockHeader::parse(&fields).unwrap();
-        let stored = &clean[block + BLOCK_HEADER_BYTES..block + BLOCK_HEADER_BYTES + header.stored_len as usize];
-        let mut payload = if header.codec == 1 {
-            zstd::bulk::decompress(stored, MAX_BLOCK_BYTES).unwrap()
-        } else {
-            stored.to_vec()
-        };
-        for (at, value) in flips {
-            let at = at.index(payload.len());
-            payload[at] = value;
-        }
-        let new_header = BlockHeader { codec: 0, raw_len: payload.len() as u32, stored_len: payload.len() as u32, ..header };
-        let mut bytes = clean[..block].to_vec();
-        bytes.extend_from_slice(&new_header.fields());
-        bytes.extend_from_slice(&new_header.checksum(&payload).to_le_bytes());
-        bytes.extend_from_slice(&payload);
-        bytes.extend_from_slice(&clean[block + BLOCK_HEADER_BYTES + header.stored_len as usize..]);
-        read_anything(&bytes);
+        read_anything(&with_payload_mutations(&flips));
     }
+
+    #[test]
+    fn both_read_paths_meet_a_damaged_payload_alike(
+        flips in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..4),
+    ) {
+        // The bulk path decodes spans whole (checks folded into its SIMD kernels), the other
+        // one fragment at a time: the same events and summary, or the same error.
+        let bytes = with_payload_mutations(&flips);
+        let outcome = |read: ReadPath| read(&bytes).map_err(|error| error.to_string());
+        prop_assert_eq!(outcome(read_bulk), outcome(read_one_by_one));
+    }
+}
+
+/// The trace of [`every_kind`] with its first block's decoded payload changed at `flips`
+/// and stored uncompressed with a valid checksum, so the event decoder (not the checksum)
+/// meets the damage.
+fn with_payload_mutations(flips: &[(prop::sample::Index, u8)]) -> Vec<u8> {
+    let events = every_kind();
+    let options = WriterOptions {
+        block_bytes: 4096,
+        zstd_level: 1,
+        window_index: None,
+    };
+    let clean = write(&TraceHeader::new(SIDE, SIDE), options, &events).0;
+    let block = first_block_offset(&clean);
+    let fields: [u8; BLOCK_HEADER_BYTES] =
+        clean[block..block + BLOCK_HEADER_BYTES].try_into().unwrap();
+    let (header, _) = BlockHeader::parse(&fields).unwrap();
+    let stored_end = block + BLOCK_HEADER_BYTES + header.stored_len as usize;
+    let stored = &clean[block + BLOCK_HEADER_BYTES..stored_end];
+    let mut payload = if header.codec == 1 {
+        zstd::bulk::decompress(stored, MAX_BLOCK_BYTES).unwrap()
+    } else {
+        stored.to_vec()
+    };
+    for (at, value) in flips {
+        let at = at.index(payload.len());
+        payload[at] = *value;
+    }
+    let new_header = BlockHeader {
+        codec: 0,
+        raw_len: payload.len() as u32,
+        stored_len: payload.len() as u32,
+        ..header
+    };
+    let mut bytes = clean[..block].to_vec();
+    bytes.extend_from_slice(&new_header.fields());
+    bytes.extend_from_slice(&new_header.checksum(&payload).to_le_bytes());
+    bytes.extend_from_slice(&payload);
+    bytes.extend_from_slice(&clean[stored_end..]);
+    bytes
 }
 
 #[test]

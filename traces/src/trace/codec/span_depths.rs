@@ -26,19 +26,15 @@ pub(super) fn span_depths(
     // The one-byte path adds in 32 bits, exact for a first depth in range and a slope of at
     // most 2^24 (what a decoder's predictor holds: see `one_byte_depths`).
     let exact_in_i32 = (0..=DEPTH_ONE as i64).contains(&first) && slope.unsigned_abs() < 1 << 24;
-    if let Some(residuals) = payload.get(pos..pos + len - 1) {
-        // (An OR of every byte, not a search that stops at the first long one: it vectorises.)
-        if exact_in_i32 && residuals.iter().fold(0, |any, &b| any | b) < 0x80 {
-            one_byte_depths(payload, pos, len - 1, first as i32, slope as i32, depths);
-            // Every depth's bits ORed, checked once: a depth in 0..2^24 sets none above bit
-            // 23, one outside (negative, or too large) does. (The first is in range; the
-            // rest are read four at a time as the kernel stored them, from index 1: a load
-            // across two of its stores would wait for both to reach the cache.)
-            if depths[1..len].iter().fold(0, |bits, &depth| bits | depth) > DEPTH_ONE {
-                return Err(first_depth_outside(payload, pos, len, first, slope));
-            }
-            return Ok((pos + len - 1, depths[len - 1] as i64));
-        }
+    let end = pos + len - 1;
+    // The one-byte path checks its residuals' lengths and its depths' range as it goes; a
+    // span it cannot vouch for (a long residual, a depth outside, both rare) is decoded
+    // again the general way, which finds and names what is wrong.
+    if exact_in_i32
+        && end <= payload.len()
+        && one_byte_depths(payload, pos, len - 1, first as i32, slope as i32, depths)
+    {
+        return Ok((end, depths[len - 1] as i64));
     }
     any_residual_depths(payload, pos, len, first, slope, depths)
 }
@@ -83,15 +79,17 @@ fn any_residual_depths(
     Ok((pos, depth))
 }
 
-/// `first` and the depths that the `residuals` one-byte residuals at `payload[pos..]` give,
-/// into `depths[..=residuals]`, the vector lengthened if it is too short (what lies past is
-/// scratch).
+/// `first` and the depths that the `residuals` residuals at `payload[pos..]` give, taken
+/// for one byte each, into `depths[..=residuals]`, the vector lengthened if it is too short
+/// (what lies past is scratch). Returns whether they are what the span holds: every
+/// residual one byte long, every depth in 0..=2^24-1.
 ///
 /// The kernels add in 32 bits, which is exact up to the first depth outside 0..2^24 (all
 /// the caller needs: it rejects the span there): that depth follows one inside the range
 /// by a step of `slope` (|slope| < 2^24) and a residual (|residual| <= 64), and a chunk's
 /// depths are its base plus at most 16 such steps (< 2^29 in size), so no sum forming it
 /// leaves the i32 range. Depths after it may wrap; nobody reads them.
+#[inline(always)]
 fn one_byte_depths(
     payload: &[u8],
     pos: usize,
@@ -99,7 +97,7 @@ fn one_byte_depths(
     first: i32,
     slope: i32,
     depths: &mut Vec<u32>,
-) {
+) -> bool {
     let chunks = residuals.div_ceil(CHUNK);
     if depths.len() < 1 + chunks * CHUNK {
         depths.resize(1 + chunks * CHUNK, 0);
@@ -107,10 +105,12 @@ fn one_byte_depths(
     depths[0] = first as u32;
     // Whole chunks straight from the payload, the last one's bytes past the residuals
     // included where the payload has them: they only give depths past the span (a chunk's
-    // depths depend on its earlier bytes only).
+    // depths depend on its earlier bytes only), and the kernel looks at the first
+    // `residuals` alone.
     let direct = chunks.min((payload.len() - pos) / CHUNK) * CHUNK;
-    one_byte_chunks(
+    let mut fits = one_byte_chunks(
         &payload[pos..pos + direct],
+        residuals.min(direct),
         first,
         slope,
         &mut depths[1..=direct],
@@ -120,46 +120,76 @@ fn one_byte_depths(
         let mut padded = [0u8; CHUNK];
         padded[..residuals - direct].copy_from_slice(&payload[pos + direct..pos + residuals]);
         let base = depths[direct] as i32;
-        one_byte_chunks(&padded, base, slope, &mut depths[1 + direct..][..CHUNK]);
+        let out = &mut depths[1 + direct..][..CHUNK];
+        fits &= one_byte_chunks(&padded, residuals - direct, base, slope, out);
     }
+    fits
 }
 
-/// The depths after `base` that `residuals` (one-byte, a whole number of chunks) give, into
-/// `out` (as long).
+/// The depths after `base` that `residuals` (taken for one byte each, a whole number of
+/// chunks) give, into `out` (as long). Returns whether the first `count` residuals are each
+/// one byte long (below 0x80) and their depths all in 0..=2^24-1; past them, the bytes'
+/// depths are scratch and not looked at.
 #[inline(always)]
-fn one_byte_chunks(residuals: &[u8], base: i32, slope: i32, out: &mut [u32]) {
+fn one_byte_chunks(residuals: &[u8], count: usize, base: i32, slope: i32, out: &mut [u32]) -> bool {
     debug_assert!(residuals.len().is_multiple_of(CHUNK) && out.len() == residuals.len());
+    debug_assert!(count <= residuals.len());
+    #[cfg(target_arch = "x86_64")]
+    if avx2::available() {
+        // SAFETY: the CPU has AVX2, checked just now.
+        return unsafe { avx2::one_byte_chunks(residuals, count, base, slope, out) };
+    }
     #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
     // SAFETY: the kernel needs SSE2, which the build targets (`target_feature = "sse2"`).
     unsafe {
-        sse2::one_byte_chunks(residuals, base, slope, out)
+        sse2::one_byte_chunks(residuals, count, base, slope, out)
     }
     #[cfg(not(all(target_arch = "x86_64", target_feature = "sse2")))]
-    one_byte_chunks_scalar(residuals, base, slope, out)
+    one_byte_chunks_scalar(residuals, count, base, slope, out)
 }
 
 /// [`one_byte_chunks`] one depth after the other: the kernel where SSE2 is missing, and the
-/// reference the tests hold the SSE2 kernel to.
+/// reference the tests hold the SIMD kernels to.
 #[cfg_attr(all(target_arch = "x86_64", target_feature = "sse2"), allow(dead_code))]
-fn one_byte_chunks_scalar(residuals: &[u8], base: i32, slope: i32, out: &mut [u32]) {
+fn one_byte_chunks_scalar(
+    residuals: &[u8],
+    count: usize,
+    base: i32,
+    slope: i32,
+    out: &mut [u32],
+) -> bool {
     let mut depth = base;
-    for (&byte, out) in residuals.iter().zip(out) {
+    let mut fits = true;
+    for (i, (&byte, out)) in residuals.iter().zip(out).enumerate() {
         depth = depth
             .wrapping_add(slope)
             .wrapping_add(unzigzag(byte as u64) as i32);
         *out = depth as u32;
+        if i < count {
+            fits &= byte < 0x80 && (0..=DEPTH_ONE as i32).contains(&depth);
+        }
     }
+    fits
 }
 
 #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
 mod sse2 {
     use super::CHUNK;
+    use crate::event::DEPTH_ONE;
     use std::arch::x86_64::*;
 
     /// [`super::one_byte_chunks`]: per chunk, the residuals' prefix sums in 16-bit lanes
-    /// (|sum| <= 16 * 64), widened, plus the slope's ramp and the base.
+    /// (|sum| <= 16 * 128), widened, plus the slope's ramp and the base. The checks ride
+    /// along: the bytes' top bits (a long residual's first byte has it) and every depth's
+    /// bits ORed, of the first `count` only, tested once at the end.
     #[target_feature(enable = "sse2")]
-    pub(super) fn one_byte_chunks(residuals: &[u8], base: i32, slope: i32, out: &mut [u32]) {
+    pub(super) fn one_byte_chunks(
+        residuals: &[u8],
+        count: usize,
+        base: i32,
+        slope: i32,
+        out: &mut [u32],
+    ) -> bool {
         // Lane k of ramp[j] is slope * (4j + k + 1): the slopes up to depth 4j + k of a chunk.
         let first_four = _mm_setr_epi32(
             slope,
@@ -172,12 +202,24 @@ mod sse2 {
         for j in 1..4 {
             ramp[j] = _mm_add_epi32(ramp[j - 1], four);
         }
+        // Lane k of index[j] is 4j + k: a depth's place in its chunk.
+        let mut index = [_mm_setr_epi32(0, 1, 2, 3); 4];
+        for j in 1..4 {
+            index[j] = _mm_add_epi32(index[j - 1], _mm_set1_epi32(4));
+        }
         let mut base = _mm_set1_epi32(base);
-        for (chunk, out) in residuals
+        let mut long_residuals = 0u32;
+        let mut depth_bits = _mm_setzero_si128();
+        for (c, (chunk, out)) in residuals
             .chunks_exact(CHUNK)
             .zip(out.chunks_exact_mut(CHUNK))
+            .enumerate()
         {
-            let residuals = unzigzag_bytes(load(chunk.try_into().expect("a chunk")));
+            // How many of this chunk's residuals are the span's (0..=16).
+            let counted = count.saturating_sub(c * CHUNK).min(CHUNK) as u32;
+            let bytes = load(chunk.try_into().expect("a chunk"));
+            long_residuals |= _mm_movemask_epi8(bytes) as u32 & ((1 << counted) - 1);
+            let residuals = unzigzag_bytes(bytes);
             let low = prefix_sums_i16(_mm_srai_epi16::<8>(_mm_unpacklo_epi8(residuals, residuals)));
             let high =
                 prefix_sums_i16(_mm_srai_epi16::<8>(_mm_unpackhi_epi8(residuals, residuals)));
@@ -192,14 +234,22 @@ mod sse2 {
                 _mm_srai_epi32::<16>(_mm_unpacklo_epi16(high, high)),
                 _mm_srai_epi32::<16>(_mm_unpackhi_epi16(high, high)),
             ];
+            let counted = _mm_set1_epi32(counted as i32);
             let mut last = base;
-            for ((sum, ramp), out) in sums.into_iter().zip(ramp).zip(out.chunks_exact_mut(4)) {
-                last = _mm_add_epi32(base, _mm_add_epi32(ramp, sum));
+            for (j, (sum, out)) in sums.into_iter().zip(out.chunks_exact_mut(4)).enumerate() {
+                last = _mm_add_epi32(base, _mm_add_epi32(ramp[j], sum));
                 store(out.try_into().expect("four depths"), last);
+                let in_span = _mm_cmpgt_epi32(counted, index[j]);
+                depth_bits = _mm_or_si128(depth_bits, _mm_and_si128(last, in_span));
             }
             // The next chunk's base: this one's last depth everywhere.
             base = _mm_shuffle_epi32::<0xFF>(last);
         }
+        // A depth in 0..2^24 sets no bit above bit 23; one outside (negative, or too large)
+        // does.
+        let outside = _mm_and_si128(depth_bits, _mm_set1_epi32(!(DEPTH_ONE as i32)));
+        let inside = _mm_movemask_epi8(_mm_cmpeq_epi32(outside, _mm_setzero_si128())) == 0xFFFF;
+        long_residuals == 0 && inside
     }
 
     /// Each byte (below 0x80) unzigzagged: (b >> 1) ^ -(b & 1), as i8.
@@ -229,6 +279,106 @@ mod sse2 {
     fn store(out: &mut [u32; 4], lanes: __m128i) {
         // SAFETY: the reference holds the 16 bytes written; an unaligned store needs no more.
         unsafe { _mm_storeu_si128(out.as_mut_ptr().cast(), lanes) }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::CHUNK;
+    use crate::event::DEPTH_ONE;
+    use std::arch::x86_64::*;
+
+    /// Whether this CPU runs the kernel (a cached flag's load).
+    #[inline(always)]
+    pub(super) fn available() -> bool {
+        is_x86_feature_detected!("avx2")
+    }
+
+    /// [`super::one_byte_chunks`] in AVX2: the SSE2 kernel's steps, a chunk's sixteen
+    /// residuals widened to 16-bit lanes in one register and its depths in two of eight.
+    #[target_feature(enable = "avx2")]
+    pub(super) fn one_byte_chunks(
+        residuals: &[u8],
+        count: usize,
+        base: i32,
+        slope: i32,
+        out: &mut [u32],
+    ) -> bool {
+        // Lane k of ramp[j] is slope * (8j + k + 1): the slopes up to depth 8j + k of a chunk;
+        // lane k of index[j] is 8j + k, a depth's place in its chunk.
+        let index = [
+            _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+            _mm256_setr_epi32(8, 9, 10, 11, 12, 13, 14, 15),
+        ];
+        let slopes = _mm256_set1_epi32(slope);
+        let one = _mm256_set1_epi32(1);
+        let ramp = index.map(|index| _mm256_mullo_epi32(slopes, _mm256_add_epi32(index, one)));
+        let mut base = _mm256_set1_epi32(base);
+        let mut long_residuals = 0u32;
+        let mut depth_bits = _mm256_setzero_si256();
+        for (c, (chunk, out)) in residuals
+            .chunks_exact(CHUNK)
+            .zip(out.chunks_exact_mut(CHUNK))
+            .enumerate()
+        {
+            // How many of this chunk's residuals are the span's (0..=16).
+            let counted = count.saturating_sub(c * CHUNK).min(CHUNK) as u32;
+            let bytes = load(chunk.try_into().expect("a chunk"));
+            long_residuals |= _mm_movemask_epi8(bytes) as u32 & ((1 << counted) - 1);
+            let sums = prefix_sums_i16(_mm256_cvtepi8_epi16(unzigzag_bytes(bytes)));
+            // Each half's sums are its own (byte shifts stay in their 128-bit half): the high
+            // half's start from the low half's total, its lane 7.
+            let totals = _mm256_shuffle_epi32::<0xFF>(_mm256_shufflehi_epi16::<0xFF>(sums));
+            let sums = _mm256_add_epi16(sums, _mm256_permute2x128_si256::<0x08>(totals, totals));
+            let sums = [
+                _mm256_cvtepi16_epi32(_mm256_castsi256_si128(sums)),
+                _mm256_cvtepi16_epi32(_mm256_extracti128_si256::<1>(sums)),
+            ];
+            let counted = _mm256_set1_epi32(counted as i32);
+            let mut last = base;
+            for (j, (sum, out)) in sums.into_iter().zip(out.chunks_exact_mut(8)).enumerate() {
+                last = _mm256_add_epi32(base, _mm256_add_epi32(ramp[j], sum));
+                store(out.try_into().expect("eight depths"), last);
+                let in_span = _mm256_cmpgt_epi32(counted, index[j]);
+                depth_bits = _mm256_or_si256(depth_bits, _mm256_and_si256(last, in_span));
+            }
+            // The next chunk's base: this one's last depth everywhere.
+            base = _mm256_permutevar8x32_epi32(last, _mm256_set1_epi32(7));
+        }
+        // A depth in 0..2^24 sets no bit above bit 23; one outside (negative, or too large)
+        // does.
+        let outside = _mm256_and_si256(depth_bits, _mm256_set1_epi32(!(DEPTH_ONE as i32)));
+        long_residuals == 0 && _mm256_testz_si256(outside, outside) == 1
+    }
+
+    /// Each byte (below 0x80) unzigzagged: (b >> 1) ^ -(b & 1), as i8.
+    #[target_feature(enable = "avx2")]
+    fn unzigzag_bytes(bytes: __m128i) -> __m128i {
+        // (A 16-bit shift: the bit each byte takes from the next is masked off.)
+        let half = _mm_and_si128(_mm_srli_epi16::<1>(bytes), _mm_set1_epi8(0x7F));
+        let odd = _mm_and_si128(bytes, _mm_set1_epi8(1));
+        _mm_xor_si128(half, _mm_sub_epi8(_mm_setzero_si128(), odd))
+    }
+
+    /// Inclusive prefix sums of each 128-bit half's eight i16 lanes (shift and add, three
+    /// times).
+    #[target_feature(enable = "avx2")]
+    fn prefix_sums_i16(lanes: __m256i) -> __m256i {
+        let lanes = _mm256_add_epi16(lanes, _mm256_slli_si256::<2>(lanes));
+        let lanes = _mm256_add_epi16(lanes, _mm256_slli_si256::<4>(lanes));
+        _mm256_add_epi16(lanes, _mm256_slli_si256::<8>(lanes))
+    }
+
+    #[target_feature(enable = "avx2")]
+    fn load(bytes: &[u8; CHUNK]) -> __m128i {
+        // SAFETY: the reference holds the 16 bytes read; an unaligned load needs no more.
+        unsafe { _mm_loadu_si128(bytes.as_ptr().cast()) }
+    }
+
+    #[target_feature(enable = "avx2")]
+    fn store(out: &mut [u32; 8], lanes: __m256i) {
+        // SAFETY: the reference holds the 32 bytes written; an unaligned store needs no more.
+        unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), lanes) }
     }
 }
 
@@ -354,23 +504,63 @@ mod tests {
         assert_eq!(error.pos, 20);
     }
 
+    type Kernel = fn(&[u8], usize, i32, i32, &mut [u32]) -> bool;
+
+    /// Every SIMD kernel this CPU runs, by name.
+    fn simd_kernels() -> Vec<(&'static str, Kernel)> {
+        #[allow(unused_mut)]
+        let mut kernels: Vec<(&'static str, Kernel)> = Vec::new();
+        #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
+        kernels.push(("sse2", |residuals, count, base, slope, out| {
+            // SAFETY: the build targets SSE2.
+            unsafe { sse2::one_byte_chunks(residuals, count, base, slope, out) }
+        }));
+        #[cfg(target_arch = "x86_64")]
+        if avx2::available() {
+            kernels.push(("avx2", |residuals, count, base, slope, out| {
+                // SAFETY: the CPU has AVX2, checked above.
+                unsafe { avx2::one_byte_chunks(residuals, count, base, slope, out) }
+            }));
+        }
+        kernels
+    }
+
     #[test]
-    fn the_sse2_kernel_is_the_scalar_one() {
+    fn the_simd_kernels_are_the_scalar_one() {
         let mut rng = SplitMix64(17);
-        for _ in 0..2000 {
-            let residuals: Vec<u8> = (0..CHUNK * (1 + rng.below(5) as usize))
-                .map(|_| rng.below(0x80) as u8)
+        for case in 0..20_000 {
+            let chunks = 1 + rng.below(5) as usize;
+            // Now and then a long residual's byte (0x80 and up), in the span or past it.
+            let long_bytes = rng.below(4) == 0;
+            let residuals: Vec<u8> = (0..CHUNK * chunks)
+                .map(|_| match long_bytes && rng.below(20) == 0 {
+                    true => 0x80 + rng.below(0x80) as u8,
+                    false => rng.below(0x80) as u8,
+                })
                 .collect();
-            let base = rng.below(1 << 24) as i32;
-            let slope = rng.below(1 << 25) as i32 - (1 << 24) + 1;
-            let mut fast = vec![0; residuals.len()];
+            let count = rng.below(residuals.len() as u64 + 1) as usize;
+            // Bases near an end of the range now and then, so depths leave it.
+            let base = match rng.below(4) {
+                0 => rng.below(2000) as i32,
+                1 => DEPTH_ONE as i32 - rng.below(2000) as i32,
+                _ => rng.below(1 << 24) as i32,
+            };
+            let slope = match rng.below(3) {
+                0 => rng.below(41) as i32 - 20,
+                _ => rng.below(1 << 25) as i32 - (1 << 24) + 1,
+            };
             let mut plain = vec![0; residuals.len()];
-            one_byte_chunks(&residuals, base, slope, &mut fast);
-            one_byte_chunks_scalar(&residuals, base, slope, &mut plain);
-            assert_eq!(
-                fast, plain,
-                "base {base} slope {slope} residuals {residuals:?}"
-            );
+            let plain_fits = one_byte_chunks_scalar(&residuals, count, base, slope, &mut plain);
+            for (kernel, one_byte_chunks) in simd_kernels() {
+                let mut fast = vec![0; residuals.len()];
+                let fits = one_byte_chunks(&residuals, count, base, slope, &mut fast);
+                let context =
+                    format!("{kernel} case {case}: base {base} slope {slope} count {count}");
+                assert_eq!(fits, plain_fits, "{context}: whether the span fits");
+                if residuals.iter().all(|&b| b < 0x80) {
+                    assert_eq!(fast, plain, "{context}: {residuals:?}");
+                }
+            }
         }
     }
 
