@@ -567,14 +567,6 @@ impl FunctionalModel {
         }
     }
 
-    /// Whether the open query (if any) forbids depth writes: the occlusion render modes.
-    fn writes_allowed(&self) -> bool {
-        !self
-            .query
-            .as_ref()
-            .is_some_and(|q| q.spec.mode.is_occlusion_render_mode())
-    }
-
     /// The plan for spans under the current state and query.
     fn span_plan(&self) -> SpanPlan {
         let test = RunTest::new(&self.state, self.writes_allowed());
