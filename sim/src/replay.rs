@@ -192,14 +192,7 @@ pub fn replay<R: Read>(
             model: Box::new(model),
             sizes: ScoutedSizes::new(open()?),
         };
-        let sink = match options.retile {
-            None => feed(&mut reader, sink, model_error)?,
-            Some(grid) => {
-                let retile = Retile::new(grid, width, height, sink)
-                    .map_err(|source| ReplayError::Retile { grid, source })?;
-                feed(&mut reader, retile, model_error)?.into_inner()
-            }
-        };
+        let sink = feed_retiled(&mut reader, sink, options.retile, model_error)?;
         return LevelModel::Sampled(sink.model)
             .finish(arch)
             .map_err(model_error);
@@ -214,15 +207,12 @@ pub fn replay<R: Read>(
         options.timeline,
     )
     .map_err(ReplayError::Setup)?;
-    let sink = LevelSink::new(model);
-    let sink = match options.retile {
-        None => feed(&mut reader, sink, model_error)?,
-        Some(grid) => {
-            let retile = Retile::new(grid, width, height, sink)
-                .map_err(|source| ReplayError::Retile { grid, source })?;
-            feed(&mut reader, retile, model_error)?.into_inner()
-        }
-    };
+    let sink = feed_retiled(
+        &mut reader,
+        LevelSink::new(model),
+        options.retile,
+        model_error,
+    )?;
     sink.model.finish(arch).map_err(model_error)
 }
 
@@ -298,6 +288,22 @@ impl<R: Read> EventSink for Scouted<R> {
         feed_window_sizes(&mut self.model, &mut self.sizes)?;
         self.model.span(span)
     }
+}
+
+/// [`feed`], through a retiling of the brief queries to `grid` when one is given.
+fn feed_retiled<R: Read, S: EventSink<Error = SimError>>(
+    reader: &mut TraceReader<R>,
+    sink: S,
+    grid: Option<TileGrid>,
+    model_error: impl Fn(SimError) -> ReplayError,
+) -> Result<S, ReplayError> {
+    let Some(grid) = grid else {
+        return feed(reader, sink, model_error);
+    };
+    let (width, height) = (reader.header().width, reader.header().height);
+    let retile = Retile::new(grid, width, height, sink)
+        .map_err(|source| ReplayError::Retile { grid, source })?;
+    Ok(feed(reader, retile, model_error)?.into_inner())
 }
 
 /// Read every event of `reader` into `sink`, stopping at the first error of either.

@@ -19,8 +19,20 @@ mod support;
 /// A trace file's bytes, as `occsim trace gen` writes them: with the window index at the
 /// default O2's depth layout, and the features written back into the header.
 fn indexed_trace(width: u32, height: u32, events: &[Event]) -> Vec<u8> {
+    indexed_trace_in_blocks(width, height, events, WriterOptions::default().block_bytes)
+}
+
+/// As [`indexed_trace`], in blocks of `block_bytes` (4096: a reader that starts mid-trace
+/// skips blocks and starts inside them).
+fn indexed_trace_in_blocks(
+    width: u32,
+    height: u32,
+    events: &[Event],
+    block_bytes: usize,
+) -> Vec<u8> {
     let layout = Arch::builtin("o2").unwrap().o2().unwrap().depth_layout();
     let options = WriterOptions {
+        block_bytes,
         window_index: Some(layout),
         ..WriterOptions::default()
     };
@@ -152,25 +164,6 @@ fn where_the_index_cannot_serve_the_fragments_are_read() {
     assert!(!analytic(&trace, &o2_with(&[]), true, Some(grid)).from_window_index);
 }
 
-/// As [`indexed_trace`], with 4096-byte blocks: a reader that starts mid-trace skips
-/// blocks and starts inside them.
-fn indexed_trace_in_small_blocks(width: u32, height: u32, events: &[Event]) -> Vec<u8> {
-    let layout = Arch::builtin("o2").unwrap().o2().unwrap().depth_layout();
-    let options = WriterOptions {
-        block_bytes: 4096,
-        zstd_level: 1,
-        window_index: Some(layout),
-    };
-    let mut file = Cursor::new(Vec::new());
-    let header = TraceHeader::new(width, height);
-    let mut writer = TraceWriter::with_options(&mut file, &header, options).unwrap();
-    for event in events {
-        writer.write_event(event).unwrap();
-    }
-    writer.finish_seekable().unwrap();
-    file.into_inner()
-}
-
 fn sampled(trace: &[u8], arch: &Arch, every: u32, window_index: bool) -> LevelResult {
     sampled_warm(trace, arch, every, window_index, WARM_UP_FRAGMENTS)
 }
@@ -207,7 +200,7 @@ fn machines_started_inside_warm_up_windows_agree_from_the_index_and_the_fragment
     let arch = o2_with(&[]);
     let mut moved = 0;
     for (name, _, (width, height), events) in traces() {
-        let trace = indexed_trace_in_small_blocks(width, height, &events);
+        let trace = indexed_trace_in_blocks(width, height, &events, 4096);
         for every in [3, 5] {
             let what = format!("{name} at sampled:{every}");
             let indexed = sampled_warm(&trace, &arch, every, true, 40);
@@ -245,7 +238,7 @@ fn the_index_gives_the_sampled_result_of_the_fragments_bit_for_bit() {
         o2_with(&["clear_writes_memory=false", "prefetch_depth_fragments=2"]),
     ];
     for (name, _, (width, height), events) in traces() {
-        let trace = indexed_trace_in_small_blocks(width, height, &events);
+        let trace = indexed_trace_in_blocks(width, height, &events, 4096);
         for arch in &archs {
             for every in [1, 2, 3, 7] {
                 let mut indexed = sampled(&trace, arch, every, true);

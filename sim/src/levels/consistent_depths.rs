@@ -193,17 +193,6 @@ mod tests {
 
     const SIDE: u16 = 6;
 
-    const FUNCS: [DepthFunc; 8] = [
-        DepthFunc::Never,
-        DepthFunc::Less,
-        DepthFunc::Equal,
-        DepthFunc::Lequal,
-        DepthFunc::Greater,
-        DepthFunc::Notequal,
-        DepthFunc::Gequal,
-        DepthFunc::Always,
-    ];
-
     /// One-fragment spans with their results packed as the trace packs them.
     fn replay(
         consistent: &mut ConsistentDepths,
@@ -251,7 +240,7 @@ mod tests {
             consistent.restart();
             for _ in 0..60 {
                 if rng.chance(10) {
-                    state.depth_func = rng.pick(&FUNCS);
+                    state.depth_func = rng.pick(&DepthFunc::ALL);
                 }
                 if rng.chance(5) {
                     state.depth_mask = !state.depth_mask;

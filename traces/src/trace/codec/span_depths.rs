@@ -254,7 +254,7 @@ mod sse2 {
 
     /// Each byte (below 0x80) unzigzagged: (b >> 1) ^ -(b & 1), as i8.
     #[target_feature(enable = "sse2")]
-    fn unzigzag_bytes(bytes: __m128i) -> __m128i {
+    pub(super) fn unzigzag_bytes(bytes: __m128i) -> __m128i {
         // (A 16-bit shift: the bit each byte takes from the next is masked off.)
         let half = _mm_and_si128(_mm_srli_epi16::<1>(bytes), _mm_set1_epi8(0x7F));
         let odd = _mm_and_si128(bytes, _mm_set1_epi8(1));
@@ -270,7 +270,7 @@ mod sse2 {
     }
 
     #[target_feature(enable = "sse2")]
-    fn load(bytes: &[u8; CHUNK]) -> __m128i {
+    pub(super) fn load(bytes: &[u8; CHUNK]) -> __m128i {
         // SAFETY: the reference holds the 16 bytes read; an unaligned load needs no more.
         unsafe { _mm_loadu_si128(bytes.as_ptr().cast()) }
     }
@@ -284,6 +284,8 @@ mod sse2 {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
+    // The 16 bytes' load and unzigzag are SSE2's: one definition.
+    use super::sse2::{load, unzigzag_bytes};
     use super::CHUNK;
     use crate::event::DEPTH_ONE;
     use std::arch::x86_64::*;
@@ -351,15 +353,6 @@ mod avx2 {
         long_residuals == 0 && _mm256_testz_si256(outside, outside) == 1
     }
 
-    /// Each byte (below 0x80) unzigzagged: (b >> 1) ^ -(b & 1), as i8.
-    #[target_feature(enable = "avx2")]
-    fn unzigzag_bytes(bytes: __m128i) -> __m128i {
-        // (A 16-bit shift: the bit each byte takes from the next is masked off.)
-        let half = _mm_and_si128(_mm_srli_epi16::<1>(bytes), _mm_set1_epi8(0x7F));
-        let odd = _mm_and_si128(bytes, _mm_set1_epi8(1));
-        _mm_xor_si128(half, _mm_sub_epi8(_mm_setzero_si128(), odd))
-    }
-
     /// Inclusive prefix sums of each 128-bit half's eight i16 lanes (shift and add, three
     /// times).
     #[target_feature(enable = "avx2")]
@@ -367,12 +360,6 @@ mod avx2 {
         let lanes = _mm256_add_epi16(lanes, _mm256_slli_si256::<2>(lanes));
         let lanes = _mm256_add_epi16(lanes, _mm256_slli_si256::<4>(lanes));
         _mm256_add_epi16(lanes, _mm256_slli_si256::<8>(lanes))
-    }
-
-    #[target_feature(enable = "avx2")]
-    fn load(bytes: &[u8; CHUNK]) -> __m128i {
-        // SAFETY: the reference holds the 16 bytes read; an unaligned load needs no more.
-        unsafe { _mm_loadu_si128(bytes.as_ptr().cast()) }
     }
 
     #[target_feature(enable = "avx2")]
