@@ -20,14 +20,13 @@
 //!   ahead ([`WindowScout`], [`feed_window_sizes`]: the window index, else the events); a
 //!   model given no sizes runs the whole window before the sampled one. A machine starts
 //!   (when none is running) with the render state there and the functional model's depth
-//!   buffer, or, read from
-//!   the window index, depths made consistent with the trace's depth-test results
-//!   ([`crate::levels::consistent_depths`]): either way its depth tests, writes, hits and
-//!   counts are right, but with empty FIFOs, an idle port and a cold prefetch. Started
-//!   inside an open query, it is told the query begins, and that query's golden
-//!   result (of which it saw only the last fragments) is not given it to check. It keeps
-//!   running while the next window is sampled or warm-up too, and is dropped at the first
-//!   window that is neither. For K = 1 and K = 2 one machine runs the whole stream.
+//!   buffer, or, read from the window index, depths made consistent with the trace's
+//!   depth-test results ([`crate::levels::consistent_depths`]): either way its depth tests,
+//!   writes, hits and counts are right, but with empty FIFOs, an idle port and a cold
+//!   prefetch. Started inside an open query, it is told the query begins, and that query's
+//!   golden result (of which it saw only the last fragments) is not given it to check. It
+//!   keeps running while the next window is sampled or warm-up too, and is dropped at the
+//!   first window that is neither. For K = 1 and K = 2 one machine runs the whole stream.
 //! - From the window index (the O2 at the index's depth layout), the formulas count
 //!   stretches, every window's results are the stream's golden ones, and only the simulated
 //!   windows' fragments are read ([`occsim_traces::trace::TestedFragments`]): the event
@@ -56,7 +55,9 @@
 //!   clear keeps the wait the formulas see, which a mean over a few sampled queries would
 //!   lose, and where the formulas' variation from query to query is noise, the mean stands.
 //! - Bias: a machine started in a warm-up window misses whatever backlog the pipe carried
-//!   to that point; the warm-up absorbs it unless it is shorter than the FIFOs. `sampled:1` runs one machine over the whole stream, so it equals `cycle`
+//!   to that point; the warm-up absorbs it unless it is shorter than the FIFOs (or than a
+//!   clear's port time, when the clear came before the warm-up). `sampled:1` runs one
+//!   machine over the whole stream, so it equals `cycle`
 //!   exactly (tested); `sampled:2` too, except that half its costs are extrapolated.
 
 use crate::arch::{Arch, Machine};
@@ -133,9 +134,9 @@ impl Window {
 /// cycles 7.7% off, now 0.7%); 4,096 fragments gave random triangles 17.9%.
 pub const WARM_UP_FRAGMENTS: u64 = 16_384;
 
-/// Each window's fragments, found ahead of the model by a second reading of the stream:
-/// a sampled window's machine starts [`WARM_UP_FRAGMENTS`] fragments before the window. Feed it
-/// the stream (or its window index) as the model sees it; it hands out the sizes of the
+/// Each window's fragments, found ahead of the model by a second reading of the stream: a
+/// sampled window's machine starts [`WARM_UP_FRAGMENTS`] fragments before the window. Feed
+/// it the stream (or its window index) as the model sees it; it hands out the sizes of the
 /// windows it has seen end.
 #[derive(Default)]
 pub struct WindowScout {
@@ -490,9 +491,8 @@ impl SampledModel {
         window.is_multiple_of(self.every as u64)
     }
 
-    /// The model will be given each window's size ahead ([`feed_window_sizes`] before every
-    /// call), so a warm-up window's machine starts near the window's end.
-    /// Its machines then run the last `warm_up_fragments` of a warm-up window.
+    /// The model will be given the windows' sizes ahead ([`feed_window_sizes`] before every
+    /// call), so that a sampled window's machine starts `warm_up_fragments` before it.
     pub fn with_window_sizes(mut self, warm_up_fragments: u64) -> SampledModel {
         // Window 0 is sampled, so its machine has started already, as it would anyway.
         self.sizes_wanted = true;
