@@ -11,7 +11,10 @@
 //! Payload: the results in the event block's fragment order, bit `i % 8` of byte `i / 8`
 //! for fragment `i` (1: passed; a fragment with the depth test off passes), padded with
 //! zeros to a whole byte. The block header's `events` is the event block's fragment count.
-//! Writers add these blocks to every trace with a window index (format version 5 on).
+//! Writers add these blocks to every trace with a window index (format version 5 on). An
+//! event block's payload is at most 1 MiB and every fragment takes at least a byte of it (a
+//! span's first its header, each further one a residual), so a depth-test block holds at
+//! most 128 KiB, well within a block's limit.
 
 use super::block::{BlockHeader, KIND_DEPTH_TESTS, KIND_EVENTS, KIND_INDEX};
 use super::codec::{BlockDecoder, DecodeContext, DrainError};
