@@ -48,8 +48,8 @@ pub struct ReplayOptions {
     /// Read the trace's window index instead of its fragments where the level can
     /// ([`AnalyticModel::reads_window_index`]): the same result, without decoding a fragment.
     pub window_index: bool,
-    /// At the sampled level, the fragments at the end of a warm-up window its machine runs
-    /// ([`crate::levels::sampled::WARM_UP_FRAGMENTS`] by default).
+    /// At the sampled level, the fragments before a sampled window its machine runs as a
+    /// warm-up ([`crate::levels::sampled::WARM_UP_FRAGMENTS`] by default).
     pub warm_up_fragments: u64,
 }
 
@@ -216,13 +216,12 @@ pub fn replay<R: Read>(
     sink.model.finish(arch).map_err(model_error)
 }
 
-/// The sampled level's window sizes, found by a reader of their own one window ahead: over
-/// the window index when the trace has one (retiling moves no window's end), else over the
-/// events.
+/// The sampled level's window sizes, found by a reader of their own up to K windows ahead:
+/// over the window index when the trace has one (retiling moves no window's end), else over
+/// the events.
 struct ScoutedSizes<R: Read> {
     reader: TraceReader<R>,
     scout: WindowScout,
-    done: bool,
 }
 
 impl<R: Read> ScoutedSizes<R> {
@@ -230,43 +229,31 @@ impl<R: Read> ScoutedSizes<R> {
         ScoutedSizes {
             reader,
             scout: WindowScout::default(),
-            done: false,
         }
     }
+}
 
-    /// Read on; false at the end of the trace.
-    fn read_on(&mut self) -> Result<bool, TraceError> {
-        if self.reader.header().window_index.is_none() {
-            return self
-                .reader
-                .next_block(&mut self.scout)
-                .map_err(ReadError::into_trace);
-        }
-        let item = self.reader.next_index_item()?;
-        if let Some(item) = &item {
-            self.scout.index_item(item);
-        }
-        Ok(item.is_some())
+/// Feed `scout` the next block of events, or the next index item; false at the trace's end.
+fn read_on<R: Read>(
+    reader: &mut TraceReader<R>,
+    scout: &mut WindowScout,
+) -> Result<bool, TraceError> {
+    if reader.header().window_index.is_none() {
+        return reader.next_block(scout).map_err(ReadError::into_trace);
     }
+    let item = reader.next_index_item()?;
+    if let Some(item) = &item {
+        scout.index_item(item);
+    }
+    Ok(item.is_some())
 }
 
 impl<R: Read> WindowSizes for ScoutedSizes<R> {
     fn next_size(&mut self) -> Result<Option<u64>, SimError> {
-        loop {
-            if let Some(size) = self.scout.next_size() {
-                return Ok(Some(size));
-            }
-            if self.done {
-                return Ok(None);
-            }
-            if !self
-                .read_on()
-                .map_err(|e| SimError::ReadAhead(e.to_string()))?
-            {
-                self.scout.finish();
-                self.done = true;
-            }
-        }
+        let reader = &mut self.reader;
+        self.scout
+            .next_size(|scout| read_on(reader, scout))
+            .map_err(|e| SimError::ReadAhead(e.to_string()))
     }
 }
 

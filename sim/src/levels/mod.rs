@@ -4,7 +4,7 @@
 //! |---|---|---|
 //! | `functional` | the golden functional model: exact results and counts | none |
 //! | `analytic` | functional + the closed-form bottleneck model ([`crate::levels::analytic`]) | predicted |
-//! | `sampled:K` | the analytic formulas on everything, the cycle model on every K-th window and the end of the one before ([`crate::levels::sampled`]); from the window index, only those windows' fragments are read | measured on 1/K, extrapolated |
+//! | `sampled:K` | the analytic formulas on everything, the cycle model on every K-th window and the fragments before it ([`crate::levels::sampled`]); from the window index, only those windows' fragments are read | measured on 1/K, extrapolated |
 //! | `cycle` | the cycle-level machine model ([`crate::MachineModel`]) | exact |
 //! | `rtl` | the cycle-level machine with every Occlusion Unit and OccU Control the bit-accurate RTL ([`crate::blocks::rtl_occu`]) | exact |
 //!
@@ -251,18 +251,12 @@ struct SliceSizes<'a> {
 
 impl WindowSizes for SliceSizes<'_> {
     fn next_size(&mut self) -> Result<Option<u64>, SimError> {
-        loop {
-            if let Some(size) = self.scout.next_size() {
-                return Ok(Some(size));
-            }
-            match self.events.next() {
-                Some(event) => self.scout.event(event),
-                None => {
-                    self.scout.finish();
-                    return Ok(self.scout.next_size());
-                }
-            }
-        }
+        let events = &mut self.events;
+        self.scout.next_size(|scout| {
+            let event = events.next();
+            event.inspect(|event| scout.event(event));
+            Ok(event.is_some())
+        })
     }
 }
 

@@ -145,6 +145,8 @@ pub struct WindowScout {
     fragments: u64,
     ended: bool,
     sizes: VecDeque<u64>,
+    /// The stream has ended ([`Self::finish`]).
+    finished: bool,
 }
 
 impl WindowScout {
@@ -184,11 +186,27 @@ impl WindowScout {
     pub fn finish(&mut self) {
         self.ended = true;
         self.close_ended();
+        self.finished = true;
     }
 
-    /// The next window's size, if the scout has seen it end.
-    pub fn next_size(&mut self) -> Option<u64> {
-        self.sizes.pop_front()
+    /// The next window's size, reading on with `read_on` (which feeds the scout and says
+    /// false at the stream's end) until the scout has seen that window end; None after the
+    /// last window.
+    pub fn next_size<E>(
+        &mut self,
+        mut read_on: impl FnMut(&mut WindowScout) -> Result<bool, E>,
+    ) -> Result<Option<u64>, E> {
+        loop {
+            if let Some(size) = self.sizes.pop_front() {
+                return Ok(Some(size));
+            }
+            if self.finished {
+                return Ok(None);
+            }
+            if !read_on(self)? {
+                self.finish();
+            }
+        }
     }
 }
 

@@ -397,15 +397,13 @@ impl<W: Write> TraceWriter<W> {
         }
         let payload = std::mem::take(&mut block.payload);
         let (kind, items) = (block.kind, std::mem::take(&mut block.items));
-        let stored_len = self.write_block(kind, items, &payload)?;
+        let written = self.write_block(kind, items, &payload)?;
         if lane == Lane::Events {
             self.predictor = SpanPredictor::default();
             self.flush_depth_tests()?;
         }
         if let Some(block) = self.open_block(lane) {
-            block.written.blocks += 1;
-            block.written.payload_bytes += payload.len() as u64;
-            block.written.stored_bytes += stored_len;
+            block.written.add(&written);
             block.payload = payload;
             block.payload.clear();
         }
@@ -419,19 +417,21 @@ impl<W: Write> TraceWriter<W> {
             return Ok(());
         };
         let bits = std::mem::take(&mut index.depth_tests);
-        let stored_len = self.write_block(KIND_DEPTH_TESTS, bits.count(), bits.bytes())?;
+        let written = self.write_block(KIND_DEPTH_TESTS, bits.count(), bits.bytes())?;
         if let Some(index) = &mut self.index {
-            let counts = &mut index.depth_test_blocks;
-            counts.blocks += 1;
-            counts.payload_bytes += bits.bytes().len() as u64;
-            counts.stored_bytes += stored_len;
+            index.depth_test_blocks.add(&written);
             index.depth_tests = bits.emptied();
         }
         Ok(())
     }
 
-    /// Compress (when that saves bytes) and write one block; returns its stored bytes.
-    fn write_block(&mut self, kind: u8, items: u32, payload: &[u8]) -> Result<u64, TraceError> {
+    /// Compress (when that saves bytes) and write one block; returns its header.
+    fn write_block(
+        &mut self,
+        kind: u8,
+        items: u32,
+        payload: &[u8],
+    ) -> Result<BlockHeader, TraceError> {
         self.stored.clear();
         self.stored
             .reserve(zstd::zstd_safe::compress_bound(payload.len()));
@@ -455,7 +455,7 @@ impl<W: Write> TraceWriter<W> {
         write_at(&mut self.out, &mut self.offset, &header.fields())?;
         write_at(&mut self.out, &mut self.offset, &crc.to_le_bytes())?;
         write_at(&mut self.out, &mut self.offset, stored)?;
-        Ok(stored.len() as u64)
+        Ok(header)
     }
 
     /// End the trace: write the last block, the summary and the trailer, and flush.

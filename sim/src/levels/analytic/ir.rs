@@ -311,6 +311,12 @@ impl IrBottleneck {
         });
     }
 
+    /// An Image Engine's cycles a fragment under the open query: `max(C, s)`.
+    fn pace(&self) -> u64 {
+        let service = self.open.as_ref().map_or(1, |q| q.service);
+        service.max(self.arch.image_engine_cycles_per_fragment)
+    }
+
     /// Count a span's work (before `functional` applies it): as its fragments one by one,
     /// each pixel's owner stepped along the row and looked up, not divided out.
     pub(super) fn span(&mut self, span: Span, functional: &FunctionalModel) {
@@ -324,8 +330,7 @@ impl IrBottleneck {
                 .for_each(|fragment| self.fragment(fragment, functional));
             return;
         }
-        let service = self.open.as_ref().map_or(1, |q| q.service);
-        let pace = service.max(self.arch.image_engine_cycles_per_fragment);
+        let pace = self.pace();
         let (owners, window) = (&self.owners, &mut self.window);
         self.interleave
             .for_each_unit_along(span.x, span.y, span.depths.len(), |unit| {
@@ -338,8 +343,7 @@ impl IrBottleneck {
     #[inline]
     pub(super) fn fragment(&mut self, fragment: Fragment, functional: &FunctionalModel) {
         let (board, engine) = self.owners[self.interleave.unit(fragment.x, fragment.y)];
-        let service = self.open.as_ref().map_or(1, |q| q.service);
-        let pace = service.max(self.arch.image_engine_cycles_per_fragment);
+        let pace = self.pace();
         self.window.fragment(board, engine, pace);
         let Some(query) = &self.open else {
             return;
