@@ -23,7 +23,8 @@ use crate::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::levels::analytic::AnalyticModel;
 use crate::levels::sampled::{
-    feed_window_sizes, SampledModel, WindowScout, WindowSizes, WARM_UP_FRAGMENTS,
+    feed_window_sizes, SampledModel, WindowScout, WindowSize, WindowSizes, TAIL_FRAGMENTS,
+    WARM_UP_FRAGMENTS,
 };
 use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use crate::timeline::Timeline;
@@ -51,6 +52,10 @@ pub struct ReplayOptions {
     /// At the sampled level, the fragments before a sampled window its machine runs as a
     /// warm-up ([`crate::levels::sampled::WARM_UP_FRAGMENTS`] by default).
     pub warm_up_fragments: u64,
+    /// At the sampled level, the fragments at the end of a long sampled window its machine
+    /// simulates ([`crate::levels::sampled::TAIL_FRAGMENTS`] by default; `u64::MAX`: every
+    /// sampled window whole).
+    pub tail_fragments: u64,
 }
 
 impl ReplayOptions {
@@ -64,6 +69,7 @@ impl ReplayOptions {
             timeline: None,
             window_index: true,
             warm_up_fragments: WARM_UP_FRAGMENTS,
+            tail_fragments: TAIL_FRAGMENTS,
         }
     }
 
@@ -79,6 +85,7 @@ impl ReplayOptions {
             timeline: None,
             window_index: true,
             warm_up_fragments: WARM_UP_FRAGMENTS,
+            tail_fragments: TAIL_FRAGMENTS,
         }
     }
 }
@@ -169,7 +176,7 @@ pub fn replay<R: Read>(
         {
             let mut model = SampledModel::from_window_index(arch, width, height, effects, every)
                 .map_err(ReplayError::Setup)?
-                .with_window_sizes(options.warm_up_fragments);
+                .with_window_sizes(options.warm_up_fragments, options.tail_fragments);
             let mut fragments = TestedFragments::new(open()?)?;
             let mut sizes = ScoutedSizes::new(open()?);
             while let Some(item) = reader.next_index_item()? {
@@ -187,7 +194,7 @@ pub fn replay<R: Read>(
         }
         let model = SampledModel::new(arch, width, height, effects, every)
             .map_err(ReplayError::Setup)?
-            .with_window_sizes(options.warm_up_fragments);
+            .with_window_sizes(options.warm_up_fragments, options.tail_fragments);
         let sink = Scouted {
             model: Box::new(model),
             sizes: ScoutedSizes::new(open()?),
@@ -249,7 +256,7 @@ fn read_on<R: Read>(
 }
 
 impl<R: Read> WindowSizes for ScoutedSizes<R> {
-    fn next_size(&mut self) -> Result<Option<u64>, SimError> {
+    fn next_size(&mut self) -> Result<Option<WindowSize>, SimError> {
         let reader = &mut self.reader;
         self.scout
             .next_size(|scout| read_on(reader, scout))

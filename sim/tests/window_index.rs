@@ -4,7 +4,7 @@
 //! InfiniteReality-like machine, a retiling) the fragments are read.
 
 use occsim_sim::effects::EffectsChoice;
-use occsim_sim::levels::sampled::WARM_UP_FRAGMENTS;
+use occsim_sim::levels::sampled::{TAIL_FRAGMENTS, WARM_UP_FRAGMENTS};
 use occsim_sim::levels::{run_level, Fidelity, LevelResult};
 use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::Arch;
@@ -175,9 +175,27 @@ fn sampled_warm(
     window_index: bool,
     warm_up_fragments: u64,
 ) -> LevelResult {
+    sampled_tails(
+        trace,
+        arch,
+        every,
+        window_index,
+        (warm_up_fragments, TAIL_FRAGMENTS),
+    )
+}
+
+/// The sampled level with a warm-up and tail of these many fragments.
+fn sampled_tails(
+    trace: &[u8],
+    arch: &Arch,
+    every: u32,
+    window_index: bool,
+    (warm_up_fragments, tail_fragments): (u64, u64),
+) -> LevelResult {
     let options = ReplayOptions {
         window_index,
         warm_up_fragments,
+        tail_fragments,
         ..ReplayOptions::at(Fidelity::Sampled { every })
     };
     replay(|| Ok(TraceReader::new(trace)?), arch, options).unwrap()
@@ -258,6 +276,42 @@ fn the_index_gives_the_sampled_result_of_the_fragments_bit_for_bit() {
                     arch.report_entries()
                 );
             }
+        }
+    }
+}
+
+#[test]
+fn long_sampled_windows_simulated_over_their_tails_agree_from_the_index_and_the_fragments() {
+    // Tails of 100 fragments after warm-ups of 40: the windows of these traces (hundreds
+    // to thousands of fragments) are cut, their heads extrapolated, and both readings still
+    // agree bit for bit, machines started inside spans and stretches of the heads.
+    let arch = o2_with(&[]);
+    for (name, _, (width, height), events) in traces() {
+        let trace = indexed_trace_in_blocks(width, height, &events, 4096);
+        for every in [1, 3, 5] {
+            let what = format!("{name} at sampled:{every}");
+            let indexed = sampled_tails(&trace, &arch, every, true, (40, 100));
+            let decoded = sampled_tails(&trace, &arch, every, false, (40, 100));
+            let windows = decoded.sampled_windows.unwrap();
+            let whole = sampled_tails(&trace, &arch, every, false, (40, u64::MAX));
+            if every == 1 {
+                // One machine runs the whole stream: nothing to cut, the cycle level's result.
+                assert_eq!(windows.tails, 0, "{what}");
+                assert_eq!(decoded, whole, "{what}");
+            } else {
+                assert!(windows.tails > 0, "{what}: no window was cut");
+                assert!(windows.tails <= windows.simulated, "{what}");
+                assert_eq!(whole.sampled_windows.unwrap().tails, 0, "{what}");
+                // The heads were extrapolated, not measured.
+                assert_ne!(decoded.total_cycles, whole.total_cycles, "{what}");
+                // Results are the functional model's either way.
+                assert_eq!(
+                    decoded.queries.iter().map(|q| q.value).collect::<Vec<_>>(),
+                    whole.queries.iter().map(|q| q.value).collect::<Vec<_>>(),
+                    "{what}"
+                );
+            }
+            assert_same_but_source(indexed, &decoded, &what);
         }
     }
 }

@@ -26,6 +26,15 @@ impl DepthBuffer {
         }
     }
 
+    /// A buffer of zeros, for a user that sets every pixel before reading it: its pages are
+    /// mapped only as they are first touched (a cleared one is written whole up front).
+    pub fn unset(width: u32, height: u32) -> DepthBuffer {
+        DepthBuffer {
+            width,
+            depths: vec![0; width as usize * height as usize],
+        }
+    }
+
     pub fn clear(&mut self) {
         self.depths.fill(DEPTH_ONE);
     }

@@ -35,7 +35,7 @@ use occsim_traces::Span;
 use std::collections::HashMap;
 
 /// What a run has learnt of one pixel's depth at the run's start.
-#[derive(Clone, Copy, Default)]
+#[derive(Clone, Copy)]
 struct PixelBounds {
     /// `run` when `low` and `high` are this run's, `run + 1` once the pixel is known
     /// (written or cleared in this run); anything else, unknown and unbounded.
@@ -44,11 +44,26 @@ struct PixelBounds {
     high: u32,
 }
 
+/// A pixel's bounds as stored: `[stamp, low, high]`. Arrays of integers are allocated
+/// zeroed by the system, their pages mapped only as a run first touches them, where a
+/// vector of structs is written whole up front (16 MB at 1280x1024).
+type StoredBounds = [u32; 3];
+
+impl PixelBounds {
+    fn load([stamp, low, high]: StoredBounds) -> PixelBounds {
+        PixelBounds { stamp, low, high }
+    }
+
+    fn store(self) -> StoredBounds {
+        [self.stamp, self.low, self.high]
+    }
+}
+
 /// The bounds on each pixel's depth at a run's start, over one run.
 pub struct ConsistentDepths {
     width: usize,
     /// Per pixel, side by side (a pixel's test reads all three: one cache line).
-    pixels: Vec<PixelBounds>,
+    pixels: Vec<StoredBounds>,
     /// The run's stamp (even).
     run: u32,
     /// A clear in this run: every pixel is known.
@@ -64,7 +79,7 @@ impl ConsistentDepths {
         let pixels = width as usize * height as usize;
         ConsistentDepths {
             width: width as usize,
-            pixels: vec![PixelBounds::default(); pixels],
+            pixels: vec![[0; 3]; pixels],
             run: 2,
             cleared: false,
             excluded: HashMap::new(),
@@ -76,7 +91,7 @@ impl ConsistentDepths {
     pub fn restart(&mut self) {
         self.run = self.run.wrapping_add(2);
         if self.run == 0 {
-            self.pixels.fill(PixelBounds::default());
+            self.pixels.fill([0; 3]);
             self.run = 2;
         }
         self.cleared = false;
@@ -118,16 +133,17 @@ impl ConsistentDepths {
         }
         for (i, &z) in span.depths.iter().enumerate() {
             let pixel = row + i;
-            let bounds = &mut self.pixels[pixel];
-            if bounds.stamp == self.run + 1 {
+            let stamp = self.pixels[pixel][0];
+            if stamp == self.run + 1 {
                 continue;
             }
-            if bounds.stamp != self.run {
-                *bounds = PixelBounds {
+            if stamp != self.run {
+                self.pixels[pixel] = PixelBounds {
                     stamp: self.run,
                     low: 0,
                     high: u32::MAX,
-                };
+                }
+                .store();
             }
             let passed = results.passed(i);
             let (x, y) = (span.x + i as u16, span.y);
@@ -140,7 +156,7 @@ impl ConsistentDepths {
                     y,
                 })?;
             if passed && writes {
-                self.pixels[pixel].stamp = self.run + 1;
+                self.pixels[pixel][0] = self.run + 1;
             }
         }
         Ok(())
@@ -150,7 +166,8 @@ impl ConsistentDepths {
     /// when no depth passes it so.
     fn bound(&mut self, pixel: usize, func: DepthFunc, z: u32, passed: bool) -> Option<()> {
         // The depth `S` stored, compared with the incoming `z`: what the result says of S.
-        let PixelBounds { low, high, .. } = &mut self.pixels[pixel];
+        let mut bounds = PixelBounds::load(self.pixels[pixel]);
+        let PixelBounds { low, high, .. } = &mut bounds;
         let excluded = &mut self.excluded;
         match (func, passed) {
             (DepthFunc::Less, true) | (DepthFunc::Gequal, false) => {
@@ -170,13 +187,20 @@ impl ConsistentDepths {
             (DepthFunc::Always, true) | (DepthFunc::Never, false) => {}
             (DepthFunc::Always, false) | (DepthFunc::Never, true) => return None,
         }
-        (*low <= *high).then_some(())
+        let consistent = *low <= *high;
+        self.pixels[pixel] = bounds.store();
+        consistent.then_some(())
     }
 
     /// A depth within the pixel's bounds: `current` if it is, else the lowest.
     fn choose(&self, pixel: usize, current: u32) -> Option<u32> {
-        let excluded = self.excluded.get(&pixel).map_or(&[][..], Vec::as_slice);
-        let PixelBounds { low, high, .. } = self.pixels[pixel];
+        let PixelBounds { low, high, .. } = PixelBounds::load(self.pixels[pixel]);
+        // Exclusions come only from EQUAL and NOTEQUAL tests: most runs have none, and then
+        // a fragment costs no hash.
+        let excluded = match self.excluded.is_empty() {
+            true => &[][..],
+            false => self.excluded.get(&pixel).map_or(&[][..], Vec::as_slice),
+        };
         if (low..=high).contains(&current) && !excluded.contains(&current) {
             return Some(current);
         }

@@ -127,6 +127,9 @@ impl QueryOutcome {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub struct SampledWindows {
     pub simulated: u64,
+    /// Of the simulated windows, those simulated over their last fragments alone, their
+    /// heads extrapolated ([`crate::levels::sampled::TAIL_FRAGMENTS`]).
+    pub tails: u64,
     pub total: u64,
 }
 
@@ -295,8 +298,8 @@ impl LevelResult {
         if let Some(windows) = self.sampled_windows {
             let _ = writeln!(
                 out,
-                "sampled windows: {} of {} simulated",
-                windows.simulated, windows.total
+                "sampled windows: {} of {} simulated ({} of them over their last fragments alone)",
+                windows.simulated, windows.total, windows.tails
             );
         }
         match (self.from_window_index, self.sampled_windows) {

@@ -225,7 +225,7 @@ pub fn run_level(
     if let Fidelity::Sampled { every } = level {
         // Its window sizes found ahead, as a replay finds them.
         let mut model = SampledModel::new(arch, width, height, effects, every)?
-            .with_window_sizes(sampled::WARM_UP_FRAGMENTS);
+            .with_window_sizes(sampled::WARM_UP_FRAGMENTS, sampled::TAIL_FRAGMENTS);
         let mut sizes = SliceSizes {
             events: events.iter(),
             scout: WindowScout::default(),
@@ -250,7 +250,7 @@ struct SliceSizes<'a> {
 }
 
 impl WindowSizes for SliceSizes<'_> {
-    fn next_size(&mut self) -> Result<Option<u64>, SimError> {
+    fn next_size(&mut self) -> Result<Option<sampled::WindowSize>, SimError> {
         let events = &mut self.events;
         self.scout.next_size(|scout| {
             let event = events.next();

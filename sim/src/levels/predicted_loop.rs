@@ -112,8 +112,13 @@ impl PredictedLoop {
         self.window_start.unwrap_or(self.pipe_end)
     }
 
+    /// Where the open window would end on the timeline were its work `cycles`.
+    pub(crate) fn end_if_closed(&self, cycles: f64) -> f64 {
+        (self.window_start() + cycles).max(self.last_release)
+    }
+
     fn close(&mut self, end: WindowEnd) {
-        self.pipe_end = (self.window_start() + end.cycles).max(self.last_release);
+        self.pipe_end = self.end_if_closed(end.cycles);
         self.tail = end.latency;
         self.window_start = None;
     }

@@ -26,7 +26,18 @@
 //!   prefetch. Started inside an open query, it is told the query begins, and that query's
 //!   golden result (of which it saw only the last fragments) is not given it to check. It
 //!   keeps running while the next window is sampled or warm-up too, and is dropped at the
-//!   first window that is neither. For K = 1 and K = 2 one machine runs the whole stream.
+//!   first window that is neither. For K = 1 one machine runs the whole stream, and for
+//!   K = 2 too unless a window is cut (below).
+//! - Tails: a sampled window longer than its warm-up and [`TAIL_FRAGMENTS`] (its size known,
+//!   and not the last) is simulated over its tail alone. Its *head* ends at the first event
+//!   other than a fragment after all but `TAIL_FRAGMENTS` of its fragments (where the
+//!   formulas can be read: a stretch of the index is never split), and is extrapolated as
+//!   an unsampled window, its work the formulas' prediction for the window so far. The
+//!   machine starts [`WARM_UP_FRAGMENTS`] before the cut (at a clear among them, or fewer
+//!   than that many before them, as a warm-up would) and its cost is measured from the
+//!   cycle its next event would have entered the pipe at the cut
+//!   ([`MachineModel::entry_cycle`]); the window's work for calibration is the rest of the
+//!   formulas' prediction. Its query's latency is measured as any sampled window's.
 //! - From the window index (the O2 at the index's depth layout), the formulas count
 //!   stretches, every window's results are the stream's golden ones, and only the simulated
 //!   windows' fragments are read ([`occsim_traces::trace::TestedFragments`]): the event
@@ -98,6 +109,14 @@ impl Work {
             host_gap: duration - pipe,
         }
     }
+
+    /// What is left of this work after its `head`.
+    fn after(self, head: Work) -> Work {
+        Work {
+            pipe: (self.pipe - head.pipe).max(0.0),
+            host_gap: (self.host_gap - head.host_gap).max(0.0),
+        }
+    }
 }
 
 struct Window {
@@ -111,6 +130,11 @@ struct Window {
     frame_ended: bool,
     /// Its fragments so far.
     fragments: u64,
+    /// Sampled over its tail alone: its head ends at the first event other than a fragment
+    /// once this many of its fragments have passed ([`TAIL_FRAGMENTS`]).
+    cut_at: Option<u64>,
+    /// The head's work, once cut (the window's work is the rest).
+    head: Option<Work>,
 }
 
 impl Window {
@@ -121,6 +145,8 @@ impl Window {
             query_ended: false,
             frame_ended: false,
             fragments: 0,
+            cut_at: None,
+            head: None,
         }
     }
 }
@@ -136,15 +162,38 @@ impl Window {
 /// cycles 7.7% off, now 0.7%); 4,096 fragments gave random triangles 17.9%.
 pub const WARM_UP_FRAGMENTS: u64 = 16_384;
 
+/// Fragments at the end of a long sampled window that its machine simulates (after its
+/// warm-up); the window's head before them is extrapolated as an unsampled window would
+/// be: I, plausible 16,384..262,144. Windows are as long as their queries make them (the
+/// demo's run from 2 to 709,000 fragments, half of its fragments in windows over 150,000),
+/// so sampling every K-th window whole simulated about a K-th of the fragments however
+/// large K; a fixed-size unit is what makes sampling cheap (SMARTS measures units of
+/// 1,000 instructions). The tail keeps what the window's cost and its query's latency
+/// depend on beyond the formulas: the pipe's state at its end. A head is cut only where
+/// the formulas can be (before an event other than a fragment), so the tail may be
+/// longer.
+pub const TAIL_FRAGMENTS: u64 = 65_536;
+
+/// What the scout tells of a window ahead.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WindowSize {
+    /// Its fragments.
+    pub fragments: u64,
+    /// Its fragments before its last record of the closed loop's host or geometry stage
+    /// (0 when it has none): from there on the host has nothing to do but wait.
+    pub host_until: u64,
+}
+
 /// Each window's fragments, found ahead of the model by a second reading of the stream: a
 /// sampled window's machine starts [`WARM_UP_FRAGMENTS`] fragments before the window. Feed
 /// it the stream (or its window index) as the model sees it; it hands out the sizes of the
-/// windows it has seen end.
+/// windows it has seen end, and where their hosts' work ends.
 #[derive(Default)]
 pub struct WindowScout {
     fragments: u64,
+    host_until: u64,
     ended: bool,
-    sizes: VecDeque<u64>,
+    sizes: VecDeque<WindowSize>,
     /// The stream has ended ([`Self::finish`]).
     finished: bool,
 }
@@ -154,8 +203,11 @@ impl WindowScout {
     /// result) or a frame's end, before the next event that is not the result.
     fn close_ended(&mut self) {
         if self.ended {
-            self.sizes.push_back(self.fragments);
-            (self.fragments, self.ended) = (0, false);
+            self.sizes.push_back(WindowSize {
+                fragments: self.fragments,
+                host_until: self.host_until,
+            });
+            (self.fragments, self.host_until, self.ended) = (0, 0, false);
         }
     }
 
@@ -166,6 +218,7 @@ impl WindowScout {
         match event {
             Event::Fragment(_) => self.fragments += 1,
             Event::QueryEnd | Event::Swap => self.ended = true,
+            event if event.is_closed_loop_record() => self.host_until = self.fragments,
             _ => {}
         }
     }
@@ -195,7 +248,7 @@ impl WindowScout {
     pub fn next_size<E>(
         &mut self,
         mut read_on: impl FnMut(&mut WindowScout) -> Result<bool, E>,
-    ) -> Result<Option<u64>, E> {
+    ) -> Result<Option<WindowSize>, E> {
         loop {
             if let Some(size) = self.sizes.pop_front() {
                 return Ok(Some(size));
@@ -226,8 +279,8 @@ impl EventSink for WindowScout {
 
 /// Where a sampled model's window sizes come from ([`SampledModel::wants_window_size`]).
 pub trait WindowSizes {
-    /// The next window's fragments; None after the last window.
-    fn next_size(&mut self) -> Result<Option<u64>, SimError>;
+    /// The next window's size; None after the last window.
+    fn next_size(&mut self) -> Result<Option<WindowSize>, SimError>;
 }
 
 /// Give `model` the window sizes it wants from `sizes`.
@@ -255,6 +308,9 @@ struct Closed {
     /// The frame it belongs to, and whether its end is that frame's end.
     frame: u64,
     frame_ended: bool,
+    /// A sampled window's head, cut while its machine ran: the cycle the machine's next
+    /// event would have entered the pipe at the cut, where the tail's measured cost begins.
+    mark: Option<u64>,
 }
 
 /// Sampled windows' figures, measured (m) beside the formulas' prediction (p) for each (a
@@ -425,7 +481,7 @@ pub struct SampledModel {
     /// Window sizes handed in ahead ([`Self::window_size`]), the first for window
     /// `sizes_first`; `sizes_end` once the last was handed in. Without sizes (a model fed no
     /// [`WindowSizes`]), a warm-up window's machine runs the whole window.
-    sizes: VecDeque<u64>,
+    sizes: VecDeque<WindowSize>,
     sizes_first: u64,
     sizes_wanted: bool,
     sizes_end: bool,
@@ -433,6 +489,13 @@ pub struct SampledModel {
     /// this number (from 0), or at a clear before it.
     warm_start: Option<u64>,
     warm_up_fragments: u64,
+    /// A sampled window longer than its warm-up and this many fragments is simulated over
+    /// its last `tail_fragments` alone (when its size is known).
+    tail_fragments: u64,
+    /// The current window's plan (sampled, warm-up, neither) is made.
+    planned: bool,
+    /// Sampled windows simulated over their tails alone.
+    tails: u64,
 }
 
 impl SampledModel {
@@ -521,6 +584,9 @@ impl SampledModel {
             sizes_end: false,
             warm_start: None,
             warm_up_fragments: WARM_UP_FRAGMENTS,
+            tail_fragments: u64::MAX,
+            planned: false,
+            tails: 0,
         };
         model.start_window()?;
         Ok(model)
@@ -531,11 +597,19 @@ impl SampledModel {
     }
 
     /// The model will be given the windows' sizes ahead ([`feed_window_sizes`] before every
-    /// call), so that a sampled window's machine starts `warm_up_fragments` before it.
-    pub fn with_window_sizes(mut self, warm_up_fragments: u64) -> SampledModel {
-        // Window 0 is sampled, so its machine has started already, as it would anyway.
+    /// call), so that a sampled window's machine starts `warm_up_fragments` before it, and a
+    /// sampled window longer than that and `tail_fragments` is simulated over its tail.
+    pub fn with_window_sizes(
+        mut self,
+        warm_up_fragments: u64,
+        tail_fragments: u64,
+    ) -> SampledModel {
         self.sizes_wanted = true;
         self.warm_up_fragments = warm_up_fragments;
+        self.tail_fragments = tail_fragments;
+        // Window 0 is planned again once its size is known: it may be cut.
+        self.run = None;
+        self.planned = false;
         self
     }
 
@@ -546,8 +620,8 @@ impl SampledModel {
         self.sizes_wanted && !self.sizes_end && known < self.windows + self.every as u64 + 2
     }
 
-    /// The next window's fragments (None: there is no next window).
-    pub fn window_size(&mut self, size: Option<u64>) {
+    /// The next window's size (None: there is no next window).
+    pub fn window_size(&mut self, size: Option<WindowSize>) {
         match size {
             Some(size) => self.sizes.push_back(size),
             None => self.sizes_end = true,
@@ -558,10 +632,17 @@ impl SampledModel {
     fn start_window(&mut self) -> Result<(), SimError> {
         let w = self.windows;
         self.warm_start = None;
-        let warm_up = if self.is_sampled(w) {
-            Some(0)
-        } else {
-            self.warm_up_start(w)
+        self.planned = true;
+        let warm_up = match (self.is_sampled(w), &self.run) {
+            (true, None) => match self.head_fragments(w) {
+                Some(head) => {
+                    self.window.cut_at = Some(head);
+                    Some(head - self.warm_up_fragments)
+                }
+                None => Some(0),
+            },
+            (true, Some(_)) => Some(0),
+            (false, _) => self.warm_up_start(w),
         };
         match (warm_up, &mut self.run) {
             (Some(_), Some(run)) => run.cooldown = None,
@@ -576,6 +657,84 @@ impl SampledModel {
         Ok(())
     }
 
+    /// Plan the window if it is not yet (window 0 of a model given window sizes).
+    fn plan(&mut self) -> Result<(), SimError> {
+        match self.planned {
+            true => Ok(()),
+            false => self.start_window(),
+        }
+    }
+
+    /// Drop the sizes of the windows before `w`: whether `w`'s is known.
+    fn sizes_from(&mut self, w: u64) -> bool {
+        while self.sizes_first < w && self.sizes.pop_front().is_some() {
+            self.sizes_first += 1;
+        }
+        self.sizes_first == w && !self.sizes.is_empty()
+    }
+
+    /// The fragments of sampled window `w`'s head, when it has one.
+    fn head_fragments(&mut self, w: u64) -> Option<u64> {
+        self.sizes_from(w);
+        self.head_ahead(0)
+    }
+
+    /// The fragments of the head of the window `ahead` after the first whose size is known,
+    /// when it has one: it is longer than its warm-up and tail, and not the last window (a
+    /// cut needs an event after it), and its host has nothing left to do from the warm-up
+    /// on. Its warm-up is then within it. At K = 1 no window is cut: one machine runs the
+    /// whole stream, the cycle level.
+    ///
+    /// Why the host must be done: a machine started mid-window has its closed loop at
+    /// reset, level with the pipe. Where the host is ahead of the pipe (it issued the
+    /// window's draws while the pipe worked through the ones before), a cold host would do
+    /// after the warm-up's start what it did long before: on an adaptive walk of the city on
+    /// ir4 a tail measured 55,000 cycles for 18,000 of the pipe's work (12% on the whole
+    /// run's cycles). A warm-up that starts at a window's beginning does not meet this: a
+    /// query's end is where the host waits for answers.
+    fn head_ahead(&self, ahead: usize) -> Option<u64> {
+        if self.every == 1 {
+            return None;
+        }
+        let size = *self
+            .sizes
+            .get(ahead)
+            .filter(|_| self.sizes.len() > ahead + 1)?;
+        let kept = self.warm_up_fragments.saturating_add(self.tail_fragments);
+        let head = size.fragments.checked_sub(self.tail_fragments)?;
+        let warm_up_start = head.checked_sub(self.warm_up_fragments)?;
+        (size.fragments > kept && size.host_until <= warm_up_start).then_some(head)
+    }
+
+    /// The window's head ends (an event other than a fragment comes after its last
+    /// fragment): its work is the formulas' prediction so far, extrapolated as an unsampled
+    /// window's; the machine, running since the warm-up, marks where the tail's cost begins.
+    fn cut_head(&mut self) {
+        self.window.cut_at = None;
+        self.tails += 1;
+        let cycles = self.formulas.finish().map_or(0.0, |end| end.cycles);
+        let end = self.predicted.end_if_closed(cycles);
+        let head = Work::of(end - self.predicted.pipe_end(), cycles);
+        self.window.head = Some(head);
+        let closed = Closed {
+            work: head,
+            class: self.window.class,
+            query: None,
+            sampled: false,
+            last: false,
+            frame: self.frames,
+            frame_ended: false,
+            mark: None,
+        };
+        match &mut self.run {
+            Some(run) => run.windows.push(Closed {
+                mark: Some(run.machine.entry_cycle()),
+                ..closed
+            }),
+            None => self.extrapolated.push(closed),
+        }
+    }
+
     /// Where the warm-up of the next sampled window begins in window `w` (not sampled):
     /// before its fragment of the number returned, so that [`Self::warm_up_fragments`]
     /// fragments precede the sampled window, or None when the warm-up lies wholly after
@@ -584,22 +743,36 @@ impl SampledModel {
     fn warm_up_start(&mut self, w: u64) -> Option<u64> {
         let every = self.every as u64;
         let sampled = w - w % every + every;
-        while self.sizes_first < w && self.sizes.pop_front().is_some() {
-            self.sizes_first += 1;
-        }
+        self.sizes_from(w);
         let ahead = (sampled - w) as usize;
         let known = self.sizes_first == w && self.sizes.len() > ahead;
+        if known && self.head_ahead(ahead).is_some() {
+            return None;
+        }
         if !known {
             // At the stream's end the sizes stop with the last window: none is sampled after.
             let ended = self.sizes_end && self.sizes_first == w;
             return (!ended && self.is_sampled(w + 1)).then_some(0);
         }
-        let after: u64 = self.sizes.range(1..ahead).sum();
+        let after: u64 = self.sizes.range(1..ahead).map(|size| size.fragments).sum();
         let left = self
             .warm_up_fragments
             .checked_sub(after)
             .filter(|&left| left > 0)?;
-        Some(self.sizes[0].saturating_sub(left))
+        Some(self.sizes[0].fragments.saturating_sub(left))
+    }
+
+    /// A clear starts the machine of a pending warm-up: a warm-up window's machine sees
+    /// every clear in that window. In a head, only a clear fewer than
+    /// [`Self::warm_up_fragments`] fragments before the warm-up: fragments after a clear
+    /// beyond what the FIFOs hold enter the pipe only once the clear's hold on the depth
+    /// test ends, so the clear's backlog is gone that many fragments later.
+    fn starts_at_clear(&self) -> bool {
+        match (self.warm_start, self.window.cut_at) {
+            (None, _) => false,
+            (Some(_), None) => true,
+            (Some(first), Some(_)) => first < self.window.fragments + self.warm_up_fragments,
+        }
     }
 
     /// The warm-up window's machine starts before fragment `k` of the next `count` (a span or
@@ -634,7 +807,7 @@ impl SampledModel {
                 let depth = self
                     .spare_depth
                     .take()
-                    .unwrap_or_else(|| DepthBuffer::new(width, height));
+                    .unwrap_or_else(|| DepthBuffer::unset(width, height));
                 let state = occsim_traces::state::RenderState {
                     width,
                     height,
@@ -659,13 +832,20 @@ impl SampledModel {
 
     /// Feed one event.
     pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        self.plan()?;
         if !matches!(event, Event::QueryResult(_)) {
             self.close_ended_window()?;
         }
+        let cut_due = self
+            .window
+            .cut_at
+            .is_some_and(|at| self.window.fragments >= at);
+        if cut_due && !matches!(event, Event::Fragment(_)) {
+            self.cut_head();
+        }
         let starts = match event {
             Event::Fragment(_) => self.machine_starts_within(1).is_some(),
-            // The machine sees every clear of its warm-up window.
-            Event::Clear => self.warm_start.is_some(),
+            Event::Clear => self.starts_at_clear(),
             _ => false,
         };
         if starts {
@@ -742,6 +922,7 @@ impl SampledModel {
     /// A span of fragments: the formulas, the functional model and a running machine take it
     /// whole (the machine no further than its cool-down's end).
     pub fn span(&mut self, span: Span) -> Result<(), SimError> {
+        self.plan()?;
         self.close_ended_window()?;
         self.core.check_span(span)?;
         self.formulas.span(span, &self.core.functional);
@@ -789,6 +970,7 @@ impl SampledModel {
         item: &IndexItem,
         fragments: &mut TestedFragments<R>,
     ) -> Result<(), ReadError<SimError>> {
+        self.plan().map_err(ReadError::Sink)?;
         let stretch = match item {
             IndexItem::Event(event) => {
                 self.event(event).map_err(ReadError::Sink)?;
@@ -856,14 +1038,19 @@ impl SampledModel {
             .query_ended
             .then(|| self.latencies.len() - 1)
             .map(|index| (index, self.core.query_mode(index)));
+        let work = match self.window.head {
+            Some(head) => self.window.work.after(head),
+            None => self.window.work,
+        };
         let closed = Closed {
-            work: self.window.work,
+            work,
             class: self.window.class,
             query,
             sampled: self.is_sampled(self.windows),
             last,
             frame: self.frames,
             frame_ended: self.window.frame_ended,
+            mark: None,
         };
         self.frames += self.window.frame_ended as u64;
         self.windows += 1;
@@ -898,6 +1085,7 @@ impl SampledModel {
         for window in run.windows {
             let query = window.query.and_then(|_| queries.next());
             let frame_end = window.frame_ended.then(|| frame_ends.next()).flatten();
+            let mark = window.mark;
             if window.sampled {
                 self.sampled += 1;
                 let end = match (query, frame_end) {
@@ -931,12 +1119,16 @@ impl SampledModel {
             } else {
                 self.extrapolated.push(window);
             }
-            previous_end = frame_end.or(query.map(|q| q.end_cycle)).or(previous_end);
+            previous_end = mark
+                .or(frame_end)
+                .or(query.map(|q| q.end_cycle))
+                .or(previous_end);
         }
         Ok(())
     }
 
     pub fn finish(mut self) -> Result<LevelResult, SimError> {
+        self.plan()?;
         self.close_window(true);
         self.flush_run()?;
         // A class without a sampled window takes every sampled window's calibration.
@@ -994,6 +1186,7 @@ impl SampledModel {
         }
         let windows = SampledWindows {
             simulated: self.sampled,
+            tails: self.tails,
             total: self.windows,
         };
         let mut result = self.core.finish()?;
@@ -1116,5 +1309,70 @@ mod tests {
         let low = samples(&[(0, 10), (10, 20)]);
         assert_eq!(low.extrapolate(0, 1.0), Some(0.0));
         assert_eq!(Calibration::default().extrapolate(5, 1.0), None);
+    }
+
+    #[test]
+    fn the_scout_tells_each_windows_size_and_where_its_host_work_ends() {
+        use occsim_traces::event::HostWork;
+        let mut scout = WindowScout::default();
+        let fragment = Event::Fragment(occsim_traces::Fragment { x: 0, y: 0, z: 0 });
+        // Window 0: 3 fragments, host work after the 2nd; window 1: host work before any
+        // fragment, then 4; window 2 (the last, cut by the stream's end): 1, no host work.
+        let host = Event::HostWork(HostWork::default());
+        for event in [
+            &fragment,
+            &fragment,
+            &host,
+            &fragment,
+            &Event::QueryEnd,
+            &host,
+        ] {
+            scout.event(event);
+        }
+        scout.fragments(4);
+        scout.event(&Event::Swap);
+        scout.event(&fragment);
+        scout.finish();
+        let sizes: Vec<_> = std::iter::from_fn(|| scout.next_size(|_| Ok::<_, ()>(false)).unwrap())
+            .map(|size| (size.fragments, size.host_until))
+            .collect();
+        assert_eq!(sizes, [(3, 2), (4, 0), (1, 0)]);
+    }
+
+    /// A sampled:3 model at the default O2, warm-ups of 10 fragments and tails of 20, told
+    /// these window sizes (fragments, host work until).
+    fn model_with_sizes(sizes: &[(u64, u64)]) -> SampledModel {
+        let arch = Arch::builtin("o2").unwrap();
+        let mut model = SampledModel::new(&arch, 8, 8, Effects::ALL, 3)
+            .unwrap()
+            .with_window_sizes(10, 20);
+        for &(fragments, host_until) in sizes {
+            model.window_size(Some(WindowSize {
+                fragments,
+                host_until,
+            }));
+        }
+        model
+    }
+
+    #[test]
+    fn a_sampled_window_is_cut_only_when_long_not_last_and_its_host_done_before_the_warm_up() {
+        // 31 fragments = 10 + 20 + 1: a head of 11, its warm-up from fragment 1.
+        assert_eq!(
+            model_with_sizes(&[(31, 1), (5, 0)]).head_fragments(0),
+            Some(11)
+        );
+        // 30 fragments: all warm-up and tail.
+        assert_eq!(model_with_sizes(&[(30, 0), (5, 0)]).head_fragments(0), None);
+        // Host work after the warm-up's start.
+        assert_eq!(model_with_sizes(&[(31, 2), (5, 0)]).head_fragments(0), None);
+        // The last window (no size after it): nothing would end its head.
+        assert_eq!(model_with_sizes(&[(100, 0)]).head_fragments(0), None);
+        // Window 3, the next sampled one, seen from window 1: its warm-up is its own, so
+        // windows 1 and 2 warm nothing up.
+        let mut model = model_with_sizes(&[(5, 0), (5, 0), (5, 0), (100, 0), (5, 0)]);
+        assert_eq!(model.warm_up_start(1), None);
+        let mut uncut = model_with_sizes(&[(5, 0), (5, 0), (5, 0), (100, 90), (5, 0)]);
+        assert_eq!(uncut.warm_up_start(2), Some(0));
     }
 }

@@ -248,6 +248,12 @@ impl IrMachine {
         Ok(crate::report::latest_answer(&self.queries, id))
     }
 
+    /// The cycle the next event fed would enter the pipe, as a query's end does (when
+    /// every Fragment Generator is free).
+    pub fn entry_cycle(&self) -> u64 {
+        self.generators_free()
+    }
+
     /// Cycles the busiest Fragment Generator has been busy so far.
     pub fn raster_busy_cycles(&self) -> u64 {
         self.generators

@@ -281,6 +281,16 @@ impl MachineModel {
         }
     }
 
+    /// The cycle the next event fed would enter the pipe (where a query's end fed now would
+    /// enter it, before the host releases it): the sampled level marks where a window's
+    /// measured part begins by it.
+    pub fn entry_cycle(&self) -> u64 {
+        match &self.pipe {
+            Pipe::O2(machine) => machine.entry_cycle(),
+            Pipe::Ir(machine) => machine.entry_cycle(),
+        }
+    }
+
     /// Fragments fast-forwarded so far ([`crate::effects`]).
     pub fn fast_forwarded_fragments(&self) -> u64 {
         match &self.pipe {

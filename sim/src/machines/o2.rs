@@ -905,6 +905,12 @@ impl O2Machine {
         Ok(crate::report::latest_answer(&self.queries, id))
     }
 
+    /// The cycle the next event fed would enter the pipe, as a query's end does (before
+    /// any release by the host).
+    pub fn entry_cycle(&self) -> u64 {
+        self.input.free_cycle()
+    }
+
     /// Cycles the rasterizer has been busy so far.
     pub fn raster_busy_cycles(&self) -> u64 {
         self.input.busy_cycles
