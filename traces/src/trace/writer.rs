@@ -14,6 +14,15 @@ use crate::event::Event;
 use crate::golden::EventSink;
 use std::io::Write;
 
+/// Payload bytes a block holds at most by default: 256 KB, about 250,000 of the demo's
+/// fragments. A reader that starts mid-trace (the sampled level's machines) decodes the
+/// block holding its first fragment from the block's start, so smaller blocks waste less;
+/// a block decoded whole also stays in a 2-core machine's cache. Measured against 1 MB
+/// blocks (`occsim replay T --fidelity sampled:10`, whole process): the demo 0.22 -> 0.13
+/// s and 3% smaller, the lazy-grid walk 0.17 -> 0.15 s and 4% larger; 128 KB gave no
+/// more.
+pub const DEFAULT_BLOCK_BYTES: usize = 256 << 10;
+
 /// How the writer cuts and compresses blocks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct WriterOptions {
@@ -28,7 +37,7 @@ pub struct WriterOptions {
 impl Default for WriterOptions {
     fn default() -> WriterOptions {
         WriterOptions {
-            block_bytes: MAX_BLOCK_BYTES,
+            block_bytes: DEFAULT_BLOCK_BYTES,
             zstd_level: 3,
             window_index: None,
         }
