@@ -700,10 +700,12 @@ impl SampledModel {
             .sizes
             .get(ahead)
             .filter(|_| self.sizes.len() > ahead + 1)?;
-        let kept = self.warm_up_fragments.saturating_add(self.tail_fragments);
         let head = size.fragments.checked_sub(self.tail_fragments)?;
-        let warm_up_start = head.checked_sub(self.warm_up_fragments)?;
-        (size.fragments > kept && size.host_until <= warm_up_start).then_some(head)
+        // A warm-up from the window's first fragment on is the whole window's.
+        let warm_up_start = head
+            .checked_sub(self.warm_up_fragments)
+            .filter(|&start| start > 0)?;
+        (size.host_until <= warm_up_start).then_some(head)
     }
 
     /// The window's head ends (an event other than a fragment comes after its last
