@@ -324,3 +324,27 @@ fn the_sampled_level_reads_fragments_where_the_index_cannot_serve() {
     }
     assert!(!sampled(&trace, &o2_with(&[]), 3, false).from_window_index);
 }
+
+#[test]
+fn windows_simulated_over_their_tails_keep_the_sampled_level_within_its_bounds() {
+    // These traces' windows are too short for the default tail of 65,536 fragments (as are
+    // the small corpus's, which the bounds test runs); with tails of 2,048 after the
+    // default warm-up, the demo's long windows are cut (6 at K = 3, 2 at K = 10), and the
+    // sampled level's cycles stay within the 1% the issue asks of it against the cycle
+    // level (sampled:1, tested equal to cycle): measured 0.08% at worst. (A warm-up of 512
+    // fragments put them 2-9% off, cut or not: the warm-up, not the tail, is what the
+    // machine's start needs.)
+    let arch = o2_with(&[]);
+    let mut tails = 0;
+    for (name, trace, _, _) in traces() {
+        let tailed = |every| sampled_tails(&trace, &arch, every, true, (WARM_UP_FRAGMENTS, 2048));
+        let cycle = tailed(1).total_cycles.unwrap() as f64;
+        for every in [3, 10] {
+            let cut = tailed(every);
+            tails += cut.sampled_windows.unwrap().tails;
+            let error = (cut.total_cycles.unwrap() as f64 - cycle).abs() / cycle;
+            assert!(error <= 0.01, "{name} at sampled:{every}: {error:.4} > 1%");
+        }
+    }
+    assert!(tails > 0, "no window was cut");
+}
