@@ -9,8 +9,12 @@
 //!   `e_w = max(s_w + T_w, r'_w)`, with `r'_w` the release of its last primitive (a pipe
 //!   that outruns the geometry stage finishes no earlier than the last primitive arrives;
 //!   on a frustum walk of the city at 160x120 on ir1 this took the frame time's error from
-//!   20.7% to 0.07%). The releases between do not stretch it: the prediction is for the
-//!   window whole. Its query's answer is available at `max(e_w, r_end) + L_w`, with `r_end`
+//!   20.7% to 0.07%). The releases between hold the formulas' pipe front: a primitive is
+//!   set up no earlier than `r_p - s_w` into the window, while the blocks behind work on
+//!   (a busy-grid walk of the city draws a large box, then its 600-triangle grid in one
+//!   batch the geometry stage takes 100,000 cycles over: the formulas had overlapped the
+//!   two, and predicted the window 32% short on ir4). Its query's answer is available at
+//!   `max(e_w, r_end) + L_w`, with `r_end`
 //!   the release of its end token, and `L_w` the formulas' latency counting only the
 //!   backlog still ahead of the token at `r_end`.
 //! - `wait`, `begin_conditional`: as in the closed loop, against those predicted answers (a
@@ -95,6 +99,12 @@ impl PredictedLoop {
     /// meanwhile.
     pub(crate) fn take_idle(&mut self) -> f64 {
         std::mem::take(&mut self.idle)
+    }
+
+    /// The release of the open window's last primitive so far, in cycles from the window's
+    /// start (0 for its first: the window starts at it).
+    pub(crate) fn release_in_window(&self) -> f64 {
+        (self.last_release - self.window_start()).max(0.0)
     }
 
     /// `e` of the last window closed.

@@ -21,7 +21,8 @@
 //! the next one's after them. At stretch `p`:
 //!
 //! ```text
-//! start_b = g_b + setup                           (at a primitive's first stretch: every board sets up every primitive)
+//! start_b = max(g_b, r) + setup                   (at a primitive's first stretch: every board sets up every primitive,
+//!                                                  no earlier than its release r from the window's start)
 //! emit_b  = start_b + F_bp / rate                 (rate = fragment_generator_fragments_per_cycle)
 //! d_i     = max(max(d_i, start_b) + D_ip, e_i + pace)   (each engine i of board b it touches;
 //!                                                         e_i: its last fragment's emission)
@@ -183,9 +184,15 @@ impl IrWindow {
         self.stretch_sets_up = false;
     }
 
-    /// A new primitive: the current stretch's work joins the clocks.
-    pub fn primitive(&mut self) {
+    /// A new primitive, released `release` cycles after the window's start: the current
+    /// stretch's work joins the clocks, and no Fragment Generator sets the primitive up
+    /// before its release.
+    pub fn primitive(&mut self, release: f64) {
         self.close_stretch();
+        let release = (release * self.rate as f64).ceil() as u64;
+        for generator in &mut self.generators {
+            *generator = (*generator).max(release);
+        }
         self.primitives += 1;
         self.stretch_sets_up = true;
     }
@@ -293,8 +300,8 @@ impl IrBottleneck {
         }
     }
 
-    pub(super) fn primitive(&mut self) {
-        self.window.primitive();
+    pub(super) fn primitive(&mut self, release: f64) {
+        self.window.primitive(release);
     }
 
     pub(super) fn begin(&mut self, spec: &QuerySpec) {

@@ -97,11 +97,12 @@ impl Formulas {
     }
 
     /// Count the other events that matter to the formulas (primitives, query begins, the
-    /// O2's clears).
-    pub(crate) fn event(&mut self, event: &Event) {
+    /// O2's clears). A primitive is set up no earlier than `front` released it: the pipe
+    /// front waits for the geometry stage, while the blocks behind it work on.
+    pub(crate) fn event(&mut self, event: &Event, front: &PredictedLoop) {
         match (self, event) {
-            (Formulas::O2(o2), Event::Primitive) => o2.primitive(),
-            (Formulas::Ir(ir), Event::Primitive) => ir.primitive(),
+            (Formulas::O2(o2), Event::Primitive) => o2.primitive(front.release_in_window()),
+            (Formulas::Ir(ir), Event::Primitive) => ir.primitive(front.release_in_window()),
             (Formulas::O2(o2), Event::QueryBegin(spec)) => o2.begin(spec),
             (Formulas::O2(o2), Event::Clear) => o2.clear(),
             (Formulas::Ir(ir), Event::QueryBegin(spec)) => ir.begin(spec),
@@ -223,7 +224,7 @@ impl AnalyticModel {
         let formulas = &mut self.formulas;
         self.frames.event(event, || formulas.cut());
         self.formulas.idle(self.frames.take_idle());
-        self.formulas.event(event);
+        self.formulas.event(event, &self.frames);
         if let Some(result) = self.core.event(event)? {
             let Some(spec) = self.open.take() else {
                 return Ok(());

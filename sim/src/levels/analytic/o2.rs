@@ -27,7 +27,8 @@
 //!
 //! The fluid: the rasterizer's clock `g` and the cycle `d` the blocks behind it are through
 //! their work, from the window's start. A stretch's primitive is set up (`setup` =
-//! `primitive_setup_cycles`) from `start = g + setup · P`, its fragments are emitted one a
+//! `primitive_setup_cycles`) from `start = max(g, r) + setup · P` (`r`: its release by
+//! the host and geometry, from the window's start), its fragments are emitted one a
 //! cycle to `start + F`, and the blocks behind take them from `b = max(d, start)`, fragment
 //! `j` in `b + j · pace`, so `d = max(b + down, start + F)`. The rasterizer emits fragment
 //! `k` only when fragment `k - Q` has left the FIFO (`Q` = `C1`, the FIFO before the depth
@@ -325,8 +326,11 @@ impl O2Bottleneck {
         self.stretch = StretchCounts::default();
     }
 
-    pub(super) fn primitive(&mut self) {
+    /// A primitive released `release` cycles after the window's start: the rasterizer sets
+    /// it up no earlier.
+    pub(super) fn primitive(&mut self, release: f64) {
         self.close_stretch();
+        self.pipe.raster = self.pipe.raster.max(release);
         self.stretch.primitives = 1;
     }
 
