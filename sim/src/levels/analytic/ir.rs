@@ -69,10 +69,8 @@ use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect, Span};
 #[derive(Clone, Debug, PartialEq)]
 pub struct IrWindow {
     pub primitives: u64,
-    /// `F_b`, per board, over the window.
-    pub board_fragments: Vec<u64>,
-    /// Fragments per Image Engine (board-major) over the window.
-    pub image_engine_fragments: Vec<u64>,
+    /// Fragments over the window.
+    pub fragments: u64,
     /// `H_i`.
     pub hit_words: Vec<u64>,
     /// Slots a cycle: `fragment_generator_fragments_per_cycle`.
@@ -81,7 +79,6 @@ pub struct IrWindow {
     setup: u64,
     /// `Q`.
     queued: u64,
-    engines_per_board: usize,
     /// `g_b`: each board's Fragment Generator clock, in slots from the window's start, after
     /// the stretches closed so far.
     generators: Vec<u64>,
@@ -97,7 +94,8 @@ pub struct IrWindow {
     /// Per Image Engine, its board's fragments in the stretch up to its last one: when it
     /// was emitted.
     stretch_engine_last: Vec<u64>,
-    touched: Vec<usize>,
+    /// The Image Engines the stretch touched, each with its board.
+    touched: Vec<(usize, usize)>,
     stretch_fragments: u64,
     /// The current stretch starts a primitive (its setup counts).
     stretch_sets_up: bool,
@@ -116,13 +114,11 @@ impl IrWindow {
         let rate = arch.fragment_generator_fragments_per_cycle.max(1) as u64;
         IrWindow {
             primitives: 0,
-            board_fragments: vec![0; arch.boards],
-            image_engine_fragments: vec![0; engines],
+            fragments: 0,
             hit_words: vec![0; engines],
             rate,
             setup: arch.fragment_generator_setup_cycles * rate,
             queued: arch.image_engine_fifo_entries as u64 + arch.image_engine_in_flight() as u64,
-            engines_per_board: arch.image_engines_per_board,
             generators: vec![0; arch.boards],
             engines_through: vec![0; engines],
             pace: arch.image_engine_cycles_per_fragment,
@@ -136,7 +132,7 @@ impl IrWindow {
     }
 
     pub fn is_empty(&self) -> bool {
-        self.primitives == 0 && self.board_fragments.iter().all(|&f| f == 0)
+        self.primitives == 0 && self.fragments == 0
     }
 
     /// Start the next window at the end token's cycle `end` (from this window's start):
@@ -144,8 +140,7 @@ impl IrWindow {
     pub fn restart_at(&mut self, end: u64) {
         self.close_stretch();
         self.primitives = 0;
-        self.board_fragments.fill(0);
-        self.image_engine_fragments.fill(0);
+        self.fragments = 0;
         self.hit_words.fill(0);
         self.generators.fill(0);
         self.idle(end);
@@ -168,8 +163,7 @@ impl IrWindow {
             starts[board] = *generator + setup;
             *generator = starts[board] + self.stretch_board_fragments[board];
         }
-        for &engine in &self.touched {
-            let board = engine / self.engines_per_board;
+        for &(board, engine) in &self.touched {
             let emitted = starts[board] + self.stretch_engine_last[engine];
             let through = &mut self.engines_through[engine];
             *through = ((*through).max(starts[board]) + self.stretch_engine_slots[engine])
@@ -197,23 +191,34 @@ impl IrWindow {
         self.stretch_sets_up = true;
     }
 
-    /// One fragment for Image Engine `engine` of `board`, paced at `pace` cycles (`max(C, s)`).
+    /// The fragments that follow are paced at `pace` cycles (`max(C, s)`).
     #[inline]
-    pub fn fragment(&mut self, board: usize, engine: usize, pace: u64) {
+    pub fn pace(&mut self, pace: u64) {
         if pace != self.pace {
             // A query began: what came before was paced at the old rate.
             self.close_stretch();
             self.pace = pace;
         }
-        self.board_fragments[board] += 1;
-        self.image_engine_fragments[engine] += 1;
+    }
+
+    /// One fragment for Image Engine `engine` of `board`, paced at `pace` cycles (`max(C, s)`).
+    #[inline]
+    pub fn fragment(&mut self, board: usize, engine: usize, pace: u64) {
+        self.pace(pace);
+        self.paced_fragment(board, engine);
+    }
+
+    /// One fragment for Image Engine `engine` of `board`, at the pace set.
+    #[inline]
+    fn paced_fragment(&mut self, board: usize, engine: usize) {
+        self.fragments += 1;
         self.stretch_board_fragments[board] += 1;
         self.stretch_engine_last[engine] = self.stretch_board_fragments[board];
         let slots = &mut self.stretch_engine_slots[engine];
         if *slots == 0 {
-            self.touched.push(engine);
+            self.touched.push((board, engine));
         }
-        *slots += pace * self.rate;
+        *slots += self.pace * self.rate;
         self.stretch_fragments += 1;
         if self.stretch_fragments == STRETCH_FRAGMENTS {
             self.close_stretch();
@@ -339,10 +344,11 @@ impl IrBottleneck {
         }
         let pace = self.pace();
         let (owners, window) = (&self.owners, &mut self.window);
+        window.pace(pace);
         self.interleave
             .for_each_unit_along(span.x, span.y, span.depths.len(), |unit| {
                 let (board, engine) = owners[unit];
-                window.fragment(board, engine, pace);
+                window.paced_fragment(board, engine);
             });
     }
 
