@@ -177,6 +177,14 @@ pub const WARM_UP_FRAGMENTS: u64 = 16_384;
 /// longer.
 pub const TAIL_FRAGMENTS: u64 = 65_536;
 
+/// Fragments from which a sampled window (or a tail) measures a rate its class keeps past
+/// it ([`Calibration::of_pipe`]): half a tail, since a tail is cut where the formulas can
+/// be read, a few fragments short of [`TAIL_FRAGMENTS`] or more. I, plausible 16,384 to
+/// 65,536: the error a window's start and end make is tens of cycles on the O2 and up to a
+/// few thousand on the InfiniteReality-like machine (an Image Engine's queue at hundreds of
+/// cycles a fragment), a percent or less of the cycles this many fragments take.
+pub const LONG_WINDOW_FRAGMENTS: u64 = TAIL_FRAGMENTS / 2;
+
 /// What the scout tells of a window ahead.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct WindowSize {
@@ -352,7 +360,7 @@ impl Calibration {
     }
 
     /// A sampled window's pipe cycles, measured `m` and predicted `p`. A window `long` (of
-    /// at least [`TAIL_FRAGMENTS`] fragments) measures a rate, `m / p`: the error its start
+    /// at least [`LONG_WINDOW_FRAGMENTS`]) measures a rate, `m / p`: the error its start
     /// and end make (the pipe filling, the backlog left behind) is small beside it, and
     /// what is left scales with the work.
     fn of_pipe(m: f64, p: f64, long: bool) -> Calibration {
@@ -1138,7 +1146,7 @@ impl SampledModel {
                         .add(Calibration::of_pipe(
                             cost as f64 - window.work.host_gap,
                             window.work.pipe,
-                            window.fragments >= TAIL_FRAGMENTS,
+                            window.fragments >= LONG_WINDOW_FRAGMENTS,
                         ));
                 }
                 if let (Some(q), Some((index, _))) = (query, window.query) {
