@@ -559,7 +559,7 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
 /// The issue's own walkthrough, a lazy-grid walk of the city over 2 frames at 1280x1024 (20
 /// M fragments, queries of 380 to 484 tiles), on ir4: sampled:10 within the 1% target of
 /// the cycle level. Its largest windows' classes (one a tile count) have no sampled window
-/// and take the pooled calibration, whose largest sample is a 300-tile query's tail of
+/// and take the pooled calibration, whose largest sample is a 484-tile query's tail of
 /// 65,440 fragments measuring 0.959 of the formulas' cycles. When only windows of 65,536
 /// fragments or more counted as long (a tail is cut at an event, a few fragments short),
 /// that rate was not carried past it, and the run came out 2.05% long; it is 0.12% short.

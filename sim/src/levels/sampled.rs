@@ -416,10 +416,9 @@ impl Calibration {
     /// its brief windows sampled at 592-4,806 cycles (ratio 1.06) and the rest up to
     /// 183,000 (their own ratio 1.002), came out 1.56% long; 0.35% now. A long window's
     /// rate carries on past it: on the forest's lazy-grid walk on ir4 with one engine, a
-    /// 300-tile query's tail of 65,536 fragments measured 0.953 of the formulas'
-    /// 737,000 cycles, and the same queries' whole windows, four times that, measured
-    /// 0.953 too; at slope 1 past the tail they came out 3.4% long each, the run 1.9%.
-    /// None without samples.
+    /// 300-tile query's sampled tail measured 0.953 of the formulas' 737,000 cycles, and
+    /// the same queries' whole windows, four times that, measured 0.953 too; at slope 1
+    /// past the tail they came out 3.4% long each, the run 1.9%. None without samples.
     fn pipe_cycles(&self, pipe: f64) -> Option<f64> {
         let ratio = if self.p > 0.0 { self.m / self.p } else { 1.0 };
         self.extrapolate_f64(pipe, ratio)
