@@ -54,6 +54,12 @@ impl DepthBuffer {
         self.depths[y as usize * self.width as usize + x as usize] = depth;
     }
 
+    /// The depths of pixels `x..x + len` of row `y` (inside the buffer).
+    pub fn row_mut(&mut self, x: u16, y: u16, len: usize) -> &mut [u32] {
+        let start = y as usize * self.width as usize + x as usize;
+        &mut self.depths[start..start + len]
+    }
+
     /// How many fragments of `span` (inside the buffer) pass a depth test by `func` against
     /// the depths stored now (a span's pixels are distinct: what testing them one by one,
     /// writing none, gives). One loop per function, so the comparison vectorises.

@@ -131,6 +131,11 @@ impl ConsistentDepths {
                 prefetch_line(line.as_ptr());
             }
         }
+        if self.excluded.is_empty()
+            && !matches!(state.depth_func, DepthFunc::Equal | DepthFunc::Notequal)
+        {
+            return self.span_bounded(state.depth_func, writes, span, results, depth, first);
+        }
         for (i, &z) in span.depths.iter().enumerate() {
             let pixel = row + i;
             let stamp = self.pixels[pixel][0];
@@ -162,34 +167,60 @@ impl ConsistentDepths {
         Ok(())
     }
 
+    /// [`Self::span`] under a function whose results never exclude a value (neither
+    /// `EQUAL` nor `NOTEQUAL`), with no value excluded in the run: the same rule, one pass
+    /// over the span's row of bounds and of depths, where the depth chosen (the current
+    /// one when it lies within the bounds, else the lowest that does) needs no lookup.
+    /// It took `sampled:10` on the demo from 110-115 to 100-102 ms a run (whole process,
+    /// best of 9), where this module had been about a fifth of the run.
+    fn span_bounded(
+        &mut self,
+        func: DepthFunc,
+        writes: bool,
+        span: Span,
+        results: DepthTestResults,
+        depth: &mut DepthBuffer,
+        first: u64,
+    ) -> Result<(), SimError> {
+        let row = span.y as usize * self.width + span.x as usize;
+        let bounds = &mut self.pixels[row..row + span.depths.len()];
+        let depths = depth.row_mut(span.x, span.y, span.depths.len());
+        let (run, known) = (self.run, self.run + 1);
+        for (i, ((&z, stored), current)) in span.depths.iter().zip(bounds).zip(depths).enumerate() {
+            if stored[0] == known {
+                continue;
+            }
+            let [_, mut low, mut high] = match stored[0] == run {
+                true => *stored,
+                false => [run, 0, u32::MAX],
+            };
+            // `Some(true)` (a value excluded) cannot come: the caller rules out EQUAL and NOTEQUAL.
+            let passed = results.passed(i);
+            if narrow(func, passed, z, &mut low, &mut high) != Some(false) || low > high {
+                return Err(SimError::InconsistentDepthTests {
+                    fragment: first + i as u64,
+                    x: span.x + i as u16,
+                    y: span.y,
+                });
+            }
+            if !(low..=high).contains(current) {
+                *current = low;
+            }
+            let stamp = if passed && writes { known } else { run };
+            *stored = [stamp, low, high];
+        }
+        Ok(())
+    }
+
     /// Narrow the pixel's bounds by a test of depth `z` under `func` that `passed`; None
     /// when no depth passes it so.
     fn bound(&mut self, pixel: usize, func: DepthFunc, z: u32, passed: bool) -> Option<()> {
-        // The depth `S` stored, compared with the incoming `z`: what the result says of S.
         let mut bounds = PixelBounds::load(self.pixels[pixel]);
-        let PixelBounds { low, high, .. } = &mut bounds;
-        let excluded = &mut self.excluded;
-        match (func, passed) {
-            (DepthFunc::Less, true) | (DepthFunc::Gequal, false) => {
-                *low = (*low).max(z.checked_add(1)?)
-            }
-            (DepthFunc::Less, false) | (DepthFunc::Gequal, true) => *high = (*high).min(z),
-            (DepthFunc::Lequal, true) | (DepthFunc::Greater, false) => *low = (*low).max(z),
-            (DepthFunc::Lequal, false) | (DepthFunc::Greater, true) => {
-                *high = (*high).min(z.checked_sub(1)?)
-            }
-            (DepthFunc::Equal, true) | (DepthFunc::Notequal, false) => {
-                (*low, *high) = ((*low).max(z), (*high).min(z))
-            }
-            (DepthFunc::Equal, false) | (DepthFunc::Notequal, true) => {
-                excluded.entry(pixel).or_default().push(z)
-            }
-            (DepthFunc::Always, true) | (DepthFunc::Never, false) => {}
-            (DepthFunc::Always, false) | (DepthFunc::Never, true) => return None,
+        if narrow(func, passed, z, &mut bounds.low, &mut bounds.high)? {
+            self.excluded.entry(pixel).or_default().push(z);
         }
-        let consistent = *low <= *high;
         self.pixels[pixel] = bounds.store();
-        consistent.then_some(())
+        (bounds.low <= bounds.high).then_some(())
     }
 
     /// A depth within the pixel's bounds: `current` if it is, else the lowest.
@@ -207,6 +238,30 @@ impl ConsistentDepths {
         // At most `excluded.len()` candidates are ruled out.
         (low..=high).find(|depth| !excluded.contains(depth))
     }
+}
+
+/// What a test of depth `z` under `func` that `passed` says of the depth `S` stored:
+/// `low..=high` narrowed, and true when it says `S != z` instead (`EQUAL` failed,
+/// `NOTEQUAL` passed); None when no depth passes it so.
+#[inline(always)]
+fn narrow(func: DepthFunc, passed: bool, z: u32, low: &mut u32, high: &mut u32) -> Option<bool> {
+    match (func, passed) {
+        (DepthFunc::Less, true) | (DepthFunc::Gequal, false) => {
+            *low = (*low).max(z.checked_add(1)?)
+        }
+        (DepthFunc::Less, false) | (DepthFunc::Gequal, true) => *high = (*high).min(z),
+        (DepthFunc::Lequal, true) | (DepthFunc::Greater, false) => *low = (*low).max(z),
+        (DepthFunc::Lequal, false) | (DepthFunc::Greater, true) => {
+            *high = (*high).min(z.checked_sub(1)?)
+        }
+        (DepthFunc::Equal, true) | (DepthFunc::Notequal, false) => {
+            (*low, *high) = ((*low).max(z), (*high).min(z))
+        }
+        (DepthFunc::Equal, false) | (DepthFunc::Notequal, true) => return Some(true),
+        (DepthFunc::Always, true) | (DepthFunc::Never, false) => {}
+        (DepthFunc::Always, false) | (DepthFunc::Never, true) => return None,
+    }
+    Some(false)
 }
 
 #[cfg(test)]
