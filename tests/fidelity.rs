@@ -510,16 +510,20 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // began to set a primitive up no earlier than the geometry stage releases it inside a
     // window (they had overlapped a long batch with the work before it): the sampled
     // cycles of the hierarchical, quadtree and adaptive walks went from 1.00-1.06% to
-    // 0.03-0.12%, the hierarchical walks' analytic p95 from 18.2% to 15.8%.
+    // 0.03-0.12%, the hierarchical walks' analytic p95 from 18.2% to 15.8%. (f) lowered when
+    // an extrapolated query of a cell (its class and the formulas' latency) with at least 10
+    // sampled queries began to take its nearest sampled query's spread about the regression
+    // (`Donors` in `levels/sampled.rs`): sampled p95 on the random triangles from 8.70% to
+    // 0.00%, on the hierarchical walks from 18.2% to 15.8%.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
         ("demo",              0.05,  0.20,  0.01,  0.20),  // p95 16.7%; sampled p95 16.7%
         ("retiled-1x1-4x4",   0.05,  0.19,  0.01,  0.064), // p95 15.8% (c), sampled p95 5.26% (d)
         ("retiled-32x32",     0.05,  0.10,  0.01,  0.03),  // every target
         ("hardcases",         0.05,  0.10,  0.01,  0.03),  // every target (sampled 0.74%)
-        ("random",            0.05,  0.10,  0.01,  0.105), // sampled p95 8.70%
+        ("random",            0.05,  0.10,  0.01,  0.03),  // every target (f)
         ("walk-frustum",      0.05,  0.10,  0.01,  0.03),  // every target
-        ("walk-hierarchical", 0.05,  0.19,  0.01,  0.219), // p95 15.8% (e); sampled p95 18.2%
+        ("walk-hierarchical", 0.05,  0.19,  0.01,  0.19),  // p95 15.8% (e); sampled p95 15.8% (f)
         ("walk-quadtree",     0.05,  0.10,  0.01,  0.03),  // every target (e)
         ("walk-adaptive",     0.05,  0.24,  0.01,  0.24),  // p95 20.0%, sampled p95 20.0% (d)
         ("walk-grids",        0.05,  0.10,  0.01,  0.041), // sampled p95 3.41% (c)
