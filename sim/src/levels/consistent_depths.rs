@@ -57,6 +57,19 @@ impl PixelBounds {
     fn store(self) -> StoredBounds {
         [self.stamp, self.low, self.high]
     }
+
+    /// A pixel's bounds in run `run`, stored as `stored` (not known yet): its bounds when
+    /// they are this run's, else none.
+    fn in_run(stored: StoredBounds, run: u32) -> PixelBounds {
+        match PixelBounds::load(stored) {
+            bounds if bounds.stamp == run => bounds,
+            _ => PixelBounds {
+                stamp: run,
+                low: 0,
+                high: u32::MAX,
+            },
+        }
+    }
 }
 
 /// The bounds on each pixel's depth at a run's start, over one run.
@@ -143,12 +156,7 @@ impl ConsistentDepths {
                 continue;
             }
             if stamp != self.run {
-                self.pixels[pixel] = PixelBounds {
-                    stamp: self.run,
-                    low: 0,
-                    high: u32::MAX,
-                }
-                .store();
+                self.pixels[pixel] = PixelBounds::in_run(self.pixels[pixel], self.run).store();
             }
             let passed = results.passed(i);
             let (x, y) = (span.x + i as u16, span.y);
@@ -190,10 +198,9 @@ impl ConsistentDepths {
             if stored[0] == known {
                 continue;
             }
-            let [_, mut low, mut high] = match stored[0] == run {
-                true => *stored,
-                false => [run, 0, u32::MAX],
-            };
+            let PixelBounds {
+                mut low, mut high, ..
+            } = PixelBounds::in_run(*stored, run);
             // `Some(true)` (a value excluded) cannot come: the caller rules out EQUAL and NOTEQUAL.
             let passed = results.passed(i);
             if narrow(func, passed, z, &mut low, &mut high) != Some(false) || low > high {
@@ -207,7 +214,7 @@ impl ConsistentDepths {
                 *current = low;
             }
             let stamp = if passed && writes { known } else { run };
-            *stored = [stamp, low, high];
+            *stored = PixelBounds { stamp, low, high }.store();
         }
         Ok(())
     }
