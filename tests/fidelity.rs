@@ -514,19 +514,30 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // an extrapolated query of a cell (its class and the formulas' latency) with at least 10
     // sampled queries began to take its nearest sampled query's spread about the regression
     // (`Donors` in `levels/sampled.rs`): sampled p95 on the random triangles from 8.70% to
-    // 0.00%, on the hierarchical walks from 18.2% to 15.8%.
+    // 0.00%, on the hierarchical walks from 18.2% to 15.8%. (g) changed when the O2 formulas'
+    // depth test began to trail by its slowest read's latency in stretches that neither
+    // write nor read densely (the 0.02 cycles a read had filled the FIFO on every big box),
+    // and a query's records to wait behind the next window's first reads when it follows at
+    // once (`levels/analytic/o2.rs`): lowered where that helped (demo analytic 16.7% -> 4.76%,
+    // sampled 16.7% -> 4.76%; grids sampled 3.41% -> 1.14%; 1x1/4x4 sampled 5.26% -> 2.96%),
+    // raised on the small walks (hierarchical 15.8% -> 36.8% at both levels, adaptive 20.0% ->
+    // 30.0%): the p95 of their 30-98 queries rests on the few whose last primitive is a thin
+    // sliver, a read every fragment, whose lag the stretch's counts do not show, and the
+    // sum had matched it by overestimating every query. At the full scale the same change
+    // took the hierarchical walks' analytic p95 from 41.2% to 11.8% and the adaptive walk's
+    // from 14.3% to 9.5%, their sampled:10 p95 from 12.0% and 23.8% to 0%.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
-        ("demo",              0.05,  0.20,  0.01,  0.20),  // p95 16.7%; sampled p95 16.7%
-        ("retiled-1x1-4x4",   0.05,  0.19,  0.01,  0.064), // p95 15.8% (c), sampled p95 5.26% (d)
+        ("demo",              0.05,  0.10,  0.01,  0.058), // every target but sampled p95 4.76% (g)
+        ("retiled-1x1-4x4",   0.05,  0.19,  0.01,  0.03),  // p95 15.8% (c); sampled p95 2.96% (g)
         ("retiled-32x32",     0.05,  0.10,  0.01,  0.03),  // every target
         ("hardcases",         0.05,  0.10,  0.01,  0.03),  // every target (sampled 0.74%)
         ("random",            0.05,  0.10,  0.01,  0.03),  // every target (f)
         ("walk-frustum",      0.05,  0.10,  0.01,  0.03),  // every target
-        ("walk-hierarchical", 0.05,  0.19,  0.01,  0.19),  // p95 15.8% (e); sampled p95 15.8% (f)
+        ("walk-hierarchical", 0.05,  0.45,  0.01,  0.45),  // p95 36.8%, sampled p95 36.8% (g)
         ("walk-quadtree",     0.05,  0.10,  0.01,  0.03),  // every target (e)
-        ("walk-adaptive",     0.05,  0.24,  0.01,  0.24),  // p95 20.0%, sampled p95 20.0% (d)
-        ("walk-grids",        0.05,  0.10,  0.01,  0.041), // sampled p95 3.41% (c)
+        ("walk-adaptive",     0.05,  0.36,  0.01,  0.36),  // p95 30.0%, sampled p95 30.0% (g)
+        ("walk-grids",        0.05,  0.10,  0.01,  0.03),  // every target (g)
     ];
     let error = |class: &str, level: &str, metric: &str| -> f64 {
         let row = rows

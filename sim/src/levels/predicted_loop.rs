@@ -17,6 +17,11 @@
 //!   `max(e_w, r_end) + L_w`, with `r_end`
 //!   the release of its end token, and `L_w` the formulas' latency counting only the
 //!   backlog still ahead of the token at `r_end`.
+//! - A query's latency becomes the formulas' *followed* latency (on the O2, its records
+//!   waiting at the in-order port behind the depth reads of the next fragments,
+//!   [`crate::levels::analytic::o2`]) when the next window's first primitive comes with no
+//!   idle gap (`r_{w+1} <= e_w`) and no `wait`, `begin_conditional` or `swap` before it:
+//!   only then does the machine emit those fragments before the records leave.
 //! - `wait`, `begin_conditional`: as in the closed loop, against those predicted answers (a
 //!   query that never ended counts as answered at 0).
 //! - `swap` closes the window it falls in (its work so far predicted as if the stream ended
@@ -46,6 +51,13 @@ pub(crate) struct PredictedLoop {
     idle: f64,
     /// Each query's predicted answer: available cycle and record words.
     answers: HashMap<u32, (u64, u64)>,
+    /// The cycle the last query's end token entered.
+    last_token: f64,
+    /// The last query's id and its latency should the next window follow its end token
+    /// with no pause (see [`PredictedLoop::amend_latency`]).
+    followed: Option<(u32, f64)>,
+    /// A latency amended since the caller last asked.
+    amended: Option<f64>,
 }
 
 impl PredictedLoop {
@@ -58,12 +70,22 @@ impl PredictedLoop {
             tail: 0.0,
             idle: 0.0,
             answers: HashMap::new(),
+            last_token: 0.0,
+            followed: None,
+            amended: None,
         })
     }
 
     /// Feed the events the loop acts on (the others pass by); a `swap` needs the open
     /// window's prediction, `cut`, which the caller takes from its formulas.
     pub(crate) fn event(&mut self, event: &Event, cut: impl FnOnce() -> Option<WindowEnd>) {
+        if matches!(
+            event,
+            Event::Wait(_) | Event::ConditionalBegin(_) | Event::Swap
+        ) {
+            // The host stops for an answer or the frame: the pipe drains first.
+            self.followed = None;
+        }
         match event {
             Event::Geometry(batch) => self.front.geometry(batch),
             Event::HostWork(work) => self.front.host_work(work),
@@ -73,6 +95,11 @@ impl PredictedLoop {
                 if self.window_start.is_none() {
                     self.window_start = Some(self.pipe_end.max(release));
                     self.idle = (release - self.pipe_end).max(0.0);
+                    if let Some((id, latency)) = self.followed.take() {
+                        if self.idle == 0.0 {
+                            self.amend_latency(id, latency);
+                        }
+                    }
                 }
             }
             Event::Wait(id) => {
@@ -142,6 +169,26 @@ impl PredictedLoop {
         let token = self.pipe_end.max(self.front.command_release() as f64);
         let available = (token + end.latency).ceil() as u64;
         self.answers.insert(result.id, (available, words));
+        self.last_token = token;
+        self.followed =
+            (end.followed_latency > end.latency).then_some((result.id, end.followed_latency));
+    }
+
+    /// The next window's first primitive came with the pipe still busy, so its first
+    /// fragments followed the last query's end token at once: the query's records wait
+    /// behind their depth reads at the in-order port, and its answer comes `latency` after
+    /// the token.
+    fn amend_latency(&mut self, id: u32, latency: f64) {
+        if let Some((available, _)) = self.answers.get_mut(&id) {
+            *available = (self.last_token + latency).ceil() as u64;
+        }
+        self.tail = latency;
+        self.amended = Some(latency);
+    }
+
+    /// The last query's latency, if amended since the last call (see `amend_latency`).
+    pub(crate) fn take_amended_latency(&mut self) -> Option<f64> {
+        self.amended.take()
     }
 
     fn idle_cycle(&self) -> PipeState {
@@ -161,5 +208,48 @@ impl PredictedLoop {
         let idle = self.idle_cycle();
         let (frames, end) = self.front.finish(idle);
         (frames.iter().map(|f| f.cycles).collect(), end)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occsim_traces::{QueryMode, TileResult};
+
+    fn ended(frames: &mut PredictedLoop) {
+        let end = WindowEnd {
+            cycles: 804.0,
+            latency: 14.0,
+            followed_latency: 21.0,
+        };
+        let result = QueryResult {
+            id: 1,
+            mode: QueryMode::Brief,
+            tiles: vec![TileResult::default()],
+            overflowed_buffers: 0,
+        };
+        frames.end_query(end, &result);
+    }
+
+    /// An open-loop stream (every release 0): the next window's first primitive comes while
+    /// the pipe is busy, so the query takes its followed latency, 21, and its answer comes
+    /// 21 cycles after its end token (at 804), at 825. A
+    /// `wait` before that primitive drains the pipe first: the latency stays 14.
+    #[test]
+    fn a_query_takes_its_followed_latency_only_when_the_next_window_follows_at_once() {
+        let arch = Arch::builtin("o2").unwrap();
+        let mut frames = PredictedLoop::new(&arch).unwrap();
+        ended(&mut frames);
+        frames.event(&Event::Primitive, || None);
+        assert_eq!(frames.take_amended_latency(), Some(21.0));
+        assert_eq!(frames.answers[&1].0, 804 + 21);
+        assert_eq!(frames.take_amended_latency(), None);
+
+        let mut frames = PredictedLoop::new(&arch).unwrap();
+        ended(&mut frames);
+        frames.event(&Event::Wait(1), || None);
+        frames.event(&Event::Primitive, || None);
+        assert_eq!(frames.take_amended_latency(), None);
+        assert_eq!(frames.answers[&1].0, 804 + 14);
     }
 }

@@ -422,9 +422,11 @@ impl IrBottleneck {
         let merged = merged_ready(&global, &board_reports, shape, &mut self.host);
         let available = delivered(&global, &merged, shape, self.arch.report_dma_bits_per_cycle);
         self.window.restart_at(cycles);
+        let latency = (available - end_cycle) as f64;
         WindowEnd {
             cycles: cycles as f64,
-            latency: (available - end_cycle) as f64,
+            latency,
+            followed_latency: latency,
         }
     }
 
@@ -456,6 +458,7 @@ impl IrBottleneck {
         Some(WindowEnd {
             cycles: cycles as f64,
             latency: drain as f64,
+            followed_latency: drain as f64,
         })
     }
 }

@@ -44,10 +44,22 @@
 //! `ε`: no block behind the rasterizer is faster than its one fragment a cycle, so a stall
 //! (a read that comes late, the port busy with writes or a reserved cycle) is never made
 //! up while fragments flow: the FIFOs keep the entries it filled until a primitive's
-//! setup leaves the rasterizer idle. The cycle model's depth test stalls 0.018 to 0.028
-//! cycles a read on the demo, the random triangles and the hierarchical walk at 640x480;
-//! `ε` = 0.02 (I: 0.01..0.03). Without it the random triangles' queries wait behind empty
-//! FIFOs (p95 latency 8 cycles against 25).
+//! setup leaves the rasterizer idle. Two kinds of stretch stall differently (measured per
+//! primitive with the cycle model's stall counters on the demo, the random triangles and
+//! the city's walks):
+//! - A stretch that writes (depth or colour) or reads densely (`R > 0.3 F`,
+//!   [`DENSE_READS_PER_FRAGMENT`]): its reads queue behind writes and reserved cycles, and
+//!   the stalls add up, `ε` = 0.02 cycles a read (I: 0.01..0.03; without it the random
+//!   triangles' queries waited behind empty FIFOs, p95 latency 8 cycles against 25).
+//! - Any other stretch: `ε` = 0. Its reads, a new word every few fragments, are issued
+//!   `L` fragments ahead and come in time once the depth test trails the rasterizer by
+//!   the slowest read's latency and a cycle; the first reads stall until it does, and no
+//!   more stall after. So after a stretch, `d >= g + λ_max + 1`, with `λ_max` the page miss
+//!   latency when the stretch missed a page, the page hit latency when it only hit
+//!   (a ratchet: the lag is kept until setup idles the rasterizer). The city's adaptive
+//!   walk ends its big box queries with the depth test 8 or 9 cycles behind (latency 13-15)
+//!   where the sum of 0.02 a read over their thousands of reads had filled the FIFO
+//!   (latency 24).
 //!
 //! Total cycles = `Σ_w T_w` + the last window's tail (the last query's latency, or its
 //! drain + 3 when the stream ends without a query end).
@@ -64,7 +76,22 @@
 //! release `r_end`, and the pipe drains while the host holds it (a host-bound window's
 //! token finds the pipe empty); in an open loop `r_end = 0`.
 //!
-//! The 4 is the empty pipe's path (depth pipeline, OccU, OccU Control, the grant after the
+//! Followed: the machine's port is in order, and the prefetch issues the depth reads of
+//! the `L` fragments after the end token before OccU Control asks for the query's record
+//! words. When the next window's first primitive comes while the pipe is still busy (no
+//! `wait`, no idle gap), those reads are the next window's first `L` fragments', emitted
+//! one a cycle after the primitive's setup, and the records go after the last of them:
+//!
+//! ```text
+//! latency = max(latency, setup + L + ceil(ceil(records / (V / 32)) / (1 - f)))
+//! ```
+//!
+//! ([`O2Formulas::followed_latency`]; the predicted timeline decides,
+//! [`crate::levels::predicted_loop`]). On the small random triangles (samples queries one
+//! after another) the machine's latencies are 17-29 cycles, this gives 22, and the
+//! formulas had given 8-19.
+//!
+//! In the first latency, the 4 is the empty pipe's path (depth pipeline, OccU, OccU Control, the grant after the
 //! last word): with one record group that fits one port cycle, latency is the machine's
 //! minimum, [`crate::machines::o2::MIN_QUERY_LATENCY_CYCLES`]. Costs: the functional model plus a
 //! few integer operations per fragment.
@@ -115,6 +142,11 @@ pub struct Downstream {
 /// (I 0.01..0.03: the cycle model's 0.018-0.028 on the demo, random triangles and a
 /// hierarchical walk; see the module docs).
 const READ_STALL_CYCLES: f64 = 0.02;
+
+/// Reads a fragment above which a stretch's reads come dense enough to queue at the port
+/// and stall the depth test (I, 0.2..0.4: on the full corpus's walks on o2, 0.3 gave the
+/// adaptive walk's p95 latency error 9.5% where 0.2 gave 14.3% and no threshold 28.6%).
+const DENSE_READS_PER_FRAGMENT: f64 = 0.3;
 
 /// The O2 formulas over stretch counts.
 pub struct O2Formulas {
@@ -174,7 +206,7 @@ impl O2Formulas {
     /// The blocks behind the rasterizer on a stretch (see the module docs).
     pub fn downstream(&self, w: &StretchCounts) -> Downstream {
         let a = &self.arch;
-        let depth = w.fragments as f64 + READ_STALL_CYCLES * w.depth_reads as f64;
+        let depth = w.fragments as f64 + self.read_stall_cycles(w) * w.depth_reads as f64;
         let occu = w.occu_cycles as f64;
         let write_bits = w.depth_writes * a.depth_bits_per_pixel as u64
             + (w.colour_writes + w.colour_reads) * a.colour_bits_per_pixel as u64;
@@ -202,6 +234,42 @@ impl O2Formulas {
             port,
             queued: queued as f64,
         }
+    }
+
+    /// `ε` of a stretch (see the module docs): reads stall the depth test where they compete
+    /// with writes for the port, or come denser than one a [`DENSE_READS_PER_FRAGMENT`]
+    /// fragments; elsewhere only the slowest read's lag ([`Self::slowest_read_lag`]).
+    fn read_stall_cycles(&self, w: &StretchCounts) -> f64 {
+        let writes = w.depth_writes + w.colour_writes + w.colour_reads > 0;
+        let dense = w.depth_reads as f64 > DENSE_READS_PER_FRAGMENT * w.fragments as f64;
+        if writes || dense {
+            READ_STALL_CYCLES
+        } else {
+            0.0
+        }
+    }
+
+    /// The least the depth test trails the rasterizer by after a stretch: its slowest
+    /// read's latency and a cycle (0 when it read nothing).
+    fn slowest_read_lag(&self, w: &StretchCounts) -> f64 {
+        let latency = if w.page_misses > 0 {
+            self.arch.page_miss_latency_cycles
+        } else if w.depth_reads > 0 {
+            self.arch.page_hit_latency_cycles
+        } else {
+            return 0.0;
+        };
+        latency as f64 + 1.0
+    }
+
+    /// Latency of a query whose records wait behind the depth reads of the next window's
+    /// first `L` fragments (set up and emitted right after the end token).
+    pub fn followed_latency(&self, record_words: u64) -> f64 {
+        let words_per_cycle = (self.arch.memory_port_bits_per_cycle / 32) as u64;
+        let port_cycles = record_words.div_ceil(words_per_cycle) as f64;
+        self.arch.primitive_setup_cycles as f64
+            + self.lookahead()
+            + (port_cycles / self.free_share()).ceil()
     }
 
     /// Latency of a query whose records are `record_words` words, after a window that
@@ -459,9 +527,11 @@ impl O2Bottleneck {
         pipe.restart();
         // The token enters at its release: the pipe drained meanwhile.
         let late = (release - (start + cycles)).max(0.0);
+        let latency = self.formulas.latency(records, (drain - late).max(0.0));
         WindowEnd {
             cycles,
-            latency: self.formulas.latency(records, (drain - late).max(0.0)),
+            latency,
+            followed_latency: latency.max(self.formulas.followed_latency(records)),
         }
     }
 
@@ -486,9 +556,11 @@ impl O2Bottleneck {
         let worked = pipe.raster > 0.0 || pipe.downstream > pipe.carried;
         worked.then(|| {
             let (cycles, backlog) = pipe.window_end();
+            let latency = backlog.max(pipe.last_read_latency as f64) + 3.0;
             WindowEnd {
                 cycles,
-                latency: backlog.max(pipe.last_read_latency as f64) + 3.0,
+                latency,
+                followed_latency: latency,
             }
         })
     }
@@ -511,6 +583,10 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
     let begin = pipe.downstream.max(start);
     let pace = down.cycles / n as f64;
     pipe.downstream = (begin + down.cycles).max(emitted);
+    // The depth test trails the rasterizer by at least its slowest read's latency + 1.
+    pipe.downstream = pipe
+        .downstream
+        .max(emitted + formulas.slowest_read_lag(stretch));
     pipe.port += down.port;
     pipe.last_read_latency = stretch.last_read_latency;
     pipe.recent.push_back(StretchTimes {
@@ -606,5 +682,54 @@ mod tests {
         }
         // The runs did end on a new word, so the last read's latency was compared.
         assert!(last_reads > 100, "{last_reads}");
+    }
+
+    /// A brief query's box: one primitive of 800 fragments that reads 100 new words (one a
+    /// page miss, the last a page hit) and writes nothing, on an O2 whose port no refresh
+    /// or host shares (`f` = 0), at 4 engines. Worked by hand:
+    /// - setup 4 cycles, so the fragments are emitted by `g` = 4 + 800 = 804;
+    /// - `R` = 100 <= 0.3 F = 240 and no write, so `ε` = 0: depth 800, OccU 800 (one tile
+    ///   at 4 engines: 1 cycle a fragment), port 100, prefetch 100 (2.06 + 1) / 16 = 19.1;
+    ///   `d` = max(4 + 800, 804) = 804;
+    /// - the slowest read, a page miss of 8 cycles, leaves the depth test 9 behind:
+    ///   `d` = 804 + 9 = 813, a backlog of 9 at the end token (the FIFO's 16 never bind);
+    /// - records: 8 words, one port cycle at 8 words a cycle;
+    /// - latency 4 + 1 + max(9, 2) = 14 (the sum 0.02 a read had given a backlog of 2, so 7);
+    /// - followed: setup 4 + L = min(16, 16) + 1 = 21.
+    #[test]
+    fn a_sparse_stretch_leaves_the_depth_test_its_slowest_reads_latency_behind() {
+        let mut arch = Arch::builtin("o2").unwrap();
+        arch.set("display_width_pixels=0").unwrap();
+        arch.set("host_memory_share=0").unwrap();
+        arch.set("engines=4").unwrap();
+        let o2 = arch.o2().unwrap();
+        assert_eq!(o2.reserved_port_share(), 0.0);
+        let mut formulas = O2Bottleneck::new(&o2, 640, 480);
+        let spec = QuerySpec {
+            id: 1,
+            mode: QueryMode::Brief,
+            buffer_entries: 8,
+            tiles: vec![Rect::new(0, 0, 640, 480)],
+        };
+        formulas.begin(&spec);
+        formulas.primitive(0.0);
+        let stretch = FragmentStretch {
+            fragments: 800,
+            depth_reads: 100,
+            page_misses: 1,
+            passed: 0,
+            last_read: DepthRead::PageHit,
+        };
+        formulas.stretch(&stretch, &RenderState::new(640, 480));
+        let result = QueryResult {
+            id: 1,
+            mode: QueryMode::Brief,
+            tiles: vec![Default::default()],
+            overflowed_buffers: 0,
+        };
+        let end = formulas.end_query(&spec, &result, 0.0, 0.0);
+        assert_eq!(end.cycles, 804.0);
+        assert_eq!(end.latency, 14.0);
+        assert_eq!(end.followed_latency, 21.0);
     }
 }
