@@ -91,10 +91,17 @@
 //! after another) the machine's latencies are 17-29 cycles, this gives 22, and the
 //! formulas had given 8-19.
 //!
-//! In the first latency, the 4 is the empty pipe's path (depth pipeline, OccU, OccU Control, the grant after the
-//! last word): with one record group that fits one port cycle, latency is the machine's
-//! minimum, [`crate::machines::o2::MIN_QUERY_LATENCY_CYCLES`]. Costs: the functional model plus a
+//! In the first latency, the 4 is the empty pipe's path (depth pipeline, OccU, OccU
+//! Control, the grant after the last word): with one record group that fits one port
+//! cycle, latency is the machine's minimum,
+//! [`crate::machines::o2::MIN_QUERY_LATENCY_CYCLES`]. Costs: the functional model plus a
 //! few integer operations per fragment.
+//!
+//! Not modelled, and not traced yet: on the 1x1-retiled small demo on o2 with one engine,
+//! two samples queries that draw (depth and colour writes) and are followed at once take
+//! 38 and 41 cycles where these formulas give 21 and 22, which sets that class's p95
+//! error; most likely their records also wait for the writes the depth write buffer (16
+//! entries) still holds.
 //!
 //! The fluid replaced a per-window maximum of the blocks' throughputs with the FIFOs taken
 //! half full at every query's end: on the small corpus (o2 and ir2 at 4 engines) the worst
