@@ -525,10 +525,13 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // sliver, a read every fragment, whose lag the stretch's counts do not show, and the
     // sum had matched it by overestimating every query. At the full scale the same change
     // took the hierarchical walks' analytic p95 from 41.2% to 11.8% and the adaptive walk's
-    // from 14.3% to 9.5%, their sampled:10 p95 from 12.0% and 23.8% to 0%.
+    // from 14.3% to 9.5%, their sampled:10 p95 from 12.0% and 23.8% to 0%. Then writes began
+    // to pack to the port's width only between two reads: the demo's analytic p95 went from
+    // 4.76% to 8.33% and its sampled p95 to 4.17%; on all engine counts, the 1x1 demo on o2
+    // with one engine went from 42% to 2.6%.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
-        ("demo",              0.05,  0.10,  0.01,  0.058), // every target but sampled p95 4.76% (g)
+        ("demo",              0.05,  0.10,  0.01,  0.05),  // every target but sampled p95 4.17% (g)
         ("retiled-1x1-4x4",   0.05,  0.19,  0.01,  0.03),  // p95 15.8% (c); sampled p95 2.96% (g)
         ("retiled-32x32",     0.05,  0.10,  0.01,  0.03),  // every target
         ("hardcases",         0.05,  0.10,  0.01,  0.03),  // every target (sampled 0.74%)
