@@ -191,6 +191,14 @@ impl PredictedLoop {
         self.amended.take()
     }
 
+    /// Set the last of a level's per-query latencies (whole cycles, rounded up) to the
+    /// last query's amended latency, if amended since the last call.
+    pub(crate) fn amend_last(&mut self, latencies: &mut [u64]) {
+        if let (Some(latency), Some(last)) = (self.take_amended_latency(), latencies.last_mut()) {
+            *last = latency.ceil() as u64;
+        }
+    }
+
     fn idle_cycle(&self) -> PipeState {
         PipeState {
             idle_cycle: (self.pipe_end + self.tail).round() as u64,

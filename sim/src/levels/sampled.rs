@@ -983,12 +983,7 @@ impl SampledModel {
         if matches!(event, Event::Swap) {
             self.window.work = Work::of(self.predicted.pipe_end() - before, cut_cycles);
         }
-        if let (Some(latency), Some(last)) = (
-            self.predicted.take_amended_latency(),
-            self.predicted_latencies.last_mut(),
-        ) {
-            *last = latency.ceil() as u64;
-        }
+        self.predicted.amend_last(&mut self.predicted_latencies);
         self.formulas.idle(self.predicted.take_idle());
         self.closed_loop |= event.is_closed_loop_record();
         self.formulas.event(event, &self.predicted);

@@ -223,12 +223,7 @@ impl AnalyticModel {
         }
         let formulas = &mut self.formulas;
         self.frames.event(event, || formulas.cut());
-        if let (Some(latency), Some(last)) = (
-            self.frames.take_amended_latency(),
-            self.latencies.last_mut(),
-        ) {
-            *last = latency.ceil() as u64;
-        }
+        self.frames.amend_last(&mut self.latencies);
         self.formulas.idle(self.frames.take_idle());
         self.formulas.event(event, &self.frames);
         if let Some(result) = self.core.event(event)? {

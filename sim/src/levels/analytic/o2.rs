@@ -285,19 +285,23 @@ impl O2Formulas {
     /// Latency of a query whose records wait behind the depth reads of the next window's
     /// first `L` fragments (set up and emitted right after the end token).
     pub fn followed_latency(&self, record_words: u64) -> f64 {
-        let words_per_cycle = (self.arch.memory_port_bits_per_cycle / 32) as u64;
-        let port_cycles = record_words.div_ceil(words_per_cycle) as f64;
         self.arch.primitive_setup_cycles as f64
             + self.lookahead()
-            + (port_cycles / self.free_share()).ceil()
+            + self.record_cycles(record_words)
     }
 
     /// Latency of a query whose records are `record_words` words, after a window that
     /// drains in `drain` cycles.
     pub fn latency(&self, record_words: u64, drain: f64) -> f64 {
+        4.0 + self.record_cycles(record_words) + drain
+    }
+
+    /// Whole cycles the port takes to write `record_words` record words, its reserved
+    /// cycles among them.
+    fn record_cycles(&self, record_words: u64) -> f64 {
         let words_per_cycle = (self.arch.memory_port_bits_per_cycle / 32) as u64;
         let port_cycles = record_words.div_ceil(words_per_cycle) as f64;
-        4.0 + (port_cycles / self.free_share()).ceil() + drain
+        (port_cycles / self.free_share()).ceil()
     }
 }
 
