@@ -528,11 +528,19 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // from 14.3% to 9.5%, their sampled:10 p95 from 12.0% and 23.8% to 0%. Then writes began
     // to pack to the port's width only between two reads: the demo's analytic p95 went from
     // 4.76% to 8.33% and its sampled p95 to 4.17%; on all engine counts, the 1x1 demo on o2
-    // with one engine went from 42% to 2.6%.
+    // with one engine went from 42% to 2.6%. (h) lowered when a query's records began to
+    // wait for the reads of exactly those of the next `L` fragments that read a word (they
+    // had waited for all `L`), the port's reserved cycles to make a read wait their longest
+    // run (ceil(f / (1 - f)), 1 here) and dense reads to stall the depth test in proportion
+    // to them, the token's path to overlap an OccU-bound backlog, and a last fragment's
+    // read to drain only what the rasterizer's later setups leave of it: the 1x1 and 4x4
+    // demos' analytic p95 15.8% -> 5.91%; raised for their sampled:10 p95, 2.96% -> 5.26%,
+    // one cycle of the 1x1 demo's 19 on o2, where the regression on 13 sampled queries
+    // lands one cycle above the analytic level's own (now exact) p95.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
         ("demo",              0.05,  0.10,  0.01,  0.05),  // every target but sampled p95 4.17% (g)
-        ("retiled-1x1-4x4",   0.05,  0.19,  0.01,  0.03),  // p95 15.8% (c); sampled p95 2.96% (g)
+        ("retiled-1x1-4x4",   0.05,  0.10,  0.01,  0.064), // every target but sampled p95 5.26% (h)
         ("retiled-32x32",     0.05,  0.10,  0.01,  0.03),  // every target
         ("hardcases",         0.05,  0.10,  0.01,  0.03),  // every target (sampled 0.74%)
         ("random",            0.05,  0.10,  0.01,  0.03),  // every target (f)
@@ -572,6 +580,58 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
         "errors over their bounds:\n{}",
         over.join("\n")
     );
+}
+
+/// With no port cycles reserved for the display refresh and the host (`f` = 0), the O2's
+/// analytic formulas are the cycle model's timing rules summed: on the small corpus at 4
+/// engines, every class's total cycles within 0.1% (the hard cases' clears 0.07%, the rest
+/// 0.04% at most, measured 2026-12-03) and its p95 latency exact, but the hard cases'
+/// (1.82%, their clears' queries); on the walks, the random triangles and the demo, 95% of
+/// the queries or more take the cycle model's latency to the cycle. At the O2's own
+/// `f` = 0.234 the same queries spread by the reserved cycles' phase, which no count tells.
+#[test]
+fn without_reserved_port_cycles_the_o2_formulas_are_the_cycle_models_timing() {
+    let temp = support::cli::scratch_dir("unreserved");
+    let stdout = support::cli::stdout_with_temp_dir(
+        &[
+            "fidelity",
+            "--corpus",
+            "--scale",
+            "small",
+            "--machines",
+            "o2",
+            "--engines",
+            "4",
+            "--set",
+            "host_memory_share=0",
+            "--set",
+            "display_width_pixels=0",
+            "--no-rtl",
+            "--json",
+        ],
+        &temp,
+    );
+    let rows: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
+    let analytic: Vec<&serde_json::Value> = rows
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|row| row["level"] == "analytic")
+        .collect();
+    assert_eq!(analytic.len(), 10, "{rows}");
+    for row in analytic {
+        let class = row["class"].as_str().unwrap();
+        let metric = |key: &str| row.pointer(key).and_then(|v| v.as_f64());
+        assert!(metric("/cycles_error").unwrap() <= 0.001, "{row}");
+        if class != "hardcases" {
+            assert_eq!(metric("/latency_p95_error"), Some(0.0), "{row}");
+        }
+        if class.starts_with("walk") && class != "walk-frustum"
+            || ["random", "demo"].contains(&class)
+        {
+            assert_eq!(metric("/query_latency_error/p95"), Some(0.0), "{row}");
+        }
+    }
 }
 
 /// The issue's own walkthrough, a lazy-grid walk of the city over 2 frames at 1280x1024 (20

@@ -85,8 +85,6 @@ pub struct WindowEnd {
     /// The latency of the query that closed it (or, for the final window without a query
     /// end, the pipe's drain), in cycles.
     pub latency: f64,
-    /// The latency when the next window's fragments follow the end token with no pause.
-    pub followed_latency: f64,
 }
 
 /// One query as a level saw it.

@@ -19,9 +19,10 @@
 //!   backlog still ahead of the token at `r_end`.
 //! - A query's latency becomes the formulas' *followed* latency (on the O2, its records
 //!   waiting at the in-order port behind the depth reads of the next fragments,
-//!   [`crate::levels::analytic::o2`]) when the next window's first primitive comes with no
-//!   idle gap (`r_{w+1} <= e_w`) and no `wait`, `begin_conditional` or `swap` before it:
-//!   only then does the machine emit those fragments before the records leave.
+//!   [`crate::levels::analytic::o2`], known once those fragments passed) when the next
+//!   window's first primitive comes with no idle gap (`r_{w+1} <= e_w`) and no `wait`,
+//!   `begin_conditional` or `swap` before it: only then does the machine emit those
+//!   fragments before the records leave ([`PredictedLoop::settle`]).
 //! - `wait`, `begin_conditional`: as in the closed loop, against those predicted answers (a
 //!   query that never ended counts as answered at 0).
 //! - `swap` closes the window it falls in (its work so far predicted as if the stream ended
@@ -32,6 +33,7 @@
 
 use crate::arch::Arch;
 use crate::error::SimError;
+use crate::levels::analytic::Formulas;
 use crate::levels::level::WindowEnd;
 use crate::machines::closed_loop::{ClosedLoop, PipeState};
 use occsim_traces::{Event, QueryResult};
@@ -53,9 +55,11 @@ pub(crate) struct PredictedLoop {
     answers: HashMap<u32, (u64, u64)>,
     /// The cycle the last query's end token entered.
     last_token: f64,
-    /// The last query's id and its latency should the next window follow its end token
-    /// with no pause (see [`PredictedLoop::amend_latency`]).
-    followed: Option<(u32, f64)>,
+    /// The last query's id, until a pause or the next window's first primitive.
+    followed: Option<u32>,
+    /// The last query's id once the next window's first primitive followed its end token
+    /// with no pause, until the formulas give its followed latency ([`Self::settle`]).
+    following: Option<u32>,
     /// A latency amended since the caller last asked.
     amended: Option<f64>,
 }
@@ -72,6 +76,7 @@ impl PredictedLoop {
             answers: HashMap::new(),
             last_token: 0.0,
             followed: None,
+            following: None,
             amended: None,
         })
     }
@@ -95,10 +100,9 @@ impl PredictedLoop {
                 if self.window_start.is_none() {
                     self.window_start = Some(self.pipe_end.max(release));
                     self.idle = (release - self.pipe_end).max(0.0);
-                    if let Some((id, latency)) = self.followed.take() {
-                        if self.idle == 0.0 {
-                            self.amend_latency(id, latency);
-                        }
+                    let followed = self.followed.take();
+                    if self.idle == 0.0 {
+                        self.following = followed;
                     }
                 }
             }
@@ -170,8 +174,8 @@ impl PredictedLoop {
         let available = (token + end.latency).ceil() as u64;
         self.answers.insert(result.id, (available, words));
         self.last_token = token;
-        self.followed =
-            (end.followed_latency > end.latency).then_some((result.id, end.followed_latency));
+        self.followed = Some(result.id);
+        self.following = None;
     }
 
     /// The next window's first primitive came with the pipe still busy, so its first
@@ -187,13 +191,20 @@ impl PredictedLoop {
     }
 
     /// The last query's latency, if amended since the last call (see `amend_latency`).
-    pub(crate) fn take_amended_latency(&mut self) -> Option<f64> {
+    fn take_amended_latency(&mut self) -> Option<f64> {
         self.amended.take()
     }
 
-    /// Set the last of a level's per-query latencies (whole cycles, rounded up) to the
-    /// last query's amended latency, if amended since the last call.
-    pub(crate) fn amend_last(&mut self, latencies: &mut [u64]) {
+    /// Once the formulas know the last query's followed latency (the fragments after its
+    /// end token passed, or a pause drained the pipe), the query takes it if the next window
+    /// followed its end token at once; the last of a level's per-query latencies (whole
+    /// cycles, rounded up) is then set to it. Called after every item the formulas count.
+    pub(crate) fn settle(&mut self, formulas: &mut Formulas, latencies: &mut [u64]) {
+        if let Some(latency) = formulas.take_followed() {
+            if let Some(id) = self.following.take() {
+                self.amend_latency(id, latency);
+            }
+        }
         if let (Some(latency), Some(last)) = (self.take_amended_latency(), latencies.last_mut()) {
             *last = latency.ceil() as u64;
         }
@@ -222,13 +233,27 @@ impl PredictedLoop {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use occsim_traces::{QueryMode, TileResult};
+    use occsim_traces::depth_layout::DepthRead;
+    use occsim_traces::state::RenderState;
+    use occsim_traces::trace::FragmentStretch;
+    use occsim_traces::{QueryMode, QuerySpec, Rect, TileResult};
 
-    fn ended(frames: &mut PredictedLoop) {
-        let end = WindowEnd {
-            cycles: 804.0,
-            latency: 14.0,
-            followed_latency: 21.0,
+    /// On the O2 (open loop, every release 0), a brief query of one tile ends on an empty
+    /// pipe: latency 4 + ceil(1 / (1 - 0.234)) = 6 (its record word's port cycle and the
+    /// reserved ones), its end token at 0. The next window's primitive (setup 4) follows at
+    /// once and its 16th fragment, the last the prefetch reads ahead of the records, reads
+    /// a new word: emitted in 4 + 15, asked for and granted in 20, the records from 21 for
+    /// their 2 cycles: latency 23, and the answer at 0 + 23. A `wait` before the primitive
+    /// drains the pipe first: the latency stays 6.
+    fn followed(wait_first: bool) -> (Vec<u64>, u64) {
+        let arch = Arch::builtin("o2").unwrap();
+        let mut frames = PredictedLoop::new(&arch).unwrap();
+        let mut formulas = Formulas::new(&arch, 640, 480).unwrap();
+        let spec = QuerySpec {
+            id: 1,
+            mode: QueryMode::Brief,
+            buffer_entries: 8,
+            tiles: vec![Rect::new(0, 0, 640, 480)],
         };
         let result = QueryResult {
             id: 1,
@@ -236,28 +261,36 @@ mod tests {
             tiles: vec![TileResult::default()],
             overflowed_buffers: 0,
         };
+        formulas.event(&Event::QueryBegin(spec.clone()), &frames);
+        let end = formulas.end_query(&spec, &result, 0.0, 0.0);
         frames.end_query(end, &result);
+        let mut latencies = vec![end.latency.ceil() as u64];
+        let mut event = |event: &Event, frames: &mut PredictedLoop| {
+            formulas.before_event(event);
+            frames.settle(&mut formulas, &mut latencies);
+            frames.event(event, || None);
+            formulas.event(event, frames);
+        };
+        if wait_first {
+            event(&Event::Wait(1), &mut frames);
+        }
+        event(&Event::Primitive, &mut frames);
+        let stretch = FragmentStretch {
+            fragments: 16,
+            depth_reads: 1,
+            page_misses: 0,
+            passed: 0,
+            last_read: DepthRead::PageHit,
+            first_reads: 1 << 15,
+        };
+        formulas.stretch(&stretch, &RenderState::new(640, 480));
+        frames.settle(&mut formulas, &mut latencies);
+        (latencies, frames.answers[&1].0)
     }
 
-    /// An open-loop stream (every release 0): the next window's first primitive comes while
-    /// the pipe is busy, so the query takes its followed latency, 21, and its answer comes
-    /// 21 cycles after its end token (at 804), at 825. A
-    /// `wait` before that primitive drains the pipe first: the latency stays 14.
     #[test]
     fn a_query_takes_its_followed_latency_only_when_the_next_window_follows_at_once() {
-        let arch = Arch::builtin("o2").unwrap();
-        let mut frames = PredictedLoop::new(&arch).unwrap();
-        ended(&mut frames);
-        frames.event(&Event::Primitive, || None);
-        assert_eq!(frames.take_amended_latency(), Some(21.0));
-        assert_eq!(frames.answers[&1].0, 804 + 21);
-        assert_eq!(frames.take_amended_latency(), None);
-
-        let mut frames = PredictedLoop::new(&arch).unwrap();
-        ended(&mut frames);
-        frames.event(&Event::Wait(1), || None);
-        frames.event(&Event::Primitive, || None);
-        assert_eq!(frames.take_amended_latency(), None);
-        assert_eq!(frames.answers[&1].0, 804 + 14);
+        assert_eq!(followed(false), (vec![23], 23));
+        assert_eq!(followed(true), (vec![6], 6));
     }
 }

@@ -958,6 +958,8 @@ impl SampledModel {
                 // In the viewport before the formulas read its depth.
                 self.core.check_fragment(fragment)?;
                 self.formulas.fragment(*fragment, &self.core.functional);
+                self.predicted
+                    .settle(&mut self.formulas, &mut self.predicted_latencies);
                 self.window.fragments += 1;
             }
             Event::QueryBegin(spec) => {
@@ -972,6 +974,9 @@ impl SampledModel {
             Event::Swap => self.window.frame_ended = true,
             _ => {}
         }
+        self.formulas.before_event(event);
+        self.predicted
+            .settle(&mut self.formulas, &mut self.predicted_latencies);
         let before = self.predicted.pipe_end();
         let formulas = &mut self.formulas;
         let mut cut_cycles = 0.0;
@@ -983,8 +988,9 @@ impl SampledModel {
         if matches!(event, Event::Swap) {
             self.window.work = Work::of(self.predicted.pipe_end() - before, cut_cycles);
         }
-        self.predicted.amend_last(&mut self.predicted_latencies);
         self.formulas.idle(self.predicted.take_idle());
+        self.predicted
+            .settle(&mut self.formulas, &mut self.predicted_latencies);
         self.closed_loop |= event.is_closed_loop_record();
         self.formulas.event(event, &self.predicted);
         if let Some(run) = &mut self.run {
@@ -1029,6 +1035,8 @@ impl SampledModel {
         self.close_ended_window()?;
         self.core.check_span(span)?;
         self.formulas.span(span, &self.core.functional);
+        self.predicted
+            .settle(&mut self.formulas, &mut self.predicted_latencies);
         let len = span.depths.len();
         let starts = self.machine_starts_within(len as u64);
         self.window.fragments += len as u64;
@@ -1087,6 +1095,8 @@ impl SampledModel {
         self.close_ended_window().map_err(ReadError::Sink)?;
         let state = *self.core.functional.state();
         self.formulas.stretch(stretch, &state);
+        self.predicted
+            .settle(&mut self.formulas, &mut self.predicted_latencies);
         self.core.count_fragments(stretch.fragments);
         let mut rest = stretch.fragments;
         if let Some(first) = self.machine_starts_within(rest) {
@@ -1240,6 +1250,9 @@ impl SampledModel {
 
     pub fn finish(mut self) -> Result<LevelResult, SimError> {
         self.plan()?;
+        self.formulas.close_head();
+        self.predicted
+            .settle(&mut self.formulas, &mut self.predicted_latencies);
         self.close_window(true);
         self.flush_run()?;
         // A class without a sampled window takes every sampled window's calibration.

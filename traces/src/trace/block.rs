@@ -9,8 +9,10 @@ pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// verbose hit lists as counts, digests and the first hits listed (`HitList`), so a result's
 /// size no longer grows with its hits; version 4 may hold window-index blocks
 /// ([`crate::trace::index`]), named by the header's `window_index`; version 5 pairs every
-/// event block of an indexed trace with a depth-test block ([`crate::trace::depth_tests`]).
-pub const FORMAT_VERSION: u16 = 5;
+/// event block of an indexed trace with a depth-test block ([`crate::trace::depth_tests`]);
+/// version 6 gives the index's stretches right after a query end their first reads
+/// ([`crate::trace::FragmentStretch::first_reads`]).
+pub const FORMAT_VERSION: u16 = 6;
 /// The oldest version this code reads: version-1 traces replay as an open loop.
 pub const OLDEST_READABLE_VERSION: u16 = 1;
 /// Most bytes of header JSON.

@@ -4,7 +4,7 @@
 //! block start, so each block decodes on its own.
 
 use super::header::StreamTally;
-use super::index::{FragmentStretch, IndexItem};
+use super::index::{FragmentStretch, IndexItem, FIRST_READS_FLAG};
 use crate::depth_layout::DepthRead;
 use crate::event::{Event, Fragment, GeometryBatch, HostWork, Span, DEPTH_ONE};
 use crate::golden::EventSink;
@@ -510,11 +510,17 @@ fn stretch(c: &mut Cursor) -> Result<FragmentStretch, PayloadError> {
     let page_misses = c.uv()?;
     let passed = c.uv()?;
     let pos = c.pos;
-    let last_read = match c.byte()? {
+    let code = c.byte()?;
+    let last_read = match code & !FIRST_READS_FLAG {
         0 => DepthRead::SameWord,
         1 => DepthRead::PageHit,
         2 => DepthRead::PageMiss,
-        code => return Err(bad(pos, format!("unknown last-read code {code}"))),
+        _ => return Err(bad(pos, format!("unknown last-read code {code}"))),
+    };
+    let first_reads = if code & FIRST_READS_FLAG != 0 {
+        c.uv()?
+    } else {
+        0
     };
     let stretch = FragmentStretch {
         fragments,
@@ -522,6 +528,7 @@ fn stretch(c: &mut Cursor) -> Result<FragmentStretch, PayloadError> {
         page_misses,
         passed,
         last_read,
+        first_reads,
     };
     match stretch.problem() {
         Some(problem) => Err(bad(start, problem)),

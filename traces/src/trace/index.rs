@@ -12,8 +12,16 @@
 //! stretch knows which fragments pass the depth test), and cuts index blocks as it cuts event
 //! blocks: one block buffer of memory each, whatever the trace's length. An index block's
 //! payload is coded as an event payload ([`super::codec`]), with `STRETCH` records in place
-//! of spans: `STRETCH fragments depth_reads page_misses passed last_read` (four varints and
-//! a byte: 0 when the stretch's last fragment read no new word, 1 a page hit, 2 a page miss).
+//! of spans: `STRETCH fragments depth_reads page_misses passed last_read [first_reads]` (four
+//! varints and a byte: 0 when the stretch's last fragment read no new word, 1 a page hit, 2 a
+//! page miss; plus [`FIRST_READS_FLAG`] when a varint of [`FragmentStretch::first_reads`]
+//! follows, from format version 6).
+//!
+//! A stretch keeps its `first_reads` only when it begins fewer than [`FIRST_READS_FRAGMENTS`]
+//! fragments after the last query end (else it is written 0): the O2-like machine's in-order
+//! port serves the depth reads of the fragments right after a query's end token before the
+//! query's records, so its formulas read which of them read a word
+//! (`occsim_sim::levels::analytic::o2`), and only there.
 
 use super::codec::{put_uv, tag};
 use crate::depth_layout::{DepthAddress, DepthLayout, DepthRead, LastRead};
@@ -35,7 +43,18 @@ pub struct FragmentStretch {
     pub passed: u64,
     /// What the last fragment read: `SameWord` when it read no new word (or tested no depth).
     pub last_read: DepthRead,
+    /// Bit `k` set when fragment `k` (`k` < [`FIRST_READS_FRAGMENTS`]) read a new word; in a
+    /// trace's index, 0 for a stretch that begins [`FIRST_READS_FRAGMENTS`] fragments or more
+    /// after the last query end.
+    pub first_reads: u64,
 }
+
+/// Fragments of a stretch whose reads [`FragmentStretch::first_reads`] marks, and how far
+/// after a query's end a stretch keeps them in an index.
+pub const FIRST_READS_FRAGMENTS: u64 = 64;
+
+/// Added to a stretch record's last-read byte when a `first_reads` varint follows.
+pub(crate) const FIRST_READS_FLAG: u8 = 4;
 
 impl FragmentStretch {
     /// No fragment yet.
@@ -45,6 +64,7 @@ impl FragmentStretch {
         page_misses: 0,
         passed: 0,
         last_read: DepthRead::SameWord,
+        first_reads: 0,
     };
 
     /// Count one fragment (inside the viewport) drawn under `state`: its depth read by the
@@ -70,11 +90,14 @@ impl FragmentStretch {
         self.depth_reads += (read != DepthRead::SameWord) as u64;
         self.page_misses += (read == DepthRead::PageMiss) as u64;
         self.last_read = read;
+        if read != DepthRead::SameWord && self.fragments <= FIRST_READS_FRAGMENTS {
+            self.first_reads |= 1 << (self.fragments - 1);
+        }
         self.passed += (draws && state.depth_func.passes(fragment.z, stored)) as u64;
     }
 
-    /// Bytes a stretch record takes at most: a tag, four 10-byte varints and a byte.
-    pub(crate) const MAX_BYTES: usize = 42;
+    /// Bytes a stretch record takes at most: a tag, five 10-byte varints and a byte.
+    pub(crate) const MAX_BYTES: usize = 52;
 
     pub(crate) fn encode(&self, out: &mut Vec<u8>) {
         out.push(tag::STRETCH);
@@ -82,11 +105,17 @@ impl FragmentStretch {
         put_uv(out, self.depth_reads);
         put_uv(out, self.page_misses);
         put_uv(out, self.passed);
-        out.push(match self.last_read {
+        let last_read = match self.last_read {
             DepthRead::SameWord => 0,
             DepthRead::PageHit => 1,
             DepthRead::PageMiss => 2,
-        });
+        };
+        if self.first_reads == 0 {
+            out.push(last_read);
+        } else {
+            out.push(last_read | FIRST_READS_FLAG);
+            put_uv(out, self.first_reads);
+        }
     }
 
     /// The counts' own consistency, as a decoder checks them.
@@ -99,6 +128,10 @@ impl FragmentStretch {
             Some("a stretch with more page misses than reads")
         } else if self.depth_reads == 0 && self.last_read != DepthRead::SameWord {
             Some("a stretch whose last fragment read a word though none was read")
+        } else if self.first_reads.count_ones() as u64 > self.depth_reads
+            || self.fragments < FIRST_READS_FRAGMENTS && self.first_reads >> self.fragments != 0
+        {
+            Some("a stretch whose first reads are more than its reads or past its fragments")
         } else {
             None
         }
@@ -121,6 +154,9 @@ pub(crate) struct WindowIndexer {
     /// An occlusion-render-mode query (brief, verbose) is open: nothing draws.
     occlusion_mode: bool,
     stretch: FragmentStretch,
+    /// Fragments since the last query end, as far as [`FIRST_READS_FRAGMENTS`] (there
+    /// before the first).
+    since_end: u64,
 }
 
 impl WindowIndexer {
@@ -131,6 +167,7 @@ impl WindowIndexer {
             last_read: LastRead::new(layout.banks),
             occlusion_mode: false,
             stretch: FragmentStretch::EMPTY,
+            since_end: FIRST_READS_FRAGMENTS,
         }
     }
 
@@ -154,7 +191,11 @@ impl WindowIndexer {
 
     /// The stretch gathered since the last other event, if it holds a fragment.
     pub(crate) fn take_stretch(&mut self) -> Option<FragmentStretch> {
-        let stretch = std::mem::replace(&mut self.stretch, FragmentStretch::EMPTY);
+        let mut stretch = std::mem::replace(&mut self.stretch, FragmentStretch::EMPTY);
+        if self.since_end >= FIRST_READS_FRAGMENTS {
+            stretch.first_reads = 0;
+        }
+        self.since_end = (self.since_end + stretch.fragments).min(FIRST_READS_FRAGMENTS);
         (stretch.fragments > 0).then_some(stretch)
     }
 
@@ -163,7 +204,10 @@ impl WindowIndexer {
         debug_assert_eq!(self.stretch.fragments, 0);
         match event {
             Event::QueryBegin(spec) => self.occlusion_mode = spec.mode.is_occlusion_render_mode(),
-            Event::QueryEnd => self.occlusion_mode = false,
+            Event::QueryEnd => {
+                self.occlusion_mode = false;
+                self.since_end = 0;
+            }
             _ => {}
         }
         self.functional.event(event);
@@ -237,33 +281,35 @@ mod tests {
         events.push(Event::QueryEnd);
         // The depth test off: one fragment, no read; then on again, (0, 0) at 200 fails
         // against the 100 stored (LESS) and re-reads word 0 of page 0, after page 1's word:
-        // a miss, the last fragment's own read.
+        // a miss, the last fragment's own read. Both begin fewer than 64 fragments after
+        // the query's end, so they keep their first reads: none, then fragment 0's.
         events.extend([
             Event::DepthTest(false),
             frag(3, 1, 5),
             Event::DepthTest(true),
         ]);
         events.push(frag(0, 0, 200));
-        let stretch = |fragments, depth_reads, page_misses, passed, last_read| {
+        let stretch = |fragments, depth_reads, page_misses, passed, last_read, first_reads| {
             IndexItem::Stretch(FragmentStretch {
                 fragments,
                 depth_reads,
                 page_misses,
                 passed,
                 last_read,
+                first_reads,
             })
         };
         let index = vec![
             IndexItem::Event(Event::DepthTest(true)),
             IndexItem::Event(Event::Primitive),
-            stretch(8, 2, 1, 8, DepthRead::SameWord),
+            stretch(8, 2, 1, 8, DepthRead::SameWord, 0),
             IndexItem::Event(brief(7)),
-            stretch(2, 1, 1, 0, DepthRead::SameWord),
+            stretch(2, 1, 1, 0, DepthRead::SameWord, 0),
             IndexItem::Event(Event::QueryEnd),
             IndexItem::Event(Event::DepthTest(false)),
-            stretch(1, 0, 0, 0, DepthRead::SameWord),
+            stretch(1, 0, 0, 0, DepthRead::SameWord, 0),
             IndexItem::Event(Event::DepthTest(true)),
-            stretch(1, 1, 1, 0, DepthRead::PageMiss),
+            stretch(1, 1, 1, 0, DepthRead::PageMiss, 1),
         ];
         (events, index)
     }
@@ -275,6 +321,64 @@ mod tests {
         assert_eq!(index_of(&bytes).unwrap(), index);
         let reader = TraceReader::new(&bytes[..]).unwrap();
         assert_eq!(reader.header().window_index, Some(LAYOUT));
+    }
+
+    /// After a query's end, one primitive's 62 fragments (rows 0 to 3 of the 16-pixel
+    /// viewport in order, a new word every 4 pixels: reads at 0, 4, ..., 60), then
+    /// another's 6 (x = 0..6 of row 5: reads at 0 and 4) beginning 62 fragments after the
+    /// end, then a third's 4 (row 6) beginning 68 after it: the first two keep their first
+    /// reads, the third is written without (0), though it read at its fragment 0.
+    #[test]
+    fn only_stretches_beginning_within_64_fragments_of_a_query_end_keep_their_first_reads() {
+        let mut events = vec![Event::DepthTest(true), brief(1), Event::QueryEnd];
+        events.push(Event::Primitive);
+        events.extend((0..62).map(|k| frag(k % 16, k / 16, 100)));
+        for row in [5, 6] {
+            events.push(Event::Primitive);
+            events.extend((0..if row == 5 { 6 } else { 4 }).map(|x| frag(x, row, 100)));
+        }
+        let first_reads: Vec<u64> = index_of(&indexed(&events))
+            .unwrap()
+            .into_iter()
+            .filter_map(|item| match item {
+                IndexItem::Stretch(stretch) => Some(stretch.first_reads),
+                IndexItem::Event(_) => None,
+            })
+            .collect();
+        let every_fourth = (0..62).step_by(4).fold(0u64, |mask, k| mask | 1 << k);
+        assert_eq!(first_reads, vec![every_fourth, 1 | 1 << 4, 0]);
+    }
+
+    /// A stretch's first reads name fragments it has and reads it made: a decoder refuses
+    /// a mask past its 2 fragments (bit 2) or with more bits (2) than its reads (1).
+    #[test]
+    fn first_reads_past_the_fragments_or_beyond_the_reads_are_a_problem() {
+        let stretch = |first_reads| FragmentStretch {
+            fragments: 2,
+            depth_reads: 1,
+            page_misses: 0,
+            passed: 0,
+            last_read: DepthRead::PageHit,
+            first_reads,
+        };
+        assert_eq!(stretch(0b10).problem(), None);
+        let problem =
+            Some("a stretch whose first reads are more than its reads or past its fragments");
+        assert_eq!(stretch(0b100).problem(), problem);
+        assert_eq!(stretch(0b11).problem(), problem);
+    }
+
+    /// A version-5 index marks no first reads: its reader says so, and models decode the
+    /// fragments instead.
+    #[test]
+    fn an_index_before_version_6_has_no_first_reads() {
+        let (events, _) = worked_example();
+        let bytes = indexed(&events);
+        assert!(TraceReader::new(&bytes[..]).unwrap().has_first_reads());
+        let old = crate::trace::tests::as_version(bytes, 5);
+        let reader = TraceReader::new(&old[..]).unwrap();
+        assert!(reader.has_depth_tests());
+        assert!(!reader.has_first_reads());
     }
 
     #[test]
@@ -340,6 +444,7 @@ mod tests {
             page_misses: 2,
             passed: 0,
             last_read: DepthRead::SameWord,
+            first_reads: 0,
         };
         assert_eq!(
             bad.problem(),

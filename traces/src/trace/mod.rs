@@ -1,11 +1,11 @@
 //! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
 //!
-//! # Layout (version 5; all integers little-endian; versions 1, without the closed loop's
-//! records, 2, with verbose hits stored one by one, 3, without window-index blocks, and 4,
-//! without depth-test blocks, still read)
+//! # Layout (version 6; all integers little-endian; versions 1, without the closed loop's
+//! records, 2, with verbose hits stored one by one, 3, without window-index blocks, 4,
+//! without depth-test blocks, and 5, without the index's first reads, still read)
 //!
 //! ```text
-//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 5 | flags u16 = 0
+//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 6 | flags u16 = 0
 //!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
 //!               (the CRC covers version .. end of JSON)
 //! event blocks  block header (20) | stored payload (stored_len), with window-index blocks
@@ -56,6 +56,6 @@ pub use error::{ReadError, TraceError};
 pub use header::{
     BlockCounts, ClosedLoopCounts, QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary,
 };
-pub use index::{FragmentStretch, IndexItem};
+pub use index::{FragmentStretch, IndexItem, FIRST_READS_FRAGMENTS};
 pub use reader::TraceReader;
 pub use writer::{TraceWriter, WriterOptions};

@@ -316,6 +316,13 @@ impl<R: Read> TraceReader<R> {
         result
     }
 
+    /// Whether the window index's stretches right after a query end carry their first reads
+    /// ([`crate::trace::FragmentStretch::first_reads`], format version 6): a model that
+    /// reads them decodes an older index's fragments instead.
+    pub fn has_first_reads(&self) -> bool {
+        self.version >= 6 && self.header.window_index.is_some()
+    }
+
     /// Whether every event block has a depth-test block after it
     /// ([`crate::trace::depth_tests`]).
     pub fn has_depth_tests(&self) -> bool {

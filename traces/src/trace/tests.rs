@@ -321,14 +321,14 @@ fn wrong_magic_is_named() {
 
 #[test]
 fn unknown_version_is_named() {
-    for version in [0u8, 6] {
+    for version in [0u8, 7] {
         let mut bytes = write_default(&every_kind());
         bytes[8] = version;
         let error = TraceReader::new(&bytes[..]).err().unwrap();
         assert!(
             matches!(
                 error,
-                TraceError::UnsupportedVersion { offset: 8, version: v, known: 5 } if v == version as u16
+                TraceError::UnsupportedVersion { offset: 8, version: v, known: 6 } if v == version as u16
             ),
             "{error}"
         );
@@ -336,8 +336,13 @@ fn unknown_version_is_named() {
 }
 
 /// `bytes` as a version-1 file: the version field rewritten and the header's CRC with it.
-fn as_version_1(mut bytes: Vec<u8>) -> Vec<u8> {
-    bytes[8] = 1;
+fn as_version_1(bytes: Vec<u8>) -> Vec<u8> {
+    as_version(bytes, 1)
+}
+
+/// `bytes` as a file of `version`: the version field rewritten and the header's CRC with it.
+pub(crate) fn as_version(mut bytes: Vec<u8>, version: u8) -> Vec<u8> {
+    bytes[8] = version;
     let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
     let crc_at = 16 + json_len;
     let crc = crc32fast::hash(&bytes[MAGIC.len()..crc_at]);
@@ -357,7 +362,7 @@ fn version_1_traces_still_read_and_say_they_have_no_closed_loop() {
     assert!(!reader.has_closed_loop());
     let current_bytes = write_default(&events);
     let current = TraceReader::new(&current_bytes[..]).unwrap();
-    assert_eq!(current.format_version(), 5);
+    assert_eq!(current.format_version(), 6);
     assert!(current.has_closed_loop());
     assert_eq!(read_bulk(&bytes).unwrap().0, events);
 }

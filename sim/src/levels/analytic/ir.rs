@@ -426,7 +426,6 @@ impl IrBottleneck {
         WindowEnd {
             cycles: cycles as f64,
             latency,
-            followed_latency: latency,
         }
     }
 
@@ -458,7 +457,6 @@ impl IrBottleneck {
         Some(WindowEnd {
             cycles: cycles as f64,
             latency: drain as f64,
-            followed_latency: drain as f64,
         })
     }
 }

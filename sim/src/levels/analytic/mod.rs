@@ -114,6 +114,38 @@ impl Formulas {
     /// cycle `start`; its end token entered the pipe no earlier than `release` (the host's
     /// release in a closed loop, 0 in an open one). Work the pipe finished before the token
     /// came is no backlog ahead of it: a host-bound window's query drains an empty pipe.
+    /// Before `event`: where it drains the pipe (a wait, a conditional begin, a clear, a
+    /// frame's or a query's end), the last query's records wait for no more reads.
+    pub(crate) fn before_event(&mut self, event: &Event) {
+        if let (
+            Formulas::O2(o2),
+            Event::Wait(_)
+            | Event::ConditionalBegin(_)
+            | Event::Clear
+            | Event::Swap
+            | Event::QueryEnd,
+        ) = (self, event)
+        {
+            o2.close_head();
+        }
+    }
+
+    /// The last query's latency once the fragments after its end token are known (O2: see
+    /// [`o2`], followed); None before, and from then on until the next query's end.
+    pub(crate) fn take_followed(&mut self) -> Option<f64> {
+        match self {
+            Formulas::O2(o2) => o2.take_followed(),
+            Formulas::Ir(_) => None,
+        }
+    }
+
+    /// The stream ended: the last query's records wait for no more reads.
+    pub(crate) fn close_head(&mut self) {
+        if let Formulas::O2(o2) = self {
+            o2.close_head();
+        }
+    }
+
     pub(crate) fn end_query(
         &mut self,
         spec: &QuerySpec,
@@ -214,6 +246,7 @@ impl AnalyticModel {
                 // Check the fragment lies in the viewport before reading its depth.
                 self.core.check_fragment(fragment)?;
                 self.formulas.fragment(*fragment, &self.core.functional);
+                self.frames.settle(&mut self.formulas, &mut self.latencies);
                 self.core.apply_fragment(*fragment);
                 return Ok(());
             }
@@ -221,10 +254,12 @@ impl AnalyticModel {
             Event::QueryBegin(spec) => self.open = Some(spec.clone()),
             _ => {}
         }
+        self.formulas.before_event(event);
+        self.frames.settle(&mut self.formulas, &mut self.latencies);
         let formulas = &mut self.formulas;
         self.frames.event(event, || formulas.cut());
-        self.frames.amend_last(&mut self.latencies);
         self.formulas.idle(self.frames.take_idle());
+        self.frames.settle(&mut self.formulas, &mut self.latencies);
         self.formulas.event(event, &self.frames);
         if let Some(result) = self.core.event(event)? {
             let Some(spec) = self.open.take() else {
@@ -246,6 +281,7 @@ impl AnalyticModel {
             IndexItem::Stretch(stretch) => {
                 let state = self.core.functional.state();
                 self.formulas.stretch(stretch, state);
+                self.frames.settle(&mut self.formulas, &mut self.latencies);
                 self.core.count_fragments(stretch.fragments);
                 Ok(())
             }
@@ -257,11 +293,14 @@ impl AnalyticModel {
     pub fn span(&mut self, span: Span) -> Result<(), SimError> {
         self.core.check_span(span)?;
         self.formulas.span(span, &self.core.functional);
+        self.frames.settle(&mut self.formulas, &mut self.latencies);
         self.core.apply_span(span);
         Ok(())
     }
 
     pub fn finish(mut self) -> Result<LevelResult, SimError> {
+        self.formulas.close_head();
+        self.frames.settle(&mut self.formulas, &mut self.latencies);
         let (frame_cycles, total) = self.frames.finish(self.formulas.finish());
         let latencies = std::mem::take(&mut self.latencies);
         let mut result = self.core.finish()?;

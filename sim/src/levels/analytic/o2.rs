@@ -48,19 +48,25 @@
 //! setup leaves the rasterizer idle. Two kinds of stretch stall differently (measured per
 //! primitive with the cycle model's stall counters on the demo, the random triangles and
 //! the city's walks):
-//! - A stretch that writes (depth or colour) or reads densely (`R > 0.3 F`,
-//!   [`DENSE_READS_PER_FRAGMENT`]): its reads queue behind writes and reserved cycles, and
-//!   the stalls add up, `ε` = 0.02 cycles a read (I: 0.01..0.03; without it the random
-//!   triangles' queries waited behind empty FIFOs, p95 latency 8 cycles against 25).
+//! - A stretch that writes (depth or colour): its reads queue behind writes and reserved
+//!   cycles, and the stalls add up, `ε` = 0.02 cycles a read (I: 0.01..0.03; without it
+//!   the random triangles' queries waited behind empty FIFOs, p95 latency 8 cycles
+//!   against 25).
+//! - A stretch that writes nothing but reads densely (`R > 0.3 F`,
+//!   [`DENSE_READS_PER_FRAGMENT`]): its reads queue only behind the reserved cycles, `ε` =
+//!   0.085 `f` a read ([`RESERVED_READ_STALL_CYCLES`]; 0.02 at the O2's `f`, none without
+//!   reserved cycles).
 //! - Any other stretch: `ε` = 0. Its reads, a new word every few fragments, are issued
 //!   `L` fragments ahead and come in time once the depth test trails the rasterizer by
-//!   the slowest read's latency and a cycle; the first reads stall until it does, and no
-//!   more stall after. So after a stretch, `d >= g + λ_max + 1`, with `λ_max` the page miss
-//!   latency when the stretch missed a page, the page hit latency when it only hit
-//!   (a ratchet: the lag is kept until setup idles the rasterizer). The city's adaptive
-//!   walk ends its big box queries with the depth test 8 or 9 cycles behind (latency 13-15)
-//!   where the sum of 0.02 a read over their thousands of reads had filled the FIFO
-//!   (latency 24).
+//!   the slowest read's latency and the longest run of reserved port cycles a read may
+//!   wait out, `ρ = ceil(f / (1 - f))` (1 at the O2's `f` = 0.234, 0 with none); the first
+//!   reads stall until it does, and no more stall after. So after a stretch,
+//!   `d >= g + λ_max + ρ`, with `λ_max` the page miss latency when the stretch missed a
+//!   page, the page hit latency when it only hit (a ratchet: the lag is kept until setup
+//!   idles the rasterizer). The city's adaptive walk ends its big box queries with the
+//!   depth test 8 or 9 cycles behind (latency 13-15) where the sum of 0.02 a read over
+//!   their thousands of reads had filled the FIFO (latency 24); with `f` = 0 the forest's
+//!   walk ends them exactly 8 behind.
 //!
 //! Total cycles = `Σ_w T_w` + the last window's tail (the last query's latency, or its
 //! drain + 3 when the stream ends without a query end).
@@ -68,29 +74,52 @@
 //! Query latency (from the `end` token entering the pipe to its records written):
 //!
 //! ```text
-//! drain   = max(d - T_w, λ_last)   (λ_last: the last fragment's read latency, 0 when it read
-//!                                   nothing new)
-//! latency = 4 + ceil(ceil(records / (V / 32)) / (1 - f)) + max(0, drain - late)
+//! drain   = max(d - T_w, e_last + λ_last - T_w)   (e_last: the cycle after the last fragment's
+//!                                   emission, λ_last its read latency; 0 when it read nothing new)
+//! drain'  = max(0, drain - late) - (3 when the OccU bound the last stretch, to 0 at least)
+//! latency = 4 + ceil(ceil(records / (V / 32)) / (1 - f)) + drain'
 //! ```
 //!
 //! with `late = max(0, r_end - (s_w + T_w))`: in a closed loop the end token enters at its
 //! release `r_end`, and the pipe drains while the host holds it (a host-bound window's
-//! token finds the pipe empty); in an open loop `r_end = 0`.
+//! token finds the pipe empty); in an open loop `r_end = 0`. The last fragment's read
+//! drains only what the rasterizer's later work leaves of it: primitives with no fragment
+//! after it set up while it comes (on the demo, 61 samples queries took the formulas'
+//! 7 cycles where the machine's 5). When the OccU binds, the token leaves the FIFO,
+//! crosses the depth pipeline and reaches the OccU while the OccU still works through the
+//! backlog ahead of it ([`OCCU_BOUND_TOKEN_OVERLAP_CYCLES`]).
+//!
+//! With no reserved port cycles (`f` = 0) these are the cycle model's rules summed: on the
+//! small corpus at 4 engines every walk's query takes the machine's latency to the cycle,
+//! and 97% of the demo's and the random triangles' (`tests/fidelity.rs`). With the O2's
+//! reserved share, which of a query's last reads and record words meet a reserved cycle
+//! depends on the cycle they come in, which no count tells: the machine's latencies for
+//! one prediction spread by a few cycles (13 to 17 on the forest's walk where the
+//! formulas give 15).
 //!
 //! Followed: the machine's port is in order, and the prefetch issues the depth reads of
 //! the `L` fragments after the end token before OccU Control asks for the query's record
 //! words. When the next window's first primitive comes while the pipe is still busy (no
 //! `wait`, no idle gap), those reads are the next window's first `L` fragments', emitted
-//! one a cycle after the primitive's setup, and the records go after the last of them:
+//! one a cycle after each primitive's setup, and the records go after the last of them
+//! that reads a new word (fragments of a word already read ask the port nothing). With
+//! `o_k` the cycles from the end token to just after fragment `k`'s emission (the setups
+//! before it included) and `k*` the last of the `L` that reads:
 //!
 //! ```text
-//! latency = max(latency, setup + L + ceil(ceil(records / (V / 32)) / (1 - f)))
+//! latency = max(latency, o_k* + 1 + ceil(ceil(records / (V / 32)) / (1 - f)))
 //! ```
 //!
-//! ([`O2Formulas::followed_latency`]; the predicted timeline decides,
-//! [`crate::levels::predicted_loop`]). On the small random triangles (samples queries one
-//! after another) the machine's latencies are 17-29 cycles, this gives 22, and the
-//! formulas had given 8-19.
+//! (the read is asked for and granted in `o_k*`, the records from the cycle after). The
+//! formulas follow the fragments after each query's end (`Head`) until `L` have passed,
+//! or the pipe drains (a wait, a clear, a frame's or another query's end, a primitive
+//! released later than the rasterizer is free): the predicted timeline decides whether
+//! the next window followed at once ([`crate::levels::predicted_loop`]). Which fragments
+//! read comes from the stretches' `first_reads` (the window index keeps them for the 64
+//! fragments after a query's end, so `L` is taken at most 64). On the small random
+//! triangles (samples queries one after another) the machine's latencies are 15-23 cycles
+//! with `f` = 0: taking every `L`-th fragment as a read gave 21 for all of them, this gives
+//! 97% of them to the cycle.
 //!
 //! In the first latency, the 4 is the empty pipe's path (depth pipeline, OccU, OccU
 //! Control, the grant after the last word): with one record group that fits one port
@@ -117,7 +146,7 @@ use occsim_traces::depth_layout::{DepthAddress, DepthRead, LastRead};
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::state::RenderState;
-use occsim_traces::trace::FragmentStretch;
+use occsim_traces::trace::{FragmentStretch, FIRST_READS_FRAGMENTS};
 use occsim_traces::{Fragment, QueryMode, QueryResult, QuerySpec, Span};
 use std::collections::VecDeque;
 
@@ -147,12 +176,29 @@ pub struct Downstream {
     /// Fragments the FIFOs hold ahead of the bottleneck: `C1`, and `C2` too when the OccU
     /// binds (behind the depth pipeline).
     pub queued: f64,
+    /// The OccU binds.
+    pub occu_bound: bool,
 }
 
 /// `ε` [cycles per depth read]: the depth test's stall a read costs that the FIFOs keep
 /// (I 0.01..0.03: the cycle model's 0.018-0.028 on the demo, random triangles and a
 /// hierarchical walk; see the module docs).
 const READ_STALL_CYCLES: f64 = 0.02;
+
+/// `ε` per unit of reserved port share [cycles per depth read] of a stretch that reads
+/// densely and writes nothing: its reads stall only where the display refresh and the host
+/// take the port's cycles, so `ε = 0.085 f` (I 0.04..0.13: 0.02 at the O2's `f` = 0.234, the
+/// writing stretches' `ε`; with `f` = 0 the formulas' latencies equal the cycle model's on
+/// every query of the forest's hierarchical walk, where 0.02 made 10% of them 1 to 9
+/// cycles long).
+const RESERVED_READ_STALL_CYCLES: f64 = 0.085;
+
+/// Cycles of the end token's path that overlap the backlog when the OccU binds [cycles]:
+/// the token leaves the FIFO, crosses the depth pipeline and reaches the OccU while the OccU
+/// still works through the fragments ahead of it (measured: with `f` = 0, the lazy-grid
+/// walks' multi-tile queries, 2 to 400 OccU cycles a fragment at 1, 4 and 16 engines, take
+/// the cycle model's latency exactly with 3, and 3 cycles more without).
+const OCCU_BOUND_TOKEN_OVERLAP_CYCLES: f64 = 3.0;
 
 /// Reads a fragment above which a stretch's reads come dense enough to queue at the port
 /// and stall the depth test (I, 0.2..0.4: on the full corpus's walks on o2, 0.3 gave the
@@ -244,6 +290,7 @@ impl O2Formulas {
             cycles,
             port,
             queued: queued as f64,
+            occu_bound: behind_depth,
         }
     }
 
@@ -262,8 +309,10 @@ impl O2Formulas {
     fn read_stall_cycles(&self, w: &StretchCounts) -> f64 {
         let writes = w.depth_writes + w.colour_writes + w.colour_reads > 0;
         let dense = w.depth_reads as f64 > DENSE_READS_PER_FRAGMENT * w.fragments as f64;
-        if writes || dense {
+        if writes {
             READ_STALL_CYCLES
+        } else if dense {
+            RESERVED_READ_STALL_CYCLES * self.arch.reserved_port_share()
         } else {
             0.0
         }
@@ -279,15 +328,21 @@ impl O2Formulas {
         } else {
             return 0.0;
         };
-        latency as f64 + 1.0
+        latency as f64 + self.longest_reserved_run()
     }
 
-    /// Latency of a query whose records wait behind the depth reads of the next window's
-    /// first `L` fragments (set up and emitted right after the end token).
-    pub fn followed_latency(&self, record_words: u64) -> f64 {
-        self.arch.primitive_setup_cycles as f64
-            + self.lookahead()
-            + self.record_cycles(record_words)
+    /// The most port cycles in a row the display refresh and the host reserve: with `f` of
+    /// them spread evenly, `ceil(f / (1 - f))` (1 at the O2's 0.234; 0 with none). A read
+    /// asked for in the first waits that long.
+    fn longest_reserved_run(&self) -> f64 {
+        let f = self.arch.reserved_port_share();
+        (f / (1.0 - f)).ceil()
+    }
+
+    /// Fragments after a query's end token whose depth reads the port may serve before the
+    /// query's records: `L`, at most the [`FIRST_READS_FRAGMENTS`] an index marks.
+    fn head_fragments(&self) -> u64 {
+        (self.lookahead() as u64).min(FIRST_READS_FRAGMENTS)
     }
 
     /// Latency of a query whose records are `record_words` words, after a window that
@@ -317,8 +372,11 @@ struct Pipe {
     carried: f64,
     /// The window's port cycles so far (the room verbose hit words find).
     port: f64,
-    /// The read latency of the last fragment so far (0 when it read nothing new).
-    last_read_latency: u64,
+    /// The OccU bound the last stretch.
+    occu_bound: bool,
+    /// The cycle the last fragment's depth read is ready, from the window's start: its
+    /// emission and its read latency (0 when it read nothing new, or before the window).
+    last_read_ready: f64,
     /// Fragments emitted so far (in the frame).
     emitted: u64,
     /// The recent stretches the FIFOs may still hold fragments of, oldest first.
@@ -342,6 +400,12 @@ impl Pipe {
         (self.raster, (self.downstream - self.raster).max(0.0))
     }
 
+    /// Cycles the last fragment's read is still ready after the rasterizer's clock: the
+    /// rasterizer's later work (empty primitives' setup) hides that much of its latency.
+    fn last_read_wait(&self) -> f64 {
+        (self.last_read_ready - self.raster).max(0.0)
+    }
+
     /// The cycle the blocks behind the rasterizer start fragment `k`, if a recent stretch
     /// holds it.
     fn started(&self, k: u64) -> Option<f64> {
@@ -356,6 +420,7 @@ impl Pipe {
     fn shift(&mut self, cycles: f64) {
         self.downstream = (self.downstream - cycles).max(0.0);
         self.carried = (self.carried - cycles).max(0.0);
+        self.last_read_ready = (self.last_read_ready - cycles).max(0.0);
         for stretch in &mut self.recent {
             stretch.begin -= cycles;
         }
@@ -368,7 +433,7 @@ impl Pipe {
         self.carried = self.downstream;
         self.raster = 0.0;
         self.port = 0.0;
-        self.last_read_latency = 0;
+        self.last_read_ready = 0.0;
     }
 }
 
@@ -389,6 +454,42 @@ pub fn query_words(spec: &QuerySpec, result: &QueryResult) -> (u64, u64) {
     (records, hits)
 }
 
+/// The last query's end while the fragments after its end token may hold its records back:
+/// the in-order port serves the depth reads of the next `L` of them first (see the module
+/// docs: followed).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Head {
+    /// The query's latency were nothing to follow it, and its records' port cycles.
+    latency: f64,
+    record_cycles: f64,
+    /// Rasterizer cycles since the end token: primitives' setup and fragments.
+    offset: f64,
+    /// Fragments since the end token (at most `L`).
+    seen: u64,
+    /// `offset` just after the emission of the last of them that read a new word.
+    last_read_end: Option<f64>,
+}
+
+impl Head {
+    fn new(latency: f64, record_cycles: f64) -> Head {
+        Head {
+            latency,
+            record_cycles,
+            offset: 0.0,
+            seen: 0,
+            last_read_end: None,
+        }
+    }
+
+    /// The query's latency: its records go after the last read, which the prefetch asks for
+    /// the cycle after its fragment's emission (`last_read_end`) and the port grants then.
+    fn latency(&self) -> f64 {
+        self.last_read_end.map_or(self.latency, |end| {
+            self.latency.max(end + 1.0 + self.record_cycles)
+        })
+    }
+}
+
 /// The O2 model's counting state: the stretch being counted and the pipe's clocks.
 pub(crate) struct O2Bottleneck {
     formulas: O2Formulas,
@@ -398,6 +499,10 @@ pub(crate) struct O2Bottleneck {
     pipe: Pipe,
     /// OccU cycles per fragment and "occlusion render mode" of the open query.
     open: Option<(u64, bool)>,
+    /// The last query's end, while the fragments after it may hold its records back.
+    head: Option<Head>,
+    /// The last query's latency once its head closed, until taken.
+    followed: Option<f64>,
 }
 
 impl O2Bottleneck {
@@ -409,7 +514,43 @@ impl O2Bottleneck {
             stretch: StretchCounts::default(),
             pipe: Pipe::default(),
             open: None,
+            head: None,
+            followed: None,
         }
+    }
+
+    /// `fragments` pass the rasterizer, `first_reads` marking those that read a new word
+    /// (bit `k`: fragment `k`): those among the `L` after the last query's end token move its
+    /// head on, and the `L`-th closes it.
+    fn follow(&mut self, fragments: u64, first_reads: u64) {
+        let limit = self.formulas.head_fragments();
+        let Some(head) = &mut self.head else {
+            return;
+        };
+        let taken = fragments.min(limit - head.seen);
+        let reads = first_reads & u64::MAX.checked_shr(64 - taken as u32).unwrap_or(0);
+        if reads != 0 {
+            // Fragment `63 - leading zeros` is the last that read; it leaves the cycle after.
+            head.last_read_end = Some(head.offset + (64 - reads.leading_zeros()) as f64);
+        }
+        head.offset += taken as f64;
+        head.seen += taken;
+        if head.seen == limit {
+            self.close_head();
+        }
+    }
+
+    /// The last query's records wait for no more reads (`L` fragments followed its end token,
+    /// or the pipe drains: a wait, a clear, a frame's or another query's end, an idle gap).
+    pub(super) fn close_head(&mut self) {
+        if let Some(head) = self.head.take() {
+            self.followed = Some(head.latency());
+        }
+    }
+
+    /// The last query's latency, once its head closed.
+    pub(super) fn take_followed(&mut self) -> Option<f64> {
+        self.followed.take()
     }
 
     /// The stretch counted so far joins the pipe's clocks (see the module docs).
@@ -422,8 +563,14 @@ impl O2Bottleneck {
     /// it up no earlier.
     pub(super) fn primitive(&mut self, release: f64) {
         self.close_stretch();
+        if release > self.pipe.raster {
+            self.close_head();
+        }
         self.pipe.raster = self.pipe.raster.max(release);
         self.stretch.primitives = 1;
+        if let Some(head) = &mut self.head {
+            head.offset += self.formulas.arch.primitive_setup_cycles as f64;
+        }
     }
 
     pub(super) fn begin(&mut self, spec: &QuerySpec) {
@@ -460,6 +607,7 @@ impl O2Bottleneck {
             page_misses: 0,
             passed: 0,
             last_read: DepthRead::SameWord,
+            first_reads: 0,
         };
         if state.depth_test {
             let last_x = span.x as u32 + last as u32;
@@ -469,6 +617,10 @@ impl O2Bottleneck {
                 let read = self.last_read.read(word, page);
                 stretch.depth_reads += (read != DepthRead::SameWord) as u64;
                 stretch.page_misses += (read == DepthRead::PageMiss) as u64;
+                let at = x - span.x as u32;
+                if read != DepthRead::SameWord && (at as u64) < FIRST_READS_FRAGMENTS {
+                    stretch.first_reads |= 1 << at;
+                }
                 let next = (x + self.address.pixels_left_in_word(x as u16)).min(end);
                 // The last fragment reads anew only when it starts its word's run.
                 if x == last_x {
@@ -489,12 +641,13 @@ impl O2Bottleneck {
     /// one would be counted (`state` the render state they were drawn in; the stretch was
     /// counted at this machine's depth layout).
     pub(super) fn stretch(&mut self, stretch: &FragmentStretch, state: &RenderState) {
-        let arch = &self.formulas.arch;
-        let w = &mut self.stretch;
         let n = stretch.fragments;
         if n == 0 {
             return;
         }
+        self.follow(n, stretch.first_reads);
+        let arch = &self.formulas.arch;
+        let w = &mut self.stretch;
         w.fragments += n;
         w.occu_cycles += n * self.open.map_or(1, |(service, _)| service);
         w.last_read_latency = match stretch.last_read {
@@ -547,21 +700,25 @@ impl O2Bottleneck {
         let idle = (pipe.downstream - pipe.carried - pipe.port).max(0.0);
         pipe.downstream += (hit_cycles - idle).max(0.0);
         let (cycles, backlog) = pipe.window_end();
-        let drain = backlog.max(pipe.last_read_latency as f64);
+        let drain = backlog.max(pipe.last_read_wait());
+        let occu_bound = pipe.occu_bound;
         pipe.restart();
         // The token enters at its release: the pipe drained meanwhile.
         let late = (release - (start + cycles)).max(0.0);
-        let latency = self.formulas.latency(records, (drain - late).max(0.0));
-        WindowEnd {
-            cycles,
-            latency,
-            followed_latency: latency.max(self.formulas.followed_latency(records)),
+        let mut drain = (drain - late).max(0.0);
+        if occu_bound {
+            // The token's first steps pass while the OccU works through the backlog.
+            drain = (drain - OCCU_BOUND_TOKEN_OVERLAP_CYCLES).max(0.0);
         }
+        let latency = self.formulas.latency(records, drain);
+        self.head = Some(Head::new(latency, self.formulas.record_cycles(records)));
+        WindowEnd { cycles, latency }
     }
 
     /// The pipe stood idle `cycles` before the window: the blocks behind the rasterizer
     /// worked through that much of the backlog carried into it.
     pub(super) fn idle(&mut self, cycles: f64) {
+        self.close_head();
         self.pipe.shift(cycles);
     }
 
@@ -580,12 +737,8 @@ impl O2Bottleneck {
         let worked = pipe.raster > 0.0 || pipe.downstream > pipe.carried;
         worked.then(|| {
             let (cycles, backlog) = pipe.window_end();
-            let latency = backlog.max(pipe.last_read_latency as f64) + 3.0;
-            WindowEnd {
-                cycles,
-                latency,
-                followed_latency: latency,
-            }
+            let latency = backlog.max(pipe.last_read_wait()) + 3.0;
+            WindowEnd { cycles, latency }
         })
     }
 }
@@ -612,7 +765,7 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
         .downstream
         .max(emitted + formulas.slowest_read_lag(stretch));
     pipe.port += down.port;
-    pipe.last_read_latency = stretch.last_read_latency;
+    pipe.occu_bound = down.occu_bound;
     pipe.recent.push_back(StretchTimes {
         first: pipe.emitted,
         fragments: n,
@@ -635,6 +788,13 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
             pipe.recent.pop_front();
         }
     }
+    // The last fragment's read is asked for when it is emitted, the cycle before the
+    // rasterizer's clock.
+    pipe.last_read_ready = if stretch.last_read_latency > 0 {
+        pipe.raster + stretch.last_read_latency as f64
+    } else {
+        0.0
+    };
 }
 
 #[cfg(test)]
@@ -708,6 +868,33 @@ mod tests {
         assert!(last_reads > 100, "{last_reads}");
     }
 
+    /// O2 at 4 engines whose port no refresh or host shares (`f` = 0).
+    fn unshared_o2() -> O2Arch {
+        let mut arch = Arch::builtin("o2").unwrap();
+        arch.set("display_width_pixels=0").unwrap();
+        arch.set("host_memory_share=0").unwrap();
+        arch.set("engines=4").unwrap();
+        let o2 = arch.o2().unwrap();
+        assert_eq!(o2.reserved_port_share(), 0.0);
+        o2
+    }
+
+    fn whole_screen_brief() -> (QuerySpec, QueryResult) {
+        let spec = QuerySpec {
+            id: 1,
+            mode: QueryMode::Brief,
+            buffer_entries: 8,
+            tiles: vec![Rect::new(0, 0, 640, 480)],
+        };
+        let result = QueryResult {
+            id: 1,
+            mode: QueryMode::Brief,
+            tiles: vec![Default::default()],
+            overflowed_buffers: 0,
+        };
+        (spec, result)
+    }
+
     /// A brief query's box: one primitive of 800 fragments that reads 100 new words (one a
     /// page miss, the last a page hit) and writes nothing, on an O2 whose port no refresh
     /// or host shares (`f` = 0), at 4 engines. Worked by hand:
@@ -715,26 +902,16 @@ mod tests {
     /// - `R` = 100 <= 0.3 F = 240 and no write, so `ε` = 0: depth 800, OccU 800 (one tile
     ///   at 4 engines: 1 cycle a fragment), port 100, prefetch 100 (2.06 + 1) / 16 = 19.1;
     ///   `d` = max(4 + 800, 804) = 804;
-    /// - the slowest read, a page miss of 8 cycles, leaves the depth test 9 behind:
-    ///   `d` = 804 + 9 = 813, a backlog of 9 at the end token (the FIFO's 16 never bind);
+    /// - the slowest read, a page miss of 8 cycles, leaves the depth test 8 behind (no
+    ///   reserved cycle to wait for): `d` = 804 + 8 = 812, a backlog of 8 at the end token
+    ///   (the FIFO's 16 never bind);
     /// - records: 8 words, one port cycle at 8 words a cycle;
-    /// - latency 4 + 1 + max(9, 2) = 14 (the sum 0.02 a read had given a backlog of 2, so 7);
-    /// - followed: setup 4 + L = min(16, 16) + 1 = 21.
+    /// - latency 4 + 1 + max(8, 2) = 13 (the sum 0.02 a read had given a backlog of 2, so
+    ///   7), the cycle model's on such queries of the forest's walk.
     #[test]
     fn a_sparse_stretch_leaves_the_depth_test_its_slowest_reads_latency_behind() {
-        let mut arch = Arch::builtin("o2").unwrap();
-        arch.set("display_width_pixels=0").unwrap();
-        arch.set("host_memory_share=0").unwrap();
-        arch.set("engines=4").unwrap();
-        let o2 = arch.o2().unwrap();
-        assert_eq!(o2.reserved_port_share(), 0.0);
-        let mut formulas = O2Bottleneck::new(&o2, 640, 480);
-        let spec = QuerySpec {
-            id: 1,
-            mode: QueryMode::Brief,
-            buffer_entries: 8,
-            tiles: vec![Rect::new(0, 0, 640, 480)],
-        };
+        let mut formulas = O2Bottleneck::new(&unshared_o2(), 640, 480);
+        let (spec, result) = whole_screen_brief();
         formulas.begin(&spec);
         formulas.primitive(0.0);
         let stretch = FragmentStretch {
@@ -743,18 +920,58 @@ mod tests {
             page_misses: 1,
             passed: 0,
             last_read: DepthRead::PageHit,
+            first_reads: 0,
         };
         formulas.stretch(&stretch, &RenderState::new(640, 480));
-        let result = QueryResult {
-            id: 1,
-            mode: QueryMode::Brief,
-            tiles: vec![Default::default()],
-            overflowed_buffers: 0,
-        };
         let end = formulas.end_query(&spec, &result, 0.0, 0.0);
         assert_eq!(end.cycles, 804.0);
-        assert_eq!(end.latency, 14.0);
-        assert_eq!(end.followed_latency, 21.0);
+        assert_eq!(end.latency, 13.0);
+    }
+
+    /// The query above (latency 13), then the next window's primitive (setup 4) and its
+    /// fragments right after the end token, `L` = 16 of them holding the records back:
+    /// - reads at fragments 0, 8 and 10 of 20: fragment 10 is emitted in cycle 4 + 10 after
+    ///   the token and leaves in 15, its read is asked for and granted in 15, the record
+    ///   word in 16: latency 15 + 1 + 1 = 17, known once fragment 15 passed;
+    /// - reads at fragments 3 and 17: fragment 17 comes after the 16, so 4 + 3 + 1 + 1 + 1
+    ///   = 10 < 13: the query keeps 13;
+    /// - a wait after 5 fragments reading at 2 and 4 drains the pipe: 4 + 4 + 1 + 1 + 1 = 11
+    ///   < 13, so 13.
+    #[test]
+    fn a_querys_records_wait_for_the_reads_of_the_next_l_fragments() {
+        let state = RenderState::new(640, 480);
+        let followed = |fragments: u64, first_reads: u64, close_after: bool| {
+            let mut formulas = O2Bottleneck::new(&unshared_o2(), 640, 480);
+            let (spec, result) = whole_screen_brief();
+            formulas.begin(&spec);
+            formulas.primitive(0.0);
+            let mut stretch = FragmentStretch {
+                fragments: 800,
+                depth_reads: 100,
+                page_misses: 1,
+                passed: 0,
+                last_read: DepthRead::PageHit,
+                first_reads: 0,
+            };
+            formulas.stretch(&stretch, &state);
+            assert_eq!(formulas.end_query(&spec, &result, 0.0, 0.0).latency, 13.0);
+            assert_eq!(formulas.take_followed(), None);
+            formulas.primitive(0.0);
+            stretch.fragments = fragments;
+            stretch.depth_reads = first_reads.count_ones() as u64;
+            stretch.page_misses = 0;
+            stretch.first_reads = first_reads;
+            formulas.stretch(&stretch, &state);
+            if close_after {
+                formulas.close_head();
+            }
+            formulas.take_followed()
+        };
+        assert_eq!(followed(20, 1 | 1 << 8 | 1 << 10, false), Some(17.0));
+        assert_eq!(followed(20, 1 << 3 | 1 << 17, false), Some(13.0));
+        // Fewer than L fragments: the head stays open until the pipe drains.
+        assert_eq!(followed(5, 1 << 2 | 1 << 4, false), None);
+        assert_eq!(followed(5, 1 << 2 | 1 << 4, true), Some(13.0));
     }
 
     /// 100 fragments drawn outside a query, every one writing depth and colour (32 + 32
