@@ -462,22 +462,24 @@ fn analytic_ir_sees_the_busiest_image_engine() {
     //
     // The formulas (module docs of `levels::analytic::ir`): start = setup 4, emit = 4 +
     // ceil(20 / 2) = 14; the engine is through its depth stage at d = max(4 + 20 · 45, 14 +
-    // 45) = 904; it holds Q = 8 + ceil(45 / 45) = 9 fragments, 405 cycles, after the
-    // generator moves on, so g = max(14, 904 - 405) = 499 = T_w. Its last result: d - 45 +
-    // L 45 + s 1 + 1 = 906, so its report is ready in 906; one hop in the local tree (its 8
-    // words over a 32-bit link, 8, and 2 of latency), no global hop for one board, and the
-    // DMA of 8 words at 16 bits a cycle, 16: available 932, latency 932 - 499 = 433.
+    // 45) = 904; the generator may run (E + 1) C - 1 = 9 * 45 - 1 = 404 cycles ahead of it
+    // (a fragment goes once the one 8 before it left the FIFO), so g = max(14, 904 - 404) =
+    // 500 = T_w. Its last result: d - 45 + L 45 + s 1 + 1 = 906, so its report is ready in
+    // 906; one hop in the local tree (its 8 words over a 32-bit link, 8, and 2 of latency),
+    // no global hop for one board, and the DMA of 8 words at 16 bits a cycle, 16: available
+    // 932, latency 932 - 500 = 432.
     //
     // The machine (rules of `blocks::image_engine`): fragment k starts its depth test in
     // s_k = 5 + 45 k (emitted from cycle 4, P = 1), so s_19 = 860 and its result is counted
     // in 905; fragment 19 is emitted when fragment 11 leaves the FIFO, in s_11 = 500, so the
     // end token enters in 501. The token passes the depth stage in 905, the OccU in 906, and
     // the report is ready in 907: available 907 + 10 + 16 = 933, latency 432. The formulas'
-    // window is 2 cycles short of the machine's, their latency 1 long.
+    // window is 1 cycle short of the machine's, their latency exact (with Q = 8 + ceil(45 /
+    // 45) = 9 fragments, 405 cycles, for the generator's lead: 499 and 433).
     let (arch, events) = two_engine_ir_stream(&[0]);
     assert_eq!(
         cycles_and_latency(Fidelity::Analytic, &arch, &events),
-        (499 + 433, 433)
+        (500 + 432, 432)
     );
     assert_eq!(
         cycles_and_latency(Fidelity::Cycle, &arch, &events),
@@ -488,13 +490,13 @@ fn analytic_ir_sees_the_busiest_image_engine() {
 #[test]
 fn analytic_ir_overlaps_one_primitive_with_the_next() {
     // As above, then a second primitive of 20 fragments all in column 1. Engine 0 still has
-    // 405 cycles of the first primitive's work when the generator moves on; engine 1 takes
-    // the second primitive meanwhile. Summing each primitive's own cycles (499 + 499) would
+    // 404 cycles of the first primitive's work when the generator moves on; engine 1 takes
+    // the second primitive meanwhile. Summing each primitive's own cycles (500 + 500) would
     // miss that overlap and the backlog the first leaves; the formulas carry both:
-    // the second starts at g = 499 + setup 4 = 503 and is emitted by 513; engine 1 is through
-    // in d = 503 + 900 = 1403 and holds 405 of it, so T_w = 998. Its last result: 1403 - 45
-    // + 47 = 1405; engine 0's, 906, is long done. Available 1405 + 10 + 16 = 1431, latency
-    // 433, total 1431.
+    // the second starts at g = 500 + setup 4 = 504 and is emitted by 514; engine 1 is through
+    // in d = 504 + 900 = 1404 and holds 404 of it, so T_w = 1000. Its last result: 1404 - 45
+    // + 47 = 1406; engine 0's, 906, is long done. Available 1406 + 10 + 16 = 1432, latency
+    // 432, total 1432.
     //
     // The machine: the generator is free in 501 and sets the second primitive up until 505;
     // engine 1 starts fragment k in 506 + 45 k, so fragment 19 of it is emitted when
@@ -503,7 +505,7 @@ fn analytic_ir_overlaps_one_primitive_with_the_next() {
     let (arch, events) = two_engine_ir_stream(&[0, 1]);
     assert_eq!(
         cycles_and_latency(Fidelity::Analytic, &arch, &events),
-        (998 + 433, 433)
+        (1000 + 432, 432)
     );
     assert_eq!(
         cycles_and_latency(Fidelity::Cycle, &arch, &events),
