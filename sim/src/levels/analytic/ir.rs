@@ -59,13 +59,16 @@
 //! `r_i` exactly as the machine runs them, moving the same words (8 a tile from every Image
 //! Engine; [`crate::blocks::merge_network::merged_ready`], then the DMA to host memory; the
 //! host of software merges is carried from query to query), and latency = available −
-//! `t_end`. Hit words per Image Engine are not capped by the verbose buffers' room: a query
-//! whose buffers overflow is predicted slower than it is.
+//! `t_end`. A verbose query's hits are counted per Image Engine and tile, each within the
+//! tile buffer's room as the machine's Occlusion Unit sends them, and merged within it.
+//! (Uncapped, one bucket an engine, the demo at 1280x1024 on ir1 had a verbose query whose
+//! buffers overflow predicted a latency of 9,842 cycles where the machine takes 1,554.)
 
 use super::{service_cycles, WindowEnd};
 use crate::arch::IrArch;
 use crate::blocks::interleave::FramebufferInterleave;
 use crate::blocks::merge_network::{delivered, merged_ready, Partial, ReportShape};
+use crate::blocks::occlusion_engine::hit_room;
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect, Span};
 
@@ -294,6 +297,12 @@ struct OpenQuery {
     service: u64,
     /// A verbose query's tiles (hit words), else empty.
     verbose_tiles: Vec<Rect>,
+    /// Hits a tile's buffer holds ([`hit_room`]).
+    room: u64,
+    /// Hits each Image Engine sent for each tile (engine-major), at most `room` each: an
+    /// engine's Occlusion Unit sends a tile's hit while its buffer has room, as the
+    /// machine's does ([`crate::blocks::occlusion_engine`]).
+    hits_sent: Vec<u64>,
 }
 
 /// The IR model's per-window counting state.
@@ -343,6 +352,11 @@ impl IrBottleneck {
                 QueryMode::Verbose => spec.tiles.clone(),
                 _ => Vec::new(),
             },
+            room: hit_room(spec.buffer_entries),
+            hits_sent: match spec.mode {
+                QueryMode::Verbose => vec![0; self.arch.image_engines() * spec.tiles.len()],
+                _ => Vec::new(),
+            },
         });
     }
 
@@ -381,7 +395,7 @@ impl IrBottleneck {
         let (board, engine) = self.owners[self.interleave.unit(fragment.x, fragment.y)];
         let pace = self.pace();
         self.window.fragment(board, engine, pace);
-        let Some(query) = &self.open else {
+        let Some(query) = &mut self.open else {
             return;
         };
         if query.verbose_tiles.is_empty() {
@@ -395,15 +409,22 @@ impl IrBottleneck {
             );
         if passed {
             let (x, y) = (fragment.x as u32, fragment.y as u32);
-            let tiles = query.verbose_tiles.iter().filter(|t| t.contains(x, y));
-            self.window.hit_words[engine] += tiles.count() as u64;
+            let sent = &mut query.hits_sent[engine * query.verbose_tiles.len()..];
+            for (tile, sent) in query.verbose_tiles.iter().zip(sent) {
+                if tile.contains(x, y) && *sent < query.room {
+                    *sent += 1;
+                    self.window.hit_words[engine] += 1;
+                }
+            }
         }
     }
 
     /// The query ended; the window that began in cycle `start` closes: its cycles and the
     /// query's latency.
     pub(super) fn end_query(&mut self, spec: &QuerySpec, start: f64, release: f64) -> WindowEnd {
-        let service = self.open.take().map_or(1, |q| q.service);
+        let open = self.open.take();
+        let service = open.as_ref().map_or(1, |q| q.service);
+        let hits_sent = open.map_or(Vec::new(), |q| q.hits_sent);
         let cycles = self.window.cycles(&self.arch);
         let pipe_done = start + cycles as f64;
         // The end token enters at its release; the Image Engines have worked on through
@@ -415,19 +436,24 @@ impl IrBottleneck {
             .backlogs(&self.arch, cycles, service)
             .map(|backlog| end_cycle + 3 + backlog.saturating_sub(late))
             .collect();
-        // Words as the machine moves them: 8 a tile from every Image Engine, and its hit
-        // words as one bucket, not capped by the buffers' room.
+        // Words as the machine moves them: 8 a tile from every Image Engine, and a verbose
+        // query's hits, each tile's within its buffer's room, merged within it.
+        let tiles = spec.tiles.len();
         let shape = ReportShape {
-            tiles: spec.tiles.len() as u64,
-            room: u64::MAX,
+            tiles: tiles as u64,
+            room: match spec.mode {
+                QueryMode::Verbose => hit_room(spec.buffer_entries),
+                _ => u64::MAX,
+            },
         };
-        let verbose = spec.mode == QueryMode::Verbose;
         let reports: Vec<Partial> = ready
             .iter()
-            .zip(&self.window.hit_words)
-            .map(|(&ready, &hits)| Partial {
+            .enumerate()
+            .map(|(engine, &ready)| Partial {
                 ready,
-                hits: if verbose { vec![hits] } else { Vec::new() },
+                hits: hits_sent
+                    .get(engine * tiles..(engine + 1) * tiles)
+                    .map_or(Vec::new(), <[u64]>::to_vec),
             })
             .collect();
         let board_reports: Vec<Partial> = reports
