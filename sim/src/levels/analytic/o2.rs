@@ -910,22 +910,31 @@ mod tests {
     ///   7), the cycle model's on such queries of the forest's walk.
     #[test]
     fn a_sparse_stretch_leaves_the_depth_test_its_slowest_reads_latency_behind() {
+        let (mut formulas, spec, result) = counted_box();
+        let end = formulas.end_query(&spec, &result, 0.0, 0.0);
+        assert_eq!(end.cycles, 804.0);
+        assert_eq!(end.latency, 13.0);
+    }
+
+    /// The box's one primitive: 800 fragments, 100 new words read (one a page miss, the
+    /// last a page hit), nothing written.
+    const BOX: FragmentStretch = FragmentStretch {
+        fragments: 800,
+        depth_reads: 100,
+        page_misses: 1,
+        passed: 0,
+        last_read: DepthRead::PageHit,
+        first_reads: 0,
+    };
+
+    /// The formulas after the box's brief query began and its primitive was counted.
+    fn counted_box() -> (O2Bottleneck, QuerySpec, QueryResult) {
         let mut formulas = O2Bottleneck::new(&unshared_o2(), 640, 480);
         let (spec, result) = whole_screen_brief();
         formulas.begin(&spec);
         formulas.primitive(0.0);
-        let stretch = FragmentStretch {
-            fragments: 800,
-            depth_reads: 100,
-            page_misses: 1,
-            passed: 0,
-            last_read: DepthRead::PageHit,
-            first_reads: 0,
-        };
-        formulas.stretch(&stretch, &RenderState::new(640, 480));
-        let end = formulas.end_query(&spec, &result, 0.0, 0.0);
-        assert_eq!(end.cycles, 804.0);
-        assert_eq!(end.latency, 13.0);
+        formulas.stretch(&BOX, &RenderState::new(640, 480));
+        (formulas, spec, result)
     }
 
     /// The query above (latency 13), then the next window's primitive (setup 4) and its
@@ -941,22 +950,11 @@ mod tests {
     fn a_querys_records_wait_for_the_reads_of_the_next_l_fragments() {
         let state = RenderState::new(640, 480);
         let followed = |fragments: u64, first_reads: u64, close_after: bool| {
-            let mut formulas = O2Bottleneck::new(&unshared_o2(), 640, 480);
-            let (spec, result) = whole_screen_brief();
-            formulas.begin(&spec);
-            formulas.primitive(0.0);
-            let mut stretch = FragmentStretch {
-                fragments: 800,
-                depth_reads: 100,
-                page_misses: 1,
-                passed: 0,
-                last_read: DepthRead::PageHit,
-                first_reads: 0,
-            };
-            formulas.stretch(&stretch, &state);
+            let (mut formulas, spec, result) = counted_box();
             assert_eq!(formulas.end_query(&spec, &result, 0.0, 0.0).latency, 13.0);
             assert_eq!(formulas.take_followed(), None);
             formulas.primitive(0.0);
+            let mut stretch = BOX;
             stretch.fragments = fragments;
             stretch.depth_reads = first_reads.count_ones() as u64;
             stretch.page_misses = 0;
