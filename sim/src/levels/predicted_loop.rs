@@ -33,7 +33,6 @@
 
 use crate::arch::Arch;
 use crate::error::SimError;
-use crate::levels::analytic::Formulas;
 use crate::levels::level::WindowEnd;
 use crate::machines::closed_loop::{ClosedLoop, PipeState};
 use occsim_traces::{Event, QueryResult};
@@ -195,12 +194,13 @@ impl PredictedLoop {
         self.amended.take()
     }
 
-    /// Once the formulas know the last query's followed latency (the fragments after its
+    /// Once the formulas know the last query's `followed` latency (the fragments after its
     /// end token passed, or a pause drained the pipe), the query takes it if the next window
     /// followed its end token at once; the last of a level's per-query latencies (whole
-    /// cycles, rounded up) is then set to it. Called after every item the formulas count.
-    pub(crate) fn settle(&mut self, formulas: &mut Formulas, latencies: &mut [u64]) {
-        if let Some(latency) = formulas.take_followed() {
+    /// cycles, rounded up) is then set to it. Called after every item the formulas count,
+    /// with what they give (`Formulas::take_followed`).
+    pub(crate) fn settle(&mut self, followed: Option<f64>, latencies: &mut [u64]) {
+        if let Some(latency) = followed {
             if let Some(id) = self.following.take() {
                 self.amend_latency(id, latency);
             }
@@ -233,58 +233,33 @@ impl PredictedLoop {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use occsim_traces::depth_layout::DepthRead;
-    use occsim_traces::state::RenderState;
-    use occsim_traces::trace::FragmentStretch;
-    use occsim_traces::{QueryMode, QuerySpec, Rect, TileResult};
+    use occsim_traces::{QueryMode, TileResult};
 
-    /// On the O2 (open loop, every release 0), a brief query of one tile ends on an empty
-    /// pipe: latency 4 + ceil(1 / (1 - 0.234)) = 6 (its record word's port cycle and the
-    /// reserved ones), its end token at 0. The next window's primitive (setup 4) follows at
-    /// once and its 16th fragment, the last the prefetch reads ahead of the records, reads
-    /// a new word: emitted in 4 + 15, asked for and granted in 20, the records from 21 for
-    /// their 2 cycles: latency 23, and the answer at 0 + 23. A `wait` before the primitive
-    /// drains the pipe first: the latency stays 6.
+    /// A query whose end token entered at 0 with a latency of 6, for which the formulas,
+    /// once the fragments after it passed, give 23 (`levels::analytic::o2` works such
+    /// latencies out). The next window's first primitive follows at once (open loop, every
+    /// release 0), so the query takes 23 and its answer comes at 23. A `wait` before that
+    /// primitive drains the pipe first: the latency stays 6.
     fn followed(wait_first: bool) -> (Vec<u64>, u64) {
         let arch = Arch::builtin("o2").unwrap();
         let mut frames = PredictedLoop::new(&arch).unwrap();
-        let mut formulas = Formulas::new(&arch, 640, 480).unwrap();
-        let spec = QuerySpec {
-            id: 1,
-            mode: QueryMode::Brief,
-            buffer_entries: 8,
-            tiles: vec![Rect::new(0, 0, 640, 480)],
-        };
         let result = QueryResult {
             id: 1,
             mode: QueryMode::Brief,
             tiles: vec![TileResult::default()],
             overflowed_buffers: 0,
         };
-        formulas.event(&Event::QueryBegin(spec.clone()), &frames);
-        let end = formulas.end_query(&spec, &result, 0.0, 0.0);
+        let end = WindowEnd {
+            cycles: 0.0,
+            latency: 6.0,
+        };
         frames.end_query(end, &result);
-        let mut latencies = vec![end.latency.ceil() as u64];
-        let mut event = |event: &Event, frames: &mut PredictedLoop| {
-            formulas.before_event(event);
-            frames.settle(&mut formulas, &mut latencies);
-            frames.event(event, || None);
-            formulas.event(event, frames);
-        };
+        let mut latencies = vec![6];
         if wait_first {
-            event(&Event::Wait(1), &mut frames);
+            frames.event(&Event::Wait(1), || None);
         }
-        event(&Event::Primitive, &mut frames);
-        let stretch = FragmentStretch {
-            fragments: 16,
-            depth_reads: 1,
-            page_misses: 0,
-            passed: 0,
-            last_read: DepthRead::PageHit,
-            first_reads: 1 << 15,
-        };
-        formulas.stretch(&stretch, &RenderState::new(640, 480));
-        frames.settle(&mut formulas, &mut latencies);
+        frames.event(&Event::Primitive, || None);
+        frames.settle(Some(23.0), &mut latencies);
         (latencies, frames.answers[&1].0)
     }
 

@@ -959,7 +959,7 @@ impl SampledModel {
                 self.core.check_fragment(fragment)?;
                 self.formulas.fragment(*fragment, &self.core.functional);
                 self.predicted
-                    .settle(&mut self.formulas, &mut self.predicted_latencies);
+                    .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
                 self.window.fragments += 1;
             }
             Event::QueryBegin(spec) => {
@@ -976,7 +976,7 @@ impl SampledModel {
         }
         self.formulas.before_event(event);
         self.predicted
-            .settle(&mut self.formulas, &mut self.predicted_latencies);
+            .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
         let before = self.predicted.pipe_end();
         let formulas = &mut self.formulas;
         let mut cut_cycles = 0.0;
@@ -990,7 +990,7 @@ impl SampledModel {
         }
         self.formulas.idle(self.predicted.take_idle());
         self.predicted
-            .settle(&mut self.formulas, &mut self.predicted_latencies);
+            .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
         self.closed_loop |= event.is_closed_loop_record();
         self.formulas.event(event, &self.predicted);
         if let Some(run) = &mut self.run {
@@ -1036,7 +1036,7 @@ impl SampledModel {
         self.core.check_span(span)?;
         self.formulas.span(span, &self.core.functional);
         self.predicted
-            .settle(&mut self.formulas, &mut self.predicted_latencies);
+            .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
         let len = span.depths.len();
         let starts = self.machine_starts_within(len as u64);
         self.window.fragments += len as u64;
@@ -1096,7 +1096,7 @@ impl SampledModel {
         let state = *self.core.functional.state();
         self.formulas.stretch(stretch, &state);
         self.predicted
-            .settle(&mut self.formulas, &mut self.predicted_latencies);
+            .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
         self.core.count_fragments(stretch.fragments);
         let mut rest = stretch.fragments;
         if let Some(first) = self.machine_starts_within(rest) {
@@ -1252,7 +1252,7 @@ impl SampledModel {
         self.plan()?;
         self.formulas.close_head();
         self.predicted
-            .settle(&mut self.formulas, &mut self.predicted_latencies);
+            .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
         self.close_window(true);
         self.flush_run()?;
         // A class without a sampled window takes every sampled window's calibration.

@@ -246,7 +246,8 @@ impl AnalyticModel {
                 // Check the fragment lies in the viewport before reading its depth.
                 self.core.check_fragment(fragment)?;
                 self.formulas.fragment(*fragment, &self.core.functional);
-                self.frames.settle(&mut self.formulas, &mut self.latencies);
+                self.frames
+                    .settle(self.formulas.take_followed(), &mut self.latencies);
                 self.core.apply_fragment(*fragment);
                 return Ok(());
             }
@@ -255,11 +256,13 @@ impl AnalyticModel {
             _ => {}
         }
         self.formulas.before_event(event);
-        self.frames.settle(&mut self.formulas, &mut self.latencies);
+        self.frames
+            .settle(self.formulas.take_followed(), &mut self.latencies);
         let formulas = &mut self.formulas;
         self.frames.event(event, || formulas.cut());
         self.formulas.idle(self.frames.take_idle());
-        self.frames.settle(&mut self.formulas, &mut self.latencies);
+        self.frames
+            .settle(self.formulas.take_followed(), &mut self.latencies);
         self.formulas.event(event, &self.frames);
         if let Some(result) = self.core.event(event)? {
             let Some(spec) = self.open.take() else {
@@ -281,7 +284,8 @@ impl AnalyticModel {
             IndexItem::Stretch(stretch) => {
                 let state = self.core.functional.state();
                 self.formulas.stretch(stretch, state);
-                self.frames.settle(&mut self.formulas, &mut self.latencies);
+                self.frames
+                    .settle(self.formulas.take_followed(), &mut self.latencies);
                 self.core.count_fragments(stretch.fragments);
                 Ok(())
             }
@@ -293,14 +297,16 @@ impl AnalyticModel {
     pub fn span(&mut self, span: Span) -> Result<(), SimError> {
         self.core.check_span(span)?;
         self.formulas.span(span, &self.core.functional);
-        self.frames.settle(&mut self.formulas, &mut self.latencies);
+        self.frames
+            .settle(self.formulas.take_followed(), &mut self.latencies);
         self.core.apply_span(span);
         Ok(())
     }
 
     pub fn finish(mut self) -> Result<LevelResult, SimError> {
         self.formulas.close_head();
-        self.frames.settle(&mut self.formulas, &mut self.latencies);
+        self.frames
+            .settle(self.formulas.take_followed(), &mut self.latencies);
         let (frame_cycles, total) = self.frames.finish(self.formulas.finish());
         let latencies = std::mem::take(&mut self.latencies);
         let mut result = self.core.finish()?;

@@ -90,8 +90,9 @@
 //! backlog ahead of it ([`OCCU_BOUND_TOKEN_OVERLAP_CYCLES`]).
 //!
 //! With no reserved port cycles (`f` = 0) these are the cycle model's rules summed: on the
-//! small corpus at 4 engines every walk's query takes the machine's latency to the cycle,
-//! and 97% of the demo's and the random triangles' (`tests/fidelity.rs`). With the O2's
+//! small corpus at 4 engines every walk's query but one (of 2,786) takes the machine's
+//! latency to the cycle, and 97% of the demo's and the random triangles'
+//! (`tests/fidelity.rs`). With the O2's
 //! reserved share, which of a query's last reads and record words meet a reserved cycle
 //! depends on the cycle they come in, which no count tells: the machine's latencies for
 //! one prediction spread by a few cycles (13 to 17 on the forest's walk where the
