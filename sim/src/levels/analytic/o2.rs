@@ -113,7 +113,7 @@
 //!
 //! (the read is asked for and granted in `o_k*`, the records from the cycle after). The
 //! formulas follow the fragments after each query's end (`Head`) until `L` have passed,
-//! or the pipe drains (a wait, a clear, a frame's or another query's end, a primitive
+//! or the pipe drains (a wait, a frame's or another query's end, a primitive
 //! released later than the rasterizer is free): the predicted timeline decides whether
 //! the next window followed at once ([`crate::levels::predicted_loop`]). Which fragments
 //! read comes from the stretches' `first_reads` (the window index keeps them for the 64
@@ -542,7 +542,7 @@ impl O2Bottleneck {
     }
 
     /// The last query's records wait for no more reads (`L` fragments followed its end token,
-    /// or the pipe drains: a wait, a clear, a frame's or another query's end, an idle gap).
+    /// or the pipe drains: a wait, a frame's or another query's end, an idle gap).
     pub(super) fn close_head(&mut self) {
         if let Some(head) = self.head.take() {
             self.followed = Some(head.latency());
