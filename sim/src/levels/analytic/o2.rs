@@ -190,8 +190,8 @@ const READ_STALL_CYCLES: f64 = 0.02;
 /// densely and writes nothing: its reads stall only where the display refresh and the host
 /// take the port's cycles, so `ε = 0.085 f` (I 0.04..0.13: 0.02 at the O2's `f` = 0.234, the
 /// writing stretches' `ε`; with `f` = 0 the formulas' latencies equal the cycle model's on
-/// every query of the forest's hierarchical walk, where 0.02 made 10% of them 1 to 9
-/// cycles long).
+/// all but 2 of the 2,581 queries of the forest's hierarchical walk at 4 engines, where 0.02
+/// made 9% of them 1 to 9 cycles long).
 const RESERVED_READ_STALL_CYCLES: f64 = 0.085;
 
 /// Cycles of the end token's path that overlap the backlog when the OccU binds [cycles]:
