@@ -958,8 +958,7 @@ impl SampledModel {
                 // In the viewport before the formulas read its depth.
                 self.core.check_fragment(fragment)?;
                 self.formulas.fragment(*fragment, &self.core.functional);
-                self.predicted
-                    .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
+                self.settle();
                 self.window.fragments += 1;
             }
             Event::QueryBegin(spec) => {
@@ -975,8 +974,7 @@ impl SampledModel {
             _ => {}
         }
         self.formulas.before_event(event);
-        self.predicted
-            .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
+        self.settle();
         let before = self.predicted.pipe_end();
         let formulas = &mut self.formulas;
         let mut cut_cycles = 0.0;
@@ -989,8 +987,7 @@ impl SampledModel {
             self.window.work = Work::of(self.predicted.pipe_end() - before, cut_cycles);
         }
         self.formulas.idle(self.predicted.take_idle());
-        self.predicted
-            .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
+        self.settle();
         self.closed_loop |= event.is_closed_loop_record();
         self.formulas.event(event, &self.predicted);
         if let Some(run) = &mut self.run {
@@ -1035,8 +1032,7 @@ impl SampledModel {
         self.close_ended_window()?;
         self.core.check_span(span)?;
         self.formulas.span(span, &self.core.functional);
-        self.predicted
-            .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
+        self.settle();
         let len = span.depths.len();
         let starts = self.machine_starts_within(len as u64);
         self.window.fragments += len as u64;
@@ -1095,8 +1091,7 @@ impl SampledModel {
         self.close_ended_window().map_err(ReadError::Sink)?;
         let state = *self.core.functional.state();
         self.formulas.stretch(stretch, &state);
-        self.predicted
-            .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
+        self.settle();
         self.core.count_fragments(stretch.fragments);
         let mut rest = stretch.fragments;
         if let Some(first) = self.machine_starts_within(rest) {
@@ -1248,11 +1243,18 @@ impl SampledModel {
         Ok(())
     }
 
+    /// The formulas' followed latency of the last query, if they know it now, to the
+    /// predicted timeline and the predicted latencies ([`PredictedLoop::settle`]).
+    fn settle(&mut self) {
+        let followed = self.formulas.take_followed();
+        self.predicted
+            .settle(followed, &mut self.predicted_latencies);
+    }
+
     pub fn finish(mut self) -> Result<LevelResult, SimError> {
         self.plan()?;
         self.formulas.close_head();
-        self.predicted
-            .settle(self.formulas.take_followed(), &mut self.predicted_latencies);
+        self.settle();
         self.close_window(true);
         self.flush_run()?;
         // A class without a sampled window takes every sampled window's calibration.

@@ -244,8 +244,7 @@ impl AnalyticModel {
                 // Check the fragment lies in the viewport before reading its depth.
                 self.core.check_fragment(fragment)?;
                 self.formulas.fragment(*fragment, &self.core.functional);
-                self.frames
-                    .settle(self.formulas.take_followed(), &mut self.latencies);
+                self.settle();
                 self.core.apply_fragment(*fragment);
                 return Ok(());
             }
@@ -254,13 +253,11 @@ impl AnalyticModel {
             _ => {}
         }
         self.formulas.before_event(event);
-        self.frames
-            .settle(self.formulas.take_followed(), &mut self.latencies);
+        self.settle();
         let formulas = &mut self.formulas;
         self.frames.event(event, || formulas.cut());
         self.formulas.idle(self.frames.take_idle());
-        self.frames
-            .settle(self.formulas.take_followed(), &mut self.latencies);
+        self.settle();
         self.formulas.event(event, &self.frames);
         if let Some(result) = self.core.event(event)? {
             let Some(spec) = self.open.take() else {
@@ -282,8 +279,7 @@ impl AnalyticModel {
             IndexItem::Stretch(stretch) => {
                 let state = self.core.functional.state();
                 self.formulas.stretch(stretch, state);
-                self.frames
-                    .settle(self.formulas.take_followed(), &mut self.latencies);
+                self.settle();
                 self.core.count_fragments(stretch.fragments);
                 Ok(())
             }
@@ -295,16 +291,21 @@ impl AnalyticModel {
     pub fn span(&mut self, span: Span) -> Result<(), SimError> {
         self.core.check_span(span)?;
         self.formulas.span(span, &self.core.functional);
-        self.frames
-            .settle(self.formulas.take_followed(), &mut self.latencies);
+        self.settle();
         self.core.apply_span(span);
         Ok(())
     }
 
+    /// The formulas' followed latency of the last query, if they know it now, to the
+    /// predicted timeline and the queries' latencies ([`PredictedLoop::settle`]).
+    fn settle(&mut self) {
+        let followed = self.formulas.take_followed();
+        self.frames.settle(followed, &mut self.latencies);
+    }
+
     pub fn finish(mut self) -> Result<LevelResult, SimError> {
         self.formulas.close_head();
-        self.frames
-            .settle(self.formulas.take_followed(), &mut self.latencies);
+        self.settle();
         let (frame_cycles, total) = self.frames.finish(self.formulas.finish());
         let latencies = std::mem::take(&mut self.latencies);
         let mut result = self.core.finish()?;
