@@ -23,7 +23,7 @@ use crate::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::levels::analytic::AnalyticModel;
 use crate::levels::sampled::{
-    feed_window_sizes, SampledModel, WindowScout, WindowSize, WindowSizes, TAIL_FRAGMENTS,
+    feed_window_sizes, tail_fragments, SampledModel, WindowScout, WindowSize, WindowSizes,
     WARM_UP_FRAGMENTS,
 };
 use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
@@ -53,9 +53,9 @@ pub struct ReplayOptions {
     /// warm-up ([`crate::levels::sampled::WARM_UP_FRAGMENTS`] by default).
     pub warm_up_fragments: u64,
     /// At the sampled level, the fragments at the end of a long sampled window its machine
-    /// simulates ([`crate::levels::sampled::TAIL_FRAGMENTS`] by default; `u64::MAX`: every
-    /// sampled window whole).
-    pub tail_fragments: u64,
+    /// simulates (None: the machine's own, [`crate::levels::sampled::tail_fragments`];
+    /// `Some(u64::MAX)`: every sampled window whole).
+    pub tail_fragments: Option<u64>,
 }
 
 impl ReplayOptions {
@@ -69,7 +69,7 @@ impl ReplayOptions {
             timeline: None,
             window_index: true,
             warm_up_fragments: WARM_UP_FRAGMENTS,
-            tail_fragments: TAIL_FRAGMENTS,
+            tail_fragments: None,
         }
     }
 
@@ -85,7 +85,7 @@ impl ReplayOptions {
             timeline: None,
             window_index: true,
             warm_up_fragments: WARM_UP_FRAGMENTS,
-            tail_fragments: TAIL_FRAGMENTS,
+            tail_fragments: None,
         }
     }
 }
@@ -170,6 +170,9 @@ pub fn replay<R: Read>(
             .map_err(model_error);
     }
     if let Fidelity::Sampled { every } = options.level {
+        let tail = options
+            .tail_fragments
+            .unwrap_or_else(|| tail_fragments(arch.machine()));
         if options.window_index
             && options.retile.is_none()
             && reader.has_depth_tests()
@@ -178,7 +181,7 @@ pub fn replay<R: Read>(
         {
             let mut model = SampledModel::from_window_index(arch, width, height, effects, every)
                 .map_err(ReplayError::Setup)?
-                .with_window_sizes(options.warm_up_fragments, options.tail_fragments);
+                .with_window_sizes(options.warm_up_fragments, tail);
             let mut fragments = TestedFragments::new(open()?)?;
             let mut sizes = ScoutedSizes::new(open()?);
             while let Some(item) = reader.next_index_item()? {
@@ -196,7 +199,7 @@ pub fn replay<R: Read>(
         }
         let model = SampledModel::new(arch, width, height, effects, every)
             .map_err(ReplayError::Setup)?
-            .with_window_sizes(options.warm_up_fragments, options.tail_fragments);
+            .with_window_sizes(options.warm_up_fragments, tail);
         let sink = Scouted {
             model: Box::new(model),
             sizes: ScoutedSizes::new(open()?),

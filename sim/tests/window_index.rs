@@ -4,7 +4,7 @@
 //! InfiniteReality-like machine, a retiling) the fragments are read.
 
 use occsim_sim::effects::EffectsChoice;
-use occsim_sim::levels::sampled::{TAIL_FRAGMENTS, WARM_UP_FRAGMENTS};
+use occsim_sim::levels::sampled::{tail_fragments, WARM_UP_FRAGMENTS};
 use occsim_sim::levels::{run_level, Fidelity, LevelResult};
 use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::Arch;
@@ -180,7 +180,7 @@ fn sampled_warm(
         arch,
         every,
         window_index,
-        (warm_up_fragments, TAIL_FRAGMENTS),
+        (warm_up_fragments, tail_fragments(arch.machine())),
     )
 }
 
@@ -190,12 +190,12 @@ fn sampled_tails(
     arch: &Arch,
     every: u32,
     window_index: bool,
-    (warm_up_fragments, tail_fragments): (u64, u64),
+    (warm_up_fragments, tail): (u64, u64),
 ) -> LevelResult {
     let options = ReplayOptions {
         window_index,
         warm_up_fragments,
-        tail_fragments,
+        tail_fragments: Some(tail),
         ..ReplayOptions::at(Fidelity::Sampled { every })
     };
     replay(|| Ok(TraceReader::new(trace)?), arch, options).unwrap()
@@ -327,11 +327,11 @@ fn the_sampled_level_reads_fragments_where_the_index_cannot_serve() {
 
 #[test]
 fn windows_simulated_over_their_tails_keep_the_sampled_level_within_its_bounds() {
-    // These traces' windows are too short for the default tail of 65,536 fragments (as are
-    // the small corpus's, which the bounds test runs); with tails of 2,048 after the
-    // default warm-up, the demo's long windows are cut (6 at K = 3, 2 at K = 10), and the
-    // sampled level's cycles stay within the 1% the issue asks of it against the cycle
-    // level (sampled:1, tested equal to cycle): measured 0.08% at worst. (A warm-up of 512
+    // These traces are small (as are the small corpus's, which the bounds test runs); with
+    // tails of 2,048 after the default warm-up, the demo's long windows are cut (6 at
+    // K = 3, 2 at K = 10), and the sampled level's cycles stay within the 1% the issue
+    // asks of it against the cycle level (sampled:1, tested equal to cycle): measured
+    // 0.08% at worst. (A warm-up of 512
     // fragments put them 2-9% off, cut or not: the warm-up, not the tail, is what the
     // machine's start needs.)
     let arch = o2_with(&[]);

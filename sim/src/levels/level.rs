@@ -128,7 +128,7 @@ impl QueryOutcome {
 pub struct SampledWindows {
     pub simulated: u64,
     /// Of the simulated windows, those simulated over their last fragments alone, their
-    /// heads extrapolated ([`crate::levels::sampled::TAIL_FRAGMENTS`]).
+    /// heads extrapolated ([`crate::levels::sampled::tail_fragments`]).
     pub tails: u64,
     pub total: u64,
 }

@@ -224,8 +224,10 @@ pub fn run_level(
     };
     if let Fidelity::Sampled { every } = level {
         // Its window sizes found ahead, as a replay finds them.
-        let mut model = SampledModel::new(arch, width, height, effects, every)?
-            .with_window_sizes(sampled::WARM_UP_FRAGMENTS, sampled::TAIL_FRAGMENTS);
+        let mut model = SampledModel::new(arch, width, height, effects, every)?.with_window_sizes(
+            sampled::WARM_UP_FRAGMENTS,
+            sampled::tail_fragments(arch.machine()),
+        );
         let mut sizes = SliceSizes {
             events: events.iter(),
             scout: WindowScout::default(),

@@ -28,10 +28,12 @@
 //!   keeps running while the next window is sampled or warm-up too, and is dropped at the
 //!   first window that is neither. For K = 1 one machine runs the whole stream, and for
 //!   K = 2 too unless a window is cut (below).
-//! - Tails: a sampled window longer than its warm-up and [`TAIL_FRAGMENTS`] (its size known,
-//!   and not the last) is simulated over its tail alone. Its *head* ends at the first event
-//!   other than a fragment after all but `TAIL_FRAGMENTS` of its fragments (where the
-//!   formulas can be read: a stretch of the index is never split), and is extrapolated as
+//! - Tails: a sampled window longer than its warm-up and its machine's tail
+//!   ([`tail_fragments`]: 16,384 fragments on the O2, 65,536 on the InfiniteReality-like
+//!   machine; its size known, and not the last) is simulated over its tail alone. Its
+//!   *head* ends at the first event other than a fragment after all but the tail's
+//!   fragments (where the formulas can be read: a stretch of the index is never split),
+//!   and is extrapolated as
 //!   an unsampled window, its work the formulas' prediction for the window so far. The
 //!   machine starts [`WARM_UP_FRAGMENTS`] before the cut (at a clear among them, or fewer
 //!   than that many before them, as a warm-up would) and its cost is measured from the
@@ -169,25 +171,50 @@ impl Window {
 pub const WARM_UP_FRAGMENTS: u64 = 16_384;
 
 /// Fragments at the end of a long sampled window that its machine simulates (after its
-/// warm-up); the window's head before them is extrapolated as an unsampled window would
-/// be: I, plausible 16,384..262,144. Windows are as long as their queries make them (the
-/// demo's run from 2 to 709,000 fragments, half of its fragments in windows over 150,000),
-/// so sampling every K-th window whole simulated about a K-th of the fragments however
-/// large K; a fixed-size unit is what makes sampling cheap (SMARTS measures units of
-/// 1,000 instructions). The tail keeps what the window's cost and its query's latency
-/// depend on beyond the formulas: the pipe's state at its end. A head is cut only where
-/// the formulas can be (at the first event other than a fragment once all but this many
-/// have passed), so the tail may be shorter: 65,088 to 65,440 fragments on a lazy-grid
-/// walk of the city at 1280x1024, whose primitives are events.
-pub const TAIL_FRAGMENTS: u64 = 65_536;
+/// warm-up), on the O2-like machine; the window's head before them is extrapolated as an
+/// unsampled window would be ([`tail_fragments`]): I, plausible 8,192..65,536. Windows are
+/// as long as their queries make them (the demo's run from 2 to 709,000 fragments, half of
+/// its fragments in windows over 150,000), so sampling every K-th window whole simulated
+/// about a K-th of the fragments however large K; a fixed-size unit is what makes sampling
+/// cheap (SMARTS measures units of 1,000 instructions). The tail keeps what the window's
+/// cost and its query's latency depend on beyond the formulas: the pipe's state at its end,
+/// which on the O2 is its FIFOs' and the port's tens of cycles. Measured with `occsim
+/// fidelity --corpus --machines o2 --no-rtl`, full and small: every class's cycles and p95
+/// latency errors at sampled:10 the same with this tail as with 65,536 (cycles within
+/// 0.05%), and a sampled:10 replay of the demo from its file 1.2-1.7x sooner (of the
+/// lazy-grid walk 1.5x).
+pub const O2_TAIL_FRAGMENTS: u64 = 16_384;
+
+/// Fragments at the end of a long sampled window that its machine simulates on the
+/// InfiniteReality-like machine ([`tail_fragments`]): I, plausible 32,768..262,144. An Image
+/// Engine's queue holds thousands of cycles of work when its Occlusion Unit binds (hundreds
+/// of cycles a fragment on a lazy-grid walk at one engine), and a head extrapolated by the
+/// formulas carries their error there: with tails of 16,384 the full corpus's grid walks
+/// at one engine came out 1.1-2.5% long at sampled:10 (within 0.3% with this one). A head
+/// is cut only where the formulas can be (at the first event other than a fragment once
+/// all but this many have passed), so the tail may be shorter: 65,088 to 65,440 fragments
+/// on a lazy-grid walk of the city at 1280x1024, whose primitives are events.
+pub const IR_TAIL_FRAGMENTS: u64 = 65_536;
+
+/// The fragments at the end of a long sampled window that `machine`'s model simulates: its
+/// tail ([`O2_TAIL_FRAGMENTS`], [`IR_TAIL_FRAGMENTS`]).
+pub fn tail_fragments(machine: Machine) -> u64 {
+    match machine {
+        Machine::O2 => O2_TAIL_FRAGMENTS,
+        Machine::Ir => IR_TAIL_FRAGMENTS,
+    }
+}
 
 /// Fragments from which a sampled window (or a tail) measures a rate its class keeps past
-/// it ([`Calibration::of_pipe`]): half a tail, since a tail is cut where the formulas can
-/// be read, most often a few fragments short of [`TAIL_FRAGMENTS`]. I, plausible 16,384 to
-/// 65,536: the error a window's start and end make is tens of cycles on the O2 and up to a
-/// few thousand on the InfiniteReality-like machine (an Image Engine's queue at hundreds of
-/// cycles a fragment), a percent or less of the cycles this many fragments take.
-pub const LONG_WINDOW_FRAGMENTS: u64 = TAIL_FRAGMENTS / 2;
+/// it ([`Calibration::of_pipe`]): half the InfiniteReality-like machine's tail, since a tail
+/// is cut where the formulas can be read, most often a few fragments short of it. I,
+/// plausible 16,384 to 65,536: the error a window's start and end make is tens of cycles on
+/// the O2 and up to a few thousand on the InfiniteReality-like machine (an Image Engine's
+/// queue at hundreds of cycles a fragment), a percent or less of the cycles this many
+/// fragments take. The O2's tails are shorter and measure no rate of their own: past the
+/// largest sampled window of a class the formulas' slope carries on there (the corpus
+/// figures of [`O2_TAIL_FRAGMENTS`] are with this).
+pub const LONG_WINDOW_FRAGMENTS: u64 = IR_TAIL_FRAGMENTS / 2;
 
 /// What the scout tells of a window ahead.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
