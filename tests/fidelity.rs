@@ -541,18 +541,25 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // read to drain only what the rasterizer's later setups leave of it: the 1x1 and 4x4
     // demos' analytic p95 15.8% -> 5.91%; raised for their sampled:10 p95, 2.96% -> 5.26%,
     // one cycle of the 1x1 demo's 19 on o2, where the regression on 13 sampled queries
-    // lands one cycle above the analytic level's own (now exact) p95.
+    // lands one cycle above the analytic level's own (now exact) p95. (j) changed when the
+    // O2 formulas' port began to run on its own clock from the fragments' emission (a lag
+    // already built is slack for a stretch's reads; they had been counted again behind it)
+    // and a read-bound fragment to leave the FIFO at the end of its pace: lowered on the
+    // walks (hierarchical 36.8% -> 26.3%, adaptive 30.0% -> 20.0%), raised for the 1x1/4x4
+    // demos' analytic p95, 5.91% -> 10.53% (21 cycles against 19 for the 1x1 demo at 4
+    // engines on o2). At the full scale on o2 at 1, 4 and 16 engines the same change took
+    // that class from 16.0% to 8.0% and every class within 9.5%.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
         ("demo",              0.05,  0.10,  0.01,  0.05),  // every target but sampled p95 4.17% (g)
-        ("retiled-1x1-4x4",   0.05,  0.10,  0.01,  0.064), // every target but sampled p95 5.26% (h)
+        ("retiled-1x1-4x4",   0.05,  0.11,  0.01,  0.064), // p95 10.53% (j), sampled p95 5.26% (h)
         ("retiled-32x32",     0.05,  0.10,  0.01,  0.03),  // every target
         ("hardcases",         0.05,  0.10,  0.01,  0.03),  // every target (sampled 0.27%)
         ("random",            0.05,  0.10,  0.01,  0.03),  // every target (f)
         ("walk-frustum",      0.05,  0.10,  0.01,  0.03),  // every target
-        ("walk-hierarchical", 0.05,  0.45,  0.01,  0.45),  // p95 36.8%, sampled p95 36.8% (g)
+        ("walk-hierarchical", 0.05,  0.27,  0.01,  0.45),  // p95 26.3% (j), sampled p95 36.8% (g)
         ("walk-quadtree",     0.05,  0.10,  0.01,  0.03),  // every target (e)
-        ("walk-adaptive",     0.05,  0.36,  0.01,  0.36),  // p95 30.0%, sampled p95 30.0% (g)
+        ("walk-adaptive",     0.05,  0.21,  0.01,  0.36),  // p95 20.0% (j), sampled p95 30.0% (g)
         ("walk-grids",        0.05,  0.10,  0.01,  0.03),  // every target (g)
     ];
     let error = |class: &str, level: &str, metric: &str| -> f64 {
