@@ -23,7 +23,7 @@
 //! port     = (R + max(ceil((W · depth_bits + (K + B) · colour_bits) / V), min(max(W, K), R)))
 //!            / (1 - f)
 //! prefetch = R · (λ̄ + 1) / L          (Little's law: L reads in flight, each λ̄ + 1 cycles)
-//! down     = max(depth, occu, port, prefetch),   pace = down / F
+//! down     = max(depth, occu, prefetch)          (the port runs on its own clock, below)
 //! ```
 //!
 //! The fluid: the rasterizer's clock `g` and the cycle `d` the blocks behind it are through
@@ -31,8 +31,8 @@
 //! `primitive_setup_cycles`) from `start = max(g, r) + setup · P` (`r`: its release by
 //! the host and geometry, from the window's start), its fragments are emitted one a
 //! cycle to `start + F`, and the blocks behind take them from `b = max(d, start)`, fragment
-//! `j` in `b + j · pace`, so `d = max(b + max(depth, occu, prefetch), p + λ_hit, start +
-//! F)`. The port runs on a clock of its own, `p = max(p, start) + port`: the prefetch asks
+//! `j` in `b + j · pace` with `pace = (max(b + down, p + λ_hit) - b) / F`, so `d = max(b +
+//! down, p + λ_hit, start + F)`. The port runs on a clock of its own, `p = max(p, start) + port`: the prefetch asks
 //! for a fragment's read as the fragment is emitted, so the port works through a stretch's
 //! reads while the depth test still works through the backlog before it, and a lag already
 //! built is slack for them; the last read's data comes `λ_hit` (the page hit latency)
@@ -200,10 +200,8 @@ pub struct StretchCounts {
 /// How long a stretch's work takes the blocks behind the rasterizer.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Downstream {
-    /// `max(depth, occu, port, prefetch)`, in cycles.
-    pub cycles: f64,
-    /// `max(depth, occu, prefetch)`: the blocks the depth test passes fragments through,
-    /// its read port aside (the port runs on its own clock: see the module docs).
+    /// `max(depth, occu, prefetch)`, in cycles: the blocks the depth test passes fragments
+    /// through, its port aside (the port runs on its own clock: see the module docs).
     pub off_port: f64,
     /// The port's cycles.
     pub port: f64,
@@ -313,7 +311,6 @@ impl O2Formulas {
             reads * (mean_latency + 1.0) / self.lookahead()
         };
         let off_port = depth.max(occu).max(prefetch);
-        let cycles = off_port.max(port);
         let behind_depth = occu > depth.max(port).max(prefetch);
         let queued = a.fifo_raster_to_depth_entries
             + if behind_depth {
@@ -322,7 +319,6 @@ impl O2Formulas {
                 0
             };
         Downstream {
-            cycles,
             off_port,
             port,
             queued: queued as f64,
