@@ -33,8 +33,8 @@
 //!   machine; its size known, and not the last) is simulated over its tail alone. Its
 //!   *head* ends at the first event other than a fragment after all but the tail's
 //!   fragments (where the formulas can be read: a stretch of the index is never split),
-//!   and is extrapolated as
-//!   an unsampled window, its work the formulas' prediction for the window so far. The
+//!   and is extrapolated as an unsampled window, its work the formulas' prediction for the
+//!   window so far. The
 //!   machine starts [`WARM_UP_FRAGMENTS`] before the cut (at a clear among them, or fewer
 //!   than that many before them, as a warm-up would) and its cost is measured from the
 //!   cycle its next event would have entered the pipe at the cut
@@ -181,8 +181,8 @@ pub const WARM_UP_FRAGMENTS: u64 = 16_384;
 /// which on the O2 is its FIFOs' and the port's tens of cycles. Measured with `occsim
 /// fidelity --corpus --machines o2 --no-rtl`, full and small: every class's cycles and p95
 /// latency errors at sampled:10 the same with this tail as with 65,536 (cycles within
-/// 0.05%), and a sampled:10 replay of the demo from its file 1.2-1.7x sooner (of the
-/// lazy-grid walk 1.5x).
+/// 0.05%), and a sampled:10 replay of the demo and of the lazy-grid walk from their files
+/// 1.2-2.0x sooner (single runs on a shared machine, whole process).
 pub const O2_TAIL_FRAGMENTS: u64 = 16_384;
 
 /// Fragments at the end of a long sampled window that its machine simulates on the

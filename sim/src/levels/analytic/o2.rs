@@ -32,14 +32,14 @@
 //! the host and geometry, from the window's start), its fragments are emitted one a
 //! cycle to `start + F`, and the blocks behind take them from `b = max(d, start)`, fragment
 //! `j` in `b + j · pace` with `pace = (max(b + down, p + λ_hit) - b) / F`, so `d = max(b +
-//! down, p + λ_hit, start + F)`. The port runs on a clock of its own, `p = max(p, start) + port`: the prefetch asks
-//! for a fragment's read as the fragment is emitted, so the port works through a stretch's
-//! reads while the depth test still works through the backlog before it, and a lag already
-//! built is slack for them; the last read's data comes `λ_hit` (the page hit latency)
-//! after the port is through them. The
-//! rasterizer emits fragment `k` only when fragment `k - Q` has left the FIFO (`Q` = `C1`,
-//! the FIFO before the depth test, and `+ C2`, the one after it, when the OccU binds): `g =
-//! max(start + F, the cycle fragment k_last - Q leaves)`, looked up in the recent stretches.
+//! down, p + λ_hit, start + F)`. The port runs on a clock of its own, `p = max(p, start) +
+//! port`: the prefetch asks for a fragment's read as the fragment is emitted, so the port
+//! works through a stretch's reads while the depth test still works through the backlog
+//! before it, and a lag already built is slack for them; the last read's data comes
+//! `λ_hit` (the page hit latency) after the port is through them. The rasterizer emits
+//! fragment `k` only when fragment `k - Q` has left the FIFO (`Q` = `C1`, the FIFO before
+//! the depth test, and `+ C2`, the one after it, when the OccU binds): `g = max(start + F,
+//! the cycle fragment k_last - Q leaves)`, looked up in the recent stretches.
 //! The OccU takes a fragment from its FIFO as it starts on it (`b + j · pace`); the depth
 //! test takes one once its read is in, at the end of its pace (`b + (j + 1) · pace`). A
 //! clear holds the depth test for its `clear_words / (1 - f)` port cycles: `d = max(d, g) +
