@@ -15,7 +15,8 @@
 //! - no IO besides the waveform encoders' `std::io::Write` (and, for [`fst`], `Seek`).
 //!
 //! Blocks, one module each: [`bits`] (fixed-width helpers), [`occlusion_engine`],
-//! [`occu_control`], [`occlusion_unit`] (the top level and its ports); waveforms: [`wave`]
+//! [`occu_control`], [`occlusion_unit`] (the top level and its ports); the model's own
+//! shortcut [`tile_locator`] (not hardware); waveforms: [`wave`]
 //! (the one writer: declarations and change detection) with two encoders, [`vcd`] and [`fst`].
 
 #![deny(clippy::float_arithmetic)]
@@ -26,6 +27,7 @@ pub mod fst;
 pub mod occlusion_engine;
 pub mod occlusion_unit;
 pub mod occu_control;
+pub mod tile_locator;
 pub mod vcd;
 pub mod wave;
 

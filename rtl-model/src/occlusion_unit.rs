@@ -27,6 +27,7 @@ use crate::occlusion_engine::{
     EngineWires, FragmentWires, OcclusionEngine, TileSlot, HIT_COUNT_BITS,
 };
 use crate::occu_control::{ControlWires, OccuControl, RecordBank, Word};
+use crate::tile_locator::TileLocator;
 
 /// Largest engine count and tile count the registers are sized for.
 pub const MAX_ENGINES: u32 = 1024;
@@ -153,6 +154,9 @@ pub struct OccuRtl {
     /// `0..holding`, so the others test nothing, queue no word and latch nothing, and eval
     /// and latch visit only these (a shortcut of the model, not hardware, like `loads`).
     holding: usize,
+    /// Which tiles may hold a pixel, for [`Self::quiet_cycles`] (a shortcut of the model,
+    /// not hardware: no register or wire depends on it).
+    locator: TileLocator,
     /// The partial-report port: the tile slots (query order) of the last end token, with
     /// [`ResultPath::PartialReport`], until the merge network takes them.
     partial_report: Vec<TileSlot>,
@@ -187,6 +191,7 @@ impl OccuRtl {
             query_open: false,
             service: 1,
             holding: 0,
+            locator: TileLocator::default(),
             partial_report: Vec::new(),
             wires: Wires::default(),
             busy_cycles: 0,
@@ -225,6 +230,12 @@ impl OccuRtl {
         }
         self.service = service;
         self.holding = self.engines.len().min(tiles.len());
+        // Only a multi-step search gains from the locator (one step is the accept cycle).
+        if service > 1 {
+            self.locator.build(&tiles);
+        } else {
+            self.locator.clear();
+        }
         debug_assert!(self.engines[self.holding..]
             .iter()
             .all(|e| e.tile_count() == 0));
@@ -261,6 +272,7 @@ impl OccuRtl {
         self.query_open = false;
         self.service = 1;
         self.holding = 0;
+        self.locator.clear();
         true
     }
 
@@ -306,7 +318,9 @@ impl OccuRtl {
     fn missing_test_steps(&self, limit: u64) -> u64 {
         let before_done = self.service - 1;
         let mut end = (self.step as u64 + limit).min(before_done as u64) as u32;
-        if self.query_open {
+        if self.query_open && self.locator.is_built() {
+            end = self.first_located_holding_step(self.step..end);
+        } else if self.query_open {
             // Each engine searches only up to the earliest hit found so far.
             let all = self.params.all_tiles_one_cycle;
             for engine in &self.engines[..self.holding] {
@@ -314,6 +328,25 @@ impl OccuRtl {
             }
         }
         end.saturating_sub(self.step) as u64
+    }
+
+    /// The first of `steps` in which an engine's comparators hold the fragment (`steps.end`
+    /// if none), by the locator's candidates: tile `t` is engine `t mod E`'s slot `t / E`,
+    /// tested at step `t / E`, so the first holding tile from `steps.start * E` on gives
+    /// the first holding step. Equals every engine's [`OcclusionEngine::first_holding_step`]
+    /// (one step a slot).
+    fn first_located_holding_step(&self, steps: std::ops::Range<u32>) -> u32 {
+        let engines = self.params.engines as u64;
+        let f = self.fragment;
+        let from = steps.start as u64 * engines;
+        let until = steps.end as u64 * engines;
+        for t in self.locator.candidates(f.x, f.y, from, until) {
+            let slot = &self.engines[(t % engines) as usize].slots[(t / engines) as usize];
+            if slot.contains(f.x, f.y) {
+                return (t / engines) as u32;
+            }
+        }
+        steps.end
     }
 
     /// Jump over `n` cycles [`Self::quiet_cycles`] found quiet: the tile step advances as
@@ -686,16 +719,39 @@ mod tests {
         }
     }
 
-    /// Overlapping tiles, some empty, over a 16 by 16 corner the fragments fall around.
+    /// Overlapping tiles, some empty, over a 16 by 16 corner the fragments fall around; or,
+    /// one query in four, a grid of 2 by 3 cells over it with a tile that wraps past 2^32
+    /// among them (where the tile locator serves the quiet-cycle search).
     fn random_query(rng: &mut Rng) -> QueryConfig {
-        let tiles = (0..1 + rng.below(24))
-            .map(|_| TileRect {
-                x: rng.below(16) as u32,
+        let tiles = if rng.below(4) == 0 {
+            let mut cells: Vec<TileRect> = (0..6)
+                .flat_map(|row| {
+                    (0..8).map(move |column| TileRect {
+                        x: column * 2,
+                        y: row * 3,
+                        width: 2,
+                        height: 3,
+                    })
+                })
+                .collect();
+            let wrapping = TileRect {
+                x: u32::MAX - 1,
                 y: rng.below(16) as u32,
-                width: rng.below(9) as u32,
-                height: rng.below(9) as u32,
-            })
-            .collect();
+                width: 4,
+                height: 2,
+            };
+            cells.insert(rng.below(cells.len() as u64) as usize, wrapping);
+            cells
+        } else {
+            (0..1 + rng.below(24))
+                .map(|_| TileRect {
+                    x: rng.below(16) as u32,
+                    y: rng.below(16) as u32,
+                    width: rng.below(9) as u32,
+                    height: rng.below(9) as u32,
+                })
+                .collect()
+        };
         QueryConfig {
             tiles,
             verbose: rng.below(2) == 0,
