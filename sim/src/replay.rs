@@ -162,9 +162,9 @@ pub fn replay<R: Read>(
     {
         let mut model =
             AnalyticModel::from_window_index(arch, width, height).map_err(ReplayError::Setup)?;
-        while let Some(item) = reader.next_index_item()? {
-            model.index_item(&item).map_err(model_error)?;
-        }
+        reader
+            .for_each_index_item(|item| model.index_item(item))
+            .map_err(|e| read_error(e, model_error))?;
         return LevelModel::Analytic(Box::new(model))
             .finish(arch)
             .map_err(model_error);
@@ -188,10 +188,7 @@ pub fn replay<R: Read>(
                 feed_window_sizes(&mut model, &mut sizes).map_err(model_error)?;
                 model
                     .index_item(&item, &mut fragments)
-                    .map_err(|e| match e {
-                        ReadError::Trace(e) => ReplayError::Read(e),
-                        ReadError::Sink(e) => model_error(e),
-                    })?;
+                    .map_err(|e| read_error(e, model_error))?;
             }
             return LevelModel::Sampled(Box::new(model))
                 .finish(arch)
@@ -311,11 +308,22 @@ fn feed<R: Read, S: EventSink<Error = SimError>>(
     mut sink: S,
     model_error: impl Fn(SimError) -> ReplayError,
 ) -> Result<S, ReplayError> {
-    while reader.next_block(&mut sink).map_err(|e| match e {
+    while reader
+        .next_block(&mut sink)
+        .map_err(|e| read_error(e, &model_error))?
+    {}
+    Ok(sink)
+}
+
+/// A reading's error as the replay's: the trace's, or the model's (worded by `model_error`).
+fn read_error(
+    error: ReadError<SimError>,
+    model_error: impl Fn(SimError) -> ReplayError,
+) -> ReplayError {
+    match error {
         ReadError::Trace(e) => ReplayError::Read(e),
         ReadError::Sink(e) => model_error(e),
-    })? {}
-    Ok(sink)
+    }
 }
 
 /// The effect models `level` builds for the trace: at the levels that build effects

@@ -258,13 +258,59 @@ mod tests {
         bytes
     }
 
+    /// The trace's index items, read one call at a time; read too by a visitor
+    /// ([`TraceReader::for_each_index_item`]), which must give the same items or the same
+    /// error.
     fn index_of(bytes: &[u8]) -> Result<Vec<IndexItem>, TraceError> {
-        let mut reader = TraceReader::new(bytes)?;
-        let mut items = Vec::new();
-        while let Some(item) = reader.next_index_item()? {
-            items.push(item);
+        let one_by_one = TraceReader::new(bytes).and_then(|mut reader| {
+            let mut items = Vec::new();
+            while let Some(item) = reader.next_index_item()? {
+                items.push(item);
+            }
+            Ok(items)
+        });
+        let visited = TraceReader::new(bytes).and_then(|mut reader| {
+            let mut items = Vec::new();
+            reader
+                .for_each_index_item(|item| {
+                    items.push(item.clone());
+                    Ok::<(), std::convert::Infallible>(())
+                })
+                .map_err(crate::trace::ReadError::into_trace)?;
+            Ok(items)
+        });
+        match (&one_by_one, &visited) {
+            (Ok(a), Ok(b)) => assert_eq!(a, b),
+            (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
+            _ => panic!("the two readings disagree: {one_by_one:?} against {visited:?}"),
         }
-        Ok(items)
+        one_by_one
+    }
+
+    /// A visitor's error stops the reading at its item and the reader for good.
+    #[test]
+    fn a_visitors_error_stops_the_index_reading() {
+        let (events, _) = worked_example();
+        let bytes = indexed(&events);
+        let mut reader = TraceReader::new(&bytes[..]).unwrap();
+        let mut seen = 0;
+        let stopped = reader.for_each_index_item(|_| {
+            seen += 1;
+            if seen == 3 {
+                Err("enough")
+            } else {
+                Ok(())
+            }
+        });
+        assert!(matches!(
+            stopped,
+            Err(crate::trace::ReadError::Sink("enough"))
+        ));
+        assert_eq!(seen, 3);
+        assert!(
+            reader.next_index_item().unwrap().is_none(),
+            "stopped for good"
+        );
     }
 
     /// A stream and its index worked by hand.
