@@ -498,13 +498,7 @@ impl<R: Read> TraceReader<R> {
                 }
                 continue;
             }
-            let mut ctx = DecodeContext {
-                width: reader.header.width,
-                height: reader.header.height,
-                tally: &mut reader.tally,
-                assembly: &mut reader.assembly,
-                unchecked_events: false,
-            };
+            let mut ctx = checked_context(&reader.header, &mut reader.tally, &mut reader.assembly);
             match decode(&mut reader.decoder, &reader.payload, &mut ctx) {
                 Ok(Some(record)) => return Ok(Some(record)),
                 Ok(None) => reader.end_block()?,
@@ -529,13 +523,7 @@ impl<R: Read> TraceReader<R> {
             if !reader.in_block && !reader.load_block(Wanted::Events)? {
                 return Ok(false);
             }
-            let mut ctx = DecodeContext {
-                width: reader.header.width,
-                height: reader.header.height,
-                tally: &mut reader.tally,
-                assembly: &mut reader.assembly,
-                unchecked_events: false,
-            };
+            let mut ctx = checked_context(&reader.header, &mut reader.tally, &mut reader.assembly);
             match reader.decoder.drain(&reader.payload, &mut ctx, sink) {
                 Ok(()) => {}
                 Err(DrainError::Payload(e)) => return Err(reader.corrupt(e)),
@@ -589,13 +577,7 @@ impl<R: Read> TraceReader<R> {
                 break;
             }
             loop {
-                let mut ctx = DecodeContext {
-                    width: self.header.width,
-                    height: self.header.height,
-                    tally: &mut self.tally,
-                    assembly: &mut self.assembly,
-                    unchecked_events: false,
-                };
+                let mut ctx = checked_context(&self.header, &mut self.tally, &mut self.assembly);
                 match self.decoder.next_index_item(&self.payload, &mut ctx) {
                     Ok(Some(item)) => visit(&item).map_err(|e| {
                         self.failed = true;
@@ -652,6 +634,23 @@ impl<R: Read> TraceReader<R> {
             offset: self.offset,
             reason: "the reader stopped at an earlier error".to_owned(),
         })
+    }
+}
+
+/// The decoding context of a reader that checks every event: the viewport of `header`, the
+/// stream checks in `tally`, a large event's parts in `assembly`. (A field each, so that the
+/// reader's decoder and payload stay free to borrow beside it.)
+fn checked_context<'a>(
+    header: &TraceHeader,
+    tally: &'a mut StreamTally,
+    assembly: &'a mut Vec<u8>,
+) -> DecodeContext<'a> {
+    DecodeContext {
+        width: header.width,
+        height: header.height,
+        tally,
+        assembly,
+        unchecked_events: false,
     }
 }
 
