@@ -155,8 +155,9 @@ pub struct OccuRtl {
     /// and latch visit only these (a shortcut of the model, not hardware, like `loads`).
     holding: usize,
     /// Which tiles may hold a pixel, for [`Self::quiet_cycles`] (a shortcut of the model,
-    /// not hardware: no register or wire depends on it).
+    /// not hardware: no register or wire depends on it), and whether queries build it.
     locator: TileLocator,
+    use_locator: bool,
     /// The partial-report port: the tile slots (query order) of the last end token, with
     /// [`ResultPath::PartialReport`], until the merge network takes them.
     partial_report: Vec<TileSlot>,
@@ -192,6 +193,7 @@ impl OccuRtl {
             service: 1,
             holding: 0,
             locator: TileLocator::default(),
+            use_locator: true,
             partial_report: Vec::new(),
             wires: Wires::default(),
             busy_cycles: 0,
@@ -201,6 +203,13 @@ impl OccuRtl {
 
     pub fn params(&self) -> OccuParams {
         self.params
+    }
+
+    /// Whether the queries loaded from now on build a tile locator for the quiet-cycle
+    /// search (on by default); off, every engine's slots are scanned, as before the
+    /// locator: what the `rtl` benchmark compares. Either way the same cycles are quiet.
+    pub fn set_tile_locator(&mut self, on: bool) {
+        self.use_locator = on;
     }
 
     /// Width of the tile step register in bits.
@@ -231,7 +240,7 @@ impl OccuRtl {
         self.service = service;
         self.holding = self.engines.len().min(tiles.len());
         // Only a multi-step search gains from the locator (one step is the accept cycle).
-        if service > 1 {
+        if service > 1 && self.use_locator {
             self.locator.build(&tiles);
         } else {
             self.locator.clear();

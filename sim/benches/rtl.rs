@@ -6,10 +6,15 @@
 //! frame, three times); then the InfiniteReality-like `ir4` (320 Image Engines, each unit
 //! the RTL) at `cycle` and `rtl`. Prints fragments per second (wall time, the fastest of
 //! five runs, the configurations taking turns: the kernel's per-thread CPU time moves at
-//! scheduler ticks, too coarse for a 40 ms cycle-level run) and the ratios.
+//! scheduler ticks, too coarse for a 40 ms cycle-level run) and the ratios. Last, the
+//! Occlusion Unit's RTL alone on a lazy-grid-like query of 400 tiles, with the tile locator
+//! answering the quiet-cycle search and with every slot scanned (what the locator saves).
 //!
 //! Run: `cargo bench -p occsim-sim --bench rtl`
 
+use occsim_rtl::{
+    CycleInputs, CycleOutputs, FragmentPort, OccuParams, OccuRtl, QueryConfig, ResultPath, TileRect,
+};
 use occsim_sim::{Arch, MachineBuilder, OccuModel, WaveformOptions};
 use occsim_traces::rounds::fastest_of_rounds;
 use occsim_traces::Event;
@@ -143,6 +148,102 @@ fn run(arch: &Arch, frame: &[Event], occu: OccuModel) -> (f64, occsim_sim::Repor
     (report.summary.fragments as f64 / seconds, report)
 }
 
+/// A brief query of a 20 by 20 grid of 32 by 24 cells over the 640x480 viewport (400 tiles, as a
+/// lazy-grid walk's queries hold hundreds), and fragments across the viewport in rows.
+fn grid_query() -> (QueryConfig, Vec<FragmentPort>) {
+    let (columns, rows) = (20, 20);
+    let (cell_width, cell_height) = (WIDTH / columns, HEIGHT / rows);
+    let tiles = (0..rows)
+        .flat_map(|row| {
+            (0..columns).map(move |column| TileRect {
+                x: column * cell_width,
+                y: row * cell_height,
+                width: cell_width,
+                height: cell_height,
+            })
+        })
+        .collect();
+    let fragments = (0..HEIGHT as u16)
+        .step_by(3)
+        .flat_map(|y| {
+            (0..WIDTH as u16).map(move |x| FragmentPort {
+                valid: true,
+                x,
+                y,
+                z: (x as u32 * 7 + y as u32) & 0xFF_FFFF,
+                pass: (x + y) % 4 != 0,
+            })
+        })
+        .collect();
+    let config = QueryConfig {
+        tiles,
+        verbose: false,
+        hit_room: 0,
+    };
+    (config, fragments)
+}
+
+/// The unit's RTL at `engines` engines through `fragments` under `config`, driven as the
+/// bridge drives it (offer a fragment, skip the quiet cycles, tick until it leaves), with the
+/// tile locator on or off; returns the cycle it ends in and its busy cycles.
+fn occu_alone(
+    engines: u32,
+    locator: bool,
+    config: &QueryConfig,
+    fragments: &[FragmentPort],
+) -> (u64, u64) {
+    let mut rtl = OccuRtl::new(OccuParams {
+        engines,
+        counter_bits: 32,
+        write_buffer_words: 16,
+        all_tiles_one_cycle: false,
+        results: ResultPath::Records,
+    });
+    rtl.set_tile_locator(locator);
+    rtl.load_query(config);
+    let mut out = CycleOutputs::default();
+    for &fragment in fragments {
+        rtl.step(
+            &CycleInputs {
+                fragment,
+                grants: 0,
+            },
+            &mut out,
+        );
+        while !out.left {
+            let quiet = rtl.quiet_cycles(1 << 32);
+            if quiet > 0 {
+                rtl.skip_quiet_cycles(quiet);
+            }
+            rtl.step(&CycleInputs::default(), &mut out);
+        }
+    }
+    (rtl.cycle, rtl.busy_cycles)
+}
+
+fn locator_saving() {
+    let (config, fragments) = grid_query();
+    for engines in [1, 4, 16] {
+        let mut jobs = [true, false].map(|locator| {
+            let (config, fragments) = (&config, &fragments);
+            move || occu_alone(engines, locator, config, fragments)
+        });
+        let figures = fastest_of_rounds(REPEATS, 0.2, &mut jobs);
+        assert_eq!(
+            figures[0].output, figures[1].output,
+            "the locator changed a cycle"
+        );
+        let rate = |seconds: f64| fragments.len() as f64 / seconds / 1e6;
+        println!(
+            "OccU RTL alone, 400-tile query, engines {engines:>2}: with the tile locator {:.1} M fragments/s, every slot scanned {:.1} M/s ({:.2}x), {} cycles",
+            rate(figures[0].seconds),
+            rate(figures[1].seconds),
+            figures[1].seconds / figures[0].seconds,
+            figures[0].output.0,
+        );
+    }
+}
+
 fn main() {
     let frame = frame(42);
     stream::announce(&frame, FRAMES);
@@ -217,4 +318,5 @@ fn main() {
         cycle / rtl,
         results[0].1.summary.cycles
     );
+    locator_saving();
 }
