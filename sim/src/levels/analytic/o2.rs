@@ -242,6 +242,12 @@ pub struct O2Formulas {
     arch: O2Arch,
     /// Port words one clear writes (0: a fast clear).
     clear_words: u64,
+    /// `f`, the port's reserved share ([`O2Arch::reserved_port_share`]), and the longest
+    /// run of reserved cycles it makes ([`Self::longest_reserved_run`]): constants of the
+    /// architecture, worked out once instead of at every stretch (each had taken a
+    /// division of the display's bit rate).
+    reserved_share: f64,
+    longest_reserved_run: f64,
 }
 
 impl O2Formulas {
@@ -255,9 +261,12 @@ impl O2Formulas {
         } else {
             0
         };
+        let reserved_share = arch.reserved_port_share();
         O2Formulas {
             arch: arch.clone(),
             clear_words,
+            reserved_share,
+            longest_reserved_run: (reserved_share / (1.0 - reserved_share)).ceil(),
         }
     }
 
@@ -279,7 +288,7 @@ impl O2Formulas {
 
     /// `1 - f`: the port's share left to the pipeline.
     fn free_share(&self) -> f64 {
-        1.0 - self.arch.reserved_port_share()
+        1.0 - self.reserved_share
     }
 
     /// Port cycles for `bits` written.
@@ -344,7 +353,7 @@ impl O2Formulas {
         if writes {
             READ_STALL_CYCLES
         } else if dense {
-            RESERVED_READ_STALL_CYCLES * self.arch.reserved_port_share()
+            RESERVED_READ_STALL_CYCLES * self.reserved_share
         } else {
             0.0
         }
@@ -367,8 +376,7 @@ impl O2Formulas {
     /// them spread evenly, `ceil(f / (1 - f))` (1 at the O2's 0.234; 0 with none). A read
     /// asked for in the first waits that long.
     fn longest_reserved_run(&self) -> f64 {
-        let f = self.arch.reserved_port_share();
-        (f / (1.0 - f)).ceil()
+        self.longest_reserved_run
     }
 
     /// Fragments after a query's end token whose depth reads the port may serve before the
