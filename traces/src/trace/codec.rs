@@ -749,24 +749,55 @@ impl BlockDecoder {
         payload: &[u8],
         ctx: &mut DecodeContext,
     ) -> Result<Option<IndexItem>, PayloadError> {
-        loop {
-            match payload.get(self.pos) {
-                None => return Ok(None),
-                Some(&tag::STRETCH) => {
-                    let mut c = Cursor::new(payload, self.pos + 1);
-                    let stretch = stretch(&mut c)?;
-                    self.pos = c.pos;
-                    self.events += 1;
-                    return Ok(Some(IndexItem::Stretch(stretch)));
-                }
-                Some(&tag::SPAN) => return Err(bad(self.pos, "a span in a window-index block")),
-                Some(_) => {}
-            }
-            match self.record(payload, ctx)? {
-                Record::Event(event) => return Ok(Some(IndexItem::Event(event))),
-                Record::Span | Record::Part => {}
+        while let Some(&t) = payload.get(self.pos) {
+            if let Some(item) = self.index_record(t, payload, ctx)? {
+                return Ok(Some(item));
             }
         }
+        Ok(None)
+    }
+
+    /// The record at the decoder's position, tagged `t`, of a window-index payload: a
+    /// stretch or an event, or None for part of a large event.
+    #[inline(always)]
+    fn index_record(
+        &mut self,
+        t: u8,
+        payload: &[u8],
+        ctx: &mut DecodeContext,
+    ) -> Result<Option<IndexItem>, PayloadError> {
+        match t {
+            tag::STRETCH => {
+                let mut c = Cursor::new(payload, self.pos + 1);
+                let stretch = stretch(&mut c)?;
+                self.pos = c.pos;
+                self.events += 1;
+                Ok(Some(IndexItem::Stretch(stretch)))
+            }
+            tag::SPAN => Err(bad(self.pos, "a span in a window-index block")),
+            _ => Ok(match self.record(payload, ctx)? {
+                Record::Event(event) => Some(IndexItem::Event(event)),
+                Record::Span | Record::Part => None,
+            }),
+        }
+    }
+
+    /// Hand every remaining item of a window-index payload to `visit`, as
+    /// [`Self::next_index_item`] gives them one by one (each borrowed, not returned: no item
+    /// is moved out through the layers of a result). Stops at the payload's first error or
+    /// the visitor's.
+    pub(crate) fn visit_index_items<E>(
+        &mut self,
+        payload: &[u8],
+        ctx: &mut DecodeContext,
+        mut visit: impl FnMut(&IndexItem) -> Result<(), E>,
+    ) -> Result<(), DrainError<E>> {
+        while let Some(&t) = payload.get(self.pos) {
+            if let Some(item) = self.index_record(t, payload, ctx)? {
+                visit(&item).map_err(DrainError::Sink)?;
+            }
+        }
+        Ok(())
     }
 
     /// Hand every remaining event of the payload to `sink`: the fast path. Stops at the

@@ -576,21 +576,19 @@ impl<R: Read> TraceReader<R> {
             if !self.in_block && !self.guarded(|reader| reader.load_block(Wanted::Index))? {
                 break;
             }
-            loop {
-                let mut ctx = checked_context(&self.header, &mut self.tally, &mut self.assembly);
-                match self.decoder.next_index_item(&self.payload, &mut ctx) {
-                    Ok(Some(item)) => visit(&item).map_err(|e| {
-                        self.failed = true;
-                        ReadError::Sink(e)
-                    })?,
-                    Ok(None) => {
-                        self.guarded(|reader| reader.end_block())?;
-                        break;
-                    }
-                    Err(e) => {
-                        self.failed = true;
-                        return Err(ReadError::Trace(self.corrupt(e)));
-                    }
+            let mut ctx = checked_context(&self.header, &mut self.tally, &mut self.assembly);
+            match self
+                .decoder
+                .visit_index_items(&self.payload, &mut ctx, &mut visit)
+            {
+                Ok(()) => self.guarded(|reader| reader.end_block())?,
+                Err(DrainError::Payload(e)) => {
+                    self.failed = true;
+                    return Err(ReadError::Trace(self.corrupt(e)));
+                }
+                Err(DrainError::Sink(e)) => {
+                    self.failed = true;
+                    return Err(ReadError::Sink(e));
                 }
             }
         }
