@@ -309,16 +309,11 @@ impl O2Formulas {
         let write_bits = w.depth_writes * a.depth_bits_per_pixel as u64
             + (w.colour_writes + w.colour_reads) * a.colour_bits_per_pixel as u64;
         let port = (w.depth_reads as f64 + self.write_cycles(w, write_bits)) / self.free_share();
-        let prefetch = if w.depth_reads == 0 {
-            0.0
-        } else {
-            let misses = w.page_misses as f64;
-            let reads = w.depth_reads as f64;
-            let mean_latency = (misses * a.page_miss_latency_cycles as f64
-                + (reads - misses) * a.page_hit_latency_cycles as f64)
-                / reads;
-            reads * (mean_latency + 1.0) / self.lookahead()
-        };
+        // `R (λ̄ + 1) / L`, with `R λ̄` the reads' latencies summed: whole cycles, so one
+        // division (of an exact sum) where the mean's had two.
+        let latencies = w.page_misses * a.page_miss_latency_cycles
+            + (w.depth_reads - w.page_misses) * a.page_hit_latency_cycles;
+        let prefetch = (latencies + w.depth_reads) as f64 / self.lookahead();
         let off_port = depth.max(occu).max(prefetch);
         let behind_depth = occu > depth.max(port).max(prefetch);
         let queued = a.fifo_raster_to_depth_entries
