@@ -560,10 +560,11 @@ impl<R: Read> TraceReader<R> {
     }
 
     /// Hand every remaining item of the window index to `visit`, block by block: what
-    /// [`Self::next_index_item`] gives one call at a time, without an item crossing the
-    /// reader's checks on its way out (the analytic level reads nothing else, and on a
-    /// walk's index of 80,000 items that passing had been a fifth of its run). A visitor's
-    /// error stops the reader, as a trace error does.
+    /// [`Self::next_index_item`] gives one call at a time, each item visited inside the
+    /// block's decoder instead of crossing the reader's per-call checks and two layers of
+    /// results on its way out (the analytic level reads nothing else: on the lazy-grid
+    /// walk's 81,000 items its run went from 7.7 to 5.7 ms, with the formulas' reserved
+    /// share worked out once). A visitor's error stops the reader, as a trace error does.
     pub fn for_each_index_item<E>(
         &mut self,
         mut visit: impl FnMut(&IndexItem) -> Result<(), E>,
