@@ -6,6 +6,7 @@ use crate::golden_check::{first_difference, GoldenCheck};
 use crate::levels::level::{Fidelity, LevelResult, QueryOutcome};
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::{Event, Fragment, QueryMode, QueryResult, Span};
+use std::borrow::Cow;
 
 /// The functional model with the stream checks every level shares: fragments inside the
 /// viewport, well-formed queries, results equal to the golden results stored in the stream,
@@ -145,8 +146,13 @@ impl FunctionalCore {
         Ok(())
     }
 
-    /// Apply one event; returns the result of a query that ended with it.
-    pub fn event(&mut self, event: &Event) -> Result<Option<QueryResult>, SimError> {
+    /// Apply one event; returns the result of a query that ended with it: the stream's
+    /// golden one, borrowed, when the core trusts them (a window index's queries hold
+    /// hundreds of tiles, and cloning each result had cost its replay a few per cent).
+    pub fn event<'e>(
+        &mut self,
+        event: &'e Event,
+    ) -> Result<Option<Cow<'e, QueryResult>>, SimError> {
         let index = self.events;
         match event {
             Event::Fragment(fragment) => {
@@ -186,7 +192,7 @@ impl FunctionalCore {
                 };
                 self.results = ResultSource::Golden { ended_with: None };
                 self.queries.push(QueryOutcome::of(golden, fragments));
-                return Ok(Some(golden.clone()));
+                return Ok(Some(Cow::Borrowed(golden)));
             }
             Event::QueryResult(golden) => {
                 self.events += 1;
@@ -211,7 +217,7 @@ impl FunctionalCore {
                 .push(QueryOutcome::of(result, self.open_fragments));
             self.golden.expect(self.queries.len() - 1, result.clone());
         }
-        Ok(ended)
+        Ok(ended.map(Cow::Owned))
     }
 
     /// The mode of the `index`-th query that ended.
