@@ -184,12 +184,17 @@ pub fn replay<R: Read>(
                 .with_window_sizes(options.warm_up_fragments, tail);
             let mut fragments = TestedFragments::new(open()?)?;
             let mut sizes = ScoutedSizes::new(open()?);
-            while let Some(item) = reader.next_index_item()? {
-                feed_window_sizes(&mut model, &mut sizes).map_err(model_error)?;
-                model
-                    .index_item(&item, &mut fragments)
-                    .map_err(|e| read_error(e, model_error))?;
-            }
+            reader
+                .for_each_index_item(|item| {
+                    feed_window_sizes(&mut model, &mut sizes).map_err(model_error)?;
+                    model
+                        .index_item(item, &mut fragments)
+                        .map_err(|e| read_error(e, model_error))
+                })
+                .map_err(|e| match e {
+                    ReadError::Trace(e) => ReplayError::Read(e),
+                    ReadError::Sink(e) => e,
+                })?;
             return LevelModel::Sampled(Box::new(model))
                 .finish(arch)
                 .map_err(model_error);
