@@ -223,7 +223,7 @@ impl IrWindow {
     }
 
     /// One fragment for Image Engine `engine` of `board`, at the pace set.
-    #[inline]
+    #[inline(always)]
     fn paced_fragment(&mut self, board: usize, engine: usize) {
         self.fragments += 1;
         self.stretch_board_fragments[board] += 1;
