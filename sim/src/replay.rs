@@ -23,8 +23,8 @@ use crate::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::levels::analytic::AnalyticModel;
 use crate::levels::sampled::{
-    feed_window_sizes, tail_fragments, SampledModel, WindowScout, WindowSize, WindowSizes,
-    WARM_UP_FRAGMENTS,
+    feed_window_sizes, tail_fragments, warm_up_fragments, SampledModel, WindowScout, WindowSize,
+    WindowSizes,
 };
 use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use crate::timeline::Timeline;
@@ -50,8 +50,8 @@ pub struct ReplayOptions {
     /// ([`AnalyticModel::reads_window_index`]): the same result, without decoding a fragment.
     pub window_index: bool,
     /// At the sampled level, the fragments before a sampled window its machine runs as a
-    /// warm-up ([`crate::levels::sampled::WARM_UP_FRAGMENTS`] by default).
-    pub warm_up_fragments: u64,
+    /// warm-up (None: the machine's own, [`crate::levels::sampled::warm_up_fragments`]).
+    pub warm_up_fragments: Option<u64>,
     /// At the sampled level, the fragments at the end of a long sampled window its machine
     /// simulates (None: the machine's own, [`crate::levels::sampled::tail_fragments`];
     /// `Some(u64::MAX)`: every sampled window whole).
@@ -68,7 +68,7 @@ impl ReplayOptions {
             waveform: None,
             timeline: None,
             window_index: true,
-            warm_up_fragments: WARM_UP_FRAGMENTS,
+            warm_up_fragments: None,
             tail_fragments: None,
         }
     }
@@ -84,7 +84,7 @@ impl ReplayOptions {
             waveform: None,
             timeline: None,
             window_index: true,
-            warm_up_fragments: WARM_UP_FRAGMENTS,
+            warm_up_fragments: None,
             tail_fragments: None,
         }
     }
@@ -173,6 +173,9 @@ pub fn replay<R: Read>(
         let tail = options
             .tail_fragments
             .unwrap_or_else(|| tail_fragments(arch.machine()));
+        let warm_up = options
+            .warm_up_fragments
+            .unwrap_or_else(|| warm_up_fragments(arch.machine()));
         if options.window_index
             && options.retile.is_none()
             && reader.has_depth_tests()
@@ -181,7 +184,7 @@ pub fn replay<R: Read>(
         {
             let mut model = SampledModel::from_window_index(arch, width, height, effects, every)
                 .map_err(ReplayError::Setup)?
-                .with_window_sizes(options.warm_up_fragments, tail);
+                .with_window_sizes(warm_up, tail);
             let mut fragments = TestedFragments::new(open()?)?;
             let mut sizes = ScoutedSizes::new(open()?);
             reader
@@ -201,7 +204,7 @@ pub fn replay<R: Read>(
         }
         let model = SampledModel::new(arch, width, height, effects, every)
             .map_err(ReplayError::Setup)?
-            .with_window_sizes(options.warm_up_fragments, tail);
+            .with_window_sizes(warm_up, tail);
         let sink = Scouted {
             model: Box::new(model),
             sizes: ScoutedSizes::new(open()?),

@@ -4,7 +4,7 @@
 //! InfiniteReality-like machine, a retiling) the fragments are read.
 
 use occsim_sim::effects::EffectsChoice;
-use occsim_sim::levels::sampled::{tail_fragments, WARM_UP_FRAGMENTS};
+use occsim_sim::levels::sampled::{tail_fragments, warm_up_fragments};
 use occsim_sim::levels::{run_level, Fidelity, LevelResult};
 use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::Arch;
@@ -165,7 +165,13 @@ fn where_the_index_cannot_serve_the_fragments_are_read() {
 }
 
 fn sampled(trace: &[u8], arch: &Arch, every: u32, window_index: bool) -> LevelResult {
-    sampled_warm(trace, arch, every, window_index, WARM_UP_FRAGMENTS)
+    sampled_warm(
+        trace,
+        arch,
+        every,
+        window_index,
+        warm_up_fragments(arch.machine()),
+    )
 }
 
 fn sampled_warm(
@@ -194,7 +200,7 @@ fn sampled_tails(
 ) -> LevelResult {
     let options = ReplayOptions {
         window_index,
-        warm_up_fragments,
+        warm_up_fragments: Some(warm_up_fragments),
         tail_fragments: Some(tail),
         ..ReplayOptions::at(Fidelity::Sampled { every })
     };
@@ -337,7 +343,15 @@ fn windows_simulated_over_their_tails_keep_the_sampled_level_within_its_bounds()
     let arch = o2_with(&[]);
     let mut tails = 0;
     for (name, trace, _, _) in traces() {
-        let tailed = |every| sampled_tails(&trace, &arch, every, true, (WARM_UP_FRAGMENTS, 2048));
+        let tailed = |every| {
+            sampled_tails(
+                &trace,
+                &arch,
+                every,
+                true,
+                (warm_up_fragments(arch.machine()), 2048),
+            )
+        };
         let cycle = tailed(1).total_cycles.unwrap() as f64;
         for every in [3, 10] {
             let cut = tailed(every);

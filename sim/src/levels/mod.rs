@@ -225,7 +225,7 @@ pub fn run_level(
     if let Fidelity::Sampled { every } = level {
         // Its window sizes found ahead, as a replay finds them.
         let mut model = SampledModel::new(arch, width, height, effects, every)?.with_window_sizes(
-            sampled::WARM_UP_FRAGMENTS,
+            sampled::warm_up_fragments(arch.machine()),
             sampled::tail_fragments(arch.machine()),
         );
         let mut sizes = SliceSizes {

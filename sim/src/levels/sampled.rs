@@ -13,8 +13,9 @@
 //!   issues those fragments' depth reads before the query's records reach the in-order port,
 //!   so the query's latency is final only then. The InfiniteReality-like machine's latency
 //!   is final at the query's end: no cool-down.
-//! - Warm-up: the cycle model also runs the [`WARM_UP_FRAGMENTS`] fragments before each
-//!   sampled window and the events among them, over as many windows as that takes (from
+//! - Warm-up: the cycle model also runs the fragments before each
+//!   sampled window and the events among them ([`warm_up_fragments`]: 4,096 on the O2,
+//!   16,384 on the InfiniteReality-like machine), over as many windows as that takes (from
 //!   the first clear among them when there is one: a clear's port time outlasts any such
 //!   count). The windows' sizes come from a second reading of the stream up to K windows
 //!   ahead ([`WindowScout`], [`feed_window_sizes`]: the window index, else the events); a
@@ -29,13 +30,13 @@
 //!   first window that is neither. For K = 1 one machine runs the whole stream, and for
 //!   K = 2 too unless a window is cut (below).
 //! - Tails: a sampled window longer than its warm-up and its machine's tail
-//!   ([`tail_fragments`]: 16,384 fragments on the O2, 65,536 on the InfiniteReality-like
+//!   ([`tail_fragments`]: 8,192 fragments on the O2, 65,536 on the InfiniteReality-like
 //!   machine; its size known, and not the last) is simulated over its tail alone. Its
 //!   *head* ends at the first event other than a fragment after all but the tail's
 //!   fragments (where the formulas can be read: a stretch of the index is never split),
 //!   and is extrapolated as an unsampled window, its work the formulas' prediction for the
 //!   window so far. The
-//!   machine starts [`WARM_UP_FRAGMENTS`] before the cut (at a clear among them, or fewer
+//!   machine starts its warm-up before the cut (at a clear among them, or fewer
 //!   than that many before them, as a warm-up would) and its cost is measured from the
 //!   cycle its next event would have entered the pipe at the cut
 //!   ([`MachineModel::entry_cycle`]); the window's work for calibration is the rest of the
@@ -159,16 +160,37 @@ impl Window {
     }
 }
 
-/// Fragments before a sampled window that a machine started for it replays (its warm-up:
-/// the end of the window before, and of earlier windows while that one is shorter): I,
-/// plausible 4,096..65,536. The machine's state that outlives a few hundred fragments is
-/// bounded by its queues (FIFOs of tens of entries, the prefetch, the write buffer, one
-/// port), which this many fragments fill and drain many times over; a clear in the warm-up,
-/// whose port time can outlast any such count, starts the machine at the clear instead.
-/// Measured on the small corpus at K = 10: a warm-up of the window before alone, however
-/// short, left an empty window's machine with its host and clears cold (the hard cases'
-/// cycles 7.7% off, now 0.7%); 4,096 fragments gave random triangles 17.9%.
-pub const WARM_UP_FRAGMENTS: u64 = 16_384;
+/// Fragments before a sampled window that an O2-like machine started for it replays (its
+/// warm-up: the end of the window before, and of earlier windows while that one is shorter;
+/// [`warm_up_fragments`]): I, plausible 4,096..65,536. The O2's state that outlives a few
+/// hundred fragments is bounded by its queues (a FIFO of 16 entries, the prefetch, the write
+/// buffer, one port: tens of cycles), which this many fragments fill and drain many times
+/// over; a clear in the warm-up, whose port time can outlast any such count, starts the
+/// machine at the clear instead. Measured with `occsim fidelity --corpus --machines o2
+/// --no-rtl`, full and small, at sampled:10: every class's cycles error within 0.01% of a
+/// 16,384-fragment warm-up's (the demo 0.05% -> 0.06%), its latency errors moved by a cycle
+/// or none (the phase of the port's reserved cycles at a query's end, which no warm-up
+/// fixes, see README); 2,048 fragments took the demo's cycles to 0.33%. A warm-up of the
+/// window before alone, however short, had left an empty window's machine with its host and
+/// clears cold (the hard cases' cycles 7.7% off, now 0.7%).
+pub const O2_WARM_UP_FRAGMENTS: u64 = 4_096;
+
+/// Fragments before a sampled window that an InfiniteReality-like machine started for it
+/// replays ([`warm_up_fragments`]): I, plausible 8,192..65,536. An Image Engine's queue holds
+/// thousands of cycles of work when its Occlusion Unit binds (hundreds of cycles a fragment
+/// on a lazy-grid walk at one engine), so its machine keeps the longer warm-up it was
+/// measured with (4,096 had given random triangles 17.9% on the small corpus, measured over
+/// both machines before the host's release rule; the O2 alone gives 0.00% with it today).
+pub const IR_WARM_UP_FRAGMENTS: u64 = 16_384;
+
+/// The fragments before a sampled window that `machine`'s model replays as its warm-up
+/// ([`O2_WARM_UP_FRAGMENTS`], [`IR_WARM_UP_FRAGMENTS`]).
+pub fn warm_up_fragments(machine: Machine) -> u64 {
+    match machine {
+        Machine::O2 => O2_WARM_UP_FRAGMENTS,
+        Machine::Ir => IR_WARM_UP_FRAGMENTS,
+    }
+}
 
 /// Fragments at the end of a long sampled window that its machine simulates (after its
 /// warm-up), on the O2-like machine; the window's head before them is extrapolated as an
@@ -180,10 +202,14 @@ pub const WARM_UP_FRAGMENTS: u64 = 16_384;
 /// cost and its query's latency depend on beyond the formulas: the pipe's state at its end,
 /// which on the O2 is its FIFOs' and the port's tens of cycles. Measured with `occsim
 /// fidelity --corpus --machines o2 --no-rtl`, full and small: every class's cycles and p95
-/// latency errors at sampled:10 the same with this tail as with 65,536 (cycles within
+/// latency errors at sampled:10 the same with a tail of 16,384 as with 65,536 (cycles within
 /// 0.05%), and a sampled:10 replay of the demo and of the lazy-grid walk from their files
-/// 1.2-2.0x sooner (single runs on a shared machine, whole process).
-pub const O2_TAIL_FRAGMENTS: u64 = 16_384;
+/// 1.2-2.0x sooner (single runs on a shared machine, whole process). With 8,192 and the
+/// O2's shorter warm-up ([`O2_WARM_UP_FRAGMENTS`]) every class's cycles error is within
+/// 0.01% of 16,384's and 16,384's warm-up (the demo 0.05% -> 0.06%), its latency errors a
+/// cycle or none apart, and sampled:10 on the demo in one process 1.5x sooner (best of 10:
+/// 46-48 -> 30-31 ms, with blocks of 256 KB).
+pub const O2_TAIL_FRAGMENTS: u64 = 8_192;
 
 /// Fragments at the end of a long sampled window that its machine simulates on the
 /// InfiniteReality-like machine ([`tail_fragments`]): I, plausible 32,768..262,144. An Image
@@ -227,7 +253,7 @@ pub struct WindowSize {
 }
 
 /// Each window's fragments, found ahead of the model by a second reading of the stream: a
-/// sampled window's machine starts [`WARM_UP_FRAGMENTS`] fragments before the window. Feed
+/// sampled window's machine starts its warm-up ([`warm_up_fragments`]) before the window. Feed
 /// it the stream (or its window index) as the model sees it; it hands out the sizes of the
 /// windows it has seen end, and where their hosts' work ends.
 #[derive(Default)]
@@ -708,7 +734,7 @@ impl SampledModel {
             sizes_wanted: false,
             sizes_end: false,
             warm_start: None,
-            warm_up_fragments: WARM_UP_FRAGMENTS,
+            warm_up_fragments: warm_up_fragments(arch.machine()),
             tail_fragments: u64::MAX,
             planned: false,
             tails: 0,

@@ -14,14 +14,17 @@ use crate::event::Event;
 use crate::golden::EventSink;
 use std::io::Write;
 
-/// Payload bytes a block holds at most by default: 256 KB, about 250,000 of the demo's
+/// Payload bytes a block holds at most by default: 64 KB, about 60,000 of the demo's
 /// fragments. A reader that starts mid-trace (the sampled level's machines) decodes the
 /// block holding its first fragment from the block's start, so smaller blocks waste less;
 /// a block decoded whole also stays in a 2-core machine's cache. Measured against 1 MB
-/// blocks (`occsim replay T --fidelity sampled:10`, whole process): the demo 0.22 -> 0.13
-/// s and 3% smaller, the lazy-grid walk 0.17 -> 0.15 s and 4% larger; 128 KB gave no
-/// more.
-pub const DEFAULT_BLOCK_BYTES: usize = 256 << 10;
+/// blocks (`occsim replay T --fidelity sampled:10`, whole process): 256 KB took the demo
+/// from 0.22 to 0.13 s. Since the O2's sampled windows simulate 12,288 fragments (warm-up
+/// and tail), 64 KB against 256 KB (in one process, best of 10, sampled:10 and sampled:100):
+/// the demo 30-31 -> 23-24 ms and 10 -> 7.6 ms, its file 1% smaller; the lazy-grid walk
+/// 24 -> 21 ms and 13 ms either way, its file 13% larger (0.88 -> 0.99 MB). 32 KB gave no
+/// more and the walk's file 28% larger.
+pub const DEFAULT_BLOCK_BYTES: usize = 64 << 10;
 
 /// How the writer cuts and compresses blocks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
