@@ -32,6 +32,7 @@ use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, RetileError, TileGrid};
 use occsim_traces::trace::{ReadError, TestedFragments, TraceError, TraceReader};
 use occsim_traces::Event;
+use std::convert::Infallible;
 use std::io::Read;
 
 /// How to replay: the level, the effect models to build, an optional retiling and, at the
@@ -258,11 +259,14 @@ fn read_on<R: Read>(
     if reader.header().window_index.is_none() {
         return reader.next_block(scout).map_err(ReadError::into_trace);
     }
-    let item = reader.next_index_item()?;
-    if let Some(item) = &item {
-        scout.index_item(item);
-    }
-    Ok(item.is_some())
+    // A block at a time: its items visited in the decoder, as the model reads them (the
+    // scout keeps only the sizes of the block's windows).
+    reader
+        .visit_index_block(|item| {
+            scout.index_item(item);
+            Ok::<(), Infallible>(())
+        })
+        .map_err(ReadError::into_trace)
 }
 
 impl<R: Read> WindowSizes for ScoutedSizes<R> {

@@ -259,7 +259,8 @@ mod tests {
     }
 
     /// The trace's index items, read one call at a time; read too by a visitor
-    /// ([`TraceReader::for_each_index_item`]), which must give the same items or the same
+    /// ([`TraceReader::for_each_index_item`]) and a block at a time
+    /// ([`TraceReader::visit_index_block`]), which must give the same items or the same
     /// error.
     fn index_of(bytes: &[u8]) -> Result<Vec<IndexItem>, TraceError> {
         let one_by_one = TraceReader::new(bytes).and_then(|mut reader| {
@@ -279,10 +280,27 @@ mod tests {
                 .map_err(crate::trace::ReadError::into_trace)?;
             Ok(items)
         });
-        match (&one_by_one, &visited) {
-            (Ok(a), Ok(b)) => assert_eq!(a, b),
-            (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
-            _ => panic!("the two readings disagree: {one_by_one:?} against {visited:?}"),
+        // Block by block (as the sampled level's scout reads), each block begun by one item
+        // read alone: the visit takes up the rest of that block.
+        let by_blocks = TraceReader::new(bytes).and_then(|mut reader| {
+            let mut items = Vec::new();
+            while let Some(item) = reader.next_index_item()? {
+                items.push(item);
+                reader
+                    .visit_index_block(|item| {
+                        items.push(item.clone());
+                        Ok::<(), std::convert::Infallible>(())
+                    })
+                    .map_err(crate::trace::ReadError::into_trace)?;
+            }
+            Ok(items)
+        });
+        for other in [&visited, &by_blocks] {
+            match (&one_by_one, other) {
+                (Ok(a), Ok(b)) => assert_eq!(a, b),
+                (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
+                _ => panic!("the readings disagree: {one_by_one:?} against {other:?}"),
+            }
         }
         one_by_one
     }

@@ -569,31 +569,43 @@ impl<R: Read> TraceReader<R> {
         &mut self,
         mut visit: impl FnMut(&IndexItem) -> Result<(), E>,
     ) -> Result<(), ReadError<E>> {
+        while self.visit_index_block(&mut visit)? {}
+        Ok(())
+    }
+
+    /// Hand the remaining items of the window index's current block (or of its next, when
+    /// none is being read) to `visit`, as [`Self::for_each_index_item`] does; false once
+    /// the index has no items left. For a reader that reads ahead of another (the sampled
+    /// level's scout): what it gathers stays within one block's items.
+    pub fn visit_index_block<E>(
+        &mut self,
+        mut visit: impl FnMut(&IndexItem) -> Result<(), E>,
+    ) -> Result<bool, ReadError<E>> {
         if self.in_block && !self.in_index_block && !self.at_end() {
             self.failed = true;
             return Err(ReadError::Trace(self.mixed_reading()));
         }
-        while !self.at_end() {
-            if !self.in_block && !self.guarded(|reader| reader.load_block(Wanted::Index))? {
-                break;
+        if self.at_end()
+            || !self.in_block && !self.guarded(|reader| reader.load_block(Wanted::Index))?
+        {
+            return Ok(false);
+        }
+        let mut ctx = checked_context(&self.header, &mut self.tally, &mut self.assembly);
+        match self
+            .decoder
+            .visit_index_items(&self.payload, &mut ctx, &mut visit)
+        {
+            Ok(()) => self.guarded(|reader| reader.end_block())?,
+            Err(DrainError::Payload(e)) => {
+                self.failed = true;
+                return Err(ReadError::Trace(self.corrupt(e)));
             }
-            let mut ctx = checked_context(&self.header, &mut self.tally, &mut self.assembly);
-            match self
-                .decoder
-                .visit_index_items(&self.payload, &mut ctx, &mut visit)
-            {
-                Ok(()) => self.guarded(|reader| reader.end_block())?,
-                Err(DrainError::Payload(e)) => {
-                    self.failed = true;
-                    return Err(ReadError::Trace(self.corrupt(e)));
-                }
-                Err(DrainError::Sink(e)) => {
-                    self.failed = true;
-                    return Err(ReadError::Sink(e));
-                }
+            Err(DrainError::Sink(e)) => {
+                self.failed = true;
+                return Err(ReadError::Sink(e));
             }
         }
-        Ok(())
+        Ok(true)
     }
 
     fn mixed_reading(&self) -> TraceError {
