@@ -44,9 +44,7 @@ struct PixelBounds {
     high: u32,
 }
 
-/// A pixel's bounds as stored: `[stamp, low, high]`. Arrays of integers are allocated
-/// zeroed by the system, their pages mapped only as a run first touches them, where a
-/// vector of structs is written whole up front (16 MB at 1280x1024).
+/// A pixel's bounds as stored: `[stamp, low, high]`, all zero before a run first bounds it.
 type StoredBounds = [u32; 3];
 
 impl PixelBounds {
@@ -75,8 +73,12 @@ impl PixelBounds {
 /// The bounds on each pixel's depth at a run's start, over one run.
 pub struct ConsistentDepths {
     width: usize,
-    /// Per pixel, side by side (a pixel's test reads all three: one cache line).
-    pixels: Vec<StoredBounds>,
+    /// Per row, per pixel, side by side (a pixel's test reads all three: one cache line).
+    /// A row is allocated when a span first tests it and empty before: memory follows the
+    /// rows the runs test. (One zeroed vector of every pixel, 16 MB at 1280x1024, was
+    /// written whole at every replay in a process that had freed one before, as a benchmark
+    /// or a sweep does: 8% of a `sampled:100` run of the demo.)
+    rows: Vec<Vec<StoredBounds>>,
     /// The run's stamp (even).
     run: u32,
     /// A clear in this run: every pixel is known.
@@ -89,10 +91,9 @@ pub struct ConsistentDepths {
 
 impl ConsistentDepths {
     pub fn new(width: u32, height: u32) -> ConsistentDepths {
-        let pixels = width as usize * height as usize;
         ConsistentDepths {
             width: width as usize,
-            pixels: vec![[0; 3]; pixels],
+            rows: vec![Vec::new(); height as usize],
             run: 2,
             cleared: false,
             excluded: HashMap::new(),
@@ -104,7 +105,7 @@ impl ConsistentDepths {
     pub fn restart(&mut self) {
         self.run = self.run.wrapping_add(2);
         if self.run == 0 {
-            self.pixels.fill([0; 3]);
+            self.rows.iter_mut().for_each(|row| *row = Vec::new());
             self.run = 2;
         }
         self.cleared = false;
@@ -133,12 +134,13 @@ impl ConsistentDepths {
             return Ok(());
         }
         let writes = state.depth_mask && writes_allowed;
-        let row = span.y as usize * self.width + span.x as usize;
         // The next span is most likely the next row's, over about the same columns (as in
         // the functional model): its pixels' bounds start on their way into the cache.
+        let columns = span.x as usize..span.x as usize + span.depths.len();
         if let Some(below) = self
-            .pixels
-            .get(row + self.width..row + self.width + span.depths.len())
+            .rows
+            .get(span.y as usize + 1)
+            .and_then(|row| row.get(columns.clone()))
         {
             for line in below.chunks(4) {
                 prefetch_line(line.as_ptr());
@@ -149,19 +151,20 @@ impl ConsistentDepths {
         {
             return self.span_bounded(state.depth_func, writes, span, results, depth, first);
         }
+        self.touch_row(span.y);
+        let run = self.run;
         for (i, &z) in span.depths.iter().enumerate() {
-            let pixel = row + i;
-            let stamp = self.pixels[pixel][0];
-            if stamp == self.run + 1 {
+            let (x, y) = (span.x + i as u16, span.y);
+            let stored = self.stored(x, y);
+            if stored[0] == run + 1 {
                 continue;
             }
-            if stamp != self.run {
-                self.pixels[pixel] = PixelBounds::in_run(self.pixels[pixel], self.run).store();
+            if stored[0] != run {
+                *stored = PixelBounds::in_run(*stored, run).store();
             }
             let passed = results.passed(i);
-            let (x, y) = (span.x + i as u16, span.y);
-            self.bound(pixel, state.depth_func, z, passed)
-                .and_then(|()| self.choose(pixel, depth.get(x, y)))
+            self.bound(x, y, state.depth_func, z, passed)
+                .and_then(|()| self.choose(x, y, depth.get(x, y)))
                 .map(|chosen| depth.set(x, y, chosen))
                 .ok_or_else(|| SimError::InconsistentDepthTests {
                     fragment: first + i as u64,
@@ -169,10 +172,29 @@ impl ConsistentDepths {
                     y,
                 })?;
             if passed && writes {
-                self.pixels[pixel][0] = self.run + 1;
+                self.stored(x, y)[0] = run + 1;
             }
         }
         Ok(())
+    }
+
+    /// Row `y`'s bounds, allocated (every pixel unbounded) if no run has tested it yet.
+    fn touch_row(&mut self, y: u16) -> &mut [StoredBounds] {
+        let row = &mut self.rows[y as usize];
+        if row.is_empty() {
+            *row = vec![[0; 3]; self.width];
+        }
+        row
+    }
+
+    /// Pixel `(x, y)`'s stored bounds (its row touched already).
+    fn stored(&mut self, x: u16, y: u16) -> &mut StoredBounds {
+        &mut self.rows[y as usize][x as usize]
+    }
+
+    /// The key of pixel `(x, y)` among the excluded values.
+    fn pixel(&self, x: u16, y: u16) -> usize {
+        y as usize * self.width + x as usize
     }
 
     /// [`Self::span`] under a function whose results never exclude a value (neither
@@ -190,10 +212,9 @@ impl ConsistentDepths {
         depth: &mut DepthBuffer,
         first: u64,
     ) -> Result<(), SimError> {
-        let row = span.y as usize * self.width + span.x as usize;
-        let bounds = &mut self.pixels[row..row + span.depths.len()];
-        let depths = depth.row_mut(span.x, span.y, span.depths.len());
         let (run, known) = (self.run, self.run + 1);
+        let bounds = &mut self.touch_row(span.y)[span.x as usize..][..span.depths.len()];
+        let depths = depth.row_mut(span.x, span.y, span.depths.len());
         for (i, ((&z, stored), current)) in span.depths.iter().zip(bounds).zip(depths).enumerate() {
             if stored[0] == known {
                 continue;
@@ -221,23 +242,27 @@ impl ConsistentDepths {
 
     /// Narrow the pixel's bounds by a test of depth `z` under `func` that `passed`; None
     /// when no depth passes it so.
-    fn bound(&mut self, pixel: usize, func: DepthFunc, z: u32, passed: bool) -> Option<()> {
-        let mut bounds = PixelBounds::load(self.pixels[pixel]);
+    fn bound(&mut self, x: u16, y: u16, func: DepthFunc, z: u32, passed: bool) -> Option<()> {
+        let mut bounds = PixelBounds::load(*self.stored(x, y));
         if narrow(func, passed, z, &mut bounds.low, &mut bounds.high)? {
+            let pixel = self.pixel(x, y);
             self.excluded.entry(pixel).or_default().push(z);
         }
-        self.pixels[pixel] = bounds.store();
+        *self.stored(x, y) = bounds.store();
         (bounds.low <= bounds.high).then_some(())
     }
 
     /// A depth within the pixel's bounds: `current` if it is, else the lowest.
-    fn choose(&self, pixel: usize, current: u32) -> Option<u32> {
-        let PixelBounds { low, high, .. } = PixelBounds::load(self.pixels[pixel]);
+    fn choose(&self, x: u16, y: u16, current: u32) -> Option<u32> {
+        let PixelBounds { low, high, .. } = PixelBounds::load(self.rows[y as usize][x as usize]);
         // Exclusions come only from EQUAL and NOTEQUAL tests: most runs have none, and then
         // a fragment costs no hash.
         let excluded = match self.excluded.is_empty() {
             true => &[][..],
-            false => self.excluded.get(&pixel).map_or(&[][..], Vec::as_slice),
+            false => self
+                .excluded
+                .get(&self.pixel(x, y))
+                .map_or(&[][..], Vec::as_slice),
         };
         if (low..=high).contains(&current) && !excluded.contains(&current) {
             return Some(current);
