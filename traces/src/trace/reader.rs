@@ -110,7 +110,9 @@ impl<R: Read> TraceReader<R> {
         self.summary.as_ref()
     }
 
-    /// Fill `buf` from the input, or say where the file ended.
+    /// Fill `buf` from the input, or say where the file ended. The bytes are read into the
+    /// buffer's spare room, not written first (`resize` had zeroed every block before
+    /// reading it: 3% of a `sampled:100` run of the demo, which skips most of its blocks).
     fn fill(
         &mut self,
         buf_len: usize,
@@ -123,28 +125,22 @@ impl<R: Read> TraceReader<R> {
             &mut self.payload
         };
         buf.clear();
-        buf.resize(buf_len, 0);
-        let mut got = 0;
-        while got < buf_len {
-            match self.input.read(&mut buf[got..]) {
-                Ok(0) => {
-                    return Err(TraceError::Truncated {
-                        offset: self.offset + got as u64,
-                        inside,
-                    })
-                }
-                Ok(n) => got += n,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(source) => {
-                    return Err(TraceError::Io {
-                        offset: self.offset + got as u64,
-                        source,
-                    })
-                }
+        buf.reserve_exact(buf_len);
+        // `read_to_end` retries an interrupted read and stops at `buf_len` bytes.
+        match (&mut self.input).take(buf_len as u64).read_to_end(buf) {
+            Ok(got) if got < buf_len => Err(TraceError::Truncated {
+                offset: self.offset + got as u64,
+                inside,
+            }),
+            Ok(_) => {
+                self.offset += buf_len as u64;
+                Ok(())
             }
+            Err(source) => Err(TraceError::Io {
+                offset: self.offset + buf.len() as u64,
+                source,
+            }),
         }
-        self.offset += buf_len as u64;
-        Ok(())
     }
 
     fn read_array<const N: usize>(&mut self, inside: &'static str) -> Result<[u8; N], TraceError> {

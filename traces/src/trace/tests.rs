@@ -435,6 +435,66 @@ fn truncation_at_every_offset_is_a_clean_error() {
     assert!(matches!(error, TraceError::TrailingData { .. }), "{error}");
 }
 
+/// A reader that gives one byte a call and is interrupted before every byte, then fails
+/// for good after `fail_after` bytes (if given).
+struct Stuttering<'a> {
+    bytes: &'a [u8],
+    interrupt_next: bool,
+    fail_after: Option<usize>,
+    given: usize,
+}
+
+impl std::io::Read for Stuttering<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        self.interrupt_next = !self.interrupt_next;
+        if !self.interrupt_next {
+            return Err(std::io::ErrorKind::Interrupted.into());
+        }
+        if Some(self.given) == self.fail_after {
+            return Err(std::io::Error::other("the disk is gone"));
+        }
+        let Some((&first, rest)) = self.bytes.split_first() else {
+            return Ok(0);
+        };
+        let Some(slot) = buf.first_mut() else {
+            return Ok(0);
+        };
+        *slot = first;
+        self.bytes = rest;
+        self.given += 1;
+        Ok(1)
+    }
+}
+
+#[test]
+fn short_and_interrupted_reads_give_the_same_trace_and_io_errors_name_their_offset() {
+    let bytes = write_default(&every_kind());
+    let stutter = |fail_after| Stuttering {
+        bytes: &bytes,
+        interrupt_next: false,
+        fail_after,
+        given: 0,
+    };
+    let mut reader = TraceReader::new(stutter(None)).unwrap();
+    let mut events = Vec::new();
+    let summary = reader
+        .read_into(&mut events)
+        .map_err(ReadError::into_trace)
+        .unwrap();
+    assert_eq!((events, summary), read_bulk(&bytes).unwrap());
+    // Failing after 100 bytes names byte 100, where the failed read began (in the header or
+    // a block: the offset counts from the file's start either way).
+    let failed = TraceReader::new(stutter(Some(100))).and_then(|mut reader| {
+        reader
+            .read_into(&mut Vec::new())
+            .map_err(ReadError::into_trace)
+    });
+    match failed {
+        Err(TraceError::Io { offset, .. }) => assert_eq!(offset, 100),
+        other => panic!("expected an I/O error at byte 100: {other:?}"),
+    }
+}
+
 #[test]
 fn the_writer_refuses_malformed_streams() {
     let header = TraceHeader::new(64, 32);
