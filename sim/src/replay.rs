@@ -158,7 +158,7 @@ pub fn replay<R: Read>(
     if options.level == Fidelity::Analytic
         && options.window_index
         && options.retile.is_none()
-        && reader.has_first_reads()
+        && reader.index_has_every_count()
         && AnalyticModel::reads_window_index(arch, reader.header())
     {
         let mut model =
@@ -180,7 +180,7 @@ pub fn replay<R: Read>(
         if options.window_index
             && options.retile.is_none()
             && reader.has_depth_tests()
-            && reader.has_first_reads()
+            && reader.index_has_every_count()
             && AnalyticModel::reads_window_index(arch, reader.header())
         {
             let mut model = SampledModel::from_window_index(arch, width, height, effects, every)

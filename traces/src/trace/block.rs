@@ -11,8 +11,9 @@ pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// ([`crate::trace::index`]), named by the header's `window_index`; version 5 pairs every
 /// event block of an indexed trace with a depth-test block ([`crate::trace::depth_tests`]);
 /// version 6 gives the index's stretches right after a query end their first reads
-/// ([`crate::trace::FragmentStretch::first_reads`]).
-pub const FORMAT_VERSION: u16 = 6;
+/// ([`crate::trace::FragmentStretch::first_reads`]); version 7 gives every stretch its
+/// densest runs of reads ([`crate::trace::FragmentStretch::dense`]).
+pub const FORMAT_VERSION: u16 = 7;
 /// The oldest version this code reads: version-1 traces replay as an open loop.
 pub const OLDEST_READABLE_VERSION: u16 = 1;
 /// Most bytes of header JSON.

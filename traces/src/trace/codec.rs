@@ -3,8 +3,9 @@
 //! depths are coded as residuals from a prediction. All prediction state resets at every
 //! block start, so each block decodes on its own.
 
+use super::dense_reads::{DenseRuns, ReadRun, DENSE_READ_COSTS};
 use super::header::StreamTally;
-use super::index::{FragmentStretch, IndexItem, FIRST_READS_FLAG};
+use super::index::{FragmentStretch, IndexItem, DENSE_RUNS_FLAG, FIRST_READS_FLAG};
 use crate::depth_layout::DepthRead;
 use crate::event::{Event, Fragment, GeometryBatch, HostWork, Span, DEPTH_ONE};
 use crate::golden::EventSink;
@@ -504,35 +505,58 @@ fn query_spec(c: &mut Cursor) -> Result<QuerySpec, PayloadError> {
 }
 
 fn stretch(c: &mut Cursor) -> Result<FragmentStretch, PayloadError> {
+    let mut stretch = FragmentStretch::EMPTY;
+    decode_stretch(c, &mut stretch)?;
+    Ok(stretch)
+}
+
+/// A stretch record into `out`, checked.
+#[inline]
+fn decode_stretch(c: &mut Cursor, out: &mut FragmentStretch) -> Result<(), PayloadError> {
     let start = c.pos - 1;
-    let fragments = c.uv()?;
-    let depth_reads = c.uv()?;
-    let page_misses = c.uv()?;
-    let passed = c.uv()?;
+    // Field by field into `out`: the record is read for every stretch of an index.
+    out.fragments = c.uv()?;
+    out.depth_reads = c.uv()?;
+    out.page_misses = c.uv()?;
+    out.passed = c.uv()?;
     let pos = c.pos;
     let code = c.byte()?;
-    let last_read = match code & !FIRST_READS_FLAG {
+    out.last_read = match code & !(FIRST_READS_FLAG | DENSE_RUNS_FLAG) {
         0 => DepthRead::SameWord,
         1 => DepthRead::PageHit,
         2 => DepthRead::PageMiss,
         _ => return Err(bad(pos, format!("unknown last-read code {code}"))),
     };
-    let first_reads = if code & FIRST_READS_FLAG != 0 {
+    out.first_reads = if code & FIRST_READS_FLAG != 0 {
         c.uv()?
     } else {
         0
     };
-    let stretch = FragmentStretch {
-        fragments,
-        depth_reads,
-        page_misses,
-        passed,
-        last_read,
-        first_reads,
-    };
-    match stretch.problem() {
+    if !out.dense.runs().is_empty() {
+        out.dense = DenseRuns::NONE;
+    }
+    if code & DENSE_RUNS_FLAG != 0 {
+        let pos = c.pos;
+        let count = c.uv()?;
+        if count == 0 || count > DENSE_READ_COSTS.len() as u64 {
+            return Err(bad(pos, format!("a stretch with {count} dense runs")));
+        }
+        for _ in 0..count {
+            let pos = c.pos;
+            let (reads, fragments) = (c.uv()?, c.uv()?);
+            let (Ok(reads), Ok(fragments)) = (u32::try_from(reads), u32::try_from(fragments))
+            else {
+                return Err(bad(pos, "a dense run of over 2^32 fragments".to_owned()));
+            };
+            out.dense.push(ReadRun { reads, fragments });
+        }
+        if out.dense.runs().len() as u64 != count {
+            return Err(bad(pos, "a stretch with a dense run twice".to_owned()));
+        }
+    }
+    match out.problem() {
         Some(problem) => Err(bad(start, problem)),
-        None => Ok(stretch),
+        None => Ok(()),
     }
 }
 
@@ -792,9 +816,21 @@ impl BlockDecoder {
         ctx: &mut DecodeContext,
         mut visit: impl FnMut(&IndexItem) -> Result<(), E>,
     ) -> Result<(), DrainError<E>> {
+        // Stretches, most items, are decoded in place into one item: a stretch's record
+        // (80 bytes with its dense runs) moved through the layers of results cost the
+        // analytic level about 36 instructions a stretch.
+        let mut item = IndexItem::Stretch(FragmentStretch::EMPTY);
         while let Some(&t) = payload.get(self.pos) {
-            if let Some(item) = self.index_record(t, payload, ctx)? {
+            if let (tag::STRETCH, IndexItem::Stretch(stretch)) = (t, &mut item) {
+                let mut c = Cursor::new(payload, self.pos + 1);
+                decode_stretch(&mut c, stretch)?;
+                self.pos = c.pos;
+                self.events += 1;
                 visit(&item).map_err(DrainError::Sink)?;
+                continue;
+            }
+            if let Some(other) = self.index_record(t, payload, ctx)? {
+                visit(&other).map_err(DrainError::Sink)?;
             }
         }
         Ok(())

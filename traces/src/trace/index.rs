@@ -12,10 +12,12 @@
 //! stretch knows which fragments pass the depth test), and cuts index blocks as it cuts event
 //! blocks: one block buffer of memory each, whatever the trace's length. An index block's
 //! payload is coded as an event payload ([`super::codec`]), with `STRETCH` records in place
-//! of spans: `STRETCH fragments depth_reads page_misses passed last_read [first_reads]` (four
-//! varints and a byte: 0 when the stretch's last fragment read no new word, 1 a page hit, 2 a
-//! page miss; plus [`FIRST_READS_FLAG`] when a varint of [`FragmentStretch::first_reads`]
-//! follows, from format version 6).
+//! of spans: `STRETCH fragments depth_reads page_misses passed last_read [first_reads]
+//! [dense_runs]` (four varints and a byte: 0 when the stretch's last fragment read no new
+//! word, 1 a page hit, 2 a page miss; plus [`FIRST_READS_FLAG`] when a varint of
+//! [`FragmentStretch::first_reads`] follows, from format version 6; plus
+//! [`DENSE_RUNS_FLAG`] when its [`FragmentStretch::dense`] runs follow, a varint count and a
+//! varint pair (reads, fragments) each, from format version 7).
 //!
 //! A stretch keeps its `first_reads` only when it begins fewer than [`FIRST_READS_FRAGMENTS`]
 //! fragments after the last query end (else it is written 0): the O2-like machine's in-order
@@ -24,6 +26,7 @@
 //! (`occsim_sim::levels::analytic::o2`), and only there.
 
 use super::codec::{put_uv, tag};
+use super::dense_reads::{DenseReadFinder, DenseRuns, DENSE_READ_COSTS};
 use crate::depth_layout::{DepthAddress, DepthLayout, DepthRead, LastRead};
 use crate::event::{Event, Fragment};
 use crate::golden::FunctionalModel;
@@ -47,6 +50,8 @@ pub struct FragmentStretch {
     /// trace's index, 0 for a stretch that begins [`FIRST_READS_FRAGMENTS`] fragments or more
     /// after the last query end.
     pub first_reads: u64,
+    /// Its densest runs of reads ([`super::dense_reads`]).
+    pub dense: DenseRuns,
 }
 
 /// Fragments of a stretch whose reads [`FragmentStretch::first_reads`] marks, and how far
@@ -55,6 +60,9 @@ pub const FIRST_READS_FRAGMENTS: u64 = 64;
 
 /// Added to a stretch record's last-read byte when a `first_reads` varint follows.
 pub(crate) const FIRST_READS_FLAG: u8 = 4;
+
+/// Added to a stretch record's last-read byte when its dense runs follow.
+pub(crate) const DENSE_RUNS_FLAG: u8 = 8;
 
 impl FragmentStretch {
     /// No fragment yet.
@@ -65,6 +73,7 @@ impl FragmentStretch {
         passed: 0,
         last_read: DepthRead::SameWord,
         first_reads: 0,
+        dense: DenseRuns::NONE,
     };
 
     /// Count one fragment (inside the viewport) drawn under `state`: its depth read by the
@@ -96,8 +105,9 @@ impl FragmentStretch {
         self.passed += (draws && state.depth_func.passes(fragment.z, stored)) as u64;
     }
 
-    /// Bytes a stretch record takes at most: a tag, five 10-byte varints and a byte.
-    pub(crate) const MAX_BYTES: usize = 52;
+    /// Bytes a stretch record takes at most: a tag, five 10-byte varints, a byte, and the
+    /// dense runs' count and pairs.
+    pub(crate) const MAX_BYTES: usize = 52 + 1 + 20 * DENSE_READ_COSTS.len();
 
     pub(crate) fn encode(&self, out: &mut Vec<u8>) {
         out.push(tag::STRETCH);
@@ -110,15 +120,28 @@ impl FragmentStretch {
             DepthRead::PageHit => 1,
             DepthRead::PageMiss => 2,
         };
-        if self.first_reads == 0 {
-            out.push(last_read);
-        } else {
-            out.push(last_read | FIRST_READS_FLAG);
+        let runs = self.dense.runs();
+        let flags = match (self.first_reads != 0, !runs.is_empty()) {
+            (true, true) => FIRST_READS_FLAG | DENSE_RUNS_FLAG,
+            (true, false) => FIRST_READS_FLAG,
+            (false, true) => DENSE_RUNS_FLAG,
+            (false, false) => 0,
+        };
+        out.push(last_read | flags);
+        if self.first_reads != 0 {
             put_uv(out, self.first_reads);
+        }
+        if !runs.is_empty() {
+            put_uv(out, runs.len() as u64);
+            for run in runs {
+                put_uv(out, run.reads.into());
+                put_uv(out, run.fragments.into());
+            }
         }
     }
 
     /// The counts' own consistency, as a decoder checks them.
+    #[inline]
     pub(crate) fn problem(&self) -> Option<&'static str> {
         if self.fragments == 0 {
             Some("a stretch of no fragments")
@@ -132,6 +155,12 @@ impl FragmentStretch {
             || self.fragments < FIRST_READS_FRAGMENTS && self.first_reads >> self.fragments != 0
         {
             Some("a stretch whose first reads are more than its reads or past its fragments")
+        } else if self.dense.runs().iter().any(|run| {
+            u64::from(run.reads) > self.depth_reads
+                || u64::from(run.fragments) > self.fragments
+                || run.reads == 0
+        }) {
+            Some("a stretch whose dense run holds no read, or more reads or fragments than it")
         } else {
             None
         }
@@ -154,6 +183,8 @@ pub(crate) struct WindowIndexer {
     /// An occlusion-render-mode query (brief, verbose) is open: nothing draws.
     occlusion_mode: bool,
     stretch: FragmentStretch,
+    /// The stretch's dense runs of reads, found as its fragments pass.
+    dense: DenseReadFinder,
     /// Fragments since the last query end, as far as [`FIRST_READS_FRAGMENTS`] (there
     /// before the first).
     since_end: u64,
@@ -167,6 +198,7 @@ impl WindowIndexer {
             last_read: LastRead::new(layout.banks),
             occlusion_mode: false,
             stretch: FragmentStretch::EMPTY,
+            dense: DenseReadFinder::default(),
             since_end: FIRST_READS_FRAGMENTS,
         }
     }
@@ -178,6 +210,7 @@ impl WindowIndexer {
         let stored = self.functional.depth_buffer().get(fragment.x, fragment.y);
         let state = self.functional.state();
         let passed = !state.depth_test || state.depth_func.passes(fragment.z, stored);
+        let reads = self.stretch.depth_reads;
         self.stretch.count_fragment(
             fragment,
             self.functional.state(),
@@ -185,6 +218,7 @@ impl WindowIndexer {
             (&self.address, &mut self.last_read),
             !self.occlusion_mode,
         );
+        self.dense.fragments(self.stretch.depth_reads > reads, 0);
         self.functional.fragment(fragment);
         passed
     }
@@ -192,6 +226,7 @@ impl WindowIndexer {
     /// The stretch gathered since the last other event, if it holds a fragment.
     pub(crate) fn take_stretch(&mut self) -> Option<FragmentStretch> {
         let mut stretch = std::mem::replace(&mut self.stretch, FragmentStretch::EMPTY);
+        stretch.dense = self.dense.take();
         if self.since_end >= FIRST_READS_FRAGMENTS {
             stretch.first_reads = 0;
         }
@@ -361,6 +396,7 @@ mod tests {
                 passed,
                 last_read,
                 first_reads,
+                dense: DenseRuns::NONE,
             })
         };
         let index = vec![
@@ -424,6 +460,7 @@ mod tests {
             passed: 0,
             last_read: DepthRead::PageHit,
             first_reads,
+            dense: DenseRuns::NONE,
         };
         assert_eq!(stretch(0b10).problem(), None);
         let problem =
@@ -432,17 +469,47 @@ mod tests {
         assert_eq!(stretch(0b11).problem(), problem);
     }
 
-    /// A version-5 index marks no first reads: its reader says so, and models decode the
-    /// fragments instead.
+    /// A version-6 index keeps no dense runs and a version-5 one no first reads: their
+    /// readers say so, and models decode the fragments instead.
     #[test]
-    fn an_index_before_version_6_has_no_first_reads() {
+    fn an_index_before_version_7_lacks_counts() {
         let (events, _) = worked_example();
         let bytes = indexed(&events);
-        assert!(TraceReader::new(&bytes[..]).unwrap().has_first_reads());
-        let old = crate::trace::tests::as_version(bytes, 5);
-        let reader = TraceReader::new(&old[..]).unwrap();
-        assert!(reader.has_depth_tests());
-        assert!(!reader.has_first_reads());
+        assert!(TraceReader::new(&bytes[..])
+            .unwrap()
+            .index_has_every_count());
+        for version in [5, 6] {
+            let old = crate::trace::tests::as_version(bytes.clone(), version);
+            let reader = TraceReader::new(&old[..]).unwrap();
+            assert!(reader.has_depth_tests());
+            assert!(!reader.index_has_every_count(), "version {version}");
+        }
+    }
+
+    /// A stretch of sparse reads with a sliver inside: the index keeps the sliver's run.
+    #[test]
+    fn the_index_keeps_a_stretchs_densest_run_of_reads() {
+        // Depth words are 4 pixels wide (LAYOUT): along row 0, x = 0..16 reads every 4th
+        // fragment; then x = 0 down rows 1..=9 reads every fragment (a one-pixel column,
+        // a new word each); then x = 4..16 of row 10, a read every 4th, its first (x = 4,
+        // a new word) right after the column: 10 reads in a row. At 4/3 they leave
+        // 10 · 4/3 - 10 = 3.3 cycles (with x = 12's read of row 0, 3 fragments before,
+        // 4/3 - 4 less; with x = 8's of row 10, 4/3 - 4 less), at 3/2 5; at 5/4 2.5 and 9/8
+        // 1.25, under the three cycles kept. The same run at both costs: kept once.
+        let mut events = vec![Event::DepthTest(true), Event::Primitive];
+        events.extend((0..16).map(|x| frag(x, 0, 100)));
+        events.extend((1..10).map(|y| frag(0, y, 100)));
+        events.extend((4..16).map(|x| frag(x, 10, 100)));
+        let items = index_of(&indexed(&events)).unwrap();
+        let Some(IndexItem::Stretch(stretch)) = items.last() else {
+            panic!("the fragments end the index: {items:?}");
+        };
+        let column = crate::trace::ReadRun {
+            reads: 10,
+            fragments: 10,
+        };
+        assert_eq!(stretch.dense.runs(), &[column]);
+        assert_eq!(stretch.depth_reads, 4 + 9 + 3);
     }
 
     #[test]
@@ -509,6 +576,7 @@ mod tests {
             passed: 0,
             last_read: DepthRead::SameWord,
             first_reads: 0,
+            dense: DenseRuns::NONE,
         };
         assert_eq!(
             bad.problem(),

@@ -312,11 +312,12 @@ impl<R: Read> TraceReader<R> {
         result
     }
 
-    /// Whether the window index's stretches right after a query end carry their first reads
-    /// ([`crate::trace::FragmentStretch::first_reads`], format version 6): a model that
-    /// reads them decodes an older index's fragments instead.
-    pub fn has_first_reads(&self) -> bool {
-        self.version >= 6 && self.header.window_index.is_some()
+    /// Whether the window index's stretches carry their first reads right after a query
+    /// end ([`crate::trace::FragmentStretch::first_reads`], format version 6) and their
+    /// densest runs of reads ([`crate::trace::FragmentStretch::dense`], version 7): a model
+    /// that reads them decodes an older index's fragments instead.
+    pub fn index_has_every_count(&self) -> bool {
+        self.version >= 7 && self.header.window_index.is_some()
     }
 
     /// Whether every event block has a depth-test block after it

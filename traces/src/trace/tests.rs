@@ -321,14 +321,14 @@ fn wrong_magic_is_named() {
 
 #[test]
 fn unknown_version_is_named() {
-    for version in [0u8, 7] {
+    for version in [0u8, 8] {
         let mut bytes = write_default(&every_kind());
         bytes[8] = version;
         let error = TraceReader::new(&bytes[..]).err().unwrap();
         assert!(
             matches!(
                 error,
-                TraceError::UnsupportedVersion { offset: 8, version: v, known: 6 } if v == version as u16
+                TraceError::UnsupportedVersion { offset: 8, version: v, known: 7 } if v == version as u16
             ),
             "{error}"
         );
@@ -362,7 +362,7 @@ fn version_1_traces_still_read_and_say_they_have_no_closed_loop() {
     assert!(!reader.has_closed_loop());
     let current_bytes = write_default(&events);
     let current = TraceReader::new(&current_bytes[..]).unwrap();
-    assert_eq!(current.format_version(), 6);
+    assert_eq!(current.format_version(), 7);
     assert!(current.has_closed_loop());
     assert_eq!(read_bulk(&bytes).unwrap().0, events);
 }

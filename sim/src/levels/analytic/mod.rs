@@ -119,6 +119,9 @@ impl Formulas {
     /// rasterizer runs on behind it, and the records still wait for the next fragments'
     /// reads; on the hard cases a query followed by a clear takes 22 cycles on the machine.)
     pub(crate) fn before_event(&mut self, event: &Event) {
+        if let (Formulas::O2(o2), false) = (&mut *self, matches!(event, Event::Fragment(_))) {
+            o2.end_run();
+        }
         if let (
             Formulas::O2(o2),
             Event::Wait(_) | Event::ConditionalBegin(_) | Event::Swap | Event::QueryEnd,

@@ -1,0 +1,340 @@
+//! A stretch's densest runs of depth reads: what its counts, summed over the whole stretch,
+//! do not show.
+//!
+//! The O2-like machine's memory port grants one depth read a free cycle, and a share `f` of
+//! its cycles is reserved for the display refresh and the host, so `n` reads in a row take
+//! about `c · n` cycles, `c = 1 / (1 - f)` (1.31 at the O2's `f` = 0.234). The rasterizer
+//! emits a fragment a cycle and the prefetch asks for its read as it is emitted; no block
+//! behind the rasterizer takes more than a fragment a cycle, so a lag once built stays until
+//! the rasterizer idles. A run of `m` fragments of which `n` read a new word (a sliver one
+//! or two pixels wide, a triangle's tip, where every fragment reads) therefore leaves the
+//! depth test `c · n - m` cycles further behind than the rasterizer, however sparsely the
+//! rest of the stretch reads: the stretch ends `max over runs (c · n - m)` later than its
+//! emission (plus a read's latency). Summed over the stretch, its reads average out (a
+//! box query of the city at 160x120 ending with a 168-fragment sliver, 0.6 reads a
+//! fragment, took the machine 20 cycles and the formulas 9).
+//!
+//! The run that maximises `c · n - m` depends on `c`, which the architecture sets (display,
+//! host share), so a stretch keeps the best run at each of the read costs
+//! [`DENSE_READ_COSTS`] (exact ratios, so that counting is integer and the same wherever it
+//! is done), and a model takes the largest `c · n - m` over them at its own `c`: exact at
+//! those costs, the best of their runs between them. Found by Kadane's maximum-subarray
+//! scan over the fragments' weights `p · read - q` for each cost `p / q`: one pass, a few
+//! integer operations a fragment and a cost, and a run of fragments of a word already read
+//! in one step.
+
+/// The read costs `c = p / q` (port cycles a depth read takes, reserved cycles included)
+/// at which a stretch keeps its densest run: `f` = 1/9, 1/5, 1/4 and 1/3 of the port's
+/// cycles reserved. The O2's 0.234 (its display refresh 0.184 and the host's 0.05) lies
+/// between 1/5 and 1/4; the host's plausible 0..0.15 keeps `f` within 0.18..0.34, and
+/// below 1/9 (no display refresh) a run must read 24 fragments in a row to leave the
+/// [`KEPT_LAG_CYCLES`]. Above 1/3 a model takes the runs kept at 3/2.
+pub const DENSE_READ_COSTS: [(u64, u64); 4] = [(9, 8), (5, 4), (4, 3), (3, 2)];
+
+/// Costs kept.
+const COSTS: usize = DENSE_READ_COSTS.len();
+
+/// The least lag a run must leave to be kept [cycles]. The O2 formulas' depth test trails
+/// the rasterizer after any stretch that reads by a read's latency (2 cycles at least, a
+/// page hit) and the longest run of reserved cycles a read waits out (1 for any `f` up to
+/// 1/2), so a run leaving less than 3 cycles tells them nothing; and most stretches then
+/// keep none (on the lazy-grid walk 81% of the stretches kept a run leaving 2).
+pub const KEPT_LAG_CYCLES: u64 = 3;
+
+/// A run of consecutive fragments: how many, and how many of them read a new depth word.
+/// (32 bits each keep a stretch's record small, which the analytic level copies for every
+/// stretch it reads; a run of more fragments, which no primitive has, is not kept.)
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ReadRun {
+    pub reads: u32,
+    pub fragments: u32,
+}
+
+impl ReadRun {
+    /// The cycles the run leaves the depth test behind the rasterizer at a read cost of
+    /// `cost` port cycles: `cost · reads - fragments`.
+    pub fn lag(self, cost: f64) -> f64 {
+        cost * f64::from(self.reads) - f64::from(self.fragments)
+    }
+}
+
+/// A stretch's densest runs: at each cost of [`DENSE_READ_COSTS`] the run that leaves the
+/// most lag, when that is at least [`KEPT_LAG_CYCLES`]; distinct, in the costs' order.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DenseRuns {
+    runs: [ReadRun; COSTS],
+    len: u8,
+}
+
+impl DenseRuns {
+    /// No run.
+    pub const NONE: DenseRuns = DenseRuns {
+        runs: [ReadRun {
+            reads: 0,
+            fragments: 0,
+        }; COSTS],
+        len: 0,
+    };
+
+    /// The runs, as kept.
+    pub fn runs(&self) -> &[ReadRun] {
+        &self.runs[..self.len as usize]
+    }
+
+    /// Add `run` unless it is kept already, or [`DENSE_READ_COSTS`]' count are.
+    pub fn push(&mut self, run: ReadRun) {
+        if self.runs().contains(&run) {
+            return;
+        }
+        if let Some(slot) = self.runs.get_mut(self.len as usize) {
+            *slot = run;
+            self.len += 1;
+        }
+    }
+
+    /// The most lag any run leaves at a read cost of `cost` port cycles (0 with none).
+    pub fn lag(&self, cost: f64) -> f64 {
+        self.runs()
+            .iter()
+            .map(|run| run.lag(cost))
+            .fold(0.0, f64::max)
+    }
+}
+
+/// A run being counted: reads and fragments.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Counted {
+    reads: u64,
+    fragments: u64,
+}
+
+/// Kadane's scan at one cost `p / q`: the best run ending at the last fragment (empty when
+/// every such run leaves less than none) and the best run so far, each with its score
+/// `p · reads - q · fragments`.
+#[derive(Clone, Copy, Debug, Default)]
+struct Scan {
+    current: Counted,
+    current_score: i64,
+    best: Counted,
+    best_score: i64,
+}
+
+/// Finds a stretch's [`DenseRuns`] as its fragments pass.
+#[derive(Clone, Debug, Default)]
+pub struct DenseReadFinder {
+    scans: [Scan; COSTS],
+    /// A fragment read a new word since the last [`Self::take`] (else no run scores).
+    read: bool,
+}
+
+impl DenseReadFinder {
+    /// A fragment that `read` a new word or not, then `then_same_word` fragments that read
+    /// none (the rest of its word's run along a row): the same as each given alone.
+    #[inline]
+    pub fn fragments(&mut self, read: bool, then_same_word: u64) {
+        self.read |= read;
+        if !self.read {
+            // Every run is empty: fragments that read nothing leave it so.
+            return;
+        }
+        for (scan, &(p, q)) in self.scans.iter_mut().zip(&DENSE_READ_COSTS) {
+            let (p, q) = (p as i64, q as i64);
+            if read {
+                scan.current.reads += 1;
+                scan.current.fragments += 1;
+                scan.current_score += p - q;
+                // A run's score rises only at a read: the best can change only here.
+                if scan.current_score > scan.best_score {
+                    scan.best = scan.current;
+                    scan.best_score = scan.current_score;
+                }
+            } else {
+                scan.skip(q, 1);
+            }
+            scan.skip(q, then_same_word);
+        }
+    }
+
+    /// No fragment read a new word since the last [`Self::take`]: it would give no run.
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        !self.read
+    }
+
+    /// The stretch's densest runs (those leaving [`KEPT_LAG_CYCLES`] or more), and a new
+    /// stretch.
+    pub fn take(&mut self) -> DenseRuns {
+        let mut runs = DenseRuns::NONE;
+        if !self.read {
+            return runs;
+        }
+        for (scan, &(_, q)) in self.scans.iter().zip(&DENSE_READ_COSTS) {
+            if scan.best_score < (KEPT_LAG_CYCLES * q) as i64 {
+                continue;
+            }
+            if let (Ok(reads), Ok(fragments)) = (
+                u32::try_from(scan.best.reads),
+                u32::try_from(scan.best.fragments),
+            ) {
+                runs.push(ReadRun { reads, fragments });
+            }
+        }
+        *self = DenseReadFinder::default();
+        runs
+    }
+}
+
+impl Scan {
+    /// `count` fragments that read nothing: the current run's score falls by `q` each, and
+    /// once below none the run is dropped (it falls monotonically, so one step is the same).
+    #[inline(always)]
+    fn skip(&mut self, q: i64, count: u64) {
+        if count == 0 {
+            return;
+        }
+        let score = self.current_score - q * count as i64;
+        if score < 0 {
+            self.current = Counted::default();
+            self.current_score = 0;
+        } else {
+            self.current.fragments += count;
+            self.current_score = score;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::SplitMix64;
+
+    fn runs_of(pattern: &str) -> DenseRuns {
+        let mut finder = DenseReadFinder::default();
+        for c in pattern.chars() {
+            finder.fragments(c == 'R', 0);
+        }
+        finder.take()
+    }
+
+    #[test]
+    fn a_sliver_of_reads_is_found_inside_a_sparse_stretch() {
+        // 40 sparse fragments (a read every 8), 12 that all read, 40 sparse again. At every
+        // cost but 9/8 the 12 reads in a row are the densest run: 5/4 leaves 12 · 5/4 - 12
+        // = 3 cycles, 4/3 4, 3/2 6 (a lone read 1/2 at most); 9/8 leaves 1.5, under the
+        // three cycles kept. The same run at every cost: kept once.
+        let sparse = "...R....".repeat(5);
+        let pattern = format!("{sparse}{}{sparse}", "R".repeat(12));
+        let runs = runs_of(&pattern);
+        assert_eq!(
+            runs.runs(),
+            &[ReadRun {
+                reads: 12,
+                fragments: 12
+            }]
+        );
+        assert_eq!(runs.lag(4.0 / 3.0), 4.0);
+        assert_eq!(runs.lag(1.0), 0.0);
+    }
+
+    #[test]
+    fn the_best_run_depends_on_the_cost() {
+        // "RRRRRR" then ".RR" eight times: 22 reads in 30 fragments. At 3/2 (weights: a
+        // read +1, a fragment without one -2) RRRRRR scores 6 and every ".RR" 0, no
+        // better: RRRRRR, leaving 9 - 6 = 3 cycles. At 4/3 (+1, -3) every ".RR" scores -1:
+        // RRRRRR again, leaving 2 (not kept). At 5/4 and 9/8 less. Had the costs gone to
+        // 2/1 (+1, -1), every ".RR" would add 1: the whole, 44 - 30 = 14 cycles.
+        let runs = runs_of(&format!("RRRRRR{}", ".RR".repeat(8)));
+        assert_eq!(
+            runs.runs(),
+            &[ReadRun {
+                reads: 6,
+                fragments: 6
+            }]
+        );
+        // At 3/2 the whole pattern leaves 33 - 30 = 3, as RRRRRR does.
+        assert_eq!(runs.lag(1.5), 3.0);
+        // Between the costs and past them, the kept runs give a lower bound: at 2, RRRRRR
+        // alone, 12 - 6 = 6, where the whole would leave 14.
+        assert_eq!(runs.lag(2.0), 6.0);
+        // A longer dense stretch changes the best run by cost: 24 reads in a row, then
+        // ".RRR" six times (42 reads in 48 fragments). At 9/8 (+1, -8) the 24 in a row
+        // score 24 (lag 3) and every ".RRR" -5: the 24. At 3/2 (+1, -2) every ".RRR"
+        // adds 1: the whole, 63 - 48 = 15.
+        let runs = runs_of(&format!("{}{}", "R".repeat(24), ".RRR".repeat(6)));
+        assert!(runs.runs().contains(&ReadRun {
+            reads: 24,
+            fragments: 24
+        }));
+        assert!(runs.runs().contains(&ReadRun {
+            reads: 42,
+            fragments: 48
+        }));
+        assert_eq!(runs.lag(1.125), 3.0);
+        assert_eq!(runs.lag(1.5), 15.0);
+    }
+
+    #[test]
+    fn runs_leaving_less_than_three_cycles_are_not_kept() {
+        // A read every other fragment leaves at most 3/2 · k - (2k - 1) < 1. Five reads in a
+        // row leave 7.5 - 5 = 2.5 at the dearest cost, 3/2: not kept; six leave 3.
+        assert!(runs_of(&"R.".repeat(30)).runs().is_empty());
+        assert!(runs_of("..RRRRR..").runs().is_empty());
+        let runs = runs_of("..RRRRRR..");
+        assert_eq!(
+            runs.runs(),
+            &[ReadRun {
+                reads: 6,
+                fragments: 6
+            }]
+        );
+        assert_eq!(runs.lag(1.5), 3.0);
+    }
+
+    #[test]
+    fn a_word_run_in_one_step_is_its_fragments_one_by_one() {
+        let mut rng = SplitMix64(15);
+        for _ in 0..200 {
+            let mut whole = DenseReadFinder::default();
+            let mut single = DenseReadFinder::default();
+            for _ in 0..rng.below(60) {
+                let read = rng.chance(50);
+                let rest = rng.below(9);
+                whole.fragments(read, rest);
+                single.fragments(read, 0);
+                for _ in 0..rest {
+                    single.fragments(false, 0);
+                }
+            }
+            assert_eq!(whole.take(), single.take());
+        }
+    }
+
+    #[test]
+    fn the_scan_finds_the_best_run_by_brute_force() {
+        let mut rng = SplitMix64(16);
+        for _ in 0..300 {
+            let reads: Vec<bool> = (0..rng.below(40)).map(|_| rng.chance(60)).collect();
+            let mut finder = DenseReadFinder::default();
+            for &read in &reads {
+                finder.fragments(read, 0);
+            }
+            let runs = finder.take();
+            for &(p, q) in &DENSE_READ_COSTS {
+                let cost = p as f64 / q as f64;
+                let mut best: f64 = 0.0;
+                for i in 0..reads.len() {
+                    for k in i..reads.len() {
+                        let n = reads[i..=k].iter().filter(|&&r| r).count() as f64;
+                        best = best.max(cost * n - (k - i + 1) as f64);
+                    }
+                }
+                // No kept run beats the best, and at its cost the best is kept when it
+                // leaves [`KEPT_LAG_CYCLES`] or more.
+                assert!(runs.lag(cost) <= best + 1e-9, "{reads:?} at {cost}");
+                if best >= KEPT_LAG_CYCLES as f64 {
+                    assert!((runs.lag(cost) - best).abs() < 1e-9, "{reads:?} at {cost}");
+                }
+            }
+        }
+    }
+}
