@@ -548,7 +548,12 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // walks (hierarchical 36.8% -> 26.3%, adaptive 30.0% -> 20.0%), raised for the 1x1/4x4
     // demos' analytic p95, 5.91% -> 10.53% (21 cycles against 19 for the 1x1 demo at 4
     // engines on o2). At the full scale on o2 at 1, 4 and 16 engines the same change took
-    // that class from 16.0% to 8.0% and every class within 9.5%.
+    // that class from 16.0% to 8.0% and every class within 9.5%. (k) lowered when the O2
+    // formulas began to keep the lag a stretch's densest run of reads leaves (a sliver
+    // reading every fragment, which the stretch's summed reads had averaged away;
+    // `traces/src/trace/dense_reads.rs`): hierarchical analytic 26.3% -> 5.26% (target),
+    // sampled 36.8% -> 15.8%; adaptive analytic 20.0% -> 5.00% (target), sampled 30.0% ->
+    // 5.00%; measured 2026-12-04.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
         ("demo",              0.05,  0.10,  0.01,  0.05),  // every target but sampled p95 4.17% (g)
@@ -557,9 +562,9 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
         ("hardcases",         0.05,  0.10,  0.01,  0.03),  // every target (sampled 0.27%)
         ("random",            0.05,  0.10,  0.01,  0.03),  // every target (f)
         ("walk-frustum",      0.05,  0.10,  0.01,  0.03),  // every target
-        ("walk-hierarchical", 0.05,  0.27,  0.01,  0.45),  // p95 26.3% (j), sampled p95 36.8% (g)
+        ("walk-hierarchical", 0.05,  0.10,  0.01,  0.19),  // sampled p95 15.8% (k)
         ("walk-quadtree",     0.05,  0.10,  0.01,  0.03),  // every target (e)
-        ("walk-adaptive",     0.05,  0.21,  0.01,  0.36),  // p95 20.0% (j), sampled p95 30.0% (g)
+        ("walk-adaptive",     0.05,  0.10,  0.01,  0.06),  // sampled p95 5.00% (k)
         ("walk-grids",        0.05,  0.10,  0.01,  0.03),  // every target (g)
     ];
     let error = |class: &str, level: &str, metric: &str| -> f64 {
