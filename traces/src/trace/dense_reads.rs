@@ -34,7 +34,7 @@ pub const DENSE_READ_COSTS: [(u64, u64); 4] = [(9, 8), (5, 4), (4, 3), (3, 2)];
 /// Costs kept.
 const COSTS: usize = DENSE_READ_COSTS.len();
 
-/// The least lag a run must leave to be kept [cycles]. The O2 formulas' depth test trails
+/// The least lag a run must leave to be kept, in cycles. The O2 formulas' depth test trails
 /// the rasterizer after any stretch that reads by a read's latency (2 cycles at least, a
 /// page hit) and the longest run of reserved cycles a read waits out (1 for any `f` up to
 /// 1/2), so a run leaving less than 3 cycles tells them nothing; and most stretches then
