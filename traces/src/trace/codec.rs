@@ -504,12 +504,6 @@ fn query_spec(c: &mut Cursor) -> Result<QuerySpec, PayloadError> {
     })
 }
 
-fn stretch(c: &mut Cursor) -> Result<FragmentStretch, PayloadError> {
-    let mut stretch = FragmentStretch::EMPTY;
-    decode_stretch(c, &mut stretch)?;
-    Ok(stretch)
-}
-
 /// A stretch record into `out`, checked.
 #[inline]
 fn decode_stretch(c: &mut Cursor, out: &mut FragmentStretch) -> Result<(), PayloadError> {
@@ -792,10 +786,8 @@ impl BlockDecoder {
     ) -> Result<Option<IndexItem>, PayloadError> {
         match t {
             tag::STRETCH => {
-                let mut c = Cursor::new(payload, self.pos + 1);
-                let stretch = stretch(&mut c)?;
-                self.pos = c.pos;
-                self.events += 1;
+                let mut stretch = FragmentStretch::EMPTY;
+                self.stretch_record(payload, &mut stretch)?;
                 Ok(Some(IndexItem::Stretch(stretch)))
             }
             tag::SPAN => Err(bad(self.pos, "a span in a window-index block")),
@@ -804,6 +796,20 @@ impl BlockDecoder {
                 Record::Span | Record::Part => None,
             }),
         }
+    }
+
+    /// The stretch record at the decoder's position (its tag read), into `out`.
+    #[inline]
+    fn stretch_record(
+        &mut self,
+        payload: &[u8],
+        out: &mut FragmentStretch,
+    ) -> Result<(), PayloadError> {
+        let mut c = Cursor::new(payload, self.pos + 1);
+        decode_stretch(&mut c, out)?;
+        self.pos = c.pos;
+        self.events += 1;
+        Ok(())
     }
 
     /// Hand every remaining item of a window-index payload to `visit`, as
@@ -822,10 +828,7 @@ impl BlockDecoder {
         let mut item = IndexItem::Stretch(FragmentStretch::EMPTY);
         while let Some(&t) = payload.get(self.pos) {
             if let (tag::STRETCH, IndexItem::Stretch(stretch)) = (t, &mut item) {
-                let mut c = Cursor::new(payload, self.pos + 1);
-                decode_stretch(&mut c, stretch)?;
-                self.pos = c.pos;
-                self.events += 1;
+                self.stretch_record(payload, stretch)?;
                 visit(&item).map_err(DrainError::Sink)?;
                 continue;
             }

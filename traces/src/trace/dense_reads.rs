@@ -148,10 +148,8 @@ impl DenseReadFinder {
                     scan.best = scan.current;
                     scan.best_score = scan.current_score;
                 }
-            } else {
-                scan.skip(q, 1);
             }
-            scan.skip(q, then_same_word);
+            scan.skip(q, then_same_word + u64::from(!read));
         }
     }
 

@@ -309,11 +309,16 @@ impl O2Formulas {
     /// cycle once the run's reads are in.
     #[inline]
     fn dense_read_lag(&self, runs: &DenseRuns) -> f64 {
-        if runs.runs().is_empty() {
-            return 0.0;
-        }
         let lag = runs.lag(1.0 / self.free_share());
         lag.min(self.arch.fifo_raster_to_depth_entries as f64)
+    }
+
+    /// `runs` of dense reads join stretch `w`: its lag is the most any of them leaves.
+    #[inline]
+    fn add_dense_runs(&self, w: &mut StretchCounts, runs: &DenseRuns) {
+        if !runs.runs().is_empty() {
+            w.dense_read_lag = w.dense_read_lag.max(self.dense_read_lag(runs));
+        }
     }
 
     /// Port cycles for `bits` written.
@@ -617,10 +622,7 @@ impl O2Bottleneck {
             return;
         }
         let runs = self.dense.take();
-        self.stretch.dense_read_lag = self
-            .stretch
-            .dense_read_lag
-            .max(self.formulas.dense_read_lag(&runs));
+        self.formulas.add_dense_runs(&mut self.stretch, &runs);
     }
 
     /// The last query's records wait for no more reads (`L` fragments followed its end token,
@@ -746,9 +748,7 @@ impl O2Bottleneck {
         };
         w.depth_reads += stretch.depth_reads;
         w.page_misses += stretch.page_misses;
-        w.dense_read_lag = w
-            .dense_read_lag
-            .max(self.formulas.dense_read_lag(&stretch.dense));
+        self.formulas.add_dense_runs(w, &stretch.dense);
         if self.open.is_some_and(|(_, mode)| mode) {
             return;
         }
@@ -826,10 +826,8 @@ impl O2Bottleneck {
     pub(super) fn finish(&self) -> Option<WindowEnd> {
         let mut pipe = self.pipe.clone();
         let mut stretch = self.stretch.clone();
-        let runs = self.dense.clone().take();
-        stretch.dense_read_lag = stretch
-            .dense_read_lag
-            .max(self.formulas.dense_read_lag(&runs));
+        self.formulas
+            .add_dense_runs(&mut stretch, &self.dense.clone().take());
         close_stretch(&self.formulas, &mut pipe, &stretch);
         // Work since the window began: a primitive, a fragment or a clear.
         let worked = pipe.raster > 0.0 || pipe.downstream > pipe.carried;
