@@ -235,8 +235,8 @@ pub fn replay<R: Read>(
 }
 
 /// The sampled level's window sizes, found by a reader of their own up to K windows ahead:
-/// over the window index when the trace has one (retiling moves no window's end), else over
-/// the events.
+/// read from the window table when the trace has one (format version 8 on), else found over
+/// the window index when it has one (retiling moves no window's end), else over the events.
 struct ScoutedSizes<R: Read> {
     reader: TraceReader<R>,
     scout: WindowScout,
@@ -251,11 +251,15 @@ impl<R: Read> ScoutedSizes<R> {
     }
 }
 
-/// Feed `scout` the next block of events, or the next index item; false at the trace's end.
+/// Give `scout` the next block of the window table, else feed it the next block of events or
+/// of index items; false at the trace's end.
 fn read_on<R: Read>(
     reader: &mut TraceReader<R>,
     scout: &mut WindowScout,
 ) -> Result<bool, TraceError> {
+    if reader.has_window_table() {
+        return scout.read_table(|sizes| reader.next_window_sizes(sizes));
+    }
     if reader.header().window_index.is_none() {
         return reader.next_block(scout).map_err(ReadError::into_trace);
     }

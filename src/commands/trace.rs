@@ -308,6 +308,16 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
         ),
         None => outln!("depth tests none (the sampled level decodes every fragment)"),
     }
+    match summary.window_table {
+        Some(table) => outln!(
+            "windows     every window's size in {} blocks, {} bytes stored: the sampled level reads them instead of the trace a second time",
+            table.blocks,
+            table.stored_bytes
+        ),
+        None => outln!(
+            "windows     no table (the sampled level finds the windows' sizes by reading the trace a second time)"
+        ),
+    }
     Ok(())
 }
 

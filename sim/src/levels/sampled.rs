@@ -17,8 +17,10 @@
 //!   sampled window and the events among them ([`warm_up_fragments`]: 4,096 on the O2,
 //!   16,384 on the InfiniteReality-like machine), over as many windows as that takes (from
 //!   the first clear among them when there is one: a clear's port time outlasts any such
-//!   count). The windows' sizes come from a second reading of the stream up to K windows
-//!   ahead ([`WindowScout`], [`feed_window_sizes`]: the window index, else the events); a
+//!   count). The windows' sizes come up to K windows ahead from the trace's window table
+//!   ([`occsim_traces::trace::windows`], format version 8), else from a second reading of
+//!   the stream ([`WindowScout`], [`feed_window_sizes`]: the window index, else the
+//!   events), the same sizes either way; a
 //!   model given no sizes runs the whole window before the sampled one. A machine starts
 //!   (when none is running) with the render state there and the functional model's depth
 //!   buffer, or, read from the window index, depths made consistent with the trace's
@@ -88,8 +90,9 @@ use crate::levels::functional::FunctionalCore;
 use crate::levels::level::{LevelResult, SampledWindows};
 use crate::levels::predicted_loop::PredictedLoop;
 use crate::machines::{MachineBuilder, MachineModel};
-use occsim_traces::golden::{DepthBuffer, EventSink};
+use occsim_traces::golden::DepthBuffer;
 use occsim_traces::trace::{IndexItem, ReadError, TestedFragments};
+pub use occsim_traces::trace::{WindowScout, WindowSize};
 use occsim_traces::{Event, QueryMode, QuerySpec, Span};
 use std::collections::{BTreeMap, VecDeque};
 use std::io::Read;
@@ -241,109 +244,6 @@ pub fn tail_fragments(machine: Machine) -> u64 {
 /// largest sampled window of a class the formulas' slope carries on there (the corpus
 /// figures of [`O2_TAIL_FRAGMENTS`] are with this).
 pub const LONG_WINDOW_FRAGMENTS: u64 = IR_TAIL_FRAGMENTS / 2;
-
-/// What the scout tells of a window ahead.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct WindowSize {
-    /// Its fragments.
-    pub fragments: u64,
-    /// Its fragments before its last record of the closed loop's host or geometry stage
-    /// (0 when it has none): from there on the host has nothing to do but wait.
-    pub host_until: u64,
-}
-
-/// Each window's fragments, found ahead of the model by a second reading of the stream: a
-/// sampled window's machine starts its warm-up ([`warm_up_fragments`]) before the window. Feed
-/// it the stream (or its window index) as the model sees it; it hands out the sizes of the
-/// windows it has seen end, and where their hosts' work ends.
-#[derive(Default)]
-pub struct WindowScout {
-    fragments: u64,
-    host_until: u64,
-    ended: bool,
-    sizes: VecDeque<WindowSize>,
-    /// The stream has ended ([`Self::finish`]).
-    finished: bool,
-}
-
-impl WindowScout {
-    /// The rule of [`SampledModel::event`]: a window ends after a query's end (and its
-    /// result) or a frame's end, before the next event that is not the result.
-    fn close_ended(&mut self) {
-        if self.ended {
-            self.sizes.push_back(WindowSize {
-                fragments: self.fragments,
-                host_until: self.host_until,
-            });
-            (self.fragments, self.host_until, self.ended) = (0, 0, false);
-        }
-    }
-
-    pub fn event(&mut self, event: &Event) {
-        if !matches!(event, Event::QueryResult(_)) {
-            self.close_ended();
-        }
-        match event {
-            Event::Fragment(_) => self.fragments += 1,
-            Event::QueryEnd | Event::Swap => self.ended = true,
-            event if event.is_closed_loop_record() => self.host_until = self.fragments,
-            _ => {}
-        }
-    }
-
-    pub fn fragments(&mut self, count: u64) {
-        self.close_ended();
-        self.fragments += count;
-    }
-
-    pub fn index_item(&mut self, item: &IndexItem) {
-        match item {
-            IndexItem::Event(event) => self.event(event),
-            IndexItem::Stretch(stretch) => self.fragments(stretch.fragments),
-        }
-    }
-
-    /// The stream ended: the final window's size.
-    pub fn finish(&mut self) {
-        self.ended = true;
-        self.close_ended();
-        self.finished = true;
-    }
-
-    /// The next window's size, reading on with `read_on` (which feeds the scout and says
-    /// false at the stream's end) until the scout has seen that window end; None after the
-    /// last window.
-    pub fn next_size<E>(
-        &mut self,
-        mut read_on: impl FnMut(&mut WindowScout) -> Result<bool, E>,
-    ) -> Result<Option<WindowSize>, E> {
-        loop {
-            if let Some(size) = self.sizes.pop_front() {
-                return Ok(Some(size));
-            }
-            if self.finished {
-                return Ok(None);
-            }
-            if !read_on(self)? {
-                self.finish();
-            }
-        }
-    }
-}
-
-impl EventSink for WindowScout {
-    type Error = std::convert::Infallible;
-
-    fn event(&mut self, event: &Event) -> Result<(), Self::Error> {
-        WindowScout::event(self, event);
-        Ok(())
-    }
-
-    fn span(&mut self, span: Span) -> Result<(), Self::Error> {
-        self.fragments(span.depths.len() as u64);
-        Ok(())
-    }
-}
 
 /// Where a sampled model's window sizes come from ([`SampledModel::wants_window_size`]).
 pub trait WindowSizes {
@@ -1564,34 +1464,6 @@ mod tests {
         let low = samples(&[(0, 10), (10, 20)]);
         assert_eq!(low.extrapolate(0, 1.0), Some(0.0));
         assert_eq!(Calibration::default().extrapolate(5, 1.0), None);
-    }
-
-    #[test]
-    fn the_scout_tells_each_windows_size_and_where_its_host_work_ends() {
-        use occsim_traces::event::HostWork;
-        let mut scout = WindowScout::default();
-        let fragment = Event::Fragment(occsim_traces::Fragment { x: 0, y: 0, z: 0 });
-        // Window 0: 3 fragments, host work after the 2nd; window 1: host work before any
-        // fragment, then 4; window 2 (the last, cut by the stream's end): 1, no host work.
-        let host = Event::HostWork(HostWork::default());
-        for event in [
-            &fragment,
-            &fragment,
-            &host,
-            &fragment,
-            &Event::QueryEnd,
-            &host,
-        ] {
-            scout.event(event);
-        }
-        scout.fragments(4);
-        scout.event(&Event::Swap);
-        scout.event(&fragment);
-        scout.finish();
-        let sizes: Vec<_> = std::iter::from_fn(|| scout.next_size(|_| Ok::<_, ()>(false)).unwrap())
-            .map(|size| (size.fragments, size.host_until))
-            .collect();
-        assert_eq!(sizes, [(3, 2), (4, 0), (1, 0)]);
     }
 
     /// A sampled:3 model at the default O2, warm-ups of 10 fragments and tails of 20, told

@@ -12,8 +12,11 @@ pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// event block of an indexed trace with a depth-test block ([`crate::trace::depth_tests`]);
 /// version 6 gives the index's stretches right after a query end their first reads
 /// ([`crate::trace::FragmentStretch::first_reads`]); version 7 gives every stretch its
-/// densest runs of reads ([`crate::trace::FragmentStretch::dense`]).
-pub const FORMAT_VERSION: u16 = 7;
+/// densest runs of reads ([`crate::trace::FragmentStretch::dense`]); version 8 adds the
+/// window table's blocks ([`crate::trace::windows`]).
+pub const FORMAT_VERSION: u16 = 8;
+/// The first version whose traces hold a window table ([`crate::trace::windows`]).
+pub const WINDOW_TABLE_VERSION: u16 = 8;
 /// The oldest version this code reads: version-1 traces replay as an open loop.
 pub const OLDEST_READABLE_VERSION: u16 = 1;
 /// Most bytes of header JSON.
@@ -36,6 +39,7 @@ pub(crate) const KIND_EVENTS: u8 = 1;
 pub(crate) const KIND_SUMMARY: u8 = 2;
 pub(crate) const KIND_INDEX: u8 = 3;
 pub(crate) const KIND_DEPTH_TESTS: u8 = 4;
+pub(crate) const KIND_WINDOWS: u8 = 5;
 /// Payload codecs.
 pub(crate) const CODEC_STORED: u8 = 0;
 pub(crate) const CODEC_ZSTD: u8 = 1;
@@ -89,7 +93,7 @@ impl BlockHeader {
         let (raw, stored) = (header.raw_len as usize, header.stored_len as usize);
         match header.kind {
             KIND_EVENTS | KIND_INDEX if raw == 0 => return Err("empty event block".to_owned()),
-            KIND_EVENTS | KIND_INDEX | KIND_DEPTH_TESTS if raw > MAX_BLOCK_BYTES => {
+            KIND_EVENTS | KIND_INDEX | KIND_DEPTH_TESTS | KIND_WINDOWS if raw > MAX_BLOCK_BYTES => {
                 return Err(format!(
                     "block claims {raw} payload bytes (most {MAX_BLOCK_BYTES})"
                 ))
@@ -109,7 +113,14 @@ impl BlockHeader {
                     header.events
                 ))
             }
-            KIND_EVENTS | KIND_SUMMARY | KIND_INDEX | KIND_DEPTH_TESTS => {}
+            // An entry of the window table takes two bytes at least.
+            KIND_WINDOWS if raw == 0 || header.events as usize > raw / 2 => {
+                return Err(format!(
+                    "window-table block claims {} windows in {raw} bytes",
+                    header.events
+                ))
+            }
+            KIND_EVENTS | KIND_SUMMARY | KIND_INDEX | KIND_DEPTH_TESTS | KIND_WINDOWS => {}
             kind => return Err(format!("unknown block kind {kind}")),
         }
         if bytes[2] != 0 || bytes[3] != 0 {

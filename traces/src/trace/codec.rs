@@ -137,8 +137,12 @@ impl<'a> Cursor<'a> {
         Cursor { bytes, pos }
     }
 
-    fn at_end(&self) -> bool {
+    pub(crate) fn at_end(&self) -> bool {
         self.pos >= self.bytes.len()
+    }
+
+    pub(crate) fn pos(&self) -> usize {
+        self.pos
     }
 
     fn remaining(&self) -> usize {
@@ -157,7 +161,7 @@ impl<'a> Cursor<'a> {
     }
 
     #[inline(always)]
-    fn uv(&mut self) -> Result<u64, PayloadError> {
+    pub(crate) fn uv(&mut self) -> Result<u64, PayloadError> {
         let first = self.byte()?;
         if first < 0x80 {
             return Ok(first as u64);

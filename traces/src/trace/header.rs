@@ -174,6 +174,9 @@ pub struct TraceSummary {
     /// (version 5 on).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub depth_tests: Option<BlockCounts>,
+    /// The window table's blocks (version 8 on, [`crate::trace::windows`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub window_table: Option<BlockCounts>,
 }
 
 /// Blocks of one kind and their bytes (the summary's `window_index` counts the window

@@ -1,24 +1,27 @@
 //! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
 //!
-//! # Layout (version 6; all integers little-endian; versions 1, without the closed loop's
+//! # Layout (version 8; all integers little-endian; versions 1, without the closed loop's
 //! records, 2, with verbose hits stored one by one, 3, without window-index blocks, 4,
-//! without depth-test blocks, and 5, without the index's first reads, still read)
+//! without depth-test blocks, 5, without the index's first reads, 6, without its densest
+//! runs of reads, and 7, without the window table, still read)
 //!
 //! ```text
-//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 6 | flags u16 = 0
+//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 8 | flags u16 = 0
 //!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
 //!               (the CRC covers version .. end of JSON)
 //! event blocks  block header (20) | stored payload (stored_len), with window-index blocks
 //!               (kind 3) among them when the header names a `window_index` layout, and
-//!               then each event block followed at once by its depth-test block (kind 4)
+//!               then each event block followed at once by its depth-test block (kind 4),
+//!               and window-table blocks (kind 5) among them
 //! summary block block header (20, kind 2, stored) | summary JSON
 //! trailer       summary block offset u64 | "OCCTEND\n" (8)
 //!
-//! block header  kind u8 (1 events, 2 summary, 3 window index, 4 depth tests) | codec u8
-//!               (0 stored, 1 zstd) | reserved u16 = 0
+//! block header  kind u8 (1 events, 2 summary, 3 window index, 4 depth tests, 5 window
+//!               table) | codec u8 (0 stored, 1 zstd) | reserved u16 = 0
 //!               | events u32 | raw_len u32 (<= 1 MiB) | stored_len u32 | CRC32 u32
 //!               (the CRC covers the first 16 header bytes and the stored payload; a
-//!               depth-test block's `events` is its event block's fragments)
+//!               depth-test block's `events` is its event block's fragments, a window-table
+//!               block's its windows)
 //! ```
 //!
 //! An event payload is a sequence of records, each a tag byte and fields (varints are
@@ -30,8 +33,9 @@
 //! previous span's x slope. All prediction state resets at each block start, so blocks
 //! decode independently; only a query begin or result too large for one block is split
 //! into `PART` records across consecutive blocks. See `codec.rs` for the record tags,
-//! [`index`] for the window index, the stream a model that needs no fragment reads, and
-//! [`depth_tests`] for the depth tests' results a model starting mid-trace reads.
+//! [`index`] for the window index, the stream a model that needs no fragment reads,
+//! [`depth_tests`] for the depth tests' results a model starting mid-trace reads, and
+//! [`windows`] for the window table, the windows' sizes a sampled model reads ahead.
 
 mod block;
 mod codec;
@@ -42,6 +46,7 @@ mod header;
 pub mod index;
 mod reader;
 pub mod synthetic;
+pub mod windows;
 mod writer;
 
 #[cfg(test)]
@@ -60,4 +65,5 @@ pub use header::{
 };
 pub use index::{FragmentStretch, IndexItem, FIRST_READS_FRAGMENTS};
 pub use reader::TraceReader;
+pub use windows::{WindowScout, WindowSize};
 pub use writer::{TraceWriter, WriterOptions};

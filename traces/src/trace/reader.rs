@@ -4,9 +4,11 @@ use super::block::*;
 use super::codec::{BlockDecoder, DecodeContext, DrainError, PayloadError};
 use super::header::{BlockCounts, StreamTally, TraceHeader, TraceSummary};
 use super::index::IndexItem;
+use super::windows::{decode_window_sizes, WindowSize};
 use super::{ReadError, TraceError};
 use crate::event::Event;
 use crate::golden::EventSink;
+use std::collections::VecDeque;
 use std::io::{Read, Seek, SeekFrom};
 
 /// Reads a trace from `R`, checking every block's checksum and every event's sense.
@@ -38,6 +40,8 @@ pub struct TraceReader<R: Read> {
     index: BlockCounts,
     /// The depth-test blocks passed so far.
     depth_tests: BlockCounts,
+    /// The window table's blocks passed so far.
+    window_table: BlockCounts,
     /// The block loaded is a window-index block (read by [`TraceReader::next_index_item`]).
     in_index_block: bool,
     summary: Option<TraceSummary>,
@@ -51,6 +55,7 @@ pub struct TraceReader<R: Read> {
 enum Wanted {
     Events,
     Index,
+    Windows,
     Nothing,
 }
 
@@ -80,6 +85,7 @@ impl<R: Read> TraceReader<R> {
             skipped: false,
             index: BlockCounts::default(),
             depth_tests: BlockCounts::default(),
+            window_table: BlockCounts::default(),
             in_index_block: false,
             summary: None,
             failed: false,
@@ -240,6 +246,21 @@ impl<R: Read> TraceReader<R> {
                     }
                 }
                 KIND_DEPTH_TESTS => self.depth_tests.add(&header),
+                KIND_WINDOWS if self.version < WINDOW_TABLE_VERSION => {
+                    return Err(TraceError::BadBlock {
+                        offset: self.block_offset,
+                        reason: format!(
+                            "a window-table block in a version-{} trace (they came in {WINDOW_TABLE_VERSION})",
+                            self.version
+                        ),
+                    })
+                }
+                KIND_WINDOWS => {
+                    self.window_table.add(&header);
+                    if wanted == Wanted::Windows {
+                        break header;
+                    }
+                }
                 _ => {
                     self.blocks += 1;
                     self.payload_bytes += header.raw_len as u64;
@@ -322,6 +343,36 @@ impl<R: Read> TraceReader<R> {
 
     /// Whether every event block has a depth-test block after it
     /// ([`crate::trace::depth_tests`]).
+    pub fn has_window_table(&self) -> bool {
+        self.version >= WINDOW_TABLE_VERSION
+    }
+
+    /// The sizes of the next block of the window table ([`crate::trace::windows`]), added to
+    /// `into` in the stream's order; false once the table has no block left (at the trace's
+    /// end). Only the window table's blocks are decompressed (the others' checksums are
+    /// checked). A trace before version 8 has no table: false at once.
+    pub fn next_window_sizes(
+        &mut self,
+        into: &mut VecDeque<WindowSize>,
+    ) -> Result<bool, TraceError> {
+        if self.in_block && !self.at_end() {
+            self.failed = true;
+            return Err(self.mixed_reading());
+        }
+        if !self.has_window_table()
+            || self.at_end()
+            || !self.guarded(|reader| reader.load_block(Wanted::Windows))?
+        {
+            return Ok(false);
+        }
+        self.in_block = false;
+        if let Err(error) = decode_window_sizes(&self.payload, self.block_events, into) {
+            self.failed = true;
+            return Err(self.corrupt(error));
+        }
+        Ok(true)
+    }
+
     pub fn has_depth_tests(&self) -> bool {
         self.version >= 5 && self.header.window_index.is_some()
     }
@@ -423,6 +474,7 @@ impl<R: Read> TraceReader<R> {
         found.stored_bytes = self.stored_bytes;
         found.window_index = self.header.window_index.map(|_| self.index);
         found.depth_tests = self.has_depth_tests().then_some(self.depth_tests);
+        found.window_table = self.has_window_table().then_some(self.window_table);
         if found != stored || self.claimed_events != stored.events {
             return Err(bad(format!(
                 "it disagrees with the trace on {}",

@@ -321,14 +321,14 @@ fn wrong_magic_is_named() {
 
 #[test]
 fn unknown_version_is_named() {
-    for version in [0u8, 8] {
+    for version in [0u8, 9] {
         let mut bytes = write_default(&every_kind());
         bytes[8] = version;
         let error = TraceReader::new(&bytes[..]).err().unwrap();
         assert!(
             matches!(
                 error,
-                TraceError::UnsupportedVersion { offset: 8, version: v, known: 7 } if v == version as u16
+                TraceError::UnsupportedVersion { offset: 8, version: v, known: 8 } if v == version as u16
             ),
             "{error}"
         );
@@ -340,8 +340,18 @@ fn as_version_1(bytes: Vec<u8>) -> Vec<u8> {
     as_version(bytes, 1)
 }
 
-/// `bytes` as a file of `version`: the version field rewritten and the header's CRC with it.
-pub(crate) fn as_version(mut bytes: Vec<u8>, version: u8) -> Vec<u8> {
+/// `bytes` as a file of `version`: before version 8, as version 7 wrote it (without its
+/// window table); the version field rewritten and the header's CRC with it.
+pub(crate) fn as_version(bytes: Vec<u8>, version: u8) -> Vec<u8> {
+    let bytes = match version < 8 {
+        true => windows::as_version_7(&bytes).expect("a whole version-8 trace"),
+        false => bytes,
+    };
+    with_version_field(bytes, version)
+}
+
+/// `bytes` with the version field rewritten to `version` and the header's CRC with it.
+fn with_version_field(mut bytes: Vec<u8>, version: u8) -> Vec<u8> {
     bytes[8] = version;
     let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
     let crc_at = 16 + json_len;
@@ -362,7 +372,7 @@ fn version_1_traces_still_read_and_say_they_have_no_closed_loop() {
     assert!(!reader.has_closed_loop());
     let current_bytes = write_default(&events);
     let current = TraceReader::new(&current_bytes[..]).unwrap();
-    assert_eq!(current.format_version(), 7);
+    assert_eq!(current.format_version(), 8);
     assert!(current.has_closed_loop());
     assert_eq!(read_bulk(&bytes).unwrap().0, events);
 }
@@ -581,6 +591,7 @@ fn small_triangles_cost_at_most_two_bytes_per_fragment() {
 }
 
 fn read_anything(bytes: &[u8]) {
+    let _ = window_table(bytes);
     let _ = read_one_by_one(bytes);
     let _ = read_bulk(bytes);
     let _ = TraceReader::new(bytes).and_then(|mut r| r.skip_to_summary());
@@ -701,4 +712,127 @@ fn a_seekable_trace_records_its_features_in_the_header() {
         .header()
         .features
         .is_none());
+}
+
+/// Every window's size as the trace's window table gives it, and the table's blocks.
+fn window_table(bytes: &[u8]) -> Result<(Vec<(u64, u64)>, u64), TraceError> {
+    let mut reader = TraceReader::new(bytes)?;
+    let mut sizes = std::collections::VecDeque::new();
+    let mut blocks = 0;
+    while reader.next_window_sizes(&mut sizes)? {
+        blocks += 1;
+    }
+    let pairs = sizes.iter().map(|s| (s.fragments, s.host_until)).collect();
+    Ok((pairs, blocks))
+}
+
+/// Windows of 0 to 4 fragments each, ended by a swap; every third with host work after its
+/// first fragment (the host work ends its host's part: `host_until` = 1 when it has a
+/// fragment before it, else 0).
+fn many_windows(windows: u64) -> Vec<Event> {
+    let mut events = Vec::new();
+    for w in 0..windows {
+        for i in 0..w % 5 {
+            events.push(frag(i as u16, (w % 100) as u16, 7));
+            if i == 0 && w % 3 == 0 {
+                events.push(Event::HostWork(HostWork::default()));
+            }
+        }
+        events.push(Event::Swap);
+    }
+    events
+}
+
+#[test]
+fn the_window_table_holds_every_window_the_events_make() {
+    // 3,000 windows of 1 to 2 bytes an entry take more than one 4,096-byte block.
+    let events = many_windows(3000);
+    let options = WriterOptions {
+        block_bytes: 4096,
+        ..WriterOptions::default()
+    };
+    let (bytes, summary) = write(&TraceHeader::new(SIDE, SIDE), options, &events);
+    let (table, blocks) = window_table(&bytes).unwrap();
+    assert!(blocks >= 2, "{blocks} blocks");
+    assert_eq!(summary.window_table.map(|t| t.blocks), Some(blocks));
+    // The scout over the events read back: the same sizes, a window for each swap (the
+    // last closed by the stream's end).
+    let mut scout = WindowScout::default();
+    let (read, _) = read_bulk(&bytes).unwrap();
+    read.iter().for_each(|event| scout.event(event));
+    scout.finish();
+    let scouted: Vec<(u64, u64)> = std::iter::from_fn(|| scout.take_ended())
+        .map(|s| (s.fragments, s.host_until))
+        .collect();
+    assert_eq!(table, scouted);
+    assert_eq!(table.len(), 3000);
+    // By hand: window 3 has 3 fragments and host work after the first; window 4 has 4 and
+    // none; window 6 has 1, then host work.
+    assert_eq!(&table[3..7], [(3, 1), (4, 0), (0, 0), (1, 1)]);
+}
+
+/// The offset of the first block of `kind` in a trace.
+fn first_block_of_kind(bytes: &[u8], kind: u8) -> usize {
+    let mut at = first_block_offset(bytes);
+    loop {
+        let fields: [u8; BLOCK_HEADER_BYTES] =
+            bytes[at..at + BLOCK_HEADER_BYTES].try_into().unwrap();
+        let (header, _) = BlockHeader::parse(&fields).unwrap();
+        if header.kind == kind {
+            return at;
+        }
+        at += BLOCK_HEADER_BYTES + header.stored_len as usize;
+    }
+}
+
+#[test]
+fn a_window_table_that_no_stream_makes_is_refused_with_its_offset() {
+    let clean = write_default(&many_windows(10));
+    let table_at = first_block_of_kind(&clean, 5);
+    // A version-7 trace has no window table: its reader says so without reading, and a
+    // window-table block in one is an error at the block.
+    let old = with_version_field(clean.clone(), 7);
+    let mut reader = TraceReader::new(&old[..]).unwrap();
+    assert!(!reader.has_window_table());
+    assert!(!reader
+        .next_window_sizes(&mut std::collections::VecDeque::new())
+        .unwrap());
+    match read_bulk(&old) {
+        Err(TraceError::BadBlock { offset, reason }) => {
+            assert_eq!(offset, table_at as u64, "{reason}");
+            assert!(reason.contains("version-7"), "{reason}");
+        }
+        other => panic!("{other:?}"),
+    }
+    // The table's block rewritten, checksum and all, to hold one window whose host work
+    // ends after fragment 2 of its 1: refused at the block, its entry at payload byte 0.
+    let fields: [u8; BLOCK_HEADER_BYTES] = clean[table_at..table_at + BLOCK_HEADER_BYTES]
+        .try_into()
+        .unwrap();
+    let (header, _) = BlockHeader::parse(&fields).unwrap();
+    let payload = [0x01, 0x02];
+    let bad = BlockHeader {
+        codec: 0,
+        events: 1,
+        raw_len: 2,
+        stored_len: 2,
+        ..header
+    };
+    let end = table_at + BLOCK_HEADER_BYTES + header.stored_len as usize;
+    let mut bytes = clean[..table_at].to_vec();
+    bytes.extend_from_slice(&bad.fields());
+    bytes.extend_from_slice(&bad.checksum(&payload).to_le_bytes());
+    bytes.extend_from_slice(&payload);
+    bytes.extend_from_slice(&clean[end..]);
+    match window_table(&bytes) {
+        Err(TraceError::Corrupt {
+            offset,
+            payload_offset,
+            reason,
+        }) => {
+            assert_eq!((offset, payload_offset), (table_at as u64, 0), "{reason}");
+            assert!(reason.contains("host work"), "{reason}");
+        }
+        other => panic!("{other:?}"),
+    }
 }

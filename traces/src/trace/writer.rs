@@ -8,6 +8,7 @@ use super::codec::{
 use super::depth_tests::DepthTestBits;
 use super::header::{BlockCounts, StreamTally, TraceHeader, TraceSummary};
 use super::index::{FragmentStretch, WindowIndexer};
+use super::windows::{WindowScout, WindowSize};
 use super::TraceError;
 use crate::depth_layout::DepthLayout;
 use crate::event::Event;
@@ -67,11 +68,12 @@ impl OpenBlock {
     }
 }
 
-/// The two streams a writer fills: the events, and the window index.
+/// The streams a writer fills: the events, the window index, and the window table.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Lane {
     Events,
     Index,
+    Windows,
 }
 
 /// The window index being written: its counting state and its open block, and the depth
@@ -117,6 +119,10 @@ pub struct TraceWriter<W: Write> {
     height: u32,
     events_seen: u64,
     index: Option<IndexLane>,
+    /// The window table: the windows' rule followed over the events written, and its open
+    /// block ([`crate::trace::windows`]).
+    windows: WindowScout,
+    window_table: OpenBlock,
     failed: bool,
 }
 
@@ -211,6 +217,8 @@ impl<W: Write> TraceWriter<W> {
             width: header.width,
             height: header.height,
             events_seen: 0,
+            windows: WindowScout::default(),
+            window_table: OpenBlock::new(KIND_WINDOWS),
             failed: false,
         })
     }
@@ -243,6 +251,8 @@ impl<W: Write> TraceWriter<W> {
                 return Err(self.invalid(reason));
             }
             self.tally.checked_fragments(1);
+            self.windows.fragments(1);
+            self.write_ended_windows()?;
             let passed = self.index.as_mut().map(|index| index.indexer.fragment(*f));
             let len = self.span_depths.len();
             let continues = len > 0
@@ -279,6 +289,17 @@ impl<W: Write> TraceWriter<W> {
         if let Some(index) = &mut self.index {
             index.indexer.event(event);
         }
+        self.windows.event(event);
+        self.write_ended_windows()
+    }
+
+    /// Into the window table: the windows the events so far have ended.
+    fn write_ended_windows(&mut self) -> Result<(), TraceError> {
+        while let Some(size) = self.windows.take_ended() {
+            self.make_room(Lane::Windows, WindowSize::MAX_BYTES)?;
+            size.encode(&mut self.window_table.payload);
+            self.window_table.items += 1;
+        }
         Ok(())
     }
 
@@ -309,6 +330,7 @@ impl<W: Write> TraceWriter<W> {
         match lane {
             Lane::Events => Some(&mut self.events),
             Lane::Index => self.index.as_mut().map(|index| &mut index.block),
+            Lane::Windows => Some(&mut self.window_table),
         }
     }
 
@@ -482,14 +504,18 @@ impl<W: Write> TraceWriter<W> {
         }
         self.flush_span()?;
         self.flush_stretch()?;
+        self.windows.finish();
+        self.write_ended_windows()?;
         self.flush_block(Lane::Events)?;
         self.flush_block(Lane::Index)?;
+        self.flush_block(Lane::Windows)?;
         let mut summary = self.tally.summary();
         summary.blocks = self.events.written.blocks;
         summary.payload_bytes = self.events.written.payload_bytes;
         summary.stored_bytes = self.events.written.stored_bytes;
         summary.window_index = self.index.as_ref().map(|index| index.block.written);
         summary.depth_tests = self.index.as_ref().map(|index| index.depth_test_blocks);
+        summary.window_table = Some(self.window_table.written);
         let json = serde_json::to_vec(&summary).map_err(|e| self.invalid(e.to_string()))?;
         let header = BlockHeader {
             kind: KIND_SUMMARY,
