@@ -8,8 +8,9 @@
 //!
 //! On the O2 and on ir4: fragments per second per level, as ratios to `cycle`, and the
 //! analytic and sampled:10 levels decoding the fragments beside them reading the window
-//! index (what the index saves); then, on the synthetic stream, what the automatic effects choice saves over
-//! `--effects all` at the cycle level.
+//! index (what the index saves), and sampled:10 and sampled:100 on the trace without its
+//! window table (what the table saves); then, on the synthetic stream, what the automatic
+//! effects choice saves over `--effects all` at the cycle level.
 //!
 //! Run: `cargo bench -p occsim-sim --bench fidelity` (several minutes: the large traces'
 //! rtl runs dominate).
@@ -176,30 +177,54 @@ fn main() {
     }
 }
 
-/// Every level's rate on `trace`, as a ratio to `cycle`; the analytic level also decoding
-/// the fragments (`analytic/decode`) beside reading the window index.
+/// How a level reads the trace.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Reading {
+    /// As `occsim replay` reads it: the window index and the window table where they serve.
+    AsWritten,
+    /// Decoding every fragment (`--no-index`): what the index saves.
+    Decode,
+    /// The trace as version 7 wrote it, without the window table: what the table saves the
+    /// sampled level (its windows' sizes found by reading the trace a second time).
+    NoTable,
+}
+
+/// Every level's rate on `trace`, as a ratio to `cycle`; the analytic and sampled levels
+/// also decoding the fragments (`/decode`) beside reading the window index, and the sampled
+/// level on the trace without its window table (`/no-table`).
 fn levels(arch: &Arch, trace: &[u8], rounds: usize) {
     let fragments = fragments_of(trace);
+    let no_table = occsim_traces::trace::windows::as_version_7(trace).expect("a version-8 trace");
     let levels = [
-        (Fidelity::Functional, true),
-        (Fidelity::Analytic, true),
-        (Fidelity::Analytic, false),
-        (Fidelity::Sampled { every: 10 }, true),
-        (Fidelity::Sampled { every: 10 }, false),
-        (Fidelity::Sampled { every: 100 }, true),
-        (Fidelity::Cycle, true),
-        (Fidelity::Rtl, true),
+        (Fidelity::Functional, Reading::AsWritten),
+        (Fidelity::Analytic, Reading::AsWritten),
+        (Fidelity::Analytic, Reading::Decode),
+        (Fidelity::Sampled { every: 10 }, Reading::AsWritten),
+        (Fidelity::Sampled { every: 10 }, Reading::Decode),
+        (Fidelity::Sampled { every: 10 }, Reading::NoTable),
+        (Fidelity::Sampled { every: 100 }, Reading::AsWritten),
+        (Fidelity::Sampled { every: 100 }, Reading::NoTable),
+        (Fidelity::Cycle, Reading::AsWritten),
+        (Fidelity::Rtl, Reading::AsWritten),
     ];
-    let mut jobs = levels.map(|(level, index)| move || run_level(level, arch, trace, index));
+    let no_table = &no_table;
+    let mut jobs = levels.map(|(level, reading)| {
+        move || match reading {
+            Reading::AsWritten => run_level(level, arch, trace, true),
+            Reading::Decode => run_level(level, arch, trace, false),
+            Reading::NoTable => run_level(level, arch, no_table, true),
+        }
+    });
     let figures = fastest_of_rounds(rounds, MIN_SECONDS, &mut jobs);
     let cycle = levels
         .iter()
         .position(|&(level, _)| level == Fidelity::Cycle);
     let cycle_seconds = figures[cycle.expect("cycle is among the levels")].seconds;
-    for ((level, index), figure) in levels.iter().zip(&figures) {
-        let name = match (level, index) {
-            (_, true) => level.to_string(),
-            (_, false) => format!("{level}/decode"),
+    for ((level, reading), figure) in levels.iter().zip(&figures) {
+        let name = match reading {
+            Reading::AsWritten => level.to_string(),
+            Reading::Decode => format!("{level}/decode"),
+            Reading::NoTable => format!("{level}/no-table"),
         };
         println!(
             "    {name:<16} {:>9.1} M fragments/s  {:>8.2}x cycle  cycles {}",

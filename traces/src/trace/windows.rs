@@ -15,7 +15,7 @@
 //! ([`crate::trace::TraceReader::next_window_sizes`]) and decompresses nothing else: on the
 //! demo, the sampled level's second reading of the stream was a sixth of sampled:100's
 //! instructions (15 of 86 M, decoding the window index again), and over the events, on a
-//! trace without an index or on the InfiniteReality-like machine, a whole second decoding.
+//! trace without an index, a whole second decoding.
 
 use super::block::{
     BlockHeader, BLOCK_HEADER_BYTES, CODEC_STORED, END_MAGIC, KIND_SUMMARY, KIND_WINDOWS, MAGIC,
