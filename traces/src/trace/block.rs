@@ -143,3 +143,22 @@ impl BlockHeader {
         Ok((header, word(16)))
     }
 }
+
+/// The summary block (stored, holding `json`) at file offset `at`, and the trailer that
+/// points at it: the bytes that end every trace.
+pub(crate) fn summary_and_trailer(json: &[u8], at: u64) -> Vec<u8> {
+    let header = BlockHeader {
+        kind: KIND_SUMMARY,
+        codec: CODEC_STORED,
+        events: 0,
+        raw_len: json.len() as u32,
+        stored_len: json.len() as u32,
+    };
+    let mut bytes = Vec::with_capacity(BLOCK_HEADER_BYTES + json.len() + TRAILER_BYTES);
+    bytes.extend_from_slice(&header.fields());
+    bytes.extend_from_slice(&header.checksum(json).to_le_bytes());
+    bytes.extend_from_slice(json);
+    bytes.extend_from_slice(&at.to_le_bytes());
+    bytes.extend_from_slice(&END_MAGIC);
+    bytes
+}

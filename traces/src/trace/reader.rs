@@ -341,8 +341,8 @@ impl<R: Read> TraceReader<R> {
         self.version >= 7 && self.header.window_index.is_some()
     }
 
-    /// Whether every event block has a depth-test block after it
-    /// ([`crate::trace::depth_tests`]).
+    /// Whether the trace holds a window table ([`crate::trace::windows`]): every trace of
+    /// version 8 on.
     pub fn has_window_table(&self) -> bool {
         self.version >= WINDOW_TABLE_VERSION
     }
@@ -373,6 +373,8 @@ impl<R: Read> TraceReader<R> {
         Ok(true)
     }
 
+    /// Whether every event block has a depth-test block after it
+    /// ([`crate::trace::depth_tests`]).
     pub fn has_depth_tests(&self) -> bool {
         self.version >= 5 && self.header.window_index.is_some()
     }

@@ -18,7 +18,7 @@
 //! trace without an index, a whole second decoding.
 
 use super::block::{
-    BlockHeader, BLOCK_HEADER_BYTES, CODEC_STORED, END_MAGIC, KIND_SUMMARY, KIND_WINDOWS, MAGIC,
+    summary_and_trailer, BlockHeader, BLOCK_HEADER_BYTES, KIND_SUMMARY, KIND_WINDOWS, MAGIC,
 };
 use super::codec::{put_uv, Cursor, PayloadError};
 use super::header::TraceSummary;
@@ -224,19 +224,8 @@ pub fn as_version_7(bytes: &[u8]) -> Option<Vec<u8>> {
                 let mut summary: TraceSummary = serde_json::from_slice(stored).ok()?;
                 summary.window_table = None;
                 let json = serde_json::to_vec(&summary).ok()?;
-                let summary_block = BlockHeader {
-                    kind: KIND_SUMMARY,
-                    codec: CODEC_STORED,
-                    events: 0,
-                    raw_len: json.len() as u32,
-                    stored_len: json.len() as u32,
-                };
-                let summary_at = out.len() as u64;
-                out.extend_from_slice(&summary_block.fields());
-                out.extend_from_slice(&summary_block.checksum(&json).to_le_bytes());
-                out.extend_from_slice(&json);
-                out.extend_from_slice(&summary_at.to_le_bytes());
-                out.extend_from_slice(&END_MAGIC);
+                let at = out.len() as u64;
+                out.extend_from_slice(&summary_and_trailer(&json, at));
                 return Some(out);
             }
             _ => out.extend_from_slice(bytes.get(at..end)?),

@@ -517,24 +517,8 @@ impl<W: Write> TraceWriter<W> {
         summary.depth_tests = self.index.as_ref().map(|index| index.depth_test_blocks);
         summary.window_table = Some(self.window_table.written);
         let json = serde_json::to_vec(&summary).map_err(|e| self.invalid(e.to_string()))?;
-        let header = BlockHeader {
-            kind: KIND_SUMMARY,
-            codec: CODEC_STORED,
-            events: 0,
-            raw_len: json.len() as u32,
-            stored_len: json.len() as u32,
-        };
-        let summary_offset = self.offset;
-        let crc = header.checksum(&json);
-        write_at(&mut self.out, &mut self.offset, &header.fields())?;
-        write_at(&mut self.out, &mut self.offset, &crc.to_le_bytes())?;
-        write_at(&mut self.out, &mut self.offset, &json)?;
-        write_at(
-            &mut self.out,
-            &mut self.offset,
-            &summary_offset.to_le_bytes(),
-        )?;
-        write_at(&mut self.out, &mut self.offset, &END_MAGIC)?;
+        let end = summary_and_trailer(&json, self.offset);
+        write_at(&mut self.out, &mut self.offset, &end)?;
         let offset = self.offset;
         self.out
             .flush()
