@@ -162,3 +162,27 @@ pub(crate) fn summary_and_trailer(json: &[u8], at: u64) -> Vec<u8> {
     bytes.extend_from_slice(&END_MAGIC);
     bytes
 }
+
+/// Where the first block of a whole trace in memory starts: after the magic, version,
+/// flags, JSON length, header JSON and its CRC. None when the bytes end before the length.
+pub(crate) fn first_block_offset(bytes: &[u8]) -> Option<usize> {
+    let json_len = u32::from_le_bytes(bytes.get(12..16)?.try_into().ok()?) as usize;
+    Some(16 + json_len + 4)
+}
+
+/// The blocks of a whole trace in memory, in order: each one's offset and header, until
+/// the bytes end or a block header does not parse (a block's payload may run past the end:
+/// the caller slices it with `get`).
+pub(crate) fn blocks_in(bytes: &[u8]) -> impl Iterator<Item = (usize, BlockHeader)> + '_ {
+    let mut at = first_block_offset(bytes).unwrap_or(usize::MAX);
+    std::iter::from_fn(move || {
+        let fields: [u8; BLOCK_HEADER_BYTES] = bytes
+            .get(at..at.checked_add(BLOCK_HEADER_BYTES)?)?
+            .try_into()
+            .ok()?;
+        let (header, _) = BlockHeader::parse(&fields).ok()?;
+        let block = (at, header);
+        at += BLOCK_HEADER_BYTES + header.stored_len as usize;
+        Some(block)
+    })
+}

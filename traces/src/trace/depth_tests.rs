@@ -526,19 +526,11 @@ mod tests {
 
     /// Where the last depth-test block ends: walk the blocks from the file header's end.
     fn end_of_last_depth_tests(bytes: &[u8]) -> usize {
-        let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
-        let (mut at, mut end) = (16 + json_len + 4, 0);
-        while at + 20 <= bytes.len() {
-            let fields: [u8; 20] = bytes[at..at + 20].try_into().unwrap();
-            let Ok((header, _)) = BlockHeader::parse(&fields) else {
-                break;
-            };
-            at += 20 + header.stored_len as usize;
-            if header.kind == KIND_DEPTH_TESTS {
-                end = at;
-            }
-        }
-        end
+        crate::trace::block::blocks_in(bytes)
+            .filter(|(_, header)| header.kind == KIND_DEPTH_TESTS)
+            .map(|(at, header)| at + crate::trace::BLOCK_HEADER_BYTES + header.stored_len as usize)
+            .last()
+            .unwrap_or(0)
     }
 
     #[test]

@@ -626,10 +626,7 @@ mod tests {
         }
     }
 
-    /// Where the first block starts: after the magic, version, flags, JSON length, JSON and
-    /// its CRC.
     fn first_block_offset(bytes: &[u8]) -> usize {
-        let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
-        16 + json_len + 4
+        crate::trace::block::first_block_offset(bytes).expect("a file header")
     }
 }

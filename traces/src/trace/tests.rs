@@ -303,8 +303,7 @@ fn summary_paths_agree_with_a_full_scan() {
 }
 
 fn first_block_offset(bytes: &[u8]) -> usize {
-    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
-    16 + json_len + 4
+    super::block::first_block_offset(bytes).expect("a file header")
 }
 
 #[test]
@@ -353,8 +352,8 @@ pub(crate) fn as_version(bytes: Vec<u8>, version: u8) -> Vec<u8> {
 /// `bytes` with the version field rewritten to `version` and the header's CRC with it.
 fn with_version_field(mut bytes: Vec<u8>, version: u8) -> Vec<u8> {
     bytes[8] = version;
-    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
-    let crc_at = 16 + json_len;
+    // The header's CRC: the 4 bytes before the first block.
+    let crc_at = first_block_offset(&bytes) - 4;
     let crc = crc32fast::hash(&bytes[MAGIC.len()..crc_at]);
     bytes[crc_at..crc_at + 4].copy_from_slice(&crc.to_le_bytes());
     bytes
@@ -773,16 +772,10 @@ fn the_window_table_holds_every_window_the_events_make() {
 
 /// The offset of the first block of `kind` in a trace.
 fn first_block_of_kind(bytes: &[u8], kind: u8) -> usize {
-    let mut at = first_block_offset(bytes);
-    loop {
-        let fields: [u8; BLOCK_HEADER_BYTES] =
-            bytes[at..at + BLOCK_HEADER_BYTES].try_into().unwrap();
-        let (header, _) = BlockHeader::parse(&fields).unwrap();
-        if header.kind == kind {
-            return at;
-        }
-        at += BLOCK_HEADER_BYTES + header.stored_len as usize;
-    }
+    super::block::blocks_in(bytes)
+        .find(|(_, header)| header.kind == kind)
+        .map(|(at, _)| at)
+        .expect("a block of the kind")
 }
 
 #[test]

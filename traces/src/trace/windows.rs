@@ -18,7 +18,8 @@
 //! trace without an index, a whole second decoding.
 
 use super::block::{
-    summary_and_trailer, BlockHeader, BLOCK_HEADER_BYTES, KIND_SUMMARY, KIND_WINDOWS, MAGIC,
+    blocks_in, first_block_offset, summary_and_trailer, BLOCK_HEADER_BYTES, KIND_SUMMARY,
+    KIND_WINDOWS, MAGIC,
 };
 use super::codec::{put_uv, Cursor, PayloadError};
 use super::header::TraceSummary;
@@ -200,22 +201,16 @@ impl EventSink for WindowScout {
 /// is as version 7 has it. For tests of the readings that serve a trace without a table;
 /// None when `bytes` is no whole version-8 trace.
 pub fn as_version_7(bytes: &[u8]) -> Option<Vec<u8>> {
-    let word = |at: usize| -> Option<usize> {
-        Some(u32::from_le_bytes(bytes.get(at..at + 4)?.try_into().ok()?) as usize)
-    };
     if bytes.get(..MAGIC.len())? != MAGIC || bytes.get(8..10)? != [8, 0] {
         return None;
     }
-    let json_end = 16 + word(12)?;
+    // The header's CRC covers version .. end of JSON: the 4 bytes before the first block.
+    let json_end = first_block_offset(bytes)? - 4;
     let mut out = bytes.get(..json_end)?.to_vec();
     out[8] = 7;
     let crc = crc32fast::hash(&out[MAGIC.len()..]);
     out.extend_from_slice(&crc.to_le_bytes());
-    let mut at = json_end + 4;
-    loop {
-        let fields: [u8; BLOCK_HEADER_BYTES] =
-            bytes.get(at..at + BLOCK_HEADER_BYTES)?.try_into().ok()?;
-        let (header, _) = BlockHeader::parse(&fields).ok()?;
+    for (at, header) in blocks_in(bytes) {
         let end = at + BLOCK_HEADER_BYTES + header.stored_len as usize;
         match header.kind {
             KIND_WINDOWS => {}
@@ -230,8 +225,9 @@ pub fn as_version_7(bytes: &[u8]) -> Option<Vec<u8>> {
             }
             _ => out.extend_from_slice(bytes.get(at..end)?),
         }
-        at = end;
     }
+    // The blocks ended before the summary.
+    None
 }
 
 #[cfg(test)]
