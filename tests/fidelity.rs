@@ -130,8 +130,35 @@ fn replay_reports_its_level_and_the_active_effects() {
     ]))
     .unwrap();
     assert_eq!(sampled["level"], "sampled:5");
+    // 28 windows, one per query. Every 5th: windows 0, 5, 10, 15, 20 and 25. Besides them
+    // the windows of the ceil(28 / 5) = 6 queries the formulas predict slowest, as the
+    // analytic level gives their latencies: queries 23, 24, 25 (2,686, 2,680 and 2,671
+    // cycles), 9 and 16 (1,360 each) and 11 (1,358), the next 1,356; 25 is one of every 5th
+    // already, so 5 more, 11 in all.
     assert_eq!(sampled["sampled_windows"]["total"], 28);
-    assert_eq!(sampled["sampled_windows"]["simulated"], 6);
+    assert_eq!(sampled["sampled_windows"]["simulated"], 11);
+    assert_eq!(sampled["sampled_windows"]["slowest"], 5);
+    let analytic: serde_json::Value = serde_json::from_str(&stdout_of(&[
+        "replay",
+        &trace,
+        "--fidelity",
+        "analytic",
+        "--json",
+    ]))
+    .unwrap();
+    let predicted: Vec<u64> = analytic["queries"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|q| q["latency_cycles"].as_u64().unwrap())
+        .collect();
+    assert_eq!(
+        [23, 24, 25, 9, 16, 11].map(|q| predicted[q]),
+        [2686, 2680, 2671, 1360, 1360, 1358]
+    );
+    let mut descending = predicted.clone();
+    descending.sort_unstable_by(|a, b| b.cmp(a));
+    assert_eq!(descending[6], 1356, "{predicted:?}");
 }
 
 #[test]
@@ -553,18 +580,23 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // reading every fragment, which the stretch's summed reads had averaged away;
     // `traces/src/trace/dense_reads.rs`): hierarchical analytic 26.3% -> 5.26% (target),
     // sampled 36.8% -> 15.8%; adaptive analytic 20.0% -> 5.00% (target), sampled 30.0% ->
-    // 5.00%; measured 2026-12-04.
+    // 5.00%; measured 2026-12-04. (l) lowered when the sampled level began to simulate,
+    // besides every K-th window, the windows of the K-th of the queries the formulas predict
+    // slowest (`SampledModel::slowest_windows`): sampled p95 on the demo 4.17% -> 0%, the
+    // hierarchical walks 15.8% -> 0%, the adaptive walk 5.00% -> 0%; the 1x1/4x4 demos stay
+    // at 5.26%, one cycle of 19 that the measured window itself gives (its machine, started
+    // mid-trace, meets the port's reserved cycles in another phase); measured 2026-12-04.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
-        ("demo",              0.05,  0.10,  0.01,  0.05),  // every target but sampled p95 4.17% (g)
-        ("retiled-1x1-4x4",   0.05,  0.11,  0.01,  0.064), // p95 10.53% (j), sampled p95 5.26% (h)
+        ("demo",              0.05,  0.10,  0.01,  0.03),  // every target (l)
+        ("retiled-1x1-4x4",   0.05,  0.11,  0.01,  0.064), // p95 10.53% (j), sampled p95 5.26% (h, l)
         ("retiled-32x32",     0.05,  0.10,  0.01,  0.03),  // every target
         ("hardcases",         0.05,  0.10,  0.01,  0.03),  // every target (sampled 0.27%)
         ("random",            0.05,  0.10,  0.01,  0.03),  // every target (f)
         ("walk-frustum",      0.05,  0.10,  0.01,  0.03),  // every target
-        ("walk-hierarchical", 0.05,  0.10,  0.01,  0.19),  // sampled p95 15.8% (k)
+        ("walk-hierarchical", 0.05,  0.10,  0.01,  0.03),  // every target (l)
         ("walk-quadtree",     0.05,  0.10,  0.01,  0.03),  // every target (e)
-        ("walk-adaptive",     0.05,  0.10,  0.01,  0.06),  // sampled p95 5.00% (k)
+        ("walk-adaptive",     0.05,  0.10,  0.01,  0.03),  // every target (l)
         ("walk-grids",        0.05,  0.10,  0.01,  0.03),  // every target (g)
     ];
     let error = |class: &str, level: &str, metric: &str| -> f64 {

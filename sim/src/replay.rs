@@ -23,8 +23,8 @@ use crate::effects::{effects_of_features, EffectScan, Effects, EffectsChoice};
 use crate::error::SimError;
 use crate::levels::analytic::AnalyticModel;
 use crate::levels::sampled::{
-    feed_window_sizes, tail_fragments, warm_up_fragments, SampledModel, WindowScout, WindowSize,
-    WindowSizes,
+    feed_window_sizes, simulates_slowest, tail_fragments, warm_up_fragments, SampledModel,
+    WindowScout, WindowSize, WindowSizes,
 };
 use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use crate::timeline::Timeline;
@@ -32,6 +32,7 @@ use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, RetileError, TileGrid};
 use occsim_traces::trace::{ReadError, TestedFragments, TraceError, TraceReader};
 use occsim_traces::Event;
+use std::collections::BTreeSet;
 use std::convert::Infallible;
 use std::io::Read;
 
@@ -171,49 +172,34 @@ pub fn replay<R: Read>(
             .map_err(model_error);
     }
     if let Fidelity::Sampled { every } = options.level {
+        // First the formulas alone over the trace, for the windows whose queries they
+        // predict slowest; then the model that simulates those and every K-th window.
+        let slowest = match simulates_slowest(every) {
+            false => BTreeSet::new(),
+            true => run_sampled(
+                reader,
+                &mut open,
+                (arch, effects, every),
+                &options,
+                |model| Ok(model.predicting()),
+            )?
+            .slowest_windows()
+            .map_err(model_error)?,
+        };
         let tail = options
             .tail_fragments
             .unwrap_or_else(|| tail_fragments(arch.machine()));
         let warm_up = options
             .warm_up_fragments
             .unwrap_or_else(|| warm_up_fragments(arch.machine()));
-        if options.window_index
-            && options.retile.is_none()
-            && reader.has_depth_tests()
-            && reader.index_has_every_count()
-            && AnalyticModel::reads_window_index(arch, reader.header())
-        {
-            let mut model = SampledModel::from_window_index(arch, width, height, effects, every)
-                .map_err(ReplayError::Setup)?
-                .with_window_sizes(warm_up, tail);
-            let mut fragments = TestedFragments::new(open()?)?;
-            let mut sizes = ScoutedSizes::new(open()?);
-            reader
-                .for_each_index_item(|item| {
-                    feed_window_sizes(&mut model, &mut sizes).map_err(model_error)?;
-                    model
-                        .index_item(item, &mut fragments)
-                        .map_err(|e| read_error(e, model_error))
-                })
-                .map_err(|e| match e {
-                    ReadError::Trace(e) => ReplayError::Read(e),
-                    ReadError::Sink(e) => e,
-                })?;
-            return LevelModel::Sampled(Box::new(model))
-                .finish(arch)
-                .map_err(model_error);
-        }
-        let model = SampledModel::new(arch, width, height, effects, every)
-            .map_err(ReplayError::Setup)?
-            .with_window_sizes(warm_up, tail);
-        let sink = Scouted {
-            model: Box::new(model),
-            sizes: ScoutedSizes::new(open()?),
-        };
-        let sink = feed_retiled(&mut reader, sink, options.retile, model_error)?;
-        return LevelModel::Sampled(sink.model)
-            .finish(arch)
-            .map_err(model_error);
+        let model = run_sampled(
+            open()?,
+            &mut open,
+            (arch, effects, every),
+            &options,
+            |model| Ok(model.with_slowest(slowest).with_window_sizes(warm_up, tail)),
+        )?;
+        return LevelModel::Sampled(model).finish(arch).map_err(model_error);
     }
     let model = LevelModel::with_outputs(
         options.level,
@@ -232,6 +218,58 @@ pub fn replay<R: Read>(
         model_error,
     )?;
     sink.model.finish(arch).map_err(model_error)
+}
+
+/// Run the sampled level's model over the trace `reader` reads: from the window index where
+/// it can (only the simulated windows' fragments read, by a second reader), else fed the
+/// events (retiled when asked); `configure` finishes the model, and its window sizes are read
+/// ahead by a reader of their own when it wants them.
+fn run_sampled<R: Read>(
+    mut reader: TraceReader<R>,
+    open: &mut impl OpenTrace<R>,
+    (arch, effects, every): (&Arch, Effects, u32),
+    options: &ReplayOptions,
+    configure: impl FnOnce(SampledModel) -> Result<SampledModel, SimError>,
+) -> Result<Box<SampledModel>, ReplayError> {
+    let (width, height) = (reader.header().width, reader.header().height);
+    let model_error = |source| ReplayError::Model {
+        machine: arch.machine().name(),
+        source,
+    };
+    if options.window_index
+        && options.retile.is_none()
+        && reader.has_depth_tests()
+        && reader.index_has_every_count()
+        && AnalyticModel::reads_window_index(arch, reader.header())
+    {
+        let model = SampledModel::from_window_index(arch, width, height, effects, every)
+            .and_then(configure)
+            .map_err(ReplayError::Setup)?;
+        let mut model = Box::new(model);
+        let mut fragments = TestedFragments::new(open()?)?;
+        let mut sizes = ScoutedSizes::new(open()?);
+        reader
+            .for_each_index_item(|item| {
+                feed_window_sizes(&mut model, &mut sizes).map_err(model_error)?;
+                model
+                    .index_item(item, &mut fragments)
+                    .map_err(|e| read_error(e, model_error))
+            })
+            .map_err(|e| match e {
+                ReadError::Trace(e) => ReplayError::Read(e),
+                ReadError::Sink(e) => e,
+            })?;
+        return Ok(model);
+    }
+    let model = SampledModel::new(arch, width, height, effects, every)
+        .and_then(configure)
+        .map_err(ReplayError::Setup)?;
+    let sink = Scouted {
+        model: Box::new(model),
+        sizes: ScoutedSizes::new(open()?),
+    };
+    let sink = feed_retiled(&mut reader, sink, options.retile, model_error)?;
+    Ok(sink.model)
 }
 
 /// The sampled level's window sizes, found by a reader of their own up to K windows ahead:

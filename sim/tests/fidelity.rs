@@ -205,7 +205,7 @@ fn sampled_every_window_equals_cycle_on(
 }
 
 #[test]
-fn sampled_windows_are_counted_and_every_kth_is_simulated() {
+fn sampled_windows_are_counted_every_kth_and_the_slowest_predicted_simulated() {
     let arch = Arch::builtin("o2").unwrap();
     let (events, width, height) = small_random();
     let queries = golden_values(&events).len() as u64;
@@ -214,7 +214,32 @@ fn sampled_windows_are_counted_and_every_kth_is_simulated() {
     let windows = result.sampled_windows.unwrap();
     // One window per query end, plus the tail after the last (the random scene ends with one).
     assert!(windows.total == queries || windows.total == queries + 1);
-    assert_eq!(windows.simulated, windows.total.div_ceil(4));
+    // Besides every 4th window, the windows of the ceil(n / 4) queries the formulas predict
+    // slowest (the analytic level's latencies; of equal ones the earlier); query i ends
+    // window i.
+    let analytic = run_level(
+        Fidelity::Analytic,
+        &arch,
+        width,
+        height,
+        EffectsChoice::All,
+        &events,
+    )
+    .unwrap();
+    let predicted: Vec<u64> = analytic
+        .queries
+        .iter()
+        .map(|q| q.latency_cycles.unwrap())
+        .collect();
+    let mut ranked: Vec<usize> = (0..predicted.len()).collect();
+    ranked.sort_by_key(|&i| (std::cmp::Reverse(predicted[i]), i));
+    let slowest_only = ranked[..predicted.len().div_ceil(4)]
+        .iter()
+        .filter(|&&i| i % 4 != 0)
+        .count() as u64;
+    assert!(slowest_only > 0, "{predicted:?}");
+    assert_eq!(windows.slowest, slowest_only);
+    assert_eq!(windows.simulated, windows.total.div_ceil(4) + slowest_only);
 }
 
 #[test]

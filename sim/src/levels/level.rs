@@ -127,6 +127,10 @@ impl QueryOutcome {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 pub struct SampledWindows {
     pub simulated: u64,
+    /// Of the simulated windows, those simulated only as one of the windows whose queries
+    /// the formulas predict slowest ([`crate::levels::sampled::SampledModel::slowest_windows`]),
+    /// not as one of every K.
+    pub slowest: u64,
     /// Of the simulated windows, those simulated over their last fragments alone, their
     /// heads extrapolated ([`crate::levels::sampled::tail_fragments`]).
     pub tails: u64,
@@ -298,8 +302,8 @@ impl LevelResult {
         if let Some(windows) = self.sampled_windows {
             let _ = writeln!(
                 out,
-                "sampled windows: {} of {} simulated ({} of them over their last fragments alone)",
-                windows.simulated, windows.total, windows.tails
+                "sampled windows: {} of {} simulated ({} of them only as one of the slowest predicted, {} over their last fragments alone)",
+                windows.simulated, windows.total, windows.slowest, windows.tails
             );
         }
         match (self.from_window_index, self.sampled_windows) {

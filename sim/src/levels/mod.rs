@@ -34,6 +34,7 @@ use crate::machines::{MachineBuilder, MachineModel};
 use crate::timeline::Timeline;
 use occsim_traces::golden::EventSink;
 use occsim_traces::{Event, Span};
+use std::collections::BTreeSet;
 
 /// A model replaying a stream at one level.
 pub enum LevelModel {
@@ -223,11 +224,25 @@ pub fn run_level(
         Effects::every_model_of(arch.machine())
     };
     if let Fidelity::Sampled { every } = level {
-        // Its window sizes found ahead, as a replay finds them.
-        let mut model = SampledModel::new(arch, width, height, effects, every)?.with_window_sizes(
-            sampled::warm_up_fragments(arch.machine()),
-            sampled::tail_fragments(arch.machine()),
-        );
+        // As a replay runs it: the formulas alone first, for the windows whose queries they
+        // predict slowest; then the model, its window sizes found ahead.
+        let slowest = match sampled::simulates_slowest(every) {
+            false => BTreeSet::new(),
+            true => {
+                let mut predicting =
+                    SampledModel::new(arch, width, height, effects, every)?.predicting();
+                for event in events {
+                    predicting.event(event)?;
+                }
+                predicting.slowest_windows()?
+            }
+        };
+        let mut model = SampledModel::new(arch, width, height, effects, every)?
+            .with_slowest(slowest)
+            .with_window_sizes(
+                sampled::warm_up_fragments(arch.machine()),
+                sampled::tail_fragments(arch.machine()),
+            );
         let mut sizes = SliceSizes {
             events: events.iter(),
             scout: WindowScout::default(),
