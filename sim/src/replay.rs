@@ -174,17 +174,18 @@ pub fn replay<R: Read>(
     if let Fidelity::Sampled { every } = options.level {
         // First the formulas alone over the trace, for the windows whose queries they
         // predict slowest; then the model that simulates those and every K-th window.
-        let slowest = match simulates_slowest(every) {
-            false => BTreeSet::new(),
-            true => run_sampled(
-                reader,
-                &mut open,
-                (arch, effects, every),
-                &options,
-                |model| Ok(model.predicting()),
-            )?
-            .slowest_windows()
-            .map_err(model_error)?,
+        let (slowest, reader) = match simulates_slowest(every, arch.machine()) {
+            false => (BTreeSet::new(), reader),
+            true => {
+                let predicting = run_sampled(
+                    reader,
+                    &mut open,
+                    (arch, effects, every),
+                    &options,
+                    |model| Ok(model.predicting()),
+                )?;
+                (predicting.slowest_windows().map_err(model_error)?, open()?)
+            }
         };
         let tail = options
             .tail_fragments
@@ -193,7 +194,7 @@ pub fn replay<R: Read>(
             .warm_up_fragments
             .unwrap_or_else(|| warm_up_fragments(arch.machine()));
         let model = run_sampled(
-            open()?,
+            reader,
             &mut open,
             (arch, effects, every),
             &options,

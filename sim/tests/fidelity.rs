@@ -214,9 +214,9 @@ fn sampled_windows_are_counted_every_kth_and_the_slowest_predicted_simulated() {
     let windows = result.sampled_windows.unwrap();
     // One window per query end, plus the tail after the last (the random scene ends with one).
     assert!(windows.total == queries || windows.total == queries + 1);
-    // Besides every 4th window, the windows of the ceil(n / 4) queries the formulas predict
-    // slowest (the analytic level's latencies; of equal ones the earlier); query i ends
-    // window i.
+    // Besides every 4th window, the windows of the ceil(n / 10) queries the formulas
+    // predict slowest (the analytic level's latencies; of equal ones the earlier); query i
+    // ends window i.
     let analytic = run_level(
         Fidelity::Analytic,
         &arch,
@@ -233,7 +233,7 @@ fn sampled_windows_are_counted_every_kth_and_the_slowest_predicted_simulated() {
         .collect();
     let mut ranked: Vec<usize> = (0..predicted.len()).collect();
     ranked.sort_by_key(|&i| (std::cmp::Reverse(predicted[i]), i));
-    let slowest_only = ranked[..predicted.len().div_ceil(4)]
+    let slowest_only = ranked[..predicted.len().div_ceil(10)]
         .iter()
         .filter(|&&i| i % 4 != 0)
         .count() as u64;

@@ -4,7 +4,7 @@
 //! |---|---|---|
 //! | `functional` | the golden functional model: exact results and counts | none |
 //! | `analytic` | functional + the closed-form bottleneck model ([`crate::levels::analytic`]) | predicted |
-//! | `sampled:K` | the analytic formulas on everything, the cycle model on every K-th window and the fragments before it ([`crate::levels::sampled`]); from the window index, only those windows' fragments are read | measured on 1/K, extrapolated |
+//! | `sampled:K` | the analytic formulas on everything, the cycle model on every K-th window (and, on the O2 at K up to 10, the top tenth of the queries by predicted latency) and the fragments before it ([`crate::levels::sampled`]); from the window index, only those windows' fragments are read | measured on 1/K (and the slowest), extrapolated |
 //! | `cycle` | the cycle-level machine model ([`crate::MachineModel`]) | exact |
 //! | `rtl` | the cycle-level machine with every Occlusion Unit and OccU Control the bit-accurate RTL ([`crate::blocks::rtl_occu`]) | exact |
 //!
@@ -226,7 +226,7 @@ pub fn run_level(
     if let Fidelity::Sampled { every } = level {
         // As a replay runs it: the formulas alone first, for the windows whose queries they
         // predict slowest; then the model, its window sizes found ahead.
-        let slowest = match sampled::simulates_slowest(every) {
+        let slowest = match sampled::simulates_slowest(every, arch.machine()) {
             false => BTreeSet::new(),
             true => {
                 let mut predicting =
