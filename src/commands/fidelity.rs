@@ -23,7 +23,8 @@ use std::time::Instant;
 #[derive(clap::Args, Clone, Debug)]
 pub struct FidelityArg {
     /// Level of detail: functional, analytic, sampled:K (cycle model on every K-th query
-    /// window), cycle or rtl.
+    /// window, and on the O2 at K up to 10 on the slowest tenth the formulas predict),
+    /// cycle or rtl.
     #[arg(long, value_name = "LEVEL", default_value = "cycle")]
     pub fidelity: Fidelity,
     /// Effect models: auto (only those the trace can observe: same results and cycles) or
@@ -53,7 +54,8 @@ pub struct FidelityArgs {
     pub retile: Option<TileGrid>,
     #[command(flatten)]
     pub corpus: super::corpus::CorpusArgs,
-    /// K of the sampled level: the cycle model runs on every K-th query window.
+    /// K of the sampled level: the cycle model runs on every K-th query window (and, on the
+    /// O2 at K up to 10, on the slowest tenth the formulas predict).
     #[arg(long, value_name = "K", default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
     pub sample_every: u32,
     /// Effect models of the cycle and sampled levels.
