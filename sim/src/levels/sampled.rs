@@ -17,7 +17,7 @@
 //!   alone, the p95 came out cycles off; with the top tenth measured (stratified sampling:
 //!   that stratum is simulated whole, the rest sampled one in K), the p95's queries are
 //!   measured ones. On the small corpus at sampled:10 on every machine and engine count,
-//!   the worst p95 error went from 4.2% to 0% on the demo, 15.8% to 0% on the
+//!   the worst p95 error went from 4.2% to 0.25% on the demo, 15.8% to 0% on the
 //!   hierarchical walks and 5.0% to 0% on the adaptive walk; at the full scale on the O2
 //!   from 4.44% to 0% on the 1x1 and 4x4 demos. What is left (one cycle of 18 to 30) is
 //!   mostly the measured windows' own: a machine started mid-trace meets the reserved
