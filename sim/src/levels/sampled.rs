@@ -679,7 +679,7 @@ impl SampledModel {
                 (ir.occu.engines, ir.occu.all_tiles_one_cycle, 0)
             }
         };
-        let mut model = SampledModel {
+        let model = SampledModel {
             arch: arch.clone(),
             effects,
             every: every.max(1),
@@ -724,7 +724,10 @@ impl SampledModel {
             planned: false,
             tails: 0,
         };
-        model.start_window()?;
+        // Window 0 is planned at the first call (`plan`): a builder (`predicting`,
+        // `with_slowest`, `with_window_sizes`) may yet change what it simulates, and a
+        // machine started here would be dropped with its depth buffer (two 5 MB buffers
+        // allocated and faulted in for nothing in the demo's sampled:10 replay).
         Ok(model)
     }
 
@@ -768,9 +771,6 @@ impl SampledModel {
     pub fn predicting(mut self) -> SampledModel {
         self.predicting = true;
         self.slowest.clear();
-        // Window 0 is planned again: no machine for it.
-        self.run = None;
-        self.planned = false;
         self
     }
 
@@ -778,9 +778,6 @@ impl SampledModel {
     /// predicting model over the same stream).
     pub fn with_slowest(mut self, windows: BTreeSet<u64>) -> SampledModel {
         self.slowest = windows;
-        // Window 0 is planned again: it may be one of them.
-        self.run = None;
-        self.planned = false;
         self
     }
 
@@ -810,9 +807,6 @@ impl SampledModel {
         self.sizes_wanted = true;
         self.warm_up_fragments = warm_up_fragments;
         self.tail_fragments = tail_fragments;
-        // Window 0 is planned again once its size is known: it may be cut.
-        self.run = None;
-        self.planned = false;
         self
     }
 

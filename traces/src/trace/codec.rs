@@ -851,6 +851,21 @@ impl BlockDecoder {
         ctx: &mut DecodeContext,
         sink: &mut S,
     ) -> Result<(), DrainError<S::Error>> {
+        self.drain_until(payload, ctx, sink, |_| false).map(|_| ())
+    }
+
+    /// [`Self::drain`], pausing before the next record once `enough(sink)` (checked between
+    /// records, so a span is handed out whole): returns whether the payload was drained to
+    /// its end. A paused decoder resumes where it stopped at the next call, with the same
+    /// payload and context. (A reader that wants a block's first fragments alone stops
+    /// decoding there.)
+    pub(crate) fn drain_until<S: EventSink>(
+        &mut self,
+        payload: &[u8],
+        ctx: &mut DecodeContext,
+        sink: &mut S,
+        enough: impl Fn(&S) -> bool,
+    ) -> Result<bool, DrainError<S::Error>> {
         while self.span.remaining > 0 {
             let fragment = self.next_span_fragment(payload)?;
             sink.event(&Event::Fragment(fragment))
@@ -861,6 +876,10 @@ impl BlockDecoder {
         // and at the end.
         let mut unreported = 0;
         while let Some(&t) = payload.get(self.pos) {
+            if enough(sink) {
+                ctx.tally.checked_fragments(unreported);
+                return Ok(false);
+            }
             // Spans are most records: skip the general dispatch for them.
             if t == tag::SPAN && ctx.assembly.is_empty() {
                 let mut c = Cursor::new(payload, self.pos + 1);
@@ -878,7 +897,7 @@ impl BlockDecoder {
             }
         }
         ctx.tally.checked_fragments(unreported);
-        Ok(())
+        Ok(true)
     }
 
     /// Read one record; a span's header only sets up `self.span`.

@@ -140,9 +140,15 @@ pub struct TestedFragments<R: Read> {
     payload: Vec<u8>,
     block: BlockFragments,
     passed: Vec<u8>,
-    /// The loaded block's first fragment in the trace, and its fragments.
+    /// The loaded block's first fragment in the trace, and its fragments (those of `block`
+    /// are its first, decoded as far as they were wanted).
     block_first: u64,
     block_len: u64,
+    /// The loaded block's decoder, paused where the fragments wanted so far end, and its
+    /// blocks' file offsets (for errors).
+    decoder: BlockDecoder,
+    assembly: Vec<u8>,
+    offsets: (u64, u64),
     /// The first fragment of the blocks not yet read.
     unread_first: u64,
     /// The next fragment to hand out or skip.
@@ -170,6 +176,9 @@ impl<R: Read> TestedFragments<R> {
             passed: Vec::new(),
             block_first: 0,
             block_len: 0,
+            decoder: BlockDecoder::new(),
+            assembly: Vec::new(),
+            offsets: (0, 0),
             unread_first: 0,
             next: 0,
         })
@@ -193,6 +202,8 @@ impl<R: Read> TestedFragments<R> {
                     .map_err(ReadError::Trace)?;
             }
             let at = (self.next - self.block_first) as usize;
+            let wanted = (at as u64 + count).min(self.block_len) as usize;
+            self.decode_to(wanted).map_err(ReadError::Trace)?;
             let spans = &self.block.spans;
             let index = spans.partition_point(|span| span.first <= at) - 1;
             for (i, span) in spans.iter().enumerate().skip(index) {
@@ -235,7 +246,7 @@ impl<R: Read> TestedFragments<R> {
             if first + fragments <= wanted {
                 continue;
             }
-            self.decode_pair(pair)?;
+            self.load_pair(pair)?;
             (self.block_first, self.block_len) = (first, fragments);
             return Ok(());
         }
@@ -278,9 +289,9 @@ impl<R: Read> TestedFragments<R> {
         }
     }
 
-    /// Decode the pair just read: the event block's fragments and the depth-test block's
-    /// results, which must count them.
-    fn decode_pair(&mut self, pair: Pair) -> Result<(), TraceError> {
+    /// Load the pair just read: the depth-test block's results and the event block's
+    /// payload, decompressed; its fragments are decoded as they are wanted ([`Self::decode_to`]).
+    fn load_pair(&mut self, pair: Pair) -> Result<(), TraceError> {
         self.reader
             .decompress_stored(&pair.tests, pair.tests_offset, &mut self.passed)?;
         self.reader.decompress(
@@ -291,32 +302,52 @@ impl<R: Read> TestedFragments<R> {
         )?;
         self.block.spans.clear();
         self.block.depths.clear();
+        self.decoder = BlockDecoder::new();
+        self.assembly.clear();
+        self.offsets = (pair.events_offset, pair.tests_offset);
+        Ok(())
+    }
+
+    /// Decode the loaded block's fragments on to at least its first `wanted` (at most all
+    /// of them): a window's fragments near a block's start cost no decoding of the rest
+    /// (the sampled level's windows, a few thousand fragments each, lie in blocks of tens of
+    /// thousands). A block decoded to its end must hold as many fragments as its depth-test
+    /// block has results; one left part-decoded has its stored bytes' checksum checked, like
+    /// the blocks passed over.
+    fn decode_to(&mut self, wanted: usize) -> Result<(), TraceError> {
+        if self.block.depths.len() >= wanted {
+            return Ok(());
+        }
         let header = self.reader.header();
-        let mut assembly = Vec::new();
         let mut ctx = DecodeContext {
             width: header.width,
             height: header.height,
             tally: &mut self.tally,
-            assembly: &mut assembly,
+            assembly: &mut self.assembly,
             unchecked_events: true,
         };
-        BlockDecoder::new()
-            .drain(&self.payload, &mut ctx, &mut self.block)
+        let (events_offset, tests_offset) = self.offsets;
+        let drained = self
+            .decoder
+            .drain_until(&self.payload, &mut ctx, &mut self.block, |block| {
+                block.depths.len() >= wanted
+            })
             .map_err(|error| match error {
                 DrainError::Payload(error) => TraceError::Corrupt {
-                    offset: pair.events_offset,
+                    offset: events_offset,
                     payload_offset: error.pos,
                     reason: error.reason,
                 },
                 DrainError::Sink(never) => match never {},
             })?;
-        if self.block.depths.len() as u64 != pair.tests.events as u64 {
+        // (Paused, it holds the `wanted`: `wanted` is at most the results' count.)
+        let decoded = self.block.depths.len();
+        if drained && decoded as u64 != self.block_len {
             return Err(TraceError::BadBlock {
-                offset: pair.tests_offset,
+                offset: tests_offset,
                 reason: format!(
-                    "the depth-test block holds {} results for {} fragments",
-                    pair.tests.events,
-                    self.block.depths.len()
+                    "the depth-test block holds {} results for {decoded} fragments",
+                    self.block_len,
                 ),
             });
         }
@@ -509,6 +540,48 @@ mod tests {
             // Past the last fragment is a clean error.
             assert!(read(&bytes, all, 1).is_err());
         }
+    }
+
+    #[test]
+    fn a_block_is_decoded_only_as_far_as_its_fragments_are_wanted() {
+        // Ten fragments from the start of the first block that holds more than 100: the
+        // decoder stops at the span that holds the tenth (spans here are at most SIDE = 24
+        // fragments long), not at the block's end; taking the rest decodes on from there
+        // and gives every result as a whole read does.
+        let events = stream(5);
+        let expected = results_of(&events);
+        let bytes = written(&events);
+        let mut fragments = TestedFragments::new(TraceReader::new(&bytes[..]).unwrap()).unwrap();
+        let mut got = Vec::new();
+        let mut take = |fragments: &mut TestedFragments<&[u8]>, count| {
+            fragments
+                .take(count, |span, results| {
+                    got.extend(
+                        span.fragments()
+                            .enumerate()
+                            .map(|(i, f)| (f, results.passed(i))),
+                    );
+                    Ok::<(), Infallible>(())
+                })
+                .unwrap();
+        };
+        take(&mut fragments, 1);
+        while fragments.block_len <= 100 {
+            let rest = fragments.block_first + fragments.block_len - fragments.next;
+            take(&mut fragments, rest + 1);
+        }
+        let start = fragments.next;
+        take(&mut fragments, 9);
+        let decoded = fragments.block.depths.len() as u64;
+        let wanted = start + 9 - fragments.block_first;
+        assert!(
+            decoded >= wanted && decoded < wanted + SIDE as u64,
+            "{decoded} for {wanted}"
+        );
+        assert!(decoded < fragments.block_len);
+        let rest = expected.len() as u64 - fragments.next;
+        take(&mut fragments, rest);
+        assert_eq!(got, expected);
     }
 
     #[test]
