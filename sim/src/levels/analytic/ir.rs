@@ -94,23 +94,32 @@ pub struct IrWindow {
     /// `g_b`: each board's Fragment Generator clock, in slots from the window's start, after
     /// the stretches closed so far.
     generators: Vec<u64>,
-    /// `d_i`, in slots: the cycle each Image Engine's depth stage is through the work it was
-    /// given.
-    engines_through: Vec<u64>,
+    /// Each Image Engine's clock and its share of the current stretch.
+    engines: Vec<EngineClock>,
     /// The pace of the last fragment counted (`max(C, s)`), in cycles.
     pace: u64,
-    /// The current stretch: its `F_bp` and `D_ip` in slots (non-zero only at `touched`),
-    /// and its fragments.
+    /// The current stretch: its `F_bp`, and its fragments.
     stretch_board_fragments: Vec<u64>,
-    stretch_engine_slots: Vec<u64>,
-    /// Per Image Engine, its board's fragments in the stretch up to its last one: when it
-    /// was emitted.
-    stretch_engine_last: Vec<u64>,
-    /// The Image Engines the stretch touched, each with its board.
-    touched: Vec<(usize, usize)>,
+    /// The Image Engines the stretch touched, each with its board: the first
+    /// `touched_count` (at most one a fragment, so a stretch's room is enough and no
+    /// fragment waits for a vector's length in memory).
+    touched: [(usize, usize); STRETCH_FRAGMENTS as usize],
+    touched_count: usize,
     stretch_fragments: u64,
     /// The current stretch starts a primitive (its setup counts).
     stretch_sets_up: bool,
+}
+
+/// One Image Engine's clock and its share of the current stretch, side by side (a
+/// fragment and a stretch's close read and write all three).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct EngineClock {
+    /// `d_i`, in slots: the cycle its depth stage is through the work it was given.
+    through: u64,
+    /// `D_ip` of the current stretch, in slots (non-zero only at `touched`).
+    slots: u64,
+    /// Its board's fragments in the stretch up to its last one: when that was emitted.
+    last: u64,
 }
 
 /// Fragments after which the formulas close a stretch of a primitive and advance the
@@ -134,12 +143,11 @@ impl IrWindow {
             fifo: arch.image_engine_fifo_entries as u64,
             interval: arch.image_engine_cycles_per_fragment,
             generators: vec![0; arch.boards],
-            engines_through: vec![0; engines],
+            engines: vec![EngineClock::default(); engines],
             pace: arch.image_engine_cycles_per_fragment,
             stretch_board_fragments: vec![0; arch.boards],
-            stretch_engine_slots: vec![0; engines],
-            stretch_engine_last: vec![0; engines],
-            touched: Vec::new(),
+            touched: [(0, 0); STRETCH_FRAGMENTS as usize],
+            touched_count: 0,
             stretch_fragments: 0,
             stretch_sets_up: false,
         }
@@ -162,8 +170,8 @@ impl IrWindow {
 
     /// `cycles` pass before the window's work starts: the engines' carried work drains.
     pub fn idle(&mut self, cycles: u64) {
-        for through in &mut self.engines_through {
-            *through = through.saturating_sub(cycles * self.rate);
+        for engine in &mut self.engines {
+            engine.through = engine.through.saturating_sub(cycles * self.rate);
         }
     }
 
@@ -172,21 +180,23 @@ impl IrWindow {
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let pace = self.pace * self.rate;
         let hidden = self.hidden();
-        let mut starts = [0u64; MAX_BOARDS];
-        for (board, generator) in self.generators.iter_mut().enumerate() {
-            starts[board] = *generator + setup;
-            *generator = starts[board] + self.stretch_board_fragments[board];
+        // The clocks in locals while the touched engines are gone through (as in
+        // `paced_piece`).
+        let boards = self.generators.len();
+        let (mut starts, mut generators) = ([0u64; MAX_BOARDS], [0u64; MAX_BOARDS]);
+        for board in 0..boards {
+            starts[board] = self.generators[board] + setup;
+            generators[board] = starts[board] + self.stretch_board_fragments[board];
         }
-        for &(board, engine) in &self.touched {
-            let emitted = starts[board] + self.stretch_engine_last[engine];
-            let through = &mut self.engines_through[engine];
-            *through = ((*through).max(starts[board]) + self.stretch_engine_slots[engine])
-                .max(emitted + pace);
-            let generator = &mut self.generators[board];
-            *generator = (*generator).max(through.saturating_sub(hidden));
-            self.stretch_engine_slots[engine] = 0;
+        for &(board, engine) in &self.touched[..self.touched_count] {
+            let clock = &mut self.engines[engine];
+            let emitted = starts[board] + clock.last;
+            clock.through = (clock.through.max(starts[board]) + clock.slots).max(emitted + pace);
+            generators[board] = generators[board].max(clock.through.saturating_sub(hidden));
+            clock.slots = 0;
         }
-        self.touched.clear();
+        self.generators.copy_from_slice(&generators[..boards]);
+        self.touched_count = 0;
         self.stretch_board_fragments.fill(0);
         self.stretch_fragments = 0;
         self.stretch_sets_up = false;
@@ -222,17 +232,75 @@ impl IrWindow {
         self.paced_fragment(board, engine);
     }
 
+    /// The fragments of pixels `x..x + len` of row `y`, at the pace set, each to the board
+    /// and Image Engine `owners` gives its interleave unit: [`Self::paced_fragment`] for
+    /// each, a stretch's piece at a time, with the piece's counters in locals. (Counted in
+    /// the window, every fragment had waited on the last one's store of the same counters:
+    /// the IR's analytic level spent 45% of its time in this loop on the demo.)
+    pub fn paced_along(
+        &mut self,
+        interleave: &FramebufferInterleave,
+        owners: &[(usize, usize)],
+        (x, y): (u16, u16),
+        len: usize,
+    ) {
+        let mut at = 0;
+        while at < len {
+            let room = (STRETCH_FRAGMENTS - self.stretch_fragments) as usize;
+            let piece = room.min(len - at);
+            self.paced_piece(interleave, owners, (x + at as u16, y), piece);
+            at += piece;
+            if self.stretch_fragments == STRETCH_FRAGMENTS {
+                self.close_stretch();
+            }
+        }
+    }
+
+    /// [`Self::paced_along`] for a piece that stays within the current stretch.
+    #[inline(always)]
+    fn paced_piece(
+        &mut self,
+        interleave: &FramebufferInterleave,
+        owners: &[(usize, usize)],
+        (x, y): (u16, u16),
+        len: usize,
+    ) {
+        let slots_a_fragment = self.pace * self.rate;
+        let boards = self.stretch_board_fragments.len();
+        let mut board_fragments = [0; MAX_BOARDS];
+        board_fragments[..boards].copy_from_slice(&self.stretch_board_fragments);
+        let (engines, touched) = (&mut self.engines, &mut self.touched);
+        let mut touched_count = self.touched_count;
+        interleave.for_each_unit_along(x, y, len, |unit| {
+            let (board, engine) = owners[unit];
+            board_fragments[board] += 1;
+            let clock = &mut engines[engine];
+            clock.last = board_fragments[board];
+            if clock.slots == 0 {
+                touched[touched_count] = (board, engine);
+                touched_count += 1;
+            }
+            clock.slots += slots_a_fragment;
+        });
+        self.touched_count = touched_count;
+        self.stretch_board_fragments
+            .copy_from_slice(&board_fragments[..boards]);
+        self.fragments += len as u64;
+        self.stretch_fragments += len as u64;
+    }
+
     /// One fragment for Image Engine `engine` of `board`, at the pace set.
     #[inline(always)]
     fn paced_fragment(&mut self, board: usize, engine: usize) {
         self.fragments += 1;
         self.stretch_board_fragments[board] += 1;
-        self.stretch_engine_last[engine] = self.stretch_board_fragments[board];
-        let slots = &mut self.stretch_engine_slots[engine];
-        if *slots == 0 {
-            self.touched.push((board, engine));
+        let clock = &mut self.engines[engine];
+        clock.last = self.stretch_board_fragments[board];
+        if clock.slots == 0 {
+            self.touched[self.touched_count] = (board, engine);
+            self.touched_count += 1;
         }
-        *slots += self.pace * self.rate;
+        clock.slots += self.pace * self.rate;
         self.stretch_fragments += 1;
         if self.stretch_fragments == STRETCH_FRAGMENTS {
             self.close_stretch();
@@ -271,10 +339,8 @@ impl IrWindow {
         service: u64,
     ) -> impl Iterator<Item = u64> + 'a {
         let tail = arch.image_engine_latency_cycles + service + 1;
-        self.engines_through
-            .iter()
-            .zip(&self.hit_words)
-            .map(move |(&through, &hits)| {
+        self.engines.iter().zip(&self.hit_words).map(
+            move |(&EngineClock { through, .. }, &hits)| {
                 // An engine given no work (or none left past the last window) has no last
                 // fragment to wait for.
                 let last_result = if through == 0 {
@@ -284,7 +350,8 @@ impl IrWindow {
                 };
                 let hits_drained = hits + 1;
                 last_result.max(hits_drained).saturating_sub(end + 3)
-            })
+            },
+        )
     }
 }
 
@@ -380,13 +447,13 @@ impl IrBottleneck {
             return;
         }
         let pace = self.pace();
-        let (owners, window) = (&self.owners, &mut self.window);
-        window.pace(pace);
-        self.interleave
-            .for_each_unit_along(span.x, span.y, span.depths.len(), |unit| {
-                let (board, engine) = owners[unit];
-                window.paced_fragment(board, engine);
-            });
+        self.window.pace(pace);
+        self.window.paced_along(
+            &self.interleave,
+            &self.owners,
+            (span.x, span.y),
+            span.depths.len(),
+        );
     }
 
     /// Count one fragment's work (before `functional` applies it).
