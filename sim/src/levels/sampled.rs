@@ -20,10 +20,12 @@
 //!   the worst p95 error went from 4.2% to 0.25% on the demo, 15.8% to 0% on the
 //!   hierarchical walks and 5.0% to 0% on the adaptive walk; at the full scale on the O2
 //!   from 4.44% to 0% on the 1x1 and 4x4 demos. What is left (one cycle of 18 to 30) is
-//!   mostly the measured windows' own: a machine started mid-trace meets the reserved
-//!   cycles in another phase than one that ran from the start. It costs windows:
-//!   sampled:10 on the demo on the O2 ran 319 M instructions (callgrind, the whole
-//!   process), now 459 M.
+//!   the measured windows' own: a machine started mid-trace meets the reserved cycles in
+//!   another phase than one that ran from the start. (With no reserved cycles, `--set
+//!   host_memory_share=0 --set display_width_pixels=0`, sampled:2 and sampled:10 give every
+//!   one of the full-scale hierarchical walk's 201 queries the cycle level's latency.) It
+//!   costs windows: sampled:10 on the demo on the O2 ran 319 M instructions (callgrind,
+//!   the whole process), 459 M with them, 438 M since its runs decode and bound less.
 //! - Only the systematic sample calibrates the extrapolation (the pipe's cycles, the
 //!   latencies' regression and donors): the slowest are not a sample of the others. A
 //!   slowest window's cost and latency are measured like any simulated window's.
