@@ -25,7 +25,7 @@
 //!   host_memory_share=0 --set display_width_pixels=0`, sampled:2 and sampled:10 give every
 //!   one of the full-scale hierarchical walk's 201 queries the cycle level's latency.) It
 //!   costs windows: sampled:10 on the demo on the O2 ran 319 M instructions (callgrind,
-//!   the whole process), 459 M with them, 438 M since its runs decode and bound less.
+//!   the whole process), 459 M with them, 442 M since its runs decode and bound less.
 //! - Only the systematic sample calibrates the extrapolation (the pipe's cycles, the
 //!   latencies' regression and donors): the slowest are not a sample of the others. A
 //!   slowest window's cost and latency are measured like any simulated window's.

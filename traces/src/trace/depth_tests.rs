@@ -311,13 +311,15 @@ impl<R: Read> TestedFragments<R> {
     /// Decode the loaded block's fragments on to at least its first `wanted` (at most all
     /// of them): a window's fragments near a block's start cost no decoding of the rest
     /// (the sampled level's windows, a few thousand fragments each, lie in blocks of tens of
-    /// thousands). A block decoded to its end must hold as many fragments as its depth-test
-    /// block has results; one left part-decoded has its stored bytes' checksum checked, like
-    /// the blocks passed over.
+    /// thousands). A block whose last fragment is wanted is decoded to its end, and must
+    /// hold as many fragments as its depth-test block has results (fewer, and the blocks
+    /// after it would be counted from the wrong fragment); one left part-decoded has its
+    /// stored bytes' checksum checked, like the blocks passed over, and may not hold more.
     fn decode_to(&mut self, wanted: usize) -> Result<(), TraceError> {
         if self.block.depths.len() >= wanted {
             return Ok(());
         }
+        let whole = wanted as u64 >= self.block_len;
         let header = self.reader.header();
         let mut ctx = DecodeContext {
             width: header.width,
@@ -330,7 +332,7 @@ impl<R: Read> TestedFragments<R> {
         let drained = self
             .decoder
             .drain_until(&self.payload, &mut ctx, &mut self.block, |block| {
-                block.depths.len() >= wanted
+                !whole && block.depths.len() >= wanted
             })
             .map_err(|error| match error {
                 DrainError::Payload(error) => TraceError::Corrupt {
@@ -340,9 +342,10 @@ impl<R: Read> TestedFragments<R> {
                 },
                 DrainError::Sink(never) => match never {},
             })?;
-        // (Paused, it holds the `wanted`: `wanted` is at most the results' count.)
+        // Paused, it holds the `wanted` (fewer than the results' count), and may hold more
+        // than that count only if the block holds more fragments than results.
         let decoded = self.block.depths.len();
-        if drained && decoded as u64 != self.block_len {
+        if decoded as u64 > self.block_len || drained && decoded as u64 != self.block_len {
             return Err(TraceError::BadBlock {
                 offset: tests_offset,
                 reason: format!(
@@ -582,6 +585,32 @@ mod tests {
         let rest = expected.len() as u64 - fragments.next;
         take(&mut fragments, rest);
         assert_eq!(got, expected);
+    }
+
+    #[test]
+    fn a_depth_test_block_that_counts_fewer_results_than_its_fragments_is_an_error() {
+        // The first depth-test block whose count is not one past a multiple of 8 counts one
+        // fragment less (its payload, ceil(count / 8) bytes, the same), its checksum made
+        // again: every block's bytes check, but its event block holds one fragment more
+        // than it has results. Reading every fragment must fail there, naming that
+        // block's offset, not hand the next blocks' fragments out one place off.
+        use crate::trace::block::{blocks_in, BLOCK_HEADER_BYTES};
+        let events = stream(6);
+        let all = results_of(&events).len() as u64;
+        let mut bytes = written(&events);
+        let (at, mut header) = blocks_in(&bytes)
+            .find(|(_, h)| h.kind == KIND_DEPTH_TESTS && h.events % 8 != 1)
+            .expect("a depth-test block to shorten");
+        header.events -= 1;
+        let stored = at + BLOCK_HEADER_BYTES..at + BLOCK_HEADER_BYTES + header.stored_len as usize;
+        let checksum = header.checksum(&bytes[stored]);
+        bytes[at..at + 16].copy_from_slice(&header.fields());
+        bytes[at + 16..at + 20].copy_from_slice(&checksum.to_le_bytes());
+        let error = read(&bytes, 0, all).unwrap_err().to_string();
+        assert!(
+            error.contains("results for") && error.contains(&at.to_string()),
+            "{error}"
+        );
     }
 
     #[test]
