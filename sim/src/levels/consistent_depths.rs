@@ -444,16 +444,21 @@ mod tests {
         assert!(replay(&mut always, &state, true, at(5), false, &mut depth).is_err());
     }
 
-    #[test]
-    fn a_restart_forgets_the_last_runs_bounds() {
-        // Run 1 bounds pixel (0, 0) to S <= 10 (LESS, 10 failed); run 2 sees 20 pass there
-        // (S > 20): fine only if run 1's bound is forgotten.
+    /// A 2x2 viewport tested LESS with the depth mask off, its buffer and its consistent
+    /// depths.
+    fn less_without_writes() -> (RenderState, DepthBuffer, ConsistentDepths) {
         let mut state = RenderState::new(2, 2);
         state.depth_test = true;
         state.depth_func = DepthFunc::Less;
         state.depth_mask = false;
-        let mut depth = DepthBuffer::new(2, 2);
-        let mut consistent = ConsistentDepths::new(2, 2);
+        (state, DepthBuffer::new(2, 2), ConsistentDepths::new(2, 2))
+    }
+
+    #[test]
+    fn a_restart_forgets_the_last_runs_bounds() {
+        // Run 1 bounds pixel (0, 0) to S <= 10 (LESS, 10 failed); run 2 sees 20 pass there
+        // (S > 20): fine only if run 1's bound is forgotten.
+        let (state, mut depth, mut consistent) = less_without_writes();
         let at = |z| Fragment { x: 0, y: 0, z };
         consistent.restart();
         replay(&mut consistent, &state, true, at(10), false, &mut depth).unwrap();
@@ -469,12 +474,7 @@ mod tests {
         // the run with stamp 4 (16,382 - 4) / 2 = 8,189 bring 16,382, one more the wrap
         // to 2, one more 4. The bound S <= 10 stored in the first run with stamp 4 must not
         // hold in the second: 20 passing LESS there (S > 20) is consistent.
-        let mut state = RenderState::new(2, 2);
-        state.depth_test = true;
-        state.depth_func = DepthFunc::Less;
-        state.depth_mask = false;
-        let mut depth = DepthBuffer::new(2, 2);
-        let mut consistent = ConsistentDepths::new(2, 2);
+        let (state, mut depth, mut consistent) = less_without_writes();
         let at = |z| Fragment { x: 0, y: 0, z };
         consistent.restart();
         assert_eq!(consistent.run, 4);

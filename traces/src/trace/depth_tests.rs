@@ -479,19 +479,30 @@ mod tests {
         bytes
     }
 
+    /// The next `count` fragments of `fragments`, each with its result, onto `got`.
+    fn take_into(
+        fragments: &mut TestedFragments<&[u8]>,
+        count: u64,
+        got: &mut Vec<(Fragment, bool)>,
+    ) -> Result<(), TraceError> {
+        fragments
+            .take(count, |span, results| {
+                got.extend(
+                    span.fragments()
+                        .enumerate()
+                        .map(|(i, f)| (f, results.passed(i))),
+                );
+                Ok::<(), Infallible>(())
+            })
+            .map_err(ReadError::into_trace)
+    }
+
     /// Fragments `from..from + count` by a fresh reader that skips to `from`.
     fn read(bytes: &[u8], from: u64, count: u64) -> Result<Vec<(Fragment, bool)>, TraceError> {
         let mut fragments = TestedFragments::new(TraceReader::new(bytes)?)?;
         fragments.skip(from);
         let mut read = Vec::new();
-        fragments
-            .take(count, |span, results| {
-                for (i, fragment) in span.fragments().enumerate() {
-                    read.push((fragment, results.passed(i)));
-                }
-                Ok::<(), Infallible>(())
-            })
-            .map_err(ReadError::into_trace)?;
+        take_into(&mut fragments, count, &mut read)?;
         Ok(read)
     }
 
@@ -527,16 +538,7 @@ mod tests {
                 at += gap;
                 let count = count.min(all - at);
                 let mut got = Vec::new();
-                fragments
-                    .take(count, |span, results| {
-                        got.extend(
-                            span.fragments()
-                                .enumerate()
-                                .map(|(i, f)| (f, results.passed(i))),
-                        );
-                        Ok::<(), Infallible>(())
-                    })
-                    .unwrap();
+                take_into(&mut fragments, count, &mut got).unwrap();
                 assert_eq!(got, expected[at as usize..(at + count) as usize]);
                 at += count;
             }
@@ -557,16 +559,7 @@ mod tests {
         let mut fragments = TestedFragments::new(TraceReader::new(&bytes[..]).unwrap()).unwrap();
         let mut got = Vec::new();
         let mut take = |fragments: &mut TestedFragments<&[u8]>, count| {
-            fragments
-                .take(count, |span, results| {
-                    got.extend(
-                        span.fragments()
-                            .enumerate()
-                            .map(|(i, f)| (f, results.passed(i))),
-                    );
-                    Ok::<(), Infallible>(())
-                })
-                .unwrap();
+            take_into(fragments, count, &mut got).unwrap()
         };
         take(&mut fragments, 1);
         while fragments.block_len <= 100 {

@@ -74,8 +74,9 @@ use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect, Span};
 
 /// Counts and clocks of one window (see the module docs). Clocks count in slots of
 /// `1 / rate` cycles, so that a Fragment Generator's emission is exact whatever the number
-/// of fragments a stretch gives it.
-#[derive(Clone, Debug, PartialEq)]
+/// of fragments a stretch gives it. (No `PartialEq`: `touched` keeps stale entries past
+/// `touched_count`, so two equal windows' fields may differ.)
+#[derive(Clone, Debug)]
 pub struct IrWindow {
     pub primitives: u64,
     /// Fragments over the window.
