@@ -1150,20 +1150,11 @@ impl SampledModel {
         let len = span.depths.len();
         // A running machine takes the span whole (it may fast-forward it), or up to the end
         // of its cool-down; then a machine waiting to start starts inside it.
-        let taken = match &mut self.run {
-            Some(run) => {
-                let taken = run.cooldown.map_or(len, |left| left.min(len));
-                run.machine.span(span.part(0..taken))?;
-                if let Some(left) = &mut run.cooldown {
-                    *left -= taken;
-                    if *left == 0 {
-                        self.flush_run()?;
-                    }
-                }
-                taken
-            }
-            None => 0,
-        };
+        let taken = self.run_share(len as u64) as usize;
+        if let Some(run) = &mut self.run {
+            run.machine.span(span.part(0..taken))?;
+        }
+        self.cool_down(taken as u64)?;
         let starts = self.machine_starts_within(len as u64);
         self.window.fragments += len as u64;
         if let Some(first) = starts {
@@ -1238,23 +1229,38 @@ impl SampledModel {
         count: u64,
         state: &RenderState,
     ) -> Result<u64, ReadError<SimError>> {
+        let taken = self.run_share(count);
         let (Some(run), Some(consistent)) = (&mut self.run, &mut self.consistent) else {
             return Ok(0);
         };
-        let taken = run.cooldown.map_or(count, |left| count.min(left as u64));
         let writes_allowed = self.core.functional.writes_allowed();
         fragments.take(taken, |span, results| {
             let depth = run.machine.depth_buffer_mut();
             consistent.span(state, writes_allowed, span, results, depth)?;
             run.machine.span(span)
         })?;
-        if let Some(left) = &mut run.cooldown {
+        self.cool_down(taken).map_err(ReadError::Sink)?;
+        Ok(taken)
+    }
+
+    /// How many of the next `count` fragments the running machine takes: all of them, or
+    /// those up to its cool-down's end; none without a machine.
+    fn run_share(&self, count: u64) -> u64 {
+        self.run.as_ref().map_or(0, |run| {
+            run.cooldown.map_or(count, |left| count.min(left as u64))
+        })
+    }
+
+    /// The running machine took `taken` fragments: a cooling machine counts them off its
+    /// cool-down, and finishes at its end.
+    fn cool_down(&mut self, taken: u64) -> Result<(), SimError> {
+        if let Some(left) = self.run.as_mut().and_then(|run| run.cooldown.as_mut()) {
             *left -= taken as usize;
             if *left == 0 {
-                self.flush_run().map_err(ReadError::Sink)?;
+                self.flush_run()?;
             }
         }
-        Ok(taken)
+        Ok(())
     }
 
     /// After a query's end and its golden result, or a frame's end, the next event opens a

@@ -226,16 +226,10 @@ impl IrWindow {
         }
     }
 
-    /// One fragment for Image Engine `engine` of `board`, paced at `pace` cycles (`max(C, s)`).
-    #[inline]
-    pub fn fragment(&mut self, board: usize, engine: usize, pace: u64) {
-        self.pace(pace);
-        self.paced_fragment(board, engine);
-    }
-
     /// The fragments of pixels `x..x + len` of row `y`, at the pace set, each to the board
-    /// and Image Engine `owners` gives its interleave unit: [`Self::paced_fragment`] for
-    /// each, a stretch's piece at a time, with the piece's counters in locals. (Counted in
+    /// and Image Engine `owners` gives its interleave unit (its board's fragment count in
+    /// the stretch, the engine's last and its slots), a stretch's piece at a time, with the
+    /// piece's counters in locals; a stretch closes at its last fragment. (Counted in
     /// the window, every fragment had waited on the last one's store of the same counters:
     /// the IR's analytic level spent 45% of its time in this loop on the demo.)
     pub fn paced_along(
@@ -288,24 +282,6 @@ impl IrWindow {
             .copy_from_slice(&board_fragments[..boards]);
         self.fragments += len as u64;
         self.stretch_fragments += len as u64;
-    }
-
-    /// One fragment for Image Engine `engine` of `board`, at the pace set.
-    #[inline(always)]
-    fn paced_fragment(&mut self, board: usize, engine: usize) {
-        self.fragments += 1;
-        self.stretch_board_fragments[board] += 1;
-        let clock = &mut self.engines[engine];
-        clock.last = self.stretch_board_fragments[board];
-        if clock.slots == 0 {
-            self.touched[self.touched_count] = (board, engine);
-            self.touched_count += 1;
-        }
-        clock.slots += self.pace * self.rate;
-        self.stretch_fragments += 1;
-        if self.stretch_fragments == STRETCH_FRAGMENTS {
-            self.close_stretch();
-        }
     }
 
     /// Slots a Fragment Generator may run ahead of an engine's work at the current pace (see
@@ -434,19 +410,11 @@ impl IrBottleneck {
         service.max(self.arch.image_engine_cycles_per_fragment)
     }
 
-    /// Count a span's work (before `functional` applies it): as its fragments one by one,
-    /// each pixel's owner stepped along the row and looked up, not divided out.
+    /// Count a span's work (before `functional` applies it): its fragments' Image Engines,
+    /// each pixel's owner stepped along the row and looked up, not divided out; under a
+    /// verbose query, each fragment's hit words too (its depth test against the buffer
+    /// before the span: a span's pixels are distinct).
     pub(super) fn span(&mut self, span: Span, functional: &FunctionalModel) {
-        if self
-            .open
-            .as_ref()
-            .is_some_and(|query| !query.verbose_tiles.is_empty())
-        {
-            // A verbose query's hit words need each fragment's depth test.
-            span.fragments()
-                .for_each(|fragment| self.fragment(fragment, functional));
-            return;
-        }
         let pace = self.pace();
         self.window.pace(pace);
         self.window.paced_along(
@@ -455,20 +423,38 @@ impl IrBottleneck {
             (span.x, span.y),
             span.depths.len(),
         );
+        if self
+            .open
+            .as_ref()
+            .is_some_and(|query| !query.verbose_tiles.is_empty())
+        {
+            span.fragments()
+                .for_each(|fragment| self.count_hits(fragment, functional));
+        }
     }
 
-    /// Count one fragment's work (before `functional` applies it).
+    /// Count one fragment's work (before `functional` applies it): a span of one.
     #[inline]
     pub(super) fn fragment(&mut self, fragment: Fragment, functional: &FunctionalModel) {
-        let (board, engine) = self.owners[self.interleave.unit(fragment.x, fragment.y)];
-        let pace = self.pace();
-        self.window.fragment(board, engine, pace);
+        let depths = [fragment.z];
+        self.span(
+            Span {
+                x: fragment.x,
+                y: fragment.y,
+                depths: &depths,
+            },
+            functional,
+        );
+    }
+
+    /// A verbose query's hit words for a fragment that passes its depth test: one for each
+    /// of the query's tiles that holds it, while its Image Engine's buffer for the tile has
+    /// room.
+    fn count_hits(&mut self, fragment: Fragment, functional: &FunctionalModel) {
+        let engine = self.owners[self.interleave.unit(fragment.x, fragment.y)].1;
         let Some(query) = &mut self.open else {
             return;
         };
-        if query.verbose_tiles.is_empty() {
-            return;
-        }
         let state = functional.state();
         let passed = !state.depth_test
             || state.depth_func.passes(
