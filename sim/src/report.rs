@@ -183,8 +183,10 @@ pub struct PortReport {
     pub colour_reads: u64,
     /// Port words the clears wrote.
     pub clear_words: u64,
-    /// Port cycles taken by the display refresh and the host.
+    /// Port cycles the display refresh and the host were served (whole cycles).
     pub reserved_cycles: u64,
+    /// Of them, cycles they took from the pixel pipeline by force (it had asked for them).
+    pub forced_cycles: u64,
     pub occu_words: u64,
 }
 
@@ -399,8 +401,8 @@ impl Report {
         if p.colour_writes + p.clear_words + p.reserved_cycles > 0 {
             let _ = writeln!(
                 out,
-                "  colour writes {} (blend reads {}), clear words {}, cycles reserved for the display refresh and the host {}",
-                p.colour_writes, p.colour_reads, p.clear_words, p.reserved_cycles
+                "  colour writes {} (blend reads {}), clear words {}, cycles served to the display refresh and the host {} ({} taken from the pipeline by force)",
+                p.colour_writes, p.colour_reads, p.clear_words, p.reserved_cycles, p.forced_cycles
             );
         }
     }

@@ -304,6 +304,8 @@ parameters! {
             V2 "O2 monitors at 72-76 Hz";
         host_memory_share: f64 = 0.05, [0.0, 0.9], "share", "fraction of the port's cycles the host CPU's own memory traffic takes (cache misses, I/O DMA)",
             I [0.0, 0.15] "not published; a CPU moving 100-300 MB/s of the 2.13 GB/s is 5-14 %";
+        other_clients_slack_cycles: u32 = 16, [1, 1 << 16], "port cycles", "how far the display refresh and the host may fall behind their share before they take a port cycle from the pixel pipeline by force; until then they take the cycles it leaves idle",
+            I [4, 64] "not published; the display engine's scan-out FIFO of a few hundred bytes to 2 KB (16 cycles: 512 bytes, 128 pixels at 32 bpp) and a few queued CPU misses";
         host_clock_mhz: f64 = 180.0, [0.001, 100_000.0], "MHz", "host CPU clock: the O2's R5000",
             V2 "O2 configurations: R5000 at 180-350 MHz, R10000 at 150-400 MHz";
         host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited",

@@ -7,14 +7,33 @@
 //! cycle and in which its bits fit next to the bits already granted in that cycle. A request
 //! never splits across cycles.
 //!
-//! Reserved cycles: the clients outside the pixel pipeline (the O2's display refresh and the
-//! host) take a share `f` of the port's cycles, whole cycles in a fixed pattern: cycle `c`
-//! is theirs when `floor((c + 1) f) > floor(c f)`, so every prefix of `n` cycles holds
-//! `floor(n f)` of them, spread evenly. No request is granted in a reserved cycle; it goes
-//! to the next free one. With `f = 0` no cycle is reserved.
+//! The other clients: the display refresh and the host (the O2's unified memory) need a
+//! share `f` of the port's cycles, `f` a cycle, and may fall behind that need by at most
+//! `slack` cycles (the display's scan-out FIFO, the host's queued misses). They take every
+//! cycle the pipeline leaves idle while they are behind, and a cycle by force when the
+//! pipeline's request would leave them more than `slack` behind. Cycle by cycle, with the
+//! debt `δ` (cycles of their need not yet served) at 0 from the start:
+//!
+//! ```text
+//! δ' = δ + f
+//! the pipeline takes cycle c  when it asks for it and δ' <= slack:  δ = δ'
+//! the other clients take c    otherwise:                            δ = max(0, δ' - 1)
+//! ```
+//!
+//! (`f` and `δ` in fixed point, 2^-32 of a cycle, so every run gives the same cycles.) A
+//! cycle is *forced* when the pipeline asked for it and lost it. With `f = 0` the port is
+//! the plain one.
+//!
+//! Why a debt and not a fixed pattern of reserved cycles: the pattern's phase runs from
+//! cycle 0, so which of a query's last reads meet a reserved cycle hangs on the cycle the
+//! query comes in, which nothing local to the query tells; the debt forgets its past in
+//! any stretch where the port idles more than `f` of its cycles, as real arbiters with
+//! FIFOs do, and a machine started mid-trace (the sampled level) meets the same port as
+//! one that ran from the start once it has.
 //!
 //! In-order service keeps the machine monotone: a request made earlier can never make a
-//! later one wait longer, so speeding up any block never slows a query down.
+//! later one wait longer (an earlier grant moves an idle cycle later, which serves the debt
+//! no less), so speeding up any block never slows a query down.
 
 use crate::timeline::{note, PortLane, State, Timeline, Track};
 
@@ -54,15 +73,27 @@ pub struct PortStats {
     pub clear_transfers: u64,
     /// One past the last cycle with a transfer.
     pub end_cycle: u64,
-    /// Cycles before `end_cycle` reserved for the display refresh and the host.
+    /// Port cycles the display refresh and the host were served before `end_cycle`, in
+    /// whole cycles (their need, `f` a cycle, less what they are still owed).
     pub reserved_cycles: u64,
+    /// Cycles the pipeline asked for and the display refresh and the host took by force.
+    pub forced_cycles: u64,
 }
+
+/// One cycle in the fixed point of the other clients' share and debt.
+const CYCLE_UNITS: u64 = 1 << 32;
 
 pub struct MemoryPort {
     bits_per_cycle: u32,
-    /// The share of cycles reserved for clients outside the pipeline (0: none).
-    reserved_share: f64,
-    /// The cycle of the last grant.
+    /// `f`, the other clients' share, in [`CYCLE_UNITS`] a cycle (0: none).
+    share_units: u64,
+    /// How far they may fall behind, in [`CYCLE_UNITS`].
+    slack_units: u64,
+    /// `δ`, what they are owed at the start of cycle `settled`, in [`CYCLE_UNITS`].
+    debt_units: u64,
+    /// The first cycle not yet settled between the pipeline and the other clients.
+    settled: u64,
+    /// The cycle of the last grant (meaningful once `settled > 0`).
     cycle: u64,
     /// Bits granted so far in `cycle`.
     cycle_bits: u32,
@@ -73,45 +104,47 @@ pub struct MemoryPort {
 
 impl MemoryPort {
     pub fn new(bits_per_cycle: u32) -> MemoryPort {
-        MemoryPort::with_reserved_share(bits_per_cycle, 0.0)
+        MemoryPort::with_other_clients(bits_per_cycle, 0.0, 0)
     }
 
-    /// A port whose cycles are a share `reserved_share` (in `0.0..1.0`) reserved.
-    pub fn with_reserved_share(bits_per_cycle: u32, reserved_share: f64) -> MemoryPort {
-        debug_assert!((0.0..1.0).contains(&reserved_share));
-        let mut port = MemoryPort {
+    /// A port whose other clients need `share` (in `0.0..1.0`) of its cycles and may fall
+    /// `slack_cycles` behind (see the module docs).
+    pub fn with_other_clients(bits_per_cycle: u32, share: f64, slack_cycles: u32) -> MemoryPort {
+        debug_assert!((0.0..1.0).contains(&share));
+        MemoryPort {
             bits_per_cycle,
-            reserved_share,
+            share_units: (share * CYCLE_UNITS as f64).round() as u64,
+            // At least a cycle: with none, every cycle would be owed to them.
+            slack_units: slack_cycles.max(1) as u64 * CYCLE_UNITS,
+            debt_units: 0,
+            settled: 0,
             cycle: 0,
             cycle_bits: 0,
             stats: PortStats::default(),
             timeline: None,
-        };
-        port.cycle = port.first_free(0);
-        port
+        }
     }
 
-    /// Whether cycle `c` belongs to the reserved clients.
+    /// Settle cycles from `settled` on: the idle ones before `c` go to the other clients,
+    /// then every cycle they take by force. Returns the cycle the pipeline gets.
     #[inline(always)]
-    fn is_reserved(&self, c: u64) -> bool {
-        self.reserved_share > 0.0 && self.reserved_before(c + 1) > self.reserved_before(c)
-    }
-
-    /// Reserved cycles among `0..n`: `floor(n f)`.
-    #[inline(always)]
-    fn reserved_before(&self, n: u64) -> u64 {
-        // The product is never negative, so the cast's truncation is the floor (without a
-        // call to libm's `floor` on every grant).
-        (n as f64 * self.reserved_share) as u64
-    }
-
-    /// The first cycle at or after `c` that is not reserved.
-    #[inline(always)]
-    fn first_free(&self, mut c: u64) -> u64 {
-        while self.is_reserved(c) {
+    fn grant_from(&mut self, c: u64) -> u64 {
+        // An idle cycle takes `1 - f` off the debt, down to 0.
+        let idle = c - self.settled;
+        let served = idle.saturating_mul(CYCLE_UNITS - self.share_units);
+        self.debt_units = self.debt_units.saturating_sub(served);
+        let mut c = c;
+        loop {
+            let owed = self.debt_units + self.share_units;
+            if owed <= self.slack_units {
+                self.debt_units = owed;
+                self.settled = c + 1;
+                return c;
+            }
+            self.debt_units = owed.saturating_sub(CYCLE_UNITS);
+            self.stats.forced_cycles += 1;
             c += 1;
         }
-        c
     }
 
     /// Report every grant's cycle to `timeline`, on its client's lane.
@@ -128,9 +161,10 @@ impl MemoryPort {
     #[inline]
     pub fn claim(&mut self, ready: u64, bits: u32, client: PortClient) -> u64 {
         debug_assert!(bits <= self.bits_per_cycle);
-        if ready > self.cycle || self.cycle_bits + bits > self.bits_per_cycle {
+        let open = self.cycle_bits > 0;
+        if !open || ready > self.cycle || self.cycle_bits + bits > self.bits_per_cycle {
             self.close_cycle();
-            self.cycle = self.first_free(ready.max(self.cycle + 1));
+            self.cycle = self.grant_from(ready.max(self.settled));
         }
         self.cycle_bits += bits;
         self.stats.bits_transferred += bits as u64;
@@ -173,7 +207,11 @@ impl MemoryPort {
     /// Close the last cycle and return the statistics.
     pub fn finish(mut self) -> PortStats {
         self.close_cycle();
-        self.stats.reserved_cycles = self.reserved_before(self.stats.end_cycle);
+        // Every cycle before `settled` (= `end_cycle`) added `f` to what the other clients
+        // need; what they are still owed was not served.
+        let need = self.settled as u128 * self.share_units as u128;
+        let served = need - self.debt_units as u128;
+        self.stats.reserved_cycles = (served / CYCLE_UNITS as u128) as u64;
         self.stats
     }
 }
@@ -183,25 +221,53 @@ mod tests {
     use super::*;
 
     #[test]
-    fn reserved_cycles_carry_nothing_else_and_spread_evenly() {
-        // A quarter reserved: floor((c + 1) / 4) > floor(c / 4) for c = 3, 7, 11, ...
-        let mut port = MemoryPort::with_reserved_share(256, 0.25);
+    fn the_other_clients_take_idle_cycles_and_force_one_when_too_far_behind() {
+        // f = 1/4, slack 1 cycle, every request a full word ready at 0. The debt after
+        // cycles 0..3 is 1/4, 1/2, 3/4, 1 (never above the slack: the pipeline's); in 4 it
+        // would be 5/4, so 4 is forced (debt 1/4); 5..7 take it to 1 again and 8 is forced.
+        let mut port = MemoryPort::with_other_clients(256, 0.25, 1);
         let grants: Vec<u64> = (0..9)
             .map(|_| port.claim(0, 256, PortClient::DepthRead))
             .collect();
-        assert_eq!(grants, [0, 1, 2, 4, 5, 6, 8, 9, 10]);
-        // Ready in a reserved cycle: the next free one. Smaller words still pack.
-        assert_eq!(port.claim(15, 128, PortClient::DepthWrite), 16);
-        assert_eq!(port.claim(15, 128, PortClient::DepthWrite), 16);
+        assert_eq!(grants, [0, 1, 2, 3, 5, 6, 7, 9, 10]);
+        // Debt 3/4 after 10. Idle 11..19 serve it (3/4 a cycle: down to 0), so a request
+        // ready in 20 has it (debt 1/4), and smaller words still pack; a full word then
+        // goes to 21 (debt 1/2).
+        assert_eq!(port.claim(20, 128, PortClient::DepthWrite), 20);
+        assert_eq!(port.claim(20, 128, PortClient::DepthWrite), 20);
+        assert_eq!(port.claim(20, 256, PortClient::DepthWrite), 21);
         let stats = port.finish();
         assert!(stats.max_bits_in_one_cycle <= 256);
-        // Cycles 0..17 hold floor(17 / 4) = 4 reserved ones (3, 7, 11, 15).
-        assert_eq!((stats.end_cycle, stats.reserved_cycles), (17, 4));
-        assert_eq!(stats.busy_cycles + stats.reserved_cycles, 10 + 4);
+        // Cycles 0..22 need 22/4 = 5.5; 1/2 still owed: 5 served (4 and 8 by force, and
+        // the idle cycles 11..19 the 3 = 3/4 + 9/4 owed over them).
+        assert_eq!(
+            (stats.end_cycle, stats.reserved_cycles, stats.forced_cycles),
+            (22, 5, 2)
+        );
+        assert_eq!(stats.busy_cycles, 11);
         // No share: the plain port.
-        let mut plain = MemoryPort::with_reserved_share(256, 0.0);
+        let mut plain = MemoryPort::with_other_clients(256, 0.0, 1);
         assert_eq!(plain.claim(3, 256, PortClient::Clear), 3);
         assert_eq!(plain.claim(0, 256, PortClient::Clear), 4);
+    }
+
+    #[test]
+    fn a_request_that_comes_later_meets_the_same_port_once_the_debt_is_paid() {
+        // The port forgets its past: after an idle stretch long enough to serve the debt,
+        // a burst takes the same cycles relative to its start whatever came before it.
+        let burst = |port: &mut MemoryPort, from: u64| -> Vec<u64> {
+            (0..12)
+                .map(|_| port.claim(from, 256, PortClient::DepthRead) - from)
+                .collect()
+        };
+        let mut fresh = MemoryPort::with_other_clients(256, 0.3, 2);
+        let mut busy = MemoryPort::with_other_clients(256, 0.3, 2);
+        for _ in 0..37 {
+            busy.claim(0, 256, PortClient::DepthWrite);
+        }
+        // At most 2 owed; 0.7 paid an idle cycle: 3 idle cycles pay it (100 is plenty).
+        let from = busy.last_grant_end() + 100;
+        assert_eq!(burst(&mut fresh, 1_000), burst(&mut busy, from));
     }
 
     #[test]

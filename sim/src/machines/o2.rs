@@ -224,9 +224,10 @@ impl O2Machine {
             depth: DepthPipeline::new(&o2, width, height, effects, depth),
             depth_to_occu: Fifo::new(o2.fifo_depth_to_occu_entries),
             occu: OccuStage::new(&o2, model),
-            port: MemoryPort::with_reserved_share(
+            port: MemoryPort::with_other_clients(
                 o2.memory_port_bits_per_cycle,
                 o2.reserved_port_share(),
+                o2.other_clients_slack_cycles,
             ),
             arch_entries,
             width,
@@ -1019,6 +1020,7 @@ impl O2Machine {
                 colour_reads: depth.colour_reads,
                 clear_words: depth.clear_words_written,
                 reserved_cycles: port.reserved_cycles,
+                forced_cycles: port.forced_cycles,
                 occu_words,
             },
             engines,

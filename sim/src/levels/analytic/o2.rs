@@ -204,8 +204,11 @@ pub struct StretchCounts {
     /// Read latency of the stretch's last fragment (0 when it read nothing new).
     pub last_read_latency: u64,
     /// The most cycles a run of dense reads in it leaves the depth test behind the
-    /// rasterizer, at this port's read cost ([`occsim_traces::trace::dense_reads`]).
+    /// rasterizer ([`occsim_traces::trace::dense_reads`]), each read a port cycle, and each
+    /// `1 / (1 - f)` (before the slack the port's other clients allow: see
+    /// [`O2Formulas::dense_read_lag`]).
     pub dense_read_lag: f64,
+    pub dense_read_lag_at_share: f64,
 }
 
 /// How long a stretch's work takes the blocks behind the rasterizer.
@@ -214,8 +217,12 @@ pub struct Downstream {
     /// `max(depth, occu, prefetch)`, in cycles: the blocks the depth test passes fragments
     /// through, its port aside (the port runs on its own clock: see the module docs).
     pub off_port: f64,
-    /// The port's cycles.
+    /// The port's cycles: the pipeline's `work` and those the other clients force.
     pub port: f64,
+    /// The port cycles the stretch's own transfers take.
+    pub work: f64,
+    /// The other clients took cycles by force (the port saturated past their slack).
+    pub forced: bool,
     /// Fragments the FIFOs hold ahead of the bottleneck: `C1`, and `C2` too when the OccU
     /// binds (behind the depth pipeline).
     pub queued: f64,
@@ -254,11 +261,13 @@ pub struct O2Formulas {
     /// Port words one clear writes (0: a fast clear).
     clear_words: u64,
     /// `f`, the port's reserved share ([`O2Arch::reserved_port_share`]), and the longest
-    /// run of reserved cycles it makes ([`Self::longest_reserved_run`]): constants of the
-    /// architecture, worked out once instead of at every stretch (each had taken a
+    /// run of cycles the other clients force ([`Self::longest_reserved_run`]): constants of
+    /// the architecture, worked out once instead of at every stretch (each had taken a
     /// division of the display's bit rate).
     reserved_share: f64,
     longest_reserved_run: f64,
+    /// How far behind their share the other clients may fall (`σ`, port cycles).
+    slack: f64,
 }
 
 impl O2Formulas {
@@ -278,6 +287,7 @@ impl O2Formulas {
             clear_words,
             reserved_share,
             longest_reserved_run: (reserved_share / (1.0 - reserved_share)).ceil(),
+            slack: arch.other_clients_slack_cycles.max(1) as f64,
         }
     }
 
@@ -302,43 +312,85 @@ impl O2Formulas {
         1.0 - self.reserved_share
     }
 
-    /// The most cycles `runs` of dense reads leave the depth test behind the rasterizer:
-    /// each read takes `1 / (1 - f)` port cycles ([`occsim_traces::trace::dense_reads`]).
-    /// No more than the FIFO before the depth test holds: once it is full the rasterizer
-    /// waits for the depth test, so a run leaves at most that many fragments queued, each a
-    /// cycle once the run's reads are in.
-    #[inline]
-    fn dense_read_lag(&self, runs: &DenseRuns) -> f64 {
-        let lag = runs.lag(1.0 / self.free_share());
-        lag.min(self.arch.fifo_raster_to_depth_entries as f64)
-    }
-
-    /// `runs` of dense reads join stretch `w`: its lag is the most any of them leaves.
+    /// `runs` of dense reads join stretch `w`: its lags are the most any of them leaves, a
+    /// read a port cycle and `c = 1 / (1 - f)` ([`Self::dense_read_lag`]).
     #[inline]
     fn add_dense_runs(&self, w: &mut StretchCounts, runs: &DenseRuns) {
         if !runs.runs().is_empty() {
-            w.dense_read_lag = w.dense_read_lag.max(self.dense_read_lag(runs));
+            w.dense_read_lag = w.dense_read_lag.max(runs.lag(1.0));
+            let at_share = runs.lag(1.0 / self.free_share());
+            w.dense_read_lag_at_share = w.dense_read_lag_at_share.max(at_share);
         }
     }
 
-    /// Port cycles for `bits` written.
+    /// The most cycles the dense runs of reads of stretch `w` leave the depth test behind
+    /// the rasterizer, the port's other clients `debt` behind as it starts. A run of `n`
+    /// reads in `m` fragments takes the port [`Self::port_time`] `= max(n, c (n + debt -
+    /// σ))` cycles, so lags `max(n - m, (c n - m) - c (σ - debt))`: the larger of the lags
+    /// at a read a cycle and at `c`, the latter less the slack left. No more than the FIFO
+    /// before the depth test holds: once it is full the rasterizer waits for the depth
+    /// test, so a run leaves at most that many fragments queued, each a cycle once the
+    /// run's reads are in.
+    fn dense_read_lag(&self, w: &StretchCounts, debt: f64) -> f64 {
+        let c = 1.0 / self.free_share();
+        let at_share = w.dense_read_lag_at_share - c * (self.slack - debt);
+        let lag = match self.reserved_share > 0.0 {
+            true => w.dense_read_lag.max(at_share),
+            false => w.dense_read_lag,
+        };
+        lag.min(self.arch.fifo_raster_to_depth_entries as f64)
+    }
+
+    /// Port cycles for `bits` written, before the other clients' share.
     pub fn port_cycles(&self, bits: u64) -> f64 {
-        bits.div_ceil(self.arch.memory_port_bits_per_cycle as u64) as f64 / self.free_share()
+        bits.div_ceil(self.arch.memory_port_bits_per_cycle as u64) as f64
     }
 
-    /// Cycles one clear holds the depth test (0: a fast clear).
-    pub fn clear_cycles(&self) -> f64 {
-        self.clear_words as f64 / self.free_share()
+    /// Port words one clear writes (0: a fast clear).
+    pub fn clear_work(&self) -> f64 {
+        self.clear_words as f64
     }
 
-    /// The blocks behind the rasterizer on a stretch (see the module docs).
-    pub fn downstream(&self, w: &StretchCounts) -> Downstream {
+    /// Cycles the port takes for `work` cycles of the pipeline's transfers in a row, its
+    /// other clients `debt` cycles behind ([`crate::blocks::memory_port`]): they take none
+    /// until they are `σ` behind, then `f` of the cycles, so `max(work, (work + debt - σ) /
+    /// (1 - f))`.
+    pub fn port_time(&self, work: f64, debt: f64) -> f64 {
+        if self.reserved_share == 0.0 {
+            return work;
+        }
+        work.max((work + debt - self.slack) / self.free_share())
+    }
+
+    /// The other clients' debt after the port did `work` cycles of the pipeline's over
+    /// `span` cycles from `debt`: `f` a cycle more, a cycle less each idle one, within
+    /// `0..=σ`.
+    pub fn debt_after(&self, debt: f64, work: f64, span: f64) -> f64 {
+        if self.reserved_share == 0.0 {
+            return 0.0;
+        }
+        (debt + work - self.free_share() * span).clamp(0.0, self.slack)
+    }
+
+    /// The other clients' debt after `cycles` idle port cycles from `debt`.
+    pub fn debt_after_idle(&self, debt: f64, cycles: f64) -> f64 {
+        self.debt_after(debt, 0.0, cycles.max(0.0))
+    }
+
+    /// The blocks behind the rasterizer on a stretch (see the module docs), the port's
+    /// other clients `debt` cycles behind as its transfers start, which the rasterizer asks
+    /// for over `asked` cycles (its reads as it emits the fragments).
+    pub fn downstream(&self, w: &StretchCounts, debt: f64, asked: f64) -> Downstream {
         let a = &self.arch;
-        let depth = w.fragments as f64 + self.read_stall_cycles(w) * w.depth_reads as f64;
-        let occu = w.occu_cycles as f64;
         let write_bits = w.depth_writes * a.depth_bits_per_pixel as u64
             + (w.colour_writes + w.colour_reads) * a.colour_bits_per_pixel as u64;
-        let port = (w.depth_reads as f64 + self.write_cycles(w, write_bits)) / self.free_share();
+        let work = w.depth_reads as f64 + self.write_cycles(w, write_bits);
+        let port = self.port_time(work, debt);
+        // Spread over the cycles they are asked in, the transfers leave idle cycles that
+        // serve the debt: cycles are forced only where the port is through them later.
+        let forced = port > work.max(asked);
+        let depth = w.fragments as f64 + self.read_stall_cycles(w, forced) * w.depth_reads as f64;
+        let occu = w.occu_cycles as f64;
         // `R (λ̄ + 1) / L`, with `R λ̄` the reads' latencies summed: whole cycles, so one
         // division (of an exact sum) where the mean's had two.
         let latencies = w.page_misses * a.page_miss_latency_cycles
@@ -355,6 +407,8 @@ impl O2Formulas {
         Downstream {
             off_port,
             port,
+            work,
+            forced,
             queued: queued as f64,
             occu_bound: behind_depth,
         }
@@ -371,13 +425,14 @@ impl O2Formulas {
 
     /// `ε` of a stretch (see the module docs): reads stall the depth test where they compete
     /// with writes for the port, or come denser than one a [`DENSE_READS_PER_FRAGMENT`]
-    /// fragments; elsewhere only the slowest read's lag ([`Self::slowest_read_lag`]).
-    fn read_stall_cycles(&self, w: &StretchCounts) -> f64 {
+    /// fragments while the other clients force cycles; elsewhere only the slowest read's
+    /// lag ([`Self::slowest_read_lag`]).
+    fn read_stall_cycles(&self, w: &StretchCounts, forced: bool) -> f64 {
         let writes = w.depth_writes + w.colour_writes + w.colour_reads > 0;
         let dense = w.depth_reads as f64 > DENSE_READS_PER_FRAGMENT * w.fragments as f64;
         if writes {
             READ_STALL_CYCLES
-        } else if dense {
+        } else if dense && forced {
             RESERVED_READ_STALL_CYCLES * self.reserved_share
         } else {
             0.0
@@ -385,8 +440,9 @@ impl O2Formulas {
     }
 
     /// The least the depth test trails the rasterizer by after a stretch: its slowest
-    /// read's latency and a cycle (0 when it read nothing).
-    fn slowest_read_lag(&self, w: &StretchCounts) -> f64 {
+    /// read's latency and, where the other clients force cycles, their longest run (0 when
+    /// it read nothing).
+    fn slowest_read_lag(&self, w: &StretchCounts, forced: bool) -> f64 {
         let latency = if w.page_misses > 0 {
             self.arch.page_miss_latency_cycles
         } else if w.depth_reads > 0 {
@@ -394,7 +450,7 @@ impl O2Formulas {
         } else {
             return 0.0;
         };
-        latency as f64 + self.longest_reserved_run()
+        latency as f64 + if forced { self.longest_reserved_run() } else { 0.0 }
     }
 
     /// The most port cycles in a row the display refresh and the host reserve: with `f` of
@@ -411,17 +467,17 @@ impl O2Formulas {
     }
 
     /// Latency of a query whose records are `record_words` words, after a window that
-    /// drains in `drain` cycles.
-    pub fn latency(&self, record_words: u64, drain: f64) -> f64 {
-        4.0 + self.record_cycles(record_words) + drain
+    /// drains in `drain` cycles, the port's other clients `debt` behind.
+    pub fn latency(&self, record_words: u64, drain: f64, debt: f64) -> f64 {
+        4.0 + self.record_cycles(record_words, debt) + drain
     }
 
-    /// Whole cycles the port takes to write `record_words` record words, its reserved
-    /// cycles among them.
-    fn record_cycles(&self, record_words: u64) -> f64 {
+    /// Whole cycles the port takes to write `record_words` record words, the other clients
+    /// `debt` behind and the cycles they force among them.
+    fn record_cycles(&self, record_words: u64, debt: f64) -> f64 {
         let words_per_cycle = (self.arch.memory_port_bits_per_cycle / 32) as u64;
         let port_cycles = record_words.div_ceil(words_per_cycle) as f64;
-        (port_cycles / self.free_share()).ceil()
+        self.port_time(port_cycles, debt).ceil()
     }
 }
 
@@ -449,6 +505,10 @@ struct Pipe {
     /// The cycle the port is through the work asked of it so far, from the window's start
     /// (the prefetch asks for a fragment's read when it is emitted, ahead of its depth test).
     port_done: f64,
+    /// How far the port's other clients are behind their share, as of `debt_at`
+    /// ([`O2Formulas::port_time`]; `debt_at` may lie before the window's start).
+    debt: f64,
+    debt_at: f64,
 }
 
 /// When the blocks behind the rasterizer take a stretch's fragments: its first fragment's
@@ -490,6 +550,8 @@ impl Pipe {
         self.port_done = (self.port_done - cycles).max(0.0);
         self.carried = (self.carried - cycles).max(0.0);
         self.last_read_ready = (self.last_read_ready - cycles).max(0.0);
+        // Not clamped: the idle cycles since the debt was last settled serve it.
+        self.debt_at -= cycles;
         for stretch in &mut self.recent {
             stretch.begin -= cycles;
         }
@@ -768,10 +830,16 @@ impl O2Bottleneck {
     /// memory), while the rasterizer runs on until the FIFO before the depth test is full.
     pub(super) fn clear(&mut self) {
         self.close_stretch();
-        let pipe = &mut self.pipe;
-        pipe.downstream = pipe.downstream.max(pipe.raster) + self.formulas.clear_cycles();
+        let (formulas, pipe) = (&self.formulas, &mut self.pipe);
+        let from = pipe.downstream.max(pipe.raster);
+        let debt = formulas.debt_after_idle(pipe.debt, from - pipe.debt_at);
+        let work = formulas.clear_work();
+        let cycles = formulas.port_time(work, debt);
+        pipe.downstream = from + cycles;
         pipe.port_done = pipe.downstream;
-        pipe.port += self.formulas.clear_cycles();
+        pipe.port += cycles;
+        pipe.debt = formulas.debt_after(debt, work, cycles);
+        pipe.debt_at = pipe.port_done;
     }
 
     /// The query `spec` ended with `result`, its window begun at `start` and its end token
@@ -788,8 +856,14 @@ impl O2Bottleneck {
         let (records, hits) = query_words(spec, result);
         // Verbose hit words went through the port beside the window's other words: what the
         // port's idle cycles in the window could not take lengthens the drain.
-        let hit_cycles = self.formulas.port_cycles(32 * hits);
         let pipe = &mut self.pipe;
+        // The other clients' debt as the records go: the port idled since it was settled,
+        // up to the token's entry at its release and through the backlog ahead of it.
+        let records_from = pipe.downstream.max(release - start);
+        let debt = self
+            .formulas
+            .debt_after_idle(pipe.debt, records_from - pipe.debt_at);
+        let hit_cycles = self.formulas.port_time(self.formulas.port_cycles(32 * hits), debt);
         let idle = (pipe.downstream - pipe.carried - pipe.port).max(0.0);
         pipe.downstream += (hit_cycles - idle).max(0.0);
         let (cycles, backlog) = pipe.window_end();
@@ -803,8 +877,8 @@ impl O2Bottleneck {
             // The token's first steps pass while the OccU works through the backlog.
             drain = (drain - OCCU_BOUND_TOKEN_OVERLAP_CYCLES).max(0.0);
         }
-        let latency = self.formulas.latency(records, drain);
-        self.head = Some(Head::new(latency, self.formulas.record_cycles(records)));
+        let latency = self.formulas.latency(records, drain, debt);
+        self.head = Some(Head::new(latency, self.formulas.record_cycles(records, debt)));
         WindowEnd { cycles, latency }
     }
 
@@ -852,17 +926,25 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
     if n == 0 {
         return;
     }
-    let down = formulas.downstream(stretch);
-    let begin = pipe.downstream.max(start);
     // The port takes the stretch's reads as the rasterizer emits them, while the depth test
     // still works through the backlog: a lag already built is slack for them.
-    pipe.port_done = pipe.port_done.max(start) + down.port;
+    let port_from = pipe.port_done.max(start);
+    let debt = formulas.debt_after_idle(pipe.debt, port_from - pipe.debt_at);
+    let down = formulas.downstream(stretch, debt, emitted - port_from);
+    let begin = pipe.downstream.max(start);
+    pipe.port_done = port_from + down.port;
+    // Its transfers spread over the fragments' emission, the idle cycles among them
+    // serving the other clients.
+    let span = down.port.max(emitted - port_from);
+    pipe.debt = formulas.debt_after(debt, down.work, span);
+    pipe.debt_at = port_from + span;
     // Its last read's data comes a page hit's latency after the port is through.
     let read_in = pipe.port_done + formulas.arch.page_hit_latency_cycles as f64;
     // A dense run of reads inside it leaves the depth test that much behind the fragments'
-    // emission (a read's own latency is the trail the ratchet below keeps).
-    let dense_in = match stretch.dense_read_lag > 0.0 {
-        true => emitted + stretch.dense_read_lag,
+    // emission, and its last read's data a page hit later.
+    let dense_read_lag = formulas.dense_read_lag(stretch, debt);
+    let dense_in = match dense_read_lag > 0.0 {
+        true => emitted + dense_read_lag + formulas.arch.page_hit_latency_cycles as f64,
         false => 0.0,
     };
     let cycles = (begin + down.off_port).max(read_in).max(dense_in) - begin;
@@ -871,7 +953,7 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
     // The depth test trails the rasterizer by at least its slowest read's latency + 1.
     pipe.downstream = pipe
         .downstream
-        .max(emitted + formulas.slowest_read_lag(stretch));
+        .max(emitted + formulas.slowest_read_lag(stretch, down.forced));
     pipe.port += down.port;
     pipe.occu_bound = down.occu_bound;
     pipe.recent.push_back(StretchTimes {
@@ -1132,9 +1214,9 @@ mod tests {
             colour_writes: 100,
             ..StretchCounts::default()
         };
-        assert_eq!(formulas.downstream(&w).port, 100.0);
+        assert_eq!(formulas.downstream(&w, 0.0, 0.0).port, 100.0);
         // With 10 reads the packed 25 cycles bind: 10 + 25.
         w.depth_reads = 10;
-        assert_eq!(formulas.downstream(&w).port, 35.0);
+        assert_eq!(formulas.downstream(&w, 0.0, 0.0).port, 35.0);
     }
 }
