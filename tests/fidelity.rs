@@ -583,11 +583,16 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // 4.17% -> 0.23%, the hierarchical walks 15.8% -> 0%, the adaptive walk 5.00% -> 0%;
     // the 1x1/4x4 demos stay at 5.26%, one cycle of 19 that the measured window itself
     // gives (its machine, started mid-trace, meets the port's reserved cycles in another
-    // phase); measured 2026-12-04.
+    // phase); measured 2026-12-04. (m) lowered to the targets when the port's other clients
+    // became a debt with a slack (they take the cycles the pipeline leaves idle, and force
+    // one only when 16 behind; `blocks/memory_port.rs`) in place of a fixed pattern of
+    // reserved cycles whose phase no count or warm-up told: the 1x1/4x4 demos' analytic p95
+    // 10.53% -> 0%, sampled 5.26% -> 0%; every class's sampled:10 p95 within 0.62%, its
+    // analytic p95 within 1.34% (the hard cases'); measured 2026-12-05.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
         ("demo",              0.05,  0.10,  0.01,  0.03),  // every target (l)
-        ("retiled-1x1-4x4",   0.05,  0.11,  0.01,  0.064), // p95 10.53% (j), sampled p95 5.26% (h, l)
+        ("retiled-1x1-4x4",   0.05,  0.10,  0.01,  0.03),  // every target (m)
         ("retiled-32x32",     0.05,  0.10,  0.01,  0.03),  // every target
         ("hardcases",         0.05,  0.10,  0.01,  0.03),  // every target (sampled 0.27%)
         ("random",            0.05,  0.10,  0.01,  0.03),  // every target (f)
@@ -635,11 +640,10 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
 /// 0.04% at most, measured 2026-12-03) and its p95 latency exact, but the hard cases'
 /// (1.82%, their clears' queries); on the walks, the random triangles and the demo, 95% of
 /// the queries or more take the cycle model's latency to the cycle. At the O2's own
-/// `f` = 0.234 the same queries spread by the reserved cycles' phase, which no count tells.
-/// The sampled level, whose measured windows start machines mid-trace and so meet those
-/// cycles in another phase, gives every class's p95 latency exactly here, the hard cases'
-/// too (measured 2026-12-05: what sampled:10 misses at `f` = 0.234, a cycle on the 1x1 and
-/// 4x4 demos and the grid walks, is that phase alone).
+/// `f` = 0.234 the other clients force cycles only where the port saturates past their
+/// slack, which the formulas follow as a debt. The sampled level, whose measured windows
+/// start machines mid-trace, gives every class's p95 latency exactly here, the hard
+/// cases' too.
 #[test]
 fn without_reserved_port_cycles_the_o2_formulas_are_the_cycle_models_timing() {
     let unreserved = [

@@ -12,19 +12,24 @@
 //! the replay reads the trace twice, the first time as the analytic level would).
 //!
 //! - Why the slowest: a latency's p95 rests on the queries near the top of the
-//!   distribution, and on the O2 the formulas miss a few cycles of a query of 10 to 30 (the
-//!   port reserves cycles in a phase no count tells). Extrapolated from every K-th query
+//!   distribution, and on the O2 the formulas miss a few cycles of some queries of 10 to 30
+//!   (when this was measured, the port reserved cycles in a fixed phase no count told).
+//!   Extrapolated from every K-th query
 //!   alone, the p95 came out cycles off; with the top tenth measured (stratified sampling:
 //!   that stratum is simulated whole, the rest sampled one in K), the p95's queries are
 //!   measured ones. On the small corpus at sampled:10 on every machine and engine count,
 //!   the worst p95 error went from 4.2% to 0.25% on the demo, 15.8% to 0% on the
 //!   hierarchical walks and 5.0% to 0% on the adaptive walk; at the full scale on the O2
-//!   from 4.44% to 0% on the 1x1 and 4x4 demos. What is left (one cycle of 18 to 30) is
-//!   the measured windows' own: a machine started mid-trace meets the reserved cycles in
-//!   another phase than one that ran from the start. (With no reserved cycles, `--set
-//!   host_memory_share=0 --set display_width_pixels=0`, sampled:2 and sampled:10 give every
-//!   one of the full-scale hierarchical walk's 201 queries the cycle level's latency.) It
-//!   costs windows: sampled:10 on the demo on the O2 ran 319 M instructions (callgrind,
+//!   from 4.44% to 0% on the 1x1 and 4x4 demos. What was left then, one cycle of 18 to 30,
+//!   was the measured windows' own: a machine started mid-trace met the reserved cycles in
+//!   another phase. Since the port's other clients became a debt that forgets its past
+//!   ([`crate::blocks::memory_port`]), a machine started mid-trace meets the same port as
+//!   one that ran from the start once its warm-up has let the port idle, and every class
+//!   of the small corpus takes its p95 to within 0.62%. What is left is the stratum's: a
+//!   query the formulas rank low and the machine finds slow is extrapolated (on the full
+//!   4x4 demo at 16 engines, a samples query whose record waits behind a port the next
+//!   query's reads and writes saturate: 34 cycles, predicted and given 22). It costs
+//!   windows: sampled:10 on the demo on the O2 ran 319 M instructions (callgrind,
 //!   the whole process), 459 M with them, 442 M since its runs decode and bound less.
 //! - Only the systematic sample calibrates the extrapolation (the pipe's cycles, the
 //!   latencies' regression and donors): the slowest are not a sample of the others. A
@@ -203,8 +208,8 @@ impl Window {
 /// machine at the clear instead. Measured with `occsim fidelity --corpus --machines o2
 /// --no-rtl`, full and small, at sampled:10: every class's cycles error within 0.01% of a
 /// 16,384-fragment warm-up's (the demo 0.05% -> 0.06%), its latency errors moved by a cycle
-/// or none (the phase of the port's reserved cycles at a query's end, which no warm-up
-/// fixes, see README); 2,048 fragments took the demo's cycles to 0.33%. A warm-up of the
+/// or none (then the phase of the port's reserved cycles at a query's end, which no warm-up
+/// fixed; the port's debt now forgets it); 2,048 fragments took the demo's cycles to 0.33%. A warm-up of the
 /// window before alone, however short, had left an empty window's machine with its host and
 /// clears cold (the hard cases' cycles 7.7% off, now 0.7%).
 pub const O2_WARM_UP_FRAGMENTS: u64 = 4_096;
@@ -458,9 +463,9 @@ const MIN_CELL_DONORS: usize = 10;
 
 /// The sampled queries' measured latencies, by *cell*: their class and the formulas'
 /// latency for them. Where the formulas give a cell's queries one latency, the regression
-/// gives them one too, though the machine's vary (on the O2 by a few cycles of a 10 to 25
-/// cycle latency: which reads of a query's last primitives wait for the port's reserved
-/// cycles, which no count tells). So when a cell holds at least [`MIN_CELL_DONORS`] sampled
+/// gives them one too, though the machine's vary (on the O2, when the port reserved cycles
+/// in a fixed pattern, by a few cycles of a 10 to 25 cycle latency: which reads of a
+/// query's last primitives waited for them, which no count told). So when a cell holds at least [`MIN_CELL_DONORS`] sampled
 /// queries, each of its extrapolated queries takes the measured latency of the cell's
 /// sampled query nearest it in the stream (its *donor*: survey sampling's nearest-neighbour
 /// hot deck), moved so that the cell's mean stays the regression's. The latencies' spread,

@@ -49,9 +49,11 @@
 //!    ([`crate::blocks::depth_pipeline`]); without it, it is a free fast clear.
 //! 9. The port's other clients ([`crate::blocks::memory_port`]). Arbitration: the display
 //!    refresh (`display_*`: W x H x bits x Hz a second over the port's bits a second) and the
-//!    host (`host_memory_share`) come first: together they own a fixed, evenly spread share
-//!    of whole port cycles, and no pipeline request is granted in one; the pixel pipeline's
-//!    requests share the other cycles in rule 5's order, a drawn fragment's colour write
+//!    host (`host_memory_share`) need a share `f` of the port's whole cycles; they take every
+//!    cycle the pipeline leaves idle, and a cycle the pipeline asks for only when they would
+//!    otherwise fall more than `other_clients_slack_cycles` behind (a debt, settled cycle by
+//!    cycle); the pixel pipeline's requests share the other cycles in rule 5's order, a
+//!    drawn fragment's colour write
 //!    (`colour_bits_per_pixel`; under `blending` after a colour read) travelling with its
 //!    depth write (b), a clear's words where the clear stands. Occlusion render modes draw
 //!    nothing, so they write no colour. Depth reads hit the open row of their bank

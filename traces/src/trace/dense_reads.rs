@@ -1,14 +1,16 @@
 //! A stretch's densest runs of depth reads: what its counts, summed over the whole stretch,
 //! do not show.
 //!
-//! The O2-like machine's memory port grants one depth read a free cycle, and a share `f` of
-//! its cycles is reserved for the display refresh and the host, so `n` reads in a row take
-//! about `c · n` cycles, `c = 1 / (1 - f)` (1.31 at the O2's `f` = 0.234). The rasterizer
+//! The O2-like machine's memory port grants one depth read a free cycle, and once the
+//! display refresh and the host have fallen their slack behind their share `f` of its
+//! cycles they take that share by force, so `n` reads in a row take about `c · n` cycles
+//! (less the slack), `c = 1 / (1 - f)` (1.31 at the O2's `f` = 0.234). The rasterizer
 //! emits a fragment a cycle and the prefetch asks for its read as it is emitted; no block
 //! behind the rasterizer takes more than a fragment a cycle, so a lag once built stays until
 //! the rasterizer idles. A run of `m` fragments of which `n` read a new word (a sliver one
 //! or two pixels wide, a triangle's tip, where every fragment reads) therefore leaves the
-//! depth test `c · n - m` cycles further behind than the rasterizer, however sparsely the
+//! depth test `c · n - m` cycles (less what the slack absorbs) further behind than the
+//! rasterizer, however sparsely the
 //! rest of the stretch reads: the stretch ends `max over runs (c · n - m)` later than its
 //! emission (plus a read's latency). Summed over the stretch, its reads average out (a
 //! box query of the city at 160x120 ending with a 168-fragment sliver, 0.6 reads a
@@ -23,7 +25,7 @@
 //! integer operations a fragment and a cost, and a run of fragments of a word already read
 //! in one step.
 
-/// The read costs `c = p / q` (port cycles a depth read takes, reserved cycles included)
+/// The read costs `c = p / q` (port cycles a depth read takes, forced cycles included)
 /// at which a stretch keeps its densest run: `f` = 1/9, 1/5, 1/4 and 1/3 of the port's
 /// cycles reserved. The O2's 0.234 (its display refresh 0.184 and the host's 0.05) lies
 /// between 1/5 and 1/4; the host's plausible 0..0.15 keeps `f` within 0.18..0.34, and
