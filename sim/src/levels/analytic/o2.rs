@@ -465,7 +465,12 @@ impl O2Formulas {
         } else {
             return 0.0;
         };
-        latency as f64 + if forced { self.longest_reserved_run() } else { 0.0 }
+        latency as f64
+            + if forced {
+                self.longest_reserved_run()
+            } else {
+                0.0
+            }
     }
 
     /// The most port cycles in a row the display refresh and the host force once past their
@@ -878,7 +883,9 @@ impl O2Bottleneck {
         let debt = self
             .formulas
             .debt_after_idle(pipe.debt, records_from - pipe.debt_at);
-        let hit_cycles = self.formulas.port_time(self.formulas.port_cycles(32 * hits), debt);
+        let hit_cycles = self
+            .formulas
+            .port_time(self.formulas.port_cycles(32 * hits), debt);
         let idle = (pipe.downstream - pipe.carried - pipe.port).max(0.0);
         pipe.downstream += (hit_cycles - idle).max(0.0);
         let (cycles, backlog) = pipe.window_end();
@@ -893,7 +900,10 @@ impl O2Bottleneck {
             drain = (drain - OCCU_BOUND_TOKEN_OVERLAP_CYCLES).max(0.0);
         }
         let latency = self.formulas.latency(records, drain, debt);
-        self.head = Some(Head::new(latency, self.formulas.record_cycles(records, debt)));
+        self.head = Some(Head::new(
+            latency,
+            self.formulas.record_cycles(records, debt),
+        ));
         WindowEnd { cycles, latency }
     }
 
