@@ -588,7 +588,7 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // one only when 16 behind; `blocks/memory_port.rs`) in place of a fixed pattern of
     // reserved cycles whose phase no count or warm-up told: the 1x1/4x4 demos' analytic p95
     // 10.53% -> 0%, sampled 5.26% -> 0%; every class's sampled:10 p95 within 0.62%, its
-    // analytic p95 within 1.34% (the hard cases'); measured 2026-12-05.
+    // analytic p95 within 1.3% (the hard cases'); measured 2026-12-05.
     #[rustfmt::skip]
     let bounds: [(&str, f64, f64, f64, f64); 10] = [
         ("demo",              0.05,  0.10,  0.01,  0.03),  // every target (l)

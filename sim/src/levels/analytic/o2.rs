@@ -149,7 +149,7 @@
 //! 4 engines every walk's query but one (of 2,786) takes the machine's latency to the
 //! cycle, and 97% of the demo's and the random triangles' (`tests/fidelity.rs`). With the
 //! O2's share and slack every small-corpus class's p95 latency is exact but the hard
-//! cases' (1.34%, behind their clears). (Under the fixed pattern of reserved cycles the
+//! cases' (1.23%, behind their clears). (Under the fixed pattern of reserved cycles the
 //! port had before, which of a query's last reads and record words met a reserved cycle
 //! hung on the cycle they came in, which no count tells: the machine's latencies for one
 //! prediction spread by a few cycles, 13 to 17 on the forest's walk where the formulas
@@ -223,11 +223,9 @@ pub struct StretchCounts {
     /// Read latency of the stretch's last fragment (0 when it read nothing new).
     pub last_read_latency: u64,
     /// The most cycles a run of dense reads in it leaves the depth test behind the
-    /// rasterizer ([`occsim_traces::trace::dense_reads`]), each read a port cycle, and each
-    /// `1 / (1 - f)` (before the slack the port's other clients allow: see
-    /// [`O2Formulas::dense_read_lag`]).
+    /// rasterizer at `1 / (1 - f)` port cycles a read ([`occsim_traces::trace::dense_reads`]),
+    /// before the slack the port's other clients allow ([`O2Formulas::dense_read_lag`]).
     pub dense_read_lag: f64,
-    pub dense_read_lag_at_share: f64,
 }
 
 /// How long a stretch's work takes the blocks behind the rasterizer.
@@ -332,33 +330,28 @@ impl O2Formulas {
         1.0 - self.reserved_share
     }
 
-    /// `runs` of dense reads join stretch `w`: its lags are the most any of them leaves, a
-    /// read a port cycle and `c = 1 / (1 - f)` ([`Self::dense_read_lag`]).
+    /// `runs` of dense reads join stretch `w`: its lag is the most any of them leaves at
+    /// `c = 1 / (1 - f)` port cycles a read ([`Self::dense_read_lag`]).
     #[inline]
     fn add_dense_runs(&self, w: &mut StretchCounts, runs: &DenseRuns) {
         if !runs.runs().is_empty() {
-            w.dense_read_lag = w.dense_read_lag.max(runs.lag(1.0));
-            let at_share = runs.lag(1.0 / self.free_share());
-            w.dense_read_lag_at_share = w.dense_read_lag_at_share.max(at_share);
+            let lag = runs.lag(1.0 / self.free_share());
+            w.dense_read_lag = w.dense_read_lag.max(lag);
         }
     }
 
     /// The most cycles the dense runs of reads of stretch `w` leave the depth test behind
     /// the rasterizer, the port's other clients `debt` behind as it starts. A run of `n`
     /// reads in `m` fragments takes the port [`Self::port_time`] `= max(n, c (n + debt -
-    /// σ))` cycles, so lags `max(n - m, (c n - m) - c (σ - debt))`: the larger of the lags
-    /// at a read a cycle and at `c`, the latter less the slack left. No more than the FIFO
-    /// before the depth test holds: once it is full the rasterizer waits for the depth
-    /// test, so a run leaves at most that many fragments queued, each a cycle once the
-    /// run's reads are in.
+    /// σ))` cycles, so lags `max(n - m, (c n - m) - c (σ - debt))`: never `n - m > 0` (a
+    /// read a cycle keeps pace), so the lag at `c` less the slack left, when positive (none
+    /// with `f` = 0: `c` = 1). No more than the FIFO before the depth test holds: once it
+    /// is full the rasterizer waits for the depth test, so a run leaves at most that many
+    /// fragments queued, each a cycle once the run's reads are in.
     fn dense_read_lag(&self, w: &StretchCounts, debt: f64) -> f64 {
         let c = 1.0 / self.free_share();
-        let at_share = w.dense_read_lag_at_share - c * (self.slack - debt);
-        let lag = match self.reserved_share > 0.0 {
-            true => w.dense_read_lag.max(at_share),
-            false => w.dense_read_lag,
-        };
-        lag.min(self.arch.fifo_raster_to_depth_entries as f64)
+        let lag = w.dense_read_lag - c * (self.slack - debt);
+        lag.clamp(0.0, self.arch.fifo_raster_to_depth_entries as f64)
     }
 
     /// Port cycles for `bits` written, before the other clients' share.
@@ -969,7 +962,9 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
     // The port's busy cycles, for the debt: writes that come a cycle apart each take a
     // cycle of their own while the port has room (they pack only once queued).
     let entries = stretch.depth_writes.max(stretch.colour_writes) + stretch.colour_reads;
-    let busy = down.work.max(((stretch.depth_reads + entries) as f64).min(span));
+    let busy = down
+        .work
+        .max(((stretch.depth_reads + entries) as f64).min(span));
     pipe.debt = formulas.debt_after(debt, busy, span);
     pipe.debt_at = port_from + span;
     // Its last read's data comes a page hit's latency after the port is through.
