@@ -49,7 +49,8 @@
 //!   sampled window and the events among them ([`warm_up_fragments`]: 4,096 on the O2,
 //!   16,384 on the InfiniteReality-like machine), over as many windows as that takes (from
 //!   a clear fewer than that many fragments before them when there is one: a clear's port
-//!   time outlasts any such count, `SampledModel::starts_at_clear`). The windows' sizes come up to K windows ahead from the trace's window table
+//!   time outlasts any such count, `SampledModel::starts_at_clear`). The windows' sizes
+//!   come up to K windows ahead from the trace's window table
 //!   ([`occsim_traces::trace::windows`], format version 8), else from a second reading of
 //!   the stream ([`WindowScout`], [`feed_window_sizes`]: the window index, else the
 //!   events), the same sizes either way; a
