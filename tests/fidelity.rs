@@ -639,44 +639,60 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
 /// engines, every class's total cycles within 0.1% (the hard cases' clears 0.07%, the rest
 /// 0.04% at most, measured 2026-12-03) and its p95 latency exact, but the hard cases'
 /// (1.82%, their clears' queries); on the walks, the random triangles and the demo, 95% of
-/// the queries or more take the cycle model's latency to the cycle. At the O2's own
-/// `f` = 0.234 the other clients force cycles only where the port saturates past their
-/// slack, which the formulas follow as a debt. The sampled level, whose measured windows
-/// start machines mid-trace, gives every class's p95 latency exactly here, the hard
-/// cases' too.
+/// the queries or more take the cycle model's latency to the cycle. The sampled level,
+/// whose measured windows start machines mid-trace, gives every class's p95 latency
+/// exactly here, the hard cases' too. All of it holds at the O2's own share, `f` = 0.234,
+/// too, since the display refresh and the host became a debt with a slack (they force
+/// cycles only where the port saturates past it, and the formulas follow the debt): the
+/// hard cases' analytic p95 is 1.23% off there (measured 2026-12-05). Under the fixed
+/// pattern of reserved cycles they had before, the sampled level's p95 was a cycle off
+/// on the 1x1 and 4x4 demos and the grid walks, and the formulas' on the 1x1 demo two.
 #[test]
-fn without_reserved_port_cycles_the_o2_formulas_are_the_cycle_models_timing() {
+fn with_or_without_the_ports_other_clients_the_o2_formulas_are_the_cycle_models_timing() {
     let unreserved = [
         "--set",
         "host_memory_share=0",
         "--set",
         "display_width_pixels=0",
     ];
-    let rows = small_corpus_at_4_engines("unreserved", "o2", &unreserved);
-    let analytic: Vec<&serde_json::Value> = rows
-        .as_array()
-        .unwrap()
-        .iter()
-        .filter(|row| row["level"] == "analytic")
-        .collect();
-    assert_eq!(analytic.len(), 10, "{rows}");
-    let sampled = rows.as_array().unwrap().iter();
-    let sampled: Vec<_> = sampled.filter(|row| row["level"] == "sampled:10").collect();
-    assert_eq!(sampled.len(), 10, "{rows}");
-    for row in sampled {
-        assert_eq!(row["latency_p95_error"].as_f64(), Some(0.0), "{row}");
-    }
-    for row in analytic {
-        let class = row["class"].as_str().unwrap();
-        let metric = |key: &str| row.pointer(key).and_then(|v| v.as_f64());
-        assert!(metric("/cycles_error").unwrap() <= 0.001, "{row}");
-        if class != "hardcases" {
-            assert_eq!(metric("/latency_p95_error"), Some(0.0), "{row}");
+    for (scratch, sets) in [("unreserved", &unreserved[..]), ("o2-share", &[][..])] {
+        let rows = small_corpus_at_4_engines(scratch, "o2", sets);
+        let analytic: Vec<&serde_json::Value> = rows
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|row| row["level"] == "analytic")
+            .collect();
+        assert_eq!(analytic.len(), 10, "{rows}");
+        let sampled = rows.as_array().unwrap().iter();
+        let sampled: Vec<_> = sampled.filter(|row| row["level"] == "sampled:10").collect();
+        assert_eq!(sampled.len(), 10, "{rows}");
+        for row in sampled {
+            assert_eq!(
+                row["latency_p95_error"].as_f64(),
+                Some(0.0),
+                "{scratch}: {row}"
+            );
         }
-        if class.starts_with("walk") && class != "walk-frustum"
-            || ["random", "demo"].contains(&class)
-        {
-            assert_eq!(metric("/query_latency_error/p95"), Some(0.0), "{row}");
+        for row in analytic {
+            let class = row["class"].as_str().unwrap();
+            let metric = |key: &str| row.pointer(key).and_then(|v| v.as_f64());
+            assert!(
+                metric("/cycles_error").unwrap() <= 0.001,
+                "{scratch}: {row}"
+            );
+            if class != "hardcases" {
+                assert_eq!(metric("/latency_p95_error"), Some(0.0), "{scratch}: {row}");
+            }
+            if class.starts_with("walk") && class != "walk-frustum"
+                || ["random", "demo"].contains(&class)
+            {
+                assert_eq!(
+                    metric("/query_latency_error/p95"),
+                    Some(0.0),
+                    "{scratch}: {row}"
+                );
+            }
         }
     }
 }
