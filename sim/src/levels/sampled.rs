@@ -842,33 +842,32 @@ impl SampledModel {
         let w = self.windows;
         self.warm_start = None;
         self.planned = true;
-        let warm_up = match (self.is_sampled(w), &self.run) {
-            (true, None) => match self.head_fragments(w) {
-                Some(head) => {
-                    self.window.cut_at = Some(head);
-                    Some(head - self.warm_up_fragments)
-                }
-                None => Some(0),
+        // Where this window's machine would start, and where a sampled window's head ends.
+        let (cut, start) = match self.is_sampled(w) {
+            true => match self.head_fragments(w) {
+                Some(head) => (Some(head), Some(head - self.warm_up_fragments)),
+                None => (None, Some(0)),
             },
-            (true, Some(_)) => match self.head_fragments(w) {
-                // A long window right after a simulated one: that one's machine cools down
-                // and finishes, and a machine starts again for this one's tail.
-                Some(head) if head - self.warm_up_fragments > self.cooldown_fragments as u64 => {
-                    self.window.cut_at = Some(head);
-                    self.warm_start = Some(head - self.warm_up_fragments);
-                    None
-                }
-                _ => Some(0),
-            },
-            (false, _) => match (self.warm_up_start(w), &self.run) {
-                // A long warm-up window after a simulated one: that one's machine cools
-                // down and finishes, and a machine starts again for the warm-up.
-                (Some(first), Some(_)) if first > self.cooldown_fragments as u64 => {
-                    self.warm_start = Some(first);
-                    None
-                }
-                (first, _) => first,
-            },
+            false => (None, self.warm_up_start(w)),
+        };
+        let running = self.run.is_some();
+        let warm_up = match start {
+            // A machine still running from a simulated window before, and this window's
+            // starting past its cool-down (a long sampled window's tail, or a long warm-up
+            // window's warm-up): that one cools down and finishes, and a machine starts
+            // again there.
+            Some(first) if running && first > self.cooldown_fragments as u64 => {
+                self.window.cut_at = cut;
+                self.warm_start = Some(first);
+                None
+            }
+            // Otherwise the running machine runs on through the window, uncut.
+            Some(_) if running => Some(0),
+            Some(first) => {
+                self.window.cut_at = cut;
+                Some(first)
+            }
+            None => None,
         };
         match (warm_up, &mut self.run) {
             (Some(_), Some(run)) => run.cooldown = None,
