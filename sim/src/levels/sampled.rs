@@ -72,7 +72,7 @@
 //!   fragments after it; that fix and the clear rule took the replay from 529 M to 443 M
 //!   instructions (callgrind), the same 118 windows simulated.
 //! - Tails: a sampled window longer than its warm-up and its machine's tail
-//!   ([`tail_fragments`]: 8,192 fragments on the O2, 65,536 on the InfiniteReality-like
+//!   ([`tail_fragments`]: 4,096 fragments on the O2, 65,536 on the InfiniteReality-like
 //!   machine; its size known, and not the last) is simulated over its tail alone. Its
 //!   *head* ends at the first event other than a fragment after all but the tail's
 //!   fragments (where the formulas can be read: a stretch of the index is never split),
@@ -252,8 +252,13 @@ pub fn warm_up_fragments(machine: Machine) -> u64 {
 /// O2's shorter warm-up ([`O2_WARM_UP_FRAGMENTS`]) every class's cycles error is within
 /// 0.01% of 16,384's and 16,384's warm-up (the demo 0.05% -> 0.06%), its latency errors a
 /// cycle or none apart, and sampled:10 on the demo in one process 1.5x sooner (best of 10:
-/// 46-48 -> 30-31 ms, with blocks of 256 KB).
-pub const O2_TAIL_FRAGMENTS: u64 = 8_192;
+/// 46-48 -> 30-31 ms, with blocks of 256 KB). Since the port's other clients became a debt
+/// that forgets its past, 4,096 against 8,192 (the same corpus runs, o2): every class's
+/// latency errors (mean, p95, per-query) the same at both scales, its cycles error the same
+/// but the full grid walks' (0.01% -> 0.08%); sampled:10 on the demo 8.5x -> 9.0x the cycle
+/// level's rate in `cargo bench -p occsim-sim --bench fidelity` (660 -> 733 M fragments/s),
+/// sampled:100 48x -> 50x; the whole process 1.06x sooner.
+pub const O2_TAIL_FRAGMENTS: u64 = 4_096;
 
 /// Fragments at the end of a long sampled window that its machine simulates on the
 /// InfiniteReality-like machine ([`tail_fragments`]): I, plausible 32,768..262,144. An Image
