@@ -542,9 +542,9 @@ struct Pipe {
     /// The cycle the port is through the work asked of it so far, from the window's start
     /// (the prefetch asks for a fragment's read when it is emitted, ahead of its depth test).
     port_done: f64,
-    /// The last stretch's writes: their share of its fragments, bits and pace (their
-    /// ready cycles are set at a query's end).
-    last_writes: LastWrites,
+    /// The last stretch's writes, as counted (divided out into [`LastWrites`] only at a
+    /// query's end).
+    last_writes: StretchWrites,
     /// How far the port's other clients are behind their share, as of `debt_at`
     /// ([`O2Formulas::port_time`]; `debt_at` may lie before the window's start).
     debt: f64,
@@ -654,6 +654,31 @@ struct LastWrites {
     bits: u32,
     first_ready: f64,
     pace: f64,
+}
+
+/// A stretch's write entries, the bits they write, its fragments and its pace.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct StretchWrites {
+    entries: u64,
+    bits: u64,
+    fragments: u64,
+    pace: f64,
+}
+
+impl StretchWrites {
+    /// The writes of a window's last `limit` fragments as this stretch has them, the last
+    /// ready `last_ready` cycles from the end token.
+    fn last(&self, last_ready: f64, limit: u64) -> LastWrites {
+        if self.entries == 0 {
+            return LastWrites::default();
+        }
+        LastWrites {
+            share: self.entries as f64 / self.fragments as f64,
+            bits: (self.bits / self.entries) as u32,
+            first_ready: last_ready - limit.saturating_sub(1) as f64 * self.pace,
+            pace: self.pace,
+        }
+    }
 }
 
 impl LastWrites {
@@ -1008,8 +1033,7 @@ impl O2Bottleneck {
         let port_backlog = (port_backlog - late).max(0.0);
         // The last fragment's write is ready as the depth test is through it.
         let limit = self.formulas.head_fragments();
-        let mut writes = pipe.last_writes;
-        writes.first_ready = backlog - late - (limit.saturating_sub(1)) as f64 * writes.pace;
+        let writes = pipe.last_writes.last(backlog - late, limit);
         let mut drain = (drain - late).max(0.0);
         if occu_bound {
             // The token's first steps pass while the OccU works through the backlog.
@@ -1106,14 +1130,10 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
         .max(emitted + formulas.slowest_read_lag(stretch, down.forced));
     pipe.port += down.port;
     pipe.occu_bound = down.occu_bound;
-    let writes = stretch.depth_writes.max(stretch.colour_writes);
-    pipe.last_writes = LastWrites {
-        share: writes as f64 / n as f64,
-        bits: match writes {
-            0 => 0,
-            _ => (formulas.write_bits(stretch) / writes) as u32,
-        },
-        first_ready: 0.0,
+    pipe.last_writes = StretchWrites {
+        entries: stretch.depth_writes.max(stretch.colour_writes),
+        bits: formulas.write_bits(stretch),
+        fragments: n,
         pace,
     };
     pipe.recent.push_back(StretchTimes {
