@@ -235,11 +235,8 @@ fn opener_with_progress(
             .unwrap_or(path.as_os_str())
             .to_string_lossy();
         bar.set_message(format!("{name} pass {passes}"));
-        // 64 KB, a block's worth: the reader copies each block out into its own buffer, so
-        // a larger one only costs fresh pages at every pass (1 MB had the sampled level's
-        // passes fault 7 MB in: `replay demo.occt --fidelity sampled:10` 1.08x slower).
         let counted = occsim_sweep::progress::Counted {
-            inner: std::io::BufReader::with_capacity(1 << 16, file),
+            inner: std::io::BufReader::with_capacity(super::trace::TRACE_READ_BUFFER_BYTES, file),
             bar,
         };
         TraceReader::new(counted)

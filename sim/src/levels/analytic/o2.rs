@@ -242,6 +242,14 @@ pub struct StretchCounts {
     pub dense_read_lag: f64,
 }
 
+impl StretchCounts {
+    /// Its write buffer's entries: a drawn fragment's colour write travels with its depth
+    /// write, so one entry a fragment that writes either.
+    fn write_entries(&self) -> u64 {
+        self.depth_writes.max(self.colour_writes)
+    }
+}
+
 /// How long a stretch's work takes the blocks behind the rasterizer.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Downstream {
@@ -452,8 +460,7 @@ impl O2Formulas {
     /// (see the module docs), so `max(ceil(bits / V), min(entries, R))`.
     fn write_cycles(&self, w: &StretchCounts, write_bits: u64) -> f64 {
         let packed = write_bits.div_ceil(self.arch.memory_port_bits_per_cycle as u64);
-        let entries = w.depth_writes.max(w.colour_writes);
-        packed.max(entries.min(w.depth_reads)) as f64
+        packed.max(w.write_entries().min(w.depth_reads)) as f64
     }
 
     /// `ε` of a stretch (see the module docs): reads stall the depth test where they compete
@@ -1113,7 +1120,7 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
     let span = down.port.max(emitted - port_from);
     // The port's busy cycles, for the debt: writes that come a cycle apart each take a
     // cycle of their own while the port has room (they pack only once queued).
-    let entries = stretch.depth_writes.max(stretch.colour_writes) + stretch.colour_reads;
+    let entries = stretch.write_entries() + stretch.colour_reads;
     let busy = down
         .work
         .max(((stretch.depth_reads + entries) as f64).min(span));
@@ -1138,7 +1145,7 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
     pipe.port += down.port;
     pipe.occu_bound = down.occu_bound;
     pipe.last_writes = StretchWrites {
-        entries: stretch.depth_writes.max(stretch.colour_writes),
+        entries: stretch.write_entries(),
         bits: formulas.write_bits(stretch),
         fragments: n,
         pace,
