@@ -184,7 +184,7 @@ enum Reading {
     AsWritten,
     /// Decoding every fragment (`--no-index`): what the index saves.
     Decode,
-    /// The trace as version 7 wrote it, without the window table: what the table saves the
+    /// The trace without its window table: what the table saves the
     /// sampled level (its windows' sizes found by reading the trace a second time).
     NoTable,
 }
@@ -194,7 +194,8 @@ enum Reading {
 /// level on the trace without its window table (`/no-table`).
 fn levels(arch: &Arch, trace: &[u8], rounds: usize) {
     let fragments = fragments_of(trace);
-    let no_table = occsim_traces::trace::windows::as_version_7(trace).expect("a version-8 trace");
+    let no_table =
+        occsim_traces::trace::windows::without_window_table(trace).expect("a whole trace");
     let levels = [
         (Fidelity::Functional, Reading::AsWritten),
         (Fidelity::Analytic, Reading::AsWritten),

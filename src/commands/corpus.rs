@@ -39,7 +39,8 @@ pub struct CorpusArgs {
     )]
     pub scale: Scale,
     /// Keep the traces in DIR, and reuse those already there (a file's name carries a digest
-    /// of its recipe) [default: a scratch directory, removed afterwards].
+    /// of its recipe and the trace format's version) [default: a scratch directory, removed
+    /// afterwards].
     #[arg(long, value_name = "DIR", requires = "corpus")]
     pub traces_dir: Option<PathBuf>,
     /// Run on these built-in machines only (comma separated) instead of the corpus's.
@@ -142,11 +143,12 @@ impl Recipe {
         }
     }
 
-    /// The trace's file in `dir`: its name, scale and a digest of the recipe, so a changed
-    /// recipe makes a new trace.
+    /// The trace's file in `dir`: its name, scale and a digest of the recipe and the trace
+    /// format's version, so a changed recipe, or a format that keeps more, makes a new trace.
     fn file_in(&self, dir: &Path, scale: Scale) -> PathBuf {
         let recipe = serde_json::to_string(self).unwrap_or_default();
-        let digest = Fnv1a::of(format!("{recipe}{scale:?}").as_bytes());
+        let version = occsim_traces::trace::FORMAT_VERSION;
+        let digest = Fnv1a::of(format!("{recipe}{scale:?}{version}").as_bytes());
         let scale = match scale {
             Scale::Small => "small",
             Scale::Full => "full",

@@ -13,8 +13,13 @@ pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// version 6 gives the index's stretches right after a query end their first reads
 /// ([`crate::trace::FragmentStretch::first_reads`]); version 7 gives every stretch its
 /// densest runs of reads ([`crate::trace::FragmentStretch::dense`]); version 8 adds the
-/// window table's blocks ([`crate::trace::windows`]).
-pub const FORMAT_VERSION: u16 = 8;
+/// window table's blocks ([`crate::trace::windows`]); version 9 gives every stretch its runs
+/// of reads that end at its last fragment ([`crate::trace::FragmentStretch::ending`]), at
+/// two dearer read costs as well ([`crate::trace::DENSE_READ_COSTS`]).
+pub const FORMAT_VERSION: u16 = 9;
+/// The first version whose window index holds every count the O2 formulas take
+/// ([`crate::trace::TraceReader::index_has_every_count`]).
+pub const INDEX_COUNTS_VERSION: u16 = 9;
 /// The first version whose traces hold a window table ([`crate::trace::windows`]).
 pub const WINDOW_TABLE_VERSION: u16 = 8;
 /// The oldest version this code reads: version-1 traces replay as an open loop.

@@ -5,7 +5,9 @@
 
 use super::dense_reads::{DenseRuns, ReadRun, DENSE_READ_COSTS};
 use super::header::StreamTally;
-use super::index::{FragmentStretch, IndexItem, DENSE_RUNS_FLAG, FIRST_READS_FLAG};
+use super::index::{
+    FragmentStretch, IndexItem, DENSE_RUNS_FLAG, ENDING_RUNS_FLAG, FIRST_READS_FLAG,
+};
 use crate::depth_layout::DepthRead;
 use crate::event::{Event, Fragment, GeometryBatch, HostWork, Span, DEPTH_ONE};
 use crate::golden::EventSink;
@@ -508,6 +510,35 @@ fn query_spec(c: &mut Cursor) -> Result<QuerySpec, PayloadError> {
     })
 }
 
+/// A stretch record's runs of reads into `runs` (none unless `present`): a count and a pair
+/// each, distinct.
+#[inline]
+fn decode_runs(c: &mut Cursor, present: bool, runs: &mut DenseRuns) -> Result<(), PayloadError> {
+    if !runs.runs().is_empty() {
+        *runs = DenseRuns::NONE;
+    }
+    if !present {
+        return Ok(());
+    }
+    let pos = c.pos;
+    let count = c.uv()?;
+    if count == 0 || count > DENSE_READ_COSTS.len() as u64 {
+        return Err(bad(pos, format!("a stretch with {count} runs of reads")));
+    }
+    for _ in 0..count {
+        let pos = c.pos;
+        let (reads, fragments) = (c.uv()?, c.uv()?);
+        let (Ok(reads), Ok(fragments)) = (u32::try_from(reads), u32::try_from(fragments)) else {
+            return Err(bad(pos, "a dense run of over 2^32 fragments".to_owned()));
+        };
+        runs.push(ReadRun { reads, fragments });
+    }
+    if runs.runs().len() as u64 != count {
+        return Err(bad(pos, "a stretch with a dense run twice".to_owned()));
+    }
+    Ok(())
+}
+
 /// A stretch record into `out`, checked.
 #[inline]
 fn decode_stretch(c: &mut Cursor, out: &mut FragmentStretch) -> Result<(), PayloadError> {
@@ -519,7 +550,7 @@ fn decode_stretch(c: &mut Cursor, out: &mut FragmentStretch) -> Result<(), Paylo
     out.passed = c.uv()?;
     let pos = c.pos;
     let code = c.byte()?;
-    out.last_read = match code & !(FIRST_READS_FLAG | DENSE_RUNS_FLAG) {
+    out.last_read = match code & !(FIRST_READS_FLAG | DENSE_RUNS_FLAG | ENDING_RUNS_FLAG) {
         0 => DepthRead::SameWord,
         1 => DepthRead::PageHit,
         2 => DepthRead::PageMiss,
@@ -530,28 +561,8 @@ fn decode_stretch(c: &mut Cursor, out: &mut FragmentStretch) -> Result<(), Paylo
     } else {
         0
     };
-    if !out.dense.runs().is_empty() {
-        out.dense = DenseRuns::NONE;
-    }
-    if code & DENSE_RUNS_FLAG != 0 {
-        let pos = c.pos;
-        let count = c.uv()?;
-        if count == 0 || count > DENSE_READ_COSTS.len() as u64 {
-            return Err(bad(pos, format!("a stretch with {count} dense runs")));
-        }
-        for _ in 0..count {
-            let pos = c.pos;
-            let (reads, fragments) = (c.uv()?, c.uv()?);
-            let (Ok(reads), Ok(fragments)) = (u32::try_from(reads), u32::try_from(fragments))
-            else {
-                return Err(bad(pos, "a dense run of over 2^32 fragments".to_owned()));
-            };
-            out.dense.push(ReadRun { reads, fragments });
-        }
-        if out.dense.runs().len() as u64 != count {
-            return Err(bad(pos, "a stretch with a dense run twice".to_owned()));
-        }
-    }
+    decode_runs(c, code & DENSE_RUNS_FLAG != 0, &mut out.dense)?;
+    decode_runs(c, code & ENDING_RUNS_FLAG != 0, &mut out.ending)?;
     match out.problem() {
         Some(problem) => Err(bad(start, problem)),
         None => Ok(()),

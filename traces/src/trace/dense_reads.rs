@@ -24,17 +24,35 @@
 //! scan over the fragments' weights `p · read - q` for each cost `p / q`: one pass, a few
 //! integer operations a fragment and a cost, and a run of fragments of a word already read
 //! in one step.
+//!
+//! Where the run sits matters too: a run that ends at the stretch's last fragment leaves
+//! the port behind (and the other clients owed) when the next work comes, a run inside it
+//! has been worked off by then. So a stretch also keeps, at each cost, the run that ends at
+//! its last fragment ([`StretchRuns::ending`]): Kadane's scan has it at every step, the
+//! best run ending where the scan is.
+//!
+//! In a stretch that draws, the depth test's writes reach the in-order port between the
+//! prefetch's reads, and a read between two writes keeps them from sharing a cycle: a read
+//! then costs the port its own cycle and the cycle of the writes it splits off, `2 / (1 -
+//! f)` (2.61 at the O2's `f`), which the two dearest costs cover.
 
 /// The read costs `c = p / q` (port cycles a depth read takes, forced cycles included)
-/// at which a stretch keeps its densest run: `f` = 1/9, 1/5, 1/4 and 1/3 of the port's
-/// cycles reserved. The O2's 0.234 (its display refresh 0.184 and the host's 0.05) lies
-/// between 1/5 and 1/4; the host's plausible 0..0.15 keeps `f` within 0.18..0.34, and
-/// below 1/9 (no display refresh) a run must read 24 fragments in a row to leave the
-/// [`KEPT_LAG_CYCLES`]. Above 1/3 a model takes the runs kept at 3/2.
-pub const DENSE_READ_COSTS: [(u64, u64); 4] = [(9, 8), (5, 4), (4, 3), (3, 2)];
+/// at which a stretch keeps its runs: `f` = 1/9, 1/5, 1/4 and 1/3 of the port's cycles
+/// reserved, and (its ending runs only) for a read that splits the writes of a stretch that
+/// draws (two port cycles), `f` = 1/5 and 1/3 again (5/2 and 3/1). The O2's 0.234 (its display refresh
+/// 0.184 and the host's 0.05) lies between 1/5 and 1/4; the host's plausible 0..0.15 keeps
+/// `f` within 0.18..0.34, and below 1/9 (no display refresh) a run must read 24 fragments
+/// in a row to leave the [`KEPT_LAG_CYCLES`]. Above 1/3 a model takes the runs kept at 3/2
+/// (3/1 for a drawing stretch's).
+pub const DENSE_READ_COSTS: [(u64, u64); 6] = [(9, 8), (5, 4), (4, 3), (3, 2), (5, 2), (3, 1)];
 
 /// Costs kept.
 const COSTS: usize = DENSE_READ_COSTS.len();
+
+/// The first costs of [`DENSE_READ_COSTS`], a read's own (the others a drawing stretch's):
+/// the densest runs are kept at them, where a model takes their lag, the ending runs at
+/// every cost.
+pub const READ_ONLY_COSTS: usize = 4;
 
 /// The least lag a run must leave to be kept, in cycles. The O2 formulas' depth test trails
 /// the rasterizer after any stretch that reads by a read's latency (2 cycles at least, a
@@ -103,6 +121,25 @@ impl DenseRuns {
     }
 }
 
+/// A stretch's runs of reads as a [`DenseReadFinder`] takes them: its densest, and those
+/// that end at its last fragment.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StretchRuns {
+    /// At each of the [`READ_ONLY_COSTS`], the run that leaves the most lag ([`DenseRuns`]).
+    pub densest: DenseRuns,
+    /// At each cost, the run ending at the last fragment that leaves the most lag, when that
+    /// is at least [`KEPT_LAG_CYCLES`]: what the port still owes as the stretch ends.
+    pub ending: DenseRuns,
+}
+
+impl StretchRuns {
+    /// No run.
+    pub const NONE: StretchRuns = StretchRuns {
+        densest: DenseRuns::NONE,
+        ending: DenseRuns::NONE,
+    };
+}
+
 /// A run being counted: reads and fragments.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct Counted {
@@ -121,7 +158,7 @@ struct Scan {
     best_score: i64,
 }
 
-/// Finds a stretch's [`DenseRuns`] as its fragments pass.
+/// Finds a stretch's [`StretchRuns`] as its fragments pass.
 #[derive(Clone, Debug, Default)]
 pub struct DenseReadFinder {
     scans: [Scan; COSTS],
@@ -161,26 +198,34 @@ impl DenseReadFinder {
         !self.read
     }
 
-    /// The stretch's densest runs (those leaving [`KEPT_LAG_CYCLES`] or more), and a new
-    /// stretch.
-    pub fn take(&mut self) -> DenseRuns {
-        let mut runs = DenseRuns::NONE;
-        if !self.read {
-            return runs;
-        }
-        for (scan, &(_, q)) in self.scans.iter().zip(&DENSE_READ_COSTS) {
-            if scan.best_score < (KEPT_LAG_CYCLES * q) as i64 {
-                continue;
-            }
-            if let (Ok(reads), Ok(fragments)) = (
-                u32::try_from(scan.best.reads),
-                u32::try_from(scan.best.fragments),
-            ) {
-                runs.push(ReadRun { reads, fragments });
+    /// The stretch's densest runs and the runs ending at its last fragment (those leaving
+    /// [`KEPT_LAG_CYCLES`] or more), and a new stretch.
+    pub fn take(&mut self) -> StretchRuns {
+        let mut runs = StretchRuns::NONE;
+        if self.read {
+            for (cost, (scan, &(_, q))) in self.scans.iter().zip(&DENSE_READ_COSTS).enumerate() {
+                let kept = (KEPT_LAG_CYCLES * q) as i64;
+                if cost < READ_ONLY_COSTS && scan.best_score >= kept {
+                    runs.densest.push_counted(scan.best);
+                }
+                if scan.current_score >= kept {
+                    runs.ending.push_counted(scan.current);
+                }
             }
         }
         *self = DenseReadFinder::default();
         runs
+    }
+}
+
+impl DenseRuns {
+    /// Add a counted run, unless its counts do not fit a [`ReadRun`] (no primitive has so
+    /// many fragments).
+    fn push_counted(&mut self, run: Counted) {
+        if let (Ok(reads), Ok(fragments)) = (u32::try_from(run.reads), u32::try_from(run.fragments))
+        {
+            self.push(ReadRun { reads, fragments });
+        }
     }
 }
 
@@ -213,7 +258,15 @@ mod tests {
         for c in pattern.chars() {
             finder.fragments(c == 'R', 0);
         }
-        finder.take()
+        finder.take().densest
+    }
+
+    fn ending_of(pattern: &str) -> DenseRuns {
+        let mut finder = DenseReadFinder::default();
+        for c in pattern.chars() {
+            finder.fragments(c == 'R', 0);
+        }
+        finder.take().ending
     }
 
     #[test]
@@ -291,6 +344,45 @@ mod tests {
     }
 
     #[test]
+    fn a_drawing_stretchs_ending_runs_are_kept_at_the_dearer_costs() {
+        // At a cost `c`, `k` reads in a row leave `c · k - k`. Two in a row end a stretch
+        // leaving 4 at 3/1 and 3 at 5/2 (kept, once), 1 at 3/2 (no densest run); a lone
+        // read leaves 2 at 3/1 (none), as does a read every fourth fragment (two of them
+        // 6 - 5 = 1).
+        let two = ReadRun {
+            reads: 2,
+            fragments: 2,
+        };
+        assert_eq!(ending_of("..RR").runs(), &[two]);
+        assert_eq!(ending_of("..RR").lag(3.0), 4.0);
+        assert!(runs_of("..RR").runs().is_empty());
+        assert!(ending_of("..R").runs().is_empty());
+        assert!(ending_of(&"...R".repeat(30)).runs().is_empty());
+    }
+
+    #[test]
+    fn a_run_worked_off_before_the_stretch_ends_does_not_end_it() {
+        // 12 reads in a row, then 40 sparse fragments (a read every 8): the 12 are the
+        // densest run, but the sparse ones work them off at every cost (at 3/1, weights +2
+        // and -1, the 12 score 24 and every "...R...." -5, so -1 after five): no ending
+        // run. The other way round, the 12 end the stretch at every cost that keeps them
+        // (not at 9/8: 12 · 9/8 - 12 = 1.5 cycles), as its densest run too (a sparse
+        // fragment before them would score less at every cost: "R...." -2 at 3/1).
+        let sparse = "...R....".repeat(5);
+        let twelve = ReadRun {
+            reads: 12,
+            fragments: 12,
+        };
+        let worked_off = format!("{}{sparse}", "R".repeat(12));
+        assert_eq!(runs_of(&worked_off).runs(), &[twelve]);
+        assert!(ending_of(&worked_off).runs().is_empty());
+        let ending = format!("{sparse}{}", "R".repeat(12));
+        assert_eq!(runs_of(&ending).runs(), &[twelve]);
+        assert_eq!(ending_of(&ending).runs(), &[twelve]);
+        assert_eq!(ending_of(&ending).lag(4.0 / 3.0), 4.0);
+    }
+
+    #[test]
     fn a_word_run_in_one_step_is_its_fragments_one_by_one() {
         let mut rng = SplitMix64(15);
         for _ in 0..200 {
@@ -318,8 +410,8 @@ mod tests {
             for &read in &reads {
                 finder.fragments(read, 0);
             }
-            let runs = finder.take();
-            for &(p, q) in &DENSE_READ_COSTS {
+            let runs = finder.take().densest;
+            for &(p, q) in &DENSE_READ_COSTS[..READ_ONLY_COSTS] {
                 let cost = p as f64 / q as f64;
                 let mut best: f64 = 0.0;
                 for i in 0..reads.len() {
@@ -333,6 +425,36 @@ mod tests {
                 assert!(runs.lag(cost) <= best + 1e-9, "{reads:?} at {cost}");
                 if best >= KEPT_LAG_CYCLES as f64 {
                     assert!((runs.lag(cost) - best).abs() < 1e-9, "{reads:?} at {cost}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_ending_runs_are_the_best_suffixes_by_brute_force() {
+        let mut rng = SplitMix64(17);
+        for _ in 0..300 {
+            let reads: Vec<bool> = (0..rng.below(40)).map(|_| rng.chance(60)).collect();
+            let mut finder = DenseReadFinder::default();
+            for &read in &reads {
+                finder.fragments(read, 0);
+            }
+            let ending = finder.take().ending;
+            for &(p, q) in &DENSE_READ_COSTS {
+                let cost = p as f64 / q as f64;
+                let mut best: f64 = 0.0;
+                for i in 0..reads.len() {
+                    let n = reads[i..].iter().filter(|&&r| r).count() as f64;
+                    best = best.max(cost * n - (reads.len() - i) as f64);
+                }
+                // Every kept run ends the stretch, so none beats the best suffix; at its cost
+                // the best is kept when it leaves [`KEPT_LAG_CYCLES`] or more.
+                assert!(ending.lag(cost) <= best + 1e-9, "{reads:?} at {cost}");
+                if best >= KEPT_LAG_CYCLES as f64 {
+                    assert!(
+                        (ending.lag(cost) - best).abs() < 1e-9,
+                        "{reads:?} at {cost}"
+                    );
                 }
             }
         }

@@ -40,6 +40,19 @@ pub struct TraceHeader {
     /// [`crate::trace::WriterOptions::window_index`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub window_index: Option<DepthLayout>,
+    /// Whether the trace holds a window table (every trace of format version 8 on, unless
+    /// made without one: [`crate::trace::windows::without_window_table`]); written only
+    /// when false.
+    #[serde(default = "holds", skip_serializing_if = "is_held")]
+    pub window_table: bool,
+}
+
+fn holds() -> bool {
+    true
+}
+
+fn is_held(held: &bool) -> bool {
+    *held
 }
 
 impl TraceHeader {
@@ -56,6 +69,7 @@ impl TraceHeader {
             scene: String::new(),
             features: None,
             window_index: None,
+            window_table: true,
         }
     }
 

@@ -17,7 +17,8 @@
 //! word, 1 a page hit, 2 a page miss; plus [`FIRST_READS_FLAG`] when a varint of
 //! [`FragmentStretch::first_reads`] follows, from format version 6; plus
 //! [`DENSE_RUNS_FLAG`] when its [`FragmentStretch::dense`] runs follow, a varint count and a
-//! varint pair (reads, fragments) each, from format version 7).
+//! varint pair (reads, fragments) each, from format version 7; plus [`ENDING_RUNS_FLAG`]
+//! when its [`FragmentStretch::ending`] runs follow, coded alike, from format version 9).
 //!
 //! A stretch keeps its `first_reads` only when it begins fewer than [`FIRST_READS_FRAGMENTS`]
 //! fragments after the last query end (else it is written 0): the O2-like machine's in-order
@@ -52,6 +53,8 @@ pub struct FragmentStretch {
     pub first_reads: u64,
     /// Its densest runs of reads ([`super::dense_reads`]).
     pub dense: DenseRuns,
+    /// Its runs of reads that end at its last fragment ([`super::dense_reads::StretchRuns`]).
+    pub ending: DenseRuns,
 }
 
 /// Fragments of a stretch whose reads [`FragmentStretch::first_reads`] marks, and how far
@@ -64,6 +67,9 @@ pub(crate) const FIRST_READS_FLAG: u8 = 4;
 /// Added to a stretch record's last-read byte when its dense runs follow.
 pub(crate) const DENSE_RUNS_FLAG: u8 = 8;
 
+/// Added to a stretch record's last-read byte when its ending runs follow.
+pub(crate) const ENDING_RUNS_FLAG: u8 = 16;
+
 impl FragmentStretch {
     /// No fragment yet.
     pub const EMPTY: FragmentStretch = FragmentStretch {
@@ -74,6 +80,7 @@ impl FragmentStretch {
         last_read: DepthRead::SameWord,
         first_reads: 0,
         dense: DenseRuns::NONE,
+        ending: DenseRuns::NONE,
     };
 
     /// Count one fragment (inside the viewport) drawn under `state`: its depth read by the
@@ -106,8 +113,8 @@ impl FragmentStretch {
     }
 
     /// Bytes a stretch record takes at most: a tag, five 10-byte varints, a byte, and the
-    /// dense runs' count and pairs.
-    pub(crate) const MAX_BYTES: usize = 52 + 1 + 20 * DENSE_READ_COSTS.len();
+    /// dense and ending runs' counts and pairs.
+    pub(crate) const MAX_BYTES: usize = 52 + 2 * (1 + 20 * DENSE_READ_COSTS.len());
 
     pub(crate) fn encode(&self, out: &mut Vec<u8>) {
         out.push(tag::STRETCH);
@@ -120,22 +127,26 @@ impl FragmentStretch {
             DepthRead::PageHit => 1,
             DepthRead::PageMiss => 2,
         };
-        let runs = self.dense.runs();
-        let flags = match (self.first_reads != 0, !runs.is_empty()) {
-            (true, true) => FIRST_READS_FLAG | DENSE_RUNS_FLAG,
-            (true, false) => FIRST_READS_FLAG,
-            (false, true) => DENSE_RUNS_FLAG,
-            (false, false) => 0,
-        };
+        let (dense, ending) = (self.dense.runs(), self.ending.runs());
+        let flags = [
+            (self.first_reads != 0, FIRST_READS_FLAG),
+            (!dense.is_empty(), DENSE_RUNS_FLAG),
+            (!ending.is_empty(), ENDING_RUNS_FLAG),
+        ]
+        .iter()
+        .filter(|(present, _)| *present)
+        .fold(0, |flags, (_, flag)| flags | flag);
         out.push(last_read | flags);
         if self.first_reads != 0 {
             put_uv(out, self.first_reads);
         }
-        if !runs.is_empty() {
-            put_uv(out, runs.len() as u64);
-            for run in runs {
-                put_uv(out, run.reads.into());
-                put_uv(out, run.fragments.into());
+        for runs in [dense, ending] {
+            if !runs.is_empty() {
+                put_uv(out, runs.len() as u64);
+                for run in runs {
+                    put_uv(out, run.reads.into());
+                    put_uv(out, run.fragments.into());
+                }
             }
         }
     }
@@ -155,11 +166,17 @@ impl FragmentStretch {
             || self.fragments < FIRST_READS_FRAGMENTS && self.first_reads >> self.fragments != 0
         {
             Some("a stretch whose first reads are more than its reads or past its fragments")
-        } else if self.dense.runs().iter().any(|run| {
-            u64::from(run.reads) > self.depth_reads
-                || u64::from(run.fragments) > self.fragments
-                || run.reads == 0
-        }) {
+        } else if self
+            .dense
+            .runs()
+            .iter()
+            .chain(self.ending.runs())
+            .any(|run| {
+                u64::from(run.reads) > self.depth_reads
+                    || u64::from(run.fragments) > self.fragments
+                    || run.reads == 0
+            })
+        {
             Some("a stretch whose dense run holds no read, or more reads or fragments than it")
         } else {
             None
@@ -226,7 +243,8 @@ impl WindowIndexer {
     /// The stretch gathered since the last other event, if it holds a fragment.
     pub(crate) fn take_stretch(&mut self) -> Option<FragmentStretch> {
         let mut stretch = std::mem::replace(&mut self.stretch, FragmentStretch::EMPTY);
-        stretch.dense = self.dense.take();
+        let runs = self.dense.take();
+        (stretch.dense, stretch.ending) = (runs.densest, runs.ending);
         if self.since_end >= FIRST_READS_FRAGMENTS {
             stretch.first_reads = 0;
         }
@@ -397,6 +415,7 @@ mod tests {
                 last_read,
                 first_reads,
                 dense: DenseRuns::NONE,
+                ending: DenseRuns::NONE,
             })
         };
         let index = vec![
@@ -461,6 +480,7 @@ mod tests {
             last_read: DepthRead::PageHit,
             first_reads,
             dense: DenseRuns::NONE,
+            ending: DenseRuns::NONE,
         };
         assert_eq!(stretch(0b10).problem(), None);
         let problem =
@@ -469,16 +489,17 @@ mod tests {
         assert_eq!(stretch(0b11).problem(), problem);
     }
 
-    /// A version-6 index keeps no dense runs and a version-5 one no first reads: their
-    /// readers say so, and models decode the fragments instead.
+    /// A version-8 index keeps no ending runs, a
+    /// version-6 one no dense runs and a version-5 one no first reads: their readers say
+    /// so, and models decode the fragments instead.
     #[test]
-    fn an_index_before_version_7_lacks_counts() {
+    fn an_index_before_version_9_lacks_counts() {
         let (events, _) = worked_example();
         let bytes = indexed(&events);
         assert!(TraceReader::new(&bytes[..])
             .unwrap()
             .index_has_every_count());
-        for version in [5, 6] {
+        for version in [5, 6, 7, 8] {
             let old = crate::trace::tests::as_version(bytes.clone(), version);
             let reader = TraceReader::new(&old[..]).unwrap();
             assert!(reader.has_depth_tests());
@@ -510,6 +531,17 @@ mod tests {
         };
         assert_eq!(stretch.dense.runs(), &[column]);
         assert_eq!(stretch.depth_reads, 4 + 9 + 3);
+        // The run ending the stretch: at 3/1 (weights +2, -1) the column's 9 reads score 18,
+        // row 10 adds +2 at each of its 3 reads and -1 at each of its other 9 fragments,
+        // 15 at its end; at 5/2 (+3, -2) 27 + 9 - 18 = 18, 9 cycles. Both from the column's
+        // top: 12 reads in 21 fragments. At 3/2 (+1, -2) row 10's first "...R" takes the
+        // column's 10 down to 0 and the next "..." below: none.
+        let ending = crate::trace::ReadRun {
+            reads: 12,
+            fragments: 21,
+        };
+        assert_eq!(stretch.ending.runs(), &[ending]);
+        assert_eq!(stretch.ending.lag(3.0), 15.0);
     }
 
     #[test]
@@ -577,6 +609,7 @@ mod tests {
             last_read: DepthRead::SameWord,
             first_reads: 0,
             dense: DenseRuns::NONE,
+            ending: DenseRuns::NONE,
         };
         assert_eq!(
             bad.problem(),

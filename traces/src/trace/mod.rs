@@ -57,7 +57,7 @@ pub use block::{
     MAX_STORED_BYTES, MAX_SUMMARY_JSON_BYTES, OLDEST_READABLE_VERSION, TRAILER_BYTES,
 };
 pub use codec::MAX_EVENT_BYTES;
-pub use dense_reads::{DenseReadFinder, DenseRuns, ReadRun, DENSE_READ_COSTS};
+pub use dense_reads::{DenseReadFinder, DenseRuns, ReadRun, StretchRuns, DENSE_READ_COSTS};
 pub use depth_tests::{DepthTestResults, TestedFragments};
 pub use error::{ReadError, TraceError};
 pub use header::{

@@ -334,17 +334,19 @@ impl<R: Read> TraceReader<R> {
     }
 
     /// Whether the window index's stretches carry their first reads right after a query
-    /// end ([`crate::trace::FragmentStretch::first_reads`], format version 6) and their
-    /// densest runs of reads ([`crate::trace::FragmentStretch::dense`], version 7): a model
-    /// that reads them decodes an older index's fragments instead.
+    /// end ([`crate::trace::FragmentStretch::first_reads`], format version 6), their
+    /// densest runs of reads ([`crate::trace::FragmentStretch::dense`], version 7) and the
+    /// runs that end at their last fragment ([`crate::trace::FragmentStretch::ending`],
+    /// version 9): a model that reads them
+    /// decodes an older index's fragments instead.
     pub fn index_has_every_count(&self) -> bool {
-        self.version >= 7 && self.header.window_index.is_some()
+        self.version >= INDEX_COUNTS_VERSION && self.header.window_index.is_some()
     }
 
     /// Whether the trace holds a window table ([`crate::trace::windows`]): every trace of
-    /// version 8 on.
+    /// version 8 on whose header does not say otherwise.
     pub fn has_window_table(&self) -> bool {
-        self.version >= WINDOW_TABLE_VERSION
+        self.version >= WINDOW_TABLE_VERSION && self.header.window_table
     }
 
     /// The sizes of the next block of the window table ([`crate::trace::windows`]), added to

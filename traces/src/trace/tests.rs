@@ -320,14 +320,14 @@ fn wrong_magic_is_named() {
 
 #[test]
 fn unknown_version_is_named() {
-    for version in [0u8, 9] {
+    for version in [0u8, 10] {
         let mut bytes = write_default(&every_kind());
         bytes[8] = version;
         let error = TraceReader::new(&bytes[..]).err().unwrap();
         assert!(
             matches!(
                 error,
-                TraceError::UnsupportedVersion { offset: 8, version: v, known: 8 } if v == version as u16
+                TraceError::UnsupportedVersion { offset: 8, version: v, known: 9 } if v == version as u16
             ),
             "{error}"
         );
@@ -339,11 +339,11 @@ fn as_version_1(bytes: Vec<u8>) -> Vec<u8> {
     as_version(bytes, 1)
 }
 
-/// `bytes` as a file of `version`: before version 8, as version 7 wrote it (without its
-/// window table); the version field rewritten and the header's CRC with it.
+/// `bytes` as a file of `version`: before version 8, without its window table; the version
+/// field rewritten and the header's CRC with it.
 pub(crate) fn as_version(bytes: Vec<u8>, version: u8) -> Vec<u8> {
     let bytes = match version < 8 {
-        true => windows::as_version_7(&bytes).expect("a whole version-8 trace"),
+        true => windows::without_window_table(&bytes).expect("a whole trace"),
         false => bytes,
     };
     with_version_field(bytes, version)
@@ -371,7 +371,7 @@ fn version_1_traces_still_read_and_say_they_have_no_closed_loop() {
     assert!(!reader.has_closed_loop());
     let current_bytes = write_default(&events);
     let current = TraceReader::new(&current_bytes[..]).unwrap();
-    assert_eq!(current.format_version(), 8);
+    assert_eq!(current.format_version(), FORMAT_VERSION);
     assert!(current.has_closed_loop());
     assert_eq!(read_bulk(&bytes).unwrap().0, events);
 }

@@ -22,7 +22,7 @@ use super::block::{
     KIND_WINDOWS, MAGIC,
 };
 use super::codec::{put_uv, Cursor, PayloadError};
-use super::header::TraceSummary;
+use super::header::{TraceHeader, TraceSummary};
 use super::index::IndexItem;
 use crate::event::Event;
 use crate::golden::EventSink;
@@ -196,18 +196,24 @@ impl EventSink for WindowScout {
     }
 }
 
-/// The trace in `bytes` as format version 7 wrote it: its window-table blocks dropped, its
-/// summary without them and its header's version 7 (its CRC made again); everything else
-/// is as version 7 has it. For tests of the readings that serve a trace without a table;
-/// None when `bytes` is no whole version-8 trace.
-pub fn as_version_7(bytes: &[u8]) -> Option<Vec<u8>> {
-    if bytes.get(..MAGIC.len())? != MAGIC || bytes.get(8..10)? != [8, 0] {
+/// The trace in `bytes` without its window table: its window-table blocks dropped, its
+/// summary without them and its header saying so (`window_table: false`, its CRC made
+/// again), so a reader finds the windows' sizes as it does in a trace before version 8.
+/// For tests and benchmarks of the readings that serve a trace without a table; None when
+/// `bytes` is no whole trace of version 8 on.
+pub fn without_window_table(bytes: &[u8]) -> Option<Vec<u8>> {
+    let version = u16::from_le_bytes(bytes.get(8..10)?.try_into().ok()?);
+    if bytes.get(..MAGIC.len())? != MAGIC || version < super::block::WINDOW_TABLE_VERSION {
         return None;
     }
-    // The header's CRC covers version .. end of JSON: the 4 bytes before the first block.
+    let json_at = MAGIC.len() + 8;
     let json_end = first_block_offset(bytes)? - 4;
-    let mut out = bytes.get(..json_end)?.to_vec();
-    out[8] = 7;
+    let mut header: TraceHeader = serde_json::from_slice(bytes.get(json_at..json_end)?).ok()?;
+    header.window_table = false;
+    let json = serde_json::to_vec(&header).ok()?;
+    let mut out = bytes.get(..json_at)?.to_vec();
+    out[12..16].copy_from_slice(&u32::try_from(json.len()).ok()?.to_le_bytes());
+    out.extend_from_slice(&json);
     let crc = crc32fast::hash(&out[MAGIC.len()..]);
     out.extend_from_slice(&crc.to_le_bytes());
     for (at, header) in blocks_in(bytes) {

@@ -173,6 +173,8 @@ impl<W: Write> TraceWriter<W> {
         }
         let header = TraceHeader {
             window_index: options.window_index,
+            // The writer always writes one.
+            window_table: true,
             ..header.clone()
         };
         if let Some(problem) = header.problem() {
