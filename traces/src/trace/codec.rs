@@ -511,8 +511,8 @@ fn query_spec(c: &mut Cursor) -> Result<QuerySpec, PayloadError> {
 }
 
 /// A stretch record's runs of reads into `runs` (none unless `present`): a count and a pair
-/// each, distinct.
-#[inline]
+/// each, distinct. (Most stretches have none: that case inlined, the rest out of line.)
+#[inline(always)]
 fn decode_runs(c: &mut Cursor, present: bool, runs: &mut DenseRuns) -> Result<(), PayloadError> {
     if !runs.runs().is_empty() {
         *runs = DenseRuns::NONE;
@@ -520,6 +520,11 @@ fn decode_runs(c: &mut Cursor, present: bool, runs: &mut DenseRuns) -> Result<()
     if !present {
         return Ok(());
     }
+    decode_present_runs(c, runs)
+}
+
+#[inline(never)]
+fn decode_present_runs(c: &mut Cursor, runs: &mut DenseRuns) -> Result<(), PayloadError> {
     let pos = c.pos;
     let count = c.uv()?;
     if count == 0 || count > DENSE_READ_COSTS.len() as u64 {

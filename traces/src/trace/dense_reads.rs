@@ -97,6 +97,7 @@ impl DenseRuns {
     };
 
     /// The runs, as kept.
+    #[inline]
     pub fn runs(&self) -> &[ReadRun] {
         &self.runs[..self.len as usize]
     }

@@ -1,12 +1,13 @@
 //! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
 //!
-//! # Layout (version 8; all integers little-endian; versions 1, without the closed loop's
+//! # Layout (version 9; all integers little-endian; versions 1, without the closed loop's
 //! records, 2, with verbose hits stored one by one, 3, without window-index blocks, 4,
 //! without depth-test blocks, 5, without the index's first reads, 6, without its densest
-//! runs of reads, and 7, without the window table, still read)
+//! runs of reads, 7, without the window table, and 8, without the index's ending runs of
+//! reads, still read)
 //!
 //! ```text
-//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 8 | flags u16 = 0
+//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 9 | flags u16 = 0
 //!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
 //!               (the CRC covers version .. end of JSON)
 //! event blocks  block header (20) | stored payload (stored_len), with window-index blocks

@@ -399,7 +399,14 @@ impl O2Formulas {
     /// (1 - f) · m, f · a · n)` (at least that from no debt: at most `σ`); and the port is
     /// through its last read `max(a · n - m, c · a · n - m - c · (σ - debt))` cycles after the
     /// run's last fragment is emitted (as [`Self::dense_read_lag`], at most `C1`).
+    #[inline]
     fn ending_runs(&self, w: &StretchCounts, debt: f64, writes: u64) -> EndingRuns {
+        if w.ending.runs().is_empty() {
+            return EndingRuns {
+                owed: 0.0,
+                port_lag: 0.0,
+            };
+        }
         let f = 1.0 - self.free_share();
         let c = 1.0 / self.free_share();
         let a = 1.0 + (writes as f64 / w.depth_reads.max(1) as f64).min(1.0);
