@@ -38,12 +38,12 @@
 
 /// The read costs `c = p / q` (port cycles a depth read takes, forced cycles included)
 /// at which a stretch keeps its runs: `f` = 1/9, 1/5, 1/4 and 1/3 of the port's cycles
-/// reserved, and (its ending runs only) for a read that splits the writes of a stretch that
-/// draws (two port cycles), `f` = 1/5 and 1/3 again (5/2 and 3/1). The O2's 0.234 (its display refresh
-/// 0.184 and the host's 0.05) lies between 1/5 and 1/4; the host's plausible 0..0.15 keeps
-/// `f` within 0.18..0.34, and below 1/9 (no display refresh) a run must read 24 fragments
-/// in a row to leave the [`KEPT_LAG_CYCLES`]. Above 1/3 a model takes the runs kept at 3/2
-/// (3/1 for a drawing stretch's).
+/// reserved, and (its ending runs only) for a read that splits the writes of a stretch
+/// that draws (two port cycles), `f` = 1/5 and 1/3 again (5/2 and 3/1). The O2's 0.234
+/// (its display refresh 0.184 and the host's 0.05) lies between 1/5 and 1/4; the host's
+/// plausible 0..0.15 keeps `f` within 0.18..0.34, and below 1/9 (no display refresh) a
+/// run must read 24 fragments in a row to leave the [`KEPT_LAG_CYCLES`]. Above 1/3 a model
+/// takes the runs kept at 3/2 (3/1 for a drawing stretch's).
 pub const DENSE_READ_COSTS: [(u64, u64); 6] = [(9, 8), (5, 4), (4, 3), (3, 2), (5, 2), (3, 1)];
 
 /// Costs kept.
@@ -402,27 +402,26 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_scan_finds_the_best_run_by_brute_force() {
-        let mut rng = SplitMix64(16);
+    /// 300 random patterns of up to 40 fragments (60% reading), scanned: at each of
+    /// `costs`, the runs `kept` of those taken never beat `best` (the brute force's lag of
+    /// the pattern at the cost), and match it where it leaves [`KEPT_LAG_CYCLES`] or more.
+    fn matches_brute_force(
+        seed: u64,
+        costs: &[(u64, u64)],
+        kept: impl Fn(StretchRuns) -> DenseRuns,
+        best: impl Fn(&[bool], f64) -> f64,
+    ) {
+        let mut rng = SplitMix64(seed);
         for _ in 0..300 {
             let reads: Vec<bool> = (0..rng.below(40)).map(|_| rng.chance(60)).collect();
             let mut finder = DenseReadFinder::default();
             for &read in &reads {
                 finder.fragments(read, 0);
             }
-            let runs = finder.take().densest;
-            for &(p, q) in &DENSE_READ_COSTS[..READ_ONLY_COSTS] {
+            let runs = kept(finder.take());
+            for &(p, q) in costs {
                 let cost = p as f64 / q as f64;
-                let mut best: f64 = 0.0;
-                for i in 0..reads.len() {
-                    for k in i..reads.len() {
-                        let n = reads[i..=k].iter().filter(|&&r| r).count() as f64;
-                        best = best.max(cost * n - (k - i + 1) as f64);
-                    }
-                }
-                // No kept run beats the best, and at its cost the best is kept when it
-                // leaves [`KEPT_LAG_CYCLES`] or more.
+                let best = best(&reads, cost);
                 assert!(runs.lag(cost) <= best + 1e-9, "{reads:?} at {cost}");
                 if best >= KEPT_LAG_CYCLES as f64 {
                     assert!((runs.lag(cost) - best).abs() < 1e-9, "{reads:?} at {cost}");
@@ -431,33 +430,34 @@ mod tests {
         }
     }
 
+    /// The most lag of `runs` of `reads` at `cost` (none below 0).
+    fn best_lag<'a>(runs: impl Iterator<Item = &'a [bool]>, cost: f64) -> f64 {
+        runs.map(|run| cost * run.iter().filter(|&&r| r).count() as f64 - run.len() as f64)
+            .fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn the_scan_finds_the_best_run_by_brute_force() {
+        // The densest runs, at the read-only costs: the best of every run.
+        matches_brute_force(
+            16,
+            &DENSE_READ_COSTS[..READ_ONLY_COSTS],
+            |runs| runs.densest,
+            |reads, cost| {
+                let runs = (0..reads.len()).flat_map(|i| (i..reads.len()).map(move |k| (i, k)));
+                best_lag(runs.map(|(i, k)| &reads[i..=k]), cost)
+            },
+        );
+    }
+
     #[test]
     fn the_ending_runs_are_the_best_suffixes_by_brute_force() {
-        let mut rng = SplitMix64(17);
-        for _ in 0..300 {
-            let reads: Vec<bool> = (0..rng.below(40)).map(|_| rng.chance(60)).collect();
-            let mut finder = DenseReadFinder::default();
-            for &read in &reads {
-                finder.fragments(read, 0);
-            }
-            let ending = finder.take().ending;
-            for &(p, q) in &DENSE_READ_COSTS {
-                let cost = p as f64 / q as f64;
-                let mut best: f64 = 0.0;
-                for i in 0..reads.len() {
-                    let n = reads[i..].iter().filter(|&&r| r).count() as f64;
-                    best = best.max(cost * n - (reads.len() - i) as f64);
-                }
-                // Every kept run ends the stretch, so none beats the best suffix; at its cost
-                // the best is kept when it leaves [`KEPT_LAG_CYCLES`] or more.
-                assert!(ending.lag(cost) <= best + 1e-9, "{reads:?} at {cost}");
-                if best >= KEPT_LAG_CYCLES as f64 {
-                    assert!(
-                        (ending.lag(cost) - best).abs() < 1e-9,
-                        "{reads:?} at {cost}"
-                    );
-                }
-            }
-        }
+        // The ending runs, at every cost: the best of the runs ending at the last fragment.
+        matches_brute_force(
+            17,
+            &DENSE_READ_COSTS,
+            |runs| runs.ending,
+            |reads, cost| best_lag((0..reads.len()).map(|i| &reads[i..]), cost),
+        );
     }
 }

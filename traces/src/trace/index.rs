@@ -489,6 +489,42 @@ mod tests {
         assert_eq!(stretch(0b11).problem(), problem);
     }
 
+    /// A run, densest or ending, with no read or more reads or fragments than its stretch
+    /// is refused as the decoder checks a record.
+    #[test]
+    fn runs_of_reads_beyond_their_stretch_are_a_problem() {
+        let runs = |reads, fragments| {
+            let mut runs = DenseRuns::NONE;
+            runs.push(crate::trace::ReadRun { reads, fragments });
+            runs
+        };
+        let stretch = FragmentStretch {
+            fragments: 10,
+            depth_reads: 4,
+            page_misses: 0,
+            passed: 0,
+            last_read: DepthRead::PageHit,
+            first_reads: 0,
+            dense: runs(4, 10),
+            ending: runs(2, 3),
+        };
+        assert_eq!(stretch.problem(), None);
+        let problem =
+            Some("a stretch whose dense run holds no read, or more reads or fragments than it");
+        for bad in [runs(5, 10), runs(4, 11), runs(0, 3)] {
+            let dense = FragmentStretch {
+                dense: bad,
+                ..stretch
+            };
+            let ending = FragmentStretch {
+                ending: bad,
+                ..stretch
+            };
+            assert_eq!(dense.problem(), problem);
+            assert_eq!(ending.problem(), problem);
+        }
+    }
+
     /// A version-8 index keeps no ending runs, a
     /// version-6 one no dense runs and a version-5 one no first reads: their readers say
     /// so, and models decode the fragments instead.
