@@ -4,6 +4,7 @@
 use occsim_sim::effects::{
     effects_of_features, observe, EffectScan, Effects, EffectsChoice, TraceFacts,
 };
+use occsim_sim::levels::sampled::QUERIES_PER_SLOWEST;
 use occsim_sim::levels::{run_level, Fidelity, LevelResult};
 use occsim_sim::{Arch, MachineBuilder, Report};
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
@@ -214,7 +215,8 @@ fn sampled_windows_are_counted_every_kth_and_the_slowest_predicted_simulated() {
     let windows = result.sampled_windows.unwrap();
     // One window per query end, plus the tail after the last (the random scene ends with one).
     assert!(windows.total == queries || windows.total == queries + 1);
-    // Besides every 4th window, the windows of the ceil(n / 10) queries the formulas
+    // Besides every 4th window, the windows of the ceil(n / QUERIES_PER_SLOWEST) queries
+    // (the top fifteenth) the formulas
     // predict slowest (the analytic level's latencies; of equal ones the earlier); query i
     // ends window i.
     let analytic = run_level(
@@ -233,7 +235,7 @@ fn sampled_windows_are_counted_every_kth_and_the_slowest_predicted_simulated() {
         .collect();
     let mut ranked: Vec<usize> = (0..predicted.len()).collect();
     ranked.sort_by_key(|&i| (std::cmp::Reverse(predicted[i]), i));
-    let slowest_only = ranked[..predicted.len().div_ceil(10)]
+    let slowest_only = ranked[..predicted.len().div_ceil(QUERIES_PER_SLOWEST)]
         .iter()
         .filter(|&&i| i % 4 != 0)
         .count() as u64;

@@ -23,7 +23,7 @@ use std::time::Instant;
 #[derive(clap::Args, Clone, Debug)]
 pub struct FidelityArg {
     /// Level of detail: functional, analytic, sampled:K (cycle model on every K-th query
-    /// window, and on the O2 at K up to 10 on the slowest tenth the formulas predict),
+    /// window, and on the O2 at K up to 15 on the slowest fifteenth the formulas predict),
     /// cycle or rtl.
     #[arg(long, value_name = "LEVEL", default_value = "cycle")]
     pub fidelity: Fidelity,
@@ -55,7 +55,7 @@ pub struct FidelityArgs {
     #[command(flatten)]
     pub corpus: super::corpus::CorpusArgs,
     /// K of the sampled level: the cycle model runs on every K-th query window (and, on the
-    /// O2 at K up to 10, on the slowest tenth the formulas predict).
+    /// O2 at K up to 15, on the slowest fifteenth the formulas predict).
     #[arg(long, value_name = "K", default_value_t = 10, value_parser = clap::value_parser!(u32).range(1..))]
     pub sample_every: u32,
     /// Effect models of the cycle and sampled levels.

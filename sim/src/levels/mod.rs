@@ -4,7 +4,7 @@
 //! |---|---|---|
 //! | `functional` | the golden functional model: exact results and counts | none |
 //! | `analytic` | functional + the closed-form bottleneck model ([`crate::levels::analytic`]) | predicted |
-//! | `sampled:K` | the analytic formulas on everything, the cycle model on every K-th window (and, on the O2 at K up to 10, the top tenth of the queries by predicted latency) and the fragments before it ([`crate::levels::sampled`]); from the window index, only those windows' fragments are read | measured on 1/K (and the slowest), extrapolated |
+//! | `sampled:K` | the analytic formulas on everything, the cycle model on every K-th window (and, on the O2 at K up to 15, the top fifteenth of the queries by predicted latency) and the fragments before it ([`crate::levels::sampled`]); from the window index, only those windows' fragments are read | measured on 1/K (and the slowest), extrapolated |
 //! | `cycle` | the cycle-level machine model ([`crate::MachineModel`]) | exact |
 //! | `rtl` | the cycle-level machine with every Occlusion Unit and OccU Control the bit-accurate RTL ([`crate::blocks::rtl_occu`]) | exact |
 //!
