@@ -216,9 +216,8 @@ fn sampled_windows_are_counted_every_kth_and_the_slowest_predicted_simulated() {
     // One window per query end, plus the tail after the last (the random scene ends with one).
     assert!(windows.total == queries || windows.total == queries + 1);
     // Besides every 4th window, the windows of the ceil(n / QUERIES_PER_SLOWEST) queries
-    // (the top fifteenth) the formulas
-    // predict slowest (the analytic level's latencies; of equal ones the earlier); query i
-    // ends window i.
+    // (the top fifteenth) the formulas predict slowest (the analytic level's latencies; of
+    // equal ones the earlier); query i ends window i.
     let analytic = run_level(
         Fidelity::Analytic,
         &arch,
