@@ -156,6 +156,7 @@ pub fn replay<R: Read>(
         machine: arch.machine().name(),
         source,
     };
+    let older_index = older_index(&reader, arch, &options);
     if options.level == Fidelity::Analytic
         && options.window_index
         && options.retile.is_none()
@@ -200,7 +201,11 @@ pub fn replay<R: Read>(
             &options,
             |model| Ok(model.with_slowest(slowest).with_window_sizes(warm_up, tail)),
         )?;
-        return LevelModel::Sampled(model).finish(arch).map_err(model_error);
+        let mut result = LevelModel::Sampled(model)
+            .finish(arch)
+            .map_err(model_error)?;
+        result.older_index = older_index;
+        return Ok(result);
     }
     let model = LevelModel::with_outputs(
         options.level,
@@ -218,7 +223,24 @@ pub fn replay<R: Read>(
         options.retile,
         model_error,
     )?;
-    sink.model.finish(arch).map_err(model_error)
+    let mut result = sink.model.finish(arch).map_err(model_error)?;
+    result.older_index = older_index;
+    Ok(result)
+}
+
+/// The format version of the trace's window index when the level would have read it but it
+/// lacks counts the formulas take ([`TraceReader::index_has_every_count`]), so the fragments
+/// are decoded instead: the report says why the replay took longer.
+fn older_index<R: Read>(
+    reader: &TraceReader<R>,
+    arch: &Arch,
+    options: &ReplayOptions,
+) -> Option<u16> {
+    let reads_index = matches!(options.level, Fidelity::Analytic | Fidelity::Sampled { .. })
+        && options.window_index
+        && options.retile.is_none()
+        && AnalyticModel::reads_window_index(arch, reader.header());
+    (reads_index && !reader.index_has_every_count()).then(|| reader.format_version())
 }
 
 /// Run the sampled level's model over the trace `reader` reads: from the window index where

@@ -164,6 +164,28 @@ fn where_the_index_cannot_serve_the_fragments_are_read() {
     assert!(!analytic(&trace, &o2_with(&[]), true, Some(grid)).from_window_index);
 }
 
+#[test]
+fn an_index_before_version_9_is_decoded_and_the_report_says_why() {
+    // A version-8 index keeps no ending runs of reads: the analytic and sampled levels read
+    // the fragments, give what decoding gives, and name the version.
+    let (_, trace, _, _) = traces().remove(0);
+    let old = occsim_traces::trace::with_version_field(&trace, 8).unwrap();
+    let arch = o2_with(&[]);
+    let decoded = analytic(&trace, &arch, false, None);
+    let from_old = analytic(&old, &arch, true, None);
+    assert!(!from_old.from_window_index);
+    assert_eq!(from_old.older_index, Some(8));
+    assert_eq!(from_old.total_cycles, decoded.total_cycles);
+    let text = from_old.to_text(false);
+    assert!(text.contains("window index (format version 8)"), "{text}");
+    assert_eq!(sampled(&old, &arch, 3, true).older_index, Some(8));
+    // Nothing to say where the index serves, or where no level would read it.
+    assert_eq!(analytic(&trace, &arch, true, None).older_index, None);
+    assert_eq!(analytic(&old, &arch, false, None).older_index, None);
+    let ir = Arch::builtin("ir2").unwrap();
+    assert_eq!(analytic(&old, &ir, true, None).older_index, None);
+}
+
 fn sampled(trace: &[u8], arch: &Arch, every: u32, window_index: bool) -> LevelResult {
     sampled_warm(
         trace,

@@ -254,6 +254,7 @@ impl FunctionalCore {
             fast_forwarded_fragments: None,
             sampled_windows: None,
             from_window_index: self.results != ResultSource::Computed,
+            older_index: None,
             queries: self.queries,
             frame_cycles: Vec::new(),
             frames_per_second: None,

@@ -167,6 +167,11 @@ pub struct LevelResult {
     /// stream's golden ones, taken, not checked (the analytic level on the O2).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub from_window_index: bool,
+    /// The trace's format version when its window index lacks counts this level's formulas
+    /// take (before [`occsim_traces::trace::INDEX_COUNTS_VERSION`]), so its fragments were
+    /// decoded instead.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub older_index: Option<u16>,
     pub queries: Vec<QueryOutcome>,
     /// Each frame's cycles, for a closed-loop stream at a level that times frames (empty
     /// otherwise).
@@ -243,6 +248,7 @@ impl LevelResult {
             fast_forwarded_fragments: None,
             sampled_windows: None,
             from_window_index: false,
+            older_index: None,
             queries,
             frame_cycles: report.frames.iter().map(|f| f.cycles).collect(),
             frames_per_second: report.summary.frames_per_second,
@@ -304,6 +310,15 @@ impl LevelResult {
                 out,
                 "sampled windows: {} of {} simulated ({} of them only as one of the slowest predicted, {} over their last fragments alone)",
                 windows.simulated, windows.total, windows.slowest, windows.tails
+            );
+        }
+        if let Some(version) = self.older_index {
+            let _ = writeln!(
+                out,
+                "decoded every fragment: the trace's window index (format version {version}) \
+                 lacks counts the formulas take from version {} on; `occsim trace gen` makes \
+                 the trace anew",
+                occsim_traces::trace::INDEX_COUNTS_VERSION
             );
         }
         match (self.from_window_index, self.sampled_windows) {

@@ -175,6 +175,21 @@ pub(crate) fn first_block_offset(bytes: &[u8]) -> Option<usize> {
     Some(16 + json_len + 4)
 }
 
+/// The trace in `bytes` with its header's version field rewritten to `version` and the
+/// header's CRC made again: for tests and benchmarks of how older versions read (what the
+/// version gates, the reader reads as that version's); None when `bytes` has no file header.
+pub fn with_version_field(bytes: &[u8], version: u16) -> Option<Vec<u8>> {
+    let crc_at = first_block_offset(bytes)?.checked_sub(4)?;
+    if bytes.get(..MAGIC.len())? != MAGIC || bytes.len() < crc_at + 4 {
+        return None;
+    }
+    let mut out = bytes.to_vec();
+    out[8..10].copy_from_slice(&version.to_le_bytes());
+    let crc = crc32fast::hash(&out[MAGIC.len()..crc_at]);
+    out[crc_at..crc_at + 4].copy_from_slice(&crc.to_le_bytes());
+    Some(out)
+}
+
 /// The blocks of a whole trace in memory, in order: each one's offset and header, until
 /// the bytes end or a block header does not parse (a block's payload may run past the end:
 /// the caller slices it with `get`).

@@ -350,13 +350,8 @@ pub(crate) fn as_version(bytes: Vec<u8>, version: u8) -> Vec<u8> {
 }
 
 /// `bytes` with the version field rewritten to `version` and the header's CRC with it.
-fn with_version_field(mut bytes: Vec<u8>, version: u8) -> Vec<u8> {
-    bytes[8] = version;
-    // The header's CRC: the 4 bytes before the first block.
-    let crc_at = first_block_offset(&bytes) - 4;
-    let crc = crc32fast::hash(&bytes[MAGIC.len()..crc_at]);
-    bytes[crc_at..crc_at + 4].copy_from_slice(&crc.to_le_bytes());
-    bytes
+fn with_version_field(bytes: Vec<u8>, version: u8) -> Vec<u8> {
+    block::with_version_field(&bytes, version.into()).expect("a file header")
 }
 
 #[test]
