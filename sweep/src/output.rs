@@ -5,7 +5,8 @@
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Mutex, MutexGuard};
 
 /// What can go wrong writing a file atomically; every variant names the file.
 #[derive(Debug, thiserror::Error)]
@@ -40,19 +41,40 @@ static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 /// Scratch directories alive now, removed with the temporary files.
 static LIVE_DIRS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 
+/// Set once [`remove_temporaries`] has begun: no temporary file or scratch directory is
+/// created from then on.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+/// `list` locked, whatever a panicking holder left.
+fn lock(list: &Mutex<Vec<PathBuf>>) -> MutexGuard<'_, Vec<PathBuf>> {
+    list.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
 /// Remove every temporary file this process is writing, and its scratch directories (for a
 /// signal handler, just before the process exits: the work they belong to will never
-/// finish).
+/// finish). The work goes on in other threads meanwhile: a temporary is created under the
+/// lock of its list, which this takes before saying no more may be, so one created first
+/// is listed here and one after fails. (Without that, a scratch directory's removal could
+/// meet a file created in it after it was listed, and leave the directory behind.)
 pub fn remove_temporaries() {
-    let take = |list: &Mutex<Vec<PathBuf>>| match list.lock() {
-        Ok(mut live) => std::mem::take(&mut *live),
-        Err(poisoned) => std::mem::take(&mut *poisoned.into_inner()),
+    let (files, dirs) = {
+        let (mut files, mut dirs) = (lock(&LIVE), lock(&LIVE_DIRS));
+        INTERRUPTED.store(true, Ordering::SeqCst);
+        (std::mem::take(&mut *files), std::mem::take(&mut *dirs))
     };
-    for path in take(&LIVE) {
+    for path in files {
         let _ = std::fs::remove_file(path);
     }
-    for path in take(&LIVE_DIRS) {
+    for path in dirs {
         let _ = std::fs::remove_dir_all(path);
+    }
+}
+
+/// The error a temporary created after [`remove_temporaries`] began gets.
+fn interrupted(path: &Path) -> OutputError {
+    OutputError::Create {
+        path: path.to_path_buf(),
+        source: std::io::Error::new(std::io::ErrorKind::Interrupted, "the process is stopping"),
     }
 }
 
@@ -66,13 +88,15 @@ impl ScratchDir {
     /// A new directory `name` under the system's temporary directory.
     pub fn create(name: &str) -> Result<ScratchDir, OutputError> {
         let path = std::env::temp_dir().join(name);
+        let mut live = lock(&LIVE_DIRS);
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            return Err(interrupted(&path));
+        }
         std::fs::create_dir_all(&path).map_err(|source| OutputError::Create {
             path: path.clone(),
             source,
         })?;
-        if let Ok(mut live) = LIVE_DIRS.lock() {
-            live.push(path.clone());
-        }
+        live.push(path.clone());
         Ok(ScratchDir { path })
     }
 
@@ -123,13 +147,16 @@ impl AtomicFile {
     pub fn create(path: &Path) -> Result<AtomicFile, OutputError> {
         let temp = temp_path_beside(path)?;
         remove_stale_temporaries(path);
+        let mut live = lock(&LIVE);
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            return Err(interrupted(&temp));
+        }
         let file = File::create(&temp).map_err(|source| OutputError::Create {
             path: temp.clone(),
             source,
         })?;
-        if let Ok(mut live) = LIVE.lock() {
-            live.push(temp.clone());
-        }
+        live.push(temp.clone());
+        drop(live);
         Ok(AtomicFile {
             temp,
             target: path.to_path_buf(),
