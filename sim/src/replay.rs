@@ -158,10 +158,8 @@ pub fn replay<R: Read>(
     };
     let older_index = older_index(&reader, arch, &options);
     if options.level == Fidelity::Analytic
-        && options.window_index
-        && options.retile.is_none()
+        && index_wanted(&reader, arch, &options)
         && reader.index_has_every_count()
-        && AnalyticModel::reads_window_index(arch, reader.header())
     {
         let mut model =
             AnalyticModel::from_window_index(arch, width, height).map_err(ReplayError::Setup)?;
@@ -237,10 +235,17 @@ fn older_index<R: Read>(
     options: &ReplayOptions,
 ) -> Option<u16> {
     let reads_index = matches!(options.level, Fidelity::Analytic | Fidelity::Sampled { .. })
-        && options.window_index
-        && options.retile.is_none()
-        && AnalyticModel::reads_window_index(arch, reader.header());
+        && index_wanted(reader, arch, options);
     (reads_index && !reader.index_has_every_count()).then(|| reader.format_version())
+}
+
+/// Whether the analytic and sampled levels would read the trace's window index instead of
+/// its fragments, as far as the options and the architecture go (what the index holds
+/// aside): asked to, its queries not retiled, its depth layout the machine's.
+fn index_wanted<R: Read>(reader: &TraceReader<R>, arch: &Arch, options: &ReplayOptions) -> bool {
+    options.window_index
+        && options.retile.is_none()
+        && AnalyticModel::reads_window_index(arch, reader.header())
 }
 
 /// Run the sampled level's model over the trace `reader` reads: from the window index where
@@ -259,11 +264,9 @@ fn run_sampled<R: Read>(
         machine: arch.machine().name(),
         source,
     };
-    if options.window_index
-        && options.retile.is_none()
+    if index_wanted(&reader, arch, options)
         && reader.has_depth_tests()
         && reader.index_has_every_count()
-        && AnalyticModel::reads_window_index(arch, reader.header())
     {
         let model = SampledModel::from_window_index(arch, width, height, effects, every)
             .and_then(configure)

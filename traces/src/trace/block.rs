@@ -175,18 +175,38 @@ pub(crate) fn first_block_offset(bytes: &[u8]) -> Option<usize> {
     Some(16 + json_len + 4)
 }
 
-/// The trace in `bytes` with its header's version field rewritten to `version` and the
-/// header's CRC made again: for tests and benchmarks of how older versions read (what the
-/// version gates, the reader reads as that version's); None when `bytes` has no file header.
-pub fn with_version_field(bytes: &[u8], version: u16) -> Option<Vec<u8>> {
-    let crc_at = first_block_offset(bytes)?.checked_sub(4)?;
-    if bytes.get(..MAGIC.len())? != MAGIC || bytes.len() < crc_at + 4 {
+/// A file header's bytes: magic, `version`, flags (0), JSON length, `json`, and the CRC of
+/// all but the magic.
+pub(crate) fn file_header_bytes(version: u16, json: &[u8]) -> Vec<u8> {
+    let mut bytes = Vec::with_capacity(json.len() + FILE_HEADER_FIXED_BYTES as usize + 4);
+    bytes.extend_from_slice(&MAGIC);
+    bytes.extend_from_slice(&version.to_le_bytes());
+    bytes.extend_from_slice(&0u16.to_le_bytes());
+    bytes.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    bytes.extend_from_slice(json);
+    let crc = crc32fast::hash(&bytes[MAGIC.len()..]);
+    bytes.extend_from_slice(&crc.to_le_bytes());
+    bytes
+}
+
+/// A whole trace's header JSON and the offset of its first block; None when `bytes` has no
+/// file header.
+pub(crate) fn header_json(bytes: &[u8]) -> Option<(&[u8], usize)> {
+    let first_block = first_block_offset(bytes)?;
+    if bytes.get(..MAGIC.len())? != MAGIC {
         return None;
     }
-    let mut out = bytes.to_vec();
-    out[8..10].copy_from_slice(&version.to_le_bytes());
-    let crc = crc32fast::hash(&out[MAGIC.len()..crc_at]);
-    out[crc_at..crc_at + 4].copy_from_slice(&crc.to_le_bytes());
+    let json = bytes.get(FILE_HEADER_FIXED_BYTES as usize..first_block.checked_sub(4)?)?;
+    Some((json, first_block))
+}
+
+/// The trace in `bytes` with its header's version field rewritten to `version` (its CRC
+/// made again): for tests and benchmarks of how older versions read (what the version
+/// gates, the reader reads as that version's); None when `bytes` has no file header.
+pub fn with_version_field(bytes: &[u8], version: u16) -> Option<Vec<u8>> {
+    let (json, first_block) = header_json(bytes)?;
+    let mut out = file_header_bytes(version, json);
+    out.extend_from_slice(bytes.get(first_block..)?);
     Some(out)
 }
 

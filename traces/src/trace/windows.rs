@@ -18,8 +18,8 @@
 //! trace without an index, a whole second decoding.
 
 use super::block::{
-    blocks_in, first_block_offset, summary_and_trailer, BLOCK_HEADER_BYTES, KIND_SUMMARY,
-    KIND_WINDOWS, MAGIC,
+    blocks_in, file_header_bytes, header_json, summary_and_trailer, BLOCK_HEADER_BYTES,
+    KIND_SUMMARY, KIND_WINDOWS,
 };
 use super::codec::{put_uv, Cursor, PayloadError};
 use super::header::{TraceHeader, TraceSummary};
@@ -202,20 +202,14 @@ impl EventSink for WindowScout {
 /// For tests and benchmarks of the readings that serve a trace without a table; None when
 /// `bytes` is no whole trace of version 8 on.
 pub fn without_window_table(bytes: &[u8]) -> Option<Vec<u8>> {
+    let (json, _) = header_json(bytes)?;
     let version = u16::from_le_bytes(bytes.get(8..10)?.try_into().ok()?);
-    if bytes.get(..MAGIC.len())? != MAGIC || version < super::block::WINDOW_TABLE_VERSION {
+    if version < super::block::WINDOW_TABLE_VERSION {
         return None;
     }
-    let json_at = MAGIC.len() + 8;
-    let json_end = first_block_offset(bytes)? - 4;
-    let mut header: TraceHeader = serde_json::from_slice(bytes.get(json_at..json_end)?).ok()?;
+    let mut header: TraceHeader = serde_json::from_slice(json).ok()?;
     header.window_table = false;
-    let json = serde_json::to_vec(&header).ok()?;
-    let mut out = bytes.get(..json_at)?.to_vec();
-    out[12..16].copy_from_slice(&u32::try_from(json.len()).ok()?.to_le_bytes());
-    out.extend_from_slice(&json);
-    let crc = crc32fast::hash(&out[MAGIC.len()..]);
-    out.extend_from_slice(&crc.to_le_bytes());
+    let mut out = file_header_bytes(version, &serde_json::to_vec(&header).ok()?);
     for (at, header) in blocks_in(bytes) {
         let end = at + BLOCK_HEADER_BYTES + header.stored_len as usize;
         match header.kind {

@@ -131,17 +131,9 @@ pub struct TraceWriter<W: Write> {
 /// and every flag set take under 300 bytes.
 const FEATURES_RESERVE_BYTES: usize = 512;
 
-/// The file header's bytes: magic, version, flags, JSON length, JSON, CRC of all but magic.
+/// The file header's bytes, at this format's version.
 fn header_bytes(json: &[u8]) -> Vec<u8> {
-    let mut bytes = Vec::with_capacity(json.len() + 24);
-    bytes.extend_from_slice(&MAGIC);
-    bytes.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-    bytes.extend_from_slice(&0u16.to_le_bytes());
-    bytes.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    bytes.extend_from_slice(json);
-    let crc = crc32fast::hash(&bytes[MAGIC.len()..]);
-    bytes.extend_from_slice(&crc.to_le_bytes());
-    bytes
+    file_header_bytes(FORMAT_VERSION, json)
 }
 
 fn write_at(out: &mut impl Write, offset: &mut u64, bytes: &[u8]) -> Result<(), TraceError> {

@@ -414,12 +414,28 @@ impl O2Formulas {
         for run in w.ending.runs() {
             let (n, m) = (a * f64::from(run.reads), f64::from(run.fragments));
             owed = owed.max((n - (1.0 - f) * m).min(f * n));
-            lag = lag.max((n - m).max(c * n - m - c * (self.slack - debt)));
+            lag = lag
+                .max(self.queued_lag(n - m))
+                .max(self.lag_past_slack(c * n - m, debt));
         }
         EndingRuns {
             owed: owed.min(self.slack),
-            port_lag: lag.clamp(0.0, self.arch.fifo_raster_to_depth_entries as f64),
+            port_lag: lag,
         }
+    }
+
+    /// What a run that lags `lag` cycles at `c` port cycles a read leaves once the slack
+    /// the other clients still allow (`σ - debt` of their cycles) is taken off, at most
+    /// what the FIFO before the depth test holds ([`Self::dense_read_lag`]).
+    fn lag_past_slack(&self, lag: f64, debt: f64) -> f64 {
+        let c = 1.0 / self.free_share();
+        self.queued_lag(lag - c * (self.slack - debt))
+    }
+
+    /// A lag, none below 0 and no more than the FIFO before the depth test holds (once it is
+    /// full the rasterizer waits).
+    fn queued_lag(&self, lag: f64) -> f64 {
+        lag.clamp(0.0, self.arch.fifo_raster_to_depth_entries as f64)
     }
 
     /// The most cycles the dense runs of reads of stretch `w` leave the depth test behind
@@ -431,9 +447,7 @@ impl O2Formulas {
     /// is full the rasterizer waits for the depth test, so a run leaves at most that many
     /// fragments queued, each a cycle once the run's reads are in.
     fn dense_read_lag(&self, w: &StretchCounts, debt: f64) -> f64 {
-        let c = 1.0 / self.free_share();
-        let lag = w.dense_read_lag - c * (self.slack - debt);
-        lag.clamp(0.0, self.arch.fifo_raster_to_depth_entries as f64)
+        self.lag_past_slack(w.dense_read_lag, debt)
     }
 
     /// Port cycles for `bits` written, before the other clients' share.
