@@ -1126,6 +1126,50 @@ mod tests {
     use super::*;
 
     #[test]
+    fn varints_of_every_length_read_back_and_bad_ones_name_their_offset() {
+        // Hand-worked: 150 = 0b1_0010110 -> [0x96, 0x01]; 300 = 0b10_0101100 -> [0xac, 0x02].
+        for (bytes, value) in [(vec![0x96, 0x01], 150), (vec![0xac, 0x02], 300)] {
+            for padding in [0, 8] {
+                let mut padded = bytes.clone();
+                padded.resize(bytes.len() + padding, 0);
+                let mut c = Cursor::new(&padded, 0);
+                assert_eq!(c.uv().unwrap(), value, "{bytes:x?} padded by {padding}");
+                assert_eq!(c.pos(), bytes.len());
+            }
+        }
+        // Every length from 1 to 10 bytes at its edges (2^(7k) - 1 and 2^(7k)), at the
+        // payload's end and with bytes after it.
+        let mut values = vec![0, 1, 127, u64::MAX];
+        for k in 1..10 {
+            values.extend([
+                (1u64 << (7 * k)) - 1,
+                1u64 << (7 * k),
+                (1u64 << (7 * k)) + 77,
+            ]);
+        }
+        for value in values {
+            let mut bytes = Vec::new();
+            put_uv(&mut bytes, value);
+            let len = bytes.len();
+            for padding in [0, 1, 8] {
+                let mut padded = bytes.clone();
+                padded.resize(len + padding, 0x80);
+                let mut c = Cursor::new(&padded, 0);
+                assert_eq!(c.uv().unwrap(), value, "{value} padded by {padding}");
+                assert_eq!(c.pos(), len, "{value} padded by {padding}");
+            }
+        }
+        // Cut short, the error names the offset of the byte that is missing (two
+        // continuation bytes: the third, at 2); too long, where the varint began.
+        let error = Cursor::new(&[0xff, 0xff], 0).uv().unwrap_err();
+        assert_eq!(error.pos, 2, "{}", error.reason);
+        let eleven = [0xffu8; 11];
+        let error = Cursor::new(&eleven, 0).uv().unwrap_err();
+        assert_eq!(error.pos, 0, "{}", error.reason);
+        assert!(error.reason.contains("overflows"), "{}", error.reason);
+    }
+
+    #[test]
     fn a_version_2_result_with_every_hit_listed_reads_as_a_hit_list() {
         // The record as versions 1 and 2 wrote it: tag, id 7, mode verbose, 0 overflowed
         // buffers, 1 tile; nohc 3, phc 4, six bounds, not overflowed; 3 hits as zigzag

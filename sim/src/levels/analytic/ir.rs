@@ -65,7 +65,7 @@
 //! buffers overflow predicted a latency of 9,842 cycles where the machine takes 1,554.)
 
 use super::{service_cycles, WindowEnd};
-use crate::arch::IrArch;
+use crate::arch::{Interleave, IrArch};
 use crate::blocks::interleave::FramebufferInterleave;
 use crate::blocks::merge_network::{delivered, merged_ready, Partial, ReportShape};
 use crate::blocks::occlusion_engine::hit_room;
@@ -100,15 +100,32 @@ pub struct IrWindow {
     /// The pace of the last fragment counted (`max(C, s)`), in cycles.
     pace: u64,
     /// The current stretch: its `F_bp`, and its fragments.
-    stretch_board_fragments: Vec<u64>,
-    /// The Image Engines the stretch touched, each with its board: the first
-    /// `touched_count` (at most one a fragment, so a stretch's room is enough and no
-    /// fragment waits for a vector's length in memory).
-    touched: [(usize, usize); STRETCH_FRAGMENTS as usize],
-    touched_count: usize,
+    stretch_board_fragments: [u64; MAX_BOARDS],
+    /// The Image Engines the stretch touched, board by board: the first `touched_count[b]`
+    /// of `touched[b]` (at most one a fragment, so a stretch's room is enough and no
+    /// fragment waits for a vector's length in memory). Kept per board so that closing the
+    /// stretch keeps each board's generator clock in a register.
+    touched: [[u16; STRETCH_FRAGMENTS as usize]; MAX_BOARDS],
+    touched_count: [usize; MAX_BOARDS],
+    /// Where the interleave deals columns (`x mod U` to unit `x mod U`), the units of a run
+    /// of a row are consecutive, and a board's are consecutive Image Engines: `U`, and the
+    /// boards as a power of two, for [`Self::columns_piece`]; else `None` (each pixel's
+    /// owner looked up).
+    columns: Option<Columns>,
     stretch_fragments: u64,
     /// The current stretch starts a primitive (its setup counts).
     stretch_sets_up: bool,
+}
+
+/// The columns interleave's shape, as [`IrWindow::columns_piece`] steps along it.
+#[derive(Clone, Copy, Debug)]
+struct Columns {
+    /// `U`: units (Image Engines on all boards).
+    units: u64,
+    /// `log2 B` (the machine has 1, 2 or 4 boards).
+    board_shift: u32,
+    /// `N`: Image Engines a board.
+    per_board: usize,
 }
 
 /// One Image Engine's clock and its share of the current stretch, side by side (a
@@ -146,9 +163,17 @@ impl IrWindow {
             generators: vec![0; arch.boards],
             engines: vec![EngineClock::default(); engines],
             pace: arch.image_engine_cycles_per_fragment,
-            stretch_board_fragments: vec![0; arch.boards],
-            touched: [(0, 0); STRETCH_FRAGMENTS as usize],
-            touched_count: 0,
+            stretch_board_fragments: [0; MAX_BOARDS],
+            touched: [[0; STRETCH_FRAGMENTS as usize]; MAX_BOARDS],
+            touched_count: [0; MAX_BOARDS],
+            columns: (arch.interleave == Interleave::Columns
+                && arch.boards.is_power_of_two()
+                && arch.boards <= MAX_BOARDS)
+                .then(|| Columns {
+                    units: engines as u64,
+                    board_shift: arch.boards.trailing_zeros(),
+                    per_board: arch.image_engines_per_board,
+                }),
             stretch_fragments: 0,
             stretch_sets_up: false,
         }
@@ -176,29 +201,25 @@ impl IrWindow {
         }
     }
 
-    /// The current stretch's work joins the clocks (see the module docs).
+    /// The current stretch's work joins the clocks (see the module docs), board by board.
     fn close_stretch(&mut self) {
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let pace = self.pace * self.rate;
         let hidden = self.hidden();
-        // The clocks in locals while the touched engines are gone through (as in
-        // `paced_piece`).
-        let boards = self.generators.len();
-        let (mut starts, mut generators) = ([0u64; MAX_BOARDS], [0u64; MAX_BOARDS]);
-        for board in 0..boards {
-            starts[board] = self.generators[board] + setup;
-            generators[board] = starts[board] + self.stretch_board_fragments[board];
+        for board in 0..self.generators.len() {
+            let start = self.generators[board] + setup;
+            let mut generator = start + self.stretch_board_fragments[board];
+            for &engine in &self.touched[board][..self.touched_count[board]] {
+                let clock = &mut self.engines[engine as usize];
+                let emitted = start + clock.last;
+                clock.through = (clock.through.max(start) + clock.slots).max(emitted + pace);
+                generator = generator.max(clock.through.saturating_sub(hidden));
+                clock.slots = 0;
+            }
+            self.generators[board] = generator;
         }
-        for &(board, engine) in &self.touched[..self.touched_count] {
-            let clock = &mut self.engines[engine];
-            let emitted = starts[board] + clock.last;
-            clock.through = (clock.through.max(starts[board]) + clock.slots).max(emitted + pace);
-            generators[board] = generators[board].max(clock.through.saturating_sub(hidden));
-            clock.slots = 0;
-        }
-        self.generators.copy_from_slice(&generators[..boards]);
-        self.touched_count = 0;
-        self.stretch_board_fragments.fill(0);
+        self.touched_count = [0; MAX_BOARDS];
+        self.stretch_board_fragments = [0; MAX_BOARDS];
         self.stretch_fragments = 0;
         self.stretch_sets_up = false;
     }
@@ -260,28 +281,83 @@ impl IrWindow {
         (x, y): (u16, u16),
         len: usize,
     ) {
+        match self.columns {
+            Some(columns) => self.columns_piece(columns, x, len),
+            None => self.owned_piece(interleave, owners, (x, y), len),
+        }
+        self.fragments += len as u64;
+        self.stretch_fragments += len as u64;
+    }
+
+    /// A piece under any interleave: each pixel's board and Image Engine looked up, its
+    /// board's fragment count in the stretch, the engine's last and its slots counted, with
+    /// the boards' counts in locals.
+    fn owned_piece(
+        &mut self,
+        interleave: &FramebufferInterleave,
+        owners: &[(usize, usize)],
+        (x, y): (u16, u16),
+        len: usize,
+    ) {
         let slots_a_fragment = self.pace * self.rate;
-        let boards = self.stretch_board_fragments.len();
-        let mut board_fragments = [0; MAX_BOARDS];
-        board_fragments[..boards].copy_from_slice(&self.stretch_board_fragments);
-        let (engines, touched) = (&mut self.engines, &mut self.touched);
-        let mut touched_count = self.touched_count;
+        let mut board_fragments = self.stretch_board_fragments;
+        let (engines, touched, touched_count) = (
+            &mut self.engines,
+            &mut self.touched,
+            &mut self.touched_count,
+        );
         interleave.for_each_unit_along(x, y, len, |unit| {
             let (board, engine) = owners[unit];
             board_fragments[board] += 1;
             let clock = &mut engines[engine];
             clock.last = board_fragments[board];
             if clock.slots == 0 {
-                touched[touched_count] = (board, engine);
-                touched_count += 1;
+                touched[board][touched_count[board]] = engine as u16;
+                touched_count[board] += 1;
             }
             clock.slots += slots_a_fragment;
         });
-        self.touched_count = touched_count;
-        self.stretch_board_fragments
-            .copy_from_slice(&board_fragments[..boards]);
-        self.fragments += len as u64;
-        self.stretch_fragments += len as u64;
+        self.stretch_board_fragments = board_fragments;
+    }
+
+    /// A piece under the columns interleave: what [`Self::owned_piece`] counts, board by
+    /// board. Pixels `x..x + len` are units `x mod U` on, consecutive until they wrap past
+    /// `U`; within such a run, board `b`'s pixels are the units `g ≡ b (mod B)`, its
+    /// consecutive Image Engines `b · N + g / B`, each once, the `j`-th of them its board's
+    /// `j + 1`-th fragment of the run.
+    fn columns_piece(&mut self, columns: Columns, x: u16, len: usize) {
+        let slots_a_fragment = self.pace * self.rate;
+        let boards = 1u64 << columns.board_shift;
+        let (mut unit, mut left) = (x as u64 % columns.units, len as u64);
+        while left > 0 {
+            let run = left.min(columns.units - unit);
+            for board in 0..boards {
+                // The run's first pixel of this board, and how many it has.
+                let first = (board + boards - (unit & (boards - 1))) & (boards - 1);
+                if first >= run {
+                    continue;
+                }
+                let count = (run - first).div_ceil(boards);
+                let board = board as usize;
+                let engine =
+                    board * columns.per_board + ((unit + first) >> columns.board_shift) as usize;
+                let fragments = self.stretch_board_fragments[board];
+                let mut touched_count = self.touched_count[board];
+                let engines = &mut self.engines[engine..engine + count as usize];
+                for (j, clock) in engines.iter_mut().enumerate() {
+                    clock.last = fragments + j as u64 + 1;
+                    if clock.slots == 0 {
+                        self.touched[board][touched_count] = (engine + j) as u16;
+                        touched_count += 1;
+                    }
+                    clock.slots += slots_a_fragment;
+                }
+                self.touched_count[board] = touched_count;
+                self.stretch_board_fragments[board] = fragments + count;
+            }
+            unit = 0;
+            left -= run;
+        }
     }
 
     /// Slots a Fragment Generator may run ahead of an engine's work at the current pace (see
@@ -561,5 +637,84 @@ impl IrBottleneck {
             cycles: cycles as f64,
             latency: drain as f64,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::arch::Arch;
+    use occsim_traces::rng::SplitMix64;
+
+    /// An `ir` architecture with `boards` boards of `per_board` Image Engines and the
+    /// columns interleave.
+    fn columns_arch(boards: usize, per_board: usize) -> IrArch {
+        let mut arch = Arch::builtin("ir").unwrap();
+        arch.set_value("boards", &boards.to_string()).unwrap();
+        arch.set_value("image_engines_per_board", &per_board.to_string())
+            .unwrap();
+        arch.ir().unwrap()
+    }
+
+    #[test]
+    fn the_columns_path_counts_what_looking_each_owner_up_counts() {
+        // Random rows (narrow ones that come back to the same engines within a stretch
+        // when several rows make one,
+        // wide ones that wrap past the last unit), paces and primitives, fed to a window
+        // that steps along the columns and to one that looks every pixel's owner up: every
+        // engine's clock and every generator's must agree after every close, and the
+        // windows' cycles at the end.
+        for (boards, per_board) in [(4, 80), (2, 80), (1, 80), (4, 3), (2, 1), (1, 1)] {
+            let arch = columns_arch(boards, per_board);
+            let interleave = FramebufferInterleave::new(&arch);
+            let owners: Vec<(usize, usize)> = (0..arch.image_engines())
+                .map(|g| {
+                    let owner = interleave.owner_of_unit(g);
+                    (owner.board, owner.board * per_board + owner.image_engine)
+                })
+                .collect();
+            let mut columns = IrWindow::new(&arch);
+            let mut looked_up = IrWindow::new(&arch);
+            assert!(columns.columns.is_some());
+            looked_up.columns = None;
+            let mut rng = SplitMix64(boards as u64 * 1000 + per_board as u64);
+            for step in 0..4_000 {
+                match rng.below(20) {
+                    0 => {
+                        let release = rng.below(50) as f64;
+                        columns.primitive(release);
+                        looked_up.primitive(release);
+                    }
+                    1 => {
+                        let pace = [11, 11, 24, 300][rng.below(4) as usize];
+                        columns.pace(pace);
+                        looked_up.pace(pace);
+                    }
+                    2 => {
+                        let end = columns.cycles(&arch);
+                        assert_eq!(end, looked_up.cycles(&arch), "step {step}");
+                        columns.restart_at(end);
+                        looked_up.restart_at(end);
+                    }
+                    _ => {
+                        let x = rng.below(1280) as u16;
+                        let len = [1, 3, 7, 40, 200, 700][rng.below(6) as usize];
+                        let len = len.min(2048 - x as usize);
+                        let y = rng.below(1024) as u16;
+                        columns.paced_along(&interleave, &owners, (x, y), len);
+                        looked_up.paced_along(&interleave, &owners, (x, y), len);
+                    }
+                }
+                if rng.below(4) > 0 {
+                    // Several rows to a stretch.
+                    continue;
+                }
+                columns.close_stretch();
+                looked_up.close_stretch();
+                assert_eq!(columns.engines, looked_up.engines, "step {step}");
+                assert_eq!(columns.generators, looked_up.generators, "step {step}");
+                assert_eq!(columns.fragments, looked_up.fragments, "step {step}");
+            }
+        }
     }
 }
