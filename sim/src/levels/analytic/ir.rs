@@ -74,8 +74,7 @@ use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect, Span};
 
 /// Counts and clocks of one window (see the module docs). Clocks count in slots of
 /// `1 / rate` cycles, so that a Fragment Generator's emission is exact whatever the number
-/// of fragments a stretch gives it. (No `PartialEq`: `touched` keeps stale entries past
-/// `touched_count`, so two equal windows' fields may differ.)
+/// of fragments a stretch gives it.
 #[derive(Clone, Debug)]
 pub struct IrWindow {
     pub primitives: u64,
@@ -101,12 +100,13 @@ pub struct IrWindow {
     pace: u64,
     /// The current stretch: its `F_bp`, and its fragments.
     stretch_board_fragments: [u64; MAX_BOARDS],
-    /// The Image Engines the stretch touched, board by board: the first `touched_count[b]`
-    /// of `touched[b]` (at most one a fragment, so a stretch's room is enough and no
-    /// fragment waits for a vector's length in memory). Kept per board so that closing the
-    /// stretch keeps each board's generator clock in a register.
-    touched: [[u16; STRETCH_FRAGMENTS as usize]; MAX_BOARDS],
-    touched_count: [usize; MAX_BOARDS],
+    /// The Image Engines the stretch touched, a bit each (engine `e` is bit `e mod 64` of
+    /// word `e / 64`): a run of a row sets its engines' bits a word at a time, and closing
+    /// the stretch goes through them in order, board after board (the engines are numbered
+    /// board-major), each board's generator clock in a register.
+    touched: Vec<u64>,
+    /// `N`: Image Engines a board.
+    per_board: usize,
     /// Where the interleave deals columns (`x mod U` to unit `x mod U`), the units of a run
     /// of a row are consecutive, and a board's are consecutive Image Engines: `U`, and the
     /// boards as a power of two, for [`Self::columns_piece`]; else `None` (each pixel's
@@ -164,8 +164,8 @@ impl IrWindow {
             engines: vec![EngineClock::default(); engines],
             pace: arch.image_engine_cycles_per_fragment,
             stretch_board_fragments: [0; MAX_BOARDS],
-            touched: [[0; STRETCH_FRAGMENTS as usize]; MAX_BOARDS],
-            touched_count: [0; MAX_BOARDS],
+            touched: vec![0; engines.div_ceil(64)],
+            per_board: arch.image_engines_per_board,
             columns: (arch.interleave == Interleave::Columns
                 && arch.boards.is_power_of_two()
                 && arch.boards <= MAX_BOARDS)
@@ -206,19 +206,39 @@ impl IrWindow {
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let pace = self.pace * self.rate;
         let hidden = self.hidden();
-        for board in 0..self.generators.len() {
-            let start = self.generators[board] + setup;
-            let mut generator = start + self.stretch_board_fragments[board];
-            for &engine in &self.touched[board][..self.touched_count[board]] {
-                let clock = &mut self.engines[engine as usize];
+        let starts = |board: usize| self.generators[board] + setup;
+        // The board whose engines come next, where its engines end, its start and clock.
+        let mut board = 0;
+        let mut board_end = self.per_board;
+        let mut start = starts(0);
+        let mut generators = [0u64; MAX_BOARDS];
+        let mut generator = start + self.stretch_board_fragments[0];
+        for (word_index, word) in self.touched.iter_mut().enumerate() {
+            let mut bits = std::mem::take(word);
+            while bits != 0 {
+                let engine = word_index * 64 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                while engine >= board_end {
+                    generators[board] = generator;
+                    board += 1;
+                    board_end += self.per_board;
+                    start = starts(board);
+                    generator = start + self.stretch_board_fragments[board];
+                }
+                let clock = &mut self.engines[engine];
                 let emitted = start + clock.last;
                 clock.through = (clock.through.max(start) + clock.slots).max(emitted + pace);
                 generator = generator.max(clock.through.saturating_sub(hidden));
                 clock.slots = 0;
             }
-            self.generators[board] = generator;
         }
-        self.touched_count = [0; MAX_BOARDS];
+        generators[board] = generator;
+        // The boards after the last touched engine's.
+        for later in board + 1..self.generators.len() {
+            generators[later] = starts(later) + self.stretch_board_fragments[later];
+        }
+        let boards = self.generators.len();
+        self.generators.copy_from_slice(&generators[..boards]);
         self.stretch_board_fragments = [0; MAX_BOARDS];
         self.stretch_fragments = 0;
         self.stretch_sets_up = false;
@@ -301,20 +321,13 @@ impl IrWindow {
     ) {
         let slots_a_fragment = self.pace * self.rate;
         let mut board_fragments = self.stretch_board_fragments;
-        let (engines, touched, touched_count) = (
-            &mut self.engines,
-            &mut self.touched,
-            &mut self.touched_count,
-        );
+        let (engines, touched) = (&mut self.engines, &mut self.touched);
         interleave.for_each_unit_along(x, y, len, |unit| {
             let (board, engine) = owners[unit];
             board_fragments[board] += 1;
             let clock = &mut engines[engine];
             clock.last = board_fragments[board];
-            if clock.slots == 0 {
-                touched[board][touched_count[board]] = engine as u16;
-                touched_count[board] += 1;
-            }
+            touched[engine / 64] |= 1 << (engine % 64);
             clock.slots += slots_a_fragment;
         });
         self.stretch_board_fragments = board_fragments;
@@ -342,17 +355,12 @@ impl IrWindow {
                 let engine =
                     board * columns.per_board + ((unit + first) >> columns.board_shift) as usize;
                 let fragments = self.stretch_board_fragments[board];
-                let mut touched_count = self.touched_count[board];
                 let engines = &mut self.engines[engine..engine + count as usize];
                 for (j, clock) in engines.iter_mut().enumerate() {
                     clock.last = fragments + j as u64 + 1;
-                    if clock.slots == 0 {
-                        self.touched[board][touched_count] = (engine + j) as u16;
-                        touched_count += 1;
-                    }
                     clock.slots += slots_a_fragment;
                 }
-                self.touched_count[board] = touched_count;
+                set_bits(&mut self.touched, engine..engine + count as usize);
                 self.stretch_board_fragments[board] = fragments + count;
             }
             unit = 0;
@@ -405,6 +413,23 @@ impl IrWindow {
                 last_result.max(hits_drained).saturating_sub(end + 3)
             },
         )
+    }
+}
+
+/// Set bits `range` of `words` (bit `i` is bit `i mod 64` of word `i / 64`), a word at a
+/// time.
+fn set_bits(words: &mut [u64], range: std::ops::Range<usize>) {
+    let mut at = range.start;
+    while at < range.end {
+        let bit = at % 64;
+        let here = (64 - bit).min(range.end - at);
+        let mask = if here == 64 {
+            u64::MAX
+        } else {
+            ((1u64 << here) - 1) << bit
+        };
+        words[at / 64] |= mask;
+        at += here;
     }
 }
 
