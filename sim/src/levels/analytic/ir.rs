@@ -124,8 +124,6 @@ struct Columns {
     units: u64,
     /// `log2 B` (the machine has 1, 2 or 4 boards).
     board_shift: u32,
-    /// `N`: Image Engines a board.
-    per_board: usize,
 }
 
 /// One Image Engine's clock and its share of the current stretch, side by side (a
@@ -172,7 +170,6 @@ impl IrWindow {
                 .then(|| Columns {
                     units: engines as u64,
                     board_shift: arch.boards.trailing_zeros(),
-                    per_board: arch.image_engines_per_board,
                 }),
             stretch_fragments: 0,
             stretch_sets_up: false,
@@ -353,7 +350,7 @@ impl IrWindow {
                 let count = (run - first).div_ceil(boards);
                 let board = board as usize;
                 let engine =
-                    board * columns.per_board + ((unit + first) >> columns.board_shift) as usize;
+                    board * self.per_board + ((unit + first) >> columns.board_shift) as usize;
                 let fragments = self.stretch_board_fragments[board];
                 let engines = &mut self.engines[engine..engine + count as usize];
                 for (j, clock) in engines.iter_mut().enumerate() {
