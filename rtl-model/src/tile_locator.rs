@@ -144,6 +144,12 @@ impl TileLocator {
         self.built = false;
     }
 
+    /// The side of a bucket, in pixels: the pixels of a row from `x` to the next multiple of
+    /// it have the same candidates.
+    pub fn bucket_side(&self) -> u32 {
+        1 << self.shift
+    }
+
     /// Whether a locator is built for the loaded query.
     pub fn is_built(&self) -> bool {
         self.built

@@ -7,8 +7,15 @@
 //! over the last hit (a buffer with no room for hits gets no terminator either).
 //! Counters are `counter_bits` wide and saturate at `2^counter_bits - 1`.
 
+use occsim_rtl::tile_locator::TileLocator;
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::{Fragment, Span, Tile, TileResult};
+
+/// Tiles up to which an engine scans them all for each fragment; past it, a
+/// [`TileLocator`] names the few that may hold it. (Scanning every tile for every fragment,
+/// a lazy-grid walk's queries of hundreds of tiles had made the IR's cycle level slower
+/// than its rtl level, which locates them.)
+const SCAN_TILES: usize = 8;
 
 /// One tile's registers inside an engine.
 #[derive(Clone, Debug)]
@@ -24,6 +31,10 @@ struct TileRegisters {
 #[derive(Clone, Debug, Default)]
 pub struct OcclusionEngine {
     tiles: Vec<TileRegisters>,
+    /// Which tiles may hold a pixel, where the engine holds more than [`SCAN_TILES`] (not
+    /// hardware: the comparators still decide, and every count equals a scan's; built or
+    /// not for the loaded query).
+    locator: TileLocator,
     verbose: bool,
     hit_room: u64,
     /// Hits each tile's result lists (`QuerySpec::listed_hits_per_tile`).
@@ -58,6 +69,13 @@ impl OcclusionEngine {
             result: TileResult::default(),
             hits_sent: 0,
         }));
+        self.locator.clear();
+        if self.tiles.len() > SCAN_TILES {
+            let rects: Vec<[u32; 4]> = (self.tiles.iter())
+                .map(|t| [t.rect.x, t.rect.y, t.rect.width, t.rect.height])
+                .collect();
+            self.locator.build(&rects);
+        }
     }
 
     /// Tiles held: the cycles one fragment costs (one tile per cycle).
@@ -65,9 +83,19 @@ impl OcclusionEngine {
         self.tiles.len()
     }
 
-    /// Count one fragment in every tile; returns the hit words sent to OccU Control.
+    /// Count one fragment in every tile that holds it (those the locator names, else every
+    /// tile tested); returns the hit words sent to OccU Control.
     #[inline]
     pub fn fragment(&mut self, fragment: Fragment, passed: bool) -> u32 {
+        if self.locator.is_built() {
+            return self.located_fragment(fragment, passed);
+        }
+        self.scanned_fragment(fragment, passed)
+    }
+
+    /// [`Self::fragment`] with every tile tested.
+    #[inline(always)]
+    fn scanned_fragment(&mut self, fragment: Fragment, passed: bool) -> u32 {
         let counter_max = self.counter_max;
         let (x, y) = (fragment.x as u32, fragment.y as u32);
         let mut hit_words = 0;
@@ -99,6 +127,64 @@ impl OcclusionEngine {
         hit_words
     }
 
+    /// [`Self::fragment`] in the tiles the locator names (out of line: the scan of a few
+    /// tiles is the common path, inlined into the machines' fragment loops).
+    #[cold]
+    #[inline(never)]
+    fn located_fragment(&mut self, fragment: Fragment, passed: bool) -> u32 {
+        let query = (
+            self.counter_max,
+            self.verbose,
+            self.hit_room,
+            self.hit_list_cap,
+        );
+        let (x, y) = (fragment.x as u32, fragment.y as u32);
+        let mut hit_words = 0;
+        for t in self.locator.candidates(x, y, 0, u64::MAX) {
+            hit_words += Self::count_in(&mut self.tiles[t as usize], fragment, passed, query);
+        }
+        hit_words
+    }
+
+    /// Count a fragment in `tile` if it holds it: PHC, and if it passed, NOHC, the box, the
+    /// depth range and a verbose query's hit (`(counter_max, verbose, hit_room,
+    /// hit_list_cap)`); returns the hit words sent.
+    #[inline(always)]
+    fn count_in(
+        tile: &mut TileRegisters,
+        fragment: Fragment,
+        passed: bool,
+        (counter_max, verbose, hit_room, hit_list_cap): (u64, bool, u64, usize),
+    ) -> u32 {
+        let (x, y) = (fragment.x as u32, fragment.y as u32);
+        if !tile.rect.contains(x, y) {
+            return 0;
+        }
+        let r = &mut tile.result;
+        r.phc = (r.phc + 1).min(counter_max);
+        if !passed {
+            return 0;
+        }
+        r.nohc = (r.nohc + 1).min(counter_max);
+        r.xmin = r.xmin.min(x);
+        r.xmax = r.xmax.max(x);
+        r.ymin = r.ymin.min(y);
+        r.ymax = r.ymax.max(y);
+        r.zmin = r.zmin.min(fragment.z);
+        r.zmax = r.zmax.max(fragment.z);
+        if !verbose {
+            return 0;
+        }
+        if tile.hits_sent < hit_room {
+            tile.hits_sent += 1;
+            r.hits.push((fragment.x, fragment.y), hit_list_cap);
+            1
+        } else {
+            r.overflowed = true;
+            0
+        }
+    }
+
     /// Count a span's fragments (`passed[i]` for its fragment `i`) in every tile at once, as
     /// a fast-forward does ([`crate::effects`]): only without a verbose query, so no hit is
     /// sent, and then the counters, boxes and depth ranges do not depend on the order the
@@ -106,26 +192,33 @@ impl OcclusionEngine {
     pub fn count_span(&mut self, span: Span, passed: &[bool]) {
         debug_assert!(!self.verbose, "a verbose query's hits are sent one by one");
         let counter_max = self.counter_max;
-        let (span_x, y) = (span.x as u64, span.y as u32);
-        let span_end = span_x + span.depths.len() as u64;
-        for tile in &mut self.tiles {
-            let rect = tile.rect;
-            if y.wrapping_sub(rect.y) >= rect.height {
-                continue;
+        if !self.locator.is_built() {
+            for tile in &mut self.tiles {
+                count_run_in(tile, span, passed, counter_max);
             }
-            let from = span_x.max(rect.x as u64);
-            let to = span_end.min(rect.x as u64 + rect.width as u64);
-            if from >= to {
-                continue;
+            return;
+        }
+        // The span cut where the locator's buckets end; in each piece, the tiles of its
+        // bucket (a tile listed in several buckets counts each piece once).
+        let side = self.locator.bucket_side();
+        let (mut at, end) = (span.x as u32, span.x as u32 + span.depths.len() as u32);
+        while at < end {
+            let to = ((at / side + 1) * side).min(end);
+            let (first, last) = ((at - span.x as u32) as usize, (to - span.x as u32) as usize);
+            let piece = Span {
+                x: at as u16,
+                y: span.y,
+                depths: &span.depths[first..last],
+            };
+            for t in self.locator.candidates(at, span.y as u32, 0, u64::MAX) {
+                count_run_in(
+                    &mut self.tiles[t as usize],
+                    piece,
+                    &passed[first..last],
+                    counter_max,
+                );
             }
-            let (first, last) = ((from - span_x) as usize, (to - span_x) as usize);
-            tile.result.record_run(
-                from as u16,
-                span.y,
-                &span.depths[first..last],
-                &passed[first..last],
-                counter_max,
-            );
+            at = to;
         }
     }
 
@@ -135,7 +228,126 @@ impl OcclusionEngine {
     }
 }
 
+/// Count a span's fragments (`passed[i]` for its fragment `i`) in `tile`: its part inside
+/// the tile, at once.
+#[inline(always)]
+fn count_run_in(tile: &mut TileRegisters, span: Span, passed: &[bool], counter_max: u64) {
+    let rect = tile.rect;
+    let (span_x, y) = (span.x as u64, span.y as u32);
+    if y.wrapping_sub(rect.y) >= rect.height {
+        return;
+    }
+    let span_end = span_x + span.depths.len() as u64;
+    let from = span_x.max(rect.x as u64);
+    let to = span_end.min(rect.x as u64 + rect.width as u64);
+    if from >= to {
+        return;
+    }
+    let (first, last) = ((from - span_x) as usize, (to - span_x) as usize);
+    tile.result.record_run(
+        from as u16,
+        span.y,
+        &span.depths[first..last],
+        &passed[first..last],
+        counter_max,
+    );
+}
+
 /// Hit room of a verbose buffer of `buffer_entries` entries.
 pub fn hit_room(buffer_entries: u32) -> u64 {
     buffer_entries.saturating_sub(BRIEF_RECORD_ENTRIES) as u64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occsim_traces::rng::SplitMix64;
+    use occsim_traces::Rect;
+
+    /// `count` random tiles over a 300 x 200 corner: small ones, a few large overlapping
+    /// ones, and where `wraps`, one wrapping past 2^32 (what a slot register holds).
+    fn random_tiles(rng: &mut SplitMix64, count: usize, wraps: bool) -> Vec<Tile> {
+        let mut tiles: Vec<Tile> = (0..count)
+            .map(|_| {
+                let (w, h) = match rng.below(8) {
+                    0 => (100 + rng.below(150), 80 + rng.below(100)),
+                    _ => (1 + rng.below(24), 1 + rng.below(24)),
+                };
+                Rect::new(
+                    rng.below(300) as u32,
+                    rng.below(200) as u32,
+                    w as u32,
+                    h as u32,
+                )
+            })
+            .collect();
+        if wraps {
+            tiles[0] = Rect::new(u32::MAX - 3, 10, 20, 5);
+        }
+        tiles
+    }
+
+    #[test]
+    fn located_tiles_count_what_each_tile_alone_counts() {
+        // An engine of many tiles (located) against one engine a tile (each scanning its
+        // one tile), fed the same fragments and spans: every tile's result, its hits and
+        // the hit words sent must agree. Verbose runs feed fragments one by one (a small
+        // buffer, so that some overflow); others mix in spans.
+        for (seed, verbose, wraps) in [
+            (1, false, false),
+            (2, true, false),
+            (3, false, true),
+            (4, true, true),
+        ] {
+            let mut rng = SplitMix64(seed);
+            let tiles = random_tiles(&mut rng, 60, wraps);
+            let (room, cap, max) = (5, 4, 1000);
+            let mut located = OcclusionEngine::default();
+            located.load(tiles.iter().copied().enumerate(), verbose, room, cap, max);
+            assert!(located.locator.is_built());
+            // Spans cross buckets (a wrapping tile's extent makes one bucket of it all).
+            assert_eq!(located.locator.bucket_side() < 64, !wraps, "seed {seed}");
+            let mut alone: Vec<OcclusionEngine> = tiles
+                .iter()
+                .enumerate()
+                .map(|(index, &tile)| {
+                    let mut engine = OcclusionEngine::default();
+                    engine.load([(index, tile)].into_iter(), verbose, room, cap, max);
+                    engine
+                })
+                .collect();
+            for step in 0..3000 {
+                let (x, y) = (rng.below(320) as u16, rng.below(220) as u16);
+                if verbose || rng.below(3) > 0 {
+                    let fragment = Fragment {
+                        x,
+                        y,
+                        z: rng.below(1 << 24) as u32,
+                    };
+                    let passed = rng.below(3) > 0;
+                    let words = located.fragment(fragment, passed);
+                    let alone_words: u32 =
+                        alone.iter_mut().map(|e| e.fragment(fragment, passed)).sum();
+                    assert_eq!(words, alone_words, "seed {seed} step {step}");
+                } else {
+                    let len = 1 + rng.below(90) as usize;
+                    let depths: Vec<u32> = (0..len).map(|_| rng.below(1 << 24) as u32).collect();
+                    let passed: Vec<bool> = (0..len).map(|_| rng.below(2) == 0).collect();
+                    let span = Span {
+                        x,
+                        y,
+                        depths: &depths,
+                    };
+                    located.count_span(span, &passed);
+                    alone.iter_mut().for_each(|e| e.count_span(span, &passed));
+                }
+            }
+            let mut results: Vec<(usize, TileResult)> = located.drain().collect();
+            results.sort_by_key(|(index, _)| *index);
+            let expected: Vec<(usize, TileResult)> =
+                alone.iter_mut().flat_map(|e| e.drain()).collect();
+            assert_eq!(results, expected, "seed {seed}");
+            assert!(expected.iter().any(|(_, r)| r.phc > 0), "some tile counted");
+        }
+    }
 }
