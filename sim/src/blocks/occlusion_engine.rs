@@ -93,9 +93,17 @@ impl OcclusionEngine {
         self.scanned_fragment(fragment, passed)
     }
 
-    /// [`Self::fragment`] with every tile tested.
+    /// Whether the loaded query's tiles are located (else [`Self::scanned_fragment`] is
+    /// [`Self::fragment`]).
+    pub fn is_located(&self) -> bool {
+        self.locator.is_built()
+    }
+
+    /// [`Self::fragment`] with every tile tested: for an engine whose query is not located
+    /// (the Occlusion Unit decides once for all its engines, so that its few-tile loop,
+    /// inlined into the machines' fragment loops, takes no branch an engine).
     #[inline(always)]
-    fn scanned_fragment(&mut self, fragment: Fragment, passed: bool) -> u32 {
+    pub fn scanned_fragment(&mut self, fragment: Fragment, passed: bool) -> u32 {
         let counter_max = self.counter_max;
         let (x, y) = (fragment.x as u32, fragment.y as u32);
         let mut hit_words = 0;

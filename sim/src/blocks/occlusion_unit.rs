@@ -24,6 +24,8 @@ pub struct OcclusionUnit {
     engine_cycles: Vec<u64>,
     /// Engines holding at least one tile of the open query.
     active: usize,
+    /// Some engine locates the open query's tiles (else each scans its few).
+    located: bool,
     /// Fragments and stall cycles of the open query (for the engines' statistics).
     query_fragments: u64,
     query_stall_cycles: u64,
@@ -55,6 +57,7 @@ impl OcclusionUnit {
             service_cycles: 1,
             engine_cycles: vec![0; engines],
             active: 0,
+            located: false,
             query_fragments: 0,
             query_stall_cycles: 0,
             free: 0,
@@ -92,6 +95,7 @@ impl OcclusionUnit {
             engine_service_cycles(spec.tiles.len(), count, self.all_tiles_one_cycle);
         self.service_cycles = self.engine_cycles.iter().copied().max().unwrap_or(0).max(1);
         self.active = count.min(spec.tiles.len());
+        self.located = self.engines.iter().any(OcclusionEngine::is_located);
     }
 
     /// Cycles one fragment occupies the unit now.
@@ -121,7 +125,22 @@ impl OcclusionUnit {
     /// Count one fragment in the open query's tiles; returns the hit words it sends.
     #[inline]
     pub fn count(&mut self, fragment: Fragment, passed: bool) -> u32 {
+        if self.located {
+            return self.count_located(fragment, passed);
+        }
         // Round-robin dealing gives tiles to engines 0..active only.
+        self.engines[..self.active]
+            .iter_mut()
+            .map(|engine| engine.scanned_fragment(fragment, passed))
+            .sum()
+    }
+
+    /// [`Self::count`] where an engine locates its tiles (a query of many tiles), out of
+    /// line. (Deciding for each engine in the loop above had made the IR's cycle level on
+    /// the demo 9% slower, 4.1% more instructions; deciding here, 3.5% and 1.3%.)
+    #[cold]
+    #[inline(never)]
+    fn count_located(&mut self, fragment: Fragment, passed: bool) -> u32 {
         self.engines[..self.active]
             .iter_mut()
             .map(|engine| engine.fragment(fragment, passed))
