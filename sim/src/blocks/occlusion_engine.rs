@@ -101,7 +101,9 @@ impl OcclusionEngine {
 
     /// [`Self::fragment`] with every tile tested: for an engine whose query is not located
     /// (the Occlusion Unit decides once for all its engines, so that its few-tile loop,
-    /// inlined into the machines' fragment loops, takes no branch an engine).
+    /// inlined into the machines' fragment loops, takes no branch an engine). The loop
+    /// counts as [`Self::count_in`] does, written out: through it, the IR's cycle level on
+    /// the demo took 1.2% more instructions.
     #[inline(always)]
     pub fn scanned_fragment(&mut self, fragment: Fragment, passed: bool) -> u32 {
         let counter_max = self.counter_max;
