@@ -275,9 +275,7 @@ impl MachineModel {
         self.events += span.depths.len() as u64;
         match &mut self.pipe {
             Pipe::O2(machine) => machine.span(span),
-            Pipe::Ir(machine) => span
-                .fragments()
-                .try_for_each(|fragment| machine.event(&Event::Fragment(fragment))),
+            Pipe::Ir(machine) => machine.span(span),
         }
     }
 
