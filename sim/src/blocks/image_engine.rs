@@ -37,6 +37,9 @@ pub struct ImageEngine {
     latency: u64,
     /// `o` of the last `P` fragments, by fragment number mod `P`.
     accepted: Vec<u64>,
+    /// The next fragment's place in `accepted` (its number mod `P`, stepped rather than
+    /// divided out a fragment).
+    slot: usize,
     /// `s_last + I`: the first cycle the next fragment may enter.
     next_start: u64,
     /// `o_last`.
@@ -63,6 +66,7 @@ impl ImageEngine {
             interval: arch.image_engine_cycles_per_fragment,
             latency: arch.image_engine_latency_cycles,
             accepted: vec![0; arch.image_engine_in_flight()],
+            slot: 0,
             next_start: 0,
             last_accepted: 0,
             fifo: Fifo::new(arch.image_engine_fifo_entries),
@@ -92,7 +96,12 @@ impl ImageEngine {
     /// Time one fragment emitted in `emitted` whose depth test `passed`.
     #[inline]
     pub fn fragment(&mut self, fragment: Fragment, passed: bool, emitted: u64, query_open: bool) {
-        let slot = (self.fragments % self.accepted.len() as u64) as usize;
+        let slot = self.slot;
+        self.slot = if slot + 1 == self.accepted.len() {
+            0
+        } else {
+            slot + 1
+        };
         let start = (emitted + 1).max(self.next_start).max(self.accepted[slot]);
         self.fifo.depart(start);
         self.fragments += 1;
