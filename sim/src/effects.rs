@@ -37,8 +37,13 @@
 //! checked as the replay goes, proves the bulk path gives what the fragments one by one give
 //! ([`crate::machines::o2::O2Machine::span`]; `replay` reports how many fragments it took).
 //! The sampled level's machines fast-forward too (they take the trace's spans whole, up to
-//! a cool-down's end). The InfiniteReality-like machine and a replay with a timeline or at
-//! the rtl fidelity (which clock or record every fragment) take fragments one by one.
+//! a cool-down's end). A replay with a timeline or at the rtl fidelity (which clock or
+//! record every fragment) takes fragments one by one. So does, in its timing, the
+//! InfiniteReality-like machine ([`crate::machines::ir::IrMachine::span`] takes a span's
+//! depth tests and interleave units at once, then times each fragment as one by one):
+//! under its columns interleave a row's fragments go to as many Image Engines, one each,
+//! so timing each at its own engine's FIFO, depth stage and Occlusion Unit is the work
+//! itself; no rule here proves a stretch of them closed-form, and it fast-forwards nothing.
 //!
 //! A span is fast-forwarded when nothing records the blocks' intervals, the Occlusion Unit is
 //! the event-timestamp one, the lookahead window (the fragments the front end let in that the

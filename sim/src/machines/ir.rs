@@ -333,14 +333,18 @@ impl IrMachine {
         let (board, engine) = self.owners[unit];
         let (board, engine) = (board as usize, engine as usize);
         let engine = &mut self.image_engines[engine];
-        let free = self.generators[board].free_cycle();
+        // Where the generator was free, for the timeline's stall slice alone.
+        let free = self
+            .timeline
+            .is_some()
+            .then(|| self.generators[board].free_cycle());
         let emitted = self.generators[board].emit(engine.slot_free_cycle());
         if let Some(query) = &mut self.open {
             engine.load(query.generation, &query.spec);
             query.fragments += 1;
         }
         engine.fragment(fragment, passed, emitted, self.open.is_some());
-        if self.timeline.is_some() {
+        if let Some(free) = free {
             let (t, board) = (&self.timeline, board as u32);
             let generator = Track::FragmentGenerator(board);
             note(t, generator, State::Stalled, free, emitted);
