@@ -248,6 +248,42 @@ proptest! {
 
     #[test]
     fn more_engines_never_make_a_query_finish_later(seed in any::<u64>()) {
+        // With the port's other clients off, more engines only shorten the Occlusion
+        // Unit's service: no query's result may come later.
+        let alone = ["host_memory_share=0", "display_width_pixels=0"];
+        let events = generated_stream(seed, 12);
+        let mut previous: Option<Vec<u64>> = None;
+        for engines in 1..=13 {
+            let mut sets = vec![format!("engines={engines}")];
+            sets.extend(alone.map(str::to_owned));
+            let report = replay(&arch(&sets), &events).unwrap();
+            let available: Vec<u64> = report.queries.iter().map(|q| q.available_cycle).collect();
+            if let Some(previous) = &previous {
+                for (q, (now, before)) in available.iter().zip(previous).enumerate() {
+                    prop_assert!(now <= before, "query #{} at {} engines: {} > {}", q, engines, now, before);
+                }
+            }
+            previous = Some(available);
+        }
+    }
+
+    #[test]
+    fn more_engines_make_a_query_finish_later_by_less_than_the_other_clients_slack(seed in any::<u64>()) {
+        // With the display refresh and the host on (the O2's defaults), the port is not
+        // monotone: work done sooner leaves those clients further behind (their debt builds
+        // a cycle's share at every busy port cycle and pays off at idle ones), and they
+        // take it back from later work. (Seed 14693689128000761447: at 6 engines a verbose
+        // query's fragments leave the Occlusion Unit a cycle apart instead of two, its
+        // records are through 3 cycles sooner, and the clear after it ends the next
+        // query's records a cycle later, 1974 against 1973.) The debt never exceeds the
+        // slack `σ` = 16 cycles, and a debt higher by `d` stretches the work after it by
+        // at most `d / (1 - f)` port cycles (`port = max(work, (work + debt - σ) / (1 -
+        // f))`), `f` the share the two take: 0.184 for the refresh (1280 x 1024 pixels of
+        // 32 bits at 75 Hz, 3.15 Gbit/s, over 256 bits at 66 MHz, 16.9 Gbit/s) and 0.05 for
+        // the host, 0.234; so no result comes more than 16 / 0.766 = 20.9, at most 20
+        // whole cycles later. (Over 20,000 generated streams the most was 8; one stream in
+        // about 300 has a result later at all, so the property above, held with these
+        // clients on, failed a run of 48 cases now and then.)
         let events = generated_stream(seed, 12);
         let mut previous: Option<Vec<u64>> = None;
         for engines in 1..=13 {
@@ -255,7 +291,7 @@ proptest! {
             let available: Vec<u64> = report.queries.iter().map(|q| q.available_cycle).collect();
             if let Some(previous) = &previous {
                 for (q, (now, before)) in available.iter().zip(previous).enumerate() {
-                    prop_assert!(now <= before, "query #{} at {} engines: {} > {}", q, engines, now, before);
+                    prop_assert!(*now <= before + 20, "query #{} at {} engines: {} > {} + 20", q, engines, now, before);
                 }
             }
             previous = Some(available);
