@@ -220,11 +220,11 @@ impl<'a> Cursor<'a> {
         Ok(value)
     }
 
-    /// A varint that must fit in 32 bits: a byte below 0x80 is one whole; else read whole from
-    /// one word where the payload holds eight bytes from it (a query's tile bounds are mostly the empty box's `u32::MAX`, five
-    /// bytes, and its tiles' rectangles a few each: the lazy-grid walk's analytic replay, 12,912
-    /// tiles, spent 8% of its instructions here when every byte took a branch), else byte by
-    /// byte, which also says what is wrong with it.
+    /// A varint that must fit in 32 bits: a byte below 0x80 is one whole; else it is read
+    /// from one word where the payload holds eight bytes from it, else byte by byte (which
+    /// also says what is wrong with it). A query's tile bounds are mostly the empty box's
+    /// `u32::MAX`, five bytes: byte by byte, the lazy-grid walk's analytic replay (12,912
+    /// tiles) spent 6% of its instructions reading them.
     #[inline(always)]
     fn u32(&mut self, what: &str) -> Result<u32, PayloadError> {
         if let Some(&first) = self.bytes.get(self.pos) {
