@@ -105,8 +105,9 @@ pub struct IrMachine {
     /// Per interleave unit, its board and its Image Engine (board-major), looked up instead
     /// of divided out a fragment.
     owners: Vec<(u32, u32)>,
-    /// A span's depth-test results (kept for the next span).
+    /// A span's depth-test results and interleave units (kept for the next span).
     span_passed: Vec<bool>,
+    span_units: Vec<usize>,
     generators: Vec<FragmentGenerator>,
     /// Board-major: Image Engine `i` of board `b` is `b * N + i`.
     image_engines: Vec<ImageEngine>,
@@ -173,6 +174,7 @@ impl IrMachine {
             interleave,
             owners,
             span_passed: Vec::new(),
+            span_units: Vec::new(),
             generators: (0..ir.boards)
                 .map(|_| {
                     FragmentGenerator::new(
@@ -309,13 +311,15 @@ impl IrMachine {
         let mut passed = std::mem::take(&mut self.span_passed);
         self.depth
             .test_span(&self.state, span, writes_allowed, &mut passed);
-        let interleave = self.interleave.clone();
-        let mut fragments = span.fragments().zip(&passed);
-        interleave.for_each_unit_along(span.x, span.y, span.depths.len(), |unit| {
-            let (fragment, &passed) = fragments.next().expect("a unit a fragment");
+        let mut units = std::mem::take(&mut self.span_units);
+        units.clear();
+        self.interleave
+            .for_each_unit_along(span.x, span.y, span.depths.len(), |unit| units.push(unit));
+        for ((fragment, &passed), &unit) in span.fragments().zip(&passed).zip(&units) {
             self.timed_fragment(fragment, unit, passed);
-        });
+        }
         self.span_passed = passed;
+        self.span_units = units;
         Ok(())
     }
 
