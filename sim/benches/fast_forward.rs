@@ -10,34 +10,17 @@
 use occsim_sim::effects::EffectsChoice;
 use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::{Arch, Fidelity, LevelResult};
-use occsim_traces::builtin::{demo_scene, DemoOptions};
-use occsim_traces::golden::GoldenModel;
 use occsim_traces::rounds::fastest_of_rounds;
-use occsim_traces::scene::{parse_scene, Command};
-use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
+use occsim_traces::trace::TraceReader;
+
+#[path = "support/demo.rs"]
+mod demo;
+
+use demo::demo_trace;
 
 /// Rounds in which every run takes its turn; each keeps its fastest, so a slow spell of the
 /// shared machine falls on all of them alike.
 const ROUNDS: usize = 3;
-
-/// The demo's trace, as `occsim trace gen demo` writes it (the header's facts written back).
-fn demo_trace() -> Vec<u8> {
-    let lines = parse_scene(&demo_scene(&DemoOptions::default()), "demo").expect("parses");
-    let Command::Viewport { width, height } = lines[0].command else {
-        panic!("a scene starts with its viewport");
-    };
-    let mut file = std::io::Cursor::new(Vec::new());
-    let mut writer = TraceWriter::new(&mut file, &TraceHeader::new(width, height)).expect("header");
-    let mut golden = GoldenModel::new(width, height);
-    for line in &lines {
-        golden
-            .execute(&line.command, &mut writer)
-            .expect("the demo renders");
-    }
-    golden.finish(&mut writer).expect("the demo renders");
-    writer.finish_seekable().expect("trace");
-    file.into_inner()
-}
 
 fn cycle_level(trace: &[u8], arch: &Arch, effects: EffectsChoice) -> LevelResult {
     let options = ReplayOptions {

@@ -9,13 +9,16 @@
 //! Run: `cargo bench -p occsim-sim --bench ir_spans`
 
 use occsim_sim::{Arch, IrMachine, Report};
-use occsim_traces::builtin::{demo_scene, DemoOptions};
-use occsim_traces::golden::{EventSink, GoldenModel};
+use occsim_traces::golden::EventSink;
 use occsim_traces::rounds::fastest_of_rounds;
-use occsim_traces::scene::{parse_scene, Command};
-use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
+use occsim_traces::trace::TraceReader;
 use occsim_traces::{Event, Span};
 use std::convert::Infallible;
+
+#[path = "support/demo.rs"]
+mod demo;
+
+use demo::demo_trace;
 
 /// Rounds in which both feeds take their turn; each keeps its fastest run.
 const ROUNDS: usize = 3;
@@ -50,26 +53,11 @@ impl EventSink for Items {
 
 /// The demo's stream as `occsim replay` reads it from `occsim trace gen demo`'s file.
 fn demo_items() -> (u32, u32, Vec<Item>) {
-    let lines = parse_scene(&demo_scene(&DemoOptions::default()), "demo").expect("parses");
-    let Command::Viewport { width, height } = lines[0].command else {
-        panic!("a scene starts with its viewport");
-    };
-    let mut file = std::io::Cursor::new(Vec::new());
-    let mut writer = TraceWriter::new(&mut file, &TraceHeader::new(width, height)).expect("header");
-    let mut golden = GoldenModel::new(width, height);
-    for line in &lines {
-        golden
-            .execute(&line.command, &mut writer)
-            .expect("the demo renders");
-    }
-    golden.finish(&mut writer).expect("the demo renders");
-    writer.finish_seekable().expect("trace");
-    let bytes = file.into_inner();
+    let bytes = demo_trace();
+    let mut reader = TraceReader::new(&bytes[..]).expect("a trace");
+    let (width, height) = (reader.header().width, reader.header().height);
     let mut items = Items::default();
-    TraceReader::new(&bytes[..])
-        .expect("a trace")
-        .read_into(&mut items)
-        .expect("reads");
+    reader.read_into(&mut items).expect("reads");
     (width, height, items.0)
 }
 

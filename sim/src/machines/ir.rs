@@ -295,7 +295,7 @@ impl IrMachine {
     /// interleave's `x mod U` found once, not divided out a pixel), each fragment then timed
     /// as [`Self::fragment`] times it. (Fragment by fragment, with three integer divisions a
     /// fragment for its owner, the IR's cycle level ran at 22.7 M fragments/s on the demo on
-    /// ir4; now 34 M/s, 1.17x of the one-by-one path with the owner table,
+    /// ir4; now 34-36 M/s, 1.20x of the one-by-one path with the owner table,
     /// `cargo bench -p occsim-sim --bench ir_spans`.)
     pub fn span(&mut self, span: Span) -> Result<(), SimError> {
         let inside = span.x as u64 + span.depths.len() as u64 <= self.width as u64
