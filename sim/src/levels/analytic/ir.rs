@@ -10,9 +10,11 @@
 //! | `D_ip` | `Σ pace` over Image Engine `i`'s fragments of stretch `p`, `pace = max(C, s)`: the depth stage (`C` = `image_engine_cycles_per_fragment`, its initiation interval) and the OccU (`s` = cycles a fragment under the open query, [`super::service_cycles`]) are pipelined, so the slower paces the engine |
 //! | `H_i` | hit words: over its passing fragments under a verbose query, the query's tiles holding each |
 //!
-//! The formulas follow the work stretch by stretch, as a fluid. A *stretch* is a primitive's
-//! fragments, cut every [`STRETCH_FRAGMENTS`] fragments and where a query begins (its pace
-//! changes). Each board's Fragment Generator has a clock `g_b`, each Image Engine the cycle
+//! The formulas follow the work stretch by stretch, as a fluid. A *stretch* is a band of a
+//! primitive's rows, cut every [`STRETCH_ROWS`] rows and where a query begins (its pace
+//! changes): under the columns interleave, what an Image Engine is given in it is what its
+//! columns hold, so a stretch is counted by column (each pixel's owner looked up under the
+//! others). Each board's Fragment Generator has a clock `g_b`, each Image Engine the cycle
 //! `d_i` its depth stage is through the work it was given, both carried from stretch to
 //! stretch. The generator emits an engine's fragment once the fragment `E` before it
 //! (`E` = `image_engine_fifo_entries`) has left the FIFO into the depth stage, so a busy
@@ -31,7 +33,9 @@
 //!                                                  no earlier than its release r from the window's start)
 //! emit_b  = start_b + F_bp / rate                 (rate = fragment_generator_fragments_per_cycle)
 //! d_i     = max(max(d_i, start_b) + D_ip, e_i + pace)   (each engine i of board b it touches;
-//!                                                         e_i: its last fragment's emission)
+//!                                                         e_i: its last fragment's emission,
+//!                                                         taken as the last row's first where
+//!                                                         that came earlier)
 //! g_b     = max(emit_b, max_i (d_i - H))
 //! T_w     = max(ceil(max_b g_b), max_i H_i - Q · C)   (hit words drain one 32-bit word a cycle)
 //! ```
@@ -46,7 +50,13 @@
 //! city on ir4, with queries of a hundred tiles and more, it predicted 40% more cycles than
 //! the machine (now 2.3% more). Cutting primitives into stretches follows their rows' uneven
 //! load (random triangles on ir2: 8.3% fewer cycles than the machine as whole primitives,
-//! 2.5% in stretches of 64).
+//! 2.5% in stretches of 64 fragments). Counted by rows, a stretch costs its columns, not its
+//! fragments: the IR's analytic level on the demo on ir4 went from 203 to 112 ms in
+//! process, and a stretch is what a trace's index could carry without the fragments (each
+//! column's count, and the last row's extent). Where in a stretch an engine's last fragment
+//! came is known only in the last row (a row is one run: a column there has its board's
+//! columns right of it after it); an engine whose columns end higher up is taken to be
+//! through a pace after the last row's first fragment of its board, a little late.
 //!
 //! Latency: the end token enters in `t_end` (the predicted cycle the window ends). Image
 //! Engine `i`'s partial report is ready in `r_i = t_end + 3 + backlog_i` (3: through its
@@ -98,7 +108,7 @@ pub struct IrWindow {
     engines: Vec<EngineClock>,
     /// The pace of the last fragment counted (`max(C, s)`), in cycles.
     pace: u64,
-    /// The current stretch: its `F_bp`, and its fragments.
+    /// The current stretch: its `F_bp`.
     stretch_board_fragments: [u64; MAX_BOARDS],
     /// The Image Engines the stretch touched, a bit each (engine `e` is bit `e mod 64` of
     /// word `e / 64`): a run of a row sets its engines' bits a word at a time, and closing
@@ -107,27 +117,43 @@ pub struct IrWindow {
     touched: Vec<u64>,
     /// `N`: Image Engines a board.
     per_board: usize,
-    /// Where the interleave deals columns (`x mod U` to unit `x mod U`), the units of a run
-    /// of a row are consecutive, and a board's are consecutive Image Engines: `U`, and the
-    /// boards as a power of two, for [`Self::columns_piece`]; else `None` (each pixel's
-    /// owner looked up).
+    /// Where the interleave deals columns (`x mod U` to unit `x mod U`), an Image Engine's
+    /// fragments in a stretch are those of its columns: `U`, the boards as a power of two,
+    /// and the stretch's fragments a column, for [`Self::fold_columns`]; else `None` (each
+    /// pixel's owner looked up).
     columns: Option<Columns>,
-    stretch_fragments: u64,
+    /// Rows the current stretch has begun, the last one's `y`, and its fragments on each
+    /// board.
+    stretch_rows: u32,
+    stretch_row: Option<u16>,
+    row_board_fragments: [u64; MAX_BOARDS],
     /// The current stretch starts a primitive (its setup counts).
     stretch_sets_up: bool,
 }
 
-/// The columns interleave's shape, as [`IrWindow::columns_piece`] steps along it.
-#[derive(Clone, Copy, Debug)]
+/// The columns interleave's shape and the current stretch's fragments in each column, as
+/// [`IrWindow::fold_columns`] deals them to the Image Engines.
+#[derive(Clone, Debug)]
 struct Columns {
     /// `U`: units (Image Engines on all boards).
     units: u64,
     /// `log2 B` (the machine has 1, 2 or 4 boards).
     board_shift: u32,
+    /// The stretch's fragments in column `x` (the viewport's width of them).
+    heights: Vec<u32>,
+    /// The columns the stretch has fragments in lie within `first..=last` (`first > last`:
+    /// none).
+    first: usize,
+    last: usize,
+    /// The columns of its last row lie within `row_first..=row_last`: there each column's
+    /// last fragment is, and (a primitive's row being one run) its board's after it in the
+    /// row are the board's columns right of it.
+    row_first: usize,
+    row_last: usize,
 }
 
 /// One Image Engine's clock and its share of the current stretch, side by side (a
-/// fragment and a stretch's close read and write all three).
+/// stretch's close reads and writes both).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct EngineClock {
     /// `d_i`, in slots: the cycle its depth stage is through the work it was given.
@@ -138,15 +164,23 @@ struct EngineClock {
     last: u64,
 }
 
-/// Fragments after which the formulas close a stretch of a primitive and advance the
-/// clocks: a primitive's rows load its Image Engines unevenly (a narrow row paces the
-/// generator at one engine's speed, a wide one at the generator's), which one sum over the
-/// whole primitive would average away (on the random scene's triangles on ir2, 8% fewer
-/// cycles than the machine). A few FIFOs' worth, so the fluid still smooths what the FIFOs do.
-const STRETCH_FRAGMENTS: u64 = 64;
+/// Rows of a primitive after which the formulas close a stretch and advance the clocks: a
+/// primitive's rows load its Image Engines unevenly (a narrow row paces the generator at
+/// one engine's speed, a wide one at the generator's), which one sum over the whole
+/// primitive averages away; a few FIFOs' worth of a narrow primitive's rows, so that the
+/// fluid still smooths what the FIFOs do. On the small corpus on ir1, ir2 and ir4
+/// (`occsim fidelity --corpus --scale small --machines ir1,ir2,ir4 --no-rtl`), the worst
+/// class's analytic cycles error was 0.6% at 4 rows, 1.0% at 8, 1.7% at 16, 5.2% at 64 and
+/// 6.3% for whole primitives (the random scene's slivers); the sampled level's worst p95
+/// latency error 0.9% at 1 row, 1.9% at 4, 2.1% at 8 and 16 (its bound is 3%). The
+/// analytic level on the demo on ir4 took 184 ms at 4 rows, 112 ms at 8 and 90 ms at 16
+/// (203 ms in stretches of 64 fragments, one by one): 8 holds every bound with room, at
+/// most of the saving.
+const STRETCH_ROWS: u32 = 8;
 
 impl IrWindow {
-    pub fn new(arch: &IrArch) -> IrWindow {
+    /// The window of `arch` over a viewport `width` pixels wide.
+    pub fn new(arch: &IrArch, width: u32) -> IrWindow {
         let engines = arch.image_engines();
         let rate = arch.fragment_generator_fragments_per_cycle.max(1) as u64;
         IrWindow {
@@ -170,8 +204,15 @@ impl IrWindow {
                 .then(|| Columns {
                     units: engines as u64,
                     board_shift: arch.boards.trailing_zeros(),
+                    heights: vec![0; width as usize],
+                    first: usize::MAX,
+                    last: 0,
+                    row_first: usize::MAX,
+                    row_last: 0,
                 }),
-            stretch_fragments: 0,
+            stretch_rows: 0,
+            stretch_row: None,
+            row_board_fragments: [0; MAX_BOARDS],
             stretch_sets_up: false,
         }
     }
@@ -198,16 +239,25 @@ impl IrWindow {
         }
     }
 
-    /// The current stretch's work joins the clocks (see the module docs), board by board.
+    /// The current stretch's work joins the clocks (see the module docs), board by board:
+    /// each engine it touched takes its share after the work before and no sooner than the
+    /// stretch starts, and is through no sooner than a pace after its board's generator
+    /// emitted its last fragment.
     fn close_stretch(&mut self) {
+        self.fold_columns();
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let pace = self.pace * self.rate;
         let hidden = self.hidden();
         let starts = |board: usize| self.generators[board] + setup;
-        // The board whose engines come next, where its engines end, its start and clock.
+        // The board whose engines come next, where its engines end, its start, its
+        // emission's end and its clock.
         let mut board = 0;
         let mut board_end = self.per_board;
+        // An engine's last fragment came no earlier than the last row's first of its board.
+        let last_row_starts =
+            |board: usize| self.stretch_board_fragments[board] - self.row_board_fragments[board];
         let mut start = starts(0);
+        let mut last_row_start = last_row_starts(0);
         let mut generators = [0u64; MAX_BOARDS];
         let mut generator = start + self.stretch_board_fragments[0];
         for (word_index, word) in self.touched.iter_mut().enumerate() {
@@ -220,13 +270,15 @@ impl IrWindow {
                     board += 1;
                     board_end += self.per_board;
                     start = starts(board);
+                    last_row_start = last_row_starts(board);
                     generator = start + self.stretch_board_fragments[board];
                 }
                 let clock = &mut self.engines[engine];
-                let emitted = start + clock.last;
+                let emitted = start + clock.last.max(last_row_start);
                 clock.through = (clock.through.max(start) + clock.slots).max(emitted + pace);
                 generator = generator.max(clock.through.saturating_sub(hidden));
                 clock.slots = 0;
+                clock.last = 0;
             }
         }
         generators[board] = generator;
@@ -237,8 +289,55 @@ impl IrWindow {
         let boards = self.generators.len();
         self.generators.copy_from_slice(&generators[..boards]);
         self.stretch_board_fragments = [0; MAX_BOARDS];
-        self.stretch_fragments = 0;
+        self.stretch_rows = 0;
+        self.stretch_row = None;
+        self.row_board_fragments = [0; MAX_BOARDS];
         self.stretch_sets_up = false;
+    }
+
+    /// Under the columns interleave, deal the stretch's columns to their Image Engines:
+    /// column `x` is unit `g = x mod U`, Image Engine `g / B` of board `g mod B` (so board
+    /// `x mod B`), and its fragments are that engine's and that board's. A column of the
+    /// last row has its last fragment there, its board's columns right of it, `(row_last -
+    /// x) / B`, after it (the engine's last is its latest column's); the other columns'
+    /// last fragments came before the last row (see [`Self::close_stretch`]).
+    fn fold_columns(&mut self) {
+        let Some(columns) = &mut self.columns else {
+            return;
+        };
+        if columns.first > columns.last {
+            return;
+        }
+        let board_mask = (1usize << columns.board_shift) - 1;
+        let (first, last) = (columns.first, columns.last);
+        let mut board_fragments = self.stretch_board_fragments;
+        for (x, &height) in (first..=last).zip(&columns.heights[first..=last]) {
+            board_fragments[x & board_mask] += height as u64;
+        }
+        let (row_first, row_last) = (columns.row_first, columns.row_last);
+        let slots_a_fragment = self.pace * self.rate;
+        let mut unit = first as u64 % columns.units;
+        for (x, height) in (first..=last).zip(&mut columns.heights[first..=last]) {
+            let fragments = std::mem::take(height) as u64;
+            if fragments > 0 {
+                let board = x & board_mask;
+                let engine = board * self.per_board + (unit >> columns.board_shift) as usize;
+                let clock = &mut self.engines[engine];
+                clock.slots += fragments * slots_a_fragment;
+                if (row_first..=row_last).contains(&x) {
+                    let after = ((row_last - x) >> columns.board_shift) as u64;
+                    clock.last = clock.last.max(board_fragments[board].saturating_sub(after));
+                }
+                self.touched[engine / 64] |= 1 << (engine % 64);
+            }
+            unit += 1;
+            if unit == columns.units {
+                unit = 0;
+            }
+        }
+        self.stretch_board_fragments = board_fragments;
+        (columns.first, columns.last) = (usize::MAX, 0);
+        (columns.row_first, columns.row_last) = (usize::MAX, 0);
     }
 
     /// A new primitive, released `release` cycles after the window's start: the current
@@ -264,12 +363,11 @@ impl IrWindow {
         }
     }
 
-    /// The fragments of pixels `x..x + len` of row `y`, at the pace set, each to the board
-    /// and Image Engine `owners` gives its interleave unit (its board's fragment count in
-    /// the stretch, the engine's last and its slots), a stretch's piece at a time, with the
-    /// piece's counters in locals; a stretch closes at its last fragment. (Counted in
-    /// the window, every fragment had waited on the last one's store of the same counters:
-    /// the IR's analytic level spent 45% of its time in this loop on the demo.)
+    /// The fragments of pixels `x..x + len` of row `y` (inside the viewport), at the pace
+    /// set: a stretch closes before the first fragment of its [`STRETCH_ROWS`]` + 1`-th
+    /// row. Under the columns interleave each column's fragments are counted, to be dealt
+    /// to the engines as the stretch closes; else each pixel goes to the board and Image
+    /// Engine `owners` gives its interleave unit.
     pub fn paced_along(
         &mut self,
         interleave: &FramebufferInterleave,
@@ -277,38 +375,45 @@ impl IrWindow {
         (x, y): (u16, u16),
         len: usize,
     ) {
-        let mut at = 0;
-        while at < len {
-            let room = (STRETCH_FRAGMENTS - self.stretch_fragments) as usize;
-            let piece = room.min(len - at);
-            self.paced_piece(interleave, owners, (x + at as u16, y), piece);
-            at += piece;
-            if self.stretch_fragments == STRETCH_FRAGMENTS {
+        if self.stretch_row != Some(y) {
+            if self.stretch_rows == STRETCH_ROWS {
                 self.close_stretch();
             }
+            self.stretch_rows += 1;
+            self.stretch_row = Some(y);
+            self.row_board_fragments = [0; MAX_BOARDS];
+            if let Some(columns) = &mut self.columns {
+                (columns.row_first, columns.row_last) = (usize::MAX, 0);
+            }
         }
-    }
-
-    /// [`Self::paced_along`] for a piece that stays within the current stretch.
-    #[inline(always)]
-    fn paced_piece(
-        &mut self,
-        interleave: &FramebufferInterleave,
-        owners: &[(usize, usize)],
-        (x, y): (u16, u16),
-        len: usize,
-    ) {
-        match self.columns {
-            Some(columns) => self.columns_piece(columns, x, len),
+        match &mut self.columns {
+            Some(columns) if len > 0 => {
+                let (first, last) = (x as usize, x as usize + len - 1);
+                for height in &mut columns.heights[first..=last] {
+                    *height += 1;
+                }
+                columns.first = columns.first.min(first);
+                columns.last = columns.last.max(last);
+                columns.row_first = columns.row_first.min(first);
+                columns.row_last = columns.row_last.max(last);
+                // Each board has `len / B` of the run's pixels, and the `len mod B` boards
+                // from the first pixel's on one more.
+                let boards = 1usize << columns.board_shift;
+                for step in 0..boards {
+                    let board = (first + step) & (boards - 1);
+                    self.row_board_fragments[board] +=
+                        (len / boards + usize::from(step < len % boards)) as u64;
+                }
+            }
+            Some(_) => {}
             None => self.owned_piece(interleave, owners, (x, y), len),
         }
         self.fragments += len as u64;
-        self.stretch_fragments += len as u64;
     }
 
-    /// A piece under any interleave: each pixel's board and Image Engine looked up, its
-    /// board's fragment count in the stretch, the engine's last and its slots counted, with
-    /// the boards' counts in locals.
+    /// A run under any interleave: each pixel's board and Image Engine looked up, its
+    /// board's fragment counts in the stretch and the row, the engine's slots and last
+    /// counted, with the boards' counts in locals.
     fn owned_piece(
         &mut self,
         interleave: &FramebufferInterleave,
@@ -318,51 +423,18 @@ impl IrWindow {
     ) {
         let slots_a_fragment = self.pace * self.rate;
         let mut board_fragments = self.stretch_board_fragments;
+        let mut row_board_fragments = self.row_board_fragments;
         let (engines, touched) = (&mut self.engines, &mut self.touched);
         interleave.for_each_unit_along(x, y, len, |unit| {
             let (board, engine) = owners[unit];
             board_fragments[board] += 1;
-            let clock = &mut engines[engine];
-            clock.last = board_fragments[board];
+            row_board_fragments[board] += 1;
             touched[engine / 64] |= 1 << (engine % 64);
-            clock.slots += slots_a_fragment;
+            engines[engine].slots += slots_a_fragment;
+            engines[engine].last = board_fragments[board];
         });
         self.stretch_board_fragments = board_fragments;
-    }
-
-    /// A piece under the columns interleave: what [`Self::owned_piece`] counts, board by
-    /// board. Pixels `x..x + len` are units `x mod U` on, consecutive until they wrap past
-    /// `U`; within such a run, board `b`'s pixels are the units `g ≡ b (mod B)`, its
-    /// consecutive Image Engines `b · N + g / B`, each once, the `j`-th of them its board's
-    /// `j + 1`-th fragment of the run.
-    fn columns_piece(&mut self, columns: Columns, x: u16, len: usize) {
-        let slots_a_fragment = self.pace * self.rate;
-        let boards = 1u64 << columns.board_shift;
-        let (mut unit, mut left) = (x as u64 % columns.units, len as u64);
-        while left > 0 {
-            let run = left.min(columns.units - unit);
-            for board in 0..boards {
-                // The run's first pixel of this board, and how many it has.
-                let first = (board + boards - (unit & (boards - 1))) & (boards - 1);
-                if first >= run {
-                    continue;
-                }
-                let count = (run - first).div_ceil(boards);
-                let board = board as usize;
-                let engine =
-                    board * self.per_board + ((unit + first) >> columns.board_shift) as usize;
-                let fragments = self.stretch_board_fragments[board];
-                let engines = &mut self.engines[engine..engine + count as usize];
-                for (j, clock) in engines.iter_mut().enumerate() {
-                    clock.last = fragments + j as u64 + 1;
-                    clock.slots += slots_a_fragment;
-                }
-                set_bits(&mut self.touched, engine..engine + count as usize);
-                self.stretch_board_fragments[board] = fragments + count;
-            }
-            unit = 0;
-            left -= run;
-        }
+        self.row_board_fragments = row_board_fragments;
     }
 
     /// Slots a Fragment Generator may run ahead of an engine's work at the current pace (see
@@ -413,23 +485,6 @@ impl IrWindow {
     }
 }
 
-/// Set bits `range` of `words` (bit `i` is bit `i mod 64` of word `i / 64`), a word at a
-/// time.
-fn set_bits(words: &mut [u64], range: std::ops::Range<usize>) {
-    let mut at = range.start;
-    while at < range.end {
-        let bit = at % 64;
-        let here = (64 - bit).min(range.end - at);
-        let mask = if here == 64 {
-            u64::MAX
-        } else {
-            ((1u64 << here) - 1) << bit
-        };
-        words[at / 64] |= mask;
-        at += here;
-    }
-}
-
 /// Boards the formulas keep clocks for on the stack (the machine has 1, 2 or 4).
 const MAX_BOARDS: usize = 4;
 
@@ -460,7 +515,8 @@ pub(crate) struct IrBottleneck {
 }
 
 impl IrBottleneck {
-    pub(super) fn new(arch: &IrArch) -> IrBottleneck {
+    /// The formulas of `arch` over a viewport `width` pixels wide.
+    pub(super) fn new(arch: &IrArch, width: u32) -> IrBottleneck {
         let interleave = FramebufferInterleave::new(arch);
         let owners = (0..arch.image_engines())
             .map(|g| {
@@ -472,7 +528,7 @@ impl IrBottleneck {
         IrBottleneck {
             interleave,
             owners,
-            window: IrWindow::new(arch),
+            window: IrWindow::new(arch, width),
             arch: arch.clone(),
             open: None,
             host: 0,
@@ -679,13 +735,40 @@ mod tests {
     }
 
     #[test]
+    fn an_engine_whose_last_fragment_came_before_the_last_row_is_timed_from_that_row() {
+        // One board of two Image Engines (U = 2: column x to engine x mod 2), the ir
+        // defaults: 2 fragments a cycle (a slot is half a cycle), setup 4 cycles = 8 slots,
+        // C = 11 cycles = 22 slots a fragment. A primitive released at 0 starts at slot 8.
+        // Row 0 has pixels 1 and 2 (fragments 1 and 2: engines 1 and 0), row 1 pixel 0
+        // (fragment 3: engine 0); the last row starts after fragment 2.
+        // Engine 1: one fragment, its last (fragment 1) before the last row, so counted at
+        // fragment 2: through = max(8 + 22, 8 + 2 + 22) = 32 (31 if fragment 1 counted).
+        // Engine 0: two fragments, its last fragment 3: max(8 + 44, 8 + 3 + 22) = 52.
+        let arch = columns_arch(1, 2);
+        let interleave = FramebufferInterleave::new(&arch);
+        let owners = [(0, 0), (0, 1)];
+        for by_columns in [true, false] {
+            let mut window = IrWindow::new(&arch, 4);
+            if !by_columns {
+                window.columns = None;
+            }
+            window.primitive(0.0);
+            window.paced_along(&interleave, &owners, (1, 0), 2);
+            window.paced_along(&interleave, &owners, (0, 1), 1);
+            window.close_stretch();
+            let through: Vec<u64> = window.engines.iter().map(|e| e.through).collect();
+            assert_eq!(through, [52, 32], "by columns: {by_columns}");
+        }
+    }
+
+    #[test]
     fn the_columns_path_counts_what_looking_each_owner_up_counts() {
-        // Random rows (narrow ones that come back to the same engines within a stretch
-        // when several rows make one,
-        // wide ones that wrap past the last unit), paces and primitives, fed to a window
-        // that steps along the columns and to one that looks every pixel's owner up: every
-        // engine's clock and every generator's must agree after every close, and the
-        // windows' cycles at the end.
+        // Random rows of one run each (narrow ones that come back to the same engines
+        // within a stretch when several rows make one, wide ones that wrap past the last
+        // unit, some fed in two pieces), paces and primitives, fed to a window that counts
+        // columns and to one that looks every pixel's owner up: every engine's clock and
+        // every generator's must agree after every close, and the windows' cycles at the
+        // end.
         for (boards, per_board) in [(4, 80), (2, 80), (1, 80), (4, 3), (2, 1), (1, 1)] {
             let arch = columns_arch(boards, per_board);
             let interleave = FramebufferInterleave::new(&arch);
@@ -695,11 +778,12 @@ mod tests {
                     (owner.board, owner.board * per_board + owner.image_engine)
                 })
                 .collect();
-            let mut columns = IrWindow::new(&arch);
-            let mut looked_up = IrWindow::new(&arch);
+            let mut columns = IrWindow::new(&arch, 2048);
+            let mut looked_up = IrWindow::new(&arch, 2048);
             assert!(columns.columns.is_some());
             looked_up.columns = None;
             let mut rng = SplitMix64(boards as u64 * 1000 + per_board as u64);
+            let mut y = 0u16;
             for step in 0..4_000 {
                 match rng.below(20) {
                     0 => {
@@ -722,9 +806,13 @@ mod tests {
                         let x = rng.below(1280) as u16;
                         let len = [1, 3, 7, 40, 200, 700][rng.below(6) as usize];
                         let len = len.min(2048 - x as usize);
-                        let y = rng.below(1024) as u16;
-                        columns.paced_along(&interleave, &owners, (x, y), len);
-                        looked_up.paced_along(&interleave, &owners, (x, y), len);
+                        // The next row, as a primitive's come.
+                        y = (y + 1) % 1024;
+                        let split = rng.below(len as u64 + 1) as usize;
+                        for (x, len) in [(x, split), (x + split as u16, len - split)] {
+                            columns.paced_along(&interleave, &owners, (x, y), len);
+                            looked_up.paced_along(&interleave, &owners, (x, y), len);
+                        }
                     }
                 }
                 if rng.below(4) > 0 {

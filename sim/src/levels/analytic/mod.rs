@@ -53,7 +53,7 @@ impl Formulas {
             Machine::O2 => {
                 Formulas::O2(Box::new(o2::O2Bottleneck::new(&arch.o2()?, width, height)))
             }
-            Machine::Ir => Formulas::Ir(Box::new(ir::IrBottleneck::new(&arch.ir()?))),
+            Machine::Ir => Formulas::Ir(Box::new(ir::IrBottleneck::new(&arch.ir()?, width))),
         })
     }
 
