@@ -170,6 +170,20 @@ pub fn replay<R: Read>(
             .finish(arch)
             .map_err(model_error);
     }
+    if options.level == Fidelity::Analytic
+        && options.window_index
+        && options.retile.is_none()
+        && AnalyticModel::reads_band_index(arch, reader.header(), reader.has_band_index())
+    {
+        let mut model =
+            AnalyticModel::from_window_index(arch, width, height).map_err(ReplayError::Setup)?;
+        reader
+            .for_each_band_item(|item| model.index_item(item))
+            .map_err(|e| read_error(e, model_error))?;
+        return LevelModel::Analytic(Box::new(model))
+            .finish(arch)
+            .map_err(model_error);
+    }
     if let Fidelity::Sampled { every } = options.level {
         // First the formulas alone over the trace, for the windows whose queries they
         // predict slowest; then the model that simulates those and every K-th window.

@@ -1228,6 +1228,8 @@ impl SampledModel {
                 return Ok(());
             }
             IndexItem::Stretch(stretch) => stretch,
+            // The window index holds no bands (its reader refuses one).
+            IndexItem::Band(_) => return Ok(()),
         };
         self.close_ended_window().map_err(ReadError::Sink)?;
         let state = *self.core.functional.state();

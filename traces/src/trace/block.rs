@@ -15,8 +15,11 @@ pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// densest runs of reads ([`crate::trace::FragmentStretch::dense`]); version 8 adds the
 /// window table's blocks ([`crate::trace::windows`]); version 9 gives every stretch its runs
 /// of reads that end at its last fragment ([`crate::trace::FragmentStretch::ending`]), at
-/// two dearer read costs as well ([`crate::trace::DENSE_READ_COSTS`]).
-pub const FORMAT_VERSION: u16 = 9;
+/// two dearer read costs as well ([`crate::trace::DENSE_READ_COSTS`]); version 10 adds the
+/// band index's blocks beside the window index's ([`crate::trace::bands`]).
+pub const FORMAT_VERSION: u16 = 10;
+/// The first version whose indexed traces hold a band index ([`crate::trace::bands`]).
+pub const BANDS_VERSION: u16 = 10;
 /// The first version whose window index holds every count the O2 formulas take
 /// ([`crate::trace::TraceReader::index_has_every_count`]).
 pub const INDEX_COUNTS_VERSION: u16 = 9;
@@ -45,6 +48,7 @@ pub(crate) const KIND_SUMMARY: u8 = 2;
 pub(crate) const KIND_INDEX: u8 = 3;
 pub(crate) const KIND_DEPTH_TESTS: u8 = 4;
 pub(crate) const KIND_WINDOWS: u8 = 5;
+pub(crate) const KIND_BANDS: u8 = 6;
 /// Payload codecs.
 pub(crate) const CODEC_STORED: u8 = 0;
 pub(crate) const CODEC_ZSTD: u8 = 1;
@@ -97,8 +101,12 @@ impl BlockHeader {
         };
         let (raw, stored) = (header.raw_len as usize, header.stored_len as usize);
         match header.kind {
-            KIND_EVENTS | KIND_INDEX if raw == 0 => return Err("empty event block".to_owned()),
-            KIND_EVENTS | KIND_INDEX | KIND_DEPTH_TESTS | KIND_WINDOWS if raw > MAX_BLOCK_BYTES => {
+            KIND_EVENTS | KIND_INDEX | KIND_BANDS if raw == 0 => {
+                return Err("empty event block".to_owned())
+            }
+            KIND_EVENTS | KIND_INDEX | KIND_BANDS | KIND_DEPTH_TESTS | KIND_WINDOWS
+                if raw > MAX_BLOCK_BYTES =>
+            {
                 return Err(format!(
                     "block claims {raw} payload bytes (most {MAX_BLOCK_BYTES})"
                 ))
@@ -125,7 +133,8 @@ impl BlockHeader {
                     header.events
                 ))
             }
-            KIND_EVENTS | KIND_SUMMARY | KIND_INDEX | KIND_DEPTH_TESTS | KIND_WINDOWS => {}
+            KIND_EVENTS | KIND_SUMMARY | KIND_INDEX | KIND_DEPTH_TESTS | KIND_WINDOWS
+            | KIND_BANDS => {}
             kind => return Err(format!("unknown block kind {kind}")),
         }
         if bytes[2] != 0 || bytes[3] != 0 {

@@ -3,6 +3,7 @@
 //! depths are coded as residuals from a prediction. All prediction state resets at every
 //! block start, so each block decodes on its own.
 
+use super::bands::{FragmentBand, RowRun, BAND_RUNS};
 use super::dense_reads::{DenseRuns, ReadRun, DENSE_READ_COSTS};
 use super::header::StreamTally;
 use super::index::{
@@ -61,6 +62,9 @@ pub(crate) mod tag {
     /// In window-index blocks only, in place of fragments: a [`FragmentStretch`]'s counts.
     /// Version 4 on.
     pub const STRETCH: u8 = 0x16;
+    /// In band-index blocks only, in place of fragments: a [`crate::trace::FragmentBand`]'s
+    /// runs. Version 10 on.
+    pub const BAND: u8 = 0x17;
 }
 
 /// Most fragments in one span: a row of the widest viewport.
@@ -597,6 +601,37 @@ fn decode_present_runs(c: &mut Cursor, runs: &mut DenseRuns) -> Result<(), Paylo
 
 /// A stretch record into `out`, checked.
 #[inline]
+/// A band record's runs (its tag read) into `out`, checked to be a band a writer makes in
+/// a viewport of `width` by `height`.
+fn decode_band(
+    c: &mut Cursor,
+    (width, height): (u32, u32),
+    out: &mut FragmentBand,
+) -> Result<(), PayloadError> {
+    let start = c.pos - 1;
+    let count = c.byte()? as usize;
+    if count == 0 || count > BAND_RUNS {
+        return Err(bad(
+            start,
+            format!("a band of {count} runs (1 to {BAND_RUNS})"),
+        ));
+    }
+    *out = FragmentBand::EMPTY;
+    let (mut x, mut y, mut len) = (0i64, 0i64, 0i64);
+    for _ in 0..count {
+        x = x.saturating_add(c.zz()?);
+        y = y.saturating_add(c.zz()?);
+        len = len.saturating_add(c.zz()?);
+        let (Ok(x), Ok(y), Ok(len)) = (u16::try_from(x), u16::try_from(y), u32::try_from(len))
+        else {
+            return Err(bad(start, "a band run's x, row or length out of range"));
+        };
+        out.try_push(RowRun { x, y, len }, width, height)
+            .map_err(|reason| bad(start, reason))?;
+    }
+    Ok(())
+}
+
 fn decode_stretch(c: &mut Cursor, out: &mut FragmentStretch) -> Result<(), PayloadError> {
     let start = c.pos - 1;
     // Field by field into `out`: the record is read for every stretch of an index.
@@ -766,6 +801,8 @@ pub(crate) struct BlockDecoder {
     /// The depths of the span being handed out whole (at most `MAX_SPAN_FRAGMENTS`, and
     /// scratch past them).
     span_depths: Vec<u32>,
+    /// The payload is a band-index block's: bands in place of fragments, not stretches.
+    pub in_bands: bool,
 }
 
 /// What the decoder needs beyond the payload: the viewport, the stream checks, and the bytes
@@ -856,10 +893,22 @@ impl BlockDecoder {
         ctx: &mut DecodeContext,
     ) -> Result<Option<IndexItem>, PayloadError> {
         match t {
+            tag::STRETCH | tag::BAND if (t == tag::BAND) != self.in_bands => Err(bad(
+                self.pos,
+                match self.in_bands {
+                    true => "a stretch in a band-index block",
+                    false => "a band in a window-index block",
+                },
+            )),
             tag::STRETCH => {
                 let mut stretch = FragmentStretch::EMPTY;
                 self.stretch_record(payload, &mut stretch)?;
                 Ok(Some(IndexItem::Stretch(stretch)))
+            }
+            tag::BAND => {
+                let mut band = FragmentBand::EMPTY;
+                self.band_record(payload, (ctx.width, ctx.height), &mut band)?;
+                Ok(Some(IndexItem::Band(band)))
             }
             tag::SPAN => Err(bad(self.pos, "a span in a window-index block")),
             _ => Ok(match self.record(payload, ctx)? {
@@ -883,6 +932,21 @@ impl BlockDecoder {
         Ok(())
     }
 
+    /// The band record at the decoder's position (its tag read), into `out`.
+    #[inline]
+    fn band_record(
+        &mut self,
+        payload: &[u8],
+        viewport: (u32, u32),
+        out: &mut FragmentBand,
+    ) -> Result<(), PayloadError> {
+        let mut c = Cursor::new(payload, self.pos + 1);
+        decode_band(&mut c, viewport, out)?;
+        self.pos = c.pos;
+        self.events += 1;
+        Ok(())
+    }
+
     /// Hand every remaining item of a window-index payload to `visit`, as
     /// [`Self::next_index_item`] gives them one by one (each borrowed, not returned: no item
     /// is moved out through the layers of a result). Stops at the payload's first error or
@@ -896,12 +960,23 @@ impl BlockDecoder {
         // Stretches, most items, are decoded in place into one item: a stretch's record
         // (80 bytes with its dense runs) moved through the layers of results cost the
         // analytic level about 36 instructions a stretch.
-        let mut item = IndexItem::Stretch(FragmentStretch::EMPTY);
+        let mut item = match self.in_bands {
+            true => IndexItem::Band(FragmentBand::EMPTY),
+            false => IndexItem::Stretch(FragmentStretch::EMPTY),
+        };
         while let Some(&t) = payload.get(self.pos) {
-            if let (tag::STRETCH, IndexItem::Stretch(stretch)) = (t, &mut item) {
-                self.stretch_record(payload, stretch)?;
-                visit(&item).map_err(DrainError::Sink)?;
-                continue;
+            match (t, &mut item) {
+                (tag::STRETCH, IndexItem::Stretch(stretch)) => {
+                    self.stretch_record(payload, stretch)?;
+                    visit(&item).map_err(DrainError::Sink)?;
+                    continue;
+                }
+                (tag::BAND, IndexItem::Band(band)) => {
+                    self.band_record(payload, (ctx.width, ctx.height), band)?;
+                    visit(&item).map_err(DrainError::Sink)?;
+                    continue;
+                }
+                _ => {}
             }
             if let Some(other) = self.index_record(t, payload, ctx)? {
                 visit(&other).map_err(DrainError::Sink)?;

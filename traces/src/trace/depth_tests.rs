@@ -16,7 +16,9 @@
 //! span's first its header, each further one a residual), so a depth-test block holds at
 //! most 128 KiB, well within a block's limit.
 
-use super::block::{BlockHeader, KIND_DEPTH_TESTS, KIND_EVENTS, KIND_INDEX, KIND_WINDOWS};
+use super::block::{
+    BlockHeader, KIND_BANDS, KIND_DEPTH_TESTS, KIND_EVENTS, KIND_INDEX, KIND_WINDOWS,
+};
 use super::codec::{BlockDecoder, DecodeContext, DrainError};
 use super::header::StreamTally;
 use super::reader::TraceReader;
@@ -263,7 +265,7 @@ impl<R: Read> TestedFragments<R> {
                 });
             };
             match header.kind {
-                KIND_INDEX | KIND_WINDOWS => continue,
+                KIND_INDEX | KIND_BANDS | KIND_WINDOWS => continue,
                 KIND_EVENTS => break header,
                 _ => {
                     return Err(TraceError::BadBlock {

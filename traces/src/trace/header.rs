@@ -191,6 +191,10 @@ pub struct TraceSummary {
     /// The window table's blocks (version 8 on, [`crate::trace::windows`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub window_table: Option<BlockCounts>,
+    /// The band index's blocks, when the trace has a window index (version 10 on,
+    /// [`crate::trace::bands`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bands: Option<BlockCounts>,
 }
 
 /// Blocks of one kind and their bytes (the summary's `window_index` counts the window

@@ -26,6 +26,7 @@
 //! query's records, so its formulas read which of them read a word
 //! (`occsim_sim::levels::analytic::o2`), and only there.
 
+use super::bands::FragmentBand;
 use super::codec::{put_uv, tag};
 use super::dense_reads::{DenseReadFinder, DenseRuns, DENSE_READ_COSTS};
 use crate::depth_layout::{DepthAddress, DepthLayout, DepthRead, LastRead};
@@ -184,11 +185,13 @@ impl FragmentStretch {
     }
 }
 
-/// One item of the index: an event of the trace other than a fragment, or a stretch.
+/// One item of the index: an event of the trace other than a fragment, or a stretch (in
+/// the window index) or a band (in the band index, [`crate::trace::bands`]) of fragments.
 #[derive(Clone, Debug, PartialEq)]
 pub enum IndexItem {
     Event(Event),
     Stretch(FragmentStretch),
+    Band(FragmentBand),
 }
 
 /// The writer's counting state: the functional model (render state, depth buffer, open
@@ -461,7 +464,7 @@ mod tests {
             .into_iter()
             .filter_map(|item| match item {
                 IndexItem::Stretch(stretch) => Some(stretch.first_reads),
-                IndexItem::Event(_) => None,
+                IndexItem::Event(_) | IndexItem::Band(_) => None,
             })
             .collect();
         let every_fourth = (0..62).step_by(4).fold(0u64, |mask, k| mask | 1 << k);

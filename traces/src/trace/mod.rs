@@ -38,6 +38,7 @@
 //! [`depth_tests`] for the depth tests' results a model starting mid-trace reads, and
 //! [`windows`] for the window table, the windows' sizes a sampled model reads ahead.
 
+pub mod bands;
 mod block;
 mod codec;
 pub mod dense_reads;
@@ -53,10 +54,11 @@ mod writer;
 #[cfg(test)]
 mod tests;
 
+pub use bands::{FragmentBand, RowRun, BAND_ROWS, BAND_RUNS};
 pub use block::{
-    with_version_field, BLOCK_HEADER_BYTES, END_MAGIC, FORMAT_VERSION, INDEX_COUNTS_VERSION, MAGIC,
-    MAX_BLOCK_BYTES, MAX_HEADER_JSON_BYTES, MAX_STORED_BYTES, MAX_SUMMARY_JSON_BYTES,
-    OLDEST_READABLE_VERSION, TRAILER_BYTES,
+    with_version_field, BANDS_VERSION, BLOCK_HEADER_BYTES, END_MAGIC, FORMAT_VERSION,
+    INDEX_COUNTS_VERSION, MAGIC, MAX_BLOCK_BYTES, MAX_HEADER_JSON_BYTES, MAX_STORED_BYTES,
+    MAX_SUMMARY_JSON_BYTES, OLDEST_READABLE_VERSION, TRAILER_BYTES,
 };
 pub use codec::MAX_EVENT_BYTES;
 pub use dense_reads::{DenseReadFinder, DenseRuns, ReadRun, StretchRuns, DENSE_READ_COSTS};

@@ -42,7 +42,10 @@ pub struct TraceReader<R: Read> {
     depth_tests: BlockCounts,
     /// The window table's blocks passed so far.
     window_table: BlockCounts,
-    /// The block loaded is a window-index block (read by [`TraceReader::next_index_item`]).
+    /// The band index's blocks passed so far.
+    bands: BlockCounts,
+    /// The block loaded is a window-index or band-index block (read by
+    /// [`TraceReader::next_index_item`] or [`TraceReader::for_each_band_item`]).
     in_index_block: bool,
     summary: Option<TraceSummary>,
     failed: bool,
@@ -55,6 +58,7 @@ pub struct TraceReader<R: Read> {
 enum Wanted {
     Events,
     Index,
+    Bands,
     Windows,
     Nothing,
 }
@@ -86,6 +90,7 @@ impl<R: Read> TraceReader<R> {
             index: BlockCounts::default(),
             depth_tests: BlockCounts::default(),
             window_table: BlockCounts::default(),
+            bands: BlockCounts::default(),
             in_index_block: false,
             summary: None,
             failed: false,
@@ -246,6 +251,21 @@ impl<R: Read> TraceReader<R> {
                     }
                 }
                 KIND_DEPTH_TESTS => self.depth_tests.add(&header),
+                KIND_BANDS if self.version < BANDS_VERSION => {
+                    return Err(TraceError::BadBlock {
+                        offset: self.block_offset,
+                        reason: format!(
+                            "a band-index block in a version-{} trace (they came in {BANDS_VERSION})",
+                            self.version
+                        ),
+                    })
+                }
+                KIND_BANDS => {
+                    self.bands.add(&header);
+                    if wanted == Wanted::Bands {
+                        break header;
+                    }
+                }
                 KIND_WINDOWS if self.version < WINDOW_TABLE_VERSION => {
                     return Err(TraceError::BadBlock {
                         offset: self.block_offset,
@@ -277,7 +297,7 @@ impl<R: Read> TraceReader<R> {
             }
         };
         self.block_events = header.events;
-        self.in_index_block = header.kind == KIND_INDEX;
+        self.in_index_block = header.kind == KIND_INDEX || header.kind == KIND_BANDS;
         if header.codec == CODEC_ZSTD {
             let stored = std::mem::take(&mut self.stored);
             let mut payload = std::mem::take(&mut self.payload);
@@ -288,6 +308,7 @@ impl<R: Read> TraceReader<R> {
             std::mem::swap(&mut self.stored, &mut self.payload);
         }
         self.decoder = BlockDecoder::new();
+        self.decoder.in_bands = header.kind == KIND_BANDS;
         self.in_block = true;
         Ok(true)
     }
@@ -479,6 +500,7 @@ impl<R: Read> TraceReader<R> {
         found.window_index = self.header.window_index.map(|_| self.index);
         found.depth_tests = self.has_depth_tests().then_some(self.depth_tests);
         found.window_table = self.has_window_table().then_some(self.window_table);
+        found.bands = self.has_band_index().then_some(self.bands);
         if found != stored || self.claimed_events != stored.events {
             return Err(bad(format!(
                 "it disagrees with the trace on {}",
@@ -622,8 +644,27 @@ impl<R: Read> TraceReader<R> {
         &mut self,
         mut visit: impl FnMut(&IndexItem) -> Result<(), E>,
     ) -> Result<(), ReadError<E>> {
-        while self.visit_index_block(&mut visit)? {}
+        while self.visit_lane_block(Wanted::Index, &mut visit)? {}
         Ok(())
+    }
+
+    /// Hand every remaining item of the band index to `visit`, as
+    /// [`Self::for_each_index_item`] does the window index's: the events other than
+    /// fragments, and in place of the fragments their [`crate::trace::FragmentBand`]s. A
+    /// trace without a band index ([`Self::has_band_index`]) has no items. Read a trace
+    /// either this way, by its window index, or by events.
+    pub fn for_each_band_item<E>(
+        &mut self,
+        mut visit: impl FnMut(&IndexItem) -> Result<(), E>,
+    ) -> Result<(), ReadError<E>> {
+        while self.visit_lane_block(Wanted::Bands, &mut visit)? {}
+        Ok(())
+    }
+
+    /// Whether the trace holds a band index ([`crate::trace::bands`]): a window index in a
+    /// version-10 trace or later.
+    pub fn has_band_index(&self) -> bool {
+        self.version >= BANDS_VERSION && self.header.window_index.is_some()
     }
 
     /// Hand the remaining items of the window index's current block (or of its next, when
@@ -632,15 +673,22 @@ impl<R: Read> TraceReader<R> {
     /// level's scout): what it gathers stays within one block's items.
     pub fn visit_index_block<E>(
         &mut self,
+        visit: impl FnMut(&IndexItem) -> Result<(), E>,
+    ) -> Result<bool, ReadError<E>> {
+        self.visit_lane_block(Wanted::Index, visit)
+    }
+
+    /// [`Self::visit_index_block`] over the blocks of the index `wanted` names.
+    fn visit_lane_block<E>(
+        &mut self,
+        wanted: Wanted,
         mut visit: impl FnMut(&IndexItem) -> Result<(), E>,
     ) -> Result<bool, ReadError<E>> {
         if self.in_block && !self.in_index_block && !self.at_end() {
             self.failed = true;
             return Err(ReadError::Trace(self.mixed_reading()));
         }
-        if self.at_end()
-            || !self.in_block && !self.guarded(|reader| reader.load_block(Wanted::Index))?
-        {
+        if self.at_end() || !self.in_block && !self.guarded(|reader| reader.load_block(wanted))? {
             return Ok(false);
         }
         let mut ctx = checked_context(&self.header, &mut self.tally, &mut self.assembly);

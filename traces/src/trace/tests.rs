@@ -320,14 +320,14 @@ fn wrong_magic_is_named() {
 
 #[test]
 fn unknown_version_is_named() {
-    for version in [0u8, 10] {
+    for version in [0u8, 11] {
         let mut bytes = write_default(&every_kind());
         bytes[8] = version;
         let error = TraceReader::new(&bytes[..]).err().unwrap();
         assert!(
             matches!(
                 error,
-                TraceError::UnsupportedVersion { offset: 8, version: v, known: 9 } if v == version as u16
+                TraceError::UnsupportedVersion { offset: 8, version: v, known: 10 } if v == version as u16
             ),
             "{error}"
         );
@@ -339,9 +339,13 @@ fn as_version_1(bytes: Vec<u8>) -> Vec<u8> {
     as_version(bytes, 1)
 }
 
-/// `bytes` as a file of `version`: before version 8, without its window table; the version
-/// field rewritten and the header's CRC with it.
+/// `bytes` as a file of `version`: before version 10, without its band index; before 8,
+/// without its window table; the version field rewritten and the header's CRC with it.
 pub(crate) fn as_version(bytes: Vec<u8>, version: u8) -> Vec<u8> {
+    let bytes = match version < 10 {
+        true => windows::without_band_index(&bytes).expect("a whole trace"),
+        false => bytes,
+    };
     let bytes = match version < 8 {
         true => windows::without_window_table(&bytes).expect("a whole trace"),
         false => bytes,

@@ -18,7 +18,7 @@
 //! trace without an index, a whole second decoding.
 
 use super::block::{
-    blocks_in, file_header_bytes, header_json, summary_and_trailer, BLOCK_HEADER_BYTES,
+    blocks_in, file_header_bytes, header_json, summary_and_trailer, BLOCK_HEADER_BYTES, KIND_BANDS,
     KIND_SUMMARY, KIND_WINDOWS,
 };
 use super::codec::{put_uv, Cursor, PayloadError};
@@ -131,6 +131,7 @@ impl WindowScout {
         match item {
             IndexItem::Event(event) => self.event(event),
             IndexItem::Stretch(stretch) => self.fragments(stretch.fragments),
+            IndexItem::Band(band) => self.fragments(band.fragments()),
         }
     }
 
@@ -202,22 +203,50 @@ impl EventSink for WindowScout {
 /// For tests and benchmarks of the readings that serve a trace without a table; None when
 /// `bytes` is no whole trace of version 8 on.
 pub fn without_window_table(bytes: &[u8]) -> Option<Vec<u8>> {
+    without_blocks(
+        bytes,
+        (super::block::WINDOW_TABLE_VERSION, KIND_WINDOWS),
+        |header| header.window_table = false,
+        |summary| summary.window_table = None,
+    )
+}
+
+/// The trace in `bytes` without its band index ([`crate::trace::bands`]): its band-index
+/// blocks dropped and its summary without them, as a trace before version 10 is. For
+/// tests; None when `bytes` is no whole trace of version 10 on.
+pub fn without_band_index(bytes: &[u8]) -> Option<Vec<u8>> {
+    without_blocks(
+        bytes,
+        (super::block::BANDS_VERSION, KIND_BANDS),
+        |_| {},
+        |summary| summary.bands = None,
+    )
+}
+
+/// The trace in `bytes` (of version `since` on) without its blocks of `kind`, its header
+/// and summary edited to match.
+fn without_blocks(
+    bytes: &[u8],
+    (since, kind): (u16, u8),
+    edit_header: impl Fn(&mut TraceHeader),
+    edit_summary: impl Fn(&mut TraceSummary),
+) -> Option<Vec<u8>> {
     let (json, _) = header_json(bytes)?;
     let version = u16::from_le_bytes(bytes.get(8..10)?.try_into().ok()?);
-    if version < super::block::WINDOW_TABLE_VERSION {
+    if version < since {
         return None;
     }
     let mut header: TraceHeader = serde_json::from_slice(json).ok()?;
-    header.window_table = false;
+    edit_header(&mut header);
     let mut out = file_header_bytes(version, &serde_json::to_vec(&header).ok()?);
     for (at, header) in blocks_in(bytes) {
         let end = at + BLOCK_HEADER_BYTES + header.stored_len as usize;
         match header.kind {
-            KIND_WINDOWS => {}
+            dropped if dropped == kind => {}
             KIND_SUMMARY => {
                 let stored = bytes.get(at + BLOCK_HEADER_BYTES..end)?;
                 let mut summary: TraceSummary = serde_json::from_slice(stored).ok()?;
-                summary.window_table = None;
+                edit_summary(&mut summary);
                 let json = serde_json::to_vec(&summary).ok()?;
                 let at = out.len() as u64;
                 out.extend_from_slice(&summary_and_trailer(&json, at));

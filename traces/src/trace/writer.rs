@@ -1,5 +1,6 @@
 //! The streaming trace writer: events in, blocks out, one block buffer of memory.
 
+use super::bands::FragmentBand;
 use super::block::*;
 use super::codec::{
     encode_large_event, encode_small_event, encode_span, put_uv, span_bytes_bound, tag,
@@ -71,11 +72,13 @@ impl OpenBlock {
     }
 }
 
-/// The streams a writer fills: the events, the window index, and the window table.
+/// The streams a writer fills: the events, the window index, the band index, and the
+/// window table.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Lane {
     Events,
     Index,
+    Bands,
     Windows,
 }
 
@@ -84,6 +87,9 @@ enum Lane {
 struct IndexLane {
     indexer: Box<WindowIndexer>,
     block: OpenBlock,
+    /// The band index's open block ([`crate::trace::bands`]), and the band being gathered.
+    bands: OpenBlock,
+    band: FragmentBand,
     depth_tests: DepthTestBits,
     span_passed: Vec<bool>,
     depth_test_blocks: BlockCounts,
@@ -193,6 +199,8 @@ impl<W: Write> TraceWriter<W> {
             index: options.window_index.map(|layout| IndexLane {
                 indexer: Box::new(WindowIndexer::new(&layout, header.width, header.height)),
                 block: OpenBlock::new(KIND_INDEX),
+                bands: OpenBlock::new(KIND_BANDS),
+                band: FragmentBand::EMPTY,
                 depth_tests: DepthTestBits::default(),
                 span_passed: Vec::new(),
                 depth_test_blocks: BlockCounts::default(),
@@ -250,7 +258,17 @@ impl<W: Write> TraceWriter<W> {
             self.tally.checked_fragments(1);
             self.windows.fragments(1);
             self.write_ended_windows()?;
-            let passed = self.index.as_mut().map(|index| index.indexer.fragment(*f));
+            if self
+                .index
+                .as_ref()
+                .is_some_and(|index| !index.band.admits(f.x, f.y))
+            {
+                self.flush_band()?;
+            }
+            let passed = self.index.as_mut().map(|index| {
+                index.band.push(f.x, f.y, 1);
+                index.indexer.fragment(*f)
+            });
             let len = self.span_depths.len();
             let continues = len > 0
                 && len < self.max_span
@@ -300,8 +318,28 @@ impl<W: Write> TraceWriter<W> {
         Ok(())
     }
 
-    /// Into the index: the stretch of fragments since its last item, if any.
+    /// Into the band index: the band being gathered, if it holds a fragment.
+    fn flush_band(&mut self) -> Result<(), TraceError> {
+        let Some(band) = self
+            .index
+            .as_mut()
+            .map(|index| std::mem::take(&mut index.band))
+            .filter(|band| !band.is_empty())
+        else {
+            return Ok(());
+        };
+        self.make_room(Lane::Bands, FragmentBand::MAX_BYTES)?;
+        if let Some(block) = self.open_block(Lane::Bands) {
+            band.encode(&mut block.payload);
+            block.items += 1;
+        }
+        Ok(())
+    }
+
+    /// Into the index: the stretch of fragments since its last item, if any (and into the
+    /// band index, its last band).
     fn flush_stretch(&mut self) -> Result<(), TraceError> {
+        self.flush_band()?;
         let Some(stretch) = self
             .index
             .as_mut()
@@ -319,14 +357,15 @@ impl<W: Write> TraceWriter<W> {
 
     /// The lanes this writer fills.
     fn lanes(&self) -> impl Iterator<Item = Lane> {
-        let index = self.index.is_some().then_some(Lane::Index);
-        std::iter::once(Lane::Events).chain(index)
+        let index = self.index.is_some().then_some([Lane::Index, Lane::Bands]);
+        std::iter::once(Lane::Events).chain(index.into_iter().flatten())
     }
 
     fn open_block(&mut self, lane: Lane) -> Option<&mut OpenBlock> {
         match lane {
             Lane::Events => Some(&mut self.events),
             Lane::Index => self.index.as_mut().map(|index| &mut index.block),
+            Lane::Bands => self.index.as_mut().map(|index| &mut index.bands),
             Lane::Windows => Some(&mut self.window_table),
         }
     }
@@ -505,12 +544,14 @@ impl<W: Write> TraceWriter<W> {
         self.write_ended_windows()?;
         self.flush_block(Lane::Events)?;
         self.flush_block(Lane::Index)?;
+        self.flush_block(Lane::Bands)?;
         self.flush_block(Lane::Windows)?;
         let mut summary = self.tally.summary();
         summary.blocks = self.events.written.blocks;
         summary.payload_bytes = self.events.written.payload_bytes;
         summary.stored_bytes = self.events.written.stored_bytes;
         summary.window_index = self.index.as_ref().map(|index| index.block.written);
+        summary.bands = self.index.as_ref().map(|index| index.bands.written);
         summary.depth_tests = self.index.as_ref().map(|index| index.depth_test_blocks);
         summary.window_table = Some(self.window_table.written);
         let json = serde_json::to_vec(&summary).map_err(|e| self.invalid(e.to_string()))?;

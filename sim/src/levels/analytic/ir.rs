@@ -11,8 +11,8 @@
 //! | `H_i` | hit words: over its passing fragments under a verbose query, the query's tiles holding each |
 //!
 //! The formulas follow the work stretch by stretch, as a fluid. A *stretch* is a band of a
-//! primitive's rows, cut every [`STRETCH_ROWS`] rows and where a query begins (its pace
-//! changes): under the columns interleave, what an Image Engine is given in it is what its
+//! primitive's rows ([`FragmentBand`]: at most [`BAND_ROWS`] rows, cut at every other
+//! event, so where a query begins and its pace changes): under the columns interleave, what an Image Engine is given in it is what its
 //! columns hold, so a stretch is counted by column (each pixel's owner looked up under the
 //! others). Each board's Fragment Generator has a clock `g_b`, each Image Engine the cycle
 //! `d_i` its depth stage is through the work it was given, both carried from stretch to
@@ -80,6 +80,9 @@ use crate::blocks::interleave::FramebufferInterleave;
 use crate::blocks::merge_network::{delivered, merged_ready, Partial, ReportShape};
 use crate::blocks::occlusion_engine::hit_room;
 use occsim_traces::golden::FunctionalModel;
+#[cfg(doc)]
+use occsim_traces::trace::BAND_ROWS;
+use occsim_traces::trace::{FragmentBand, RowRun};
 use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect, Span};
 
 /// Counts and clocks of one window (see the module docs). Clocks count in slots of
@@ -108,48 +111,44 @@ pub struct IrWindow {
     engines: Vec<EngineClock>,
     /// The pace of the last fragment counted (`max(C, s)`), in cycles.
     pace: u64,
-    /// The current stretch: its `F_bp`.
+    /// The current stretch: its fragments, then (as it closes) its `F_bp` and its last
+    /// row's fragments on each board.
+    band: FragmentBand,
     stretch_board_fragments: [u64; MAX_BOARDS],
+    row_board_fragments: [u64; MAX_BOARDS],
     /// The Image Engines the stretch touched, a bit each (engine `e` is bit `e mod 64` of
-    /// word `e / 64`): a run of a row sets its engines' bits a word at a time, and closing
-    /// the stretch goes through them in order, board after board (the engines are numbered
-    /// board-major), each board's generator clock in a register.
+    /// word `e / 64`): closing the stretch goes through them in order, board after board
+    /// (the engines are numbered board-major), each board's generator clock in a register.
     touched: Vec<u64>,
     /// `N`: Image Engines a board.
     per_board: usize,
-    /// Where the interleave deals columns (`x mod U` to unit `x mod U`), an Image Engine's
-    /// fragments in a stretch are those of its columns: `U`, the boards as a power of two,
-    /// and the stretch's fragments a column, for [`Self::fold_columns`]; else `None` (each
-    /// pixel's owner looked up).
-    columns: Option<Columns>,
-    /// Rows the current stretch has begun, the last one's `y`, and its fragments on each
-    /// board.
-    stretch_rows: u32,
-    stretch_row: Option<u16>,
-    row_board_fragments: [u64; MAX_BOARDS],
+    /// How a stretch's fragments are dealt to the Image Engines.
+    dealer: Dealer,
     /// The current stretch starts a primitive (its setup counts).
     stretch_sets_up: bool,
 }
 
-/// The columns interleave's shape and the current stretch's fragments in each column, as
-/// [`IrWindow::fold_columns`] deals them to the Image Engines.
+/// How [`IrWindow::deal`] gives a stretch's fragments to their Image Engines.
+#[derive(Clone, Debug)]
+enum Dealer {
+    /// Under the columns interleave (`x mod U` to unit `x mod U`), an engine's fragments
+    /// are those of its columns: counted a column at a time.
+    Columns(Columns),
+    /// Under the others, each pixel's owner looked up: the interleave, and per unit its
+    /// board and Image Engine (board-major).
+    Owners(FramebufferInterleave, Vec<(usize, usize)>),
+}
+
+/// The columns interleave's shape, and room to count a stretch's fragments a column.
 #[derive(Clone, Debug)]
 struct Columns {
     /// `U`: units (Image Engines on all boards).
     units: u64,
     /// `log2 B` (the machine has 1, 2 or 4 boards).
     board_shift: u32,
-    /// The stretch's fragments in column `x` (the viewport's width of them).
-    heights: Vec<u32>,
-    /// The columns the stretch has fragments in lie within `first..=last` (`first > last`:
-    /// none).
-    first: usize,
-    last: usize,
-    /// The columns of its last row lie within `row_first..=row_last`: there each column's
-    /// last fragment is, and (a primitive's row being one run) its board's after it in the
-    /// row are the board's columns right of it.
-    row_first: usize,
-    row_last: usize,
+    /// A stretch's runs as steps: `+1` where a run begins, `-1` past its end (the
+    /// viewport's width and one of them, all zero between stretches).
+    steps: Vec<i32>,
 }
 
 /// One Image Engine's clock and its share of the current stretch, side by side (a
@@ -163,20 +162,6 @@ struct EngineClock {
     /// Its board's fragments in the stretch up to its last one: when that was emitted.
     last: u64,
 }
-
-/// Rows of a primitive after which the formulas close a stretch and advance the clocks: a
-/// primitive's rows load its Image Engines unevenly (a narrow row paces the generator at
-/// one engine's speed, a wide one at the generator's), which one sum over the whole
-/// primitive averages away; a few FIFOs' worth of a narrow primitive's rows, so that the
-/// fluid still smooths what the FIFOs do. On the small corpus on ir1, ir2 and ir4
-/// (`occsim fidelity --corpus --scale small --machines ir1,ir2,ir4 --no-rtl`), the worst
-/// class's analytic cycles error was 0.6% at 4 rows, 1.0% at 8, 1.7% at 16, 5.2% at 64 and
-/// 6.3% for whole primitives (the random scene's slivers); the sampled level's worst p95
-/// latency error 0.9% at 1 row, 1.9% at 4, 2.1% at 8 and 16 (its bound is 3%). The
-/// analytic level on the demo on ir4 took 184 ms at 4 rows, 112 ms at 8 and 90 ms at 16
-/// (203 ms in stretches of 64 fragments, one by one): 8 holds every bound with room, at
-/// most of the saving.
-const STRETCH_ROWS: u32 = 8;
 
 impl IrWindow {
     /// The window of `arch` over a viewport `width` pixels wide.
@@ -195,24 +180,25 @@ impl IrWindow {
             generators: vec![0; arch.boards],
             engines: vec![EngineClock::default(); engines],
             pace: arch.image_engine_cycles_per_fragment,
+            band: FragmentBand::EMPTY,
             stretch_board_fragments: [0; MAX_BOARDS],
+            row_board_fragments: [0; MAX_BOARDS],
             touched: vec![0; engines.div_ceil(64)],
             per_board: arch.image_engines_per_board,
-            columns: (arch.interleave == Interleave::Columns
+            dealer: if arch.interleave == Interleave::Columns
                 && arch.boards.is_power_of_two()
-                && arch.boards <= MAX_BOARDS)
-                .then(|| Columns {
+                && arch.boards <= MAX_BOARDS
+            {
+                Dealer::Columns(Columns {
                     units: engines as u64,
                     board_shift: arch.boards.trailing_zeros(),
-                    heights: vec![0; width as usize],
-                    first: usize::MAX,
-                    last: 0,
-                    row_first: usize::MAX,
-                    row_last: 0,
-                }),
-            stretch_rows: 0,
-            stretch_row: None,
-            row_board_fragments: [0; MAX_BOARDS],
+                    steps: vec![0; width as usize + 1],
+                })
+            } else {
+                let interleave = FramebufferInterleave::new(arch);
+                let owners = owners_of_units(arch, &interleave);
+                Dealer::Owners(interleave, owners)
+            },
             stretch_sets_up: false,
         }
     }
@@ -244,7 +230,16 @@ impl IrWindow {
     /// stretch starts, and is through no sooner than a pace after its board's generator
     /// emitted its last fragment.
     fn close_stretch(&mut self) {
-        self.fold_columns();
+        let band = std::mem::take(&mut self.band);
+        self.close_band(&band);
+    }
+
+    /// [`Self::close_stretch`] with `band` its fragments.
+    fn close_band(&mut self, band: &FragmentBand) {
+        if self.close_narrow_columns(band) {
+            return;
+        }
+        self.deal(band);
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let pace = self.pace * self.rate;
         let hidden = self.hidden();
@@ -289,55 +284,143 @@ impl IrWindow {
         let boards = self.generators.len();
         self.generators.copy_from_slice(&generators[..boards]);
         self.stretch_board_fragments = [0; MAX_BOARDS];
-        self.stretch_rows = 0;
-        self.stretch_row = None;
         self.row_board_fragments = [0; MAX_BOARDS];
         self.stretch_sets_up = false;
     }
 
-    /// Under the columns interleave, deal the stretch's columns to their Image Engines:
-    /// column `x` is unit `g = x mod U`, Image Engine `g / B` of board `g mod B` (so board
-    /// `x mod B`), and its fragments are that engine's and that board's. A column of the
-    /// last row has its last fragment there, its board's columns right of it, `(row_last -
-    /// x) / B`, after it (the engine's last is its latest column's); the other columns'
-    /// last fragments came before the last row (see [`Self::close_stretch`]).
-    fn fold_columns(&mut self) {
-        let Some(columns) = &mut self.columns else {
-            return;
+    /// [`Self::close_stretch`] in one pass over the columns, where the interleave deals
+    /// columns and the stretch spans no more of them than there are units (so each engine
+    /// has one column of it, and its share, last and clock are that column's): the same
+    /// clocks as dealing first and then closing engine by engine (on the lazy-grid walk's
+    /// band index, ir4, 52 ms against 37). Returns false, having done nothing, elsewhere.
+    fn close_narrow_columns(&mut self, band: &FragmentBand) -> bool {
+        let Dealer::Columns(columns) = &mut self.dealer else {
+            return false;
         };
-        if columns.first > columns.last {
-            return;
+        let runs = band.runs();
+        let first = runs.iter().map(|run| run.x as usize).min().unwrap_or(0);
+        let end = runs
+            .iter()
+            .map(|run| run.x as usize + run.len as usize)
+            .max()
+            .unwrap_or(0);
+        if runs.is_empty() || (end - first) as u64 > columns.units {
+            return false;
         }
-        let board_mask = (1usize << columns.board_shift) - 1;
-        let (first, last) = (columns.first, columns.last);
-        let mut board_fragments = self.stretch_board_fragments;
-        for (x, &height) in (first..=last).zip(&columns.heights[first..=last]) {
-            board_fragments[x & board_mask] += height as u64;
+        let shift = columns.board_shift;
+        let (mut fragments, mut last_row) = ([0u64; MAX_BOARDS], [0u64; MAX_BOARDS]);
+        let last_row_from = band.runs().len() - band.last_row().len();
+        for (k, run) in band.runs().iter().enumerate() {
+            columns.steps[run.x as usize] += 1;
+            columns.steps[run.x as usize + run.len as usize] -= 1;
+            add_run_to_boards(&mut fragments, run, shift);
+            if k >= last_row_from {
+                add_run_to_boards(&mut last_row, run, shift);
+            }
         }
-        let (row_first, row_last) = (columns.row_first, columns.row_last);
-        let slots_a_fragment = self.pace * self.rate;
+        let row_first = band
+            .last_row()
+            .iter()
+            .map(|run| run.x as usize)
+            .min()
+            .unwrap_or(0);
+        let row_end = band
+            .last_row()
+            .iter()
+            .map(|run| run.x as usize + run.len as usize)
+            .max()
+            .unwrap_or(0);
+        let setup = if self.stretch_sets_up { self.setup } else { 0 };
+        let pace = self.pace * self.rate;
+        let hidden = match self.pace > self.interval {
+            true => self.queued * pace,
+            false => (self.fifo + 1) * pace - self.rate,
+        };
+        let boards = self.generators.len();
+        let mut starts = [0u64; MAX_BOARDS];
+        let mut generators = [0u64; MAX_BOARDS];
+        for board in 0..boards {
+            starts[board] = self.generators[board] + setup;
+            generators[board] = starts[board] + fragments[board];
+        }
+        let board_mask = (1usize << shift) - 1;
         let mut unit = first as u64 % columns.units;
-        for (x, height) in (first..=last).zip(&mut columns.heights[first..=last]) {
-            let fragments = std::mem::take(height) as u64;
-            if fragments > 0 {
+        let mut height = 0i64;
+        for x in first..end {
+            height += std::mem::take(&mut columns.steps[x]) as i64;
+            if height > 0 {
                 let board = x & board_mask;
-                let engine = board * self.per_board + (unit >> columns.board_shift) as usize;
-                let clock = &mut self.engines[engine];
-                clock.slots += fragments * slots_a_fragment;
-                if (row_first..=row_last).contains(&x) {
-                    let after = ((row_last - x) >> columns.board_shift) as u64;
-                    clock.last = clock.last.max(board_fragments[board].saturating_sub(after));
+                let engine = board * self.per_board + (unit >> shift) as usize;
+                let start = starts[board];
+                // Its last fragment: in the last row, its board's columns right of it after
+                // it; else no later than the last row's first of its board.
+                let mut last = fragments[board] - last_row[board];
+                if (row_first..row_end).contains(&x) {
+                    let after = ((row_end - 1 - x) >> shift) as u64;
+                    last = last.max(fragments[board].saturating_sub(after));
                 }
-                self.touched[engine / 64] |= 1 << (engine % 64);
+                let clock = &mut self.engines[engine].through;
+                *clock = (start.max(*clock) + height as u64 * pace).max(start + last + pace);
+                generators[board] = generators[board].max(clock.saturating_sub(hidden));
             }
             unit += 1;
             if unit == columns.units {
                 unit = 0;
             }
         }
-        self.stretch_board_fragments = board_fragments;
-        (columns.first, columns.last) = (usize::MAX, 0);
-        (columns.row_first, columns.row_last) = (usize::MAX, 0);
+        columns.steps[end] = 0;
+        self.generators.copy_from_slice(&generators[..boards]);
+        self.stretch_sets_up = false;
+        true
+    }
+
+    /// Deal the current stretch's fragments to their boards and Image Engines: each
+    /// board's `F_bp` and its last row's fragments, each engine's slots and last, the
+    /// engines touched.
+    fn deal(&mut self, band: &FragmentBand) {
+        if band.is_empty() {
+            return;
+        }
+        let slots_a_fragment = self.pace * self.rate;
+        let last_row_from = band.runs().len() - band.last_row().len();
+        match &mut self.dealer {
+            Dealer::Columns(columns) => {
+                let shift = columns.board_shift;
+                for (k, run) in band.runs().iter().enumerate() {
+                    add_run_to_boards(&mut self.stretch_board_fragments, run, shift);
+                    if k >= last_row_from {
+                        add_run_to_boards(&mut self.row_board_fragments, run, shift);
+                    }
+                }
+                deal_columns(
+                    columns,
+                    band,
+                    (
+                        &self.stretch_board_fragments,
+                        self.per_board,
+                        slots_a_fragment,
+                    ),
+                    &mut self.engines,
+                    &mut self.touched,
+                );
+            }
+            Dealer::Owners(interleave, owners) => {
+                let (boards, rows) = (
+                    &mut self.stretch_board_fragments,
+                    &mut self.row_board_fragments,
+                );
+                for (k, run) in band.runs().iter().enumerate() {
+                    interleave.for_each_unit_along(run.x, run.y, run.len as usize, |unit| {
+                        let (board, engine) = owners[unit];
+                        boards[board] += 1;
+                        rows[board] += (k >= last_row_from) as u64;
+                        self.touched[engine / 64] |= 1 << (engine % 64);
+                        self.engines[engine].slots += slots_a_fragment;
+                        self.engines[engine].last = boards[board];
+                    });
+                }
+            }
+        }
     }
 
     /// A new primitive, released `release` cycles after the window's start: the current
@@ -364,77 +447,24 @@ impl IrWindow {
     }
 
     /// The fragments of pixels `x..x + len` of row `y` (inside the viewport), at the pace
-    /// set: a stretch closes before the first fragment of its [`STRETCH_ROWS`]` + 1`-th
-    /// row. Under the columns interleave each column's fragments are counted, to be dealt
-    /// to the engines as the stretch closes; else each pixel goes to the board and Image
-    /// Engine `owners` gives its interleave unit.
-    pub fn paced_along(
-        &mut self,
-        interleave: &FramebufferInterleave,
-        owners: &[(usize, usize)],
-        (x, y): (u16, u16),
-        len: usize,
-    ) {
-        if self.stretch_row != Some(y) {
-            if self.stretch_rows == STRETCH_ROWS {
-                self.close_stretch();
-            }
-            self.stretch_rows += 1;
-            self.stretch_row = Some(y);
-            self.row_board_fragments = [0; MAX_BOARDS];
-            if let Some(columns) = &mut self.columns {
-                (columns.row_first, columns.row_last) = (usize::MAX, 0);
-            }
+    /// set: they join the current stretch, which closes first where its band would not
+    /// admit them ([`FragmentBand::admits`]: at its ninth row).
+    pub fn paced_along(&mut self, (x, y): (u16, u16), len: usize) {
+        if len == 0 {
+            return;
         }
-        match &mut self.columns {
-            Some(columns) if len > 0 => {
-                let (first, last) = (x as usize, x as usize + len - 1);
-                for height in &mut columns.heights[first..=last] {
-                    *height += 1;
-                }
-                columns.first = columns.first.min(first);
-                columns.last = columns.last.max(last);
-                columns.row_first = columns.row_first.min(first);
-                columns.row_last = columns.row_last.max(last);
-                // Each board has `len / B` of the run's pixels, and the `len mod B` boards
-                // from the first pixel's on one more.
-                let boards = 1usize << columns.board_shift;
-                for step in 0..boards {
-                    let board = (first + step) & (boards - 1);
-                    self.row_board_fragments[board] +=
-                        (len / boards + usize::from(step < len % boards)) as u64;
-                }
-            }
-            Some(_) => {}
-            None => self.owned_piece(interleave, owners, (x, y), len),
+        if !self.band.admits(x, y) {
+            self.close_stretch();
         }
+        self.band.push(x, y, len as u32);
         self.fragments += len as u64;
     }
 
-    /// A run under any interleave: each pixel's board and Image Engine looked up, its
-    /// board's fragment counts in the stretch and the row, the engine's slots and last
-    /// counted, with the boards' counts in locals.
-    fn owned_piece(
-        &mut self,
-        interleave: &FramebufferInterleave,
-        owners: &[(usize, usize)],
-        (x, y): (u16, u16),
-        len: usize,
-    ) {
-        let slots_a_fragment = self.pace * self.rate;
-        let mut board_fragments = self.stretch_board_fragments;
-        let mut row_board_fragments = self.row_board_fragments;
-        let (engines, touched) = (&mut self.engines, &mut self.touched);
-        interleave.for_each_unit_along(x, y, len, |unit| {
-            let (board, engine) = owners[unit];
-            board_fragments[board] += 1;
-            row_board_fragments[board] += 1;
-            touched[engine / 64] |= 1 << (engine % 64);
-            engines[engine].slots += slots_a_fragment;
-            engines[engine].last = board_fragments[board];
-        });
-        self.stretch_board_fragments = board_fragments;
-        self.row_board_fragments = row_board_fragments;
+    /// A band of a trace's band index, at the pace set: one stretch, closed.
+    pub fn band(&mut self, band: &FragmentBand) {
+        debug_assert!(self.band.is_empty(), "a band index's window takes no spans");
+        self.fragments += band.fragments();
+        self.close_band(band);
     }
 
     /// Slots a Fragment Generator may run ahead of an engine's work at the current pace (see
@@ -485,6 +515,84 @@ impl IrWindow {
     }
 }
 
+/// Add a run's fragments to its boards' counts: under the columns interleave pixel `x` is
+/// board `x mod B`'s (`B = 1 << shift`), so each board has `len / B` of them, and the
+/// `len mod B` boards from the first pixel's on one more.
+fn add_run_to_boards(boards: &mut [u64; MAX_BOARDS], run: &RowRun, shift: u32) {
+    let count = 1usize << shift;
+    let len = run.len as usize;
+    for step in 0..count {
+        let board = (run.x as usize + step) & (count - 1);
+        boards[board] += (len / count + usize::from(step < len % count)) as u64;
+    }
+}
+
+/// Deal `band`'s columns to their Image Engines (the boards' stretch totals `boards`
+/// counted): column `x` is unit `g = x mod U`, Image Engine `g / B` of board `g mod B` (so
+/// board `x mod B`), and its fragments are that engine's. The band's runs are stepped into
+/// `columns.steps` and summed along the columns it spans, each column once, whatever its
+/// height. A column of the last row has its last fragment there, with its board's columns
+/// right of it in the row, `(row_end - 1 - x) / B`, after it (a primitive's row is one
+/// run; the engine's last is its latest column's); the other columns' last fragments came
+/// before the last row ([`IrWindow::close_stretch`] counts them at its start).
+fn deal_columns(
+    columns: &mut Columns,
+    band: &FragmentBand,
+    (boards, per_board, slots_a_fragment): (&[u64; MAX_BOARDS], usize, u64),
+    engines: &mut [EngineClock],
+    touched: &mut [u64],
+) {
+    let (mut first, mut end) = (usize::MAX, 0);
+    for run in band.runs() {
+        let (x, run_end) = (run.x as usize, run.x as usize + run.len as usize);
+        columns.steps[x] += 1;
+        columns.steps[run_end] -= 1;
+        (first, end) = (first.min(x), end.max(run_end));
+    }
+    let last_row = band.last_row();
+    let row_first = last_row.iter().map(|run| run.x as usize).min().unwrap_or(0);
+    let row_end = last_row
+        .iter()
+        .map(|run| run.x as usize + run.len as usize)
+        .max()
+        .unwrap_or(0);
+    let board_mask = (1usize << columns.board_shift) - 1;
+    let mut unit = first as u64 % columns.units;
+    let mut height = 0i64;
+    for x in first..end {
+        height += std::mem::take(&mut columns.steps[x]) as i64;
+        if height > 0 {
+            let board = x & board_mask;
+            let engine = board * per_board + (unit >> columns.board_shift) as usize;
+            let clock = &mut engines[engine];
+            clock.slots += height as u64 * slots_a_fragment;
+            if (row_first..row_end).contains(&x) {
+                let after = ((row_end - 1 - x) >> columns.board_shift) as u64;
+                clock.last = clock.last.max(boards[board].saturating_sub(after));
+            }
+            touched[engine / 64] |= 1 << (engine % 64);
+        }
+        unit += 1;
+        if unit == columns.units {
+            unit = 0;
+        }
+    }
+    columns.steps[end] = 0;
+}
+
+/// Per interleave unit of `arch`, its board and its Image Engine (board-major).
+fn owners_of_units(arch: &IrArch, interleave: &FramebufferInterleave) -> Vec<(usize, usize)> {
+    (0..arch.image_engines())
+        .map(|g| {
+            let owner = interleave.owner_of_unit(g);
+            (
+                owner.board,
+                owner.board * arch.image_engines_per_board + owner.image_engine,
+            )
+        })
+        .collect()
+}
+
 /// Boards the formulas keep clocks for on the stack (the machine has 1, 2 or 4).
 const MAX_BOARDS: usize = 4;
 
@@ -518,13 +626,7 @@ impl IrBottleneck {
     /// The formulas of `arch` over a viewport `width` pixels wide.
     pub(super) fn new(arch: &IrArch, width: u32) -> IrBottleneck {
         let interleave = FramebufferInterleave::new(arch);
-        let owners = (0..arch.image_engines())
-            .map(|g| {
-                let owner = interleave.owner_of_unit(g);
-                let engine = owner.board * arch.image_engines_per_board + owner.image_engine;
-                (owner.board, engine)
-            })
-            .collect();
+        let owners = owners_of_units(arch, &interleave);
         IrBottleneck {
             interleave,
             owners,
@@ -571,12 +673,7 @@ impl IrBottleneck {
     pub(super) fn span(&mut self, span: Span, functional: &FunctionalModel) {
         let pace = self.pace();
         self.window.pace(pace);
-        self.window.paced_along(
-            &self.interleave,
-            &self.owners,
-            (span.x, span.y),
-            span.depths.len(),
-        );
+        self.window.paced_along((span.x, span.y), span.depths.len());
         if self
             .open
             .as_ref()
@@ -585,6 +682,20 @@ impl IrBottleneck {
             span.fragments()
                 .for_each(|fragment| self.count_hits(fragment, functional));
         }
+    }
+
+    /// Count a band of a trace's band index: one stretch (a verbose query's hits are not
+    /// in a band: [`super::AnalyticModel::reads_band_index`] reads none under one).
+    pub(super) fn band(&mut self, band: &FragmentBand) {
+        let pace = self.pace();
+        self.window.pace(pace);
+        self.window.band(band);
+    }
+
+    /// An event other than a fragment comes: the stretch closes (as a band of the index
+    /// ends at every such event).
+    pub(super) fn close_stretch(&mut self) {
+        self.window.close_stretch();
     }
 
     /// Count one fragment's work (before `functional` applies it): a span of one.
@@ -734,6 +845,14 @@ mod tests {
         arch.ir().unwrap()
     }
 
+    /// The dealer that looks each pixel's owner up, for `arch` (whose interleave deals
+    /// columns: the window's own dealer counts them a column at a time).
+    fn looked_up(arch: &IrArch) -> Dealer {
+        let interleave = FramebufferInterleave::new(arch);
+        let owners = owners_of_units(arch, &interleave);
+        Dealer::Owners(interleave, owners)
+    }
+
     #[test]
     fn an_engine_whose_last_fragment_came_before_the_last_row_is_timed_from_that_row() {
         // One board of two Image Engines (U = 2: column x to engine x mod 2), the ir
@@ -745,16 +864,14 @@ mod tests {
         // fragment 2: through = max(8 + 22, 8 + 2 + 22) = 32 (31 if fragment 1 counted).
         // Engine 0: two fragments, its last fragment 3: max(8 + 44, 8 + 3 + 22) = 52.
         let arch = columns_arch(1, 2);
-        let interleave = FramebufferInterleave::new(&arch);
-        let owners = [(0, 0), (0, 1)];
         for by_columns in [true, false] {
             let mut window = IrWindow::new(&arch, 4);
             if !by_columns {
-                window.columns = None;
+                window.dealer = looked_up(&arch);
             }
             window.primitive(0.0);
-            window.paced_along(&interleave, &owners, (1, 0), 2);
-            window.paced_along(&interleave, &owners, (0, 1), 1);
+            window.paced_along((1, 0), 2);
+            window.paced_along((0, 1), 1);
             window.close_stretch();
             let through: Vec<u64> = window.engines.iter().map(|e| e.through).collect();
             assert_eq!(through, [52, 32], "by columns: {by_columns}");
@@ -771,17 +888,10 @@ mod tests {
         // end.
         for (boards, per_board) in [(4, 80), (2, 80), (1, 80), (4, 3), (2, 1), (1, 1)] {
             let arch = columns_arch(boards, per_board);
-            let interleave = FramebufferInterleave::new(&arch);
-            let owners: Vec<(usize, usize)> = (0..arch.image_engines())
-                .map(|g| {
-                    let owner = interleave.owner_of_unit(g);
-                    (owner.board, owner.board * per_board + owner.image_engine)
-                })
-                .collect();
             let mut columns = IrWindow::new(&arch, 2048);
             let mut looked_up = IrWindow::new(&arch, 2048);
-            assert!(columns.columns.is_some());
-            looked_up.columns = None;
+            assert!(matches!(columns.dealer, Dealer::Columns(_)));
+            looked_up.dealer = self::looked_up(&arch);
             let mut rng = SplitMix64(boards as u64 * 1000 + per_board as u64);
             let mut y = 0u16;
             for step in 0..4_000 {
@@ -810,8 +920,8 @@ mod tests {
                         y = (y + 1) % 1024;
                         let split = rng.below(len as u64 + 1) as usize;
                         for (x, len) in [(x, split), (x + split as u16, len - split)] {
-                            columns.paced_along(&interleave, &owners, (x, y), len);
-                            looked_up.paced_along(&interleave, &owners, (x, y), len);
+                            columns.paced_along((x, y), len);
+                            looked_up.paced_along((x, y), len);
                         }
                     }
                 }

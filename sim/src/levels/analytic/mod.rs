@@ -25,8 +25,8 @@ use crate::levels::level::{Fidelity, LevelResult};
 use crate::levels::predicted_loop::PredictedLoop;
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::state::RenderState;
-use occsim_traces::trace::{FragmentStretch, IndexItem, TraceHeader};
-use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, Span};
+use occsim_traces::trace::{FragmentBand, FragmentStretch, IndexItem, TraceHeader};
+use occsim_traces::{Event, Fragment, QueryMode, QueryResult, QuerySpec, Span};
 
 pub use crate::levels::level::WindowEnd;
 
@@ -81,7 +81,16 @@ impl Formulas {
     pub(crate) fn stretch(&mut self, stretch: &FragmentStretch, state: &RenderState) {
         match self {
             Formulas::O2(o2) => o2.stretch(stretch, state),
-            Formulas::Ir(_) => unreachable!("the IR formulas count Image Engines' fragments"),
+            Formulas::Ir(_) => unreachable!("the IR formulas count bands"),
+        }
+    }
+
+    /// Count a band of fragments from a trace's band index. Only the IR formulas count
+    /// from bands ([`AnalyticModel::reads_band_index`]).
+    pub(crate) fn band(&mut self, band: &FragmentBand) {
+        match self {
+            Formulas::Ir(ir) => ir.band(band),
+            Formulas::O2(_) => unreachable!("the O2 formulas count stretches"),
         }
     }
 
@@ -119,8 +128,11 @@ impl Formulas {
     /// rasterizer runs on behind it, and the records still wait for the next fragments'
     /// reads; on the hard cases a query followed by a clear takes 22 cycles on the machine.)
     pub(crate) fn before_event(&mut self, event: &Event) {
-        if let (Formulas::O2(o2), false) = (&mut *self, matches!(event, Event::Fragment(_))) {
-            o2.end_run();
+        match (&mut *self, matches!(event, Event::Fragment(_))) {
+            (Formulas::O2(o2), false) => o2.end_run(),
+            // As a band of the band index ends there.
+            (Formulas::Ir(ir), false) => ir.close_stretch(),
+            _ => {}
         }
         if let (
             Formulas::O2(o2),
@@ -213,6 +225,21 @@ impl AnalyticModel {
         golden && arch.o2().is_ok_and(|o2| o2.depth_layout() == layout)
     }
 
+    /// Whether the analytic level of `arch` can replay a trace with `header` (read by
+    /// `reader`) from its band index alone ([`occsim_traces::trace::bands`]): the IR
+    /// formulas, whose counts a band holds whatever the interleave, on a trace with a band
+    /// index whose header says it carries golden results (or has no query) and no verbose
+    /// query (a band keeps where its fragments are, not which pass: the hits a verbose
+    /// query's Image Engines send need the fragments).
+    pub fn reads_band_index(arch: &Arch, header: &TraceHeader, has_band_index: bool) -> bool {
+        let Some(features) = &header.features else {
+            return false;
+        };
+        let golden = features.query_results || features.query_modes.is_empty();
+        let verbose = features.query_modes.contains(&QueryMode::Verbose);
+        has_band_index && golden && !verbose && arch.machine() == Machine::Ir
+    }
+
     /// The model for a replay from the window index (see [`Self::reads_window_index`]):
     /// results are the stream's golden ones.
     pub fn from_window_index(
@@ -284,6 +311,12 @@ impl AnalyticModel {
                 self.formulas.stretch(stretch, state);
                 self.settle();
                 self.core.count_fragments(stretch.fragments);
+                Ok(())
+            }
+            IndexItem::Band(band) => {
+                self.formulas.band(band);
+                self.settle();
+                self.core.count_fragments(band.fragments());
                 Ok(())
             }
         }
