@@ -30,7 +30,7 @@ use crate::levels::{Fidelity, LevelModel, LevelResult, LevelSink};
 use crate::timeline::Timeline;
 use occsim_traces::golden::EventSink;
 use occsim_traces::retile::{Retile, RetileError, TileGrid};
-use occsim_traces::trace::{ReadError, TestedFragments, TraceError, TraceReader};
+use occsim_traces::trace::{IndexItem, ReadError, TestedFragments, TraceError, TraceReader};
 use occsim_traces::Event;
 use std::collections::BTreeSet;
 use std::convert::Infallible;
@@ -170,11 +170,7 @@ pub fn replay<R: Read>(
             .finish(arch)
             .map_err(model_error);
     }
-    if options.level == Fidelity::Analytic
-        && options.window_index
-        && options.retile.is_none()
-        && AnalyticModel::reads_band_index(arch, reader.header(), reader.has_band_index())
-    {
+    if options.level == Fidelity::Analytic && bands_wanted(&reader, arch, &options) {
         let mut model =
             AnalyticModel::from_window_index(arch, width, height).map_err(ReplayError::Setup)?;
         reader
@@ -262,6 +258,15 @@ fn index_wanted<R: Read>(reader: &TraceReader<R>, arch: &Arch, options: &ReplayO
         && AnalyticModel::reads_window_index(arch, reader.header())
 }
 
+/// Whether the IR's analytic and sampled levels would read the trace's band index instead
+/// of its fragments: asked to, its queries not retiled, and an index the formulas can read
+/// ([`AnalyticModel::reads_band_index`]).
+fn bands_wanted<R: Read>(reader: &TraceReader<R>, arch: &Arch, options: &ReplayOptions) -> bool {
+    options.window_index
+        && options.retile.is_none()
+        && AnalyticModel::reads_band_index(arch, reader.header(), reader.has_band_index())
+}
+
 /// Run the sampled level's model over the trace `reader` reads: from the window index where
 /// it can (only the simulated windows' fragments read, by a second reader), else fed the
 /// events (retiled when asked); `configure` finishes the model, and its window sizes are read
@@ -278,27 +283,29 @@ fn run_sampled<R: Read>(
         machine: arch.machine().name(),
         source,
     };
-    if index_wanted(&reader, arch, options)
-        && reader.has_depth_tests()
-        && reader.index_has_every_count()
-    {
+    let window_index = index_wanted(&reader, arch, options) && reader.index_has_every_count();
+    let bands = bands_wanted(&reader, arch, options);
+    if (window_index || bands) && reader.has_depth_tests() {
         let model = SampledModel::from_window_index(arch, width, height, effects, every)
             .and_then(configure)
             .map_err(ReplayError::Setup)?;
         let mut model = Box::new(model);
         let mut fragments = TestedFragments::new(open()?)?;
         let mut sizes = ScoutedSizes::new(open()?);
-        reader
-            .for_each_index_item(|item| {
-                feed_window_sizes(&mut model, &mut sizes).map_err(model_error)?;
-                model
-                    .index_item(item, &mut fragments)
-                    .map_err(|e| read_error(e, model_error))
-            })
-            .map_err(|e| match e {
-                ReadError::Trace(e) => ReplayError::Read(e),
-                ReadError::Sink(e) => e,
-            })?;
+        let mut feed = |item: &IndexItem| {
+            feed_window_sizes(&mut model, &mut sizes).map_err(model_error)?;
+            model
+                .index_item(item, &mut fragments)
+                .map_err(|e| read_error(e, model_error))
+        };
+        match bands {
+            true => reader.for_each_band_item(&mut feed),
+            false => reader.for_each_index_item(&mut feed),
+        }
+        .map_err(|e| match e {
+            ReadError::Trace(e) => ReplayError::Read(e),
+            ReadError::Sink(e) => e,
+        })?;
         return Ok(model);
     }
     let model = SampledModel::new(arch, width, height, effects, every)

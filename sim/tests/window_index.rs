@@ -169,7 +169,8 @@ fn an_index_before_version_9_is_decoded_and_the_report_says_why() {
     // A version-8 index keeps no ending runs of reads: the analytic and sampled levels read
     // the fragments, give what decoding gives, and name the version.
     let (_, trace, _, _) = traces().remove(0);
-    let old = occsim_traces::trace::with_version_field(&trace, 8).unwrap();
+    let without_bands = occsim_traces::trace::windows::without_band_index(&trace).unwrap();
+    let old = occsim_traces::trace::with_version_field(&without_bands, 8).unwrap();
     let arch = o2_with(&[]);
     let decoded = analytic(&trace, &arch, false, None);
     let from_old = analytic(&old, &arch, true, None);
@@ -408,4 +409,145 @@ fn the_window_table_gives_the_sampled_level_the_sizes_its_scout_finds_without_on
             }
         }
     }
+}
+
+fn ir_with(name: &str, sets: &[&str]) -> Arch {
+    let mut arch = Arch::builtin(name).unwrap();
+    for set in sets {
+        arch.set(set).unwrap();
+    }
+    arch
+}
+
+#[test]
+fn the_band_index_gives_the_ir_analytic_result_of_the_fragments_bit_for_bit() {
+    // The scenes without verbose queries (their hits need the fragments): the hard cases'
+    // and the demo's verbose queries made brief, and the random triangles.
+    let scenes = traces().into_iter().map(|(name, _, _, _)| name);
+    let texts = [
+        HARDCASES.replace(" verbose ", " brief "),
+        demo_scene(&DemoOptions {
+            width: 320,
+            height: 256,
+            frames: 2,
+            lots_per_side: 8,
+            ..DemoOptions::default()
+        })
+        .replace(" verbose ", " brief "),
+        random_scene(&RandomOptions {
+            width: 256,
+            height: 192,
+            triangles: 600,
+            queries: 60,
+            ..RandomOptions::default()
+        }),
+    ];
+    // Every board count, the columns interleave on many or few engines (a band wider than
+    // the units deals an engine several columns), and the others (each pixel looked up).
+    let archs = [
+        ir_with("ir1", &[]),
+        ir_with("ir2", &["engines=1"]),
+        ir_with("ir4", &[]),
+        ir_with("ir2", &["image_engines_per_board=3"]),
+        ir_with("ir2", &["interleave=morton"]),
+        ir_with("ir4", &["interleave=blocks"]),
+    ];
+    for (name, text) in scenes.zip(texts) {
+        let (width, height, events) = support::scene_events(&text);
+        let trace = indexed_trace(width, height, &events);
+        for arch in &archs {
+            let what = format!("{name} on {:?}", arch.report_entries());
+            let indexed = analytic(&trace, arch, true, None);
+            let decoded = analytic(&trace, arch, false, None);
+            let one_by_one = run_level(
+                Fidelity::Analytic,
+                arch,
+                width,
+                height,
+                EffectsChoice::Auto,
+                &events,
+            )
+            .unwrap();
+            assert_eq!(one_by_one.total_cycles, decoded.total_cycles, "{what}");
+            assert_eq!(one_by_one.queries, decoded.queries, "{what}");
+            assert!(decoded.checked_queries > 0, "{what}: nothing checked");
+            assert_eq!(
+                indexed.checked_queries, 0,
+                "{what}: the golden results taken"
+            );
+            assert_same_but_source(indexed, &decoded, &what);
+        }
+    }
+}
+
+#[test]
+fn the_band_index_gives_the_ir_sampled_result_of_the_fragments_bit_for_bit() {
+    // From the band index, the IR's machines read only the simulated windows' fragments
+    // (their depths made consistent with the trace's depth tests): every count, cycle and
+    // latency as decoding every fragment gives.
+    let archs = [
+        ir_with("ir2", &[]),
+        ir_with("ir4", &["engines=1"]),
+        ir_with("ir2", &["interleave=morton"]),
+    ];
+    let texts = [
+        (
+            "hardcases, brief",
+            HARDCASES.replace(" verbose ", " brief "),
+        ),
+        (
+            "random",
+            random_scene(&RandomOptions {
+                width: 256,
+                height: 192,
+                triangles: 600,
+                queries: 60,
+                ..RandomOptions::default()
+            }),
+        ),
+    ];
+    for (name, text) in texts {
+        let (width, height, events) = support::scene_events(&text);
+        let trace = indexed_trace_in_blocks(width, height, &events, 4096);
+        for arch in &archs {
+            for every in [1, 2, 3, 7] {
+                let indexed = sampled(&trace, arch, every, true);
+                let decoded = sampled(&trace, arch, every, false);
+                let windows = indexed.sampled_windows.unwrap();
+                assert!(windows.simulated > 0 && windows.total > windows.simulated || every == 1);
+                let what = format!("{name} at sampled:{every} on {:?}", arch.report_entries());
+                assert!(indexed.checked_queries > 0, "{what}: nothing checked");
+                let mut indexed = indexed;
+                indexed.checked_queries = decoded.checked_queries;
+                assert_same_but_source(indexed, &decoded, &what);
+            }
+        }
+    }
+}
+
+#[test]
+fn the_ir_analytic_level_decodes_a_trace_with_verbose_queries_or_an_older_one() {
+    let (_, trace, _, _) = traces().remove(0);
+    let ir = ir_with("ir2", &[]);
+    // The hard cases have verbose queries, whose Image Engines' hits a band does not hold.
+    assert!(!analytic(&trace, &ir, true, None).from_window_index);
+    // Without them, from the band index; not in a version-9 trace, which has none.
+    let (width, height, events) = support::scene_events(&HARDCASES.replace(" verbose ", " brief "));
+    let brief = indexed_trace(width, height, &events);
+    assert!(analytic(&brief, &ir, true, None).from_window_index);
+    let old = occsim_traces::trace::with_version_field(
+        &occsim_traces::trace::windows::without_band_index(&brief).unwrap(),
+        9,
+    )
+    .unwrap();
+    let from_old = analytic(&old, &ir, true, None);
+    assert!(!from_old.from_window_index);
+    assert_eq!(
+        from_old.total_cycles,
+        analytic(&brief, &ir, false, None).total_cycles
+    );
+    // Nor where asked not to, or retiled.
+    assert!(!analytic(&brief, &ir, false, None).from_window_index);
+    let grid: TileGrid = "2x2".parse().unwrap();
+    assert!(!analytic(&brief, &ir, true, Some(grid)).from_window_index);
 }

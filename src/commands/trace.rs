@@ -308,6 +308,15 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
         ),
         _ => outln!("index       none (the analytic level decodes the fragments)"),
     }
+    match summary.bands {
+        Some(bands) => outln!(
+            "bands       every run of fragments as bands of rows in {} blocks, {} bytes stored ({} before compression): the IR's analytic level reads them where no query is verbose",
+            bands.blocks,
+            bands.stored_bytes,
+            bands.payload_bytes
+        ),
+        None => outln!("bands       none (the IR's analytic level decodes the fragments)"),
+    }
     match summary.depth_tests {
         Some(tests) => outln!(
             "depth tests each fragment's result in {} blocks, {} bytes stored ({} before compression): the sampled level starts its machines mid-trace",

@@ -1219,23 +1219,29 @@ impl SampledModel {
         fragments: &mut TestedFragments<R>,
     ) -> Result<(), ReadError<SimError>> {
         self.plan().map_err(ReadError::Sink)?;
-        let stretch = match item {
-            IndexItem::Event(event) => {
-                self.event(event).map_err(ReadError::Sink)?;
-                if let (Event::Clear, Some(consistent)) = (event, &mut self.consistent) {
-                    consistent.clear();
-                }
-                return Ok(());
+        if let IndexItem::Event(event) = item {
+            self.event(event).map_err(ReadError::Sink)?;
+            if let (Event::Clear, Some(consistent)) = (event, &mut self.consistent) {
+                consistent.clear();
             }
-            IndexItem::Stretch(stretch) => stretch,
-            // The window index holds no bands (its reader refuses one).
-            IndexItem::Band(_) => return Ok(()),
-        };
+            return Ok(());
+        }
         self.close_ended_window().map_err(ReadError::Sink)?;
         let state = *self.core.functional.state();
-        self.formulas.stretch(stretch, &state);
+        // The O2's formulas count the window index's stretches, the IR's the band index's
+        // bands.
+        let count = match item {
+            IndexItem::Stretch(stretch) => {
+                self.formulas.stretch(stretch, &state);
+                stretch.fragments
+            }
+            IndexItem::Band(band) => {
+                self.formulas.band(band);
+                band.fragments()
+            }
+            IndexItem::Event(_) => return Ok(()),
+        };
         self.settle();
-        let count = stretch.fragments;
         self.core.count_fragments(count);
         // A running machine takes the stretch, or its cool-down's part of it; then a machine
         // waiting to start starts inside it (after a cool-down that ends there).

@@ -152,6 +152,156 @@ impl FragmentBand {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::event::{Event, Fragment};
+    use crate::query::{QueryMode, QuerySpec};
+    use crate::state::Rect;
+    use crate::trace::block::{BlockHeader, CODEC_STORED, KIND_BANDS, KIND_INDEX};
+    use crate::trace::{IndexItem, TraceHeader, TraceReader, TraceWriter, WriterOptions};
+
+    fn indexed(events: &[Event]) -> Vec<u8> {
+        let options = WriterOptions {
+            window_index: Some(crate::depth_layout::DepthLayout {
+                tile_width_pixels: 8,
+                tile_height_pixels: 8,
+                pixels_per_word: 4,
+                banks: 1,
+            }),
+            ..WriterOptions::default()
+        };
+        let mut bytes = Vec::new();
+        let mut writer =
+            TraceWriter::with_options(&mut bytes, &TraceHeader::new(16, 16), options).unwrap();
+        for event in events {
+            writer.write_event(event).unwrap();
+        }
+        writer.finish().unwrap();
+        bytes
+    }
+
+    fn band_items(bytes: &[u8]) -> Result<Vec<IndexItem>, crate::trace::TraceError> {
+        let mut reader = TraceReader::new(bytes)?;
+        let mut items = Vec::new();
+        reader
+            .for_each_band_item(|item| {
+                items.push(item.clone());
+                Ok::<(), ()>(())
+            })
+            .map_err(|e| match e {
+                crate::trace::ReadError::Trace(e) => e,
+                crate::trace::ReadError::Sink(()) => unreachable!(),
+            })?;
+        Ok(items)
+    }
+
+    fn frag(x: u16, y: u16) -> Event {
+        Event::Fragment(Fragment { x, y, z: 100 })
+    }
+
+    #[test]
+    fn the_band_index_holds_the_events_and_each_run_of_fragments_in_bands() {
+        // A primitive of ten rows (x 2..5 on rows 0..9: 3 fragments each), then a query
+        // begin, then two scattered fragments on row 12: a band of rows 0..7, one of rows 8
+        // and 9 (cut at the ninth row), then the event, then a band of two runs.
+        let mut events = vec![Event::Primitive];
+        for y in 0..10 {
+            events.extend((2..5).map(|x| frag(x, y)));
+        }
+        let begin = Event::QueryBegin(QuerySpec {
+            id: 1,
+            mode: QueryMode::Brief,
+            buffer_entries: 8,
+            tiles: vec![Rect::new(0, 0, 16, 16)],
+        });
+        events.push(begin.clone());
+        events.extend([frag(1, 12), frag(9, 12), Event::QueryEnd]);
+        let items = band_items(&indexed(&events)).unwrap();
+        let band = |runs: &[(u16, u16, u32)]| {
+            let mut band = FragmentBand::EMPTY;
+            for &(x, y, len) in runs {
+                band.push(x, y, len);
+            }
+            IndexItem::Band(band)
+        };
+        let rows = |range: std::ops::Range<u16>| range.map(|y| (2, y, 3)).collect::<Vec<_>>();
+        assert_eq!(
+            items,
+            [
+                IndexItem::Event(Event::Primitive),
+                band(&rows(0..8)),
+                band(&rows(8..10)),
+                IndexItem::Event(begin),
+                band(&[(1, 12, 1), (9, 12, 1)]),
+                IndexItem::Event(Event::QueryEnd),
+            ]
+        );
+    }
+
+    /// `bytes` with a stored block of `kind` holding `payload` put ahead of every other
+    /// block; returns the bytes and the block's offset.
+    fn with_block_first(mut bytes: Vec<u8>, kind: u8, payload: &[u8]) -> (Vec<u8>, usize) {
+        let block = BlockHeader {
+            kind,
+            codec: CODEC_STORED,
+            events: 1,
+            raw_len: payload.len() as u32,
+            stored_len: payload.len() as u32,
+        };
+        let (_, at) = crate::trace::block::header_json(&bytes).unwrap();
+        let mut inserted = block.fields().to_vec();
+        inserted.extend_from_slice(&block.checksum(payload).to_le_bytes());
+        inserted.extend_from_slice(payload);
+        bytes.splice(at..at, inserted);
+        (bytes, at)
+    }
+
+    #[test]
+    fn a_band_no_writer_makes_or_in_the_wrong_index_is_refused_with_its_offset() {
+        let clean = indexed(&[Event::Primitive, frag(0, 0)]);
+        let mut two_runs = FragmentBand::EMPTY;
+        two_runs.push(0, 0, 1);
+        two_runs.push(4, 0, 2);
+        let mut payload = Vec::new();
+        two_runs.encode(&mut payload);
+        // Right as a band-index block; a band in a window-index block is refused.
+        let (good, _) = with_block_first(clean.clone(), KIND_BANDS, &payload);
+        assert!(
+            band_items(&good).is_err(),
+            "the summary counts one band block fewer"
+        );
+        let (wrong, at) = with_block_first(clean.clone(), KIND_INDEX, &payload);
+        let mut reader = TraceReader::new(&wrong[..]).unwrap();
+        let error = reader
+            .for_each_index_item(|_| Ok::<(), ()>(()))
+            .err()
+            .map(|e| format!("{e:?}"))
+            .unwrap();
+        assert!(error.contains("a band in a window-index block"), "{error}");
+        assert!(error.contains(&at.to_string()), "{error}");
+        // Runs no writer makes: past the viewport (16 wide), or continuing the run before.
+        for (runs, why) in [
+            (&[(10u16, 0u16, 7u32)][..], "outside the viewport"),
+            (&[(0, 0, 2), (2, 0, 1)][..], "continues the one before"),
+        ] {
+            let mut payload = vec![tag::BAND, runs.len() as u8];
+            let mut before = (0i64, 0i64, 0i64);
+            for &(x, y, len) in runs {
+                for (value, was) in [
+                    (x as i64, before.0),
+                    (y as i64, before.1),
+                    (len as i64, before.2),
+                ] {
+                    crate::trace::codec::put_zz(&mut payload, value - was);
+                }
+                before = (x as i64, y as i64, len as i64);
+            }
+            let (bad, at) = with_block_first(clean.clone(), KIND_BANDS, &payload);
+            let error = band_items(&bad).unwrap_err().to_string();
+            assert!(
+                error.contains(why) && error.contains(&at.to_string()),
+                "{error}"
+            );
+        }
+    }
 
     #[test]
     fn a_band_takes_eight_rows_and_sixteen_runs_and_joins_a_row_s_pieces() {
