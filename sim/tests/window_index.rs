@@ -1,7 +1,8 @@
 //! The analytic level read from a trace's window index equals the analytic level read from
 //! its fragments' spans, which equals it fed fragment by fragment, bit for bit, wherever the
-//! index is used; and where the index cannot serve (another depth layout, the
-//! InfiniteReality-like machine, a retiling) the fragments are read.
+//! index is used; and where the index cannot serve (another depth layout, a retiling) the
+//! fragments are read. So for the InfiniteReality-like machine's analytic and sampled
+//! levels and the band index.
 
 use occsim_sim::effects::EffectsChoice;
 use occsim_sim::levels::sampled::{tail_fragments, warm_up_fragments};
@@ -155,7 +156,6 @@ fn where_the_index_cannot_serve_the_fragments_are_read() {
     for arch in [
         o2_with(&["memory_banks=4"]),
         o2_with(&["framebuffer_tile_width_pixels=64"]),
-        Arch::builtin("ir2").unwrap(),
     ] {
         assert!(!analytic(&trace, &arch, true, None).from_window_index);
     }
@@ -348,10 +348,12 @@ fn long_sampled_windows_simulated_over_their_tails_agree_from_the_index_and_the_
 #[test]
 fn the_sampled_level_reads_fragments_where_the_index_cannot_serve() {
     let (_, trace, _, _) = traces().remove(0);
-    for arch in [o2_with(&["memory_banks=4"]), Arch::builtin("ir2").unwrap()] {
-        assert!(!sampled(&trace, &arch, 3, true).from_window_index);
-    }
+    assert!(!sampled(&trace, &o2_with(&["memory_banks=4"]), 3, true).from_window_index);
     assert!(!sampled(&trace, &o2_with(&[]), 3, false).from_window_index);
+    // The IR's reads the band index, but not where asked not to.
+    let ir = Arch::builtin("ir2").unwrap();
+    assert!(sampled(&trace, &ir, 3, true).from_window_index);
+    assert!(!sampled(&trace, &ir, 3, false).from_window_index);
 }
 
 #[test]
@@ -419,31 +421,20 @@ fn ir_with(name: &str, sets: &[&str]) -> Arch {
     arch
 }
 
+/// The hard cases with their verbose queries made brief, as [`traces`] gives a trace.
+fn brief_hardcases() -> Trace {
+    let (width, height, events) = support::scene_events(&HARDCASES.replace(" verbose ", " brief "));
+    let trace = indexed_trace(width, height, &events);
+    ("hardcases, brief", trace, (width, height), events)
+}
+
 #[test]
 fn the_band_index_gives_the_ir_analytic_result_of_the_fragments_bit_for_bit() {
-    // The scenes without verbose queries (their hits need the fragments): the hard cases'
-    // and the demo's verbose queries made brief, and the random triangles.
-    let scenes = traces().into_iter().map(|(name, _, _, _)| name);
-    let texts = [
-        HARDCASES.replace(" verbose ", " brief "),
-        demo_scene(&DemoOptions {
-            width: 320,
-            height: 256,
-            frames: 2,
-            lots_per_side: 8,
-            ..DemoOptions::default()
-        })
-        .replace(" verbose ", " brief "),
-        random_scene(&RandomOptions {
-            width: 256,
-            height: 192,
-            triangles: 600,
-            queries: 60,
-            ..RandomOptions::default()
-        }),
-    ];
-    // Every board count, the columns interleave on many or few engines (a band wider than
-    // the units deals an engine several columns), and the others (each pixel looked up).
+    // The hard cases (verbose queries whose buffers overflow: a band marks its runs that
+    // pass), the two-frame demo (verbose queries too), the random triangles, and the hard
+    // cases with no verbose query. Every board count, the columns interleave on many or
+    // few engines (a band wider than the units deals an engine several columns), and the
+    // others (each pixel looked up).
     let archs = [
         ir_with("ir1", &[]),
         ir_with("ir2", &["engines=1"]),
@@ -452,9 +443,7 @@ fn the_band_index_gives_the_ir_analytic_result_of_the_fragments_bit_for_bit() {
         ir_with("ir2", &["interleave=morton"]),
         ir_with("ir4", &["interleave=blocks"]),
     ];
-    for (name, text) in scenes.zip(texts) {
-        let (width, height, events) = support::scene_events(&text);
-        let trace = indexed_trace(width, height, &events);
+    for (name, trace, (width, height), events) in traces().into_iter().chain([brief_hardcases()]) {
         for arch in &archs {
             let what = format!("{name} on {:?}", arch.report_entries());
             let indexed = analytic(&trace, arch, true, None);
@@ -490,34 +479,18 @@ fn the_band_index_gives_the_ir_sampled_result_of_the_fragments_bit_for_bit() {
         ir_with("ir4", &["engines=1"]),
         ir_with("ir2", &["interleave=morton"]),
     ];
-    let texts = [
-        (
-            "hardcases, brief",
-            HARDCASES.replace(" verbose ", " brief "),
-        ),
-        (
-            "random",
-            random_scene(&RandomOptions {
-                width: 256,
-                height: 192,
-                triangles: 600,
-                queries: 60,
-                ..RandomOptions::default()
-            }),
-        ),
-    ];
-    for (name, text) in texts {
-        let (width, height, events) = support::scene_events(&text);
+    let mut scenes = traces();
+    scenes.remove(1);
+    for (name, _, (width, height), events) in scenes {
         let trace = indexed_trace_in_blocks(width, height, &events, 4096);
         for arch in &archs {
             for every in [1, 2, 3, 7] {
-                let indexed = sampled(&trace, arch, every, true);
+                let mut indexed = sampled(&trace, arch, every, true);
                 let decoded = sampled(&trace, arch, every, false);
                 let windows = indexed.sampled_windows.unwrap();
                 assert!(windows.simulated > 0 && windows.total > windows.simulated || every == 1);
                 let what = format!("{name} at sampled:{every} on {:?}", arch.report_entries());
                 assert!(indexed.checked_queries > 0, "{what}: nothing checked");
-                let mut indexed = indexed;
                 indexed.checked_queries = decoded.checked_queries;
                 assert_same_but_source(indexed, &decoded, &what);
             }
@@ -526,17 +499,13 @@ fn the_band_index_gives_the_ir_sampled_result_of_the_fragments_bit_for_bit() {
 }
 
 #[test]
-fn the_ir_analytic_level_decodes_a_trace_with_verbose_queries_or_an_older_one() {
+fn the_ir_analytic_level_decodes_an_older_trace_a_retiled_one_or_where_asked() {
     let (_, trace, _, _) = traces().remove(0);
     let ir = ir_with("ir2", &[]);
-    // The hard cases have verbose queries, whose Image Engines' hits a band does not hold.
-    assert!(!analytic(&trace, &ir, true, None).from_window_index);
-    // Without them, from the band index; not in a version-9 trace, which has none.
-    let (width, height, events) = support::scene_events(&HARDCASES.replace(" verbose ", " brief "));
-    let brief = indexed_trace(width, height, &events);
-    assert!(analytic(&brief, &ir, true, None).from_window_index);
+    assert!(analytic(&trace, &ir, true, None).from_window_index);
+    // A version-9 trace has no band index.
     let old = occsim_traces::trace::with_version_field(
-        &occsim_traces::trace::windows::without_band_index(&brief).unwrap(),
+        &occsim_traces::trace::windows::without_band_index(&trace).unwrap(),
         9,
     )
     .unwrap();
@@ -544,10 +513,10 @@ fn the_ir_analytic_level_decodes_a_trace_with_verbose_queries_or_an_older_one() 
     assert!(!from_old.from_window_index);
     assert_eq!(
         from_old.total_cycles,
-        analytic(&brief, &ir, false, None).total_cycles
+        analytic(&trace, &ir, false, None).total_cycles
     );
-    // Nor where asked not to, or retiled.
-    assert!(!analytic(&brief, &ir, false, None).from_window_index);
+    // Retiled queries are not the trace's; asked not to, it decodes.
     let grid: TileGrid = "2x2".parse().unwrap();
-    assert!(!analytic(&brief, &ir, true, Some(grid)).from_window_index);
+    assert!(!analytic(&trace, &ir, true, Some(grid)).from_window_index);
+    assert!(!analytic(&trace, &ir, false, None).from_window_index);
 }

@@ -8,11 +8,13 @@
 //!
 //! A band record is `BAND count` and then each run as its `x`, `y` and `len` less the run
 //! before's (zigzag varints; the first run's relative to 0): a primitive's rows step by
-//! a pixel or two, so most take three bytes. A band's runs are those a
+//! a pixel or two, so most take three bytes. Under a verbose query, a band with passing
+//! runs is `BAND_PASSING count mask` and its runs, bit `k` of the varint `mask` set when
+//! run `k`'s fragments passed their depth test. A band's runs are those a
 //! [`FragmentBand::push`] would make: a run that continues the one before on its row is
 //! part of it, so no run starts where the one before ends on the same row.
 
-use super::codec::{put_zz, tag};
+use super::codec::{put_uv, put_zz, tag};
 
 /// Rows a band holds at most: a stretch of the IR formulas, which close one and advance
 /// their clocks there. A primitive's rows load its Image Engines unevenly (a narrow row
@@ -32,12 +34,15 @@ pub const BAND_ROWS: usize = 8;
 /// a row make a run each, and a band of them closes at this many).
 pub const BAND_RUNS: usize = 16;
 
-/// A run of fragments at pixels `x..x + len` of row `y`.
+/// A run of fragments at pixels `x..x + len` of row `y`; under a verbose query, `passes`
+/// says they passed their depth test (a run's fragments all pass or all fail: where that
+/// changes along a row, a run ends), which tells the Image Engines' hits.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RowRun {
     pub x: u16,
     pub y: u16,
     pub len: u32,
+    pub passes: bool,
 }
 
 /// Up to [`BAND_ROWS`] rows (and [`BAND_RUNS`] runs) of fragments, in the order they came.
@@ -50,6 +55,18 @@ pub struct FragmentBand {
     last_row: u8,
 }
 
+impl RowRun {
+    /// `len` fragments at `x..` of row `y`, outside a verbose query.
+    pub const fn at(x: u16, y: u16, len: u32) -> RowRun {
+        RowRun {
+            x,
+            y,
+            len,
+            passes: false,
+        }
+    }
+}
+
 impl Default for FragmentBand {
     fn default() -> FragmentBand {
         FragmentBand::EMPTY
@@ -58,14 +75,20 @@ impl Default for FragmentBand {
 
 impl FragmentBand {
     pub const EMPTY: FragmentBand = FragmentBand {
-        runs: [RowRun { x: 0, y: 0, len: 0 }; BAND_RUNS],
+        runs: [RowRun {
+            x: 0,
+            y: 0,
+            len: 0,
+            passes: false,
+        }; BAND_RUNS],
         count: 0,
         rows: 0,
         last_row: 0,
     };
 
-    /// Bytes a band record takes at most: a tag, its count, and three varints a run.
-    pub(crate) const MAX_BYTES: usize = 2 + BAND_RUNS * 3 * 10;
+    /// Bytes a band record takes at most: a tag, its count, its passing runs' mask, and
+    /// three varints a run.
+    pub(crate) const MAX_BYTES: usize = 2 + 3 + BAND_RUNS * 3 * 10;
 
     pub fn is_empty(&self) -> bool {
         self.count == 0
@@ -81,40 +104,55 @@ impl FragmentBand {
         &self.runs[self.last_row as usize..self.count as usize]
     }
 
+    /// Bit `k` set when run `k` passes.
+    fn passing_mask(&self) -> u16 {
+        (self.runs().iter().enumerate()).fold(0, |mask, (k, run)| mask | (run.passes as u16) << k)
+    }
+
     pub fn fragments(&self) -> u64 {
         self.runs().iter().map(|run| run.len as u64).sum()
     }
 
-    /// Whether `len` fragments at `x..` of row `y` continue its last run.
-    fn continues(&self, x: u16, y: u16) -> bool {
-        self.runs()
-            .last()
-            .is_some_and(|last| last.y == y && last.x as u32 + last.len == x as u32)
+    /// Whether `run` continues its last run (on its row, from its end, passing alike).
+    fn continues(&self, run: &RowRun) -> bool {
+        self.runs().last().is_some_and(|last| {
+            last.y == run.y && last.x as u32 + last.len == run.x as u32 && last.passes == run.passes
+        })
     }
 
-    /// Whether a run at `x` of row `y` fits: it continues the last run, or the band has a
-    /// run to spare and, where the run begins a row, a row to spare.
-    pub fn admits(&self, x: u16, y: u16) -> bool {
-        if self.continues(x, y) {
+    /// Whether `run` fits: it continues the last run, or the band has a run to spare and,
+    /// where the run begins a row, a row to spare.
+    pub fn admits_run(&self, run: &RowRun) -> bool {
+        if self.continues(run) {
             return true;
         }
-        let new_row = self.runs().last().is_none_or(|last| last.y != y);
+        let new_row = self.runs().last().is_none_or(|last| last.y != run.y);
         (self.count as usize) < BAND_RUNS && !(new_row && self.rows as usize == BAND_ROWS)
     }
 
-    /// Add `len` fragments at `x..` of row `y` (which it [`Self::admits`]).
-    pub fn push(&mut self, x: u16, y: u16, len: u32) {
-        debug_assert!(self.admits(x, y));
-        if self.continues(x, y) {
-            self.runs[self.count as usize - 1].len += len;
+    /// Add `run` (which it [`Self::admits_run`]).
+    pub fn push_run(&mut self, run: RowRun) {
+        debug_assert!(self.admits_run(&run));
+        if self.continues(&run) {
+            self.runs[self.count as usize - 1].len += run.len;
             return;
         }
-        if self.runs().last().is_none_or(|last| last.y != y) {
+        if self.runs().last().is_none_or(|last| last.y != run.y) {
             self.rows += 1;
             self.last_row = self.count;
         }
-        self.runs[self.count as usize] = RowRun { x, y, len };
+        self.runs[self.count as usize] = run;
         self.count += 1;
+    }
+
+    /// [`Self::admits_run`] for a run at `x` of row `y` outside a verbose query.
+    pub fn admits(&self, x: u16, y: u16) -> bool {
+        self.admits_run(&RowRun::at(x, y, 0))
+    }
+
+    /// [`Self::push_run`] for `len` fragments at `x..` of row `y` outside a verbose query.
+    pub fn push(&mut self, x: u16, y: u16, len: u32) {
+        self.push_run(RowRun::at(x, y, len));
     }
 
     /// Add `run` as read from a trace in a viewport of `width` by `height`, or say why a
@@ -129,16 +167,23 @@ impl FragmentBand {
         if run.len == 0 || run.x as u32 + run.len > width || run.y as u32 >= height {
             return Err("a band run empty or outside the viewport");
         }
-        if self.continues(run.x, run.y) || !self.admits(run.x, run.y) {
+        if self.continues(&run) || !self.admits_run(&run) {
             return Err("a band run that continues the one before, or past 16 runs or 8 rows");
         }
-        self.push(run.x, run.y, run.len);
+        self.push_run(run);
         Ok(())
     }
 
     pub(crate) fn encode(&self, out: &mut Vec<u8>) {
-        out.push(tag::BAND);
-        out.push(self.count);
+        let passing = self.passing_mask();
+        if passing == 0 {
+            out.push(tag::BAND);
+            out.push(self.count);
+        } else {
+            out.push(tag::BAND_PASSING);
+            out.push(self.count);
+            put_uv(out, passing as u64);
+        }
         let mut before = RowRun::default();
         for run in self.runs() {
             put_zz(out, run.x as i64 - before.x as i64);
@@ -214,6 +259,15 @@ mod tests {
         });
         events.push(begin.clone());
         events.extend([frag(1, 12), frag(9, 12), Event::QueryEnd]);
+        // Under a verbose query (the depth test off: every fragment passes), its runs are
+        // marked passing.
+        let verbose = Event::QueryBegin(QuerySpec {
+            id: 2,
+            mode: QueryMode::Verbose,
+            buffer_entries: 8,
+            tiles: vec![Rect::new(0, 0, 16, 16)],
+        });
+        events.extend([verbose.clone(), frag(3, 14), frag(4, 14), Event::QueryEnd]);
         let items = band_items(&indexed(&events)).unwrap();
         let band = |runs: &[(u16, u16, u32)]| {
             let mut band = FragmentBand::EMPTY;
@@ -231,6 +285,16 @@ mod tests {
                 band(&rows(8..10)),
                 IndexItem::Event(begin),
                 band(&[(1, 12, 1), (9, 12, 1)]),
+                IndexItem::Event(Event::QueryEnd),
+                IndexItem::Event(verbose),
+                IndexItem::Band({
+                    let mut passing = FragmentBand::EMPTY;
+                    passing.push_run(RowRun {
+                        passes: true,
+                        ..RowRun::at(3, 14, 2)
+                    });
+                    passing
+                }),
                 IndexItem::Event(Event::QueryEnd),
             ]
         );
@@ -281,8 +345,13 @@ mod tests {
         for (runs, why) in [
             (&[(10u16, 0u16, 7u32)][..], "outside the viewport"),
             (&[(0, 0, 2), (2, 0, 1)][..], "continues the one before"),
+            (&[(0, 0, 1)][..], "with none passing"),
         ] {
             let mut payload = vec![tag::BAND, runs.len() as u8];
+            if why == "with none passing" {
+                // A passing band's mask of no run.
+                payload = vec![tag::BAND_PASSING, 1, 0];
+            }
             let mut before = (0i64, 0i64, 0i64);
             for &(x, y, len) in runs {
                 for (value, was) in [
@@ -310,14 +379,7 @@ mod tests {
         band.push(4, 10, 3);
         assert!(band.admits(7, 10));
         band.push(7, 10, 2);
-        assert_eq!(
-            band.runs(),
-            [RowRun {
-                x: 4,
-                y: 10,
-                len: 5
-            }]
-        );
+        assert_eq!(band.runs(), [RowRun::at(4, 10, 5)]);
         for y in 11..18 {
             assert!(band.admits(0, y));
             band.push(0, y, 1);
@@ -341,7 +403,7 @@ mod tests {
 
     #[test]
     fn runs_that_no_band_makes_are_refused() {
-        let run = |x, y, len| RowRun { x, y, len };
+        let run = |x, y, len| RowRun::at(x, y, len);
         let read = |runs: &[RowRun]| {
             let mut band = FragmentBand::EMPTY;
             runs.iter().try_for_each(|&r| band.try_push(r, 16, 16))

@@ -65,6 +65,9 @@ pub(crate) mod tag {
     /// In band-index blocks only, in place of fragments: a [`crate::trace::FragmentBand`]'s
     /// runs. Version 10 on.
     pub const BAND: u8 = 0x17;
+    /// As BAND, with a varint mask of its runs that passed their depth test (under a
+    /// verbose query). Version 10 on.
+    pub const BAND_PASSING: u8 = 0x18;
 }
 
 /// Most fragments in one span: a row of the widest viewport.
@@ -600,15 +603,15 @@ fn decode_present_runs(c: &mut Cursor, runs: &mut DenseRuns) -> Result<(), Paylo
 }
 
 /// A stretch record into `out`, checked.
-#[inline]
-/// A band record's runs (its tag read) into `out`, checked to be a band a writer makes in
-/// a viewport of `width` by `height`.
+/// A band record's runs (its tag, `BAND` or `BAND_PASSING`, read) into `out`, checked to
+/// be a band a writer makes in a viewport of `width` by `height`.
 fn decode_band(
     c: &mut Cursor,
     (width, height): (u32, u32),
     out: &mut FragmentBand,
 ) -> Result<(), PayloadError> {
     let start = c.pos - 1;
+    let passing_tag = c.bytes[start] == tag::BAND_PASSING;
     let count = c.byte()? as usize;
     if count == 0 || count > BAND_RUNS {
         return Err(bad(
@@ -616,9 +619,16 @@ fn decode_band(
             format!("a band of {count} runs (1 to {BAND_RUNS})"),
         ));
     }
+    let passing = match passing_tag {
+        true => c.uv_max((1 << count) - 1, "passing runs' mask")?,
+        false => 0,
+    };
+    if passing_tag && passing == 0 {
+        return Err(bad(start, "a band of passing runs with none passing"));
+    }
     *out = FragmentBand::EMPTY;
     let (mut x, mut y, mut len) = (0i64, 0i64, 0i64);
-    for _ in 0..count {
+    for k in 0..count {
         x = x.saturating_add(c.zz()?);
         y = y.saturating_add(c.zz()?);
         len = len.saturating_add(c.zz()?);
@@ -626,12 +636,14 @@ fn decode_band(
         else {
             return Err(bad(start, "a band run's x, row or length out of range"));
         };
-        out.try_push(RowRun { x, y, len }, width, height)
+        let passes = passing >> k & 1 == 1;
+        out.try_push(RowRun { x, y, len, passes }, width, height)
             .map_err(|reason| bad(start, reason))?;
     }
     Ok(())
 }
 
+#[inline]
 fn decode_stretch(c: &mut Cursor, out: &mut FragmentStretch) -> Result<(), PayloadError> {
     let start = c.pos - 1;
     // Field by field into `out`: the record is read for every stretch of an index.
@@ -893,19 +905,23 @@ impl BlockDecoder {
         ctx: &mut DecodeContext,
     ) -> Result<Option<IndexItem>, PayloadError> {
         match t {
-            tag::STRETCH | tag::BAND if (t == tag::BAND) != self.in_bands => Err(bad(
-                self.pos,
-                match self.in_bands {
-                    true => "a stretch in a band-index block",
-                    false => "a band in a window-index block",
-                },
-            )),
+            tag::STRETCH | tag::BAND | tag::BAND_PASSING
+                if (t != tag::STRETCH) != self.in_bands =>
+            {
+                Err(bad(
+                    self.pos,
+                    match self.in_bands {
+                        true => "a stretch in a band-index block",
+                        false => "a band in a window-index block",
+                    },
+                ))
+            }
             tag::STRETCH => {
                 let mut stretch = FragmentStretch::EMPTY;
                 self.stretch_record(payload, &mut stretch)?;
                 Ok(Some(IndexItem::Stretch(stretch)))
             }
-            tag::BAND => {
+            tag::BAND | tag::BAND_PASSING => {
                 let mut band = FragmentBand::EMPTY;
                 self.band_record(payload, (ctx.width, ctx.height), &mut band)?;
                 Ok(Some(IndexItem::Band(band)))
@@ -971,7 +987,7 @@ impl BlockDecoder {
                     visit(&item).map_err(DrainError::Sink)?;
                     continue;
                 }
-                (tag::BAND, IndexItem::Band(band)) => {
+                (tag::BAND | tag::BAND_PASSING, IndexItem::Band(band)) => {
                     self.band_record(payload, (ctx.width, ctx.height), band)?;
                     visit(&item).map_err(DrainError::Sink)?;
                     continue;

@@ -202,6 +202,8 @@ pub(crate) struct WindowIndexer {
     last_read: LastRead,
     /// An occlusion-render-mode query (brief, verbose) is open: nothing draws.
     occlusion_mode: bool,
+    /// A verbose query is open: the band index marks the runs that pass.
+    pub(crate) verbose: bool,
     stretch: FragmentStretch,
     /// The stretch's dense runs of reads, found as its fragments pass.
     dense: DenseReadFinder,
@@ -217,6 +219,7 @@ impl WindowIndexer {
             address: DepthAddress::new(layout, width),
             last_read: LastRead::new(layout.banks),
             occlusion_mode: false,
+            verbose: false,
             stretch: FragmentStretch::EMPTY,
             dense: DenseReadFinder::default(),
             since_end: FIRST_READS_FRAGMENTS,
@@ -259,9 +262,13 @@ impl WindowIndexer {
     pub(crate) fn event(&mut self, event: &Event) {
         debug_assert_eq!(self.stretch.fragments, 0);
         match event {
-            Event::QueryBegin(spec) => self.occlusion_mode = spec.mode.is_occlusion_render_mode(),
+            Event::QueryBegin(spec) => {
+                self.occlusion_mode = spec.mode.is_occlusion_render_mode();
+                self.verbose = spec.mode == crate::query::QueryMode::Verbose;
+            }
             Event::QueryEnd => {
                 self.occlusion_mode = false;
+                self.verbose = false;
                 self.since_end = 0;
             }
             _ => {}

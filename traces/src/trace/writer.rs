@@ -1,6 +1,6 @@
 //! The streaming trace writer: events in, blocks out, one block buffer of memory.
 
-use super::bands::FragmentBand;
+use super::bands::{FragmentBand, RowRun};
 use super::block::*;
 use super::codec::{
     encode_large_event, encode_small_event, encode_span, put_uv, span_bytes_bound, tag,
@@ -12,7 +12,7 @@ use super::index::{FragmentStretch, WindowIndexer};
 use super::windows::{WindowScout, WindowSize};
 use super::TraceError;
 use crate::depth_layout::DepthLayout;
-use crate::event::Event;
+use crate::event::{Event, Fragment};
 use crate::golden::EventSink;
 use std::io::Write;
 
@@ -258,17 +258,10 @@ impl<W: Write> TraceWriter<W> {
             self.tally.checked_fragments(1);
             self.windows.fragments(1);
             self.write_ended_windows()?;
-            if self
-                .index
-                .as_ref()
-                .is_some_and(|index| !index.band.admits(f.x, f.y))
-            {
-                self.flush_band()?;
+            let passed = self.index.as_mut().map(|index| index.indexer.fragment(*f));
+            if let Some(passed) = passed {
+                self.band_fragment(*f, passed)?;
             }
-            let passed = self.index.as_mut().map(|index| {
-                index.band.push(f.x, f.y, 1);
-                index.indexer.fragment(*f)
-            });
             let len = self.span_depths.len();
             let continues = len > 0
                 && len < self.max_span
@@ -314,6 +307,26 @@ impl<W: Write> TraceWriter<W> {
             self.make_room(Lane::Windows, WindowSize::MAX_BYTES)?;
             size.encode(&mut self.window_table.payload);
             self.window_table.items += 1;
+        }
+        Ok(())
+    }
+
+    /// Into the band being gathered: fragment `f`, passing its depth test or not (marked
+    /// under a verbose query); the band goes into the band index first where it would not
+    /// admit it.
+    fn band_fragment(&mut self, f: Fragment, passed: bool) -> Result<(), TraceError> {
+        let Some(index) = &self.index else {
+            return Ok(());
+        };
+        let run = RowRun {
+            passes: passed && index.indexer.verbose,
+            ..RowRun::at(f.x, f.y, 1)
+        };
+        if !index.band.admits_run(&run) {
+            self.flush_band()?;
+        }
+        if let Some(index) = &mut self.index {
+            index.band.push_run(run);
         }
         Ok(())
     }

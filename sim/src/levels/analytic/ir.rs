@@ -450,14 +450,19 @@ impl IrWindow {
     /// set: they join the current stretch, which closes first where its band would not
     /// admit them ([`FragmentBand::admits`]: at its ninth row).
     pub fn paced_along(&mut self, (x, y): (u16, u16), len: usize) {
-        if len == 0 {
+        self.paced_run(RowRun::at(x, y, len as u32));
+    }
+
+    /// [`Self::paced_along`] for a run that may pass (under a verbose query).
+    pub fn paced_run(&mut self, run: RowRun) {
+        if run.len == 0 {
             return;
         }
-        if !self.band.admits(x, y) {
+        if !self.band.admits_run(&run) {
             self.close_stretch();
         }
-        self.band.push(x, y, len as u32);
-        self.fragments += len as u64;
+        self.band.push_run(run);
+        self.fragments += run.len as u64;
     }
 
     /// A band of a trace's band index, at the pace set: one stretch, closed.
@@ -673,23 +678,54 @@ impl IrBottleneck {
     pub(super) fn span(&mut self, span: Span, functional: &FunctionalModel) {
         let pace = self.pace();
         self.window.pace(pace);
-        self.window.paced_along((span.x, span.y), span.depths.len());
-        if self
-            .open
+        if !self.verbose_open() {
+            self.window.paced_along((span.x, span.y), span.depths.len());
+            return;
+        }
+        // Under a verbose query, the span as runs of fragments that pass their depth test
+        // or fail it (against the buffer before the span: its pixels are distinct), as the
+        // band index keeps them.
+        let state = functional.state();
+        let mut run = RowRun::at(span.x, span.y, 0);
+        for fragment in span.fragments() {
+            let stored = functional.depth_buffer().get(fragment.x, fragment.y);
+            let passes = !state.depth_test || state.depth_func.passes(fragment.z, stored);
+            if passes != run.passes && run.len > 0 {
+                self.verbose_run(run);
+                run = RowRun::at(fragment.x, span.y, 0);
+            }
+            run.passes = passes;
+            run.len += 1;
+        }
+        self.verbose_run(run);
+    }
+
+    /// A verbose query is open.
+    fn verbose_open(&self) -> bool {
+        self.open
             .as_ref()
             .is_some_and(|query| !query.verbose_tiles.is_empty())
-        {
-            span.fragments()
-                .for_each(|fragment| self.count_hits(fragment, functional));
+    }
+
+    /// A run under a verbose query: its work, and its hits if it passes.
+    fn verbose_run(&mut self, run: RowRun) {
+        self.window.paced_run(run);
+        if run.passes {
+            self.count_hits(run);
         }
     }
 
-    /// Count a band of a trace's band index: one stretch (a verbose query's hits are not
-    /// in a band: [`super::AnalyticModel::reads_band_index`] reads none under one).
+    /// Count a band of a trace's band index: one stretch, and under a verbose query its
+    /// passing runs' hits.
     pub(super) fn band(&mut self, band: &FragmentBand) {
         let pace = self.pace();
         self.window.pace(pace);
         self.window.band(band);
+        if self.verbose_open() {
+            for run in band.runs().iter().filter(|run| run.passes) {
+                self.count_hits(*run);
+            }
+        }
     }
 
     /// An event other than a fragment comes: the stretch closes (as a band of the index
@@ -712,30 +748,29 @@ impl IrBottleneck {
         );
     }
 
-    /// A verbose query's hit words for a fragment that passes its depth test: one for each
-    /// of the query's tiles that holds it, while its Image Engine's buffer for the tile has
-    /// room.
-    fn count_hits(&mut self, fragment: Fragment, functional: &FunctionalModel) {
-        let engine = self.owners[self.interleave.unit(fragment.x, fragment.y)].1;
+    /// A verbose query's hit words for a run of fragments that pass their depth test: one
+    /// for each of the query's tiles that holds a fragment, while its Image Engine's buffer
+    /// for the tile has room.
+    fn count_hits(&mut self, run: RowRun) {
         let Some(query) = &mut self.open else {
             return;
         };
-        let state = functional.state();
-        let passed = !state.depth_test
-            || state.depth_func.passes(
-                fragment.z,
-                functional.depth_buffer().get(fragment.x, fragment.y),
-            );
-        if passed {
-            let (x, y) = (fragment.x as u32, fragment.y as u32);
-            let sent = &mut query.hits_sent[engine * query.verbose_tiles.len()..];
-            for (tile, sent) in query.verbose_tiles.iter().zip(sent) {
-                if tile.contains(x, y) && *sent < query.room {
-                    *sent += 1;
-                    self.window.hit_words[engine] += 1;
+        let tiles = query.verbose_tiles.len();
+        let (owners, hit_words) = (&self.owners, &mut self.window.hit_words);
+        let y = run.y as u32;
+        let mut x = run.x as u32;
+        self.interleave
+            .for_each_unit_along(run.x, run.y, run.len as usize, |unit| {
+                let engine = owners[unit].1;
+                let sent = &mut query.hits_sent[engine * tiles..(engine + 1) * tiles];
+                for (tile, sent) in query.verbose_tiles.iter().zip(sent) {
+                    if tile.contains(x, y) && *sent < query.room {
+                        *sent += 1;
+                        hit_words[engine] += 1;
+                    }
                 }
-            }
-        }
+                x += 1;
+            });
     }
 
     /// The query ended; the window that began in cycle `start` closes: its cycles and the

@@ -26,7 +26,7 @@ use crate::levels::predicted_loop::PredictedLoop;
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::state::RenderState;
 use occsim_traces::trace::{FragmentBand, FragmentStretch, IndexItem, TraceHeader};
-use occsim_traces::{Event, Fragment, QueryMode, QueryResult, QuerySpec, Span};
+use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, Span};
 
 pub use crate::levels::level::WindowEnd;
 
@@ -225,19 +225,17 @@ impl AnalyticModel {
         golden && arch.o2().is_ok_and(|o2| o2.depth_layout() == layout)
     }
 
-    /// Whether the analytic level of `arch` can replay a trace with `header` (read by
-    /// `reader`) from its band index alone ([`occsim_traces::trace::bands`]): the IR
-    /// formulas, whose counts a band holds whatever the interleave, on a trace with a band
-    /// index whose header says it carries golden results (or has no query) and no verbose
-    /// query (a band keeps where its fragments are, not which pass: the hits a verbose
-    /// query's Image Engines send need the fragments).
+    /// Whether the analytic level of `arch` can replay a trace with `header` from its band
+    /// index alone (`has_band_index`, [`occsim_traces::trace::bands`]): the IR formulas,
+    /// whose counts a band holds whatever the interleave (under a verbose query, which of
+    /// its runs pass), on a trace whose header says it carries golden results (or has no
+    /// query) to stand for the results fragments would give.
     pub fn reads_band_index(arch: &Arch, header: &TraceHeader, has_band_index: bool) -> bool {
-        let Some(features) = &header.features else {
-            return false;
-        };
-        let golden = features.query_results || features.query_modes.is_empty();
-        let verbose = features.query_modes.contains(&QueryMode::Verbose);
-        has_band_index && golden && !verbose && arch.machine() == Machine::Ir
+        let golden = header
+            .features
+            .as_ref()
+            .is_some_and(|features| features.query_results || features.query_modes.is_empty());
+        has_band_index && golden && arch.machine() == Machine::Ir
     }
 
     /// The model for a replay from the window index (see [`Self::reads_window_index`]):
