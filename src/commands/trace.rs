@@ -310,7 +310,7 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
     }
     match summary.bands {
         Some(bands) => outln!(
-            "bands       every run of fragments as bands of rows in {} blocks, {} bytes stored ({} before compression): the IR's analytic level reads them where no query is verbose",
+            "bands       every run of fragments as bands of rows in {} blocks, {} bytes stored ({} before compression): the IR's analytic and sampled levels read them instead of the fragments",
             bands.blocks,
             bands.stored_bytes,
             bands.payload_bytes

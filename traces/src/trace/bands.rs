@@ -4,7 +4,9 @@
 //! machine's analytic formulas count them (`occsim_sim::levels::analytic::ir`). A band
 //! keeps where its fragments are (each row's runs), not their depths: what an interleave
 //! deals to its Image Engines, whatever the interleave and the number of engines, so one
-//! index serves every IR architecture.
+//! index serves every IR architecture. Under a verbose query a band's runs are cut where
+//! the depth test's outcome changes and marked passing: the Image Engines' hits are the
+//! passing fragments' (a writer's functional model tells it which pass).
 //!
 //! A band record is `BAND count` and then each run as its `x`, `y` and `len` less the run
 //! before's (zigzag varints; the first run's relative to 0): a primitive's rows step by

@@ -12,9 +12,10 @@
 //!
 //! The formulas follow the work stretch by stretch, as a fluid. A *stretch* is a band of a
 //! primitive's rows ([`FragmentBand`]: at most [`BAND_ROWS`] rows, cut at every other
-//! event, so where a query begins and its pace changes): under the columns interleave, what an Image Engine is given in it is what its
-//! columns hold, so a stretch is counted by column (each pixel's owner looked up under the
-//! others). Each board's Fragment Generator has a clock `g_b`, each Image Engine the cycle
+//! event, so where a query begins and its pace changes): under the columns interleave,
+//! what an Image Engine is given in it is what its columns hold, so a stretch is counted
+//! by column (each pixel's owner looked up under the others). A trace's band index holds
+//! the bands, so the formulas count them without the fragments. Each board's Fragment Generator has a clock `g_b`, each Image Engine the cycle
 //! `d_i` its depth stage is through the work it was given, both carried from stretch to
 //! stretch. The generator emits an engine's fragment once the fragment `E` before it
 //! (`E` = `image_engine_fifo_entries`) has left the FIFO into the depth stage, so a busy
@@ -52,8 +53,8 @@
 //! load (random triangles on ir2: 8.3% fewer cycles than the machine as whole primitives,
 //! 2.5% in stretches of 64 fragments). Counted by rows, a stretch costs its columns, not its
 //! fragments: the IR's analytic level on the demo on ir4 went from 203 to 112 ms in
-//! process, and a stretch is what a trace's index could carry without the fragments (each
-//! column's count, and the last row's extent). Where in a stretch an engine's last fragment
+//! process decoding the fragments (a band no wider than the units closed in one pass, 96
+//! ms; from the band index, 56 ms). Where in a stretch an engine's last fragment
 //! came is known only in the last row (a row is one run: a column there has its board's
 //! columns right of it after it); an engine whose columns end higher up is taken to be
 //! through a pace after the last row's first fragment of its board, a little late.
