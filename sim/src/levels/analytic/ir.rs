@@ -295,48 +295,20 @@ impl IrWindow {
     /// clocks as dealing first and then closing engine by engine (on the lazy-grid walk's
     /// band index, ir4, 52 ms against 37). Returns false, having done nothing, elsewhere.
     fn close_narrow_columns(&mut self, band: &FragmentBand) -> bool {
+        let hidden = self.hidden();
         let Dealer::Columns(columns) = &mut self.dealer else {
             return false;
         };
-        let runs = band.runs();
-        let first = runs.iter().map(|run| run.x as usize).min().unwrap_or(0);
-        let end = runs
-            .iter()
-            .map(|run| run.x as usize + run.len as usize)
-            .max()
-            .unwrap_or(0);
-        if runs.is_empty() || (end - first) as u64 > columns.units {
+        let (first, end) = extent(band.runs());
+        if band.is_empty() || (end - first) as u64 > columns.units {
             return false;
         }
         let shift = columns.board_shift;
-        let (mut fragments, mut last_row) = ([0u64; MAX_BOARDS], [0u64; MAX_BOARDS]);
-        let last_row_from = band.runs().len() - band.last_row().len();
-        for (k, run) in band.runs().iter().enumerate() {
-            columns.steps[run.x as usize] += 1;
-            columns.steps[run.x as usize + run.len as usize] -= 1;
-            add_run_to_boards(&mut fragments, run, shift);
-            if k >= last_row_from {
-                add_run_to_boards(&mut last_row, run, shift);
-            }
-        }
-        let row_first = band
-            .last_row()
-            .iter()
-            .map(|run| run.x as usize)
-            .min()
-            .unwrap_or(0);
-        let row_end = band
-            .last_row()
-            .iter()
-            .map(|run| run.x as usize + run.len as usize)
-            .max()
-            .unwrap_or(0);
+        let (fragments, last_row) = column_boards(band, shift);
+        step_runs(&mut columns.steps, band.runs());
+        let (row_first, row_end) = extent(band.last_row());
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let pace = self.pace * self.rate;
-        let hidden = match self.pace > self.interval {
-            true => self.queued * pace,
-            false => (self.fifo + 1) * pace - self.rate,
-        };
         let boards = self.generators.len();
         let mut starts = [0u64; MAX_BOARDS];
         let mut generators = [0u64; MAX_BOARDS];
@@ -386,13 +358,8 @@ impl IrWindow {
         let last_row_from = band.runs().len() - band.last_row().len();
         match &mut self.dealer {
             Dealer::Columns(columns) => {
-                let shift = columns.board_shift;
-                for (k, run) in band.runs().iter().enumerate() {
-                    add_run_to_boards(&mut self.stretch_board_fragments, run, shift);
-                    if k >= last_row_from {
-                        add_run_to_boards(&mut self.row_board_fragments, run, shift);
-                    }
-                }
+                (self.stretch_board_fragments, self.row_board_fragments) =
+                    column_boards(band, columns.board_shift);
                 deal_columns(
                     columns,
                     band,
@@ -521,6 +488,39 @@ impl IrWindow {
     }
 }
 
+/// The columns `runs` span, `first..end` (`0..0` for none).
+fn extent(runs: &[RowRun]) -> (usize, usize) {
+    let first = runs.iter().map(|run| run.x as usize).min().unwrap_or(0);
+    let end = runs
+        .iter()
+        .map(|run| run.x as usize + run.len as usize)
+        .max();
+    (first, end.unwrap_or(0))
+}
+
+/// Step `runs` into `steps`: `+1` at each one's first column, `-1` past its last, so that
+/// the sum along the columns is each column's fragments.
+fn step_runs(steps: &mut [i32], runs: &[RowRun]) {
+    for run in runs {
+        steps[run.x as usize] += 1;
+        steps[run.x as usize + run.len as usize] -= 1;
+    }
+}
+
+/// Under the columns interleave (`B = 1 << shift` boards), `band`'s fragments on each
+/// board, and its last row's.
+fn column_boards(band: &FragmentBand, shift: u32) -> ([u64; MAX_BOARDS], [u64; MAX_BOARDS]) {
+    let (mut fragments, mut last_row) = ([0; MAX_BOARDS], [0; MAX_BOARDS]);
+    let last_row_from = band.runs().len() - band.last_row().len();
+    for (k, run) in band.runs().iter().enumerate() {
+        add_run_to_boards(&mut fragments, run, shift);
+        if k >= last_row_from {
+            add_run_to_boards(&mut last_row, run, shift);
+        }
+    }
+    (fragments, last_row)
+}
+
 /// Add a run's fragments to its boards' counts: under the columns interleave pixel `x` is
 /// board `x mod B`'s (`B = 1 << shift`), so each board has `len / B` of them, and the
 /// `len mod B` boards from the first pixel's on one more.
@@ -548,20 +548,9 @@ fn deal_columns(
     engines: &mut [EngineClock],
     touched: &mut [u64],
 ) {
-    let (mut first, mut end) = (usize::MAX, 0);
-    for run in band.runs() {
-        let (x, run_end) = (run.x as usize, run.x as usize + run.len as usize);
-        columns.steps[x] += 1;
-        columns.steps[run_end] -= 1;
-        (first, end) = (first.min(x), end.max(run_end));
-    }
-    let last_row = band.last_row();
-    let row_first = last_row.iter().map(|run| run.x as usize).min().unwrap_or(0);
-    let row_end = last_row
-        .iter()
-        .map(|run| run.x as usize + run.len as usize)
-        .max()
-        .unwrap_or(0);
+    let (first, end) = extent(band.runs());
+    step_runs(&mut columns.steps, band.runs());
+    let (row_first, row_end) = extent(band.last_row());
     let board_mask = (1usize << columns.board_shift) - 1;
     let mut unit = first as u64 % columns.units;
     let mut height = 0i64;
