@@ -13,7 +13,7 @@
 //! a pixel or two, so most take three bytes. Under a verbose query, a band with passing
 //! runs is `BAND_PASSING count mask` and its runs, bit `k` of the varint `mask` set when
 //! run `k`'s fragments passed their depth test. A band's runs are those a
-//! [`FragmentBand::push`] would make: a run that continues the one before on its row is
+//! [`FragmentBand::push_run`] would make: a run that continues the one before on its row is
 //! part of it, so no run starts where the one before ends on the same row.
 
 use super::codec::{put_uv, put_zz, tag};
