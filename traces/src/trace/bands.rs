@@ -302,6 +302,23 @@ mod tests {
         );
     }
 
+    #[test]
+    fn a_reader_inside_the_window_index_refuses_the_band_index() {
+        let bytes = indexed(&[Event::Primitive, frag(0, 0), Event::Primitive, frag(1, 1)]);
+        let mut reader = TraceReader::new(&bytes[..]).unwrap();
+        // One item in: the reader is inside a window-index block.
+        assert_eq!(
+            reader.next_index_item().unwrap(),
+            Some(IndexItem::Event(Event::Primitive))
+        );
+        let error = reader
+            .for_each_band_item(|_| Ok::<(), ()>(()))
+            .err()
+            .map(|e| format!("{e:?}"))
+            .unwrap();
+        assert!(error.contains("one of them"), "{error}");
+    }
+
     /// `bytes` with a stored block of `kind` holding `payload` put ahead of every other
     /// block; returns the bytes and the block's offset.
     fn with_block_first(mut bytes: Vec<u8>, kind: u8, payload: &[u8]) -> (Vec<u8>, usize) {

@@ -627,7 +627,7 @@ impl<R: Read> TraceReader<R> {
         if self.at_end() {
             return Ok(None);
         }
-        if self.in_block && !self.in_index_block {
+        if self.in_block && !self.reading(Wanted::Index) {
             self.failed = true;
             return Err(self.mixed_reading());
         }
@@ -684,7 +684,7 @@ impl<R: Read> TraceReader<R> {
         wanted: Wanted,
         mut visit: impl FnMut(&IndexItem) -> Result<(), E>,
     ) -> Result<bool, ReadError<E>> {
-        if self.in_block && !self.in_index_block && !self.at_end() {
+        if self.in_block && !self.reading(wanted) && !self.at_end() {
             self.failed = true;
             return Err(ReadError::Trace(self.mixed_reading()));
         }
@@ -709,10 +709,18 @@ impl<R: Read> TraceReader<R> {
         Ok(true)
     }
 
+    /// Whether the block loaded is one of the index `wanted` names (the window index's or
+    /// the band index's).
+    fn reading(&self, wanted: Wanted) -> bool {
+        self.in_index_block && self.decoder.in_bands == (wanted == Wanted::Bands)
+    }
+
     fn mixed_reading(&self) -> TraceError {
         TraceError::BadBlock {
             offset: self.block_offset,
-            reason: "a trace is read either by events or by its window index, not both".to_owned(),
+            reason:
+                "a trace is read by events, by its window index or by its band index, one of them"
+                    .to_owned(),
         }
     }
 
