@@ -157,24 +157,11 @@ pub fn replay<R: Read>(
         source,
     };
     let older_index = older_index(&reader, arch, &options);
-    if options.level == Fidelity::Analytic
-        && index_wanted(&reader, arch, &options)
-        && reader.index_has_every_count()
+    if let (Fidelity::Analytic, Some(index)) = (options.level, index_read(&reader, arch, &options))
     {
         let mut model =
             AnalyticModel::from_window_index(arch, width, height).map_err(ReplayError::Setup)?;
-        reader
-            .for_each_index_item(|item| model.index_item(item))
-            .map_err(|e| read_error(e, model_error))?;
-        return LevelModel::Analytic(Box::new(model))
-            .finish(arch)
-            .map_err(model_error);
-    }
-    if options.level == Fidelity::Analytic && bands_wanted(&reader, arch, &options) {
-        let mut model =
-            AnalyticModel::from_window_index(arch, width, height).map_err(ReplayError::Setup)?;
-        reader
-            .for_each_band_item(|item| model.index_item(item))
+        for_each_item(&mut reader, index, |item| model.index_item(item))
             .map_err(|e| read_error(e, model_error))?;
         return LevelModel::Analytic(Box::new(model))
             .finish(arch)
@@ -258,6 +245,42 @@ fn index_wanted<R: Read>(reader: &TraceReader<R>, arch: &Arch, options: &ReplayO
         && AnalyticModel::reads_window_index(arch, reader.header())
 }
 
+/// Which of a trace's indexes the analytic and sampled levels read instead of its
+/// fragments: the IR's formulas the band index, the O2's the window index.
+#[derive(Clone, Copy)]
+enum IndexRead {
+    Window,
+    Bands,
+}
+
+/// The index the analytic and sampled levels read on `arch`, if one serves: the band
+/// index ([`bands_wanted`]), or a window index with every count the formulas take.
+fn index_read<R: Read>(
+    reader: &TraceReader<R>,
+    arch: &Arch,
+    options: &ReplayOptions,
+) -> Option<IndexRead> {
+    if bands_wanted(reader, arch, options) {
+        Some(IndexRead::Bands)
+    } else if index_wanted(reader, arch, options) && reader.index_has_every_count() {
+        Some(IndexRead::Window)
+    } else {
+        None
+    }
+}
+
+/// Hand every remaining item of the trace's `index` to `visit`.
+fn for_each_item<R: Read, E>(
+    reader: &mut TraceReader<R>,
+    index: IndexRead,
+    visit: impl FnMut(&IndexItem) -> Result<(), E>,
+) -> Result<(), ReadError<E>> {
+    match index {
+        IndexRead::Window => reader.for_each_index_item(visit),
+        IndexRead::Bands => reader.for_each_band_item(visit),
+    }
+}
+
 /// Whether the IR's analytic and sampled levels would read the trace's band index instead
 /// of its fragments: asked to, its queries not retiled, and an index the formulas can read
 /// ([`AnalyticModel::reads_band_index`]).
@@ -283,9 +306,8 @@ fn run_sampled<R: Read>(
         machine: arch.machine().name(),
         source,
     };
-    let window_index = index_wanted(&reader, arch, options) && reader.index_has_every_count();
-    let bands = bands_wanted(&reader, arch, options);
-    if (window_index || bands) && reader.has_depth_tests() {
+    let index = index_read(&reader, arch, options).filter(|_| reader.has_depth_tests());
+    if let Some(index) = index {
         let model = SampledModel::from_window_index(arch, width, height, effects, every)
             .and_then(configure)
             .map_err(ReplayError::Setup)?;
@@ -298,11 +320,7 @@ fn run_sampled<R: Read>(
                 .index_item(item, &mut fragments)
                 .map_err(|e| read_error(e, model_error))
         };
-        match bands {
-            true => reader.for_each_band_item(&mut feed),
-            false => reader.for_each_index_item(&mut feed),
-        }
-        .map_err(|e| match e {
+        for_each_item(&mut reader, index, &mut feed).map_err(|e| match e {
             ReadError::Trace(e) => ReplayError::Read(e),
             ReadError::Sink(e) => e,
         })?;

@@ -61,6 +61,28 @@ fn analytic(
     replay(|| Ok(TraceReader::new(trace)?), arch, options).unwrap()
 }
 
+/// The analytic level on `arch` read from the trace's index, from its fragments, and fed
+/// its `events` one by one (a viewport of `width` by `height`).
+fn analytic_three_ways(
+    trace: &[u8],
+    (width, height): (u32, u32),
+    events: &[Event],
+    arch: &Arch,
+) -> (LevelResult, LevelResult, LevelResult) {
+    let indexed = analytic(trace, arch, true, None);
+    let decoded = analytic(trace, arch, false, None);
+    let one_by_one = run_level(
+        Fidelity::Analytic,
+        arch,
+        width,
+        height,
+        EffectsChoice::Auto,
+        events,
+    )
+    .unwrap();
+    (indexed, decoded, one_by_one)
+}
+
 /// A scene's name, trace bytes, viewport and events.
 type Trace = (&'static str, Vec<u8>, (u32, u32), Vec<Event>);
 
@@ -120,17 +142,8 @@ fn the_index_gives_the_analytic_result_of_the_fragments_bit_for_bit() {
     ];
     for (name, trace, (width, height), events) in traces() {
         for arch in &archs {
-            let mut indexed = analytic(&trace, arch, true, None);
-            let decoded = analytic(&trace, arch, false, None);
-            let one_by_one = run_level(
-                Fidelity::Analytic,
-                arch,
-                width,
-                height,
-                EffectsChoice::Auto,
-                &events,
-            )
-            .unwrap();
+            let (mut indexed, decoded, one_by_one) =
+                analytic_three_ways(&trace, (width, height), &events, arch);
             assert_eq!(
                 one_by_one.queries, decoded.queries,
                 "{name}: spans and fragments differ"
@@ -446,17 +459,8 @@ fn the_band_index_gives_the_ir_analytic_result_of_the_fragments_bit_for_bit() {
     for (name, trace, (width, height), events) in traces().into_iter().chain([brief_hardcases()]) {
         for arch in &archs {
             let what = format!("{name} on {:?}", arch.report_entries());
-            let indexed = analytic(&trace, arch, true, None);
-            let decoded = analytic(&trace, arch, false, None);
-            let one_by_one = run_level(
-                Fidelity::Analytic,
-                arch,
-                width,
-                height,
-                EffectsChoice::Auto,
-                &events,
-            )
-            .unwrap();
+            let (indexed, decoded, one_by_one) =
+                analytic_three_ways(&trace, (width, height), &events, arch);
             assert_eq!(one_by_one.total_cycles, decoded.total_cycles, "{what}");
             assert_eq!(one_by_one.queries, decoded.queries, "{what}");
             assert!(decoded.checked_queries > 0, "{what}: nothing checked");

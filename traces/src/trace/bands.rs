@@ -203,27 +203,8 @@ mod tests {
     use crate::query::{QueryMode, QuerySpec};
     use crate::state::Rect;
     use crate::trace::block::{BlockHeader, CODEC_STORED, KIND_BANDS, KIND_INDEX};
-    use crate::trace::{IndexItem, TraceHeader, TraceReader, TraceWriter, WriterOptions};
-
-    fn indexed(events: &[Event]) -> Vec<u8> {
-        let options = WriterOptions {
-            window_index: Some(crate::depth_layout::DepthLayout {
-                tile_width_pixels: 8,
-                tile_height_pixels: 8,
-                pixels_per_word: 4,
-                banks: 1,
-            }),
-            ..WriterOptions::default()
-        };
-        let mut bytes = Vec::new();
-        let mut writer =
-            TraceWriter::with_options(&mut bytes, &TraceHeader::new(16, 16), options).unwrap();
-        for event in events {
-            writer.write_event(event).unwrap();
-        }
-        writer.finish().unwrap();
-        bytes
-    }
+    use crate::trace::index::tests::indexed;
+    use crate::trace::{IndexItem, TraceReader};
 
     fn band_items(bytes: &[u8]) -> Result<Vec<IndexItem>, crate::trace::TraceError> {
         let mut reader = TraceReader::new(bytes)?;

@@ -278,7 +278,7 @@ impl WindowIndexer {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::event::DEPTH_ONE;
     use crate::query::{QueryMode, QuerySpec};
@@ -306,7 +306,8 @@ mod tests {
         })
     }
 
-    fn indexed(events: &[Event]) -> Vec<u8> {
+    /// `events` as a 16x16 trace with a window index (and so a band index) at `LAYOUT`.
+    pub(in crate::trace) fn indexed(events: &[Event]) -> Vec<u8> {
         let options = WriterOptions {
             window_index: Some(LAYOUT),
             ..WriterOptions::default()

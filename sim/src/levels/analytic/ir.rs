@@ -303,10 +303,7 @@ impl IrWindow {
         if band.is_empty() || (end - first) as u64 > columns.units {
             return false;
         }
-        let shift = columns.board_shift;
-        let (fragments, last_row) = column_boards(band, shift);
-        step_runs(&mut columns.steps, band.runs());
-        let (row_first, row_end) = extent(band.last_row());
+        let (fragments, last_row) = column_boards(band, columns.board_shift);
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let pace = self.pace * self.rate;
         let boards = self.generators.len();
@@ -316,32 +313,19 @@ impl IrWindow {
             starts[board] = self.generators[board] + setup;
             generators[board] = starts[board] + fragments[board];
         }
-        let board_mask = (1usize << shift) - 1;
-        let mut unit = first as u64 % columns.units;
-        let mut height = 0i64;
-        for x in first..end {
-            height += std::mem::take(&mut columns.steps[x]) as i64;
-            if height > 0 {
-                let board = x & board_mask;
-                let engine = board * self.per_board + (unit >> shift) as usize;
+        let engines = &mut self.engines;
+        columns.each_column(
+            band,
+            (&fragments, self.per_board),
+            |board, engine, height, last| {
                 let start = starts[board];
-                // Its last fragment: in the last row, its board's columns right of it after
-                // it; else no later than the last row's first of its board.
-                let mut last = fragments[board] - last_row[board];
-                if (row_first..row_end).contains(&x) {
-                    let after = ((row_end - 1 - x) >> shift) as u64;
-                    last = last.max(fragments[board].saturating_sub(after));
-                }
-                let clock = &mut self.engines[engine].through;
-                *clock = (start.max(*clock) + height as u64 * pace).max(start + last + pace);
+                // Its last fragment, no earlier than the last row's first of its board.
+                let last = last.max(fragments[board] - last_row[board]);
+                let clock = &mut engines[engine].through;
+                *clock = (start.max(*clock) + height * pace).max(start + last + pace);
                 generators[board] = generators[board].max(clock.saturating_sub(hidden));
-            }
-            unit += 1;
-            if unit == columns.units {
-                unit = 0;
-            }
-        }
-        columns.steps[end] = 0;
+            },
+        );
         self.generators.copy_from_slice(&generators[..boards]);
         self.stretch_sets_up = false;
         true
@@ -360,17 +344,14 @@ impl IrWindow {
             Dealer::Columns(columns) => {
                 (self.stretch_board_fragments, self.row_board_fragments) =
                     column_boards(band, columns.board_shift);
-                deal_columns(
-                    columns,
-                    band,
-                    (
-                        &self.stretch_board_fragments,
-                        self.per_board,
-                        slots_a_fragment,
-                    ),
-                    &mut self.engines,
-                    &mut self.touched,
-                );
+                let (engines, touched) = (&mut self.engines, &mut self.touched);
+                let boards = (&self.stretch_board_fragments, self.per_board);
+                columns.each_column(band, boards, |_, engine, height, last| {
+                    let clock = &mut engines[engine];
+                    clock.slots += height * slots_a_fragment;
+                    clock.last = clock.last.max(last);
+                    touched[engine / 64] |= 1 << (engine % 64);
+                });
             }
             Dealer::Owners(interleave, owners) => {
                 let (boards, rows) = (
@@ -533,46 +514,49 @@ fn add_run_to_boards(boards: &mut [u64; MAX_BOARDS], run: &RowRun, shift: u32) {
     }
 }
 
-/// Deal `band`'s columns to their Image Engines (the boards' stretch totals `boards`
-/// counted): column `x` is unit `g = x mod U`, Image Engine `g / B` of board `g mod B` (so
-/// board `x mod B`), and its fragments are that engine's. The band's runs are stepped into
-/// `columns.steps` and summed along the columns it spans, each column once, whatever its
-/// height. A column of the last row has its last fragment there, with its board's columns
-/// right of it in the row, `(row_end - 1 - x) / B`, after it (a primitive's row is one
-/// run; the engine's last is its latest column's); the other columns' last fragments came
-/// before the last row ([`IrWindow::close_stretch`] counts them at its start).
-fn deal_columns(
-    columns: &mut Columns,
-    band: &FragmentBand,
-    (boards, per_board, slots_a_fragment): (&[u64; MAX_BOARDS], usize, u64),
-    engines: &mut [EngineClock],
-    touched: &mut [u64],
-) {
-    let (first, end) = extent(band.runs());
-    step_runs(&mut columns.steps, band.runs());
-    let (row_first, row_end) = extent(band.last_row());
-    let board_mask = (1usize << columns.board_shift) - 1;
-    let mut unit = first as u64 % columns.units;
-    let mut height = 0i64;
-    for x in first..end {
-        height += std::mem::take(&mut columns.steps[x]) as i64;
-        if height > 0 {
-            let board = x & board_mask;
-            let engine = board * per_board + (unit >> columns.board_shift) as usize;
-            let clock = &mut engines[engine];
-            clock.slots += height as u64 * slots_a_fragment;
-            if (row_first..row_end).contains(&x) {
-                let after = ((row_end - 1 - x) >> columns.board_shift) as u64;
-                clock.last = clock.last.max(boards[board].saturating_sub(after));
+impl Columns {
+    /// Hand each column `band` holds fragments in to `each`, as `(board, engine,
+    /// fragments, last)` (the boards' totals `boards`, `per_board` Image Engines a board):
+    /// column `x` is unit `g = x mod U`, Image Engine `g / B` of board `g mod B` (so board
+    /// `x mod B`). The band's runs are stepped into `steps` and summed along the columns it
+    /// spans, each column once, whatever its height. `last` is where the column's last
+    /// fragment came among its board's, where that is known: in the last row, with its
+    /// board's columns right of it in the row, `(row_end - 1 - x) / B`, after it (a
+    /// primitive's row is one run); else 0 (it came before the last row,
+    /// [`IrWindow::close_stretch`] counts it at that row's start).
+    fn each_column(
+        &mut self,
+        band: &FragmentBand,
+        (boards, per_board): (&[u64; MAX_BOARDS], usize),
+        mut each: impl FnMut(usize, usize, u64, u64),
+    ) {
+        let (first, end) = extent(band.runs());
+        step_runs(&mut self.steps, band.runs());
+        let (row_first, row_end) = extent(band.last_row());
+        let board_mask = (1usize << self.board_shift) - 1;
+        let mut unit = first as u64 % self.units;
+        let mut height = 0i64;
+        for x in first..end {
+            height += std::mem::take(&mut self.steps[x]) as i64;
+            if height > 0 {
+                let board = x & board_mask;
+                let engine = board * per_board + (unit >> self.board_shift) as usize;
+                let last = match (row_first..row_end).contains(&x) {
+                    true => {
+                        let after = ((row_end - 1 - x) >> self.board_shift) as u64;
+                        boards[board].saturating_sub(after)
+                    }
+                    false => 0,
+                };
+                each(board, engine, height as u64, last);
             }
-            touched[engine / 64] |= 1 << (engine % 64);
+            unit += 1;
+            if unit == self.units {
+                unit = 0;
+            }
         }
-        unit += 1;
-        if unit == columns.units {
-            unit = 0;
-        }
+        self.steps[end] = 0;
     }
-    columns.steps[end] = 0;
 }
 
 /// Per interleave unit of `arch`, its board and its Image Engine (board-major).
