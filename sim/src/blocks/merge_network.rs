@@ -118,6 +118,27 @@ pub fn merged_ready(
     let crossed =
         |p: &Partial| p.ready + transfer_cycles(p.words(shape.tiles), network.link_bits_per_cycle);
     match network.kind {
+        MergeKind::Tree if inputs.iter().all(|p| p.hits.is_empty()) => {
+            // Without hits, every report crosses a link in the same cycles: the tree's
+            // levels as ready cycles alone, each merged in place (a brief query's end on
+            // ir4 had moved 320 reports through seven levels of vectors).
+            let hop = transfer_cycles(
+                shape.tiles * BRIEF_RECORD_ENTRIES as u64,
+                network.link_bits_per_cycle,
+            ) + network.hop_latency_cycles;
+            let mut level: Vec<u64> = inputs.iter().map(|p| p.ready).collect();
+            while level.len() > 1 {
+                let merged = level.len().div_ceil(2);
+                for i in 0..merged {
+                    level[i] = match level.get(2 * i + 1) {
+                        Some(&right) => level[2 * i].max(right) + hop,
+                        None => level[2 * i],
+                    };
+                }
+                level.truncate(merged);
+            }
+            Partial::brief(level.first().copied().unwrap_or(0))
+        }
         MergeKind::Tree => {
             let mut level = inputs.to_vec();
             while level.len() > 1 {
@@ -272,6 +293,34 @@ mod tests {
             ..links(MergeKind::Tree)
         };
         assert_eq!(merged_ready(&narrow, &verbose, shape, &mut host).ready, 42);
+    }
+
+    #[test]
+    fn a_tree_of_reports_without_hits_merges_as_one_with_empty_hit_counts() {
+        // Reports without hits take the tree's shortcut (ready cycles alone); the same
+        // reports each with a tile's count of 0 hits move the same words the long way.
+        let links = MergeNetwork {
+            link_bits_per_cycle: 64,
+            ..network(MergeKind::Tree)
+        };
+        let shape = ReportShape { tiles: 3, room: 40 };
+        let mut rng = occsim_traces::rng::SplitMix64(15);
+        for count in 1..=21 {
+            let brief: Vec<Partial> = (0..count)
+                .map(|_| Partial::brief(rng.below(1000)))
+                .collect();
+            let counted: Vec<Partial> = brief
+                .iter()
+                .map(|p| Partial {
+                    ready: p.ready,
+                    hits: vec![0; 3],
+                })
+                .collect();
+            let mut host = 0;
+            let short = merged_ready(&links, &brief, shape, &mut host).ready;
+            let long = merged_ready(&links, &counted, shape, &mut host).ready;
+            assert_eq!(short, long, "{count} reports");
+        }
     }
 
     #[test]
