@@ -193,7 +193,8 @@ impl IrWindow {
                 Dealer::Columns(Columns {
                     units: engines as u64,
                     board_shift: arch.boards.trailing_zeros(),
-                    steps: vec![0; width as usize + 1],
+                    // Room for a sweep's last group of columns, a board each.
+                    steps: vec![0; width as usize + MAX_BOARDS],
                 })
             } else {
                 let interleave = FramebufferInterleave::new(arch);
@@ -305,8 +306,8 @@ impl IrWindow {
         }
         let (fragments, last_row) = column_boards(band, columns.board_shift);
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
-        let pace = self.pace * self.rate;
         let boards = self.generators.len();
+        let pace = self.pace * self.rate;
         let mut starts = [0u64; MAX_BOARDS];
         let mut generators = [0u64; MAX_BOARDS];
         for board in 0..boards {
@@ -491,26 +492,34 @@ fn step_runs(steps: &mut [i32], runs: &[RowRun]) {
 /// Under the columns interleave (`B = 1 << shift` boards), `band`'s fragments on each
 /// board, and its last row's.
 fn column_boards(band: &FragmentBand, shift: u32) -> ([u64; MAX_BOARDS], [u64; MAX_BOARDS]) {
+    match shift {
+        0 => column_boards_of::<1>(band),
+        1 => column_boards_of::<2>(band),
+        _ => column_boards_of::<4>(band),
+    }
+}
+
+/// [`column_boards`] over `B` boards.
+fn column_boards_of<const B: usize>(band: &FragmentBand) -> ([u64; MAX_BOARDS], [u64; MAX_BOARDS]) {
     let (mut fragments, mut last_row) = ([0; MAX_BOARDS], [0; MAX_BOARDS]);
     let last_row_from = band.runs().len() - band.last_row().len();
     for (k, run) in band.runs().iter().enumerate() {
-        add_run_to_boards(&mut fragments, run, shift);
+        add_run_to_boards::<B>(&mut fragments, run);
         if k >= last_row_from {
-            add_run_to_boards(&mut last_row, run, shift);
+            add_run_to_boards::<B>(&mut last_row, run);
         }
     }
     (fragments, last_row)
 }
 
 /// Add a run's fragments to its boards' counts: under the columns interleave pixel `x` is
-/// board `x mod B`'s (`B = 1 << shift`), so each board has `len / B` of them, and the
-/// `len mod B` boards from the first pixel's on one more.
-fn add_run_to_boards(boards: &mut [u64; MAX_BOARDS], run: &RowRun, shift: u32) {
-    let count = 1usize << shift;
+/// board `x mod B`'s, so each board has `len / B` of them, and the `len mod B` boards from
+/// the first pixel's on one more.
+fn add_run_to_boards<const B: usize>(boards: &mut [u64; MAX_BOARDS], run: &RowRun) {
     let len = run.len as usize;
-    for step in 0..count {
-        let board = (run.x as usize + step) & (count - 1);
-        boards[board] += (len / count + usize::from(step < len % count)) as u64;
+    for step in 0..B {
+        let board = (run.x as usize + step) % B;
+        boards[board] += (len / B + usize::from(step < len % B)) as u64;
     }
 }
 
@@ -527,32 +536,55 @@ impl Columns {
     fn each_column(
         &mut self,
         band: &FragmentBand,
+        boards: (&[u64; MAX_BOARDS], usize),
+        each: impl FnMut(usize, usize, u64, u64),
+    ) {
+        match self.board_shift {
+            0 => self.each_column_of::<1>(band, boards, each),
+            1 => self.each_column_of::<2>(band, boards, each),
+            _ => self.each_column_of::<4>(band, boards, each),
+        }
+    }
+
+    /// [`Self::each_column`] over `B` boards, in groups of `B` columns (one a board, so
+    /// that a caller's terms of each board stay in registers: the lazy-grid walk's band
+    /// index on ir4 in 35.8 ms against 38.8 column by column, the demo's in 32.6 against
+    /// 36.5, best of 20 interleaved). The columns of group
+    /// `x / B` are each board's Image Engine `x / B mod N`.
+    #[inline(always)]
+    fn each_column_of<const B: usize>(
+        &mut self,
+        band: &FragmentBand,
         (boards, per_board): (&[u64; MAX_BOARDS], usize),
         mut each: impl FnMut(usize, usize, u64, u64),
     ) {
+        let shift = B.trailing_zeros();
         let (first, end) = extent(band.runs());
         step_runs(&mut self.steps, band.runs());
         let (row_first, row_end) = extent(band.last_row());
-        let board_mask = (1usize << self.board_shift) - 1;
-        let mut unit = first as u64 % self.units;
-        let mut height = 0i64;
-        for x in first..end {
-            height += std::mem::take(&mut self.steps[x]) as i64;
-            if height > 0 {
-                let board = x & board_mask;
-                let engine = board * per_board + (unit >> self.board_shift) as usize;
+        let mut engine = (first / B) % per_board;
+        let mut height = 0i32;
+        // From the first group's first column (no run starts left of `first`) to the last
+        // group's last (`steps` has room for it).
+        for group in first / B..end.div_ceil(B) {
+            for (board, &board_fragments) in boards.iter().enumerate().take(B) {
+                let x = group * B + board;
+                height += std::mem::take(&mut self.steps[x]);
+                if height <= 0 {
+                    continue;
+                }
                 let last = match (row_first..row_end).contains(&x) {
                     true => {
-                        let after = ((row_end - 1 - x) >> self.board_shift) as u64;
-                        boards[board].saturating_sub(after)
+                        let after = ((row_end - 1 - x) >> shift) as u64;
+                        board_fragments.saturating_sub(after)
                     }
                     false => 0,
                 };
-                each(board, engine, height as u64, last);
+                each(board, board * per_board + engine, height as u64, last);
             }
-            unit += 1;
-            if unit == self.units {
-                unit = 0;
+            engine += 1;
+            if engine == per_board {
+                engine = 0;
             }
         }
         self.steps[end] = 0;
