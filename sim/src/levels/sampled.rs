@@ -265,15 +265,22 @@ pub fn warm_up_fragments(machine: Machine) -> u64 {
 pub const O2_TAIL_FRAGMENTS: u64 = 4_096;
 
 /// Fragments at the end of a long sampled window that its machine simulates on the
-/// InfiniteReality-like machine ([`tail_fragments`]): I, plausible 32,768..262,144. An Image
+/// InfiniteReality-like machine ([`tail_fragments`]): I, plausible 16,384..262,144. An Image
 /// Engine's queue holds thousands of cycles of work when its Occlusion Unit binds (hundreds
 /// of cycles a fragment on a lazy-grid walk at one engine), and a head extrapolated by the
-/// formulas carries their error there: with tails of 16,384 the full corpus's grid walks
-/// at one engine came out 1.1-2.5% long at sampled:10 (within 0.3% with this one). A head
-/// is cut only where the formulas can be (at the first event other than a fragment once
-/// all but this many have passed), so the tail may be shorter: 65,088 to 65,440 fragments
-/// on a lazy-grid walk of the city at 1280x1024, whose primitives are events.
-pub const IR_TAIL_FRAGMENTS: u64 = 65_536;
+/// formulas carries their error there: when the formulas dealt stretches of 64 fragments,
+/// tails of 16,384 took the full corpus's grid walks at one engine 1.1-2.5% long at
+/// sampled:10, and this was 65,536. Since the formulas count bands of rows, 16,384 holds
+/// every class within its bounds (`occsim fidelity --corpus --scale full --machines
+/// ir1,ir2,ir4 --no-rtl`, worst cycles error of each class against 65,536's: the demo 0.38%
+/// -> 0.61%, the adaptive walks 0.02% -> 0.39%, the grid walks 0.29% -> 0.40%, the hard
+/// cases 0.65% both; every latency error within 0.01%), and sampled:10 on ir4 replays the
+/// lazy-grid walk in 119 ms instead of 161, the city's hierarchical walk in 63 instead of 83
+/// and the demo in 119 instead of 147 (in one process, best of 9 interleaved). A warm-up of
+/// 8,192 with it took the demo to 2.27% and the random triangles to 2.62%. A head is cut
+/// only where the formulas can be (at the first event other than a fragment once all but
+/// this many have passed), so the tail may be shorter.
+pub const IR_TAIL_FRAGMENTS: u64 = 16_384;
 
 /// The fragments at the end of a long sampled window that `machine`'s model simulates: its
 /// tail ([`O2_TAIL_FRAGMENTS`], [`IR_TAIL_FRAGMENTS`]).
@@ -287,12 +294,14 @@ pub fn tail_fragments(machine: Machine) -> u64 {
 /// Fragments from which a sampled window (or a tail) measures a rate its class keeps past
 /// it ([`Calibration::of_pipe`]): half the InfiniteReality-like machine's tail, since a tail
 /// is cut where the formulas can be read, most often a few fragments short of it. I,
-/// plausible 16,384 to 65,536: the error a window's start and end make is tens of cycles on
+/// plausible 8,192 to 65,536: the error a window's start and end make is tens of cycles on
 /// the O2 and up to a few thousand on the InfiniteReality-like machine (an Image Engine's
 /// queue at hundreds of cycles a fragment), a percent or less of the cycles this many
 /// fragments take. The O2's tails are shorter and measure no rate of their own: past the
-/// largest sampled window of a class the formulas' slope carries on there (the corpus
-/// figures of [`O2_TAIL_FRAGMENTS`] are with this).
+/// largest sampled window of a class the formulas' slope carries on there. From 32,768
+/// (with the longer tail) to 8,192, the O2's runs of the full corpus (`occsim fidelity
+/// --corpus --scale full --machines o2 --no-rtl`) kept every error but the quadtree walks'
+/// sampled:10 cycles (0.01% -> 0.04%).
 pub const LONG_WINDOW_FRAGMENTS: u64 = IR_TAIL_FRAGMENTS / 2;
 
 /// Where a sampled model's window sizes come from ([`SampledModel::wants_window_size`]).
