@@ -107,7 +107,9 @@ pub struct IrWindow {
     interval: u64,
     /// `g_b`: each board's Fragment Generator clock, in slots from the window's start, after
     /// the stretches closed so far.
-    generators: Vec<u64>,
+    generators: [u64; MAX_BOARDS],
+    /// `B`: boards (the generators' clocks past them stay 0).
+    boards: usize,
     /// Each Image Engine's clock and its share of the current stretch.
     engines: Vec<EngineClock>,
     /// The pace of the last fragment counted (`max(C, s)`), in cycles.
@@ -178,7 +180,8 @@ impl IrWindow {
             queued: arch.image_engine_fifo_entries as u64 + arch.image_engine_in_flight() as u64,
             fifo: arch.image_engine_fifo_entries as u64,
             interval: arch.image_engine_cycles_per_fragment,
-            generators: vec![0; arch.boards],
+            generators: [0; MAX_BOARDS],
+            boards: arch.boards,
             engines: vec![EngineClock::default(); engines],
             pace: arch.image_engine_cycles_per_fragment,
             band: FragmentBand::EMPTY,
@@ -280,11 +283,15 @@ impl IrWindow {
         }
         generators[board] = generator;
         // The boards after the last touched engine's.
-        for later in board + 1..self.generators.len() {
-            generators[later] = starts(later) + self.stretch_board_fragments[later];
+        for (later, generator) in generators
+            .iter_mut()
+            .enumerate()
+            .take(self.boards)
+            .skip(board + 1)
+        {
+            *generator = starts(later) + self.stretch_board_fragments[later];
         }
-        let boards = self.generators.len();
-        self.generators.copy_from_slice(&generators[..boards]);
+        self.generators = generators;
         self.stretch_board_fragments = [0; MAX_BOARDS];
         self.row_board_fragments = [0; MAX_BOARDS];
         self.stretch_sets_up = false;
@@ -306,7 +313,7 @@ impl IrWindow {
         }
         let (fragments, last_row) = column_boards(band, columns.board_shift);
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
-        let boards = self.generators.len();
+        let boards = self.boards;
         let pace = self.pace * self.rate;
         let mut starts = [0u64; MAX_BOARDS];
         let mut generators = [0u64; MAX_BOARDS];
@@ -327,7 +334,7 @@ impl IrWindow {
                 generators[board] = generators[board].max(clock.saturating_sub(hidden));
             },
         );
-        self.generators.copy_from_slice(&generators[..boards]);
+        self.generators = generators;
         self.stretch_sets_up = false;
         true
     }
@@ -379,7 +386,7 @@ impl IrWindow {
     pub fn primitive(&mut self, release: f64) {
         self.close_stretch();
         let release = (release * self.rate as f64).ceil() as u64;
-        for generator in &mut self.generators {
+        for generator in &mut self.generators[..self.boards] {
             *generator = (*generator).max(release);
         }
         self.primitives += 1;
@@ -437,7 +444,11 @@ impl IrWindow {
     /// `T_w`: the window's cycles, the current stretch's work included.
     pub fn cycles(&mut self, arch: &IrArch) -> u64 {
         self.close_stretch();
-        let generators = self.generators.iter().copied().max().unwrap_or(0);
+        let generators = self.generators[..self.boards]
+            .iter()
+            .copied()
+            .max()
+            .unwrap_or(0);
         let hits = self.hit_words.iter().copied().max().unwrap_or(0);
         let hidden = self.queued * arch.image_engine_cycles_per_fragment;
         generators
