@@ -1,10 +1,12 @@
-//! What each fidelity level costs, on three traces encoded in memory as `occsim trace gen`
+//! What each fidelity level costs, on four traces encoded in memory as `occsim trace gen`
 //! writes them (with the window index) and read by every run as `occsim replay` reads a file:
 //! - `synthetic`: three frames of the replay benchmark's scene (about 1.5 M fragments, a
 //!   clear and 120 queries of every mode a frame);
 //! - `demo`: `occsim trace gen demo` (27 M fragments, 609 queries, 4 frames);
 //! - `lazy-grid`: `occsim trace gen --scene city --driver lazy-grid --frames 2` (20 M
-//!   fragments, 156 queries of up to hundreds of tiles).
+//!   fragments, 156 queries of up to hundreds of tiles);
+//! - `city-hierarchical`: `occsim trace gen --scene city --driver hierarchical --frames 2`
+//!   (31 M fragments, 198 one-tile queries), the third trace the targets name.
 //!
 //! On the O2 and on ir4: fragments per second per level, as ratios to `cycle`, and the
 //! analytic and sampled:10 levels decoding the fragments beside them reading the window
@@ -89,8 +91,8 @@ fn demo_trace() -> Vec<u8> {
     })
 }
 
-/// `occsim trace gen --scene city --driver lazy-grid --frames 2` (its default 1280x1024).
-fn lazy_grid_trace() -> Vec<u8> {
+/// `occsim trace gen --scene city --driver DRIVER --frames 2` (its default 1280x1024).
+fn city_walk_trace(driver: DriverKind) -> Vec<u8> {
     let walk = Walk {
         frames: 2,
         width: 1280,
@@ -102,13 +104,7 @@ fn lazy_grid_trace() -> Vec<u8> {
         ..CityOptions::default()
     });
     write_trace(walk.width, walk.height, |writer| {
-        generate(
-            &scene,
-            &DriverOptions::new(DriverKind::LazyGrid),
-            &walk,
-            writer,
-        )
-        .expect("walks");
+        generate(&scene, &DriverOptions::new(driver), &walk, writer).expect("walks");
     })
 }
 
@@ -146,7 +142,12 @@ fn main() {
         // ratio (with one round, the lazy walk's cycle level ran at 22 M fragments/s in
         // one run and 35 M/s in the next, its analytic level 66x and 122x of it).
         ("demo", demo_trace(), 3),
-        ("lazy-grid", lazy_grid_trace(), 3),
+        ("lazy-grid", city_walk_trace(DriverKind::LazyGrid), 3),
+        (
+            "city-hierarchical",
+            city_walk_trace(DriverKind::Hierarchical),
+            3,
+        ),
     ];
     for (name, trace, rounds) in &traces {
         println!(
