@@ -323,7 +323,7 @@ impl IrWindow {
         }
         let engines = &mut self.engines;
         columns.each_column(
-            band,
+            (band, (first, end)),
             (&fragments, self.per_board),
             |board, engine, height, last| {
                 let start = starts[board];
@@ -354,7 +354,8 @@ impl IrWindow {
                     column_boards(band, columns.board_shift);
                 let (engines, touched) = (&mut self.engines, &mut self.touched);
                 let boards = (&self.stretch_board_fragments, self.per_board);
-                columns.each_column(band, boards, |_, engine, height, last| {
+                let spanned = (band, extent(band.runs()));
+                columns.each_column(spanned, boards, |_, engine, height, last| {
                     let clock = &mut engines[engine];
                     clock.slots += height * slots_a_fragment;
                     clock.last = clock.last.max(last);
@@ -536,7 +537,8 @@ fn add_run_to_boards<const B: usize>(boards: &mut [u64; MAX_BOARDS], run: &RowRu
 
 impl Columns {
     /// Hand each column `band` holds fragments in to `each`, as `(board, engine,
-    /// fragments, last)` (the boards' totals `boards`, `per_board` Image Engines a board):
+    /// fragments, last)` (`spanned`: the band and the columns its runs span, [`extent`], as
+    /// its caller found them; the boards' totals `boards`, `per_board` Image Engines a board):
     /// column `x` is unit `g = x mod U`, Image Engine `g / B` of board `g mod B` (so board
     /// `x mod B`). The band's runs are stepped into `steps` and summed along the columns it
     /// spans, each column once, whatever its height. `last` is where the column's last
@@ -546,14 +548,14 @@ impl Columns {
     /// [`IrWindow::close_stretch`] counts it at that row's start).
     fn each_column(
         &mut self,
-        band: &FragmentBand,
+        spanned: (&FragmentBand, (usize, usize)),
         boards: (&[u64; MAX_BOARDS], usize),
         each: impl FnMut(usize, usize, u64, u64),
     ) {
         match self.board_shift {
-            0 => self.each_column_of::<1>(band, boards, each),
-            1 => self.each_column_of::<2>(band, boards, each),
-            _ => self.each_column_of::<4>(band, boards, each),
+            0 => self.each_column_of::<1>(spanned, boards, each),
+            1 => self.each_column_of::<2>(spanned, boards, each),
+            _ => self.each_column_of::<4>(spanned, boards, each),
         }
     }
 
@@ -565,12 +567,11 @@ impl Columns {
     #[inline(always)]
     fn each_column_of<const B: usize>(
         &mut self,
-        band: &FragmentBand,
+        (band, (first, end)): (&FragmentBand, (usize, usize)),
         (boards, per_board): (&[u64; MAX_BOARDS], usize),
         mut each: impl FnMut(usize, usize, u64, u64),
     ) {
         let shift = B.trailing_zeros();
-        let (first, end) = extent(band.runs());
         step_runs(&mut self.steps, band.runs());
         let (row_first, row_end) = extent(band.last_row());
         let mut engine = (first / B) % per_board;
