@@ -110,8 +110,11 @@ pub struct IrWindow {
     generators: [u64; MAX_BOARDS],
     /// `B`: boards (the generators' clocks past them stay 0).
     boards: usize,
-    /// Each Image Engine's clock and its share of the current stretch.
-    engines: Vec<EngineClock>,
+    /// `d_i`: each Image Engine's clock (board-major), in slots: the cycle its depth stage
+    /// is through the work it was given.
+    through: Vec<u64>,
+    /// Each Image Engine's share of the current stretch, where it is dealt first.
+    shares: Vec<EngineShare>,
     /// The pace of the last fragment counted (`max(C, s)`), in cycles.
     pace: u64,
     /// The current stretch: its fragments, then (as it closes) its `F_bp` and its last
@@ -154,13 +157,10 @@ struct Columns {
     steps: Vec<i32>,
 }
 
-/// One Image Engine's clock and its share of the current stretch, side by side (a
-/// stretch's close reads and writes both).
+/// One Image Engine's share of the current stretch.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-struct EngineClock {
-    /// `d_i`, in slots: the cycle its depth stage is through the work it was given.
-    through: u64,
-    /// `D_ip` of the current stretch, in slots (non-zero only at `touched`).
+struct EngineShare {
+    /// `D_ip`, in slots (non-zero only at `touched`).
     slots: u64,
     /// Its board's fragments in the stretch up to its last one: when that was emitted.
     last: u64,
@@ -182,7 +182,8 @@ impl IrWindow {
             interval: arch.image_engine_cycles_per_fragment,
             generators: [0; MAX_BOARDS],
             boards: arch.boards,
-            engines: vec![EngineClock::default(); engines],
+            through: vec![0; engines],
+            shares: vec![EngineShare::default(); engines],
             pace: arch.image_engine_cycles_per_fragment,
             band: FragmentBand::EMPTY,
             stretch_board_fragments: [0; MAX_BOARDS],
@@ -225,8 +226,8 @@ impl IrWindow {
 
     /// `cycles` pass before the window's work starts: the engines' carried work drains.
     pub fn idle(&mut self, cycles: u64) {
-        for engine in &mut self.engines {
-            engine.through = engine.through.saturating_sub(cycles * self.rate);
+        for through in &mut self.through {
+            *through = through.saturating_sub(cycles * self.rate);
         }
     }
 
@@ -273,12 +274,11 @@ impl IrWindow {
                     last_row_start = last_row_starts(board);
                     generator = start + self.stretch_board_fragments[board];
                 }
-                let clock = &mut self.engines[engine];
-                let emitted = start + clock.last.max(last_row_start);
-                clock.through = (clock.through.max(start) + clock.slots).max(emitted + pace);
-                generator = generator.max(clock.through.saturating_sub(hidden));
-                clock.slots = 0;
-                clock.last = 0;
+                let share = std::mem::take(&mut self.shares[engine]);
+                let clock = &mut self.through[engine];
+                let emitted = start + share.last.max(last_row_start);
+                *clock = ((*clock).max(start) + share.slots).max(emitted + pace);
+                generator = generator.max(clock.saturating_sub(hidden));
             }
         }
         generators[board] = generator;
@@ -315,26 +315,29 @@ impl IrWindow {
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let boards = self.boards;
         let pace = self.pace * self.rate;
-        let mut starts = [0u64; MAX_BOARDS];
-        let mut generators = [0u64; MAX_BOARDS];
+        // Each board's start and a pace after its last fragment's emission.
+        let (mut starts, mut paced_ends) = ([0u64; MAX_BOARDS], [0u64; MAX_BOARDS]);
         for board in 0..boards {
             starts[board] = self.generators[board] + setup;
-            generators[board] = starts[board] + fragments[board];
+            paced_ends[board] = starts[board] + fragments[board] + pace;
         }
-        let engines = &mut self.engines;
+        let mut latest = [0u64; MAX_BOARDS];
+        let through = &mut self.through;
         columns.each_column(
             (band, (first, end)),
-            (&fragments, self.per_board),
-            |board, engine, height, last| {
-                let start = starts[board];
+            self.per_board,
+            |board, engine, height, after| {
                 // Its last fragment, no earlier than the last row's first of its board.
-                let last = last.max(fragments[board] - last_row[board]);
-                let clock = &mut engines[engine].through;
-                *clock = (start.max(*clock) + height * pace).max(start + last + pace);
-                generators[board] = generators[board].max(clock.saturating_sub(hidden));
+                let emitted = paced_ends[board] - after.min(last_row[board]);
+                let clock = &mut through[engine];
+                *clock = (starts[board].max(*clock) + height * pace).max(emitted);
+                latest[board] = latest[board].max(*clock);
             },
         );
-        self.generators = generators;
+        for board in 0..boards {
+            let generator = starts[board] + fragments[board];
+            self.generators[board] = generator.max(latest[board].saturating_sub(hidden));
+        }
         self.stretch_sets_up = false;
         true
     }
@@ -352,13 +355,13 @@ impl IrWindow {
             Dealer::Columns(columns) => {
                 (self.stretch_board_fragments, self.row_board_fragments) =
                     column_boards(band, columns.board_shift);
-                let (engines, touched) = (&mut self.engines, &mut self.touched);
-                let boards = (&self.stretch_board_fragments, self.per_board);
+                let (shares, touched) = (&mut self.shares, &mut self.touched);
+                let boards = &self.stretch_board_fragments;
                 let spanned = (band, extent(band.runs()));
-                columns.each_column(spanned, boards, |_, engine, height, last| {
-                    let clock = &mut engines[engine];
-                    clock.slots += height * slots_a_fragment;
-                    clock.last = clock.last.max(last);
+                columns.each_column(spanned, self.per_board, |board, engine, height, after| {
+                    let share = &mut shares[engine];
+                    share.slots += height * slots_a_fragment;
+                    share.last = share.last.max(boards[board].saturating_sub(after));
                     touched[engine / 64] |= 1 << (engine % 64);
                 });
             }
@@ -373,8 +376,8 @@ impl IrWindow {
                         boards[board] += 1;
                         rows[board] += (k >= last_row_from) as u64;
                         self.touched[engine / 64] |= 1 << (engine % 64);
-                        self.engines[engine].slots += slots_a_fragment;
-                        self.engines[engine].last = boards[board];
+                        self.shares[engine].slots += slots_a_fragment;
+                        self.shares[engine].last = boards[board];
                     });
                 }
             }
@@ -466,8 +469,10 @@ impl IrWindow {
         service: u64,
     ) -> impl Iterator<Item = u64> + 'a {
         let tail = arch.image_engine_latency_cycles + service + 1;
-        self.engines.iter().zip(&self.hit_words).map(
-            move |(&EngineClock { through, .. }, &hits)| {
+        self.through
+            .iter()
+            .zip(&self.hit_words)
+            .map(move |(&through, &hits)| {
                 // An engine given no work (or none left past the last window) has no last
                 // fragment to wait for.
                 let last_result = if through == 0 {
@@ -477,8 +482,7 @@ impl IrWindow {
                 };
                 let hits_drained = hits + 1;
                 last_result.max(hits_drained).saturating_sub(end + 3)
-            },
-        )
+            })
     }
 }
 
@@ -537,25 +541,25 @@ fn add_run_to_boards<const B: usize>(boards: &mut [u64; MAX_BOARDS], run: &RowRu
 
 impl Columns {
     /// Hand each column `band` holds fragments in to `each`, as `(board, engine,
-    /// fragments, last)` (`spanned`: the band and the columns its runs span, [`extent`], as
-    /// its caller found them; the boards' totals `boards`, `per_board` Image Engines a board):
-    /// column `x` is unit `g = x mod U`, Image Engine `g / B` of board `g mod B` (so board
-    /// `x mod B`). The band's runs are stepped into `steps` and summed along the columns it
-    /// spans, each column once, whatever its height. `last` is where the column's last
-    /// fragment came among its board's, where that is known: in the last row, with its
-    /// board's columns right of it in the row, `(row_end - 1 - x) / B`, after it (a
-    /// primitive's row is one run); else 0 (it came before the last row,
-    /// [`IrWindow::close_stretch`] counts it at that row's start).
+    /// fragments, after)` (`spanned`: the band and the columns its runs span, [`extent`],
+    /// as its caller found them; `per_board` Image Engines a board): column `x` is unit
+    /// `g = x mod U`, Image Engine `g / B` of board `g mod B` (so board `x mod B`). The
+    /// band's runs are stepped into `steps` and summed along the columns it spans, each
+    /// column once, whatever its height. `after` is how many of its board's fragments came
+    /// after the column's last, where that is known: in the last row, with its board's
+    /// columns right of it in the row, `(row_end - 1 - x) / B` (a primitive's row is one
+    /// run); else `u64::MAX` (it came before the last row, [`IrWindow::close_stretch`]
+    /// counts it at that row's start).
     fn each_column(
         &mut self,
         spanned: (&FragmentBand, (usize, usize)),
-        boards: (&[u64; MAX_BOARDS], usize),
+        per_board: usize,
         each: impl FnMut(usize, usize, u64, u64),
     ) {
         match self.board_shift {
-            0 => self.each_column_of::<1>(spanned, boards, each),
-            1 => self.each_column_of::<2>(spanned, boards, each),
-            _ => self.each_column_of::<4>(spanned, boards, each),
+            0 => self.each_column_of::<1>(spanned, per_board, each),
+            1 => self.each_column_of::<2>(spanned, per_board, each),
+            _ => self.each_column_of::<4>(spanned, per_board, each),
         }
     }
 
@@ -568,31 +572,29 @@ impl Columns {
     fn each_column_of<const B: usize>(
         &mut self,
         (band, (first, end)): (&FragmentBand, (usize, usize)),
-        (boards, per_board): (&[u64; MAX_BOARDS], usize),
+        per_board: usize,
         mut each: impl FnMut(usize, usize, u64, u64),
     ) {
         let shift = B.trailing_zeros();
         step_runs(&mut self.steps, band.runs());
         let (row_first, row_end) = extent(band.last_row());
+        let row_width = row_end - row_first;
         let mut engine = (first / B) % per_board;
         let mut height = 0i32;
         // From the first group's first column (no run starts left of `first`) to the last
         // group's last (`steps` has room for it).
         for group in first / B..end.div_ceil(B) {
-            for (board, &board_fragments) in boards.iter().enumerate().take(B) {
+            for board in 0..B {
                 let x = group * B + board;
                 height += std::mem::take(&mut self.steps[x]);
                 if height <= 0 {
                     continue;
                 }
-                let last = match (row_first..row_end).contains(&x) {
-                    true => {
-                        let after = ((row_end - 1 - x) >> shift) as u64;
-                        board_fragments.saturating_sub(after)
-                    }
-                    false => 0,
+                let after = match x.wrapping_sub(row_first) < row_width {
+                    true => ((row_end - 1 - x) >> shift) as u64,
+                    false => u64::MAX,
                 };
-                each(board, board * per_board + engine, height as u64, last);
+                each(board, board * per_board + engine, height as u64, after);
             }
             engine += 1;
             if engine == per_board {
@@ -926,8 +928,7 @@ mod tests {
             window.paced_along((1, 0), 2);
             window.paced_along((0, 1), 1);
             window.close_stretch();
-            let through: Vec<u64> = window.engines.iter().map(|e| e.through).collect();
-            assert_eq!(through, [52, 32], "by columns: {by_columns}");
+            assert_eq!(window.through, [52, 32], "by columns: {by_columns}");
         }
     }
 
@@ -984,7 +985,8 @@ mod tests {
                 }
                 columns.close_stretch();
                 looked_up.close_stretch();
-                assert_eq!(columns.engines, looked_up.engines, "step {step}");
+                assert_eq!(columns.through, looked_up.through, "step {step}");
+                assert_eq!(columns.shares, looked_up.shares, "step {step}");
                 assert_eq!(columns.generators, looked_up.generators, "step {step}");
                 assert_eq!(columns.fragments, looked_up.fragments, "step {step}");
             }
