@@ -54,7 +54,7 @@
 //! 2.5% in stretches of 64 fragments). Counted by rows, a stretch costs its columns, not its
 //! fragments: the IR's analytic level on the demo on ir4 went from 203 to 112 ms in
 //! process decoding the fragments (a band no wider than the units closed in one pass, 96
-//! ms; from the band index, 56 ms). Where in a stretch an engine's last fragment
+//! ms; from the band index, 56 ms; its columns closed as vectors, 25 ms). Where in a stretch an engine's last fragment
 //! came is known only in the last row (a row is one run: a column there has its board's
 //! columns right of it after it); an engine whose columns end higher up is taken to be
 //! through a pace after the last row's first fragment of its board, a little late.
@@ -85,6 +85,7 @@ use occsim_traces::golden::FunctionalModel;
 use occsim_traces::trace::BAND_ROWS;
 use occsim_traces::trace::{FragmentBand, RowRun};
 use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect, Span};
+use std::ops::Range;
 
 /// Counts and clocks of one window (see the module docs). Clocks count in slots of
 /// `1 / rate` cycles, so that a Fragment Generator's emission is exact whatever the number
@@ -110,10 +111,12 @@ pub struct IrWindow {
     generators: [u64; MAX_BOARDS],
     /// `B`: boards (the generators' clocks past them stay 0).
     boards: usize,
-    /// `d_i`: each Image Engine's clock (board-major), in slots: the cycle its depth stage
-    /// is through the work it was given.
+    /// `d_i`: each Image Engine's clock, in slots: the cycle its depth stage is through the
+    /// work it was given; numbered as its dealer numbers the engines
+    /// ([`Dealer::index_of_engine`]).
     through: Vec<u64>,
-    /// Each Image Engine's share of the current stretch, where it is dealt first.
+    /// Each Image Engine's share of the current stretch, where it is dealt first (numbered
+    /// as `through`).
     shares: Vec<EngineShare>,
     /// The pace of the last fragment counted (`max(C, s)`), in cycles.
     pace: u64,
@@ -122,9 +125,8 @@ pub struct IrWindow {
     band: FragmentBand,
     stretch_board_fragments: [u64; MAX_BOARDS],
     row_board_fragments: [u64; MAX_BOARDS],
-    /// The Image Engines the stretch touched, a bit each (engine `e` is bit `e mod 64` of
-    /// word `e / 64`): closing the stretch goes through them in order, board after board
-    /// (the engines are numbered board-major), each board's generator clock in a register.
+    /// The Image Engines the stretch touched, a bit each (numbered as `through`: engine `e`
+    /// is bit `e mod 64` of word `e / 64`).
     touched: Vec<u64>,
     /// `N`: Image Engines a board.
     per_board: usize,
@@ -138,23 +140,48 @@ pub struct IrWindow {
 #[derive(Clone, Debug)]
 enum Dealer {
     /// Under the columns interleave (`x mod U` to unit `x mod U`), an engine's fragments
-    /// are those of its columns: counted a column at a time.
+    /// are those of its columns: counted a column at a time, the engines numbered by unit
+    /// (a stretch's columns are then a run of clocks).
     Columns(Columns),
     /// Under the others, each pixel's owner looked up: the interleave, and per unit its
-    /// board and Image Engine (board-major).
+    /// board and Image Engine (board-major, as they are numbered).
     Owners(FramebufferInterleave, Vec<(usize, usize)>),
+}
+
+impl Dealer {
+    /// Where Image Engine `engine` (board-major, `per_board` a board) is in the window's
+    /// clocks: unit `g = e · B + b` for engine `e` of board `b` under the columns
+    /// interleave, else `engine`.
+    fn index_of_engine(&self, engine: usize, per_board: usize) -> usize {
+        match self {
+            Dealer::Columns(columns) => {
+                ((engine % per_board) << columns.board_shift) | (engine / per_board)
+            }
+            Dealer::Owners(..) => engine,
+        }
+    }
+
+    /// The board of the engine at `index` of the window's clocks.
+    fn board_of(&self, index: usize, per_board: usize) -> usize {
+        match self {
+            Dealer::Columns(columns) => index & ((1 << columns.board_shift) - 1),
+            Dealer::Owners(..) => index / per_board,
+        }
+    }
 }
 
 /// The columns interleave's shape, and room to count a stretch's fragments a column.
 #[derive(Clone, Debug)]
 struct Columns {
-    /// `U`: units (Image Engines on all boards).
-    units: u64,
     /// `log2 B` (the machine has 1, 2 or 4 boards).
     board_shift: u32,
     /// A stretch's runs as steps: `+1` where a run begins, `-1` past its end (the
-    /// viewport's width and one of them, all zero between stretches).
+    /// viewport's width and a vector's, all zero between stretches).
     steps: Vec<i32>,
+    /// A narrow stretch's columns from a vector's start on, as [`close_narrow_lanes`]
+    /// takes them: their heights (in slots) and their engines' clocks.
+    heights: Vec<u64>,
+    clocks: Vec<u64>,
 }
 
 /// One Image Engine's share of the current stretch.
@@ -195,10 +222,11 @@ impl IrWindow {
                 && arch.boards <= MAX_BOARDS
             {
                 Dealer::Columns(Columns {
-                    units: engines as u64,
                     board_shift: arch.boards.trailing_zeros(),
-                    // Room for a sweep's last group of columns, a board each.
-                    steps: vec![0; width as usize + MAX_BOARDS],
+                    // Room for a sweep's last vector of columns.
+                    steps: vec![0; width as usize + LANES],
+                    heights: vec![0; engines + 2 * LANES],
+                    clocks: vec![0; engines + 2 * LANES],
                 })
             } else {
                 let interleave = FramebufferInterleave::new(arch);
@@ -249,49 +277,30 @@ impl IrWindow {
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let pace = self.pace * self.rate;
         let hidden = self.hidden();
-        let starts = |board: usize| self.generators[board] + setup;
-        // The board whose engines come next, where its engines end, its start, its
-        // emission's end and its clock.
-        let mut board = 0;
-        let mut board_end = self.per_board;
+        let fragments = &self.stretch_board_fragments;
+        let starts: [u64; MAX_BOARDS] = std::array::from_fn(|board| self.generators[board] + setup);
         // An engine's last fragment came no earlier than the last row's first of its board.
-        let last_row_starts =
-            |board: usize| self.stretch_board_fragments[board] - self.row_board_fragments[board];
-        let mut start = starts(0);
-        let mut last_row_start = last_row_starts(0);
-        let mut generators = [0u64; MAX_BOARDS];
-        let mut generator = start + self.stretch_board_fragments[0];
+        let last_row_starts: [u64; MAX_BOARDS] =
+            std::array::from_fn(|board| fragments[board] - self.row_board_fragments[board]);
+        let mut latest = [0u64; MAX_BOARDS];
         for (word_index, word) in self.touched.iter_mut().enumerate() {
             let mut bits = std::mem::take(word);
             while bits != 0 {
-                let engine = word_index * 64 + bits.trailing_zeros() as usize;
+                let index = word_index * 64 + bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                while engine >= board_end {
-                    generators[board] = generator;
-                    board += 1;
-                    board_end += self.per_board;
-                    start = starts(board);
-                    last_row_start = last_row_starts(board);
-                    generator = start + self.stretch_board_fragments[board];
-                }
-                let share = std::mem::take(&mut self.shares[engine]);
-                let clock = &mut self.through[engine];
-                let emitted = start + share.last.max(last_row_start);
+                let board = self.dealer.board_of(index, self.per_board);
+                let share = std::mem::take(&mut self.shares[index]);
+                let clock = &mut self.through[index];
+                let start = starts[board];
+                let emitted = start + share.last.max(last_row_starts[board]);
                 *clock = ((*clock).max(start) + share.slots).max(emitted + pace);
-                generator = generator.max(clock.saturating_sub(hidden));
+                latest[board] = latest[board].max(*clock);
             }
         }
-        generators[board] = generator;
-        // The boards after the last touched engine's.
-        for (later, generator) in generators
-            .iter_mut()
-            .enumerate()
-            .take(self.boards)
-            .skip(board + 1)
-        {
-            *generator = starts(later) + self.stretch_board_fragments[later];
+        for board in 0..self.boards {
+            let generator = starts[board] + fragments[board];
+            self.generators[board] = generator.max(latest[board].saturating_sub(hidden));
         }
-        self.generators = generators;
         self.stretch_board_fragments = [0; MAX_BOARDS];
         self.row_board_fragments = [0; MAX_BOARDS];
         self.stretch_sets_up = false;
@@ -301,40 +310,62 @@ impl IrWindow {
     /// columns and the stretch spans no more of them than there are units (so each engine
     /// has one column of it, and its share, last and clock are that column's): the same
     /// clocks as dealing first and then closing engine by engine (on the lazy-grid walk's
-    /// band index, ir4, 52 ms against 37). Returns false, having done nothing, elsewhere.
+    /// band index, ir4, 52 ms against 37). The columns' engines are a run of clocks,
+    /// closed as vectors ([`close_narrow_lanes`]) where they lie; where the run passes the
+    /// last unit they are copied out and back. (Column by column, with the engines
+    /// numbered board-major: the demo's band index on ir4 in 30.1 ms against 24.6, the
+    /// lazy-grid walk's 32.8 against 27.5, the city's hierarchical walk's 26.3 against
+    /// 22.1, best of 6 interleaved.) Returns false, having done nothing, elsewhere.
     fn close_narrow_columns(&mut self, band: &FragmentBand) -> bool {
         let hidden = self.hidden();
         let Dealer::Columns(columns) = &mut self.dealer else {
             return false;
         };
         let (first, end) = extent(band.runs());
-        if band.is_empty() || (end - first) as u64 > columns.units {
+        let units = self.through.len();
+        if band.is_empty() || end - first > units {
             return false;
         }
-        let (fragments, last_row) = column_boards(band, columns.board_shift);
-        let setup = if self.stretch_sets_up { self.setup } else { 0 };
-        let boards = self.boards;
         let pace = self.pace * self.rate;
-        // Each board's start and a pace after its last fragment's emission.
-        let (mut starts, mut paced_ends) = ([0u64; MAX_BOARDS], [0u64; MAX_BOARDS]);
-        for board in 0..boards {
-            starts[board] = self.generators[board] + setup;
-            paced_ends[board] = starts[board] + fragments[board] + pace;
+        // The columns from the vector holding the first on, to the vector holding the last.
+        let from = first - first % LANES;
+        let lanes = (end - from).next_multiple_of(LANES);
+        let fragments = columns.heights_in_slots(band, from..from + lanes, pace);
+        let mut last_row = [0; MAX_BOARDS];
+        for run in band.last_row() {
+            add_run_to_boards(&mut last_row, run, columns.board_shift);
         }
-        let mut latest = [0u64; MAX_BOARDS];
-        let through = &mut self.through;
-        columns.each_column(
-            (band, (first, end)),
-            self.per_board,
-            |board, engine, height, after| {
-                // Its last fragment, no earlier than the last row's first of its board.
-                let emitted = paced_ends[board] - after.min(last_row[board]);
-                let clock = &mut through[engine];
-                *clock = (starts[board].max(*clock) + height * pace).max(emitted);
-                latest[board] = latest[board].max(*clock);
-            },
-        );
-        for board in 0..boards {
+        let setup = if self.stretch_sets_up { self.setup } else { 0 };
+        let starts: [u64; MAX_BOARDS] = std::array::from_fn(|board| self.generators[board] + setup);
+        let (row_first, row_end) = extent(band.last_row());
+        let narrow = NarrowStretch {
+            from,
+            board_shift: columns.board_shift,
+            starts,
+            paced_ends: std::array::from_fn(|board| starts[board] + fragments[board] + pace),
+            last_row,
+            row: (row_first, row_end),
+        };
+        let heights = &columns.heights[..lanes];
+        let latest = match from % units + lanes <= units {
+            // The columns' engines in order, each once (a column without fragments leaves
+            // its clock as it is).
+            true => {
+                close_narrow_lanes(heights, &mut self.through[from % units..][..lanes], &narrow)
+            }
+            false => {
+                let clocks = &mut columns.clocks[..lanes];
+                copy_around(&self.through, from % units, clocks);
+                let latest = close_narrow_lanes(heights, clocks, &narrow);
+                copy_back_around(
+                    &clocks[first - from..end - from],
+                    first % units,
+                    &mut self.through,
+                );
+                latest
+            }
+        };
+        for board in 0..self.boards {
             let generator = starts[board] + fragments[board];
             self.generators[board] = generator.max(latest[board].saturating_sub(hidden));
         }
@@ -445,6 +476,14 @@ impl IrWindow {
         }
     }
 
+    /// Each Image Engine's clock, board-major.
+    #[cfg(test)]
+    fn engine_clocks(&self) -> Vec<u64> {
+        (0..self.through.len())
+            .map(|engine| self.through[self.dealer.index_of_engine(engine, self.per_board)])
+            .collect()
+    }
+
     /// `T_w`: the window's cycles, the current stretch's work included.
     pub fn cycles(&mut self, arch: &IrArch) -> u64 {
         self.close_stretch();
@@ -469,20 +508,19 @@ impl IrWindow {
         service: u64,
     ) -> impl Iterator<Item = u64> + 'a {
         let tail = arch.image_engine_latency_cycles + service + 1;
-        self.through
-            .iter()
-            .zip(&self.hit_words)
-            .map(move |(&through, &hits)| {
-                // An engine given no work (or none left past the last window) has no last
-                // fragment to wait for.
-                let last_result = if through == 0 {
-                    0
-                } else {
-                    (through.div_ceil(self.rate) + tail).saturating_sub(self.pace)
-                };
-                let hits_drained = hits + 1;
-                last_result.max(hits_drained).saturating_sub(end + 3)
-            })
+        let through = (0..self.through.len())
+            .map(|engine| self.through[self.dealer.index_of_engine(engine, self.per_board)]);
+        through.zip(&self.hit_words).map(move |(through, &hits)| {
+            // An engine given no work (or none left past the last window) has no last
+            // fragment to wait for.
+            let last_result = if through == 0 {
+                0
+            } else {
+                (through.div_ceil(self.rate) + tail).saturating_sub(self.pace)
+            };
+            let hits_drained = hits + 1;
+            last_result.max(hits_drained).saturating_sub(end + 3)
+        })
     }
 }
 
@@ -520,9 +558,9 @@ fn column_boards_of<const B: usize>(band: &FragmentBand) -> ([u64; MAX_BOARDS], 
     let (mut fragments, mut last_row) = ([0; MAX_BOARDS], [0; MAX_BOARDS]);
     let last_row_from = band.runs().len() - band.last_row().len();
     for (k, run) in band.runs().iter().enumerate() {
-        add_run_to_boards::<B>(&mut fragments, run);
+        add_run_to_boards(&mut fragments, run, B.trailing_zeros());
         if k >= last_row_from {
-            add_run_to_boards::<B>(&mut last_row, run);
+            add_run_to_boards(&mut last_row, run, B.trailing_zeros());
         }
     }
     (fragments, last_row)
@@ -531,16 +569,58 @@ fn column_boards_of<const B: usize>(band: &FragmentBand) -> ([u64; MAX_BOARDS], 
 /// Add a run's fragments to its boards' counts: under the columns interleave pixel `x` is
 /// board `x mod B`'s, so each board has `len / B` of them, and the `len mod B` boards from
 /// the first pixel's on one more.
-fn add_run_to_boards<const B: usize>(boards: &mut [u64; MAX_BOARDS], run: &RowRun) {
-    let len = run.len as usize;
-    for step in 0..B {
-        let board = (run.x as usize + step) % B;
-        boards[board] += (len / B + usize::from(step < len % B)) as u64;
+fn add_run_to_boards(boards: &mut [u64; MAX_BOARDS], run: &RowRun, shift: u32) {
+    let (len, b) = (run.len as usize, 1 << shift);
+    for step in 0..b {
+        let board = (run.x as usize + step) % b;
+        boards[board] += (len / b + usize::from(step < len % b)) as u64;
     }
 }
 
 impl Columns {
-    /// Hand each column `band` holds fragments in to `each`, as `(board, engine,
+    /// Step `band`'s runs and sum them along `columns` (from a multiple of `B` to one,
+    /// holding every run): each column's height in slots (`pace` a fragment) into
+    /// `heights` (from its start), `steps` left all zero. Returns each board's fragments.
+    fn heights_in_slots(
+        &mut self,
+        band: &FragmentBand,
+        columns: Range<usize>,
+        pace: u64,
+    ) -> [u64; MAX_BOARDS] {
+        match self.board_shift {
+            0 => self.heights_in_slots_of::<1>(band, columns, pace),
+            1 => self.heights_in_slots_of::<2>(band, columns, pace),
+            _ => self.heights_in_slots_of::<4>(band, columns, pace),
+        }
+    }
+
+    /// [`Self::heights_in_slots`] over `B` boards, a group of `B` columns (one a board) at
+    /// a time, so that each board's count stays in a register.
+    #[inline(always)]
+    fn heights_in_slots_of<const B: usize>(
+        &mut self,
+        band: &FragmentBand,
+        columns: Range<usize>,
+        pace: u64,
+    ) -> [u64; MAX_BOARDS] {
+        step_runs(&mut self.steps, band.runs());
+        // The last run's end may be the columns' (its step is not summed).
+        self.steps[columns.end] = 0;
+        let steps = &mut self.steps[columns.clone()];
+        let heights = &mut self.heights[..columns.len()];
+        let mut fragments = [0u64; MAX_BOARDS];
+        let mut height = 0i32;
+        for (steps, heights) in steps.chunks_exact_mut(B).zip(heights.chunks_exact_mut(B)) {
+            for board in 0..B {
+                height += std::mem::take(&mut steps[board]);
+                heights[board] = height as u64 * pace;
+                fragments[board] += height as u64;
+            }
+        }
+        fragments
+    }
+
+    /// Hand each column `band` holds fragments in to `each`, as `(board, unit,
     /// fragments, after)` (`spanned`: the band and the columns its runs span, [`extent`],
     /// as its caller found them; `per_board` Image Engines a board): column `x` is unit
     /// `g = x mod U`, Image Engine `g / B` of board `g mod B` (so board `x mod B`). The
@@ -566,8 +646,7 @@ impl Columns {
     /// [`Self::each_column`] over `B` boards, in groups of `B` columns (one a board, so
     /// that a caller's terms of each board stay in registers: the lazy-grid walk's band
     /// index on ir4 in 35.8 ms against 38.8 column by column, the demo's in 32.6 against
-    /// 36.5, best of 20 interleaved). The columns of group
-    /// `x / B` are each board's Image Engine `x / B mod N`.
+    /// 36.5, best of 20 interleaved).
     #[inline(always)]
     fn each_column_of<const B: usize>(
         &mut self,
@@ -579,7 +658,9 @@ impl Columns {
         step_runs(&mut self.steps, band.runs());
         let (row_first, row_end) = extent(band.last_row());
         let row_width = row_end - row_first;
-        let mut engine = (first / B) % per_board;
+        let units = B * per_board;
+        // The group's first unit (its board 0's).
+        let mut unit = (first / B * B) % units;
         let mut height = 0i32;
         // From the first group's first column (no run starts left of `first`) to the last
         // group's last (`steps` has room for it).
@@ -594,15 +675,204 @@ impl Columns {
                     true => ((row_end - 1 - x) >> shift) as u64,
                     false => u64::MAX,
                 };
-                each(board, board * per_board + engine, height as u64, after);
+                each(board, unit + board, height as u64, after);
             }
-            engine += 1;
-            if engine == per_board {
-                engine = 0;
+            unit += B;
+            if unit == units {
+                unit = 0;
             }
         }
         self.steps[end] = 0;
     }
+}
+
+/// Lanes of [`close_narrow_lanes`]' vectors (a multiple of every `B`).
+const LANES: usize = 8;
+
+/// What [`close_narrow_lanes`] needs of a narrow stretch, in slots: its columns from
+/// `from` (a multiple of [`LANES`]) on, each board's start, a pace after its last
+/// fragment's emission and its last row's fragments, and the last row's columns.
+struct NarrowStretch {
+    from: usize,
+    board_shift: u32,
+    starts: [u64; MAX_BOARDS],
+    paced_ends: [u64; MAX_BOARDS],
+    last_row: [u64; MAX_BOARDS],
+    row: (usize, usize),
+}
+
+/// Close a narrow stretch's columns (`heights` in slots and their engines' `clocks`, a
+/// column each from `stretch.from` on, a whole number of vectors): each column with
+/// fragments takes its height after its engine's work before and no sooner than its
+/// board's start, and is through no sooner than a pace after its last fragment's emission
+/// (the last row's first of its board where it came earlier). Returns each board's latest
+/// clock (0 for none). In AVX2 vectors where the processor has them: the same integers.
+fn close_narrow_lanes(
+    heights: &[u64],
+    clocks: &mut [u64],
+    stretch: &NarrowStretch,
+) -> [u64; MAX_BOARDS] {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor has AVX2 (just checked), all the function needs.
+        return unsafe { avx2::close_narrow_lanes(heights, clocks, stretch) };
+    }
+    close_narrow_lanes_of(heights, clocks, stretch)
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{NarrowStretch, LANES, MAX_BOARDS};
+    use std::arch::x86_64::*;
+
+    /// The larger of each lane's signed 64-bit integers (AVX2 has no instruction for it).
+    #[inline(always)]
+    unsafe fn max(a: __m256i, b: __m256i) -> __m256i {
+        _mm256_blendv_epi8(b, a, _mm256_cmpgt_epi64(a, b))
+    }
+
+    /// The smaller.
+    #[inline(always)]
+    unsafe fn min(a: __m256i, b: __m256i) -> __m256i {
+        _mm256_blendv_epi8(a, b, _mm256_cmpgt_epi64(a, b))
+    }
+
+    /// [`super::close_narrow_lanes_of`] in vectors of four columns, lane for lane (signed
+    /// lanes: clocks stay far below `2^62` slots).
+    #[target_feature(enable = "avx2")]
+    pub(super) unsafe fn close_narrow_lanes(
+        heights: &[u64],
+        clocks: &mut [u64],
+        stretch: &NarrowStretch,
+    ) -> [u64; MAX_BOARDS] {
+        const WIDTH: usize = 4;
+        let boards = (1 << stretch.board_shift) - 1;
+        // Every vector starts at a multiple of 4, so lane k is board k mod B in each.
+        let of_lane = |terms: &[u64; MAX_BOARDS]| {
+            let lane = |k: usize| terms[k & boards] as i64;
+            _mm256_setr_epi64x(lane(0), lane(1), lane(2), lane(3))
+        };
+        let (starts, paced_ends, last_row) = (
+            of_lane(&stretch.starts),
+            of_lane(&stretch.paced_ends),
+            of_lane(&stretch.last_row),
+        );
+        let row_before = _mm256_set1_epi64x(stretch.row.0 as i64 - 1);
+        let row_end = _mm256_set1_epi64x(stretch.row.1 as i64);
+        let row_last = _mm256_set1_epi64x(stretch.row.1 as i64 - 1);
+        let shift = _mm_cvtsi32_si128(stretch.board_shift as i32);
+        let none_after = _mm256_set1_epi64x(i64::MAX);
+        let zero = _mm256_setzero_si256();
+        let step = _mm256_set1_epi64x(WIDTH as i64);
+        let from = stretch.from as i64;
+        let mut x = _mm256_setr_epi64x(from, from + 1, from + 2, from + 3);
+        let mut latest = zero;
+        debug_assert!(heights.len() == clocks.len() && heights.len().is_multiple_of(LANES));
+        for (heights, clocks) in heights
+            .chunks_exact(WIDTH)
+            .zip(clocks.chunks_exact_mut(WIDTH))
+        {
+            // SAFETY: both chunks are four u64s; unaligned loads and stores.
+            let height = unsafe { _mm256_loadu_si256(heights.as_ptr().cast()) };
+            let clock = unsafe { _mm256_loadu_si256(clocks.as_ptr().cast()) };
+            let in_row = _mm256_and_si256(
+                _mm256_cmpgt_epi64(x, row_before),
+                _mm256_cmpgt_epi64(row_end, x),
+            );
+            let after = _mm256_blendv_epi8(
+                none_after,
+                _mm256_srl_epi64(_mm256_sub_epi64(row_last, x), shift),
+                in_row,
+            );
+            let emitted = _mm256_sub_epi64(paced_ends, min(after, last_row));
+            let done = max(_mm256_add_epi64(max(starts, clock), height), emitted);
+            let untouched = _mm256_cmpeq_epi64(height, zero);
+            let clock = _mm256_blendv_epi8(done, clock, untouched);
+            // SAFETY: as the load.
+            unsafe { _mm256_storeu_si256(clocks.as_mut_ptr().cast(), clock) };
+            latest = max(latest, _mm256_andnot_si256(untouched, done));
+            x = _mm256_add_epi64(x, step);
+        }
+        let mut lanes = [0u64; WIDTH];
+        // SAFETY: four u64s.
+        unsafe { _mm256_storeu_si256(lanes.as_mut_ptr().cast(), latest) };
+        let mut boards_latest = [0u64; MAX_BOARDS];
+        for (lane, latest) in lanes.into_iter().enumerate() {
+            boards_latest[lane & boards] = boards_latest[lane & boards].max(latest);
+        }
+        boards_latest
+    }
+}
+
+/// [`close_narrow_lanes`]' loop: [`LANES`] columns at a time, each lane's board the same
+/// in every vector (the vectors start at multiples of `B`). In signed integers (clocks
+/// stay far below `2^62` slots), which the processor compares as vectors.
+#[inline(always)]
+fn close_narrow_lanes_of(
+    heights: &[u64],
+    clocks: &mut [u64],
+    stretch: &NarrowStretch,
+) -> [u64; MAX_BOARDS] {
+    let boards = (1 << stretch.board_shift) - 1;
+    let of_lane = |terms: &[u64; MAX_BOARDS]| -> [i64; LANES] {
+        std::array::from_fn(|lane| terms[lane & boards] as i64)
+    };
+    let (starts, paced_ends, last_row) = (
+        of_lane(&stretch.starts),
+        of_lane(&stretch.paced_ends),
+        of_lane(&stretch.last_row),
+    );
+    let (row_first, row_end) = (stretch.row.0 as i64, stretch.row.1 as i64);
+    let shift = stretch.board_shift;
+    let mut latest = [0i64; LANES];
+    let mut x0 = stretch.from as i64;
+    for (heights, clocks) in heights
+        .chunks_exact(LANES)
+        .zip(clocks.chunks_exact_mut(LANES))
+    {
+        for lane in 0..LANES {
+            let x = x0 + lane as i64;
+            // Its board's fragments after its last, in the last row (else before it, and
+            // its last row's first counts).
+            let in_row = x >= row_first && x < row_end;
+            let after = if in_row {
+                (row_end - 1 - x) >> shift
+            } else {
+                i64::MAX
+            };
+            let emitted = paced_ends[lane] - after.min(last_row[lane]);
+            let (clock, height) = (clocks[lane] as i64, heights[lane] as i64);
+            let done = (starts[lane].max(clock) + height).max(emitted);
+            let touched = height != 0;
+            clocks[lane] = if touched { done } else { clock } as u64;
+            latest[lane] = latest[lane].max(if touched { done } else { 0 });
+        }
+        x0 += LANES as i64;
+    }
+    let mut boards_latest = [0u64; MAX_BOARDS];
+    for (lane, latest) in latest.into_iter().enumerate() {
+        boards_latest[lane & boards] = boards_latest[lane & boards].max(latest as u64);
+    }
+    boards_latest
+}
+
+/// Copy `source` into `out` from `start` on, going round to its beginning past its end.
+fn copy_around(source: &[u64], mut start: usize, out: &mut [u64]) {
+    let mut done = 0;
+    while done < out.len() {
+        let len = (out.len() - done).min(source.len() - start);
+        out[done..done + len].copy_from_slice(&source[start..start + len]);
+        done += len;
+        start = 0;
+    }
+}
+
+/// Copy `values` into `dest` from `start` on, going round to its beginning past its end
+/// (`values` no longer than `dest`).
+fn copy_back_around(values: &[u64], start: usize, dest: &mut [u64]) {
+    let len = values.len().min(dest.len() - start);
+    dest[start..start + len].copy_from_slice(&values[..len]);
+    dest[..values.len() - len].copy_from_slice(&values[len..]);
 }
 
 /// Per interleave unit of `arch`, its board and its Image Engine (board-major).
@@ -928,7 +1198,46 @@ mod tests {
             window.paced_along((1, 0), 2);
             window.paced_along((0, 1), 1);
             window.close_stretch();
-            assert_eq!(window.through, [52, 32], "by columns: {by_columns}");
+            assert_eq!(window.engine_clocks(), [52, 32], "by columns: {by_columns}");
+        }
+    }
+
+    #[test]
+    #[cfg(target_arch = "x86_64")]
+    fn the_vector_close_gives_the_clocks_the_lane_by_lane_close_gives() {
+        // Random narrow stretches (heights with gaps, clocks before and after the boards'
+        // starts, last rows anywhere among the columns, 1, 2 and 4 boards): the AVX2
+        // close and the plain one must leave the same clocks and give the same latest.
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            return;
+        }
+        let mut rng = SplitMix64(7);
+        for case in 0..2_000 {
+            let board_shift = rng.below(3) as u32;
+            let lanes = LANES * (1 + rng.below(6) as usize);
+            let from = LANES * rng.below(40) as usize;
+            let heights: Vec<u64> = (0..lanes)
+                .map(|_| [0, 0, 22, 44, 176, 600][rng.below(6) as usize])
+                .collect();
+            let clocks: Vec<u64> = (0..lanes).map(|_| rng.below(3_000)).collect();
+            let starts: [u64; MAX_BOARDS] = std::array::from_fn(|_| rng.below(2_000));
+            let last_row: [u64; MAX_BOARDS] = std::array::from_fn(|_| rng.below(40));
+            let row_first = from + rng.below(lanes as u64) as usize;
+            let row_end = row_first + rng.below((from + lanes - row_first) as u64 + 1) as usize;
+            let stretch = NarrowStretch {
+                from,
+                board_shift,
+                starts,
+                paced_ends: std::array::from_fn(|b| starts[b] + last_row[b] + rng.below(90) + 22),
+                last_row,
+                row: (row_first, row_end),
+            };
+            let (mut plain, mut vector) = (clocks.clone(), clocks);
+            let expected = close_narrow_lanes_of(&heights, &mut plain, &stretch);
+            // SAFETY: the processor has AVX2 (checked above).
+            let got = unsafe { avx2::close_narrow_lanes(&heights, &mut vector, &stretch) };
+            assert_eq!(got, expected, "case {case}");
+            assert_eq!(vector, plain, "case {case}");
         }
     }
 
@@ -985,7 +1294,11 @@ mod tests {
                 }
                 columns.close_stretch();
                 looked_up.close_stretch();
-                assert_eq!(columns.through, looked_up.through, "step {step}");
+                assert_eq!(
+                    columns.engine_clocks(),
+                    looked_up.engine_clocks(),
+                    "step {step}"
+                );
                 assert_eq!(columns.shares, looked_up.shares, "step {step}");
                 assert_eq!(columns.generators, looked_up.generators, "step {step}");
                 assert_eq!(columns.fragments, looked_up.fragments, "step {step}");
