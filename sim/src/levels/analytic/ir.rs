@@ -54,7 +54,7 @@
 //! 2.5% in stretches of 64 fragments). Counted by rows, a stretch costs its columns, not its
 //! fragments: the IR's analytic level on the demo on ir4 went from 203 to 112 ms in
 //! process decoding the fragments (a band no wider than the units closed in one pass, 96
-//! ms; from the band index, 56 ms; its columns closed as vectors, 25 ms). Where in a stretch an engine's last fragment
+//! ms; from the band index, 56 ms; its columns closed as vectors, 24 ms). Where in a stretch an engine's last fragment
 //! came is known only in the last row (a row is one run: a column there has its board's
 //! columns right of it after it); an engine whose columns end higher up is taken to be
 //! through a pace after the last row's first fragment of its board, a little late.
@@ -136,7 +136,7 @@ pub struct IrWindow {
     stretch_sets_up: bool,
 }
 
-/// How [`IrWindow::deal`] gives a stretch's fragments to their Image Engines.
+/// How a stretch's fragments are given to their Image Engines ([`IrWindow::close_band`]).
 #[derive(Clone, Debug)]
 enum Dealer {
     /// Under the columns interleave (`x mod U` to unit `x mod U`), an engine's fragments
@@ -160,14 +160,6 @@ impl Dealer {
             Dealer::Owners(..) => engine,
         }
     }
-
-    /// The board of the engine at `index` of the window's clocks.
-    fn board_of(&self, index: usize, per_board: usize) -> usize {
-        match self {
-            Dealer::Columns(columns) => index & ((1 << columns.board_shift) - 1),
-            Dealer::Owners(..) => index / per_board,
-        }
-    }
 }
 
 /// The columns interleave's shape, and room to count a stretch's fragments a column.
@@ -178,10 +170,13 @@ struct Columns {
     /// A stretch's runs as steps: `+1` where a run begins, `-1` past its end (the
     /// viewport's width and a vector's, all zero between stretches).
     steps: Vec<i32>,
-    /// A narrow stretch's columns from a vector's start on, as [`close_narrow_lanes`]
-    /// takes them: their heights (in slots) and their engines' clocks.
+    /// A stretch's columns from a vector's start on, as [`close_lanes`] takes them: their
+    /// heights (in slots), and room for their engines' clocks.
     heights: Vec<u64>,
     clocks: Vec<u64>,
+    /// A wide stretch's columns summed into their units (whole vectors).
+    unit_slots: Vec<u64>,
+    unit_after: Vec<u64>,
 }
 
 /// One Image Engine's share of the current stretch.
@@ -225,8 +220,10 @@ impl IrWindow {
                     board_shift: arch.boards.trailing_zeros(),
                     // Room for a sweep's last vector of columns.
                     steps: vec![0; width as usize + LANES],
-                    heights: vec![0; engines + 2 * LANES],
-                    clocks: vec![0; engines + 2 * LANES],
+                    heights: vec![0; width as usize + 2 * LANES],
+                    clocks: vec![0; (width as usize).max(engines) + 2 * LANES],
+                    unit_slots: vec![0; engines + LANES],
+                    unit_after: vec![0; engines + LANES],
                 })
             } else {
                 let interleave = FramebufferInterleave::new(arch);
@@ -270,10 +267,16 @@ impl IrWindow {
 
     /// [`Self::close_stretch`] with `band` its fragments.
     fn close_band(&mut self, band: &FragmentBand) {
-        if self.close_narrow_columns(band) {
-            return;
+        match self.dealer {
+            Dealer::Columns(_) => self.close_columns(band),
+            Dealer::Owners(..) => self.close_owners(band),
         }
-        self.deal(band);
+    }
+
+    /// [`Self::close_band`] where each pixel's owner is looked up: the stretch dealt to
+    /// its engines' shares, then each engine it touched closed.
+    fn close_owners(&mut self, band: &FragmentBand) {
+        self.deal_owners(band);
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let pace = self.pace * self.rate;
         let hidden = self.hidden();
@@ -288,7 +291,7 @@ impl IrWindow {
             while bits != 0 {
                 let index = word_index * 64 + bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let board = self.dealer.board_of(index, self.per_board);
+                let board = index / self.per_board;
                 let share = std::mem::take(&mut self.shares[index]);
                 let clock = &mut self.through[index];
                 let start = starts[board];
@@ -306,26 +309,23 @@ impl IrWindow {
         self.stretch_sets_up = false;
     }
 
-    /// [`Self::close_stretch`] in one pass over the columns, where the interleave deals
-    /// columns and the stretch spans no more of them than there are units (so each engine
-    /// has one column of it, and its share, last and clock are that column's): the same
-    /// clocks as dealing first and then closing engine by engine (on the lazy-grid walk's
-    /// band index, ir4, 52 ms against 37). The columns' engines are a run of clocks,
-    /// closed as vectors ([`close_narrow_lanes`]) where they lie; where the run passes the
-    /// last unit they are copied out and back. (Column by column, with the engines
-    /// numbered board-major: the demo's band index on ir4 in 30.1 ms against 24.6, the
-    /// lazy-grid walk's 32.8 against 27.5, the city's hierarchical walk's 26.3 against
-    /// 22.1, best of 6 interleaved.) Returns false, having done nothing, elsewhere.
-    fn close_narrow_columns(&mut self, band: &FragmentBand) -> bool {
+    /// [`Self::close_stretch`] by columns, where the interleave deals columns: the same
+    /// clocks as dealing first and then closing engine by engine. With the engines numbered
+    /// by unit, a stretch no wider than the units is a run of clocks, one column each
+    /// (copied out and back where the run passes the last unit); a wider one's columns are
+    /// summed into their units first. Either way the engines are then closed as vectors
+    /// ([`close_lanes`]). (Column by column, with the engines numbered board-major and a
+    /// wide stretch dealt to them first: the demo's band index on ir4 in 31.0 ms against
+    /// 23.9, the lazy-grid walk's 33.7 against 28.7, the city's hierarchical walk's 27.2
+    /// against 20.5, best of 8 interleaved; before the narrow ones closed in one pass, 52
+    /// ms on the lazy walk against 37.)
+    fn close_columns(&mut self, band: &FragmentBand) {
         let hidden = self.hidden();
         let Dealer::Columns(columns) = &mut self.dealer else {
-            return false;
+            return;
         };
         let (first, end) = extent(band.runs());
         let units = self.through.len();
-        if band.is_empty() || end - first > units {
-            return false;
-        }
         let pace = self.pace * self.rate;
         // The columns from the vector holding the first on, to the vector holding the last.
         let from = first - first % LANES;
@@ -337,81 +337,63 @@ impl IrWindow {
         }
         let setup = if self.stretch_sets_up { self.setup } else { 0 };
         let starts: [u64; MAX_BOARDS] = std::array::from_fn(|board| self.generators[board] + setup);
-        let (row_first, row_end) = extent(band.last_row());
-        let narrow = NarrowStretch {
-            from,
+        let terms = BoardTerms {
             board_shift: columns.board_shift,
             starts,
             paced_ends: std::array::from_fn(|board| starts[board] + fragments[board] + pace),
             last_row,
-            row: (row_first, row_end),
+            from,
+            row: extent(band.last_row()),
         };
         let heights = &columns.heights[..lanes];
-        let latest = match from % units + lanes <= units {
+        let latest = if end - first > units {
+            columns.close_folded(from, lanes, &mut self.through, &terms)
+        } else if from % units + lanes <= units {
             // The columns' engines in order, each once (a column without fragments leaves
             // its clock as it is).
-            true => {
-                close_narrow_lanes(heights, &mut self.through[from % units..][..lanes], &narrow)
-            }
-            false => {
-                let clocks = &mut columns.clocks[..lanes];
-                copy_around(&self.through, from % units, clocks);
-                let latest = close_narrow_lanes(heights, clocks, &narrow);
-                copy_back_around(
-                    &clocks[first - from..end - from],
-                    first % units,
-                    &mut self.through,
-                );
-                latest
-            }
+            close_lanes::<false>(
+                heights,
+                &[],
+                &mut self.through[from % units..][..lanes],
+                &terms,
+            )
+        } else {
+            let clocks = &mut columns.clocks[..lanes];
+            copy_around(&self.through, from % units, clocks);
+            let latest = close_lanes::<false>(heights, &[], clocks, &terms);
+            let (columns, dest) = (first - from..end - from, &mut self.through);
+            copy_back_around(&clocks[columns], first % units, dest);
+            latest
         };
         for board in 0..self.boards {
             let generator = starts[board] + fragments[board];
             self.generators[board] = generator.max(latest[board].saturating_sub(hidden));
         }
         self.stretch_sets_up = false;
-        true
     }
 
-    /// Deal the current stretch's fragments to their boards and Image Engines: each
-    /// board's `F_bp` and its last row's fragments, each engine's slots and last, the
-    /// engines touched.
-    fn deal(&mut self, band: &FragmentBand) {
-        if band.is_empty() {
+    /// Deal `band`'s fragments to their boards and Image Engines, each pixel's owner
+    /// looked up: each board's `F_bp` and its last row's fragments, each engine's slots and
+    /// last, the engines touched.
+    fn deal_owners(&mut self, band: &FragmentBand) {
+        let Dealer::Owners(interleave, owners) = &self.dealer else {
             return;
-        }
+        };
         let slots_a_fragment = self.pace * self.rate;
         let last_row_from = band.runs().len() - band.last_row().len();
-        match &mut self.dealer {
-            Dealer::Columns(columns) => {
-                (self.stretch_board_fragments, self.row_board_fragments) =
-                    column_boards(band, columns.board_shift);
-                let (shares, touched) = (&mut self.shares, &mut self.touched);
-                let boards = &self.stretch_board_fragments;
-                let spanned = (band, extent(band.runs()));
-                columns.each_column(spanned, self.per_board, |board, engine, height, after| {
-                    let share = &mut shares[engine];
-                    share.slots += height * slots_a_fragment;
-                    share.last = share.last.max(boards[board].saturating_sub(after));
-                    touched[engine / 64] |= 1 << (engine % 64);
-                });
-            }
-            Dealer::Owners(interleave, owners) => {
-                let (boards, rows) = (
-                    &mut self.stretch_board_fragments,
-                    &mut self.row_board_fragments,
-                );
-                for (k, run) in band.runs().iter().enumerate() {
-                    interleave.for_each_unit_along(run.x, run.y, run.len as usize, |unit| {
-                        let (board, engine) = owners[unit];
-                        boards[board] += 1;
-                        rows[board] += (k >= last_row_from) as u64;
-                        self.touched[engine / 64] |= 1 << (engine % 64);
-                        self.shares[engine].slots += slots_a_fragment;
-                        self.shares[engine].last = boards[board];
-                    });
-                }
-            }
+        let (boards, rows) = (
+            &mut self.stretch_board_fragments,
+            &mut self.row_board_fragments,
+        );
+        for (k, run) in band.runs().iter().enumerate() {
+            interleave.for_each_unit_along(run.x, run.y, run.len as usize, |unit| {
+                let (board, engine) = owners[unit];
+                boards[board] += 1;
+                rows[board] += (k >= last_row_from) as u64;
+                self.touched[engine / 64] |= 1 << (engine % 64);
+                self.shares[engine].slots += slots_a_fragment;
+                self.shares[engine].last = boards[board];
+            });
         }
     }
 
@@ -543,29 +525,6 @@ fn step_runs(steps: &mut [i32], runs: &[RowRun]) {
     }
 }
 
-/// Under the columns interleave (`B = 1 << shift` boards), `band`'s fragments on each
-/// board, and its last row's.
-fn column_boards(band: &FragmentBand, shift: u32) -> ([u64; MAX_BOARDS], [u64; MAX_BOARDS]) {
-    match shift {
-        0 => column_boards_of::<1>(band),
-        1 => column_boards_of::<2>(band),
-        _ => column_boards_of::<4>(band),
-    }
-}
-
-/// [`column_boards`] over `B` boards.
-fn column_boards_of<const B: usize>(band: &FragmentBand) -> ([u64; MAX_BOARDS], [u64; MAX_BOARDS]) {
-    let (mut fragments, mut last_row) = ([0; MAX_BOARDS], [0; MAX_BOARDS]);
-    let last_row_from = band.runs().len() - band.last_row().len();
-    for (k, run) in band.runs().iter().enumerate() {
-        add_run_to_boards(&mut fragments, run, B.trailing_zeros());
-        if k >= last_row_from {
-            add_run_to_boards(&mut last_row, run, B.trailing_zeros());
-        }
-    }
-    (fragments, last_row)
-}
-
 /// Add a run's fragments to its boards' counts: under the columns interleave pixel `x` is
 /// board `x mod B`'s, so each board has `len / B` of them, and the `len mod B` boards from
 /// the first pixel's on one more.
@@ -578,6 +537,49 @@ fn add_run_to_boards(boards: &mut [u64; MAX_BOARDS], run: &RowRun, shift: u32) {
 }
 
 impl Columns {
+    /// Close a stretch wider than the units (its `lanes` columns from `from` summed
+    /// already, [`Self::heights_in_slots`]): each unit's columns summed into its share, its
+    /// last fragment the latest of theirs (the last row's, `terms.row`), then every unit's
+    /// clock in `through` closed as [`close_lanes`] closes them. Returns each board's latest
+    /// clock.
+    fn close_folded(
+        &mut self,
+        from: usize,
+        lanes: usize,
+        through: &mut [u64],
+        terms: &BoardTerms,
+    ) -> [u64; MAX_BOARDS] {
+        let units = through.len();
+        // Whole vectors: the lanes past the last unit have no work.
+        let padded = units.next_multiple_of(LANES);
+        let (slots, after) = (
+            &mut self.unit_slots[..padded],
+            &mut self.unit_after[..padded],
+        );
+        slots.fill(0);
+        after.fill(u64::MAX);
+        for (unit, columns) in runs_of_units(from..from + lanes, units) {
+            let heights = &self.heights[columns.start - from..columns.end - from];
+            for (slots, height) in slots[unit..].iter_mut().zip(heights) {
+                *slots += height;
+            }
+        }
+        let (row_first, row_end) = terms.row;
+        for (unit, columns) in runs_of_units(row_first..row_end, units) {
+            let heights = &self.heights[columns.start - from..columns.end - from];
+            for ((after, &height), x) in after[unit..].iter_mut().zip(heights).zip(columns) {
+                if height != 0 {
+                    *after = (*after).min(((row_end - 1 - x) >> terms.board_shift) as u64);
+                }
+            }
+        }
+        let clocks = &mut self.clocks[..padded];
+        clocks[..units].copy_from_slice(through);
+        let latest = close_lanes::<true>(slots, after, clocks, terms);
+        through.copy_from_slice(&clocks[..units]);
+        latest
+    }
+
     /// Step `band`'s runs and sum them along `columns` (from a multiple of `B` to one,
     /// holding every run): each column's height in slots (`pace` a fragment) into
     /// `heights` (from its start), `steps` left all zero. Returns each board's fragments.
@@ -619,110 +621,50 @@ impl Columns {
         }
         fragments
     }
-
-    /// Hand each column `band` holds fragments in to `each`, as `(board, unit,
-    /// fragments, after)` (`spanned`: the band and the columns its runs span, [`extent`],
-    /// as its caller found them; `per_board` Image Engines a board): column `x` is unit
-    /// `g = x mod U`, Image Engine `g / B` of board `g mod B` (so board `x mod B`). The
-    /// band's runs are stepped into `steps` and summed along the columns it spans, each
-    /// column once, whatever its height. `after` is how many of its board's fragments came
-    /// after the column's last, where that is known: in the last row, with its board's
-    /// columns right of it in the row, `(row_end - 1 - x) / B` (a primitive's row is one
-    /// run); else `u64::MAX` (it came before the last row, [`IrWindow::close_stretch`]
-    /// counts it at that row's start).
-    fn each_column(
-        &mut self,
-        spanned: (&FragmentBand, (usize, usize)),
-        per_board: usize,
-        each: impl FnMut(usize, usize, u64, u64),
-    ) {
-        match self.board_shift {
-            0 => self.each_column_of::<1>(spanned, per_board, each),
-            1 => self.each_column_of::<2>(spanned, per_board, each),
-            _ => self.each_column_of::<4>(spanned, per_board, each),
-        }
-    }
-
-    /// [`Self::each_column`] over `B` boards, in groups of `B` columns (one a board, so
-    /// that a caller's terms of each board stay in registers: the lazy-grid walk's band
-    /// index on ir4 in 35.8 ms against 38.8 column by column, the demo's in 32.6 against
-    /// 36.5, best of 20 interleaved).
-    #[inline(always)]
-    fn each_column_of<const B: usize>(
-        &mut self,
-        (band, (first, end)): (&FragmentBand, (usize, usize)),
-        per_board: usize,
-        mut each: impl FnMut(usize, usize, u64, u64),
-    ) {
-        let shift = B.trailing_zeros();
-        step_runs(&mut self.steps, band.runs());
-        let (row_first, row_end) = extent(band.last_row());
-        let row_width = row_end - row_first;
-        let units = B * per_board;
-        // The group's first unit (its board 0's).
-        let mut unit = (first / B * B) % units;
-        let mut height = 0i32;
-        // From the first group's first column (no run starts left of `first`) to the last
-        // group's last (`steps` has room for it).
-        for group in first / B..end.div_ceil(B) {
-            for board in 0..B {
-                let x = group * B + board;
-                height += std::mem::take(&mut self.steps[x]);
-                if height <= 0 {
-                    continue;
-                }
-                let after = match x.wrapping_sub(row_first) < row_width {
-                    true => ((row_end - 1 - x) >> shift) as u64,
-                    false => u64::MAX,
-                };
-                each(board, unit + board, height as u64, after);
-            }
-            unit += B;
-            if unit == units {
-                unit = 0;
-            }
-        }
-        self.steps[end] = 0;
-    }
 }
 
-/// Lanes of [`close_narrow_lanes`]' vectors (a multiple of every `B`).
+/// Lanes of [`close_lanes`]' vectors (a multiple of every `B`).
 const LANES: usize = 8;
 
-/// What [`close_narrow_lanes`] needs of a narrow stretch, in slots: its columns from
-/// `from` (a multiple of [`LANES`]) on, each board's start, a pace after its last
-/// fragment's emission and its last row's fragments, and the last row's columns.
-struct NarrowStretch {
-    from: usize,
+/// What [`close_lanes`] needs of a stretch, in slots: each board's start, a pace after
+/// its last fragment's emission (`start + F_bp + pace`) and its last row's fragments; the
+/// column of its first lane (a multiple of [`LANES`]) and its last row's columns.
+struct BoardTerms {
     board_shift: u32,
     starts: [u64; MAX_BOARDS],
     paced_ends: [u64; MAX_BOARDS],
     last_row: [u64; MAX_BOARDS],
+    from: usize,
     row: (usize, usize),
 }
 
-/// Close a narrow stretch's columns (`heights` in slots and their engines' `clocks`, a
-/// column each from `stretch.from` on, a whole number of vectors): each column with
-/// fragments takes its height after its engine's work before and no sooner than its
-/// board's start, and is through no sooner than a pace after its last fragment's emission
-/// (the last row's first of its board where it came earlier). Returns each board's latest
-/// clock (0 for none). In AVX2 vectors where the processor has them: the same integers.
-fn close_narrow_lanes(
-    heights: &[u64],
+/// Close a stretch's engines, lane by lane (lane `k` an engine of board `k mod B`, a whole
+/// number of vectors): each engine with work (`slots`, 0 for none) takes it after its work
+/// before and no sooner than its board's start, and is through no sooner than a pace after
+/// its last fragment's emission, the last row's first of its board where it came earlier.
+/// Where its last fragment came is `after` (its board's fragments after it, `u64::MAX`
+/// for before the last row) where `FOLDED` (an engine a lane), else the lanes are the
+/// columns from `terms.from`, one each, and a column in the last row has its board's
+/// columns right of it there after it, `(row_end - 1 - x) / B` (a primitive's row is one
+/// run). Returns each board's latest clock (0 for none). In AVX2 vectors where the
+/// processor has them: the same integers.
+fn close_lanes<const FOLDED: bool>(
+    slots: &[u64],
+    after: &[u64],
     clocks: &mut [u64],
-    stretch: &NarrowStretch,
+    terms: &BoardTerms,
 ) -> [u64; MAX_BOARDS] {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2 (just checked), all the function needs.
-        return unsafe { avx2::close_narrow_lanes(heights, clocks, stretch) };
+        return unsafe { avx2::close_lanes::<FOLDED>(slots, after, clocks, terms) };
     }
-    close_narrow_lanes_of(heights, clocks, stretch)
+    close_lanes_of::<FOLDED>(slots, after, clocks, terms)
 }
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
-    use super::{NarrowStretch, LANES, MAX_BOARDS};
+    use super::{BoardTerms, LANES, MAX_BOARDS};
     use std::arch::x86_64::*;
 
     /// The larger of each lane's signed 64-bit integers (AVX2 has no instruction for it).
@@ -731,64 +673,70 @@ mod avx2 {
         _mm256_blendv_epi8(b, a, _mm256_cmpgt_epi64(a, b))
     }
 
-    /// The smaller.
-    #[inline(always)]
-    unsafe fn min(a: __m256i, b: __m256i) -> __m256i {
-        _mm256_blendv_epi8(a, b, _mm256_cmpgt_epi64(a, b))
-    }
-
-    /// [`super::close_narrow_lanes_of`] in vectors of four columns, lane for lane (signed
-    /// lanes: clocks stay far below `2^62` slots).
+    /// [`super::close_lanes_of`] in vectors of four lanes (signed lanes: clocks stay far
+    /// below `2^62` slots; an unknown `after`, `u64::MAX`, is negative).
     #[target_feature(enable = "avx2")]
-    pub(super) unsafe fn close_narrow_lanes(
-        heights: &[u64],
+    pub(super) unsafe fn close_lanes<const FOLDED: bool>(
+        slots: &[u64],
+        after: &[u64],
         clocks: &mut [u64],
-        stretch: &NarrowStretch,
+        terms: &BoardTerms,
     ) -> [u64; MAX_BOARDS] {
         const WIDTH: usize = 4;
-        let boards = (1 << stretch.board_shift) - 1;
+        let boards = (1 << terms.board_shift) - 1;
         // Every vector starts at a multiple of 4, so lane k is board k mod B in each.
         let of_lane = |terms: &[u64; MAX_BOARDS]| {
             let lane = |k: usize| terms[k & boards] as i64;
             _mm256_setr_epi64x(lane(0), lane(1), lane(2), lane(3))
         };
         let (starts, paced_ends, last_row) = (
-            of_lane(&stretch.starts),
-            of_lane(&stretch.paced_ends),
-            of_lane(&stretch.last_row),
+            of_lane(&terms.starts),
+            of_lane(&terms.paced_ends),
+            of_lane(&terms.last_row),
         );
-        let row_before = _mm256_set1_epi64x(stretch.row.0 as i64 - 1);
-        let row_end = _mm256_set1_epi64x(stretch.row.1 as i64);
-        let row_last = _mm256_set1_epi64x(stretch.row.1 as i64 - 1);
-        let shift = _mm_cvtsi32_si128(stretch.board_shift as i32);
-        let none_after = _mm256_set1_epi64x(i64::MAX);
+        let row_before = _mm256_set1_epi64x(terms.row.0 as i64 - 1);
+        let row_end = _mm256_set1_epi64x(terms.row.1 as i64);
+        let row_last = _mm256_set1_epi64x(terms.row.1 as i64 - 1);
+        let shift = _mm_cvtsi32_si128(terms.board_shift as i32);
+        let unknown = _mm256_set1_epi64x(-1);
         let zero = _mm256_setzero_si256();
         let step = _mm256_set1_epi64x(WIDTH as i64);
-        let from = stretch.from as i64;
+        let from = terms.from as i64;
         let mut x = _mm256_setr_epi64x(from, from + 1, from + 2, from + 3);
         let mut latest = zero;
-        debug_assert!(heights.len() == clocks.len() && heights.len().is_multiple_of(LANES));
-        for (heights, clocks) in heights
-            .chunks_exact(WIDTH)
-            .zip(clocks.chunks_exact_mut(WIDTH))
-        {
-            // SAFETY: both chunks are four u64s; unaligned loads and stores.
-            let height = unsafe { _mm256_loadu_si256(heights.as_ptr().cast()) };
-            let clock = unsafe { _mm256_loadu_si256(clocks.as_ptr().cast()) };
-            let in_row = _mm256_and_si256(
-                _mm256_cmpgt_epi64(x, row_before),
-                _mm256_cmpgt_epi64(row_end, x),
+        debug_assert!(slots.len() == clocks.len() && slots.len().is_multiple_of(LANES));
+        debug_assert!(!FOLDED || after.len() == clocks.len());
+        for (chunk, clocks) in clocks.chunks_exact_mut(WIDTH).enumerate() {
+            let lanes = chunk * WIDTH..chunk * WIDTH + WIDTH;
+            // SAFETY: every chunk is four u64s in bounds; unaligned loads and stores.
+            let (share, clock) = unsafe {
+                (
+                    _mm256_loadu_si256(slots[lanes.clone()].as_ptr().cast()),
+                    _mm256_loadu_si256(clocks.as_ptr().cast()),
+                )
+            };
+            let after = match FOLDED {
+                // SAFETY: as above.
+                true => unsafe { _mm256_loadu_si256(after[lanes].as_ptr().cast()) },
+                false => {
+                    let in_row = _mm256_and_si256(
+                        _mm256_cmpgt_epi64(x, row_before),
+                        _mm256_cmpgt_epi64(row_end, x),
+                    );
+                    let after = _mm256_srl_epi64(_mm256_sub_epi64(row_last, x), shift);
+                    _mm256_blendv_epi8(unknown, after, in_row)
+                }
+            };
+            // min(after, last row), an unknown one (negative) past any.
+            let later = _mm256_or_si256(
+                _mm256_cmpgt_epi64(after, last_row),
+                _mm256_cmpgt_epi64(zero, after),
             );
-            let after = _mm256_blendv_epi8(
-                none_after,
-                _mm256_srl_epi64(_mm256_sub_epi64(row_last, x), shift),
-                in_row,
-            );
-            let emitted = _mm256_sub_epi64(paced_ends, min(after, last_row));
-            let done = max(_mm256_add_epi64(max(starts, clock), height), emitted);
-            let untouched = _mm256_cmpeq_epi64(height, zero);
+            let emitted = _mm256_sub_epi64(paced_ends, _mm256_blendv_epi8(after, last_row, later));
+            let done = max(_mm256_add_epi64(max(starts, clock), share), emitted);
+            let untouched = _mm256_cmpeq_epi64(share, zero);
             let clock = _mm256_blendv_epi8(done, clock, untouched);
-            // SAFETY: as the load.
+            // SAFETY: as the loads.
             unsafe { _mm256_storeu_si256(clocks.as_mut_ptr().cast(), clock) };
             latest = max(latest, _mm256_andnot_si256(untouched, done));
             x = _mm256_add_epi64(x, step);
@@ -804,56 +752,52 @@ mod avx2 {
     }
 }
 
-/// [`close_narrow_lanes`]' loop: [`LANES`] columns at a time, each lane's board the same
-/// in every vector (the vectors start at multiples of `B`). In signed integers (clocks
-/// stay far below `2^62` slots), which the processor compares as vectors.
-#[inline(always)]
-fn close_narrow_lanes_of(
-    heights: &[u64],
+/// [`close_lanes`]' loop, lane by lane.
+fn close_lanes_of<const FOLDED: bool>(
+    slots: &[u64],
+    after: &[u64],
     clocks: &mut [u64],
-    stretch: &NarrowStretch,
+    terms: &BoardTerms,
 ) -> [u64; MAX_BOARDS] {
-    let boards = (1 << stretch.board_shift) - 1;
-    let of_lane = |terms: &[u64; MAX_BOARDS]| -> [i64; LANES] {
-        std::array::from_fn(|lane| terms[lane & boards] as i64)
-    };
-    let (starts, paced_ends, last_row) = (
-        of_lane(&stretch.starts),
-        of_lane(&stretch.paced_ends),
-        of_lane(&stretch.last_row),
-    );
-    let (row_first, row_end) = (stretch.row.0 as i64, stretch.row.1 as i64);
-    let shift = stretch.board_shift;
-    let mut latest = [0i64; LANES];
-    let mut x0 = stretch.from as i64;
-    for (heights, clocks) in heights
-        .chunks_exact(LANES)
-        .zip(clocks.chunks_exact_mut(LANES))
-    {
-        for lane in 0..LANES {
-            let x = x0 + lane as i64;
-            // Its board's fragments after its last, in the last row (else before it, and
-            // its last row's first counts).
-            let in_row = x >= row_first && x < row_end;
-            let after = if in_row {
-                (row_end - 1 - x) >> shift
-            } else {
-                i64::MAX
-            };
-            let emitted = paced_ends[lane] - after.min(last_row[lane]);
-            let (clock, height) = (clocks[lane] as i64, heights[lane] as i64);
-            let done = (starts[lane].max(clock) + height).max(emitted);
-            let touched = height != 0;
-            clocks[lane] = if touched { done } else { clock } as u64;
-            latest[lane] = latest[lane].max(if touched { done } else { 0 });
+    let boards = (1 << terms.board_shift) - 1;
+    let (row_first, row_end) = terms.row;
+    let mut latest = [0u64; MAX_BOARDS];
+    for (lane, (&share, clock)) in slots.iter().zip(clocks).enumerate() {
+        let board = lane & boards;
+        let x = terms.from + lane;
+        let after = match FOLDED {
+            true => after[lane],
+            false if (row_first..row_end).contains(&x) => {
+                ((row_end - 1 - x) >> terms.board_shift) as u64
+            }
+            false => u64::MAX,
+        };
+        let emitted = terms.paced_ends[board] - after.min(terms.last_row[board]);
+        let done = (terms.starts[board].max(*clock) + share).max(emitted);
+        if share != 0 {
+            *clock = done;
+            latest[board] = latest[board].max(done);
         }
-        x0 += LANES as i64;
     }
-    let mut boards_latest = [0u64; MAX_BOARDS];
-    for (lane, latest) in latest.into_iter().enumerate() {
-        boards_latest[lane & boards] = boards_latest[lane & boards].max(latest as u64);
-    }
-    boards_latest
+    latest
+}
+
+/// `columns` as runs of consecutive units (column `x` is unit `x mod units`): each run's
+/// first unit and its columns.
+fn runs_of_units(
+    columns: Range<usize>,
+    units: usize,
+) -> impl Iterator<Item = (usize, Range<usize>)> {
+    let mut start = columns.start;
+    std::iter::from_fn(move || {
+        (start < columns.end).then(|| {
+            let unit = start % units;
+            let end = columns.end.min(start + units - unit);
+            let run = (unit, start..end);
+            start = end;
+            run
+        })
+    })
 }
 
 /// Copy `source` into `out` from `start` on, going round to its beginning past its end.
@@ -1205,37 +1149,50 @@ mod tests {
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn the_vector_close_gives_the_clocks_the_lane_by_lane_close_gives() {
-        // Random narrow stretches (heights with gaps, clocks before and after the boards'
-        // starts, last rows anywhere among the columns, 1, 2 and 4 boards): the AVX2
-        // close and the plain one must leave the same clocks and give the same latest.
+        // Random stretches (work with gaps, clocks before and after the boards' starts,
+        // last rows anywhere among the columns, or an engine's last fragment given, 1, 2
+        // and 4 boards): the AVX2 close and the plain one must leave the same clocks and
+        // give the same latest, by columns and by units alike.
         if !std::arch::is_x86_feature_detected!("avx2") {
             return;
         }
         let mut rng = SplitMix64(7);
-        for case in 0..2_000 {
+        for case in 0..4_000 {
             let board_shift = rng.below(3) as u32;
             let lanes = LANES * (1 + rng.below(6) as usize);
             let from = LANES * rng.below(40) as usize;
-            let heights: Vec<u64> = (0..lanes)
+            let slots: Vec<u64> = (0..lanes)
                 .map(|_| [0, 0, 22, 44, 176, 600][rng.below(6) as usize])
+                .collect();
+            let after: Vec<u64> = (0..lanes)
+                .map(|_| [u64::MAX, 0, 3, 50][rng.below(4) as usize])
                 .collect();
             let clocks: Vec<u64> = (0..lanes).map(|_| rng.below(3_000)).collect();
             let starts: [u64; MAX_BOARDS] = std::array::from_fn(|_| rng.below(2_000));
             let last_row: [u64; MAX_BOARDS] = std::array::from_fn(|_| rng.below(40));
             let row_first = from + rng.below(lanes as u64) as usize;
             let row_end = row_first + rng.below((from + lanes - row_first) as u64 + 1) as usize;
-            let stretch = NarrowStretch {
-                from,
+            let terms = BoardTerms {
                 board_shift,
                 starts,
                 paced_ends: std::array::from_fn(|b| starts[b] + last_row[b] + rng.below(90) + 22),
                 last_row,
+                from,
                 row: (row_first, row_end),
             };
             let (mut plain, mut vector) = (clocks.clone(), clocks);
-            let expected = close_narrow_lanes_of(&heights, &mut plain, &stretch);
-            // SAFETY: the processor has AVX2 (checked above).
-            let got = unsafe { avx2::close_narrow_lanes(&heights, &mut vector, &stretch) };
+            let (expected, got) = match case % 2 == 0 {
+                true => (
+                    close_lanes_of::<true>(&slots, &after, &mut plain, &terms),
+                    // SAFETY: the processor has AVX2 (checked above).
+                    unsafe { avx2::close_lanes::<true>(&slots, &after, &mut vector, &terms) },
+                ),
+                false => (
+                    close_lanes_of::<false>(&slots, &[], &mut plain, &terms),
+                    // SAFETY: as above.
+                    unsafe { avx2::close_lanes::<false>(&slots, &[], &mut vector, &terms) },
+                ),
+            };
             assert_eq!(got, expected, "case {case}");
             assert_eq!(vector, plain, "case {case}");
         }
