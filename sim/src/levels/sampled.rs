@@ -181,7 +181,7 @@ struct Window {
     /// Its fragments so far.
     fragments: u64,
     /// Sampled over its tail alone: its head ends at the first event other than a fragment
-    /// once this many of its fragments have passed ([`TAIL_FRAGMENTS`]).
+    /// once this many of its fragments have passed ([`tail_fragments`]).
     cut_at: Option<u64>,
     /// The head's work, once cut (the window's work is the rest).
     head: Option<Work>,

@@ -55,7 +55,7 @@
 //! # Fidelity
 //! Every Image Engine's Occlusion Unit and OccU Control is the event-timestamp model
 //! (`cycle`) or the `occsim-rtl` model clocked cycle by cycle (`rtl`,
-//! [`IrMachine::with_occu_model`], [`crate::blocks::rtl_occu`]), with identical reports. An rtl
+//! [`MachineBuilder::occu`], [`crate::blocks::rtl_occu`]), with identical reports. An rtl
 //! unit is clocked only when its Image Engine has a fragment for it (quiescent cycles are
 //! skipped in bulk), so idle Image Engines cost nothing; a waveform (`--vcd`) dumps Image
 //! Engine 0 of board 0.

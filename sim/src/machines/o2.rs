@@ -192,7 +192,7 @@ impl O2Machine {
     }
 
     /// [`Self::finish`], handing the depth buffer's memory back for reuse.
-    /// The depth buffer the depth test reads ([`MachineModel::depth_buffer_mut`]).
+    /// The depth buffer the depth test reads ([`super::MachineModel::depth_buffer_mut`]).
     pub fn depth_buffer_mut(&mut self) -> &mut DepthBuffer {
         self.depth.depth_buffer_mut()
     }

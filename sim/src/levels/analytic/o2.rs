@@ -308,7 +308,7 @@ const READ_STALL_CYCLES: f64 = 0.02;
 /// made 9% of them 1 to 9 cycles long).
 const RESERVED_READ_STALL_CYCLES: f64 = 0.085;
 
-/// Cycles of the end token's path that overlap the backlog when the OccU binds [cycles]:
+/// Cycles of the end token's path that overlap the backlog when the OccU binds \[cycles\]:
 /// the token leaves the FIFO, crosses the depth pipeline and reaches the OccU while the OccU
 /// still works through the fragments ahead of it (measured: with `f` = 0, the lazy-grid
 /// walks' multi-tile queries, 2 to 400 OccU cycles a fragment at 1, 4 and 16 engines, take
