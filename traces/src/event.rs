@@ -123,7 +123,7 @@ pub struct HostWork {
     /// Visibility decisions taken from query answers.
     pub decisions: u32,
     /// Framebuffer pixels read back and searched for changes (the software occlusion test
-    /// of the paper's reference [10], a virtual occlusion buffer).
+    /// of the paper's reference \[10\], a virtual occlusion buffer).
     pub pixels: u32,
 }
 

@@ -59,7 +59,7 @@ pub(crate) mod tag {
     /// A query result whose verbose tiles store their hit lists as `HitList` holds them:
     /// count, the listed hits, digests, bounds and the last hit. Version 3 on.
     pub const QUERY_RESULT: u8 = 0x15;
-    /// In window-index blocks only, in place of fragments: a [`FragmentStretch`]'s counts.
+    /// In window-index blocks only, in place of fragments: a [`crate::trace::index::FragmentStretch`]'s counts.
     /// Version 4 on.
     pub const STRETCH: u8 = 0x16;
     /// In band-index blocks only, in place of fragments: a [`crate::trace::FragmentBand`]'s

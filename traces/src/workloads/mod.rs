@@ -517,7 +517,7 @@ pub struct DriverOptions {
     pub collision_tiles: u32,
     /// Collision: the step's length in metres (None: the distance to the next frame's eye).
     pub collision_step: Option<f32>,
-    /// Hierarchical: test boxes the paper's earlier software way (its reference [10]): draw
+    /// Hierarchical: test boxes the paper's earlier software way (its reference \[10\]): draw
     /// the box, then read the framebuffer back over the box's rectangle and search it for
     /// changed pixels on the host, instead of reading the Occlusion Unit's record.
     pub virtual_occlusion_buffer: bool,

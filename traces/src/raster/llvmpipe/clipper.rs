@@ -1,7 +1,7 @@
 //! The draw module's clipper (draw_pipe_clip.c, `do_clip_tri` and `emit_poly`), step for
 //! step: the planes some vertex violates, in the order of their mask bits; distances as
 //! `dot4` computes them; each new vertex interpolated from the endpoint the code picks, not
-//! forced onto the plane; the polygon emitted as triangles (p[i-1], p[i], p[0]) (the
+//! forced onto the plane; the polygon emitted as triangles (`p[i-1]`, `p[i]`, `p[0]`) (the
 //! provoking vertex last, GL's default).
 
 use super::float::{add, div, mul, sub};
