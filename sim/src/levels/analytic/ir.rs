@@ -218,10 +218,12 @@ impl IrWindow {
             {
                 Dealer::Columns(Columns {
                     board_shift: arch.boards.trailing_zeros(),
-                    // Room for a sweep's last vector of columns.
+                    // A stretch's columns run from a vector's start (at most `LANES - 1`
+                    // before its first) to a vector's end (as many past its last), and a
+                    // narrow one spans at most `U` columns.
                     steps: vec![0; width as usize + LANES],
-                    heights: vec![0; width as usize + 2 * LANES],
-                    clocks: vec![0; (width as usize).max(engines) + 2 * LANES],
+                    heights: vec![0; width as usize + LANES],
+                    clocks: vec![0; engines + 2 * LANES],
                     unit_slots: vec![0; engines + LANES],
                     unit_after: vec![0; engines + LANES],
                 })
