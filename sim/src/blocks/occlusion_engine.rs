@@ -10,6 +10,7 @@
 use occsim_rtl::tile_locator::TileLocator;
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::{Fragment, Span, Tile, TileResult};
+use std::sync::Arc;
 
 /// Tiles up to which an engine scans them all for each fragment; past it, a
 /// [`TileLocator`] names the few that may hold it. (Scanning every tile for every fragment,
@@ -34,7 +35,7 @@ pub struct OcclusionEngine {
     /// Which tiles may hold a pixel, where the engine holds more than [`SCAN_TILES`] (not
     /// hardware: the comparators still decide, and every count equals a scan's; built or
     /// not for the loaded query).
-    locator: TileLocator,
+    locator: Option<Arc<TileLocator>>,
     verbose: bool,
     hit_room: u64,
     /// Hits each tile's result lists (`QuerySpec::listed_hits_per_tile`).
@@ -58,6 +59,20 @@ impl OcclusionEngine {
         hit_list_cap: usize,
         counter_max: u64,
     ) {
+        self.load_with(tiles, verbose, hit_room, hit_list_cap, counter_max, None);
+    }
+
+    /// [`Self::load`], with `locator` as the tiles' locator where given (another unit's,
+    /// built for the same tiles: [`crate::blocks::occlusion_unit::QueryLocators`]).
+    pub fn load_with(
+        &mut self,
+        tiles: impl Iterator<Item = (usize, Tile)>,
+        verbose: bool,
+        hit_room: u64,
+        hit_list_cap: usize,
+        counter_max: u64,
+        locator: Option<&Option<Arc<TileLocator>>>,
+    ) {
         self.verbose = verbose;
         self.hit_room = hit_room;
         self.hit_list_cap = hit_list_cap;
@@ -69,13 +84,22 @@ impl OcclusionEngine {
             result: TileResult::default(),
             hits_sent: 0,
         }));
-        self.locator.clear();
-        if self.tiles.len() > SCAN_TILES {
-            let rects: Vec<[u32; 4]> = (self.tiles.iter())
-                .map(|t| [t.rect.x, t.rect.y, t.rect.width, t.rect.height])
-                .collect();
-            self.locator.build(&rects);
-        }
+        self.locator = match locator {
+            Some(locator) => locator.clone(),
+            None if self.tiles.len() > SCAN_TILES => {
+                let rects: Vec<[u32; 4]> = (self.tiles.iter())
+                    .map(|t| [t.rect.x, t.rect.y, t.rect.width, t.rect.height])
+                    .collect();
+                let mut locator = TileLocator::default();
+                locator.build(&rects).then(|| Arc::new(locator))
+            }
+            None => None,
+        };
+    }
+
+    /// The loaded tiles' locator (none where they are scanned).
+    pub fn locator(&self) -> &Option<Arc<TileLocator>> {
+        &self.locator
     }
 
     /// Tiles held: the cycles one fragment costs (one tile per cycle).
@@ -87,7 +111,7 @@ impl OcclusionEngine {
     /// tile tested); returns the hit words sent to OccU Control.
     #[inline]
     pub fn fragment(&mut self, fragment: Fragment, passed: bool) -> u32 {
-        if self.locator.is_built() {
+        if self.locator.is_some() {
             return self.located_fragment(fragment, passed);
         }
         self.scanned_fragment(fragment, passed)
@@ -96,7 +120,7 @@ impl OcclusionEngine {
     /// Whether the loaded query's tiles are located (else [`Self::scanned_fragment`] is
     /// [`Self::fragment`]).
     pub fn is_located(&self) -> bool {
-        self.locator.is_built()
+        self.locator.is_some()
     }
 
     /// [`Self::fragment`] with every tile tested: for an engine whose query is not located
@@ -150,7 +174,10 @@ impl OcclusionEngine {
         );
         let (x, y) = (fragment.x as u32, fragment.y as u32);
         let mut hit_words = 0;
-        for t in self.locator.candidates(x, y, 0, u64::MAX) {
+        let Some(locator) = &self.locator else {
+            return 0;
+        };
+        for t in locator.candidates(x, y, 0, u64::MAX) {
             hit_words += Self::count_in(&mut self.tiles[t as usize], fragment, passed, query);
         }
         hit_words
@@ -202,15 +229,15 @@ impl OcclusionEngine {
     pub fn count_span(&mut self, span: Span, passed: &[bool]) {
         debug_assert!(!self.verbose, "a verbose query's hits are sent one by one");
         let counter_max = self.counter_max;
-        if !self.locator.is_built() {
+        let Some(locator) = &self.locator else {
             for tile in &mut self.tiles {
                 count_run_in(tile, span, passed, counter_max);
             }
             return;
-        }
+        };
         // The span cut where the locator's buckets end; in each piece, the tiles of its
         // bucket (a tile listed in several buckets counts each piece once).
-        let side = self.locator.bucket_side();
+        let side = locator.bucket_side();
         let (mut at, end) = (span.x as u32, span.x as u32 + span.depths.len() as u32);
         while at < end {
             let to = ((at / side + 1) * side).min(end);
@@ -220,7 +247,7 @@ impl OcclusionEngine {
                 y: span.y,
                 depths: &span.depths[first..last],
             };
-            for t in self.locator.candidates(at, span.y as u32, 0, u64::MAX) {
+            for t in locator.candidates(at, span.y as u32, 0, u64::MAX) {
                 count_run_in(
                     &mut self.tiles[t as usize],
                     piece,
@@ -314,9 +341,9 @@ mod tests {
             let (room, cap, max) = (5, 4, 1000);
             let mut located = OcclusionEngine::default();
             located.load(tiles.iter().copied().enumerate(), verbose, room, cap, max);
-            assert!(located.locator.is_built());
+            let locator = located.locator().clone().expect("located");
             // Spans cross buckets (a wrapping tile's extent makes one bucket of it all).
-            assert_eq!(located.locator.bucket_side() < 64, !wraps, "seed {seed}");
+            assert_eq!(locator.bucket_side() < 64, !wraps, "seed {seed}");
             let mut alone: Vec<OcclusionEngine> = tiles
                 .iter()
                 .enumerate()

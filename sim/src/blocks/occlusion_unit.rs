@@ -12,7 +12,22 @@
 
 use crate::arch::O2Arch;
 use crate::blocks::occlusion_engine::{hit_room, OcclusionEngine};
+use occsim_rtl::tile_locator::TileLocator;
 use occsim_traces::{Fragment, QueryMode, QuerySpec, Span, TileResult};
+use std::sync::Arc;
+
+/// The tile locators of a query's engines, built by the first unit that loads the query and
+/// taken by the rest: every Image Engine of the InfiniteReality-like machine deals the same
+/// tiles to its engines, and building a query of hundreds of tiles' locators in each of
+/// 320 units had been an eighth of the cycle level's time on a lazy-grid walk of the city on
+/// ir4. (Not hardware: the comparators still decide; the locator only names the
+/// candidates.)
+#[derive(Default)]
+pub struct QueryLocators {
+    /// The query they were built for, and each engine's (none where it scans).
+    query: Option<u64>,
+    locators: Vec<Option<Arc<TileLocator>>>,
+}
 
 pub struct OcclusionUnit {
     pub engines: Vec<OcclusionEngine>,
@@ -68,7 +83,20 @@ impl OcclusionUnit {
 
     /// Configure the engines for a query.
     pub fn begin(&mut self, spec: &QuerySpec) {
+        self.begin_sharing(spec, None);
+    }
+
+    /// [`Self::begin`], the engines' locators taken from `shared` where it holds query
+    /// `generation`'s for as many engines, else built and left there.
+    pub fn begin_sharing(&mut self, spec: &QuerySpec, shared: Option<(&mut QueryLocators, u64)>) {
         let count = self.engines.len();
+        let (shared, generation) = match shared {
+            Some((shared, generation)) => (Some(shared), generation),
+            None => (None, 0),
+        };
+        let built = shared.as_ref().is_some_and(|shared| {
+            shared.query == Some(generation) && shared.locators.len() == count
+        });
         let verbose = spec.mode == QueryMode::Verbose;
         let room = if verbose {
             hit_room(spec.buffer_entries)
@@ -83,13 +111,16 @@ impl OcclusionUnit {
                 .enumerate()
                 .skip(e)
                 .step_by(count);
-            engine.load(
-                dealt,
-                verbose,
-                room,
-                spec.listed_hits_per_tile(),
-                self.counter_max,
-            );
+            let locator = match (&shared, built) {
+                (Some(shared), true) => Some(&shared.locators[e]),
+                _ => None,
+            };
+            let cap = spec.listed_hits_per_tile();
+            engine.load_with(dealt, verbose, room, cap, self.counter_max, locator);
+        }
+        if let (Some(shared), false) = (shared, built) {
+            shared.query = Some(generation);
+            shared.locators = self.engines.iter().map(|e| e.locator().clone()).collect();
         }
         self.engine_cycles =
             engine_service_cycles(spec.tiles.len(), count, self.all_tiles_one_cycle);
@@ -247,4 +278,71 @@ pub struct OccuStats {
     pub engines: Vec<(u64, u64)>,
     pub words_written: u64,
     pub port_cycles: u64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occsim_traces::rng::SplitMix64;
+    use occsim_traces::Rect;
+
+    /// A brief query of `tiles` random tiles over a 320x240 viewport.
+    fn query(rng: &mut SplitMix64, tiles: usize) -> QuerySpec {
+        let tile = |rng: &mut SplitMix64| {
+            let (x, y) = (rng.below(300) as u32, rng.below(220) as u32);
+            Rect::new(x, y, 1 + rng.below(40) as u32, 1 + rng.below(40) as u32)
+        };
+        QuerySpec {
+            id: 1,
+            mode: QueryMode::Brief,
+            buffer_entries: 8,
+            tiles: (0..tiles).map(|_| tile(rng)).collect(),
+        }
+    }
+
+    #[test]
+    fn units_loading_one_query_share_its_locators_and_count_as_a_unit_alone() {
+        // Three units of 4 engines load a query of 200 tiles (50 an engine: located)
+        // through one `QueryLocators`: the second and third take the first's locators (the
+        // same ones, not copies), and each counts the same fragments as a unit that loaded
+        // the query alone. A second query (another generation) is built again.
+        let mut rng = SplitMix64(11);
+        let mut shared = QueryLocators::default();
+        for generation in [1, 2] {
+            let spec = query(&mut rng, 200);
+            let mut alone = OcclusionUnit::with_engines(4, false, 1 << 20);
+            alone.begin(&spec);
+            let mut units: Vec<OcclusionUnit> = (0..3)
+                .map(|_| OcclusionUnit::with_engines(4, false, 1 << 20))
+                .collect();
+            for unit in &mut units {
+                unit.begin_sharing(&spec, Some((&mut shared, generation)));
+            }
+            assert!(units[0].located, "generation {generation}");
+            for unit in &units[1..] {
+                for (engine, first) in unit.engines.iter().zip(&units[0].engines) {
+                    let (Some(taken), Some(built)) = (engine.locator(), first.locator()) else {
+                        panic!("an engine of 50 tiles is located");
+                    };
+                    assert!(Arc::ptr_eq(taken, built), "generation {generation}");
+                }
+            }
+            for cycle in 0..2_000 {
+                let fragment = Fragment {
+                    x: rng.below(320) as u16,
+                    y: rng.below(240) as u16,
+                    z: rng.below(1 << 24) as u32,
+                };
+                let passed = rng.below(2) == 0;
+                alone.fragment(fragment, passed, cycle, true);
+                for unit in &mut units {
+                    unit.fragment(fragment, passed, cycle, true);
+                }
+            }
+            let expected = alone.end(spec.tiles.len());
+            for unit in &mut units {
+                assert_eq!(unit.end(spec.tiles.len()), expected, "generation {generation}");
+            }
+        }
+    }
 }

@@ -9,7 +9,7 @@
 use crate::arch::{IrArch, O2Arch};
 use crate::blocks::memory_port::MemoryPort;
 use crate::blocks::occlusion_unit::OcclusionUnit;
-use crate::blocks::occlusion_unit::OccuStats;
+use crate::blocks::occlusion_unit::{OccuStats, QueryLocators};
 use crate::blocks::occu_control::OccuControl;
 use crate::blocks::rtl_occu::RtlOccu;
 use crate::blocks::waveform::WaveformOptions;
@@ -67,6 +67,16 @@ impl OccuStage {
     pub fn begin(&mut self, spec: &QuerySpec) {
         match self {
             OccuStage::Cycle { occu, .. } => occu.begin(spec),
+            OccuStage::Rtl(rtl) => rtl.begin(spec),
+        }
+    }
+
+    /// [`Self::begin`] for query `generation`, its tiles' locators shared with the other
+    /// units through `shared` ([`QueryLocators`]; the register-transfer model builds its
+    /// own).
+    pub fn begin_sharing(&mut self, spec: &QuerySpec, shared: &mut QueryLocators, generation: u64) {
+        match self {
+            OccuStage::Cycle { occu, .. } => occu.begin_sharing(spec, Some((shared, generation))),
             OccuStage::Rtl(rtl) => rtl.begin(spec),
         }
     }
