@@ -341,7 +341,11 @@ mod tests {
             }
             let expected = alone.end(spec.tiles.len());
             for unit in &mut units {
-                assert_eq!(unit.end(spec.tiles.len()), expected, "generation {generation}");
+                assert_eq!(
+                    unit.end(spec.tiles.len()),
+                    expected,
+                    "generation {generation}"
+                );
             }
         }
     }
