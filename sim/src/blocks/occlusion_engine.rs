@@ -32,9 +32,9 @@ struct TileRegisters {
 #[derive(Clone, Debug, Default)]
 pub struct OcclusionEngine {
     tiles: Vec<TileRegisters>,
-    /// Which tiles may hold a pixel, where the engine holds more than [`SCAN_TILES`] (not
-    /// hardware: the comparators still decide, and every count equals a scan's; built or
-    /// not for the loaded query).
+    /// Which tiles may hold a pixel, where the engine holds more than [`SCAN_TILES`] of the
+    /// loaded query's (not hardware: the comparators still decide, and every count equals a
+    /// scan's; none where it scans; shared with the other units that load the same tiles).
     locator: Option<Arc<TileLocator>>,
     verbose: bool,
     hit_room: u64,
