@@ -50,21 +50,10 @@ pub struct OcclusionEngine {
 impl OcclusionEngine {
     /// Load the tiles of a new query: `(index in the query, rectangle)`. `verbose` queries
     /// send hits while a tile's buffer has `hit_room` entries for them, listing the first
-    /// `hit_list_cap` of a tile's hits in its result.
+    /// `hit_list_cap` of a tile's hits in its result. `locator` is the tiles' locator where
+    /// given (another unit's, built for the same tiles:
+    /// [`crate::blocks::occlusion_unit::QueryLocators`]), else built here.
     pub fn load(
-        &mut self,
-        tiles: impl Iterator<Item = (usize, Tile)>,
-        verbose: bool,
-        hit_room: u64,
-        hit_list_cap: usize,
-        counter_max: u64,
-    ) {
-        self.load_with(tiles, verbose, hit_room, hit_list_cap, counter_max, None);
-    }
-
-    /// [`Self::load`], with `locator` as the tiles' locator where given (another unit's,
-    /// built for the same tiles: [`crate::blocks::occlusion_unit::QueryLocators`]).
-    pub fn load_with(
         &mut self,
         tiles: impl Iterator<Item = (usize, Tile)>,
         verbose: bool,
@@ -340,7 +329,8 @@ mod tests {
             let tiles = random_tiles(&mut rng, 60, wraps);
             let (room, cap, max) = (5, 4, 1000);
             let mut located = OcclusionEngine::default();
-            located.load(tiles.iter().copied().enumerate(), verbose, room, cap, max);
+            let dealt = tiles.iter().copied().enumerate();
+            located.load(dealt, verbose, room, cap, max, None);
             let locator = located.locator().clone().expect("located");
             // Spans cross buckets (a wrapping tile's extent makes one bucket of it all).
             assert_eq!(locator.bucket_side() < 64, !wraps, "seed {seed}");
@@ -349,7 +339,7 @@ mod tests {
                 .enumerate()
                 .map(|(index, &tile)| {
                     let mut engine = OcclusionEngine::default();
-                    engine.load([(index, tile)].into_iter(), verbose, room, cap, max);
+                    engine.load([(index, tile)].into_iter(), verbose, room, cap, max, None);
                     engine
                 })
                 .collect();

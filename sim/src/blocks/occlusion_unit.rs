@@ -116,7 +116,7 @@ impl OcclusionUnit {
                 _ => None,
             };
             let cap = spec.listed_hits_per_tile();
-            engine.load_with(dealt, verbose, room, cap, self.counter_max, locator);
+            engine.load(dealt, verbose, room, cap, self.counter_max, locator);
         }
         if let (Some(shared), false) = (shared, built) {
             shared.query = Some(generation);
