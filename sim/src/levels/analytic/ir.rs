@@ -361,10 +361,10 @@ impl IrWindow {
             )
         } else {
             let clocks = &mut columns.clocks[..lanes];
-            copy_around(&self.through, from % units, clocks);
+            copy_around(&self.through, from, clocks);
             let latest = close_lanes::<false>(heights, &[], clocks, &terms);
             let (columns, dest) = (first - from..end - from, &mut self.through);
-            copy_back_around(&clocks[columns], first % units, dest);
+            copy_back_around(&clocks[columns], first, dest);
             latest
         };
         for board in 0..self.boards {
@@ -460,12 +460,10 @@ impl IrWindow {
         }
     }
 
-    /// Each Image Engine's clock, board-major.
-    #[cfg(test)]
-    fn engine_clocks(&self) -> Vec<u64> {
+    /// Each Image Engine's clock (`d_i`), board-major.
+    fn engine_clocks(&self) -> impl Iterator<Item = u64> + '_ {
         (0..self.through.len())
             .map(|engine| self.through[self.dealer.index_of_engine(engine, self.per_board)])
-            .collect()
     }
 
     /// `T_w`: the window's cycles, the current stretch's work included.
@@ -492,19 +490,19 @@ impl IrWindow {
         service: u64,
     ) -> impl Iterator<Item = u64> + 'a {
         let tail = arch.image_engine_latency_cycles + service + 1;
-        let through = (0..self.through.len())
-            .map(|engine| self.through[self.dealer.index_of_engine(engine, self.per_board)]);
-        through.zip(&self.hit_words).map(move |(through, &hits)| {
-            // An engine given no work (or none left past the last window) has no last
-            // fragment to wait for.
-            let last_result = if through == 0 {
-                0
-            } else {
-                (through.div_ceil(self.rate) + tail).saturating_sub(self.pace)
-            };
-            let hits_drained = hits + 1;
-            last_result.max(hits_drained).saturating_sub(end + 3)
-        })
+        self.engine_clocks()
+            .zip(&self.hit_words)
+            .map(move |(through, &hits)| {
+                // An engine given no work (or none left past the last window) has no last
+                // fragment to wait for.
+                let last_result = if through == 0 {
+                    0
+                } else {
+                    (through.div_ceil(self.rate) + tail).saturating_sub(self.pace)
+                };
+                let hits_drained = hits + 1;
+                last_result.max(hits_drained).saturating_sub(end + 3)
+            })
     }
 }
 
@@ -802,23 +800,22 @@ fn runs_of_units(
     })
 }
 
-/// Copy `source` into `out` from `start` on, going round to its beginning past its end.
-fn copy_around(source: &[u64], mut start: usize, out: &mut [u64]) {
-    let mut done = 0;
-    while done < out.len() {
-        let len = (out.len() - done).min(source.len() - start);
-        out[done..done + len].copy_from_slice(&source[start..start + len]);
-        done += len;
-        start = 0;
+/// Copy the clocks of columns `from..from + out.len()` out of `clocks` (one a unit, column
+/// `x` unit `x mod units`) into `out`.
+fn copy_around(clocks: &[u64], from: usize, out: &mut [u64]) {
+    for (unit, columns) in runs_of_units(from..from + out.len(), clocks.len()) {
+        let run = columns.start - from..columns.end - from;
+        out[run.clone()].copy_from_slice(&clocks[unit..unit + run.len()]);
     }
 }
 
-/// Copy `values` into `dest` from `start` on, going round to its beginning past its end
-/// (`values` no longer than `dest`).
-fn copy_back_around(values: &[u64], start: usize, dest: &mut [u64]) {
-    let len = values.len().min(dest.len() - start);
-    dest[start..start + len].copy_from_slice(&values[..len]);
-    dest[..values.len() - len].copy_from_slice(&values[len..]);
+/// Copy `values`, the clocks of columns `from..from + values.len()` (no more than the
+/// units), back into `clocks`.
+fn copy_back_around(values: &[u64], from: usize, clocks: &mut [u64]) {
+    for (unit, columns) in runs_of_units(from..from + values.len(), clocks.len()) {
+        let run = columns.start - from..columns.end - from;
+        clocks[unit..unit + run.len()].copy_from_slice(&values[run]);
+    }
 }
 
 /// Per interleave unit of `arch`, its board and its Image Engine (board-major).
@@ -1144,7 +1141,11 @@ mod tests {
             window.paced_along((1, 0), 2);
             window.paced_along((0, 1), 1);
             window.close_stretch();
-            assert_eq!(window.engine_clocks(), [52, 32], "by columns: {by_columns}");
+            assert_eq!(
+                window.engine_clocks().collect::<Vec<_>>(),
+                [52, 32],
+                "by columns: {by_columns}"
+            );
         }
     }
 
@@ -1254,8 +1255,8 @@ mod tests {
                 columns.close_stretch();
                 looked_up.close_stretch();
                 assert_eq!(
-                    columns.engine_clocks(),
-                    looked_up.engine_clocks(),
+                    columns.engine_clocks().collect::<Vec<_>>(),
+                    looked_up.engine_clocks().collect::<Vec<_>>(),
                     "step {step}"
                 );
                 assert_eq!(columns.shares, looked_up.shares, "step {step}");
