@@ -19,6 +19,7 @@ use crate::blocks::host::{cost, Host};
 use crate::timeline::{note, State, Track};
 use occsim_traces::GeometryBatch;
 
+#[derive(Clone, Debug)]
 pub enum Geometry {
     OnHost {
         per_vertex: f64,
@@ -35,6 +36,21 @@ pub enum Geometry {
 }
 
 impl Geometry {
+    /// The same stage on a timeline `base` cycles later: its engines' free cycles and its
+    /// last release moved back by `base` (where they were earlier, at 0: idle).
+    pub fn moved_back(&self, base: u64) -> Geometry {
+        let mut moved = self.clone();
+        if let Geometry::Engines {
+            free, last_release, ..
+        } = &mut moved
+        {
+            free.iter_mut()
+                .for_each(|cycle| *cycle = cycle.saturating_sub(base));
+            *last_release = last_release.saturating_sub(base);
+        }
+        moved
+    }
+
     /// Process `batch` (the host's per-draw cost already paid); returns the cycle its
     /// primitives are released to the rasterizer and the geometry stage's busy cycles.
     pub fn batch(&mut self, batch: &GeometryBatch, host: &mut Host) -> (u64, u64) {

@@ -73,6 +73,12 @@ impl Host {
         self.now
     }
 
+    /// Take up at `now` (a machine started mid-stream takes its host's clock from the
+    /// analytic level's; the counters stay the machine's own).
+    pub fn resume_at(&mut self, now: u64) {
+        self.now = now;
+    }
+
     /// Spend `cycles` busy.
     pub fn spend(&mut self, cycles: u64) {
         note(

@@ -137,6 +137,11 @@ impl PredictedLoop {
         (self.last_release - self.window_start()).max(0.0)
     }
 
+    /// The host and geometry stage, as at the cycle level.
+    pub(crate) fn front(&self) -> &ClosedLoop {
+        &self.front
+    }
+
     /// `e` of the last window closed.
     pub(crate) fn pipe_end(&self) -> f64 {
         self.pipe_end

@@ -46,8 +46,8 @@
 //!   so the query's latency is final only then. The InfiniteReality-like machine's latency
 //!   is final at the query's end: no cool-down.
 //! - Warm-up: the cycle model also runs the fragments before each
-//!   sampled window and the events among them ([`warm_up_fragments`]: 4,096 on the O2,
-//!   12,288 on the InfiniteReality-like machine), over as many windows as that takes (from
+//!   sampled window and the events among them ([`warm_up_fragments`]: 4,096 on either
+//!   machine), over as many windows as that takes (from
 //!   a clear fewer than that many fragments before them when there is one: a clear's port
 //!   time outlasts any such count, `SampledModel::starts_at_clear`). The windows' sizes
 //!   come up to K windows ahead from the trace's window table
@@ -59,7 +59,12 @@
 //!   buffer, or, read from the window index, depths made consistent with the trace's
 //!   depth-test results ([`crate::levels::consistent_depths`]): either way its depth tests,
 //!   writes, hits and counts are right, but with empty FIFOs, an idle port and a cold
-//!   prefetch. Started inside an open query, it is told the query begins, and that query's
+//!   prefetch. Its host and geometry stage take up where the formulas' timeline has them
+//!   there ([`crate::levels::predicted_loop`], the same blocks), moved onto its clock, and
+//!   its pipe starts where the formulas have the work so far
+//!   ([`MachineModel::resume_front`]): a host at reset, level with the pipe, would issue
+//!   again after the start the draws it had issued while the pipe worked through the ones
+//!   before, and hold the pipe for them. Started inside an open query, it is told the query begins, and that query's
 //!   golden result (of which it saw only the last fragments) is not given it to check. It
 //!   keeps running while the next window is sampled or warm-up too, and is dropped at the
 //!   first window that is neither. For K = 1 one machine runs the whole stream, and for
@@ -220,19 +225,25 @@ impl Window {
 pub const O2_WARM_UP_FRAGMENTS: u64 = 4_096;
 
 /// Fragments before a sampled window that an InfiniteReality-like machine started for it
-/// replays ([`warm_up_fragments`]): I, plausible 8,192..65,536. An Image Engine's queue holds
+/// replays ([`warm_up_fragments`]): I, plausible 4,096..65,536. An Image Engine's queue holds
 /// thousands of cycles of work when its Occlusion Unit binds (hundreds of cycles a fragment
-/// on a lazy-grid walk at one engine), so its machine keeps a longer warm-up than the O2's
-/// (4,096 had given random triangles 17.9% on the small corpus, measured over both machines
-/// before the host's release rule; the O2 alone gives 0.00% with it today). With the
-/// formulas counting bands and tails of 16,384: 8,192 took the full corpus's demo to 2.27%
-/// and its random triangles to 2.62% at sampled:10; 12,288 keeps every IR class of both
-/// corpora within its bounds (`occsim fidelity --corpus --scale full --machines
-/// ir1,ir2,ir4 --no-rtl`: worst cycles error the demo 0.61% -> 0.19%, the random triangles
-/// 0.53% -> 0.59%, the rest within 0.02% of 16,384's; every latency error the same) and
-/// replays the demo at sampled:10 on ir4 in 102 ms against 111 (the lazy walk 112 against
-/// 116, the city's hierarchical walk 54 against 60; one process, best of 12 interleaved).
-pub const IR_WARM_UP_FRAGMENTS: u64 = 12_288;
+/// on a lazy-grid walk at one engine). This was 12,288 while a machine started with its host
+/// at reset: shorter warm-ups left sampled windows after host-bound ones long (8,192 took
+/// the full corpus's demo to 2.27% at sampled:10, 4,096 the full demo on ir4 to 2.6%), the
+/// host issuing again what it had issued before the start. With the host taken up from the
+/// formulas' timeline ([`MachineModel::resume_front`]), 4,096 keeps every IR class of both
+/// corpora within its bounds (`occsim fidelity --corpus --scale full|small --machines
+/// ir1,ir2,ir4 --no-rtl`, worst cycles error against 12,288's with the host at reset: full,
+/// the demo 0.19% -> 0.20%, the 1x1-4x4 retiled demos 0.38% -> 0.42%, the random triangles
+/// 0.59% -> 0.78%, the adaptive walks 0.38% -> 0.33%, the rest within 0.02%; small, the
+/// random triangles 0.58% -> 0.86%, the rest the same; every latency error as it was but
+/// the small random triangles' mean, 0.11% -> 0.27%). The random triangles, which have no closed loop, are what a longer
+/// warm-up still buys (8,192: 0.69% and 0.65%): their windows' costs hang on the Image
+/// Engines' backlogs, which even 12,288 fragments leave a few cycles off. sampled:10 on ir4
+/// then replays the demo in 75 ms against 98, the lazy-grid walk in 86 against 99 and the
+/// city's hierarchical walk in 43 against 47 (one process, best of 5 interleaved; 8,192:
+/// 84, 90 and 44).
+pub const IR_WARM_UP_FRAGMENTS: u64 = 4_096;
 
 /// The fragments before a sampled window that `machine`'s model replays as its warm-up
 /// ([`O2_WARM_UP_FRAGMENTS`], [`IR_WARM_UP_FRAGMENTS`]).
@@ -587,6 +598,8 @@ struct Run {
     /// The machine started inside the open query, so it saw only its last fragments: its
     /// golden result is not the machine's to check.
     partial_query: bool,
+    /// The cycle its pipe started at (its first window's cost counts from there).
+    start: u64,
 }
 
 pub struct SampledModel {
@@ -1085,7 +1098,14 @@ impl SampledModel {
         if let Some(spec) = open {
             machine.event(&Event::QueryBegin(spec.clone()))?;
         }
+        // Its host and geometry stage where the predicted timeline has them, its pipe
+        // starting where the formulas have the window's work so far (after the begin
+        // above, whose host work was done long before).
+        let work = self.formulas.finish().map_or(0.0, |end| end.cycles);
+        let origin = self.predicted.end_if_closed(work).round() as u64;
+        let start = machine.resume_front(self.predicted.front(), origin)?;
         self.run = Some(Run {
+            start,
             machine,
             windows: Vec::new(),
             cooldown: None,
@@ -1394,7 +1414,7 @@ impl SampledModel {
             *end += frame.cycles;
             Some(*end)
         });
-        let mut previous_end: Option<u64> = None;
+        let mut previous_end = run.start;
         for window in run.windows {
             let query = window.query.and_then(|_| queries.next());
             let frame_end = window.frame_ended.then(|| frame_ends.next()).flatten();
@@ -1407,7 +1427,7 @@ impl SampledModel {
                     (Some(q), _) if !window.last => q.end_cycle,
                     _ => report.summary.cycles,
                 };
-                let cost = end.saturating_sub(previous_end.unwrap_or(0));
+                let cost = end.saturating_sub(previous_end);
                 self.sampled_cycles += cost;
                 self.sampled_costs.push((window.frame, cost));
                 if let (Some(q), Some((index, _))) = (query, window.query) {
@@ -1448,7 +1468,7 @@ impl SampledModel {
             previous_end = mark
                 .or(frame_end)
                 .or(query.map(|q| q.end_cycle))
-                .or(previous_end);
+                .unwrap_or(previous_end);
         }
         Ok(())
     }

@@ -289,6 +289,20 @@ impl MachineModel {
         }
     }
 
+    /// A machine started mid-stream: its host and geometry stage take up where `front`
+    /// (the analytic level's closed loop at the same point of the stream) is, with this
+    /// machine's pipe starting at `origin` on `front`'s timeline
+    /// ([`ClosedLoop::resume_from`]). Its clock counts from the earlier of `origin` and
+    /// the host's clock there (a host ahead of the pipe keeps its lead), and nothing enters
+    /// its pipe before `origin` does: the cycle returned, in its own clock.
+    pub fn resume_front(&mut self, front: &ClosedLoop, origin: u64) -> Result<u64, SimError> {
+        let base = origin.min(front.host_now());
+        self.front.resume_from(front, base);
+        let start = origin - base;
+        self.pipe.release(start)?;
+        Ok(start)
+    }
+
     /// Fragments fast-forwarded so far ([`crate::effects`]).
     pub fn fast_forwarded_fragments(&self) -> u64 {
         match &self.pipe {
