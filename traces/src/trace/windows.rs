@@ -35,7 +35,9 @@ pub struct WindowSize {
     /// Its fragments.
     pub fragments: u64,
     /// Its fragments before its last record of the closed loop's host or geometry stage
-    /// (0 when it has none): from there on the host has nothing to do but wait.
+    /// (0 when it has none): from there on the host has nothing to do but wait. (The
+    /// sampled level cut a window only where this came before the warm-up, until its
+    /// machines took their host up from the formulas' timeline; the table keeps it.)
     pub host_until: u64,
 }
 
