@@ -142,6 +142,11 @@ impl PredictedLoop {
         &self.front
     }
 
+    /// Each query's predicted answer so far, by id: available cycle and record words.
+    pub(crate) fn answers(&self) -> &HashMap<u32, (u64, u64)> {
+        &self.answers
+    }
+
     /// `e` of the last window closed.
     pub(crate) fn pipe_end(&self) -> f64 {
         self.pipe_end

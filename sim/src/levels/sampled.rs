@@ -60,8 +60,9 @@
 //!   depth-test results ([`crate::levels::consistent_depths`]): either way its depth tests,
 //!   writes, hits and counts are right, but with empty FIFOs, an idle port and a cold
 //!   prefetch. Its host and geometry stage take up where the formulas' timeline has them
-//!   there ([`crate::levels::predicted_loop`], the same blocks), moved onto its clock, and
-//!   its pipe starts where the formulas have the work so far
+//!   there ([`crate::levels::predicted_loop`], the same blocks), moved onto its clock, its
+//!   host waiting for the queries that ended before the start until that timeline has
+//!   them answered, and its pipe starts where the formulas have the work so far
 //!   ([`MachineModel::resume_front`]): a host at reset, level with the pipe, would issue
 //!   again after the start the draws it had issued while the pipe worked through the ones
 //!   before, and hold the pipe for them. Started inside an open query, it is told the query begins, and that query's
@@ -1100,12 +1101,14 @@ impl SampledModel {
         if let Some(spec) = open {
             machine.event(&Event::QueryBegin(spec.clone()))?;
         }
-        // Its host and geometry stage where the predicted timeline has them, its pipe
-        // starting where the formulas have the window's work so far (after the begin
-        // above, whose host work was done long before).
+        // Its host and geometry stage where the predicted timeline has them, and the
+        // answers its host may still wait for, its pipe starting where the formulas have
+        // the window's work so far (after the begin above, whose host work was done long
+        // before).
         let work = self.formulas.finish().map_or(0.0, |end| end.cycles);
         let origin = self.predicted.end_if_closed(work).round() as u64;
-        let start = machine.resume_front(self.predicted.front(), origin)?;
+        let (front, answers) = (self.predicted.front(), self.predicted.answers());
+        let start = machine.resume_front(front, answers, origin)?;
         self.run = Some(Run {
             start,
             machine,

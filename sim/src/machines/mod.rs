@@ -19,6 +19,7 @@ use crate::report::Report;
 use occsim_traces::golden::DepthBuffer;
 use occsim_traces::state::RenderState;
 use occsim_traces::{Event, Span};
+use std::collections::HashMap;
 
 /// A machine being replayed: its pixel pipeline and the closed loop that feeds it.
 pub struct MachineModel {
@@ -26,9 +27,11 @@ pub struct MachineModel {
     front: ClosedLoop,
     /// Events fed so far (the index of the next, for errors).
     events: u64,
-    /// Started mid-stream (the sampled level's windows): a query that ended before the
-    /// start is taken as answered at the start.
-    resumed: bool,
+    /// Started mid-stream (the sampled level's windows): the answers (available cycle and
+    /// record words) of queries that ended before the start, as the timeline its host was
+    /// taken up from has them ([`Self::resume_front`]); another such query is taken as
+    /// answered at the start.
+    resumed: Option<HashMap<u32, (u64, u64)>>,
 }
 
 /// The pixel pipeline of either kind.
@@ -177,7 +180,7 @@ impl<'a> MachineBuilder<'a> {
             Machine::Ir => Pipe::Ir(IrMachine::assemble(self, width, height, copy, Some(state))?),
         };
         let mut machine = MachineModel::of(pipe, front);
-        machine.resumed = true;
+        machine.resumed = Some(HashMap::new());
         Ok(machine)
     }
 
@@ -208,7 +211,7 @@ impl MachineModel {
             pipe,
             front,
             events: 0,
-            resumed: false,
+            resumed: None,
         }
     }
 
@@ -292,12 +295,25 @@ impl MachineModel {
     /// A machine started mid-stream: its host and geometry stage take up where `front`
     /// (the analytic level's closed loop at the same point of the stream) is, with this
     /// machine's pipe starting at `origin` on `front`'s timeline
-    /// ([`ClosedLoop::resume_from`]). Its clock counts from the earlier of `origin` and
-    /// the host's clock there (a host ahead of the pipe keeps its lead), and nothing enters
-    /// its pipe before `origin` does: the cycle returned, in its own clock.
-    pub fn resume_front(&mut self, front: &ClosedLoop, origin: u64) -> Result<u64, SimError> {
+    /// ([`ClosedLoop::resume_from`]), and its host waits for the queries that ended before
+    /// the start until `answers` (that timeline's, by query id: available cycle and record
+    /// words) has them available. Its clock counts from the earlier of `origin` and the
+    /// host's clock there (a host ahead of the pipe keeps its lead), and nothing enters its
+    /// pipe before `origin` does: the cycle returned, in its own clock.
+    pub fn resume_front(
+        &mut self,
+        front: &ClosedLoop,
+        answers: &HashMap<u32, (u64, u64)>,
+        origin: u64,
+    ) -> Result<u64, SimError> {
         let base = origin.min(front.host_now());
         self.front.resume_from(front, base);
+        // Only an answer still ahead of the start can hold the host.
+        let ahead = answers
+            .iter()
+            .filter(|(_, &(available, _))| available > base)
+            .map(|(&id, &(available, words))| (id, (available - base, words)));
+        self.resumed = Some(ahead.collect());
         let start = origin - base;
         self.pipe.release(start)?;
         Ok(start)
@@ -314,8 +330,10 @@ impl MachineModel {
     fn awaited(&mut self, id: u32, event: u64) -> Result<(u64, u64), SimError> {
         match self.pipe.result_available(id)? {
             Some(answer) => Ok(answer),
-            None if self.resumed => Ok((0, 0)),
-            None => Err(SimError::NoResultToWaitFor { event, id }),
+            None => match &self.resumed {
+                Some(answers) => Ok(answers.get(&id).copied().unwrap_or((0, 0))),
+                None => Err(SimError::NoResultToWaitFor { event, id }),
+            },
         }
     }
 
@@ -335,4 +353,49 @@ fn close_loop(front: ClosedLoop, state: PipeState, report: &mut Report) {
     let clock_mhz = front.clock_mhz();
     let (frames, end) = front.finish(state);
     report.close_loop(frames, end, clock_mhz);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use occsim_traces::HostWork;
+
+    /// A machine started mid-stream waits for a query that ended before its start until the
+    /// timeline it took its host up from has the answer available, on its own clock; a query
+    /// whose answer came before the start holds it no longer.
+    #[test]
+    fn a_resumed_machine_waits_for_the_answers_still_ahead_of_its_start() {
+        let arch = Arch::builtin("ir4").unwrap();
+        let ir = arch.ir().unwrap();
+        let (notify, per_word) = (
+            ir.result_notify_latency_cycles,
+            ir.result_read_cycles_per_word,
+        );
+        let mut front = closed_loop_of(&arch).unwrap();
+        front.host_work(&HostWork {
+            nodes: 10,
+            ..HostWork::default()
+        });
+        let base = front.host_now();
+        assert!(base > 0);
+        let state = RenderState::new(8, 8);
+        let mut machine = MachineBuilder::new(&arch)
+            .resume_with_depths(&state, DepthBuffer::unset(8, 8))
+            .unwrap();
+        // Query 7's answer 1,000 cycles past the host's clock, query 8's before it.
+        let answers = HashMap::from([(7, (base + 1_000, 2)), (8, (base - 1, 1))]);
+        // The pipe starts 400 cycles after the host's clock: the clock counts from the host's.
+        assert_eq!(
+            machine.resume_front(&front, &answers, base + 400).unwrap(),
+            400
+        );
+        assert_eq!(machine.front.host_now(), 0);
+        machine.event(&Event::Wait(7)).unwrap();
+        let after = 1_000 + notify + 2 * per_word;
+        assert_eq!(machine.front.host_now(), after);
+        // Answered before the start (and query 9 unknown): no wait.
+        machine.event(&Event::Wait(8)).unwrap();
+        machine.event(&Event::Wait(9)).unwrap();
+        assert_eq!(machine.front.host_now(), after);
+    }
 }
