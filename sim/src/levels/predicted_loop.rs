@@ -142,9 +142,9 @@ impl PredictedLoop {
         &self.front
     }
 
-    /// Each query's predicted answer so far, by id: available cycle and record words.
-    pub(crate) fn answers(&self) -> &HashMap<u32, (u64, u64)> {
-        &self.answers
+    /// Query `id`'s predicted answer, if it ended: available cycle and record words.
+    pub(crate) fn answer(&self, id: u32) -> Option<(u64, u64)> {
+        self.answers.get(&id).copied()
     }
 
     /// `e` of the last window closed.

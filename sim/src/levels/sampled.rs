@@ -1101,14 +1101,12 @@ impl SampledModel {
         if let Some(spec) = open {
             machine.event(&Event::QueryBegin(spec.clone()))?;
         }
-        // Its host and geometry stage where the predicted timeline has them, and the
-        // answers its host may still wait for, its pipe starting where the formulas have
-        // the window's work so far (after the begin above, whose host work was done long
-        // before).
+        // Its host and geometry stage where the predicted timeline has them, its pipe
+        // starting where the formulas have the window's work so far (after the begin
+        // above, whose host work was done long before).
         let work = self.formulas.finish().map_or(0.0, |end| end.cycles);
         let origin = self.predicted.end_if_closed(work).round() as u64;
-        let (front, answers) = (self.predicted.front(), self.predicted.answers());
-        let start = machine.resume_front(front, answers, origin)?;
+        let start = machine.resume_front(self.predicted.front(), origin)?;
         self.run = Some(Run {
             start,
             machine,
@@ -1179,6 +1177,13 @@ impl SampledModel {
         self.closed_loop |= event.is_closed_loop_record();
         self.formulas.event(event, &self.predicted);
         if let Some(run) = &mut self.run {
+            // A wait or conditional on a query that ended before the machine started is
+            // answered where the predicted timeline answers it.
+            if let Event::Wait(id) | Event::ConditionalBegin(id) = event {
+                if let Some(answer) = self.predicted.answer(*id) {
+                    run.machine.take_answer(*id, answer);
+                }
+            }
             match event {
                 Event::QueryResult(_) if run.partial_query => run.partial_query = false,
                 _ => run.machine.event(event)?,

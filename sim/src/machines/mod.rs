@@ -27,11 +27,20 @@ pub struct MachineModel {
     front: ClosedLoop,
     /// Events fed so far (the index of the next, for errors).
     events: u64,
-    /// Started mid-stream (the sampled level's windows): the answers (available cycle and
-    /// record words) of queries that ended before the start, as the timeline its host was
-    /// taken up from has them ([`Self::resume_front`]); another such query is taken as
+    /// Started mid-stream (the sampled level's windows).
+    resumed: Option<Resumed>,
+}
+
+/// What a machine started mid-stream knows of the stream before it.
+#[derive(Default)]
+struct Resumed {
+    /// The cycle of the timeline its host was taken up from where its clock starts
+    /// ([`MachineModel::resume_front`]).
+    base: u64,
+    /// Answers (available cycle, on its clock, and record words) of queries that ended
+    /// before its start ([`MachineModel::take_answer`]); any other such query is taken as
     /// answered at the start.
-    resumed: Option<HashMap<u32, (u64, u64)>>,
+    answers: HashMap<u32, (u64, u64)>,
 }
 
 /// The pixel pipeline of either kind.
@@ -180,7 +189,7 @@ impl<'a> MachineBuilder<'a> {
             Machine::Ir => Pipe::Ir(IrMachine::assemble(self, width, height, copy, Some(state))?),
         };
         let mut machine = MachineModel::of(pipe, front);
-        machine.resumed = Some(HashMap::new());
+        machine.resumed = Some(Resumed::default());
         Ok(machine)
     }
 
@@ -295,28 +304,28 @@ impl MachineModel {
     /// A machine started mid-stream: its host and geometry stage take up where `front`
     /// (the analytic level's closed loop at the same point of the stream) is, with this
     /// machine's pipe starting at `origin` on `front`'s timeline
-    /// ([`ClosedLoop::resume_from`]), and its host waits for the queries that ended before
-    /// the start until `answers` (that timeline's, by query id: available cycle and record
-    /// words) has them available. Its clock counts from the earlier of `origin` and the
+    /// ([`ClosedLoop::resume_from`]). Its clock counts from the earlier of `origin` and the
     /// host's clock there (a host ahead of the pipe keeps its lead), and nothing enters its
     /// pipe before `origin` does: the cycle returned, in its own clock.
-    pub fn resume_front(
-        &mut self,
-        front: &ClosedLoop,
-        answers: &HashMap<u32, (u64, u64)>,
-        origin: u64,
-    ) -> Result<u64, SimError> {
+    pub fn resume_front(&mut self, front: &ClosedLoop, origin: u64) -> Result<u64, SimError> {
         let base = origin.min(front.host_now());
         self.front.resume_from(front, base);
-        // Only an answer still ahead of the start can hold the host.
-        let ahead = answers
-            .iter()
-            .filter(|(_, &(available, _))| available > base)
-            .map(|(&id, &(available, words))| (id, (available - base, words)));
-        self.resumed = Some(ahead.collect());
+        self.resumed.get_or_insert_with(Resumed::default).base = base;
         let start = origin - base;
         self.pipe.release(start)?;
         Ok(start)
+    }
+
+    /// The answer to query `id` (available cycle and record words) on the timeline this
+    /// machine's host was taken up from ([`Self::resume_front`]), before a `wait` or
+    /// `begin_conditional` on it: a query that ended before the machine started is then
+    /// answered there, moved onto the machine's clock (0 where earlier), not at the start.
+    /// A machine that saw the query end keeps its own answer.
+    pub fn take_answer(&mut self, id: u32, (available, words): (u64, u64)) {
+        if let Some(resumed) = &mut self.resumed {
+            let available = available.saturating_sub(resumed.base);
+            resumed.answers.insert(id, (available, words));
+        }
     }
 
     /// Fragments fast-forwarded so far ([`crate::effects`]).
@@ -331,7 +340,7 @@ impl MachineModel {
         match self.pipe.result_available(id)? {
             Some(answer) => Ok(answer),
             None => match &self.resumed {
-                Some(answers) => Ok(answers.get(&id).copied().unwrap_or((0, 0))),
+                Some(resumed) => Ok(resumed.answers.get(&id).copied().unwrap_or((0, 0))),
                 None => Err(SimError::NoResultToWaitFor { event, id }),
             },
         }
@@ -362,9 +371,10 @@ mod tests {
 
     /// A machine started mid-stream waits for a query that ended before its start until the
     /// timeline it took its host up from has the answer available, on its own clock; a query
-    /// whose answer came before the start holds it no longer.
+    /// answered there before the start holds it no longer, though the host still reads its
+    /// words; one it has no answer for is answered at the start.
     #[test]
-    fn a_resumed_machine_waits_for_the_answers_still_ahead_of_its_start() {
+    fn a_resumed_machine_waits_for_the_answers_of_the_timeline_it_took_up() {
         let arch = Arch::builtin("ir4").unwrap();
         let ir = arch.ir().unwrap();
         let (notify, per_word) = (
@@ -382,20 +392,20 @@ mod tests {
         let mut machine = MachineBuilder::new(&arch)
             .resume_with_depths(&state, DepthBuffer::unset(8, 8))
             .unwrap();
-        // Query 7's answer 1,000 cycles past the host's clock, query 8's before it.
-        let answers = HashMap::from([(7, (base + 1_000, 2)), (8, (base - 1, 1))]);
         // The pipe starts 400 cycles after the host's clock: the clock counts from the host's.
-        assert_eq!(
-            machine.resume_front(&front, &answers, base + 400).unwrap(),
-            400
-        );
+        assert_eq!(machine.resume_front(&front, base + 400).unwrap(), 400);
         assert_eq!(machine.front.host_now(), 0);
+        // Query 7 answered 1,000 cycles past the host's clock, 2 words.
+        machine.take_answer(7, (base + 1_000, 2));
         machine.event(&Event::Wait(7)).unwrap();
         let after = 1_000 + notify + 2 * per_word;
         assert_eq!(machine.front.host_now(), after);
-        // Answered before the start (and query 9 unknown): no wait.
+        // Query 8 answered before the start: no wait, its 3 words read.
+        machine.take_answer(8, (base - 1, 3));
         machine.event(&Event::Wait(8)).unwrap();
+        assert_eq!(machine.front.host_now(), after + 3 * per_word);
+        // Query 9, no answer given: answered at the start, no words.
         machine.event(&Event::Wait(9)).unwrap();
-        assert_eq!(machine.front.host_now(), after);
+        assert_eq!(machine.front.host_now(), after + 3 * per_word);
     }
 }
