@@ -264,8 +264,8 @@ mod tests {
     }
 
     /// A loop resumed from another on a timeline `base` cycles later releases every later
-    /// command and primitive `base` cycles sooner, as long as nothing it took was earlier
-    /// than `base`; with `base` past its engines' free cycles, those engines are idle.
+    /// command and primitive `base` cycles sooner, as long as the host's clock is not
+    /// earlier than `base`; with `base` past every clock, the loop is at reset.
     #[test]
     fn a_resumed_loop_releases_what_the_loop_it_took_up_releases_base_cycles_sooner() {
         let arch = Arch::builtin("ir4").unwrap();
@@ -279,7 +279,8 @@ mod tests {
         let host = original.host_now();
         let release = original.primitive_release();
         assert!(release > host, "the geometry stage holds the last batch");
-        // Base at the host's clock: every clock the original holds is at or past it.
+        // Base at the host's clock: what the original holds before it (the fourth geometry
+        // engine, idle at 0) the host's clock outweighs in both loops.
         let mut resumed = closed_loop_of(&arch).unwrap();
         resumed.resume_from(&original, host);
         assert_eq!(resumed.host_now(), 0);
