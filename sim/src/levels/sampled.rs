@@ -984,6 +984,13 @@ impl SampledModel {
             .map(|_| head)
     }
 
+    /// The formulas' work in the open window so far (its pipe cycles), and where on the
+    /// predicted timeline the window would end were that all its work.
+    fn work_so_far(&self) -> (f64, f64) {
+        let cycles = self.formulas.finish().map_or(0.0, |end| end.cycles);
+        (cycles, self.predicted.end_if_closed(cycles))
+    }
+
     /// The window's head ends (an event other than a fragment comes after its last
     /// fragment): its work is the formulas' prediction so far, extrapolated as an unsampled
     /// window's; the machine, running since the warm-up, marks where the tail's cost begins.
@@ -991,8 +998,7 @@ impl SampledModel {
         self.window.cut_at = None;
         self.window.head_fragments = self.window.fragments;
         self.tails += 1;
-        let cycles = self.formulas.finish().map_or(0.0, |end| end.cycles);
-        let end = self.predicted.end_if_closed(cycles);
+        let (cycles, end) = self.work_so_far();
         let head = Work::of(end - self.predicted.pipe_end(), cycles);
         self.window.head = Some(head);
         let closed = Closed {
@@ -1105,8 +1111,7 @@ impl SampledModel {
         // Its host and geometry stage where the predicted timeline has them, its pipe
         // starting where the formulas have the window's work so far (after the begin
         // above, whose host work was done long before).
-        let work = self.formulas.finish().map_or(0.0, |end| end.cycles);
-        let origin = self.predicted.end_if_closed(work).round() as u64;
+        let origin = self.work_so_far().1.round() as u64;
         let start = machine.resume_front(self.predicted.front(), origin)?;
         self.run = Some(Run {
             start,
