@@ -160,7 +160,12 @@ impl FunctionalCore {
                 self.apply_fragment(*fragment);
                 return Ok(None);
             }
-            Event::Primitive => self.primitives += 1,
+            Event::Primitive => {
+                // Nothing the functional model keeps changes: counted, and done.
+                self.primitives += 1;
+                self.events += 1;
+                return Ok(None);
+            }
             Event::QueryBegin(spec) => {
                 check_spec(spec, index, self.open)?;
                 self.open = Some(spec.id);

@@ -738,6 +738,11 @@ fn hit_list(c: &mut Cursor) -> Result<HitList, PayloadError> {
     let start = c.pos;
     let len = c.uv_max(MAX_BUFFER_ENTRIES as u64, "hit count")?;
     let listed_count = c.uv_max(len.min(LISTED_HITS_PER_QUERY as u64), "listed hits")?;
+    if len == 0 {
+        // A brief tile's list, nearly every list a trace holds: nothing else follows, and
+        // nothing is left to check against the count.
+        return Ok(HitList::default());
+    }
     let listed: Vec<Hit> = hits(c, listed_count as usize)?.collect();
     let (mut digests, mut bounds, mut last) = (None, None, None);
     if len > 0 {
@@ -990,6 +995,19 @@ impl BlockDecoder {
                 (tag::BAND | tag::BAND_PASSING, IndexItem::Band(band)) => {
                     self.band_record(payload, (ctx.width, ctx.height), band)?;
                     visit(&item).map_err(DrainError::Sink)?;
+                    continue;
+                }
+                // Primitives, the next most, skip the general dispatch (a tag alone).
+                (tag::PRIMITIVE, _) if ctx.assembly.is_empty() => {
+                    const PRIMITIVE: IndexItem = IndexItem::Event(Event::Primitive);
+                    if !ctx.unchecked_events {
+                        ctx.tally
+                            .event(&Event::Primitive)
+                            .map_err(|reason| bad(self.pos, reason))?;
+                    }
+                    self.pos += 1;
+                    self.events += 1;
+                    visit(&PRIMITIVE).map_err(DrainError::Sink)?;
                     continue;
                 }
                 _ => {}

@@ -40,6 +40,45 @@ pub(crate) fn service_cycles(tiles: usize, engines: usize, all_tiles_one_cycle: 
     }
 }
 
+/// Bounds for the formulas' quantities (clocks, cycle counts, debts), none of which is ever
+/// NaN: a comparison each, one `maxsd`/`minsd` on x86_64, where `f64::max` and `min`, which
+/// must return the other operand of a NaN, take four instructions, and `clamp` checks its
+/// bounds. The O2 formulas run a dependent chain of them per stretch.
+pub(crate) trait NotNan {
+    /// `self`, or `floor` if that is larger (`f64::max` but for a NaN).
+    fn at_least(self, floor: f64) -> f64;
+    /// `self`, or `ceiling` if that is smaller (`f64::min` but for a NaN).
+    fn at_most(self, ceiling: f64) -> f64;
+    /// `self` within `floor..=ceiling` (`floor <= ceiling`).
+    fn within(self, floor: f64, ceiling: f64) -> f64;
+}
+
+impl NotNan for f64 {
+    #[inline(always)]
+    fn at_least(self, floor: f64) -> f64 {
+        if self > floor {
+            self
+        } else {
+            floor
+        }
+    }
+
+    #[inline(always)]
+    fn at_most(self, ceiling: f64) -> f64 {
+        if self < ceiling {
+            self
+        } else {
+            ceiling
+        }
+    }
+
+    #[inline(always)]
+    fn within(self, floor: f64, ceiling: f64) -> f64 {
+        debug_assert!(floor <= ceiling);
+        self.at_least(floor).at_most(ceiling)
+    }
+}
+
 /// The formulas of the machine being modelled: they count each window's work as events
 /// arrive and predict at its end (shared with the sampled level's extrapolation).
 pub(crate) enum Formulas {

@@ -234,7 +234,7 @@
 //! half full at every query's end: on the small corpus (o2 and ir2 at 4 engines) the worst
 //! p95 latency error went from 69% to 20%.
 
-use super::{service_cycles, WindowEnd};
+use super::{service_cycles, NotNan, WindowEnd};
 use crate::arch::O2Arch;
 use occsim_traces::depth_layout::{DepthAddress, DepthRead, LastRead};
 use occsim_traces::golden::FunctionalModel;
@@ -468,7 +468,7 @@ impl O2Formulas {
         if self.reserved_share == 0.0 {
             return work;
         }
-        work.max((work + debt - self.slack) / self.free_share())
+        work.at_least((work + debt - self.slack) / self.free_share())
     }
 
     /// The other clients' debt after the port did `work` cycles of the pipeline's over
@@ -478,12 +478,12 @@ impl O2Formulas {
         if self.reserved_share == 0.0 {
             return 0.0;
         }
-        (debt + work - self.free_share() * span).clamp(0.0, self.slack)
+        (debt + work - self.free_share() * span).within(0.0, self.slack)
     }
 
     /// The other clients' debt after `cycles` idle port cycles from `debt`.
     pub fn debt_after_idle(&self, debt: f64, cycles: f64) -> f64 {
-        self.debt_after(debt, 0.0, cycles.max(0.0))
+        self.debt_after(debt, 0.0, cycles.at_least(0.0))
     }
 
     /// The blocks behind the rasterizer on a stretch (see the module docs), the port's
@@ -496,7 +496,7 @@ impl O2Formulas {
         let port = self.port_time(work, debt);
         // Spread over the cycles they are asked in, the transfers leave idle cycles that
         // serve the debt: cycles are forced only where the port is through them later.
-        let forced = port > work.max(asked);
+        let forced = port > work.at_least(asked);
         let depth = w.fragments as f64 + self.read_stall_cycles(w, forced) * w.depth_reads as f64;
         let occu = w.occu_cycles as f64;
         // `R (λ̄ + 1) / L`, with `R λ̄` the reads' latencies summed: whole cycles, so one
@@ -504,8 +504,8 @@ impl O2Formulas {
         let latencies = w.page_misses * a.page_miss_latency_cycles
             + (w.depth_reads - w.page_misses) * a.page_hit_latency_cycles;
         let prefetch = (latencies + w.depth_reads) as f64 / self.lookahead();
-        let off_port = depth.max(occu).max(prefetch);
-        let behind_depth = occu > depth.max(port).max(prefetch);
+        let off_port = depth.at_least(occu).at_least(prefetch);
+        let behind_depth = occu > depth.at_least(port).at_least(prefetch);
         let queued = a.fifo_raster_to_depth_entries
             + if behind_depth {
                 a.fifo_depth_to_occu_entries
@@ -647,13 +647,13 @@ impl Pipe {
     /// The rasterizer emits the end token: the window's cycles `T_w` and the backlog ahead
     /// of the token.
     fn window_end(&self) -> (f64, f64) {
-        (self.raster, (self.downstream - self.raster).max(0.0))
+        (self.raster, (self.downstream - self.raster).at_least(0.0))
     }
 
     /// Cycles the last fragment's read is still ready after the rasterizer's clock: the
     /// rasterizer's later work (empty primitives' setup) hides that much of its latency.
     fn last_read_wait(&self) -> f64 {
-        (self.last_read_ready - self.raster).max(0.0)
+        (self.last_read_ready - self.raster).at_least(0.0)
     }
 
     /// The cycle the blocks behind the rasterizer start fragment `k`, if a recent stretch
@@ -966,7 +966,7 @@ impl O2Bottleneck {
         if release > self.pipe.raster {
             self.close_head();
         }
-        self.pipe.raster = self.pipe.raster.max(release);
+        self.pipe.raster = self.pipe.raster.at_least(release);
         self.stretch.primitives = 1;
         if let Some(head) = &mut self.head {
             head.offset += self.formulas.arch.primitive_setup_cycles as f64;
@@ -1200,26 +1200,26 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
     }
     // The port takes the stretch's reads as the rasterizer emits them, while the depth test
     // still works through the backlog: a lag already built is slack for them.
-    let port_from = pipe.port_done.max(start);
+    let port_from = pipe.port_done.at_least(start);
     let debt = formulas.debt_after_idle(pipe.debt, port_from - pipe.debt_at);
     let down = formulas.downstream(stretch, debt, emitted - port_from);
-    let begin = pipe.downstream.max(start);
+    let begin = pipe.downstream.at_least(start);
     pipe.port_done = port_from + down.port;
     // Its transfers spread over the fragments' emission, the idle cycles among them
     // serving the other clients.
-    let span = down.port.max(emitted - port_from);
+    let span = down.port.at_least(emitted - port_from);
     // The port's busy cycles, for the debt: writes that come a cycle apart each take a
     // cycle of their own while the port has room (they pack only once queued).
     let entries = stretch.write_entries() + stretch.colour_reads;
     let busy = down
         .work
-        .max(((stretch.depth_reads + entries) as f64).min(span));
+        .at_least(((stretch.depth_reads + entries) as f64).at_most(span));
     pipe.debt = formulas.debt_after(debt, busy, span);
     // The runs of reads ending it leave the clients owed and the port behind as it ends.
     let ending = formulas.ending_runs(stretch, debt, entries);
-    pipe.debt = pipe.debt.max(ending.owed);
+    pipe.debt = pipe.debt.at_least(ending.owed);
     if ending.port_lag > 0.0 {
-        pipe.port_done = pipe.port_done.max(emitted + ending.port_lag);
+        pipe.port_done = pipe.port_done.at_least(emitted + ending.port_lag);
     }
     pipe.debt_at = port_from + span;
     // Its last read's data comes a page hit's latency after the port is through.
@@ -1231,13 +1231,13 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
         true => emitted + dense_read_lag + formulas.arch.page_hit_latency_cycles as f64,
         false => 0.0,
     };
-    let cycles = (begin + down.off_port).max(read_in).max(dense_in) - begin;
+    let cycles = (begin + down.off_port).at_least(read_in).at_least(dense_in) - begin;
     let pace = cycles / n as f64;
-    pipe.downstream = (begin + cycles).max(emitted);
+    pipe.downstream = (begin + cycles).at_least(emitted);
     // The depth test trails the rasterizer by at least its slowest read's latency + 1.
     pipe.downstream = pipe
         .downstream
-        .max(emitted + formulas.slowest_read_lag(stretch, down.forced));
+        .at_least(emitted + formulas.slowest_read_lag(stretch, down.forced));
     pipe.port += down.port;
     pipe.occu_bound = down.occu_bound;
     pipe.last_writes = StretchWrites {
@@ -1259,7 +1259,7 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
     let queued = down.queued as u64 - (!down.occu_bound) as u64;
     if let Some(blocking) = (pipe.emitted - 1).checked_sub(queued) {
         if let Some(started) = pipe.started(blocking) {
-            pipe.raster = pipe.raster.max(started);
+            pipe.raster = pipe.raster.at_least(started);
         }
         // Older stretches hold no fragment the next may wait for.
         while pipe
