@@ -331,6 +331,9 @@ pub struct O2Formulas {
     /// division of the display's bit rate).
     reserved_share: f64,
     longest_reserved_run: f64,
+    /// `c = 1 / (1 - f)`: port cycles a read takes where the other clients take their
+    /// share (worked out once: each stretch had taken two or three divisions for it).
+    cycles_per_read: f64,
     /// How far behind their share the other clients may fall (`σ`, port cycles).
     slack: f64,
 }
@@ -352,6 +355,7 @@ impl O2Formulas {
             clear_words,
             reserved_share,
             longest_reserved_run: (reserved_share / (1.0 - reserved_share)).ceil(),
+            cycles_per_read: 1.0 / (1.0 - reserved_share),
             slack: arch.other_clients_slack_cycles.max(1) as f64,
         }
     }
@@ -382,7 +386,7 @@ impl O2Formulas {
     #[inline]
     fn add_dense_runs(&self, w: &mut StretchCounts, runs: &DenseRuns) {
         if !runs.runs().is_empty() {
-            let lag = runs.lag(1.0 / self.free_share());
+            let lag = runs.lag(self.cycles_per_read);
             w.dense_read_lag = w.dense_read_lag.max(lag);
         }
     }
@@ -408,7 +412,7 @@ impl O2Formulas {
             };
         }
         let f = 1.0 - self.free_share();
-        let c = 1.0 / self.free_share();
+        let c = self.cycles_per_read;
         let a = 1.0 + (writes as f64 / w.depth_reads.max(1) as f64).min(1.0);
         let (mut owed, mut lag) = (0.0f64, 0.0f64);
         for run in w.ending.runs() {
@@ -428,7 +432,7 @@ impl O2Formulas {
     /// the other clients still allow (`σ - debt` of their cycles) is taken off, at most
     /// what the FIFO before the depth test holds ([`Self::dense_read_lag`]).
     fn lag_past_slack(&self, lag: f64, debt: f64) -> f64 {
-        let c = 1.0 / self.free_share();
+        let c = self.cycles_per_read;
         self.queued_lag(lag - c * (self.slack - debt))
     }
 
