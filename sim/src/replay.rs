@@ -188,7 +188,7 @@ pub fn replay<R: Read>(
             .unwrap_or_else(|| tail_fragments(arch.machine()));
         let warm_up = options
             .warm_up_fragments
-            .unwrap_or_else(|| warm_up_fragments(arch.machine()));
+            .unwrap_or_else(|| warm_up_fragments(arch.machine(), every));
         let model = run_sampled(
             reader,
             &mut open,

@@ -206,7 +206,7 @@ fn sampled(trace: &[u8], arch: &Arch, every: u32, window_index: bool) -> LevelRe
         arch,
         every,
         window_index,
-        warm_up_fragments(arch.machine()),
+        warm_up_fragments(arch.machine(), every),
     )
 }
 
@@ -387,7 +387,7 @@ fn windows_simulated_over_their_tails_keep_the_sampled_level_within_its_bounds()
                 &arch,
                 every,
                 true,
-                (warm_up_fragments(arch.machine()), 2048),
+                (warm_up_fragments(arch.machine(), every), 2048),
             )
         };
         let cycle = tailed(1).total_cycles.unwrap() as f64;

@@ -240,7 +240,7 @@ pub fn run_level(
         let mut model = SampledModel::new(arch, width, height, effects, every)?
             .with_slowest(slowest)
             .with_window_sizes(
-                sampled::warm_up_fragments(arch.machine()),
+                sampled::warm_up_fragments(arch.machine(), every),
                 sampled::tail_fragments(arch.machine()),
             );
         let mut sizes = SliceSizes {
