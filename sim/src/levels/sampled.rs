@@ -252,8 +252,9 @@ pub const IR_WARM_UP_FRAGMENTS: u64 = 4_096;
 /// sampled:`every` ([`O2_WARM_UP_FRAGMENTS`], [`IR_WARM_UP_FRAGMENTS`]). On the
 /// InfiniteReality-like machine it grows with K, one [`IR_WARM_UP_FRAGMENTS`] every 10 up
 /// to three (12,288 from K = 21 on): the fewer windows a run samples, the less a longer
-/// warm-up costs it (the formulas' pass is most of a sampled:100 run there), and the more
-/// each sampled window's bias from the Image Engines' backlogs it leaves weighs. On the
+/// warm-up costs it (the formulas' pass is most of a sampled:100 run there), and the less
+/// room their sampling noise leaves for the bias a short warm-up gives each window (the
+/// Image Engines' backlogs a few cycles off). On the
 /// small random triangles on ir4 at 4 engines, sampled:100's cycles error went from 1.18%
 /// to 0.75% (over the 1% bound before) for 10% more time; at K = 10 the same warm-up would
 /// take 0.87% to 0.59% for 18% more, which sampled:10's speed target does not leave.

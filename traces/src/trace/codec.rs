@@ -744,33 +744,34 @@ fn hit_list(c: &mut Cursor) -> Result<HitList, PayloadError> {
         return Ok(HitList::default());
     }
     let listed: Vec<Hit> = hits(c, listed_count as usize)?.collect();
-    let (mut digests, mut bounds, mut last) = (None, None, None);
-    if len > 0 {
-        let pos = c.pos;
-        let flags = c.byte()?;
-        if flags > 0b11 {
-            return Err(bad(
-                pos,
-                format!("hit list flags {flags:#04x} have unknown bits"),
-            ));
-        }
-        if flags & 1 == 1 {
-            digests = Some(HitDigests {
-                in_order: c.u64_le("in-order hit digest")?,
-                as_set: c.u64_le("hit set digest")?,
-            });
-        }
-        let mut coordinate = || c.uv_max(u16::MAX as u64, "hit bound").map(|v| v as u16);
-        bounds = Some(HitBounds {
-            xmin: coordinate()?,
-            xmax: coordinate()?,
-            ymin: coordinate()?,
-            ymax: coordinate()?,
-        });
-        if flags & 2 == 2 {
-            last = Some((coordinate()?, coordinate()?));
-        }
+    let pos = c.pos;
+    let flags = c.byte()?;
+    if flags > 0b11 {
+        return Err(bad(
+            pos,
+            format!("hit list flags {flags:#04x} have unknown bits"),
+        ));
     }
+    let digests = if flags & 1 == 1 {
+        Some(HitDigests {
+            in_order: c.u64_le("in-order hit digest")?,
+            as_set: c.u64_le("hit set digest")?,
+        })
+    } else {
+        None
+    };
+    let mut coordinate = || c.uv_max(u16::MAX as u64, "hit bound").map(|v| v as u16);
+    let bounds = Some(HitBounds {
+        xmin: coordinate()?,
+        xmax: coordinate()?,
+        ymin: coordinate()?,
+        ymax: coordinate()?,
+    });
+    let last = if flags & 2 == 2 {
+        Some((coordinate()?, coordinate()?))
+    } else {
+        None
+    };
     HitList::from_parts(len, listed, digests, bounds, last).map_err(|why| bad(start, why))
 }
 
