@@ -299,6 +299,19 @@ impl<'a> Cursor<'a> {
         }
     }
 
+    /// A flags byte of which only the bits of `known` may be set.
+    fn flags(&mut self, known: u8, what: &str) -> Result<u8, PayloadError> {
+        let pos = self.pos;
+        let flags = self.byte()?;
+        if flags & !known != 0 {
+            return Err(bad(
+                pos,
+                format!("{what} flags {flags:#04x} have unknown bits"),
+            ));
+        }
+        Ok(flags)
+    }
+
     fn mode(&mut self) -> Result<QueryMode, PayloadError> {
         let pos = self.pos;
         let code = self.byte()?;
@@ -510,14 +523,7 @@ fn put_hits(out: &mut Vec<u8>, hits: &[Hit]) {
 fn geometry_batch(c: &mut Cursor) -> Result<GeometryBatch, PayloadError> {
     let vertices = c.u32("batch vertices")?;
     let triangles = c.u32("batch triangles")?;
-    let pos = c.pos;
-    let flags = c.byte()?;
-    if flags > 0b11 {
-        return Err(bad(
-            pos,
-            format!("geometry flags {flags:#04x} have unknown bits"),
-        ));
-    }
+    let flags = c.flags(0b11, "geometry")?;
     Ok(GeometryBatch {
         vertices,
         triangles,
@@ -744,14 +750,7 @@ fn hit_list(c: &mut Cursor) -> Result<HitList, PayloadError> {
         return Ok(HitList::default());
     }
     let listed: Vec<Hit> = hits(c, listed_count as usize)?.collect();
-    let pos = c.pos;
-    let flags = c.byte()?;
-    if flags > 0b11 {
-        return Err(bad(
-            pos,
-            format!("hit list flags {flags:#04x} have unknown bits"),
-        ));
-    }
+    let flags = c.flags(0b11, "hit list")?;
     let digests = if flags & 1 == 1 {
         Some(HitDigests {
             in_order: c.u64_le("in-order hit digest")?,
