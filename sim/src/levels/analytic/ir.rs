@@ -27,11 +27,12 @@
 //! and a cycle long: 117 cycles where the machine's FIFO-full engines drain in 105 on the
 //! city's hierarchical walk on ir2, the random triangles' cycles 2.7% short on ir4, now
 //! 0.3% long.) Held back to an engine's last fragment, the generator still emits the `b_i`
-//! fragments of its board that follow that one in the stretch. (Without them, a full-viewport
-//! query of the hard cases on ir2, whose busiest engine owns the first column of every
-//! row, sent its end token 14 cycles early and drained 12 cycles long: latency 160 against
-//! 148; the grid walks' worst mean latency error went from 3.5% to 0.5%.) An engine still
-//! busy with one stretch's fragments takes the next one's after them. At stretch `p`:
+//! fragments of its board that follow that one in the stretch. (Without them, a
+//! full-viewport query of the hard cases on ir2, whose busiest engine owns the first column
+//! of every row, sent its end token 14 cycles early and drained 12 cycles long: latency 160
+//! against 148; on the small corpus the grid walks' worst mean latency error went from 3.5%
+//! to 0.5%.) An engine still busy with one stretch's fragments takes the next one's after
+//! them. At stretch `p`:
 //!
 //! ```text
 //! start_b = max(g_b, r) + setup                   (at a primitive's first stretch: every board sets up every primitive,
@@ -1164,8 +1165,8 @@ mod tests {
     fn a_generator_held_by_a_backlogged_engine_still_emits_the_fragments_after_its_last() {
         // One board of eight Image Engines (U = 8: column x to engine x), 2 fragments a
         // cycle (a slot is half a cycle), setup 8 slots, C = 22 slots, a FIFO of E = 2:
-        // the generator may run H = (E + 1) · C - 1 cycles = 3 · 22 - 2 = 64 slots ahead of
-        // an engine's work. Rows 0 to 6 hold pixel 0 alone (engine 0), row 7 pixels 0 to 7
+        // the generator may run H = (E + 1) · C - 1 = 3 · 11 - 1 = 32 cycles (64 slots)
+        // ahead of an engine's work. Rows 0 to 6 hold pixel 0 alone (engine 0), row 7 pixels 0 to 7
         // (one fragment an engine): 15 fragments, the primitive's setup from slot 0.
         // Engine 0: eight fragments, through at 8 + 8 · 22 = 184; its last fragment (the
         // last row's first) enters its FIFO no sooner than 184 - 64 = 120, and the 7
