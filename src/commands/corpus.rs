@@ -103,11 +103,31 @@ struct ClassRow {
     latency_error: Option<f64>,
     latency_p95_error: Option<f64>,
     frame_error: Option<f64>,
+    /// The run each of those errors is from.
+    worst_runs: WorstRuns,
     /// Every query of every run, pooled.
     query_latency_error: Option<ErrorDistribution>,
     /// The cycle level's wall time over this level's, summed over the runs.
     speed_vs_cycle: Option<f64>,
     results_exact: bool,
+}
+
+/// The runs a class's worst errors are from, named as the progress bar names them ("demo on
+/// o2, 4 engines"): where to look, when a class's error is large, with `occsim fidelity
+/// TRACE --arch M --engines E`. None where no run has the error, or every run's is 0.
+#[derive(Default, Serialize)]
+struct WorstRuns {
+    cycles_error: Option<String>,
+    latency_error: Option<String>,
+    latency_p95_error: Option<String>,
+    frame_error: Option<String>,
+}
+
+/// One trace on one machine and engine count: its class, its name and every level's row.
+struct Run {
+    class: String,
+    name: String,
+    rows: Vec<LevelRow>,
 }
 
 /// Parse the corpus file (the built-in one without a path), naming the file in errors.
@@ -265,7 +285,7 @@ pub fn run(
             std::process::id()
         ))?),
     };
-    let mut runs: Vec<(String, Vec<LevelRow>)> = Vec::new();
+    let mut runs: Vec<Run> = Vec::new();
     let steps = recipes.len() * machines.len() * engine_counts.len();
     let bar = occsim_sweep::progress::bar(steps as u64, "runs");
     for recipe in recipes {
@@ -282,11 +302,15 @@ pub fn run(
             for &engines in &engine_counts {
                 let arch = machine_with(machine, engines, sets)?;
                 let hidden = occsim_sweep::progress::ProgressBar::hidden();
-                bar.set_message(format!("{} on {machine}, {engines} engines", recipe.name));
+                bar.set_message(run_name(&recipe.name, machine, engines));
                 let (rows, _) = ladder.run(&arch, &trace, &hidden).with_context(|| {
                     format!("{} on {machine} with {engines} engines", recipe.name)
                 })?;
-                runs.push((recipe.class.clone(), rows));
+                runs.push(Run {
+                    class: recipe.class.clone(),
+                    name: run_name(&recipe.name, machine, engines),
+                    rows,
+                });
                 bar.inc(1);
             }
         }
@@ -319,51 +343,81 @@ fn machine_with(name: &str, engines: u64, sets: &[String]) -> anyhow::Result<Arc
     Ok(arch)
 }
 
-/// Per class (in first-seen order) and level: the worst run's errors, every query's
-/// latency error pooled, and the speed against cycle over the runs.
-fn by_class(runs: &[(String, Vec<LevelRow>)]) -> Vec<ClassRow> {
+/// A run's name: `trace on machine, E engines`.
+fn run_name(trace: &str, machine: &str, engines: u64) -> String {
+    let unit = if engines == 1 { "engine" } else { "engines" };
+    format!("{trace} on {machine}, {engines} {unit}")
+}
+
+/// Per class (in first-seen order) and level: the worst run's errors and which run each is
+/// from, every query's latency error pooled, and the speed against cycle over the runs.
+fn by_class(runs: &[Run]) -> Vec<ClassRow> {
     let mut classes: Vec<&str> = Vec::new();
-    for (class, _) in runs {
-        if !classes.contains(&class.as_str()) {
-            classes.push(class);
+    for run in runs {
+        if !classes.contains(&run.class.as_str()) {
+            classes.push(&run.class);
         }
     }
     let mut rows = Vec::new();
     for class in classes {
-        let members: Vec<&Vec<LevelRow>> = runs
-            .iter()
-            .filter(|(c, _)| c == class)
-            .map(|(_, rows)| rows)
-            .collect();
+        let members: Vec<&Run> = runs.iter().filter(|run| run.class == class).collect();
         let cycle_seconds: f64 = members
             .iter()
-            .flat_map(|rows| rows.iter().filter(|r| r.level == "cycle"))
+            .flat_map(|run| run.rows.iter().filter(|r| r.level == "cycle"))
             .filter_map(|r| r.wall_seconds)
             .sum();
-        for level in members[0].iter().map(|r| r.level.clone()) {
-            let of_level: Vec<&LevelRow> = members
+        for level in members[0].rows.iter().map(|r| r.level.clone()) {
+            let of_level: Vec<(&str, &LevelRow)> = members
                 .iter()
-                .filter_map(|rows| rows.iter().find(|r| r.level == level))
+                .filter_map(|run| {
+                    let row = run.rows.iter().find(|r| r.level == level)?;
+                    Some((run.name.as_str(), row))
+                })
                 .collect();
+            // The largest error, as `f64::max` finds it, and its run (the first of equal
+            // ones).
             let worst = |f: &dyn Fn(&LevelRow) -> Option<f64>| {
-                of_level.iter().filter_map(|r| f(r)).reduce(f64::max)
+                of_level
+                    .iter()
+                    .filter_map(|(name, r)| Some((f(r)?, *name)))
+                    .fold(None, |worst: Option<(f64, &str)>, (e, name)| match worst {
+                        Some((w, _)) if !w.is_nan() && (e.is_nan() || e <= w) => worst,
+                        _ => Some((e, name)),
+                    })
             };
-            let seconds: f64 = of_level.iter().filter_map(|r| r.wall_seconds).sum();
+            let (cycles, latency, p95, frame) = (
+                worst(&|r| r.cycles_error),
+                worst(&|r| r.latency_error),
+                worst(&|r| r.latency_p95_error),
+                worst(&|r| r.frame_error),
+            );
+            // An error of 0 is no run's in particular.
+            let name = |w: Option<(f64, &str)>| {
+                w.filter(|&(e, _)| e != 0.0)
+                    .map(|(_, name)| name.to_string())
+            };
+            let seconds: f64 = of_level.iter().filter_map(|(_, r)| r.wall_seconds).sum();
             let pooled = of_level
                 .iter()
-                .flat_map(|r| r.query_errors.iter().copied())
+                .flat_map(|(_, r)| r.query_errors.iter().copied())
                 .collect();
             rows.push(ClassRow {
                 class: class.to_string(),
                 level: level.clone(),
                 runs: of_level.len(),
-                cycles_error: worst(&|r| r.cycles_error),
-                latency_error: worst(&|r| r.latency_error),
-                latency_p95_error: worst(&|r| r.latency_p95_error),
-                frame_error: worst(&|r| r.frame_error),
+                cycles_error: cycles.map(|(e, _)| e),
+                latency_error: latency.map(|(e, _)| e),
+                latency_p95_error: p95.map(|(e, _)| e),
+                frame_error: frame.map(|(e, _)| e),
+                worst_runs: WorstRuns {
+                    cycles_error: name(cycles),
+                    latency_error: name(latency),
+                    latency_p95_error: name(p95),
+                    frame_error: name(frame),
+                },
                 query_latency_error: ErrorDistribution::of(pooled),
                 speed_vs_cycle: (seconds > 0.0).then(|| cycle_seconds / seconds),
-                results_exact: of_level.iter().all(|r| r.results_exact == Some(true)),
+                results_exact: of_level.iter().all(|(_, r)| r.results_exact == Some(true)),
             });
         }
     }
