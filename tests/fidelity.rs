@@ -721,16 +721,16 @@ fn class_error(rows: &serde_json::Value, class: &str, level: &str, metric: &str)
 
 /// Sampled:100 on the same corpus (o2, ir2 and ir4, 4 engines), held to the targets issue 15
 /// sets sampled:K, 1% on cycles and 3% on p95 latency, on every class. The hard cases' p95 on
-/// ir2 was 5.91% (203 cycles against 191) while the IR's formulas held a Fragment Generator
-/// back only until a backlogged engine's last fragment could enter its FIFO, not through the
-/// fragments its board emits after that one: their 28 queries give K = 100 one sampled
-/// window, a query of the whole 64x64 viewport whose end token the formulas then sent 14
-/// cycles early (its drain 12 cycles long), and the regression moved every other query by
-/// that one query's error. Now 1.23%. On ir4 the random triangles' cycles were 1.18% off (20
-/// sampled windows of 2,000) until the IR's warm-up grew with K past 10
-/// (`warm_up_fragments`): 0.75% with 12,288 fragments. Measured 2026-12-06 (`occsim
-/// fidelity --corpus --scale small --machines o2,ir2,ir4 --engines 4 --sample-every 100
-/// --no-rtl`).
+/// ir2 was 5.91% off (191 cycles where the machine takes 203) while the IR's formulas held a
+/// Fragment Generator back only until a backlogged engine's last fragment could enter its
+/// FIFO, not through the fragments its board emits after that one: their 28 queries give K =
+/// 100 one sampled window, a query of the whole 64x64 viewport whose end token the formulas
+/// then sent 14 cycles early (its drain 12 cycles long), and the regression moved every
+/// other query by that one query's error. Now 1.23%. On ir4 the random triangles' cycles
+/// were 1.18% off (20 sampled windows of 2,000) until the IR's warm-up grew with K past 10
+/// (`warm_up_fragments`): 0.75% with 12,288 fragments, 0.71% since the generator hold.
+/// Measured 2026-12-06 (`occsim fidelity --corpus --scale small --machines o2,ir2,ir4
+/// --engines 4 --sample-every 100 --no-rtl`).
 #[test]
 fn sampled_100_stays_within_its_bounds_on_every_class() {
     let rows = small_corpus_at_4_engines("bounds-100", "o2,ir2,ir4", &["--sample-every", "100"]);
