@@ -633,50 +633,21 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
 #[test]
 fn the_corpus_names_the_run_of_each_worst_error() {
     let dir = support::cli::scratch_dir("worst-runs");
-    let recipe = dir.join("h.toml");
-    std::fs::write(
-        &recipe,
+    let traces = dir.join("traces");
+    let rows = corpus_rows(
+        &dir,
         "machines = [\"o2\", \"ir2\"]\nengines = [1, 4]\n[[trace]]\nname = \"h\"\n\
          class = \"h\"\nscene = \"hardcases\"\n",
-    )
-    .unwrap();
-    let traces = dir.join("traces");
-    let stdout = support::cli::stdout_with_temp_dir(
-        &[
-            "fidelity",
-            "--corpus",
-            "--corpus-file",
-            recipe.to_str().unwrap(),
-            "--traces-dir",
-            traces.to_str().unwrap(),
-            "--no-rtl",
-            "--json",
-        ],
-        &dir,
+        &["--traces-dir", traces.to_str().unwrap()],
     );
-    let rows: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
-    let row = |level: &str| {
-        rows.as_array()
-            .unwrap()
-            .iter()
-            .find(|r| r["level"] == level)
-            .unwrap()
-            .clone()
-    };
-    assert!(
-        row("cycle")["worst_runs"]
-            .as_object()
-            .unwrap()
-            .values()
-            .all(|name| name.is_null()),
-        "{rows}"
-    );
+    let names = level_row(&rows, "cycle")["worst_runs"].as_object().unwrap();
+    assert!(names.values().all(|name| name.is_null()), "{rows}");
     let trace = std::fs::read_dir(&traces)
         .unwrap()
         .map(|entry| entry.unwrap().path())
         .find(|path| path.extension().is_some_and(|e| e == "occt"))
         .unwrap();
-    let analytic = row("analytic");
+    let analytic = level_row(&rows, "analytic");
     for metric in ["cycles_error", "latency_p95_error"] {
         let name = analytic["worst_runs"][metric].as_str().unwrap();
         // "h on MACHINE, E engine(s)"
@@ -696,15 +667,34 @@ fn the_corpus_names_the_run_of_each_worst_error() {
             "--json",
         ]);
         let alone: serde_json::Value = serde_json::from_str(&alone).unwrap();
-        let level = alone
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|r| r["level"] == "analytic")
-            .unwrap();
         assert!(analytic[metric].as_f64().unwrap() > 0.0, "{rows}");
+        let level = level_row(&alone, "analytic");
         assert_eq!(level[metric], analytic[metric], "{name}: {metric}");
     }
+}
+
+/// `fidelity --corpus --json` on the recipes `recipes` (a corpus file's text, written into
+/// `dir`, which is also the scratch directory), with `more` flags: its rows.
+fn corpus_rows(dir: &std::path::Path, recipes: &str, more: &[&str]) -> serde_json::Value {
+    let file = dir.join("recipes.toml");
+    std::fs::write(&file, recipes).unwrap();
+    let mut args = vec![
+        "fidelity",
+        "--corpus",
+        "--corpus-file",
+        file.to_str().unwrap(),
+        "--no-rtl",
+        "--json",
+    ];
+    args.extend_from_slice(more);
+    serde_json::from_slice(&support::cli::stdout_with_temp_dir(&args, dir)).unwrap()
+}
+
+/// The row of `level` in a `fidelity --json` answer (one trace's, or one class's).
+fn level_row<'a>(rows: &'a serde_json::Value, level: &str) -> &'a serde_json::Value {
+    let mut rows = rows.as_array().unwrap().iter();
+    rows.find(|row| row["level"] == level)
+        .unwrap_or_else(|| panic!("no {level} row"))
 }
 
 /// A corpus row's `metric` for `class` at `level`, its counts checked exact.
@@ -781,38 +771,16 @@ fn sampled_100_stays_within_its_bounds_on_every_class() {
 #[test]
 fn a_query_with_no_sampled_query_of_its_class_takes_its_modes_ratio_not_its_offset() {
     let dir = support::cli::scratch_dir("other-class");
-    let recipe = dir.join("busy.toml");
-    std::fs::write(
-        &recipe,
+    let rows = corpus_rows(
+        &dir,
         "machines = [\"ir1\"]\nengines = [1]\n[[trace]]\nname = \"busy\"\nclass = \"busy\"\n\
          walk = \"--scene city --driver busy-grid\"\n\
-         full = { width = 640, height = 480, frames = 1 }\n\
          small = { width = 640, height = 480, frames = 1 }\n",
-    )
-    .unwrap();
-    let stdout = support::cli::stdout_with_temp_dir(
-        &[
-            "fidelity",
-            "--corpus",
-            "--corpus-file",
-            recipe.to_str().unwrap(),
-            "--scale",
-            "small",
-            "--sample-every",
-            "100",
-            "--no-rtl",
-            "--json",
-        ],
-        &dir,
+        &["--scale", "small", "--sample-every", "100"],
     );
-    let rows: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
     let error = |metric: &str| class_error(&rows, "busy", "sampled:100", metric);
-    let median = rows
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|row| row["level"] == "sampled:100")
-        .and_then(|row| row.pointer("/query_latency_error/p50"))
+    let median = level_row(&rows, "sampled:100")
+        .pointer("/query_latency_error/p50")
         .and_then(|p50| p50.as_f64())
         .unwrap();
     assert!(error("latency_error") <= 0.01, "{rows}");
