@@ -302,13 +302,14 @@ pub fn run(
             for &engines in &engine_counts {
                 let arch = machine_with(machine, engines, sets)?;
                 let hidden = occsim_sweep::progress::ProgressBar::hidden();
-                bar.set_message(run_name(&recipe.name, machine, engines));
-                let (rows, _) = ladder.run(&arch, &trace, &hidden).with_context(|| {
-                    format!("{} on {machine} with {engines} engines", recipe.name)
-                })?;
+                let name = run_name(&recipe.name, machine, engines);
+                bar.set_message(name.clone());
+                let (rows, _) = ladder
+                    .run(&arch, &trace, &hidden)
+                    .with_context(|| name.clone())?;
                 runs.push(Run {
                     class: recipe.class.clone(),
-                    name: run_name(&recipe.name, machine, engines),
+                    name,
                     rows,
                 });
                 bar.inc(1);
