@@ -132,8 +132,8 @@ fn replay_reports_its_level_and_the_active_effects() {
     assert_eq!(sampled["level"], "sampled:5");
     // 28 windows, one per query. Every 5th: windows 0, 5, 10, 15, 20 and 25. Besides them
     // the windows of the ceil(28 / 15) = 2 queries the formulas predict slowest, as the
-    // analytic level gives their latencies: queries 23 and 24 (2,666 and 2,659 cycles,
-    // behind clears), the next 2,650 (query 25); neither is one of every 5th, so 2 more, 8
+    // analytic level gives their latencies: queries 23 and 24 (2,667 and 2,660 cycles,
+    // behind clears), the next 2,651 (query 25); neither is one of every 5th, so 2 more, 8
     // in all.
     assert_eq!(sampled["sampled_windows"]["total"], 28);
     assert_eq!(sampled["sampled_windows"]["simulated"], 8);
@@ -152,10 +152,10 @@ fn replay_reports_its_level_and_the_active_effects() {
         .iter()
         .map(|q| q["latency_cycles"].as_u64().unwrap())
         .collect();
-    assert_eq!([23, 24, 25].map(|q| predicted[q]), [2666, 2659, 2650]);
+    assert_eq!([23, 24, 25].map(|q| predicted[q]), [2667, 2660, 2651]);
     let mut descending = predicted.clone();
     descending.sort_unstable_by(|a, b| b.cmp(a));
-    assert_eq!(descending[..3], [2666, 2659, 2650], "{predicted:?}");
+    assert_eq!(descending[..3], [2667, 2660, 2651], "{predicted:?}");
 }
 
 #[test]
@@ -790,8 +790,13 @@ fn a_query_with_no_sampled_query_of_its_class_takes_its_modes_ratio_not_its_offs
 
 /// With no port cycles reserved for the display refresh and the host (`f` = 0), the O2's
 /// analytic formulas are the cycle model's timing rules summed: on the small corpus at 4
-/// engines, every class's total cycles within 0.1% (the hard cases' clears 0.07%, the rest
-/// 0.04% at most, measured 2026-12-03) and its p95 latency exact, but the hard cases'
+/// engines, every class's total cycles within 0.1% (0.04% at most, measured 2026-12-03) but
+/// the hard cases' 0.2% (0.19%: after each of their clears the machine's port serves the
+/// last window's writes and the prefetch's reads of the fragments queued behind the clear
+/// before its words, 4 to 18 cycles the formulas do not place; the 0.02 cycles a read they
+/// had summed over every drawing stretch covered them, 0.06%, and put the random triangles'
+/// queries 3 to 7 cycles late: `levels/analytic/o2.rs`, reads' stalls) and its p95 latency
+/// exact, but the hard cases'
 /// (1.82%, their clears' queries); on the walks, the random triangles and the demo, 95% of
 /// the queries or more take the cycle model's latency to the cycle. The sampled level,
 /// whose measured windows start machines mid-trace, gives every class's p95 latency
@@ -831,8 +836,9 @@ fn with_or_without_the_ports_other_clients_the_o2_formulas_are_the_cycle_models_
         for row in analytic {
             let class = row["class"].as_str().unwrap();
             let metric = |key: &str| row.pointer(key).and_then(|v| v.as_f64());
+            let cycles_bound = if class == "hardcases" { 0.002 } else { 0.001 };
             assert!(
-                metric("/cycles_error").unwrap() <= 0.001,
+                metric("/cycles_error").unwrap() <= cycles_bound,
                 "{scratch}: {row}"
             );
             if class != "hardcases" {

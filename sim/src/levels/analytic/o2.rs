@@ -19,7 +19,7 @@
 //! `other_clients_slack_cycles`, and `δ` how far behind they are as the stretch starts):
 //!
 //! ```text
-//! depth    = F + ε · R               (ε = READ_STALL_CYCLES: see below)
+//! depth    = F                       (a cycle a fragment; its reads' stalls: see below)
 //! occu     = S
 //! work     = R + max(ceil((W · depth_bits + (K + B) · colour_bits) / V), min(max(W, K), R))
 //! port     = max(work, (work + δ - σ) / (1 - f))   (the other clients force cycles past σ)
@@ -121,31 +121,29 @@
 //! of the token, carried into the next window. A verbose query's hit words take the port
 //! cycles the window left idle, and lengthen `d` by the rest.
 //!
-//! `ε`: no block behind the rasterizer is faster than its one fragment a cycle, so a stall
-//! (a read that comes late, the port busy with writes or a forced cycle) is never made
-//! up while fragments flow: the FIFOs keep the entries it filled until a primitive's
-//! setup leaves the rasterizer idle. Two kinds of stretch stall differently (measured per
-//! primitive with the cycle model's stall counters on the demo, the random triangles and
-//! the city's walks):
-//! - A stretch that writes (depth or colour): its reads queue behind writes (and forced
-//!   cycles), and the stalls add up, `ε` = 0.02 cycles a read (I: 0.01..0.03; without it
-//!   the random triangles' queries waited behind empty FIFOs, p95 latency 8 cycles
-//!   against 25).
-//! - A forced stretch that writes nothing but reads densely (`R > 0.3 F`,
-//!   [`DENSE_READS_PER_FRAGMENT`]): its reads queue only behind the forced cycles, `ε` =
-//!   0.085 `f` a read ([`RESERVED_READ_STALL_CYCLES`]; 0.02 at the O2's `f`, none without
-//!   forced cycles).
-//! - Any other stretch: `ε` = 0. Its reads, a new word every few fragments, are issued
-//!   `L` fragments ahead and come in time once the depth test trails the rasterizer by
-//!   the slowest read's latency and, in a forced stretch, the longest run of forced port
-//!   cycles a read may wait out, `ρ = ceil(f / (1 - f))` (1 at the O2's `f` = 0.234); the first
-//!   reads stall until it does, and no more stall after. So after a stretch,
-//!   `d >= g + λ_max + ρ`, with `λ_max` the page miss latency when the stretch missed a
-//!   page, the page hit latency when it only hit (a ratchet: the lag is kept until setup
-//!   idles the rasterizer). The city's adaptive walk ends its big box queries with the
-//!   depth test 8 or 9 cycles behind (latency 13-15) where the sum of 0.02 a read over
-//!   their thousands of reads had filled the FIFO (latency 24); with `f` = 0 the forest's
-//!   walk ends them exactly 8 behind.
+//! Reads' stalls: no block behind the rasterizer is faster than its one fragment a cycle,
+//! so a stall (a read that comes late, behind the port's writes or a forced cycle) is
+//! never made up while fragments flow: the FIFOs keep the entries it filled until a
+//! primitive's setup leaves the rasterizer idle. But the stalls do not add up without end:
+//! the prefetch asks for a read as its fragment is emitted, and the depth test reaches that
+//! fragment as many cycles later as it trails the rasterizer, so a read stalls it only
+//! while the trail is shorter than the read's wait and latency, and each stall lengthens
+//! the trail. The trail therefore stops at the slowest read's: once the depth test trails
+//! the rasterizer by the slowest read's latency and, in a forced stretch, the longest run
+//! of forced port cycles a read may wait out, `ρ = ceil(f / (1 - f))` (1 at the O2's `f` =
+//! 0.234), the reads come in time. So after a stretch, `d >= g + λ_max + ρ`, with `λ_max`
+//! the page miss latency when the stretch missed a page, the page hit latency when it only
+//! hit (a ratchet: the trail is kept until setup idles the rasterizer), whether it writes
+//! or not. The city's adaptive walk ends its big box queries with the depth test 8 or 9
+//! cycles behind (latency 13-15); with `f` = 0 the forest's walk ends them exactly 8
+//! behind. (Before, a stretch that wrote stalled its depth test 0.02 cycles for every
+//! read, summed over the stretch, and a forced one that read more than 0.3 a fragment
+//! 0.085 `f`: over a long drawing primitive the sum filled the FIFO where the machine's
+//! trail stops at its slowest read's. Against the cycle level, per query, on the full
+//! corpus's O2 runs (1, 4 and 16 engines), 249 queries were more than 2 cycles off and
+//! are 145 now, the mean per-query error went from 0.42% to 0.31%, and on the random
+//! triangles, whose every query ends a drawing primitive of thousands of fragments, 42
+//! queries a run were off by 3 to 7 cycles and 10 are.)
 //!
 //! Total cycles = `Σ_w T_w` + the last window's tail (the last query's latency, or its
 //! drain + 3 when the stream ends without a query end).
@@ -295,31 +293,12 @@ pub struct Downstream {
     pub occu_bound: bool,
 }
 
-/// `ε` [cycles per depth read]: the depth test's stall a read costs that the FIFOs keep
-/// (I 0.01..0.03: the cycle model's 0.018-0.028 on the demo, random triangles and a
-/// hierarchical walk; see the module docs).
-const READ_STALL_CYCLES: f64 = 0.02;
-
-/// `ε` per unit of reserved port share [cycles per depth read] of a forced stretch that
-/// reads densely and writes nothing: its reads stall only where the display refresh and the
-/// host force the port's cycles, so `ε = 0.085 f` (I 0.04..0.13, fitted when every reserved
-/// cycle was forced, a fixed pattern: 0.02 at the O2's `f` = 0.234, the
-/// writing stretches' `ε`; with `f` = 0 the formulas' latencies equal the cycle model's on
-/// all but 2 of the 2,581 queries of the forest's hierarchical walk at 4 engines, where 0.02
-/// made 9% of them 1 to 9 cycles long).
-const RESERVED_READ_STALL_CYCLES: f64 = 0.085;
-
 /// Cycles of the end token's path that overlap the backlog when the OccU binds \[cycles\]:
 /// the token leaves the FIFO, crosses the depth pipeline and reaches the OccU while the OccU
 /// still works through the fragments ahead of it (measured: with `f` = 0, the lazy-grid
 /// walks' multi-tile queries, 2 to 400 OccU cycles a fragment at 1, 4 and 16 engines, take
 /// the cycle model's latency exactly with 3, and 3 cycles more without).
 const OCCU_BOUND_TOKEN_OVERLAP_CYCLES: f64 = 3.0;
-
-/// Reads a fragment above which a stretch's reads come dense enough to queue at the port
-/// and stall the depth test (I, 0.2..0.4: on the full corpus's walks on o2, 0.3 gave the
-/// adaptive walk's p95 latency error 9.5% where 0.2 gave 14.3% and no threshold 28.6%).
-const DENSE_READS_PER_FRAGMENT: f64 = 0.3;
 
 /// The O2 formulas over stretch counts.
 pub struct O2Formulas {
@@ -502,7 +481,7 @@ impl O2Formulas {
         // Spread over the cycles they are asked in, the transfers leave idle cycles that
         // serve the debt: cycles are forced only where the port is through them later.
         let forced = port > work.at_least(asked);
-        let depth = w.fragments as f64 + self.read_stall_cycles(w, forced) * w.depth_reads as f64;
+        let depth = w.fragments as f64;
         let occu = w.occu_cycles as f64;
         // `R (λ̄ + 1) / L`, with `R λ̄` the reads' latencies summed: whole cycles, so one
         // division (of an exact sum) where the mean's had two.
@@ -540,22 +519,6 @@ impl O2Formulas {
     fn write_cycles(&self, w: &StretchCounts, write_bits: u64) -> f64 {
         let packed = write_bits.div_ceil(self.arch.memory_port_bits_per_cycle as u64);
         packed.max(w.write_entries().min(w.depth_reads)) as f64
-    }
-
-    /// `ε` of a stretch (see the module docs): reads stall the depth test where they compete
-    /// with writes for the port, or come denser than one a [`DENSE_READS_PER_FRAGMENT`]
-    /// fragments while the other clients force cycles; elsewhere only the slowest read's
-    /// lag ([`Self::slowest_read_lag`]).
-    fn read_stall_cycles(&self, w: &StretchCounts, forced: bool) -> f64 {
-        let writes = w.depth_writes + w.colour_writes + w.colour_reads > 0;
-        let dense = w.depth_reads as f64 > DENSE_READS_PER_FRAGMENT * w.fragments as f64;
-        if writes {
-            READ_STALL_CYCLES
-        } else if dense && forced {
-            RESERVED_READ_STALL_CYCLES * self.reserved_share
-        } else {
-            0.0
-        }
     }
 
     /// The least the depth test trails the rasterizer by after a stretch: its slowest
@@ -1449,8 +1412,8 @@ mod tests {
     /// page miss, the last a page hit) and writes nothing, on an O2 whose port no refresh
     /// or host shares (`f` = 0), at 4 engines. Worked by hand:
     /// - setup 4 cycles, so the fragments are emitted by `g` = 4 + 800 = 804;
-    /// - `R` = 100 <= 0.3 F = 240 and no write, so `ε` = 0: depth 800, OccU 800 (one tile
-    ///   at 4 engines: 1 cycle a fragment), port 100, prefetch 100 (2.06 + 1) / 16 = 19.1;
+    /// - depth 800, OccU 800 (one tile at 4 engines: 1 cycle a fragment), port 100,
+    ///   prefetch 100 (2.06 + 1) / 16 = 19.1;
     ///   `d` = max(4 + 800, 804) = 804;
     /// - the slowest read, a page miss of 8 cycles, leaves the depth test 8 behind (no
     ///   reserved cycle to wait for): `d` = 804 + 8 = 812, a backlog of 8 at the end token
@@ -1487,6 +1450,35 @@ mod tests {
         formulas.primitive(0.0);
         formulas.stretch(&BOX, &RenderState::new(640, 480));
         (formulas, spec, result)
+    }
+
+    /// A primitive of 4,000 fragments drawn outside a query (each writing depth and colour,
+    /// 64 bits), 1,000 of them reading a new word (page hits, the last fragment's too), on
+    /// a port no refresh or host shares (`f` = 0, so no forced cycle). Worked by hand:
+    /// - setup 4, emitted by `g` = 4,004; port = 1,000 reads + max(ceil(4,000 · 64 / 256) =
+    ///   1,000, min(4,000, 1,000)) = 2,000 cycles, through in 2,004, the last read in
+    ///   2,006; the depth test, a fragment a cycle, through in 4,004;
+    /// - its reads' stalls stop once it trails by the slowest read's latency, a page hit's
+    ///   2: `d` = 4,006, a backlog of 2; the stream ends: latency 2 + 3 = 5.
+    /// (Summing 0.02 cycles a read over the stretch, as the formulas did, gave depth 4,020
+    /// and the FIFO's 16 fragments queued at the end: latency 19.)
+    #[test]
+    fn a_drawing_stretch_leaves_the_depth_test_its_slowest_reads_latency_behind_too() {
+        let mut formulas = O2Bottleneck::new(&unshared_o2(), 640, 480);
+        formulas.primitive(0.0);
+        let drawn = FragmentStretch {
+            fragments: 4000,
+            depth_reads: 1000,
+            page_misses: 0,
+            passed: 4000,
+            last_read: DepthRead::PageHit,
+            first_reads: 0,
+            dense: DenseRuns::NONE,
+            ending: DenseRuns::NONE,
+        };
+        formulas.stretch(&drawn, &RenderState::new(640, 480));
+        let end = formulas.finish().unwrap();
+        assert_eq!((end.cycles, end.latency), (4004.0, 5.0));
     }
 
     /// A query of latency 13 (one record cycle) whose window's last 16 fragments each wrote
@@ -1563,11 +1555,10 @@ mod tests {
     /// new word (page hits) and writing depth and colour, with the token's window restarted:
     /// `d` = 8, the port through the box's reads long before. Worked by hand:
     /// - emitted by `g` = 4 + 10 = 14; port = 10 reads + max(ceil(10 · 64 / 256) = 3,
-    ///   min(10, 10)) = 20 cycles; depth 10 + 0.02 · 10 = 10.2 (it writes); OccU 10;
-    ///   prefetch 10 · 3 / 16 = 1.9;
+    ///   min(10, 10)) = 20 cycles; depth 10; OccU 10; prefetch 10 · 3 / 16 = 1.9;
     /// - the port takes the reads from their emission: through in max(0, 4) + 20 = 24, the
     ///   last read's data in 24 + 2 = 26; the depth test, from `b` = max(8, 4) = 8, would be
-    ///   through in 8 + 10.2 = 18.2: `d` = 26 (queued behind the backlog, as the formulas
+    ///   through in 8 + 10 = 18: `d` = 26 (queued behind the backlog, as the formulas
     ///   had it, 8 + 20 = 28);
     /// - the stream ends: latency `d - g` + 3 = 12 + 3 = 15 (17 before).
     #[test]
