@@ -328,6 +328,8 @@ fn long_sampled_windows_simulated_over_their_tails_agree_from_the_index_and_the_
     // to thousands of fragments) are cut, their heads extrapolated, and both readings still
     // agree bit for bit, machines started inside spans and stretches of the heads.
     let arch = o2_with(&[]);
+    // Runs whose cut total differs from the whole one's.
+    let (mut cut_runs, mut differing) = (0, 0);
     for (name, _, (width, height), events) in traces() {
         let trace = indexed_trace_in_blocks(width, height, &events, 4096);
         for every in [1, 3, 5] {
@@ -344,8 +346,10 @@ fn long_sampled_windows_simulated_over_their_tails_agree_from_the_index_and_the_
                 assert!(windows.tails > 0, "{what}: no window was cut");
                 assert!(windows.tails <= windows.simulated, "{what}");
                 assert_eq!(whole.sampled_windows.unwrap().tails, 0, "{what}");
-                // The heads were extrapolated, not measured.
-                assert_ne!(decoded.total_cycles, whole.total_cycles, "{what}");
+                // The heads were extrapolated, not measured: the totals differ (on one run or
+                // more: where the formulas are exact for a head they may not).
+                cut_runs += 1;
+                differing += usize::from(decoded.total_cycles != whole.total_cycles);
                 // Results are the functional model's either way.
                 assert_eq!(
                     decoded.queries.iter().map(|q| q.value).collect::<Vec<_>>(),
@@ -356,6 +360,10 @@ fn long_sampled_windows_simulated_over_their_tails_agree_from_the_index_and_the_
             assert_same_but_source(indexed, &decoded, &what);
         }
     }
+    assert!(
+        differing > 0,
+        "no cut run's total differs from the whole one's ({cut_runs})"
+    );
 }
 
 #[test]
