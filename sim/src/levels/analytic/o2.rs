@@ -1471,6 +1471,7 @@ mod tests {
     ///   2,006; the depth test, a fragment a cycle, through in 4,004;
     /// - its reads' stalls stop once it trails by the slowest read's latency, a page hit's
     ///   2: `d` = 4,006, a backlog of 2; the stream ends: latency 2 + 3 = 5.
+    ///
     /// (Summing 0.02 cycles a read over the stretch, as the formulas did, gave depth 4,020
     /// and the FIFO's 16 fragments queued at the end: latency 19.)
     #[test]
@@ -1638,9 +1639,9 @@ mod tests {
     /// 64 bits), which is ready only the cycle after, so the write shares its cycle with the
     /// next fragment's colour read and no other: 100 cycles of writes, one a fragment. A
     /// depth read takes its cycle whole and strands the colour read after it in a cycle of
-    /// its own: 10 more. Port = 10 reads + max(ceil(100 · 96 / 256) = 38, min(100, 10 + 100)
-    /// + min(10, 100)) = 10 + 110 = 120 cycles (packing the colour reads with the writes
-    /// gave 10 + 38 = 48). On the small hard cases on o2 at 4 engines under blending the
+    /// its own: 10 more. Port = 10 reads + max(ceil(100 · 96 / 256) = 38,
+    /// min(100, 10 + 100) + min(10, 100)) = 10 + 110 = 120 cycles (packing the colour
+    /// reads with the writes gave 10 + 38 = 48). On the small hard cases on o2 at 4 engines under blending the
     /// cycle level took 121,560 cycles and the formulas 88,579 (27% short); now 0.11% off.
     #[test]
     fn under_blending_a_fragments_write_waits_for_its_colour_read() {
