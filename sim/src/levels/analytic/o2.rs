@@ -1337,10 +1337,18 @@ mod tests {
 
     /// O2 at 4 engines whose port no refresh or host shares (`f` = 0).
     fn unshared_o2() -> O2Arch {
+        unshared_o2_with(&[])
+    }
+
+    /// The same with `sets` (`key=value`) besides.
+    fn unshared_o2_with(sets: &[&str]) -> O2Arch {
         let mut arch = Arch::builtin("o2").unwrap();
         arch.set("display_width_pixels=0").unwrap();
         arch.set("host_memory_share=0").unwrap();
         arch.set("engines=4").unwrap();
+        for set in sets {
+            arch.set(set).unwrap();
+        }
         let o2 = arch.o2().unwrap();
         assert_eq!(o2.reserved_port_share(), 0.0);
         o2
@@ -1617,10 +1625,7 @@ mod tests {
     /// + max(25, min(100, 50)) = 100 cycles (packing alone gave 75).
     #[test]
     fn writes_pack_to_the_ports_width_only_between_two_reads() {
-        let mut arch = Arch::builtin("o2").unwrap();
-        arch.set("display_width_pixels=0").unwrap();
-        arch.set("host_memory_share=0").unwrap();
-        let formulas = O2Formulas::new(&arch.o2().unwrap(), 640, 480);
+        let formulas = O2Formulas::new(&unshared_o2(), 640, 480);
         let mut w = StretchCounts {
             fragments: 100,
             depth_reads: 50,
@@ -1641,15 +1646,12 @@ mod tests {
     /// depth read takes its cycle whole and strands the colour read after it in a cycle of
     /// its own: 10 more. Port = 10 reads + max(ceil(100 · 96 / 256) = 38,
     /// min(100, 10 + 100) + min(10, 100)) = 10 + 110 = 120 cycles (packing the colour
-    /// reads with the writes gave 10 + 38 = 48). On the small hard cases on o2 at 4 engines under blending the
-    /// cycle level took 121,560 cycles and the formulas 88,579 (27% short); now 0.11% off.
+    /// reads with the writes gave 10 + 38 = 48). On the small hard cases on o2 at 4
+    /// engines under blending the cycle level took 121,560 cycles and the formulas 88,579
+    /// (27% short); now 0.11% off.
     #[test]
     fn under_blending_a_fragments_write_waits_for_its_colour_read() {
-        let mut arch = Arch::builtin("o2").unwrap();
-        arch.set("display_width_pixels=0").unwrap();
-        arch.set("host_memory_share=0").unwrap();
-        arch.set("blending=true").unwrap();
-        let formulas = O2Formulas::new(&arch.o2().unwrap(), 640, 480);
+        let formulas = O2Formulas::new(&unshared_o2_with(&["blending=true"]), 640, 480);
         let w = StretchCounts {
             fragments: 100,
             depth_reads: 10,
