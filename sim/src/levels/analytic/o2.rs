@@ -52,10 +52,11 @@
 //! works through a stretch's reads while the depth test still works through the backlog
 //! before it, and a lag already built is slack for them; the last read's data comes
 //! `λ_hit` (the page hit latency) after the port is through them, or `λ_miss` when the
-//! stretch's last fragment read a word on another page (its read is the port's last). The rasterizer emits
-//! fragment `k` only when fragment `k - Q` has left the FIFO (`Q` = `C1`, the FIFO before
-//! the depth test, and `+ C2`, the one after it, when the OccU binds): `g = max(start + F,
-//! the cycle fragment k_last - Q leaves)`, looked up in the recent stretches.
+//! stretch's last fragment read a word on another page (its read is the port's last).
+//! The rasterizer emits fragment `k` only when fragment `k - Q` has left the FIFO (`Q` =
+//! `C1`, the FIFO before the depth test, and `+ C2`, the one after it, when the OccU
+//! binds): `g = max(start + F, the cycle fragment k_last - Q leaves)`, looked up in the
+//! recent stretches.
 //! The OccU takes a fragment from its FIFO as it starts on it (`b + j · pace`); the depth
 //! test takes one once its read is in, at the end of its pace (`b + (j + 1) · pace`). A
 //! clear holds the depth test for its `clear_words / (1 - f)` port cycles: `d = max(d, g) +
