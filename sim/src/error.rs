@@ -2,7 +2,7 @@
 
 use crate::arch::ArchError;
 use occsim_traces::query::{BRIEF_RECORD_ENTRIES, MAX_TILES};
-use occsim_traces::QuerySpec;
+use occsim_traces::QueryShape;
 use thiserror::Error;
 
 #[derive(Debug, Error, PartialEq)]
@@ -103,7 +103,7 @@ pub(crate) fn check_fragment_inside(
 }
 
 /// Reject a query the hardware cannot take.
-pub(crate) fn check_spec(spec: &QuerySpec, event: u64, open: Option<u32>) -> Result<(), SimError> {
+pub(crate) fn check_spec(spec: QueryShape, event: u64, open: Option<u32>) -> Result<(), SimError> {
     if let Some(open_id) = open {
         return Err(SimError::NestedQuery {
             event,
@@ -118,11 +118,11 @@ pub(crate) fn check_spec(spec: &QuerySpec, event: u64, open: Option<u32>) -> Res
             entries: spec.buffer_entries,
         });
     }
-    if spec.tiles.is_empty() || spec.tiles.len() > MAX_TILES {
+    if spec.tiles == 0 || spec.tiles > MAX_TILES {
         return Err(SimError::TileCount {
             event,
             id: spec.id,
-            count: spec.tiles.len(),
+            count: spec.tiles,
             max: MAX_TILES,
         });
     }

@@ -161,6 +161,11 @@ pub fn replay<R: Read>(
     {
         let mut model =
             AnalyticModel::from_window_index(arch, width, height).map_err(ReplayError::Setup)?;
+        // The O2's formulas ask nothing of a query's tiles but their number; the IR's
+        // place a verbose query's tiles.
+        if let IndexRead::Window = index {
+            reader.skim_queries();
+        }
         for_each_item(&mut reader, index, |item| model.index_item(item))
             .map_err(|e| read_error(e, model_error))?;
         return LevelModel::Analytic(Box::new(model))

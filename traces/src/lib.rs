@@ -29,7 +29,9 @@ pub mod workloads;
 
 pub use event::{Event, Fragment, GeometryBatch, HostWork, Span};
 pub use hit_list::{Hit, HitList};
-pub use query::{QueryMode, QueryResult, QuerySpec, RunTally, Tile, TileResult};
+pub use query::{
+    QueryMode, QueryResult, QueryShape, QuerySpec, QueryTotals, RunTally, Tile, TileResult,
+};
 pub use scene::{Command, SceneError, SceneLine};
 pub use state::{DepthFunc, Rect};
 

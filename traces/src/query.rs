@@ -93,6 +93,54 @@ impl QuerySpec {
     }
 }
 
+/// What a query's begin says but its tiles' rectangles: what a reader that skims the
+/// trace's queries gets ([`crate::trace::TraceReader::skim_queries`]), and all the O2's
+/// formulas and the stream's checks ask of a begin.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct QueryShape {
+    pub id: u32,
+    pub mode: QueryMode,
+    pub buffer_entries: u32,
+    pub tiles: usize,
+}
+
+impl QuerySpec {
+    pub fn shape(&self) -> QueryShape {
+        QueryShape {
+            id: self.id,
+            mode: self.mode,
+            buffer_entries: self.buffer_entries,
+            tiles: self.tiles.len(),
+        }
+    }
+}
+
+/// A query's result summed over its tiles: what a reader that skims the trace's queries
+/// gets, and all a level that predicts time asks of a result.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct QueryTotals {
+    pub id: u32,
+    pub mode: QueryMode,
+    pub tiles: usize,
+    /// NOHC and PHC summed over the tiles.
+    pub nohc: u64,
+    pub phc: u64,
+    /// Hits the tiles' verbose buffers hold, summed ([`HitList::len`]).
+    pub held_hits: u64,
+    pub overflowed_buffers: u32,
+}
+
+impl QueryTotals {
+    /// The value a GL program reads: the passing count for `samples`, 0 or 1 for `any`,
+    /// the NOHC sum over tiles for the occlusion modes.
+    pub fn value(&self) -> u64 {
+        match self.mode {
+            QueryMode::Any => (self.nohc > 0) as u64,
+            _ => self.nohc,
+        }
+    }
+}
+
 /// One tile's answer: the brief record and, in verbose mode, the stored hits.
 ///
 /// Empty box and z range (no passing fragment) read as min = `u32::MAX`, max = 0, as the
@@ -283,13 +331,27 @@ pub struct QueryResult {
 }
 
 impl QueryResult {
-    /// The value a GL program reads: the passing count for `samples`, 0 or 1 for `any`,
-    /// the NOHC sum over tiles for the occlusion modes.
+    /// The value a GL program reads ([`QueryTotals::value`]).
     pub fn value(&self) -> u64 {
-        let passed: u64 = self.tiles.iter().map(|t| t.nohc).sum();
-        match self.mode {
-            QueryMode::Any => (passed > 0) as u64,
-            _ => passed,
+        self.totals().value()
+    }
+
+    /// Its tiles summed.
+    pub fn totals(&self) -> QueryTotals {
+        let mut totals = QueryTotals {
+            id: self.id,
+            mode: self.mode,
+            tiles: self.tiles.len(),
+            nohc: 0,
+            phc: 0,
+            held_hits: 0,
+            overflowed_buffers: self.overflowed_buffers,
+        };
+        for tile in &self.tiles {
+            totals.nohc += tile.nohc;
+            totals.phc += tile.phc;
+            totals.held_hits += tile.hits.len();
         }
+        totals
     }
 }

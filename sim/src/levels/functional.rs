@@ -5,8 +5,7 @@ use crate::error::{check_spec, SimError};
 use crate::golden_check::{first_difference, GoldenCheck};
 use crate::levels::level::{Fidelity, LevelResult, QueryOutcome};
 use occsim_traces::golden::FunctionalModel;
-use occsim_traces::{Event, Fragment, QueryMode, QueryResult, Span};
-use std::borrow::Cow;
+use occsim_traces::{Event, Fragment, QueryMode, QueryShape, QueryTotals, Span};
 
 /// The functional model with the stream checks every level shares: fragments inside the
 /// viewport, well-formed queries, results equal to the golden results stored in the stream,
@@ -16,7 +15,8 @@ pub struct FunctionalCore {
     width: u32,
     height: u32,
     events: u64,
-    open: Option<u32>,
+    /// The open query (the model's, when it hears of queries: see [`Self::writes_allowed`]).
+    open: Option<QueryShape>,
     open_fragments: u64,
     /// Queries that have ended: what a wait or a conditional may name.
     ended: std::collections::HashSet<u32>,
@@ -146,14 +146,11 @@ impl FunctionalCore {
         Ok(())
     }
 
-    /// Apply one event; returns the result of a query that ended with it: the stream's
-    /// golden one, borrowed, when the core trusts them (a window index's queries hold
-    /// hundreds of tiles, and cloning each result had cost its replay a few per cent).
-    pub fn event<'e>(
-        &mut self,
-        event: &'e Event,
-    ) -> Result<Option<Cow<'e, QueryResult>>, SimError> {
+    /// Apply one event; returns the totals of a query that ended with it: the stream's
+    /// golden result's when the core trusts them.
+    pub fn event(&mut self, event: &Event) -> Result<Option<QueryTotals>, SimError> {
         let index = self.events;
+        let trusting = self.results != ResultSource::Computed;
         match event {
             Event::Fragment(fragment) => {
                 self.check_fragment(fragment)?;
@@ -166,17 +163,28 @@ impl FunctionalCore {
                 self.events += 1;
                 return Ok(None);
             }
-            Event::QueryBegin(spec) => {
-                check_spec(spec, index, self.open)?;
-                self.open = Some(spec.id);
-                self.open_fragments = 0;
+            // No fragment reaches a trusting core's model: the golden result stands for its
+            // counts, so the model need not hear of the query (opening one sets up a
+            // counter a tile, and closing it builds a result: a window index's queries hold
+            // hundreds of tiles, and the lazy-grid walk's analytic replay spent 4% on them).
+            Event::QueryBegin(spec) if trusting => {
+                self.begin_skimmed(spec.shape())?;
+                return Ok(None);
             }
+            Event::QueryBegin(spec) => self.open_query(spec.shape(), index)?,
             Event::QueryEnd => {
-                let id = self
+                let open = self
                     .open
                     .take()
                     .ok_or(SimError::EndWithoutBegin { event: index })?;
-                self.ended.insert(id);
+                self.ended.insert(open.id);
+                if let ResultSource::Golden { ended_with } = &mut self.results {
+                    self.events += 1;
+                    if ended_with.replace(self.open_fragments).is_some() {
+                        return Err(SimError::MissingGolden);
+                    }
+                    return Ok(None);
+                }
             }
             Event::Wait(id) | Event::ConditionalBegin(id) if !self.ended.contains(id) => {
                 return Err(SimError::NoResultToWaitFor {
@@ -184,20 +192,8 @@ impl FunctionalCore {
                     id: *id,
                 });
             }
-            Event::QueryResult(golden) if self.results != ResultSource::Computed => {
-                self.events += 1;
-                let ResultSource::Golden {
-                    ended_with: Some(fragments),
-                } = self.results
-                else {
-                    return Err(SimError::ResultWithoutQuery {
-                        event: index,
-                        id: golden.id,
-                    });
-                };
-                self.results = ResultSource::Golden { ended_with: None };
-                self.queries.push(QueryOutcome::of(golden, fragments));
-                return Ok(Some(Cow::Borrowed(golden)));
+            Event::QueryResult(golden) if trusting => {
+                return self.result_skimmed(&golden.totals()).map(Some);
             }
             Event::QueryResult(golden) => {
                 self.events += 1;
@@ -209,27 +205,59 @@ impl FunctionalCore {
             _ => {}
         }
         self.events += 1;
-        if let ResultSource::Golden { ended_with } = &mut self.results {
-            // No fragment reaches the model: the golden result stands for its counts, so
-            // the model need not hear of the query (opening one sets up a counter a tile,
-            // and closing it builds a result: a window index's queries hold hundreds of
-            // tiles, and the lazy-grid walk's analytic replay spent 4% on them).
-            match event {
-                Event::QueryBegin(_) => return Ok(None),
-                Event::QueryEnd if ended_with.replace(self.open_fragments).is_some() => {
-                    return Err(SimError::MissingGolden)
-                }
-                Event::QueryEnd => return Ok(None),
-                _ => {}
-            }
-        }
-        let ended = self.functional.event(event);
-        if let Some(result) = &ended {
-            self.queries
-                .push(QueryOutcome::of(result, self.open_fragments));
-            self.golden.expect(self.queries.len() - 1, result.clone());
-        }
-        Ok(ended.map(Cow::Owned))
+        let Some(result) = self.functional.event(event) else {
+            return Ok(None);
+        };
+        let totals = result.totals();
+        self.queries
+            .push(QueryOutcome::of(&totals, self.open_fragments));
+        self.golden.expect(self.queries.len() - 1, result);
+        Ok(Some(totals))
+    }
+
+    /// Whether a passing fragment may write depth and colour now: no occlusion-render-mode
+    /// query (brief, verbose) is open. What the model says when it hears of the queries
+    /// (the same query is open in both), and what a trusting core's model cannot.
+    pub(crate) fn writes_allowed(&self) -> bool {
+        !self
+            .open
+            .is_some_and(|open| open.mode.is_occlusion_render_mode())
+    }
+
+    /// A query begins (`event` its index): checked, and open.
+    fn open_query(&mut self, shape: QueryShape, event: u64) -> Result<(), SimError> {
+        check_spec(shape, event, self.open.map(|open| open.id))?;
+        self.open = Some(shape);
+        self.open_fragments = 0;
+        Ok(())
+    }
+
+    /// A query begin of a core that trusts the golden results, as a window index read
+    /// skimmed gives it ([`occsim_traces::trace::IndexItem::Shape`]).
+    pub(crate) fn begin_skimmed(&mut self, shape: QueryShape) -> Result<(), SimError> {
+        self.open_query(shape, self.events)?;
+        self.events += 1;
+        Ok(())
+    }
+
+    /// A golden result's totals, as a window index read skimmed gives them
+    /// ([`occsim_traces::trace::IndexItem::Totals`]), to a core that trusts them: the
+    /// totals of the query that ended before.
+    pub(crate) fn result_skimmed(&mut self, totals: &QueryTotals) -> Result<QueryTotals, SimError> {
+        let index = self.events;
+        self.events += 1;
+        let ResultSource::Golden {
+            ended_with: Some(fragments),
+        } = self.results
+        else {
+            return Err(SimError::ResultWithoutQuery {
+                event: index,
+                id: totals.id,
+            });
+        };
+        self.results = ResultSource::Golden { ended_with: None };
+        self.queries.push(QueryOutcome::of(totals, fragments));
+        Ok(*totals)
     }
 
     /// The mode of the `index`-th query that ended.
@@ -239,8 +267,8 @@ impl FunctionalCore {
 
     /// The result without timing (the functional level's answer).
     pub fn finish(self) -> Result<LevelResult, SimError> {
-        if let Some(id) = self.open {
-            return Err(SimError::OpenAtEnd { id });
+        if let Some(open) = self.open {
+            return Err(SimError::OpenAtEnd { id: open.id });
         }
         if let ResultSource::Golden {
             ended_with: Some(_),

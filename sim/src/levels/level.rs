@@ -107,17 +107,17 @@ pub struct QueryOutcome {
 }
 
 impl QueryOutcome {
-    /// The outcome of the query that gave `result`, `fragments` of them inside it.
-    pub(crate) fn of(result: &occsim_traces::QueryResult, fragments: u64) -> QueryOutcome {
+    /// The outcome of the query whose result came to `totals`, `fragments` of them inside it.
+    pub(crate) fn of(totals: &occsim_traces::QueryTotals, fragments: u64) -> QueryOutcome {
         QueryOutcome {
-            id: result.id,
-            mode: result.mode,
+            id: totals.id,
+            mode: totals.mode,
             fragments,
-            value: result.value(),
-            tiles: result.tiles.len(),
-            nohc: result.tiles.iter().map(|t| t.nohc).sum(),
-            phc: result.tiles.iter().map(|t| t.phc).sum(),
-            overflowed_buffers: result.overflowed_buffers,
+            value: totals.value(),
+            tiles: totals.tiles,
+            nohc: totals.nohc,
+            phc: totals.phc,
+            overflowed_buffers: totals.overflowed_buffers,
             latency_cycles: None,
         }
     }

@@ -35,7 +35,7 @@ use crate::arch::Arch;
 use crate::error::SimError;
 use crate::levels::level::WindowEnd;
 use crate::machines::closed_loop::{ClosedLoop, PipeState};
-use occsim_traces::{Event, QueryResult};
+use occsim_traces::{Event, QueryTotals};
 use std::collections::HashMap;
 
 pub(crate) struct PredictedLoop {
@@ -82,6 +82,12 @@ impl PredictedLoop {
 
     /// Feed the events the loop acts on (the others pass by); a `swap` needs the open
     /// window's prediction, `cut`, which the caller takes from its formulas.
+    /// A query begins, read skimmed: the host issues a command, as [`Self::event`] takes a
+    /// whole begin.
+    pub(crate) fn query_begin(&mut self) {
+        self.front.state_change();
+    }
+
     pub(crate) fn event(&mut self, event: &Event, cut: impl FnOnce() -> Option<WindowEnd>) {
         if matches!(
             event,
@@ -174,11 +180,10 @@ impl PredictedLoop {
     }
 
     /// A query ended, closing its window: `end` is the level's prediction.
-    pub(crate) fn end_query(&mut self, end: WindowEnd, result: &QueryResult) {
+    pub(crate) fn end_query(&mut self, end: WindowEnd, result: &QueryTotals) {
         self.close(end);
-        let hits: u64 = result.tiles.iter().map(|t| t.hits.len()).sum();
-        let words =
-            result.tiles.len() as u64 * occsim_traces::query::BRIEF_RECORD_ENTRIES as u64 + hits;
+        let words = result.tiles as u64 * occsim_traces::query::BRIEF_RECORD_ENTRIES as u64
+            + result.held_hits;
         let token = self.pipe_end.max(self.front.command_release() as f64);
         let available = (token + end.latency).ceil() as u64;
         self.answers.insert(result.id, (available, words));
@@ -243,7 +248,7 @@ impl PredictedLoop {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use occsim_traces::{QueryMode, TileResult};
+    use occsim_traces::{QueryMode, QueryResult, TileResult};
 
     /// A query whose end token entered at 0 with a latency of 6, for which the formulas,
     /// once the fragments after it passed, give 23 (`levels::analytic::o2` works such
@@ -258,7 +263,8 @@ mod tests {
             mode: QueryMode::Brief,
             tiles: vec![TileResult::default()],
             overflowed_buffers: 0,
-        };
+        }
+        .totals();
         let end = WindowEnd {
             cycles: 0.0,
             latency: 6.0,

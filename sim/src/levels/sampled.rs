@@ -1229,7 +1229,9 @@ impl SampledModel {
                 let start = self.predicted.window_start();
                 let release = self.predicted.command_release();
                 let before = self.predicted.pipe_end();
-                let end = self.formulas.end_query(&spec, &result, start, release);
+                let end = self
+                    .formulas
+                    .end_query(&spec.shape(), &result, start, release);
                 self.predicted.end_query(end, &result);
                 // The window's work: its time on the predicted timeline, host gaps and all.
                 self.window.work = Work::of(self.predicted.pipe_end() - before, end.cycles);
@@ -1308,6 +1310,9 @@ impl SampledModel {
                 band.fragments()
             }
             IndexItem::Event(_) => return Ok(()),
+            IndexItem::Shape(_) | IndexItem::Totals(_) => {
+                unreachable!("the sampled level reads whole queries: its machines begin with them")
+            }
         };
         self.settle();
         self.core.count_fragments(count);
@@ -1342,7 +1347,7 @@ impl SampledModel {
         let (Some(run), Some(consistent)) = (&mut self.run, &mut self.consistent) else {
             return Ok(0);
         };
-        let writes_allowed = self.core.functional.writes_allowed();
+        let writes_allowed = self.core.writes_allowed();
         fragments.take(taken, |span, results| {
             let depth = run.machine.depth_buffer_mut();
             consistent.span(state, writes_allowed, span, results, depth)?;

@@ -146,9 +146,13 @@ impl ClosedLoop {
                 | Event::QueryBegin(_)
                 | Event::QueryEnd
         );
-        if !is_state_change {
-            return;
+        if is_state_change {
+            self.state_change();
         }
+    }
+
+    /// The driver issues a state change, a clear, or a query begin or end ([`Self::command`]).
+    pub fn state_change(&mut self) {
         if self.seen {
             self.host.state_changes(1);
         } else {

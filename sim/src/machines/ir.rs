@@ -371,7 +371,7 @@ impl IrMachine {
     }
 
     fn begin(&mut self, spec: &QuerySpec, event: u64) -> Result<(), SimError> {
-        check_spec(spec, event, self.open.as_ref().map(|q| q.spec.id))?;
+        check_spec(spec.shape(), event, self.open.as_ref().map(|q| q.spec.id))?;
         let registers = spec.tiles.len().saturating_mul(self.image_engines.len());
         if registers > MAX_TILE_REGISTERS {
             return Err(SimError::TileRegisters {

@@ -287,7 +287,7 @@ impl O2Machine {
                 });
             }
             Event::QueryBegin(spec) => {
-                check_spec(spec, index, self.front_open)?;
+                check_spec(spec.shape(), index, self.front_open)?;
                 self.front_open = Some(spec.id);
                 self.pending.push_back(Pending::QueryBegin {
                     spec: Box::new(spec.clone()),

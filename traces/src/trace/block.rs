@@ -16,8 +16,10 @@ pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// window table's blocks ([`crate::trace::windows`]); version 9 gives every stretch its runs
 /// of reads that end at its last fragment ([`crate::trace::FragmentStretch::ending`]), at
 /// two dearer read costs as well ([`crate::trace::DENSE_READ_COSTS`]); version 10 adds the
-/// band index's blocks beside the window index's ([`crate::trace::bands`]).
-pub const FORMAT_VERSION: u16 = 10;
+/// band index's blocks beside the window index's ([`crate::trace::bands`]); version 11
+/// gives query records the length of their tiles' bytes, and results their totals
+/// ([`crate::trace::TraceReader::skim_queries`]).
+pub const FORMAT_VERSION: u16 = 11;
 /// The first version whose indexed traces hold a band index ([`crate::trace::bands`]).
 pub const BANDS_VERSION: u16 = 10;
 /// The first version whose window index holds every count the O2 formulas take

@@ -15,7 +15,10 @@ use crate::golden::EventSink;
 use crate::hit_list::{
     listed_hits_per_tile, Hit, HitBounds, HitDigests, HitList, LISTED_HITS_PER_QUERY,
 };
-use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult, MAX_BUFFER_ENTRIES, MAX_TILES};
+use crate::query::{
+    QueryMode, QueryResult, QueryShape, QuerySpec, QueryTotals, TileResult, MAX_BUFFER_ENTRIES,
+    MAX_TILES,
+};
 use crate::state::{DepthFunc, Rect};
 use span_depths::span_depths;
 
@@ -68,6 +71,15 @@ pub(crate) mod tag {
     /// As BAND, with a varint mask of its runs that passed their depth test (under a
     /// verbose query). Version 10 on.
     pub const BAND_PASSING: u8 = 0x18;
+    /// A query begin whose rectangles' bytes are counted: id, mode, buffer entries and
+    /// tile count as QUERY_BEGIN's, then a varint length and that many bytes of rectangles.
+    /// Version 11 on, in place of QUERY_BEGIN.
+    pub const QUERY_BEGIN_SIZED: u8 = 0x19;
+    /// A query result with its totals and its tiles' bytes counted: id, mode, overflowed
+    /// buffers and tile count as QUERY_RESULT's, the NOHC, PHC and held hits summed over
+    /// the tiles, then a varint length and that many bytes of tile results. Version 11 on,
+    /// in place of QUERY_RESULT.
+    pub const QUERY_RESULT_TOTALED: u8 = 0x1A;
 }
 
 /// Most fragments in one span: a row of the widest viewport.
@@ -455,23 +467,39 @@ fn put_rect(out: &mut Vec<u8>, rect: &Rect) {
 pub(crate) fn encode_large_event(out: &mut Vec<u8>, event: &Event) {
     match event {
         Event::QueryBegin(spec) => {
-            out.push(tag::QUERY_BEGIN);
+            out.push(tag::QUERY_BEGIN_SIZED);
             put_uv(out, spec.id as u64);
             out.push(spec.mode.code());
             put_uv(out, spec.buffer_entries as u64);
             put_uv(out, spec.tiles.len() as u64);
-            spec.tiles.iter().for_each(|t| put_rect(out, t));
+            put_sized(out, |body| {
+                spec.tiles.iter().for_each(|t| put_rect(body, t))
+            });
         }
         Event::QueryResult(result) => {
-            out.push(tag::QUERY_RESULT);
+            let totals = result.totals();
+            out.push(tag::QUERY_RESULT_TOTALED);
             put_uv(out, result.id as u64);
             out.push(result.mode.code());
             put_uv(out, result.overflowed_buffers as u64);
             put_uv(out, result.tiles.len() as u64);
-            result.tiles.iter().for_each(|t| put_tile_result(out, t));
+            for sum in [totals.nohc, totals.phc, totals.held_hits] {
+                put_uv(out, sum);
+            }
+            put_sized(out, |body| {
+                result.tiles.iter().for_each(|t| put_tile_result(body, t))
+            });
         }
         _ => unreachable!("not a large event: {event:?}"),
     }
+}
+
+/// What `put` writes, after its length in bytes (so that a reader may pass over it).
+fn put_sized(out: &mut Vec<u8>, put: impl FnOnce(&mut Vec<u8>)) {
+    let mut body = Vec::new();
+    put(&mut body);
+    put_uv(out, body.len() as u64);
+    out.extend_from_slice(&body);
 }
 
 fn put_tile_result(out: &mut Vec<u8>, tile: &TileResult) {
@@ -541,35 +569,154 @@ fn rect(c: &mut Cursor) -> Result<Rect, PayloadError> {
     ))
 }
 
-/// Decode a query begin or result record (tag included), which must fill `bytes` exactly.
-fn decode_large_event(bytes: &[u8]) -> Result<Event, PayloadError> {
+/// Decode a query begin or result record (tag included), which must fill `bytes` exactly:
+/// whole, or skimmed when `skim`.
+fn decode_large_event(bytes: &[u8], skim: bool) -> Result<QueryRecord, PayloadError> {
     let mut c = Cursor::new(bytes, 0);
-    let event = match c.byte()? {
-        tag::QUERY_BEGIN => Event::QueryBegin(query_spec(&mut c)?),
-        tag::QUERY_RESULT => Event::QueryResult(query_result(&mut c, HitCoding::Digested)?),
-        tag::QUERY_RESULT_LISTED => Event::QueryResult(query_result(&mut c, HitCoding::Listed)?),
-        t => return Err(bad(0, format!("multi-block event has tag {t:#04x}"))),
+    let t = c.byte()?;
+    let Some(query) = query_record(&mut c, t, skim)? else {
+        return Err(bad(0, format!("multi-block event has tag {t:#04x}")));
     };
     if !c.at_end() {
         return Err(bad(c.pos, "multi-block event has bytes after its end"));
     }
-    Ok(event)
+    Ok(query)
+}
+
+/// A query begin or result as its reader asked for it.
+pub(crate) enum QueryRecord {
+    Whole(Event),
+    /// A begin, its tiles' rectangles passed over.
+    Shape(QueryShape),
+    /// A result, its tiles passed over.
+    Totals(QueryTotals),
+}
+
+/// The query record of tag `t` (read), whole or skimmed; None for another tag. A record
+/// from before version 11 has no lengths to pass over, so it is read whole and skimmed
+/// after.
+#[inline]
+fn query_record(c: &mut Cursor, t: u8, skim: bool) -> Result<Option<QueryRecord>, PayloadError> {
+    let event = match t {
+        tag::QUERY_BEGIN_SIZED => {
+            let shape = shape_head(c)?;
+            // Every rectangle takes at least 4 bytes.
+            let end = body_end(c, shape.tiles, 4, "rectangles")?;
+            if skim {
+                c.pos = end;
+                return Ok(Some(QueryRecord::Shape(shape)));
+            }
+            let spec = query_spec_tiles(c, shape)?;
+            body_read(c, end, "rectangles")?;
+            Event::QueryBegin(spec)
+        }
+        tag::QUERY_RESULT_TOTALED => {
+            let start = c.pos - 1;
+            let (totals, list_cap) = totals_head(c)?;
+            let end = body_end(c, totals.tiles, 10, "tile results")?;
+            if skim {
+                c.pos = end;
+                return Ok(Some(QueryRecord::Totals(totals)));
+            }
+            let result = query_result_tiles(c, totals, list_cap, HitCoding::Digested)?;
+            body_read(c, end, "tile results")?;
+            if result.totals() != totals {
+                return Err(bad(
+                    start,
+                    format!(
+                        "query {}'s result totals {totals:?} are not its tiles' {:?}",
+                        totals.id,
+                        result.totals()
+                    ),
+                ));
+            }
+            Event::QueryResult(result)
+        }
+        tag::QUERY_BEGIN => Event::QueryBegin(query_spec(c)?),
+        tag::QUERY_RESULT => Event::QueryResult(query_result(c, HitCoding::Digested)?),
+        tag::QUERY_RESULT_LISTED => Event::QueryResult(query_result(c, HitCoding::Listed)?),
+        _ => return Ok(None),
+    };
+    Ok(Some(match (skim, event) {
+        (true, Event::QueryBegin(spec)) => QueryRecord::Shape(spec.shape()),
+        (true, Event::QueryResult(result)) => QueryRecord::Totals(result.totals()),
+        (_, event) => QueryRecord::Whole(event),
+    }))
+}
+
+/// Where the body of a sized query record ends: its length read and checked to hold
+/// `count` items of at least `least` bytes each within the payload.
+fn body_end(c: &mut Cursor, count: usize, least: usize, what: &str) -> Result<usize, PayloadError> {
+    let pos = c.pos;
+    let len = c.uv_max(c.remaining() as u64, "query record length")? as usize;
+    if len < count * least {
+        return Err(bad(
+            pos,
+            format!("{count} {what} in {len} bytes (at least {least} each)"),
+        ));
+    }
+    Ok(c.pos + len)
+}
+
+/// Check a sized record's body was read to its end, no further.
+fn body_read(c: &Cursor, end: usize, what: &str) -> Result<(), PayloadError> {
+    match c.pos == end {
+        true => Ok(()),
+        false => Err(bad(
+            c.pos,
+            format!(
+                "{what} end at byte {}, not at {end} as their length says",
+                c.pos
+            ),
+        )),
+    }
+}
+
+/// A query begin's id, mode, buffer entries and tile count.
+fn shape_head(c: &mut Cursor) -> Result<QueryShape, PayloadError> {
+    Ok(QueryShape {
+        id: c.u32("query id")?,
+        mode: c.mode()?,
+        buffer_entries: c.u32("buffer entries")?,
+        tiles: c.uv_max(MAX_TILES as u64, "tile count")? as usize,
+    })
+}
+
+/// A totaled result's id, mode, overflowed buffers, tile count and sums, and the hits its
+/// tiles list at most.
+fn totals_head(c: &mut Cursor) -> Result<(QueryTotals, usize), PayloadError> {
+    let id = c.u32("query id")?;
+    let mode = c.mode()?;
+    let overflowed_buffers = c.u32("overflowed buffers")?;
+    let tiles = c.uv_max(MAX_TILES as u64, "tile count")? as usize;
+    let totals = QueryTotals {
+        id,
+        mode,
+        tiles,
+        nohc: c.uv()?,
+        phc: c.uv()?,
+        held_hits: c.uv()?,
+        overflowed_buffers,
+    };
+    Ok((totals, listed_hits_per_tile(tiles)))
 }
 
 fn query_spec(c: &mut Cursor) -> Result<QuerySpec, PayloadError> {
-    let id = c.u32("query id")?;
-    let mode = c.mode()?;
-    let buffer_entries = c.u32("buffer entries")?;
-    let count = c.uv_max(MAX_TILES as u64, "tile count")? as usize;
+    let shape = shape_head(c)?;
+    query_spec_tiles(c, shape)
+}
+
+/// The begin of `shape`, its rectangles read.
+fn query_spec_tiles(c: &mut Cursor, shape: QueryShape) -> Result<QuerySpec, PayloadError> {
     // Every tile takes at least 4 bytes: no allocation beyond what the payload can hold.
-    let mut tiles = Vec::with_capacity(count.min(c.remaining() / 4));
-    for _ in 0..count {
+    let mut tiles = Vec::with_capacity(shape.tiles.min(c.remaining() / 4));
+    for _ in 0..shape.tiles {
         tiles.push(rect(c)?);
     }
     Ok(QuerySpec {
-        id,
-        mode,
-        buffer_entries,
+        id: shape.id,
+        mode: shape.mode,
+        buffer_entries: shape.buffer_entries,
         tiles,
     })
 }
@@ -687,22 +834,42 @@ enum HitCoding {
     Digested,
 }
 
+/// A result as versions before 11 store it: no totals, no length.
 fn query_result(c: &mut Cursor, coding: HitCoding) -> Result<QueryResult, PayloadError> {
     let id = c.u32("query id")?;
     let mode = c.mode()?;
     let overflowed_buffers = c.u32("overflowed buffers")?;
-    let count = c.uv_max(MAX_TILES as u64, "tile count")? as usize;
-    let list_cap = listed_hits_per_tile(count);
-    // Every tile result takes at least 10 bytes.
-    let mut tiles = Vec::with_capacity(count.min(c.remaining() / 10));
-    for _ in 0..count {
-        push_tile_result(c, coding, list_cap, &mut tiles)?;
-    }
-    Ok(QueryResult {
+    let tiles = c.uv_max(MAX_TILES as u64, "tile count")? as usize;
+    let head = QueryTotals {
         id,
         mode,
         tiles,
+        nohc: 0,
+        phc: 0,
+        held_hits: 0,
         overflowed_buffers,
+    };
+    query_result_tiles(c, head, listed_hits_per_tile(tiles), coding)
+}
+
+/// The result whose id, mode, overflowed buffers and tile count `head` gives, its tiles
+/// read (`list_cap` hits listed in each at most).
+fn query_result_tiles(
+    c: &mut Cursor,
+    head: QueryTotals,
+    list_cap: usize,
+    coding: HitCoding,
+) -> Result<QueryResult, PayloadError> {
+    // Every tile result takes at least 10 bytes.
+    let mut tiles = Vec::with_capacity(head.tiles.min(c.remaining() / 10));
+    for _ in 0..head.tiles {
+        push_tile_result(c, coding, list_cap, &mut tiles)?;
+    }
+    Ok(QueryResult {
+        id: head.id,
+        mode: head.mode,
+        tiles,
+        overflowed_buffers: head.overflowed_buffers,
     })
 }
 
@@ -844,11 +1011,22 @@ pub(crate) struct DecodeContext<'a> {
     /// that starts mid-stream, for its fragments only): parts of large events are passed
     /// over, and no event reaches the tally.
     pub unchecked_events: bool,
+    /// Read queries' begins as their shapes and their results as their totals, their tiles
+    /// passed over ([`crate::trace::TraceReader::skim_queries`]; index lanes only).
+    pub skim_queries: bool,
 }
+
+/// Why an event reader never meets a skimmed query: only the index lanes' readers skim
+/// ([`crate::trace::TraceReader::skim_queries`]).
+const EVENTS_WHOLE: &str = "a reader of events reads its queries whole";
 
 /// A decoded record.
 enum Record {
     Event(Event),
+    /// A query begin, skimmed.
+    Shape(QueryShape),
+    /// A query result, skimmed.
+    Totals(QueryTotals),
     /// A span's header was read; its fragments follow.
     Span,
     /// Part of a large event was stored.
@@ -892,6 +1070,7 @@ impl BlockDecoder {
             match self.record(payload, ctx)? {
                 Record::Event(event) => return Ok(Some(event)),
                 Record::Span | Record::Part => {}
+                Record::Shape(_) | Record::Totals(_) => unreachable!("{EVENTS_WHOLE}"),
             }
         }
     }
@@ -945,6 +1124,8 @@ impl BlockDecoder {
             tag::SPAN => Err(bad(self.pos, "a span in a window-index block")),
             _ => Ok(match self.record(payload, ctx)? {
                 Record::Event(event) => Some(IndexItem::Event(event)),
+                Record::Shape(shape) => Some(IndexItem::Shape(shape)),
+                Record::Totals(totals) => Some(IndexItem::Totals(totals)),
                 Record::Span | Record::Part => None,
             }),
         }
@@ -1084,6 +1265,7 @@ impl BlockDecoder {
                 Record::Event(event) => sink.event(&event).map_err(DrainError::Sink)?,
                 Record::Span => self.drain_span(payload, sink, self.span)?,
                 Record::Part => {}
+                Record::Shape(_) | Record::Totals(_) => unreachable!("{EVENTS_WHOLE}"),
             }
         }
         ctx.tally.checked_fragments(unreported);
@@ -1126,19 +1308,24 @@ impl BlockDecoder {
                 if t == tag::PART {
                     return Ok(Record::Part);
                 }
-                let event = decode_large_event(ctx.assembly).map_err(|e| {
+                let query = decode_large_event(ctx.assembly, ctx.skim_queries).map_err(|e| {
                     bad(
                         start,
                         format!("in multi-block event at its byte {}: {}", e.pos, e.reason),
                     )
                 })?;
                 ctx.assembly.clear();
-                event
+                return self.query_read(query, start, c.pos, ctx);
             }
-            tag::QUERY_BEGIN => Event::QueryBegin(query_spec(&mut c)?),
-            tag::QUERY_RESULT => Event::QueryResult(query_result(&mut c, HitCoding::Digested)?),
-            tag::QUERY_RESULT_LISTED => {
-                Event::QueryResult(query_result(&mut c, HitCoding::Listed)?)
+            tag::QUERY_BEGIN
+            | tag::QUERY_BEGIN_SIZED
+            | tag::QUERY_RESULT
+            | tag::QUERY_RESULT_LISTED
+            | tag::QUERY_RESULT_TOTALED => {
+                let Some(query) = query_record(&mut c, t, ctx.skim_queries)? else {
+                    unreachable!("{t:#04x} is a query record's tag");
+                };
+                return self.query_read(query, start, c.pos, ctx);
             }
             tag::CLEAR => Event::Clear,
             tag::DEPTH_FUNC => {
@@ -1177,6 +1364,32 @@ impl BlockDecoder {
         self.pos = c.pos;
         self.events += 1;
         Ok(Record::Event(event))
+    }
+
+    /// A query record read from `start` to `end`: checked by the stream checks, whole or
+    /// skimmed.
+    fn query_read(
+        &mut self,
+        query: QueryRecord,
+        start: usize,
+        end: usize,
+        ctx: &mut DecodeContext,
+    ) -> Result<Record, PayloadError> {
+        if !ctx.unchecked_events {
+            match &query {
+                QueryRecord::Whole(event) => ctx.tally.event(event),
+                QueryRecord::Shape(shape) => ctx.tally.query_begin(*shape),
+                QueryRecord::Totals(totals) => ctx.tally.query_result(totals),
+            }
+            .map_err(|reason| bad(start, reason))?;
+        }
+        self.pos = end;
+        self.events += 1;
+        Ok(match query {
+            QueryRecord::Whole(event) => Record::Event(event),
+            QueryRecord::Shape(shape) => Record::Shape(shape),
+            QueryRecord::Totals(totals) => Record::Totals(totals),
+        })
     }
 
     /// Read a span header, check the span lies in a `width` x `height` viewport, and
@@ -1354,6 +1567,69 @@ mod tests {
         assert!(error.reason.contains("overflows"), "{}", error.reason);
     }
 
+    /// A result record as version 11 writes it: tag, id 7, mode brief, 0 overflowed
+    /// buffers, 1 tile, then NOHC 3, PHC 4 and 0 held hits summed, then the tile's bytes.
+    /// Read whole, its totals must be its tiles'; skimmed, they are taken as they are.
+    #[test]
+    fn a_result_whose_totals_are_not_its_tiles_is_refused_where_read_whole() {
+        let result = QueryResult {
+            id: 7,
+            mode: QueryMode::Brief,
+            tiles: vec![TileResult {
+                nohc: 3,
+                phc: 4,
+                ..TileResult::default()
+            }],
+            overflowed_buffers: 0,
+        };
+        let mut record = Vec::new();
+        encode_large_event(&mut record, &Event::QueryResult(result.clone()));
+        assert_eq!(
+            record[..8],
+            [
+                tag::QUERY_RESULT_TOTALED,
+                7,
+                QueryMode::Brief.code(),
+                0,
+                1,
+                3,
+                4,
+                0
+            ]
+        );
+        let whole = |record: &[u8]| match decode_large_event(record, false) {
+            Ok(QueryRecord::Whole(Event::QueryResult(result))) => Ok(result),
+            Ok(_) => panic!("not a whole result"),
+            Err(e) => Err(e),
+        };
+        let skimmed = |record: &[u8]| match decode_large_event(record, true) {
+            Ok(QueryRecord::Totals(totals)) => totals,
+            _ => panic!("not totals"),
+        };
+        assert_eq!(whole(&record).unwrap(), result);
+        assert_eq!(skimmed(&record), result.totals());
+        // NOHC 3 -> 2: read whole, refused at the record's first byte, naming the query.
+        record[5] = 2;
+        let error = whole(&record).unwrap_err();
+        assert_eq!(error.pos, 0);
+        assert!(
+            error.reason.contains("query 7's result totals"),
+            "{}",
+            error.reason
+        );
+        assert_eq!(skimmed(&record).nohc, 2);
+        // A length past the record's end is refused either way.
+        record[8] = 0x7f;
+        for skim in [false, true] {
+            let error = decode_large_event(&record, skim).err().expect("refused");
+            assert!(
+                error.reason.contains("query record length"),
+                "{}",
+                error.reason
+            );
+        }
+    }
+
     #[test]
     fn a_version_2_result_with_every_hit_listed_reads_as_a_hit_list() {
         // The record as versions 1 and 2 wrote it: tag, id 7, mode verbose, 0 overflowed
@@ -1362,7 +1638,9 @@ mod tests {
         let mut record = vec![tag::QUERY_RESULT_LISTED, 7, QueryMode::Verbose.code(), 0, 1];
         record.extend([3, 4, 2, 5, 1, 2, 9, 9, 0, 3]);
         record.extend([4, 2, 6, 0, 1, 2]);
-        let Event::QueryResult(result) = decode_large_event(&record).unwrap() else {
+        let QueryRecord::Whole(Event::QueryResult(result)) =
+            decode_large_event(&record, false).unwrap()
+        else {
             panic!("not a result");
         };
         let hits = [(2, 1), (5, 1), (4, 2)];

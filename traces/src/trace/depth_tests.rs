@@ -329,6 +329,7 @@ impl<R: Read> TestedFragments<R> {
             tally: &mut self.tally,
             assembly: &mut self.assembly,
             unchecked_events: true,
+            skim_queries: false,
         };
         let (events_offset, tests_offset) = self.offsets;
         let drained = self

@@ -4,7 +4,9 @@
 
 use crate::depth_layout::DepthLayout;
 use crate::event::Event;
-use crate::query::{QueryMode, QueryResult, MAX_BUFFER_ENTRIES, MAX_TILES};
+use crate::query::{
+    QueryMode, QueryResult, QueryShape, QueryTotals, MAX_BUFFER_ENTRIES, MAX_TILES,
+};
 use crate::raster::RasterProfile;
 use crate::state::{DepthFunc, MAX_VIEWPORT_SIDE};
 use serde::{Deserialize, Serialize};
@@ -237,15 +239,6 @@ pub struct ClosedLoopCounts {
     pub host_nodes: u64,
 }
 
-/// The parts of a query the stream checks need.
-#[derive(Clone, Copy, Debug)]
-struct QueryShape {
-    id: u32,
-    mode: QueryMode,
-    tiles: usize,
-    buffer_entries: u32,
-}
-
 /// Counts an event stream and checks its structure: fragments inside the viewport, queries
 /// begun before they end and not nested, results matching the query that just ended.
 #[derive(Clone, Debug)]
@@ -266,6 +259,14 @@ pub(crate) struct StreamTally {
     depth_writes: bool,
     max_query_tiles: u64,
     conditional_open: bool,
+}
+
+/// Hits one tile's buffer of the query `shape` holds at most.
+fn hit_room(shape: QueryShape) -> u64 {
+    match shape.mode {
+        QueryMode::Verbose => (shape.buffer_entries - crate::query::BRIEF_RECORD_ENTRIES) as u64,
+        _ => 0,
+    }
 }
 
 impl StreamTally {
@@ -333,41 +334,7 @@ impl StreamTally {
             }
             Event::Cull(on) => features.culling |= on,
             Event::Scissor(rect) => features.scissor |= rect.is_some(),
-            Event::QueryBegin(spec) => {
-                if let Some(open) = self.open {
-                    return Err(format!(
-                        "query {} begins inside open query {}",
-                        spec.id, open.id
-                    ));
-                }
-                if spec.tiles.len() > MAX_TILES {
-                    return Err(format!(
-                        "query {} has {} tiles (most {MAX_TILES})",
-                        spec.id,
-                        spec.tiles.len()
-                    ));
-                }
-                if !(crate::query::BRIEF_RECORD_ENTRIES..=MAX_BUFFER_ENTRIES)
-                    .contains(&spec.buffer_entries)
-                {
-                    return Err(format!(
-                        "query {} buffer of {} entries",
-                        spec.id, spec.buffer_entries
-                    ));
-                }
-                self.open = Some(QueryShape {
-                    id: spec.id,
-                    mode: spec.mode,
-                    tiles: spec.tiles.len(),
-                    buffer_entries: spec.buffer_entries,
-                });
-                self.awaiting_result = None;
-                self.summary.queries += 1;
-                self.summary.queries_by_mode.count(spec.mode);
-                self.mode_bits |= 1 << spec.mode.code();
-                self.occlusion_mode_open = spec.mode.is_occlusion_render_mode();
-                self.max_query_tiles = self.max_query_tiles.max(spec.tiles.len() as u64);
-            }
+            Event::QueryBegin(spec) => self.begin(spec.shape())?,
             Event::QueryEnd => match self.open.take() {
                 Some(open) => {
                     self.awaiting_result = Some(open);
@@ -376,14 +343,8 @@ impl StreamTally {
                 None => return Err("query end without begin".to_owned()),
             },
             Event::QueryResult(result) => {
-                let Some(ended) = self.awaiting_result.take() else {
-                    return Err(format!(
-                        "result of query {} without a query end before it",
-                        result.id
-                    ));
-                };
-                self.check_result(ended, result)?;
-                self.summary.query_results += 1;
+                let ended = self.result(&result.totals())?;
+                self.check_tiles(ended, result)?;
             }
             Event::Geometry(batch) => {
                 let counts = &mut self.summary.closed_loop;
@@ -412,19 +373,81 @@ impl StreamTally {
         Ok(())
     }
 
-    fn check_result(&self, ended: QueryShape, result: &QueryResult) -> Result<(), String> {
-        if result.id != ended.id || result.mode != ended.mode || result.tiles.len() != ended.tiles {
+    /// Check and account a query begin read skimmed, as [`Self::event`] does a whole one.
+    pub(crate) fn query_begin(&mut self, shape: QueryShape) -> Result<(), String> {
+        self.begin(shape)?;
+        self.summary.events += 1;
+        Ok(())
+    }
+
+    /// Check and account a query result read skimmed, as [`Self::event`] does a whole one
+    /// but for its tiles one by one.
+    pub(crate) fn query_result(&mut self, totals: &QueryTotals) -> Result<(), String> {
+        self.result(totals)?;
+        self.summary.events += 1;
+        Ok(())
+    }
+
+    fn begin(&mut self, shape: QueryShape) -> Result<(), String> {
+        if let Some(open) = self.open {
             return Err(format!(
-                "result (query {}, {}, {} tiles) does not match the query that ended (query {}, {}, {} tiles)",
-                result.id, result.mode.name(), result.tiles.len(), ended.id, ended.mode.name(), ended.tiles
+                "query {} begins inside open query {}",
+                shape.id, open.id
             ));
         }
-        let hit_room = match ended.mode {
-            QueryMode::Verbose => {
-                (ended.buffer_entries - crate::query::BRIEF_RECORD_ENTRIES) as u64
-            }
-            _ => 0,
+        if shape.tiles > MAX_TILES {
+            return Err(format!(
+                "query {} has {} tiles (most {MAX_TILES})",
+                shape.id, shape.tiles
+            ));
+        }
+        if !(crate::query::BRIEF_RECORD_ENTRIES..=MAX_BUFFER_ENTRIES)
+            .contains(&shape.buffer_entries)
+        {
+            return Err(format!(
+                "query {} buffer of {} entries",
+                shape.id, shape.buffer_entries
+            ));
+        }
+        self.open = Some(shape);
+        self.awaiting_result = None;
+        self.summary.queries += 1;
+        self.summary.queries_by_mode.count(shape.mode);
+        self.mode_bits |= 1 << shape.mode.code();
+        self.occlusion_mode_open = shape.mode.is_occlusion_render_mode();
+        self.max_query_tiles = self.max_query_tiles.max(shape.tiles as u64);
+        Ok(())
+    }
+
+    /// A result (its totals) after its query's end: checked against the query that ended,
+    /// which it returns.
+    fn result(&mut self, totals: &QueryTotals) -> Result<QueryShape, String> {
+        let Some(ended) = self.awaiting_result.take() else {
+            return Err(format!(
+                "result of query {} without a query end before it",
+                totals.id
+            ));
         };
+        if totals.id != ended.id || totals.mode != ended.mode || totals.tiles != ended.tiles {
+            return Err(format!(
+                "result (query {}, {}, {} tiles) does not match the query that ended (query {}, {}, {} tiles)",
+                totals.id, totals.mode.name(), totals.tiles, ended.id, ended.mode.name(), ended.tiles
+            ));
+        }
+        let room = hit_room(ended);
+        if totals.held_hits > room.saturating_mul(ended.tiles as u64) {
+            return Err(format!(
+                "query {}'s {} tiles hold {} hits (room for {room} each)",
+                ended.id, ended.tiles, totals.held_hits
+            ));
+        }
+        self.summary.query_results += 1;
+        Ok(ended)
+    }
+
+    /// A whole result's tiles, each checked against the query that ended.
+    fn check_tiles(&self, ended: QueryShape, result: &QueryResult) -> Result<(), String> {
+        let hit_room = hit_room(ended);
         for (index, tile) in result.tiles.iter().enumerate() {
             if tile.hits.len() > hit_room {
                 return Err(format!(

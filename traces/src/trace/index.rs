@@ -32,6 +32,7 @@ use super::dense_reads::{DenseReadFinder, DenseRuns, DENSE_READ_COSTS};
 use crate::depth_layout::{DepthAddress, DepthLayout, DepthRead, LastRead};
 use crate::event::{Event, Fragment};
 use crate::golden::FunctionalModel;
+use crate::query::{QueryShape, QueryTotals};
 use crate::state::RenderState;
 
 /// What a run of fragments between two other events asks of the O2-like machine's blocks.
@@ -192,6 +193,10 @@ pub enum IndexItem {
     Event(Event),
     Stretch(FragmentStretch),
     Band(FragmentBand),
+    /// A query's begin, skimmed ([`crate::trace::TraceReader::skim_queries`]).
+    Shape(QueryShape),
+    /// A query's result, skimmed.
+    Totals(QueryTotals),
 }
 
 /// The writer's counting state: the functional model (render state, depth buffer, open
@@ -281,7 +286,8 @@ impl WindowIndexer {
 pub(super) mod tests {
     use super::*;
     use crate::event::DEPTH_ONE;
-    use crate::query::{QueryMode, QuerySpec};
+    use crate::hit_list::HitList;
+    use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult};
     use crate::state::Rect;
     use crate::trace::{TraceError, TraceHeader, TraceReader, TraceWriter, WriterOptions};
 
@@ -359,14 +365,104 @@ pub(super) mod tests {
             }
             Ok(items)
         });
-        for other in [&visited, &by_blocks] {
-            match (&one_by_one, other) {
-                (Ok(a), Ok(b)) => assert_eq!(a, b),
-                (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
-                _ => panic!("the readings disagree: {one_by_one:?} against {other:?}"),
+        // Skimmed, one by one and visited: each query's begin its shape and its result its
+        // totals, the rest as read whole (or the same error: the tiles passed over are still
+        // under their block's checksum).
+        let skimmed_one_by_one = TraceReader::new(bytes).and_then(|mut reader| {
+            reader.skim_queries();
+            let mut items = Vec::new();
+            while let Some(item) = reader.next_index_item()? {
+                items.push(item);
             }
+            Ok(items)
+        });
+        let skimmed_visited = TraceReader::new(bytes).and_then(|mut reader| {
+            reader.skim_queries();
+            let mut items = Vec::new();
+            reader
+                .for_each_index_item(|item| {
+                    items.push(item.clone());
+                    Ok::<(), std::convert::Infallible>(())
+                })
+                .map_err(crate::trace::ReadError::into_trace)?;
+            Ok(items)
+        });
+        let said = |reading: &Result<Vec<IndexItem>, TraceError>| match reading {
+            Ok(items) => Ok(items.clone()),
+            Err(e) => Err(e.to_string()),
+        };
+        let skimmed = said(&one_by_one).map(|items| {
+            items
+                .into_iter()
+                .map(|item| match item {
+                    IndexItem::Event(Event::QueryBegin(spec)) => IndexItem::Shape(spec.shape()),
+                    IndexItem::Event(Event::QueryResult(result)) => {
+                        IndexItem::Totals(result.totals())
+                    }
+                    item => item,
+                })
+                .collect::<Vec<_>>()
+        });
+        for (a, b) in [
+            (said(&one_by_one), said(&visited)),
+            (said(&one_by_one), said(&by_blocks)),
+            (skimmed.clone(), said(&skimmed_one_by_one)),
+            (skimmed, said(&skimmed_visited)),
+        ] {
+            assert!(a == b, "the readings disagree: {a:?} against {b:?}");
         }
         one_by_one
+    }
+
+    /// A verbose query whose first tile's buffer overflows, in a window index: read
+    /// skimmed (by `index_of`, one by one and visited), its begin is its shape and its
+    /// result its totals, the rest as read whole.
+    #[test]
+    fn a_skimmed_query_is_its_shape_and_its_results_totals() {
+        let spec = QuerySpec {
+            id: 3,
+            mode: QueryMode::Verbose,
+            // Room for 2 hits.
+            buffer_entries: 10,
+            tiles: vec![Rect::new(0, 0, 8, 16), Rect::new(8, 0, 8, 16)],
+        };
+        // Three fragments pass in tile 0 into the cleared buffer: more than its room, so it
+        // overflowed and holds one hit (the terminator took the last entry); tile 1 none.
+        let mut first = TileResult::default();
+        for x in 0..3 {
+            first.record(x, 0, 100, true);
+        }
+        first.hits = HitList::from_hits([(0, 0)], 64);
+        first.overflowed = true;
+        let result = QueryResult {
+            id: 3,
+            mode: QueryMode::Verbose,
+            tiles: vec![first, TileResult::default()],
+            overflowed_buffers: 1,
+        };
+        let mut events = vec![Event::QueryBegin(spec.clone()), Event::Primitive];
+        events.extend((0..3).map(|x| frag(x, 0, 100)));
+        events.extend([Event::QueryEnd, Event::QueryResult(result.clone())]);
+        let items = index_of(&indexed(&events)).unwrap();
+        assert!(items.contains(&IndexItem::Event(Event::QueryBegin(spec.clone()))));
+        assert!(items.contains(&IndexItem::Event(Event::QueryResult(result.clone()))));
+        let totals = QueryTotals {
+            id: 3,
+            mode: QueryMode::Verbose,
+            tiles: 2,
+            nohc: 3,
+            phc: 3,
+            held_hits: 1,
+            overflowed_buffers: 1,
+        };
+        assert_eq!(result.totals(), totals);
+        let shape = QueryShape {
+            id: 3,
+            mode: QueryMode::Verbose,
+            buffer_entries: 10,
+            tiles: 2,
+        };
+        assert_eq!(spec.shape(), shape);
     }
 
     /// A visitor's error stops the reading at its item and the reader for good.
@@ -472,7 +568,7 @@ pub(super) mod tests {
             .into_iter()
             .filter_map(|item| match item {
                 IndexItem::Stretch(stretch) => Some(stretch.first_reads),
-                IndexItem::Event(_) | IndexItem::Band(_) => None,
+                _ => None,
             })
             .collect();
         let every_fourth = (0..62).step_by(4).fold(0u64, |mask, k| mask | 1 << k);

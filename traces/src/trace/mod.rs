@@ -1,13 +1,14 @@
 //! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
 //!
-//! # Layout (version 9; all integers little-endian; versions 1, without the closed loop's
+//! # Layout (version 11; all integers little-endian; versions 1, without the closed loop's
 //! records, 2, with verbose hits stored one by one, 3, without window-index blocks, 4,
 //! without depth-test blocks, 5, without the index's first reads, 6, without its densest
-//! runs of reads, 7, without the window table, and 8, without the index's ending runs of
-//! reads, still read)
+//! runs of reads, 7, without the window table, 8, without the index's ending runs of
+//! reads, 9, without the band index, and 10, with query records whose tiles a reader
+//! cannot pass over, still read)
 //!
 //! ```text
-//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 9 | flags u16 = 0
+//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 11 | flags u16 = 0
 //!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
 //!               (the CRC covers version .. end of JSON)
 //! event blocks  block header (20) | stored payload (stored_len), with window-index blocks
@@ -33,7 +34,10 @@
 //! per row from the last row step); each further depth relative to the one before plus the
 //! previous span's x slope. All prediction state resets at each block start, so blocks
 //! decode independently; only a query begin or result too large for one block is split
-//! into `PART` records across consecutive blocks. See `codec.rs` for the record tags,
+//! into `PART` records across consecutive blocks. A query's begin and result records give
+//! the length of their tiles' bytes, and a result its totals before them, so that a reader
+//! that needs no tile (the O2's analytic level) passes over them
+//! ([`TraceReader::skim_queries`]). See `codec.rs` for the record tags,
 //! [`index`] for the window index, the stream a model that needs no fragment reads,
 //! [`depth_tests`] for the depth tests' results a model starting mid-trace reads, and
 //! [`windows`] for the window table, the windows' sizes a sampled model reads ahead.

@@ -51,6 +51,8 @@ pub struct TraceReader<R: Read> {
     failed: bool,
     /// The file's format version.
     version: u16,
+    /// The index lanes' queries are read skimmed ([`TraceReader::skim_queries`]).
+    skim_queries: bool,
 }
 
 /// Which blocks [`TraceReader::load_block`] decodes.
@@ -95,6 +97,7 @@ impl<R: Read> TraceReader<R> {
             summary: None,
             failed: false,
             version: FORMAT_VERSION,
+            skim_queries: false,
         };
         reader.header = reader.read_file_header()?;
         reader.tally = StreamTally::new(&reader.header);
@@ -573,7 +576,13 @@ impl<R: Read> TraceReader<R> {
                 }
                 continue;
             }
-            let mut ctx = checked_context(&reader.header, &mut reader.tally, &mut reader.assembly);
+            let skim = reader.skim_queries && wanted != Wanted::Events;
+            let mut ctx = checked_context(
+                &reader.header,
+                &mut reader.tally,
+                &mut reader.assembly,
+                skim,
+            );
             match decode(&mut reader.decoder, &reader.payload, &mut ctx) {
                 Ok(Some(record)) => return Ok(Some(record)),
                 Ok(None) => reader.end_block()?,
@@ -598,7 +607,12 @@ impl<R: Read> TraceReader<R> {
             if !reader.in_block && !reader.load_block(Wanted::Events)? {
                 return Ok(false);
             }
-            let mut ctx = checked_context(&reader.header, &mut reader.tally, &mut reader.assembly);
+            let mut ctx = checked_context(
+                &reader.header,
+                &mut reader.tally,
+                &mut reader.assembly,
+                false,
+            );
             match reader.decoder.drain(&reader.payload, &mut ctx, sink) {
                 Ok(()) => {}
                 Err(DrainError::Payload(e)) => return Err(reader.corrupt(e)),
@@ -632,6 +646,16 @@ impl<R: Read> TraceReader<R> {
             return Err(self.mixed_reading());
         }
         self.next_record(Wanted::Index, BlockDecoder::next_index_item)
+    }
+
+    /// Read the index lanes' queries skimmed from here on: each begin as its shape and each
+    /// result as its totals ([`IndexItem::Shape`], [`IndexItem::Totals`]), their tiles
+    /// passed over unread (a version-11 record says where its tiles end; an older one is
+    /// read whole and summed). For a reader that asks nothing of a query's tiles, as the
+    /// O2's analytic level: on the lazy-grid walk (156 queries, 12,912 tiles) reading them
+    /// had been a tenth of its run. Events are read whole as ever.
+    pub fn skim_queries(&mut self) {
+        self.skim_queries = true;
     }
 
     /// Hand every remaining item of the window index to `visit`, block by block: what
@@ -691,7 +715,12 @@ impl<R: Read> TraceReader<R> {
         if self.at_end() || !self.in_block && !self.guarded(|reader| reader.load_block(wanted))? {
             return Ok(false);
         }
-        let mut ctx = checked_context(&self.header, &mut self.tally, &mut self.assembly);
+        let mut ctx = checked_context(
+            &self.header,
+            &mut self.tally,
+            &mut self.assembly,
+            self.skim_queries,
+        );
         match self
             .decoder
             .visit_index_items(&self.payload, &mut ctx, &mut visit)
@@ -764,6 +793,7 @@ fn checked_context<'a>(
     header: &TraceHeader,
     tally: &'a mut StreamTally,
     assembly: &'a mut Vec<u8>,
+    skim_queries: bool,
 ) -> DecodeContext<'a> {
     DecodeContext {
         width: header.width,
@@ -771,6 +801,7 @@ fn checked_context<'a>(
         tally,
         assembly,
         unchecked_events: false,
+        skim_queries,
     }
 }
 

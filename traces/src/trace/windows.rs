@@ -134,6 +134,9 @@ impl WindowScout {
             IndexItem::Event(event) => self.event(event),
             IndexItem::Stretch(stretch) => self.fragments(stretch.fragments),
             IndexItem::Band(band) => self.fragments(band.fragments()),
+            // As their events: a begin closes a window that ended, a result does not.
+            IndexItem::Shape(_) => self.close_ended(),
+            IndexItem::Totals(_) => {}
         }
     }
 

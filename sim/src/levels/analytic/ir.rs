@@ -89,7 +89,7 @@ use occsim_traces::golden::FunctionalModel;
 #[cfg(doc)]
 use occsim_traces::trace::BAND_ROWS;
 use occsim_traces::trace::{FragmentBand, RowRun};
-use occsim_traces::{Fragment, QueryMode, QuerySpec, Rect, Span};
+use occsim_traces::{Fragment, QueryMode, QueryShape, QuerySpec, Rect, Span};
 use std::ops::Range;
 
 /// Counts and clocks of one window (see the module docs). Clocks count in slots of
@@ -1020,7 +1020,7 @@ impl IrBottleneck {
 
     /// The query ended; the window that began in cycle `start` closes: its cycles and the
     /// query's latency.
-    pub(super) fn end_query(&mut self, spec: &QuerySpec, start: f64, release: f64) -> WindowEnd {
+    pub(super) fn end_query(&mut self, shape: &QueryShape, start: f64, release: f64) -> WindowEnd {
         let open = self.open.take();
         let service = open.as_ref().map_or(1, |q| q.service);
         let hits_sent = open.map_or(Vec::new(), |q| q.hits_sent);
@@ -1037,11 +1037,11 @@ impl IrBottleneck {
             .collect();
         // Words as the machine moves them: 8 a tile from every Image Engine, and a verbose
         // query's hits, each tile's within its buffer's room, merged within it.
-        let tiles = spec.tiles.len();
-        let shape = ReportShape {
+        let tiles = shape.tiles;
+        let report = ReportShape {
             tiles: tiles as u64,
-            room: match spec.mode {
-                QueryMode::Verbose => hit_room(spec.buffer_entries),
+            room: match shape.mode {
+                QueryMode::Verbose => hit_room(shape.buffer_entries),
                 _ => u64::MAX,
             },
         };
@@ -1061,14 +1061,19 @@ impl IrBottleneck {
                 merged_ready(
                     &self.arch.local_merge_network(),
                     board,
-                    shape,
+                    report,
                     &mut self.host,
                 )
             })
             .collect();
         let global = self.arch.global_merge_network();
-        let merged = merged_ready(&global, &board_reports, shape, &mut self.host);
-        let available = delivered(&global, &merged, shape, self.arch.report_dma_bits_per_cycle);
+        let merged = merged_ready(&global, &board_reports, report, &mut self.host);
+        let available = delivered(
+            &global,
+            &merged,
+            report,
+            self.arch.report_dma_bits_per_cycle,
+        );
         self.window.restart_at(cycles);
         let latency = (available - end_cycle) as f64;
         WindowEnd {

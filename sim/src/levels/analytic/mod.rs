@@ -26,7 +26,7 @@ use crate::levels::predicted_loop::PredictedLoop;
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::state::RenderState;
 use occsim_traces::trace::{FragmentBand, FragmentStretch, IndexItem, TraceHeader};
-use occsim_traces::{Event, Fragment, QueryResult, QuerySpec, Span};
+use occsim_traces::{Event, Fragment, QueryShape, QueryTotals, Span};
 
 pub use crate::levels::level::WindowEnd;
 
@@ -151,7 +151,7 @@ impl Formulas {
         match (self, event) {
             (Formulas::O2(o2), Event::Primitive) => o2.primitive(front.release_in_window()),
             (Formulas::Ir(ir), Event::Primitive) => ir.primitive(front.release_in_window()),
-            (Formulas::O2(o2), Event::QueryBegin(spec)) => o2.begin(spec),
+            (Formulas::O2(o2), Event::QueryBegin(spec)) => o2.begin(&spec.shape()),
             (Formulas::O2(o2), Event::Clear) => o2.clear(),
             (Formulas::Ir(ir), Event::QueryBegin(spec)) => ir.begin(spec),
             _ => {}
@@ -167,11 +167,8 @@ impl Formulas {
     /// rasterizer runs on behind it, and the records still wait for the next fragments'
     /// reads; on the hard cases a query followed by a clear takes 22 cycles on the machine.)
     pub(crate) fn before_event(&mut self, event: &Event) {
-        match (&mut *self, matches!(event, Event::Fragment(_))) {
-            (Formulas::O2(o2), false) => o2.end_run(),
-            // As a band of the band index ends there.
-            (Formulas::Ir(ir), false) => ir.close_stretch(),
-            _ => {}
+        if !matches!(event, Event::Fragment(_)) {
+            self.end_run();
         }
         if let (
             Formulas::O2(o2),
@@ -179,6 +176,24 @@ impl Formulas {
         ) = (self, event)
         {
             o2.close_head();
+        }
+    }
+
+    /// An event other than a fragment comes: a run of fragments ends.
+    pub(crate) fn end_run(&mut self) {
+        match self {
+            Formulas::O2(o2) => o2.end_run(),
+            // As a band of the band index ends there.
+            Formulas::Ir(ir) => ir.close_stretch(),
+        }
+    }
+
+    /// A query begins, read skimmed: only the O2's formulas read a window index, and they
+    /// ask nothing of its tiles but their number.
+    pub(crate) fn begin_skimmed(&mut self, shape: &QueryShape) {
+        match self {
+            Formulas::O2(o2) => o2.begin(shape),
+            Formulas::Ir(_) => unreachable!("the IR formulas read whole queries"),
         }
     }
 
@@ -200,14 +215,14 @@ impl Formulas {
 
     pub(crate) fn end_query(
         &mut self,
-        spec: &QuerySpec,
-        result: &QueryResult,
+        shape: &QueryShape,
+        totals: &QueryTotals,
         start: f64,
         release: f64,
     ) -> WindowEnd {
         match self {
-            Formulas::O2(o2) => o2.end_query(spec, result, start, release),
-            Formulas::Ir(ir) => ir.end_query(spec, start, release),
+            Formulas::O2(o2) => o2.end_query(shape, totals, start, release),
+            Formulas::Ir(ir) => ir.end_query(shape, start, release),
         }
     }
 
@@ -235,7 +250,7 @@ impl Formulas {
 pub struct AnalyticModel {
     core: FunctionalCore,
     formulas: Formulas,
-    open: Option<QuerySpec>,
+    open: Option<QueryShape>,
     /// The windows' times in the closed loop (`Σ T_w` when nothing holds the pipe back).
     frames: PredictedLoop,
     latencies: Vec<u64>,
@@ -316,7 +331,7 @@ impl AnalyticModel {
                 return Ok(());
             }
             // A malformed begin is refused by the core below, before any end.
-            Event::QueryBegin(spec) => self.open = Some(spec.clone()),
+            Event::QueryBegin(spec) => self.open = Some(spec.shape()),
             _ => {}
         }
         self.formulas.before_event(event);
@@ -326,23 +341,55 @@ impl AnalyticModel {
         self.formulas.idle(self.frames.take_idle());
         self.settle();
         self.formulas.event(event, &self.frames);
-        if let Some(result) = self.core.event(event)? {
-            let Some(spec) = self.open.take() else {
-                return Ok(());
-            };
-            let start = self.frames.window_start();
-            let release = self.frames.command_release();
-            let end = self.formulas.end_query(&spec, &result, start, release);
-            self.frames.end_query(end, &result);
-            self.latencies.push(end.latency.ceil() as u64);
+        if let Some(totals) = self.core.event(event)? {
+            self.end_query(&totals);
         }
         Ok(())
+    }
+
+    /// A query begin read skimmed, taken as [`Self::event`] takes a whole one (a command, no
+    /// fragment: the formulas' run ends, the host issues it, the pipe may idle first).
+    fn begin_skimmed(&mut self, shape: &QueryShape) -> Result<(), SimError> {
+        self.open = Some(*shape);
+        self.formulas.end_run();
+        self.settle();
+        self.frames.query_begin();
+        self.formulas.idle(self.frames.take_idle());
+        self.settle();
+        self.formulas.begin_skimmed(shape);
+        self.core.begin_skimmed(*shape)
+    }
+
+    /// A query result read skimmed, taken as [`Self::event`] takes a whole one (no command:
+    /// the formulas' run ends, and the query that ended takes its result).
+    fn result_skimmed(&mut self, totals: &QueryTotals) -> Result<(), SimError> {
+        self.formulas.end_run();
+        self.settle();
+        self.formulas.idle(self.frames.take_idle());
+        self.settle();
+        let totals = self.core.result_skimmed(totals)?;
+        self.end_query(&totals);
+        Ok(())
+    }
+
+    /// The query that began last ended with a result of `totals`: its window closes.
+    fn end_query(&mut self, totals: &QueryTotals) {
+        let Some(shape) = self.open.take() else {
+            return;
+        };
+        let start = self.frames.window_start();
+        let release = self.frames.command_release();
+        let end = self.formulas.end_query(&shape, totals, start, release);
+        self.frames.end_query(end, totals);
+        self.latencies.push(end.latency.ceil() as u64);
     }
 
     /// One item of a window index: a stretch of fragments counted whole, or an event.
     pub fn index_item(&mut self, item: &IndexItem) -> Result<(), SimError> {
         match item {
             IndexItem::Event(event) => self.event(event),
+            IndexItem::Shape(shape) => self.begin_skimmed(shape),
+            IndexItem::Totals(totals) => self.result_skimmed(totals),
             IndexItem::Stretch(stretch) => {
                 let state = self.core.functional.state();
                 self.formulas.stretch(stretch, state);

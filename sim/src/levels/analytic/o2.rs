@@ -250,7 +250,7 @@ use occsim_traces::golden::FunctionalModel;
 use occsim_traces::query::BRIEF_RECORD_ENTRIES;
 use occsim_traces::state::RenderState;
 use occsim_traces::trace::{DenseReadFinder, DenseRuns, FragmentStretch, FIRST_READS_FRAGMENTS};
-use occsim_traces::{Fragment, QueryMode, QueryResult, QuerySpec, Span};
+use occsim_traces::{Fragment, QueryMode, QueryShape, QueryTotals, Span};
 use std::collections::VecDeque;
 
 /// Counts of one stretch of work (see the module table): a primitive's fragments, or the
@@ -670,21 +670,25 @@ impl Pipe {
     }
 }
 
-/// Record words a query writes at its end, and the verbose hit words its engines sent.
-pub fn query_words(spec: &QuerySpec, result: &QueryResult) -> (u64, u64) {
-    let room = spec.buffer_entries.saturating_sub(BRIEF_RECORD_ENTRIES) as u64;
-    let mut records = 0;
-    let mut hits = 0;
-    for tile in &result.tiles {
-        records += BRIEF_RECORD_ENTRIES as u64;
-        if spec.mode == QueryMode::Verbose {
-            hits += tile.nohc.min(room);
-            if tile.overflowed && room > 0 {
-                records += 1;
-            }
-        }
+/// Record words a query writes at its end, and the verbose hit words its engines sent,
+/// from its result's totals: a brief record a tile, and a verbose query's overflowed
+/// buffers a terminator each where they have room for one. Its engines sent each tile's
+/// hits up to the buffer's room: a buffer that did not overflow holds them all; one that
+/// overflowed holds all but the one the terminator took (`verbose_hits_kept`), so the hits
+/// sent are those held and one an overflowed buffer with room.
+pub fn query_words(shape: &QueryShape, totals: &QueryTotals) -> (u64, u64) {
+    let tiles = totals.tiles as u64;
+    let records = tiles * BRIEF_RECORD_ENTRIES as u64;
+    if shape.mode != QueryMode::Verbose {
+        return (records, 0);
     }
-    (records, hits)
+    let room = shape.buffer_entries.saturating_sub(BRIEF_RECORD_ENTRIES) as u64;
+    let terminators = if room > 0 {
+        totals.overflowed_buffers as u64
+    } else {
+        0
+    };
+    (records + terminators, totals.held_hits + terminators)
 }
 
 /// The last query's end while the fragments after its end token may hold its records back:
@@ -953,9 +957,9 @@ impl O2Bottleneck {
         }
     }
 
-    pub(super) fn begin(&mut self, spec: &QuerySpec) {
-        let service = self.formulas.service_cycles(spec.tiles.len());
-        self.open = Some((service, spec.mode.is_occlusion_render_mode()));
+    pub(super) fn begin(&mut self, shape: &QueryShape) {
+        let service = self.formulas.service_cycles(shape.tiles);
+        self.open = Some((service, shape.mode.is_occlusion_render_mode()));
     }
 
     /// Count one fragment's work (before `functional` applies it).
@@ -1082,14 +1086,14 @@ impl O2Bottleneck {
     /// released at `release`: the window's cycles and the query's latency.
     pub(super) fn end_query(
         &mut self,
-        spec: &QuerySpec,
-        result: &QueryResult,
+        shape: &QueryShape,
+        totals: &QueryTotals,
         start: f64,
         release: f64,
     ) -> WindowEnd {
         self.open = None;
         self.close_stretch();
-        let (records, hits) = query_words(spec, result);
+        let (records, hits) = query_words(shape, totals);
         // Verbose hit words went through the port beside the window's other words: what the
         // port's idle cycles in the window could not take lengthens the drain.
         let pipe = &mut self.pipe;
@@ -1270,7 +1274,7 @@ mod tests {
     use crate::arch::Arch;
     use occsim_traces::rng::SplitMix64;
     use occsim_traces::trace::ReadRun;
-    use occsim_traces::{DepthFunc, Event, Rect};
+    use occsim_traces::{DepthFunc, Event, HitList, QueryResult, QuerySpec, Rect, TileResult};
 
     /// Random row runs (some crossing words and 16-pixel pages, some of one fragment)
     /// under random render state, inside and outside a brief query: the counts after each
@@ -1312,8 +1316,8 @@ mod tests {
                     buffer_entries: 8,
                     tiles: vec![Rect::new(0, 0, width, height)],
                 };
-                whole.begin(&spec);
-                single.begin(&spec);
+                whole.begin(&spec.shape());
+                single.begin(&spec.shape());
             }
             let len = 1 + rng.below(24) as usize;
             let x = rng.below(width as u64 - len as u64 + 1) as u16;
@@ -1412,7 +1416,42 @@ mod tests {
         assert_eq!((ending.owed, ending.port_lag), (0.0, 0.0));
     }
 
-    fn whole_screen_brief() -> (QuerySpec, QueryResult) {
+    /// A verbose query of three tiles with room for 4 hits each (12 entries) whose
+    /// fragments pass 2, 9 and 0 times: tile 0 holds its 2 hits; tile 1 overflowed and
+    /// holds 3 (the terminator takes the fourth entry); tile 2 none. The engines sent each
+    /// tile's hits up to its room, 2 + 4 + 0 = 6 words, and the records are 8 words a tile
+    /// and tile 1's terminator, 25. With no room (8 entries) 5 passing fragments overflow a
+    /// buffer that holds nothing, not even the terminator: 8 record words, no hit words.
+    #[test]
+    fn a_verbose_querys_words_are_its_records_terminators_and_hits_sent() {
+        let tile = |nohc: u64, held: u16, overflowed: bool| TileResult {
+            nohc,
+            phc: nohc,
+            hits: HitList::from_hits((0..held).map(|x| (x, 0)), 64),
+            overflowed,
+            ..TileResult::default()
+        };
+        let query = |buffer_entries: u32, tiles: Vec<TileResult>| {
+            let result = QueryResult {
+                id: 1,
+                mode: QueryMode::Verbose,
+                overflowed_buffers: tiles.iter().filter(|t| t.overflowed).count() as u32,
+                tiles,
+            };
+            let shape = QueryShape {
+                id: 1,
+                mode: QueryMode::Verbose,
+                buffer_entries,
+                tiles: result.tiles.len(),
+            };
+            query_words(&shape, &result.totals())
+        };
+        let three = vec![tile(2, 2, false), tile(9, 3, true), tile(0, 0, false)];
+        assert_eq!(query(12, three), (25, 6));
+        assert_eq!(query(8, vec![tile(5, 0, true)]), (8, 0));
+    }
+
+    fn whole_screen_brief() -> (QueryShape, QueryTotals) {
         let spec = QuerySpec {
             id: 1,
             mode: QueryMode::Brief,
@@ -1425,7 +1464,7 @@ mod tests {
             tiles: vec![Default::default()],
             overflowed_buffers: 0,
         };
-        (spec, result)
+        (spec.shape(), result.totals())
     }
 
     /// A brief query's box: one primitive of 800 fragments that reads 100 new words (one a
@@ -1463,7 +1502,7 @@ mod tests {
     };
 
     /// The formulas after the box's brief query began and its primitive was counted.
-    fn counted_box() -> (O2Bottleneck, QuerySpec, QueryResult) {
+    fn counted_box() -> (O2Bottleneck, QueryShape, QueryTotals) {
         let mut formulas = O2Bottleneck::new(&unshared_o2(), 640, 480);
         let (spec, result) = whole_screen_brief();
         formulas.begin(&spec);
