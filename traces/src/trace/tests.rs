@@ -271,6 +271,33 @@ fn a_result_larger_than_a_block_travels_in_parts() {
     );
     assert_eq!(read_one_by_one(&bytes).unwrap().0, events);
     assert_eq!(read_bulk(&bytes).unwrap().0, events);
+    // With a window index, whose query records travel in parts too: read skimmed, the
+    // begin is its shape and the result its totals.
+    let options = WriterOptions {
+        window_index: Some(crate::depth_layout::DepthLayout {
+            tile_width_pixels: 128,
+            tile_height_pixels: 128,
+            pixels_per_word: 8,
+            banks: 2,
+        }),
+        ..WriterOptions::default()
+    };
+    let (indexed, _) = write(&TraceHeader::new(SIDE, SIDE), options, &events);
+    let mut reader = TraceReader::new(&indexed[..]).unwrap();
+    reader.skim_queries();
+    let mut items = Vec::new();
+    reader
+        .for_each_index_item(|item| {
+            items.push(item.clone());
+            Ok::<(), std::convert::Infallible>(())
+        })
+        .unwrap();
+    let (Event::QueryBegin(spec), Event::QueryResult(result)) = (&events[0], &events[2]) else {
+        unreachable!("the events above");
+    };
+    assert_eq!(items[0], IndexItem::Shape(spec.shape()));
+    assert_eq!(items[2], IndexItem::Totals(result.totals()));
+    assert_eq!(result.totals().held_hits, 256 * 65536);
 }
 
 #[test]
