@@ -682,23 +682,29 @@ fn shape_head(c: &mut Cursor) -> Result<QueryShape, PayloadError> {
     })
 }
 
-/// A totaled result's id, mode, overflowed buffers, tile count and sums, and the hits its
-/// tiles list at most.
-fn totals_head(c: &mut Cursor) -> Result<(QueryTotals, usize), PayloadError> {
+/// A result's id, mode, overflowed buffers and tile count, its sums left 0.
+fn result_head(c: &mut Cursor) -> Result<QueryTotals, PayloadError> {
     let id = c.u32("query id")?;
     let mode = c.mode()?;
     let overflowed_buffers = c.u32("overflowed buffers")?;
-    let tiles = c.uv_max(MAX_TILES as u64, "tile count")? as usize;
-    let totals = QueryTotals {
+    Ok(QueryTotals {
         id,
         mode,
-        tiles,
-        nohc: c.uv()?,
-        phc: c.uv()?,
-        held_hits: c.uv()?,
+        tiles: c.uv_max(MAX_TILES as u64, "tile count")? as usize,
+        nohc: 0,
+        phc: 0,
+        held_hits: 0,
         overflowed_buffers,
-    };
-    Ok((totals, listed_hits_per_tile(tiles)))
+    })
+}
+
+/// A totaled result's head and sums, and the hits its tiles list at most.
+fn totals_head(c: &mut Cursor) -> Result<(QueryTotals, usize), PayloadError> {
+    let mut totals = result_head(c)?;
+    totals.nohc = c.uv()?;
+    totals.phc = c.uv()?;
+    totals.held_hits = c.uv()?;
+    Ok((totals, listed_hits_per_tile(totals.tiles)))
 }
 
 fn query_spec(c: &mut Cursor) -> Result<QuerySpec, PayloadError> {
@@ -836,20 +842,8 @@ enum HitCoding {
 
 /// A result as versions before 11 store it: no totals, no length.
 fn query_result(c: &mut Cursor, coding: HitCoding) -> Result<QueryResult, PayloadError> {
-    let id = c.u32("query id")?;
-    let mode = c.mode()?;
-    let overflowed_buffers = c.u32("overflowed buffers")?;
-    let tiles = c.uv_max(MAX_TILES as u64, "tile count")? as usize;
-    let head = QueryTotals {
-        id,
-        mode,
-        tiles,
-        nohc: 0,
-        phc: 0,
-        held_hits: 0,
-        overflowed_buffers,
-    };
-    query_result_tiles(c, head, listed_hits_per_tile(tiles), coding)
+    let head = result_head(c)?;
+    query_result_tiles(c, head, listed_hits_per_tile(head.tiles), coding)
 }
 
 /// The result whose id, mode, overflowed buffers and tile count `head` gives, its tiles

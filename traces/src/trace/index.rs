@@ -333,23 +333,8 @@ pub(super) mod tests {
     /// ([`TraceReader::visit_index_block`]), which must give the same items or the same
     /// error.
     fn index_of(bytes: &[u8]) -> Result<Vec<IndexItem>, TraceError> {
-        let one_by_one = TraceReader::new(bytes).and_then(|mut reader| {
-            let mut items = Vec::new();
-            while let Some(item) = reader.next_index_item()? {
-                items.push(item);
-            }
-            Ok(items)
-        });
-        let visited = TraceReader::new(bytes).and_then(|mut reader| {
-            let mut items = Vec::new();
-            reader
-                .for_each_index_item(|item| {
-                    items.push(item.clone());
-                    Ok::<(), std::convert::Infallible>(())
-                })
-                .map_err(crate::trace::ReadError::into_trace)?;
-            Ok(items)
-        });
+        let one_by_one = items_one_by_one(bytes, false);
+        let visited = items_visited(bytes, false);
         // Block by block (as the sampled level's scout reads), each block begun by one item
         // read alone: the visit takes up the rest of that block.
         let by_blocks = TraceReader::new(bytes).and_then(|mut reader| {
@@ -368,25 +353,8 @@ pub(super) mod tests {
         // Skimmed, one by one and visited: each query's begin its shape and its result its
         // totals, the rest as read whole (or the same error: the tiles passed over are still
         // under their block's checksum).
-        let skimmed_one_by_one = TraceReader::new(bytes).and_then(|mut reader| {
-            reader.skim_queries();
-            let mut items = Vec::new();
-            while let Some(item) = reader.next_index_item()? {
-                items.push(item);
-            }
-            Ok(items)
-        });
-        let skimmed_visited = TraceReader::new(bytes).and_then(|mut reader| {
-            reader.skim_queries();
-            let mut items = Vec::new();
-            reader
-                .for_each_index_item(|item| {
-                    items.push(item.clone());
-                    Ok::<(), std::convert::Infallible>(())
-                })
-                .map_err(crate::trace::ReadError::into_trace)?;
-            Ok(items)
-        });
+        let skimmed_one_by_one = items_one_by_one(bytes, true);
+        let skimmed_visited = items_visited(bytes, true);
         let said = |reading: &Result<Vec<IndexItem>, TraceError>| match reading {
             Ok(items) => Ok(items.clone()),
             Err(e) => Err(e.to_string()),
@@ -463,6 +431,38 @@ pub(super) mod tests {
             tiles: 2,
         };
         assert_eq!(spec.shape(), shape);
+    }
+
+    /// The index items of `bytes`, read one call at a time (skimmed when `skim`).
+    fn items_one_by_one(bytes: &[u8], skim: bool) -> Result<Vec<IndexItem>, TraceError> {
+        let mut reader = TraceReader::new(bytes)?;
+        if skim {
+            reader.skim_queries();
+        }
+        let mut items = Vec::new();
+        while let Some(item) = reader.next_index_item()? {
+            items.push(item);
+        }
+        Ok(items)
+    }
+
+    /// The index items of `bytes`, visited block by block (skimmed when `skim`).
+    pub(in crate::trace) fn items_visited(
+        bytes: &[u8],
+        skim: bool,
+    ) -> Result<Vec<IndexItem>, TraceError> {
+        let mut reader = TraceReader::new(bytes)?;
+        if skim {
+            reader.skim_queries();
+        }
+        let mut items = Vec::new();
+        reader
+            .for_each_index_item(|item| {
+                items.push(item.clone());
+                Ok::<(), std::convert::Infallible>(())
+            })
+            .map_err(crate::trace::ReadError::into_trace)?;
+        Ok(items)
     }
 
     /// A visitor's error stops the reading at its item and the reader for good.

@@ -283,15 +283,7 @@ fn a_result_larger_than_a_block_travels_in_parts() {
         ..WriterOptions::default()
     };
     let (indexed, _) = write(&TraceHeader::new(SIDE, SIDE), options, &events);
-    let mut reader = TraceReader::new(&indexed[..]).unwrap();
-    reader.skim_queries();
-    let mut items = Vec::new();
-    reader
-        .for_each_index_item(|item| {
-            items.push(item.clone());
-            Ok::<(), std::convert::Infallible>(())
-        })
-        .unwrap();
+    let items = index::tests::items_visited(&indexed, true).unwrap();
     let (Event::QueryBegin(spec), Event::QueryResult(result)) = (&events[0], &events[2]) else {
         unreachable!("the events above");
     };
