@@ -103,26 +103,26 @@ pub(crate) fn check_fragment_inside(
 }
 
 /// Reject a query the hardware cannot take.
-pub(crate) fn check_spec(spec: QueryShape, event: u64, open: Option<u32>) -> Result<(), SimError> {
+pub(crate) fn check_spec(shape: QueryShape, event: u64, open: Option<u32>) -> Result<(), SimError> {
     if let Some(open_id) = open {
         return Err(SimError::NestedQuery {
             event,
-            id: spec.id,
+            id: shape.id,
             open_id,
         });
     }
-    if spec.buffer_entries < BRIEF_RECORD_ENTRIES {
+    if shape.buffer_entries < BRIEF_RECORD_ENTRIES {
         return Err(SimError::BufferTooSmall {
             event,
-            id: spec.id,
-            entries: spec.buffer_entries,
+            id: shape.id,
+            entries: shape.buffer_entries,
         });
     }
-    if spec.tiles == 0 || spec.tiles > MAX_TILES {
+    if shape.tiles == 0 || shape.tiles > MAX_TILES {
         return Err(SimError::TileCount {
             event,
-            id: spec.id,
-            count: spec.tiles,
+            id: shape.id,
+            count: shape.tiles,
             max: MAX_TILES,
         });
     }

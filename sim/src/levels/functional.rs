@@ -168,7 +168,7 @@ impl FunctionalCore {
             // counter a tile, and closing it builds a result: a window index's queries hold
             // hundreds of tiles, and the lazy-grid walk's analytic replay spent 4% on them).
             Event::QueryBegin(spec) if trusting => {
-                self.begin_skimmed(spec.shape())?;
+                self.begin_trusted(spec.shape())?;
                 return Ok(None);
             }
             Event::QueryBegin(spec) => self.open_query(spec.shape(), index)?,
@@ -193,7 +193,7 @@ impl FunctionalCore {
                 });
             }
             Event::QueryResult(golden) if trusting => {
-                return self.result_skimmed(&golden.totals()).map(Some);
+                return self.result_trusted(&golden.totals()).map(Some);
             }
             Event::QueryResult(golden) => {
                 self.events += 1;
@@ -232,18 +232,19 @@ impl FunctionalCore {
         Ok(())
     }
 
-    /// A query begin of a core that trusts the golden results, as a window index read
-    /// skimmed gives it ([`occsim_traces::trace::IndexItem::Shape`]).
-    pub(crate) fn begin_skimmed(&mut self, shape: QueryShape) -> Result<(), SimError> {
+    /// A query begin to a core that trusts the golden results: its model hears nothing of
+    /// it, so its shape is all it takes (as a window index read skimmed gives it,
+    /// [`occsim_traces::trace::IndexItem::Shape`]).
+    pub(crate) fn begin_trusted(&mut self, shape: QueryShape) -> Result<(), SimError> {
         self.open_query(shape, self.events)?;
         self.events += 1;
         Ok(())
     }
 
-    /// A golden result's totals, as a window index read skimmed gives them
-    /// ([`occsim_traces::trace::IndexItem::Totals`]), to a core that trusts them: the
-    /// totals of the query that ended before.
-    pub(crate) fn result_skimmed(&mut self, totals: &QueryTotals) -> Result<QueryTotals, SimError> {
+    /// A golden result's totals to a core that trusts them (as a window index read skimmed
+    /// gives them, [`occsim_traces::trace::IndexItem::Totals`]): the totals of the query
+    /// that ended before.
+    pub(crate) fn result_trusted(&mut self, totals: &QueryTotals) -> Result<QueryTotals, SimError> {
         let index = self.events;
         self.events += 1;
         let ResultSource::Golden {
