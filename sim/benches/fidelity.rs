@@ -10,14 +10,17 @@
 //!
 //! On the O2 and on ir4: fragments per second per level, as ratios to `cycle`, and the
 //! analytic and sampled:10 levels decoding the fragments beside them reading the window
-//! index (what the index saves), and sampled:10 and sampled:100 on the trace without its
-//! window table (what the table saves); then, on the synthetic stream, what the automatic
-//! effects choice saves over `--effects all` at the cycle level.
+//! index (what the index saves), the O2's analytic level reading the index's queries whole
+//! beside it skimming them (what skimming saves), and sampled:10 and sampled:100 on the
+//! trace without its window table (what the table saves); then, on the synthetic stream,
+//! what the automatic effects choice saves over `--effects all` at the cycle level.
 //!
 //! Run: `cargo bench -p occsim-sim --bench fidelity` (several minutes: the large traces'
 //! rtl runs dominate).
 
+use occsim_sim::arch::Machine;
 use occsim_sim::effects::{effects_of_features, observe, Effects};
+use occsim_sim::levels::analytic::AnalyticModel;
 use occsim_sim::levels::Fidelity;
 use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::{Arch, MachineBuilder};
@@ -188,6 +191,22 @@ enum Reading {
     /// The trace without its window table: what the table saves the
     /// sampled level (its windows' sizes found by reading the trace a second time).
     NoTable,
+    /// The window index with its queries read whole, each tile decoded, where `occsim
+    /// replay` skims them (`TraceReader::skim_queries`): what skimming saves the O2's
+    /// analytic level.
+    WholeQueries,
+}
+
+/// One run of the analytic level from the window index with its queries read whole (see
+/// [`Reading::WholeQueries`]): its predicted cycles.
+fn analytic_reading_whole_queries(arch: &Arch, trace: &[u8]) -> Option<u64> {
+    let mut reader = TraceReader::new(trace).expect("header");
+    let (width, height) = (reader.header().width, reader.header().height);
+    let mut model = AnalyticModel::from_window_index(arch, width, height).expect("model");
+    reader
+        .for_each_index_item(|item| model.index_item(item))
+        .expect("reads");
+    model.finish().expect("finishes").total_cycles
 }
 
 /// Every level's rate on `trace`, as a ratio to `cycle`; the analytic and sampled levels
@@ -197,7 +216,7 @@ fn levels(arch: &Arch, trace: &[u8], rounds: usize) {
     let fragments = fragments_of(trace);
     let no_table =
         occsim_traces::trace::windows::without_window_table(trace).expect("a whole trace");
-    let levels = [
+    let mut levels = vec![
         (Fidelity::Functional, Reading::AsWritten),
         (Fidelity::Analytic, Reading::AsWritten),
         (Fidelity::Analytic, Reading::Decode),
@@ -209,14 +228,23 @@ fn levels(arch: &Arch, trace: &[u8], rounds: usize) {
         (Fidelity::Cycle, Reading::AsWritten),
         (Fidelity::Rtl, Reading::AsWritten),
     ];
+    // The IR's formulas read the band index's queries whole (they place a verbose query's
+    // tiles), so only the O2's analytic level has a skimming to weigh.
+    if arch.machine() == Machine::O2 {
+        levels.insert(2, (Fidelity::Analytic, Reading::WholeQueries));
+    }
     let no_table = &no_table;
-    let mut jobs = levels.map(|(level, reading)| {
-        move || match reading {
-            Reading::AsWritten => run_level(level, arch, trace, true),
-            Reading::Decode => run_level(level, arch, trace, false),
-            Reading::NoTable => run_level(level, arch, no_table, true),
-        }
-    });
+    let mut jobs: Vec<_> = levels
+        .iter()
+        .map(|&(level, reading)| {
+            move || match reading {
+                Reading::AsWritten => run_level(level, arch, trace, true),
+                Reading::Decode => run_level(level, arch, trace, false),
+                Reading::NoTable => run_level(level, arch, no_table, true),
+                Reading::WholeQueries => analytic_reading_whole_queries(arch, trace),
+            }
+        })
+        .collect();
     let figures = fastest_of_rounds(rounds, MIN_SECONDS, &mut jobs);
     let cycle = levels
         .iter()
@@ -227,9 +255,10 @@ fn levels(arch: &Arch, trace: &[u8], rounds: usize) {
             Reading::AsWritten => level.to_string(),
             Reading::Decode => format!("{level}/decode"),
             Reading::NoTable => format!("{level}/no-table"),
+            Reading::WholeQueries => format!("{level}/whole-queries"),
         };
         println!(
-            "    {name:<16} {:>9.1} M fragments/s  {:>8.2}x cycle  cycles {}",
+            "    {name:<22} {:>9.1} M fragments/s  {:>8.2}x cycle  cycles {}",
             fragments / figure.seconds / 1e6,
             cycle_seconds / figure.seconds,
             figure.output.map_or("-".to_string(), |c| c.to_string())
