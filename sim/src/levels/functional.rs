@@ -158,9 +158,7 @@ impl FunctionalCore {
                 return Ok(None);
             }
             Event::Primitive => {
-                // Nothing the functional model keeps changes: counted, and done.
-                self.primitives += 1;
-                self.events += 1;
+                self.primitive();
                 return Ok(None);
             }
             // No fragment reaches a trusting core's model: the golden result stands for its
@@ -213,6 +211,13 @@ impl FunctionalCore {
             .push(QueryOutcome::of(&totals, self.open_fragments));
         self.golden.expect(self.queries.len() - 1, result);
         Ok(Some(totals))
+    }
+
+    /// A primitive: nothing the functional model keeps changes, so it is counted, and done.
+    #[inline]
+    pub(crate) fn primitive(&mut self) {
+        self.primitives += 1;
+        self.events += 1;
     }
 
     /// Whether a passing fragment may write depth and colour now: no occlusion-render-mode

@@ -88,6 +88,22 @@ impl PredictedLoop {
         self.front.state_change();
     }
 
+    /// A primitive: released where the host and geometry stage let it go; the first of a
+    /// window starts it.
+    #[inline]
+    pub(crate) fn primitive(&mut self) {
+        let release = self.front.primitive_release() as f64;
+        self.last_release = release;
+        if self.window_start.is_none() {
+            self.window_start = Some(self.pipe_end.max(release));
+            self.idle = (release - self.pipe_end).max(0.0);
+            let followed = self.followed.take();
+            if self.idle == 0.0 {
+                self.following = followed;
+            }
+        }
+    }
+
     pub(crate) fn event(&mut self, event: &Event, cut: impl FnOnce() -> Option<WindowEnd>) {
         if matches!(
             event,
@@ -99,18 +115,7 @@ impl PredictedLoop {
         match event {
             Event::Geometry(batch) => self.front.geometry(batch),
             Event::HostWork(work) => self.front.host_work(work),
-            Event::Primitive => {
-                let release = self.front.primitive_release() as f64;
-                self.last_release = release;
-                if self.window_start.is_none() {
-                    self.window_start = Some(self.pipe_end.max(release));
-                    self.idle = (release - self.pipe_end).max(0.0);
-                    let followed = self.followed.take();
-                    if self.idle == 0.0 {
-                        self.following = followed;
-                    }
-                }
-            }
+            Event::Primitive => self.primitive(),
             Event::Wait(id) => {
                 let (available, words) = self.answers.get(id).copied().unwrap_or((0, 0));
                 self.front.wait(available, words);
