@@ -1142,15 +1142,14 @@ impl SampledModel {
 
     /// Feed one event.
     pub fn event(&mut self, event: &Event) -> Result<(), SimError> {
+        if let Event::Primitive = event {
+            return self.primitive();
+        }
         self.plan()?;
         if !matches!(event, Event::QueryResult(_)) {
             self.close_ended_window()?;
         }
-        let cut_due = self
-            .window
-            .cut_at
-            .is_some_and(|at| self.window.fragments >= at);
-        if cut_due && !matches!(event, Event::Fragment(_)) {
+        if self.cut_due() && !matches!(event, Event::Fragment(_)) {
             self.cut_head();
         }
         let starts = match event {
@@ -1240,6 +1239,37 @@ impl SampledModel {
             self.predicted_latencies.push(predicted);
         }
         Ok(())
+    }
+
+    /// A primitive, as [`Self::event`] takes any other event, its steps called directly (a
+    /// window index's items are nearly all primitives and stretches): the window that
+    /// ended closes, a head due is cut, the formulas' run ends, the predicted front releases
+    /// it (the pipe idle until then if it starts a window), the rasterizer sets it up no
+    /// earlier, and a running machine takes it.
+    fn primitive(&mut self) -> Result<(), SimError> {
+        self.plan()?;
+        self.close_ended_window()?;
+        if self.cut_due() {
+            self.cut_head();
+        }
+        self.formulas.end_run();
+        self.settle();
+        self.predicted.primitive();
+        self.formulas.idle(self.predicted.take_idle());
+        self.settle();
+        self.formulas.primitive(self.predicted.release_in_window());
+        if let Some(run) = &mut self.run {
+            run.machine.event(&Event::Primitive)?;
+        }
+        self.core.primitive();
+        Ok(())
+    }
+
+    /// The window's head is to be cut before the next event: its fragments reached the cut.
+    fn cut_due(&self) -> bool {
+        self.window
+            .cut_at
+            .is_some_and(|at| self.window.fragments >= at)
     }
 
     /// A span of fragments: the formulas, the functional model and a running machine take it
