@@ -620,13 +620,13 @@ fn query_record(c: &mut Cursor, t: u8, skim: bool) -> Result<Option<QueryRecord>
             }
             let result = query_result_tiles(c, totals, list_cap, HitCoding::Digested)?;
             body_read(c, end, "tile results")?;
-            if result.totals() != totals {
+            let summed = result.totals();
+            if summed != totals {
                 return Err(bad(
                     start,
                     format!(
-                        "query {}'s result totals {totals:?} are not its tiles' {:?}",
-                        totals.id,
-                        result.totals()
+                        "query {}'s result totals {totals:?} are not its tiles' {summed:?}",
+                        totals.id
                     ),
                 ));
             }
@@ -1311,16 +1311,6 @@ impl BlockDecoder {
                 ctx.assembly.clear();
                 return self.query_read(query, start, c.pos, ctx);
             }
-            tag::QUERY_BEGIN
-            | tag::QUERY_BEGIN_SIZED
-            | tag::QUERY_RESULT
-            | tag::QUERY_RESULT_LISTED
-            | tag::QUERY_RESULT_TOTALED => {
-                let Some(query) = query_record(&mut c, t, ctx.skim_queries)? else {
-                    unreachable!("{t:#04x} is a query record's tag");
-                };
-                return self.query_read(query, start, c.pos, ctx);
-            }
             tag::CLEAR => Event::Clear,
             tag::DEPTH_FUNC => {
                 let pos = c.pos;
@@ -1348,7 +1338,13 @@ impl BlockDecoder {
             tag::CONDITIONAL_BEGIN => Event::ConditionalBegin(c.u32("conditional query id")?),
             tag::CONDITIONAL_END => Event::ConditionalEnd,
             tag::SWAP => Event::Swap,
-            t => return Err(bad(start, format!("unknown record tag {t:#04x}"))),
+            // The query records' tags, which `query_record` alone knows, or none.
+            t => {
+                return match query_record(&mut c, t, ctx.skim_queries)? {
+                    Some(query) => self.query_read(query, start, c.pos, ctx),
+                    None => Err(bad(start, format!("unknown record tag {t:#04x}"))),
+                }
+            }
         };
         if !ctx.unchecked_events {
             ctx.tally
