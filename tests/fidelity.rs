@@ -858,23 +858,36 @@ fn with_or_without_the_ports_other_clients_the_o2_formulas_are_the_cycle_models_
 }
 
 /// Under blending (`--set blending=true`: every drawn fragment's colour is read before it is
-/// written), the O2's formulas keep every class's cycles on the small corpus at 4 engines
-/// within 0.2% of the cycle level's, at the analytic and the sampled:10 level (0.11% at
-/// most, the hard cases, measured 2026-12-06). Before a fragment's write waited for its
-/// colour read in the formulas (`levels/analytic/o2.rs`, `write_cycles`), the hard cases'
-/// analytic cycles were 27% short and the demo's 3.6%. (Their latencies under blending are
-/// not bounded here: README, Bounds.)
+/// written), the O2's formulas keep every class of the small corpus at 4 engines within
+/// issue 15's latency targets, at the analytic level (p95 within 10%) and the sampled:10
+/// level (p95 within 3%), and their cycles within 0.4% of the cycle level's.
+///
+/// Measured on 2026-12-06 (`occsim fidelity --corpus --scale small --machines o2 --engines 4
+/// --no-rtl --set blending=true`): p95 at most 1.50% at either level (the hard cases), cycles
+/// at most 0.32% (the hard cases' analytic level; the bound is that and a fifth). Before the
+/// formulas' depth test ran ahead of the window's last writes (its write buffer holding
+/// them) and the head's port gave the other clients their cycles
+/// (`levels/analytic/o2.rs`, `trailing_write_cycles` and `PortOrder`), sampled:10's p95 was
+/// 12.5% off on the demo, whose slowest windows' formulas were 16 to 31 cycles short (the
+/// machine's 55, 104 and 81), and the hard cases' queries 23% off on average on the full
+/// corpus; their cycles were 0.11% short, now 0.32%. Before a fragment's write waited for its
+/// colour read (`write_cycles`), the hard cases' analytic cycles were 27% short and the
+/// demo's 3.6%.
 #[test]
-fn under_blending_the_o2_formulas_keep_every_classs_cycles() {
+fn under_blending_the_o2_formulas_keep_every_classs_cycles_and_p95_latency() {
     let rows = small_corpus_at_4_engines("blending", "o2", &["--set", "blending=true"]);
     let rows = rows.as_array().unwrap();
-    let timed = rows
-        .iter()
-        .filter(|row| ["analytic", "sampled:10"].contains(&row["level"].as_str().unwrap()));
     let mut checked = 0;
-    for row in timed {
-        let error = row["cycles_error"].as_f64().unwrap();
-        assert!(error <= 0.002, "{row}");
+    for row in rows {
+        let p95_bound = match row["level"].as_str().unwrap() {
+            "analytic" => 0.10,
+            "sampled:10" => 0.03,
+            _ => continue,
+        };
+        let cycles = row["cycles_error"].as_f64().unwrap();
+        assert!(cycles <= 0.004, "{row}");
+        let p95 = row["latency_p95_error"].as_f64().unwrap();
+        assert!(p95 <= p95_bound, "{row}");
         checked += 1;
     }
     assert_eq!(checked, 20, "{rows:?}");

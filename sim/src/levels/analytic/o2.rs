@@ -45,14 +45,25 @@
 //! `primitive_setup_cycles`) from `start = max(g, r) + setup · P` (`r`: its release by
 //! the host and geometry, from the window's start), its fragments are emitted one a
 //! cycle to `start + F`, and the blocks behind take them from `b = max(d, start)`, fragment
-//! `j` in `b + j · pace` with `pace = (max(b + down, p + λ_hit, start + F + V) - b) / F`,
-//! so `d = max(b + down, p + λ_hit, start + F + V, start + F)` (`V`: the lag its densest
+//! `j` in `b + j · pace` with `pace = (max(b + down, p - t + λ_hit, start + F + V) - b) / F`,
+//! so `d = max(b + down, p - t + λ_hit, start + F + V, start + F)` (`V`: the lag its densest
 //! run of reads leaves, below; 0 without one). The port runs on a clock of its own, `p = max(p, start) +
 //! port`: the prefetch asks for a fragment's read as the fragment is emitted, so the port
 //! works through a stretch's reads while the depth test still works through the backlog
 //! before it, and a lag already built is slack for them; the last read's data comes
 //! `λ_hit` (the page hit latency) after the port is through them, or `λ_miss` when the
 //! stretch's last fragment read a word on another page (its read is the port's last).
+//! Through them, not through the stretch's work: `t` of the port's cycles are the writes
+//! of its last `min(L, depth_write_buffer_entries)` fragments (under blending each after its
+//! colour read), which rule 5 puts after the last read and the write buffer holds while the
+//! depth test goes on ([`O2Formulas::trailing_write_cycles`]). Where a stretch's blended
+//! writes bind the port they are about 1.6 cycles a fragment, and at a query's end the
+//! machine's depth test is 16 of them ahead of its port: with the depth test through only
+//! once the port was, the rasterizer was held back as much too long, and the small demo's
+//! slowest samples queries under blending drained in 33, 73 and 65 cycles where the
+//! machine takes 55, 104 and 81 (now 55, 104 and 81 at the sampled level, which simulates
+//! them, and its p95 0% off where it was 12.5%: the formulas' error had moved every query it
+//! calibrates by 3 cycles).
 //! The rasterizer emits fragment `k` only when fragment `k - Q` has left the FIFO (`Q` =
 //! `C1`, the FIFO before the depth test, and `+ C2`, the one after it, when the OccU
 //! binds): `g = max(start + F, the cycle fragment k_last - Q leaves)`, looked up in the
@@ -188,15 +199,18 @@
 //! so the records also wait for the window's last `L` writes, and a write shares a port
 //! cycle only with the writes queued right before it: a read between two writes splits
 //! them. The formulas run that order on an in-order port (`PortOrder`) from the end token:
-//! free once the port is through the window's work (`p - g`), the window's last `L`
-//! fragments writing as its last stretch does (the share of its fragments that write, ready
-//! a pace apart up to the depth test's drain), the next window's reads asked for the cycle
-//! after their fragment's emission (`o_k`: the cycles from the end token to fragment `k`'s
-//! emission, the setups before it included):
+//! free once the port is through the window's work but its last writes (`p - t - g`), the
+//! window's last `L` fragments writing as its last stretch does (the share of its fragments
+//! that write, ready a pace apart up to the depth test's drain; under blending each write
+//! from the cycle after its colour read's grant), the next window's reads asked for the
+//! cycle after their fragment's emission (`o_k`: the cycles from the end token to fragment
+//! `k`'s emission, the setups before it included), then the records' `ceil(records / (V /
+//! 32))` cycles; the other clients take the cycles the arbiter gives them (their debt from
+//! the window's work on, `f` a granted cycle, one forced cycle where it would pass `σ`):
 //!
 //! ```text
 //! for k in 0..L: write k of the window's last L (when it writes); read of fragment k after the token (when it reads)
-//! latency = max(latency, last grant + 1 + ceil(ceil(records / (V / 32)) / (1 - f)))
+//! latency = max(latency, last record grant + 1)
 //! ```
 //!
 //! (without writes, the last read is asked for and granted in `o_k* + 1`, the records from
@@ -519,8 +533,13 @@ impl O2Formulas {
     /// The bits a stretch writes: depth and colour (and under blending the colour it reads,
     /// which travels with them).
     fn write_bits(&self, w: &StretchCounts) -> u64 {
+        self.entry_bits(w) + w.colour_reads * self.arch.colour_bits_per_pixel as u64
+    }
+
+    /// The bits a stretch's write entries write: depth and colour.
+    fn entry_bits(&self, w: &StretchCounts) -> u64 {
         w.depth_writes * self.arch.depth_bits_per_pixel as u64
-            + (w.colour_writes + w.colour_reads) * self.arch.colour_bits_per_pixel as u64
+            + w.colour_writes * self.arch.colour_bits_per_pixel as u64
     }
 
     /// Port cycles a stretch's writes take (before the reserved share): `write_bits` packed
@@ -531,6 +550,32 @@ impl O2Formulas {
         let packed = write_bits.div_ceil(self.arch.memory_port_bits_per_cycle as u64);
         let runs = w.write_entries().min(w.depth_reads + w.colour_reads);
         packed.max(runs + w.depth_reads.min(w.colour_reads)) as f64
+    }
+
+    /// Port cycles the transfers that follow a stretch's last depth read take: the write
+    /// entries of its last `L` fragments (rule 5 puts fragment `j`'s write before fragment
+    /// `j + L`'s read) and, under blending, their colour reads, at the stretch's shares of
+    /// them and its port's rate. With no read among them the writes pack to the port's
+    /// width, but a colour read goes before each blended write, which shares its cycle with
+    /// the next one's read: `n` blended fragments take `n + 1` cycles. The depth test is
+    /// through its last fragment before the port is through these: its write buffer holds
+    /// them (`depth_write_buffer_entries` at most).
+    fn trailing_write_cycles(&self, w: &StretchCounts, down: &Downstream) -> f64 {
+        if down.work == 0.0 {
+            return 0.0;
+        }
+        let held = self
+            .lookahead()
+            .at_most(self.arch.depth_write_buffer_entries as f64);
+        let share = (held / w.fragments as f64).at_most(1.0);
+        let bits = self.entry_bits(w) as f64 * share;
+        let packed = (bits / self.arch.memory_port_bits_per_cycle as f64).ceil();
+        let colour_reads = (w.colour_reads as f64 * share).ceil();
+        let blended = match colour_reads > 0.0 {
+            true => colour_reads + 1.0,
+            false => 0.0,
+        };
+        packed.at_least(blended) * down.port / down.work
     }
 
     /// The least the depth test trails the rasterizer by after a stretch: its slowest
@@ -574,9 +619,14 @@ impl O2Formulas {
     /// Whole cycles the port takes to write `record_words` record words, the other clients
     /// `debt` behind and the cycles they force among them.
     fn record_cycles(&self, record_words: u64, debt: f64) -> f64 {
-        let words_per_cycle = (self.arch.memory_port_bits_per_cycle / 32) as u64;
-        let port_cycles = record_words.div_ceil(words_per_cycle) as f64;
+        let port_cycles = self.record_port_cycles(record_words) as f64;
         self.port_time(port_cycles, debt).ceil()
+    }
+
+    /// The port cycles of `record_words` record words, before the other clients'.
+    fn record_port_cycles(&self, record_words: u64) -> u64 {
+        let words_per_cycle = (self.arch.memory_port_bits_per_cycle / 32) as u64;
+        record_words.div_ceil(words_per_cycle)
     }
 }
 
@@ -607,6 +657,10 @@ struct Pipe {
     /// The last stretch's writes, as counted (divided out into [`LastWrites`] only at a
     /// query's end).
     last_writes: StretchWrites,
+    /// The port cycles of its last fragments' writes, which follow its last read
+    /// ([`O2Formulas::trailing_write_cycles`]): `port_done` less these is the port through
+    /// the work before them.
+    trailing: f64,
     /// How far the port's other clients are behind their share, as of `debt_at`
     /// ([`O2Formulas::port_time`]; `debt_at` may lie before the window's start).
     debt: f64,
@@ -698,7 +752,7 @@ pub fn query_words(shape: &QueryShape, totals: &QueryTotals) -> (u64, u64) {
 struct Head {
     /// The query's latency were nothing to follow it, and its records' port cycles.
     latency: f64,
-    record_cycles: f64,
+    record_cycles: u64,
     /// Rasterizer cycles since the end token: primitives' setup and fragments.
     offset: f64,
     /// Fragments since the end token (at most `L`).
@@ -707,26 +761,29 @@ struct Head {
     writes: LastWrites,
     /// The in-order port's last grant, from the end token, and the bits it holds.
     port: PortOrder,
-    /// A fragment after the token read a new word: the records wait for the port.
-    read_followed: bool,
 }
 
 /// The writes of a window's last `L` fragments, as its last stretch has them: fragment `k`
 /// of them (from 0) writes when `floor((k + 1) · share) > floor(k · share)`, `bits` bits,
-/// ready (its depth test passed) in `first_ready + k · pace` cycles from the end token.
+/// asked for (its depth test passed) in `first_ready + k · pace` cycles from the end token;
+/// under blending after a colour read of `colour_read_bits` asked for then (0: none), the
+/// write from the cycle after the read's grant.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct LastWrites {
     share: f64,
     bits: u32,
+    colour_read_bits: u32,
     first_ready: f64,
     pace: f64,
 }
 
-/// A stretch's write entries, the bits they write, its fragments and its pace.
+/// A stretch's write entries, the bits they write, the bits of the colour read before each
+/// (0: none), its fragments and its pace.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 struct StretchWrites {
     entries: u64,
     bits: u64,
+    colour_read_bits: u32,
     fragments: u64,
     pace: f64,
 }
@@ -741,6 +798,7 @@ impl StretchWrites {
         LastWrites {
             share: self.entries as f64 / self.fragments as f64,
             bits: (self.bits / self.entries) as u32,
+            colour_read_bits: self.colour_read_bits,
             first_ready: last_ready - limit.saturating_sub(1) as f64 * self.pace,
             pace: self.pace,
         }
@@ -765,56 +823,86 @@ impl LastWrites {
 /// counts do not place), and dropping those writes as counted took the small corpus's
 /// analytic mean latency error on o2 from 1.50% to 2.43% on the demo and from 0.93% to
 /// 1.02% on the hard cases.
+///
+/// The port's other clients take their cycles as the machine's arbiter gives them
+/// ([`crate::blocks::memory_port`]): every idle one, and one the pipeline asks for when they
+/// would otherwise be more than their slack behind. (Granting a cycle a request, the
+/// blended writes of the hard cases' full-viewport queries, each a cycle with the next
+/// one's colour read, went through the port 1.3 times as fast as the machine's, whose
+/// other clients took a cycle in four: their first query's records were available in 48
+/// cycles where the machine's took 54.)
 #[derive(Clone, Copy, Debug, PartialEq)]
 struct PortOrder {
     last_grant: f64,
     bits: u32,
     width: u32,
+    /// How far the other clients are behind their share after the last grant, their share
+    /// `f` and their slack `σ`.
+    debt: f64,
+    share: f64,
+    slack: f64,
 }
 
 impl PortOrder {
-    /// The port after its backlog: free from `free`.
-    fn free_from(free: f64, width: u32) -> PortOrder {
+    /// The port of `formulas` after its backlog: free from `free`, its other clients `debt`
+    /// behind then.
+    fn free_from(free: f64, formulas: &O2Formulas, debt: f64) -> PortOrder {
         PortOrder {
             last_grant: free - 1.0,
-            bits: width,
-            width,
+            bits: formulas.arch.memory_port_bits_per_cycle,
+            width: formulas.arch.memory_port_bits_per_cycle,
+            debt,
+            share: formulas.reserved_share,
+            slack: formulas.slack,
         }
     }
 
-    fn write(&mut self, ready: f64, bits: u32) {
+    /// A write of `bits` asked for in `ready`: its grant.
+    fn write(&mut self, ready: f64, bits: u32) -> f64 {
         if ready <= self.last_grant && self.bits + bits <= self.width {
             self.bits += bits;
         } else {
-            self.last_grant = (self.last_grant + 1.0).max(ready);
+            self.grant(ready);
             self.bits = bits;
         }
+        self.last_grant
     }
 
     fn read(&mut self, ready: f64) {
-        self.last_grant = (self.last_grant + 1.0).max(ready);
+        self.grant(ready);
         self.bits = self.width;
+    }
+
+    /// A cycle of its own for a request asked for in `ready`: the first at or after it and
+    /// after the last grant that the other clients leave the pipeline. The idle cycles
+    /// before it serve their debt; then each cycle adds `f` to it, and past `σ` they take
+    /// the cycle.
+    fn grant(&mut self, ready: f64) {
+        let mut cycle = (self.last_grant + 1.0).max(ready);
+        if self.share > 0.0 {
+            let idle = cycle - self.last_grant - 1.0;
+            self.debt = (self.debt - (1.0 - self.share) * idle).max(0.0);
+            while self.debt + self.share > self.slack {
+                self.debt = (self.debt + self.share - 1.0).max(0.0);
+                cycle += 1.0;
+            }
+            self.debt += self.share;
+        }
+        self.last_grant = cycle;
     }
 }
 
 impl Head {
-    /// The query's records take `record_cycles` after the port's backlog at the end token
-    /// (`port_backlog`) and `writes`.
-    fn new(
-        latency: f64,
-        record_cycles: f64,
-        port_backlog: f64,
-        writes: LastWrites,
-        width: u32,
-    ) -> Head {
+    /// The query's records take `record_cycles` port cycles after the port's backlog at
+    /// the end token (`port`) and `writes`.
+    fn new(latency: f64, record_cycles: u64, port: PortOrder, writes: LastWrites) -> Head {
         Head {
             latency,
             record_cycles,
             offset: 0.0,
             seen: 0,
             writes,
-            port: PortOrder::free_from(port_backlog, width),
-            read_followed: false,
+            port,
         }
     }
 
@@ -825,28 +913,31 @@ impl Head {
         self.last_write(self.seen);
         if reads {
             self.port.read(at + 1.0);
-            self.read_followed = true;
         }
         self.seen += 1;
     }
 
     fn last_write(&mut self, k: u64) {
-        if let Some(ready) = self.writes.write(k) {
-            self.port.write(ready, self.writes.bits);
+        let Some(mut ready) = self.writes.write(k) else {
+            return;
+        };
+        if self.writes.colour_read_bits > 0 {
+            ready = self.port.write(ready, self.writes.colour_read_bits) + 1.0;
         }
+        self.port.write(ready, self.writes.bits);
     }
 
-    /// The query's latency: when a read followed the token, its records go after the
-    /// port's last grant, behind the window's last writes and the reads among them.
+    /// The query's latency: its records go after the port's last grant, behind the window's
+    /// last writes (its depth test runs ahead of them: [`O2Formulas::trailing_write_cycles`])
+    /// and the reads of the fragments after the token among them.
     fn latency(mut self, limit: u64) -> f64 {
-        if !self.read_followed {
-            return self.latency;
-        }
         for k in self.seen..limit {
             self.last_write(k);
         }
-        self.latency
-            .max(self.port.last_grant + 1.0 + self.record_cycles)
+        for _ in 0..self.record_cycles {
+            self.port.read(self.port.last_grant + 1.0);
+        }
+        self.latency.max(self.port.last_grant + 1.0)
     }
 }
 
@@ -1077,6 +1168,7 @@ impl O2Bottleneck {
         let cycles = formulas.port_time(work, debt);
         pipe.downstream = from + cycles;
         pipe.port_done = pipe.downstream;
+        pipe.trailing = 0.0;
         pipe.port += cycles;
         pipe.debt = formulas.debt_after(debt, work, cycles);
         pipe.debt_at = pipe.port_done;
@@ -1110,7 +1202,13 @@ impl O2Bottleneck {
         pipe.downstream += (hit_cycles - idle).max(0.0);
         let (cycles, backlog) = pipe.window_end();
         let drain = backlog.max(pipe.last_read_wait());
-        let port_backlog = (pipe.port_done - cycles).max(0.0);
+        // The port through all but the window's last writes, which the head takes in order,
+        // the other clients as far behind then as they were after its work.
+        let port_free = pipe.port_done - pipe.trailing;
+        let port_debt = self
+            .formulas
+            .debt_after_idle(pipe.debt, port_free - pipe.debt_at);
+        let port_backlog = (port_free - cycles).max(0.0);
         let occu_bound = pipe.occu_bound;
         pipe.restart();
         // The token enters at its release: the pipe drained meanwhile.
@@ -1125,12 +1223,12 @@ impl O2Bottleneck {
             drain = (drain - OCCU_BOUND_TOKEN_OVERLAP_CYCLES).max(0.0);
         }
         let latency = self.formulas.latency(records, drain, debt);
+        let port = PortOrder::free_from(port_backlog, &self.formulas, port_debt);
         self.head = Some(Head::new(
             latency,
-            self.formulas.record_cycles(records, debt),
-            port_backlog,
+            self.formulas.record_port_cycles(records),
+            port,
             writes,
-            self.formulas.arch.memory_port_bits_per_cycle,
         ));
         WindowEnd { cycles, latency }
     }
@@ -1163,7 +1261,9 @@ impl O2Bottleneck {
         let worked = pipe.raster > 0.0 || pipe.downstream > pipe.carried;
         worked.then(|| {
             let (cycles, backlog) = pipe.window_end();
-            let latency = backlog.max(pipe.last_read_wait()) + 3.0;
+            // The port's last writes trail the depth test: the run ends with the last.
+            let port_backlog = pipe.port_done - cycles;
+            let latency = (backlog.max(pipe.last_read_wait()) + 3.0).at_least(port_backlog);
             WindowEnd { cycles, latency }
         })
     }
@@ -1212,7 +1312,11 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
         0 => formulas.arch.page_hit_latency_cycles,
         latency => latency,
     };
-    let read_in = pipe.port_done + last_latency as f64;
+    // The transfers of its last fragments' writes follow that read on the in-order port,
+    // and the depth test runs ahead of them, its write buffer holding them.
+    let trailing = formulas.trailing_write_cycles(stretch, &down);
+    pipe.trailing = trailing;
+    let read_in = (pipe.port_done - trailing) + last_latency as f64;
     // A dense run of reads inside it leaves the depth test that much behind the fragments'
     // emission, and its last read's data a page hit later.
     let dense_read_lag = formulas.dense_read_lag(stretch, debt);
@@ -1231,7 +1335,11 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
     pipe.occu_bound = down.occu_bound;
     pipe.last_writes = StretchWrites {
         entries: stretch.write_entries(),
-        bits: formulas.write_bits(stretch),
+        bits: formulas.entry_bits(stretch),
+        colour_read_bits: match stretch.colour_reads {
+            0 => 0,
+            _ => formulas.arch.colour_bits_per_pixel,
+        },
         fragments: n,
         pace,
     };
@@ -1541,6 +1649,86 @@ mod tests {
         assert_eq!((end.cycles, end.latency), (4004.0, 5.0));
     }
 
+    /// A window's last 4 fragments blended, their depth tests a cycle apart from the end
+    /// token (`k`), nothing after the token, the port free at it and shared with no one.
+    /// Worked by hand: colour read 0 in 0; write 0 (64 bits) from the cycle after, in 1;
+    /// colour read 1, asked for in 1, shares that cycle (96 bits); write 1 in 2, with colour
+    /// read 2; write 2 in 3, with colour read 3; write 3 in 4; the record in 5, available in
+    /// 6. Four blended fragments take the port 4 + 1 cycles, as
+    /// `trailing_write_cycles` counts them.
+    #[test]
+    fn under_blending_each_of_the_last_writes_follows_its_colour_read() {
+        let formulas = O2Formulas::new(&unshared_o2_with(&["blending=true"]), 640, 480);
+        let writes = LastWrites {
+            share: 1.0,
+            bits: 64,
+            colour_read_bits: 32,
+            first_ready: 0.0,
+            pace: 1.0,
+        };
+        let head = Head::new(0.0, 1, PortOrder::free_from(0.0, &formulas, 0.0), writes);
+        assert_eq!(head.latency(4), 6.0);
+        // Without the colour reads the writes go in 0 to 3 (asked for a cycle apart, none
+        // queued to pack with), the record in 4, available in 5.
+        let opaque = LastWrites {
+            colour_read_bits: 0,
+            ..writes
+        };
+        let head = Head::new(0.0, 1, PortOrder::free_from(0.0, &formulas, 0.0), opaque);
+        assert_eq!(head.latency(4), 5.0);
+    }
+
+    /// The port's other clients at `f` = 1/4 with a slack of 1, owed nothing, and requests
+    /// asked for every cycle from 0: their debt after each granted cycle is 0.25, 0.5, 0.75
+    /// and 1 (cycles 0 to 3, none past the slack); in cycle 4 it would be 1.25, so they take
+    /// it (debt 0.25), and the request goes in 5 (debt 0.5). After an idle stretch from 6 to
+    /// 9 (4 idle cycles serve 0.75 each: debt 0) a request asked for in 10 goes in 10.
+    #[test]
+    fn the_heads_port_gives_the_other_clients_the_cycles_the_arbiter_does() {
+        let mut port = PortOrder {
+            last_grant: -1.0,
+            bits: 256,
+            width: 256,
+            debt: 0.0,
+            share: 0.25,
+            slack: 1.0,
+        };
+        let grants: Vec<f64> = (0..5)
+            .map(|_| {
+                port.read(0.0);
+                port.last_grant
+            })
+            .collect();
+        assert_eq!(grants, [0.0, 1.0, 2.0, 3.0, 5.0]);
+        assert_eq!(port.debt, 0.5);
+        port.read(10.0);
+        assert_eq!((port.last_grant, port.debt), (10.0, 0.25));
+    }
+
+    /// A stretch of 64 fragments, every one drawn and writing 32 bits of depth and 32 of
+    /// colour, on a port shared with no one: the transfers after its last read are its last
+    /// `min(L, write buffer)` = 16 fragments' writes, a quarter of the stretch's. Opaque,
+    /// their 16 · 64 = 1,024 bits pack into 4 cycles of 256; blended, each write waits for its
+    /// colour read and shares its cycle with the next one's read: 16 + 1 = 17 cycles.
+    #[test]
+    fn the_writes_after_a_stretchs_last_read_are_its_last_fragments() {
+        let trailing = |sets: &[&str], colour_reads: u64| {
+            let formulas = O2Formulas::new(&unshared_o2_with(sets), 640, 480);
+            let drawn = StretchCounts {
+                fragments: 64,
+                depth_reads: 8,
+                depth_writes: 64,
+                colour_writes: 64,
+                colour_reads,
+                ..StretchCounts::default()
+            };
+            let down = formulas.downstream(&drawn, 0.0, 64.0);
+            formulas.trailing_write_cycles(&drawn, &down)
+        };
+        assert_eq!(trailing(&[], 0), 4.0);
+        assert_eq!(trailing(&["blending=true"], 64), 17.0);
+    }
+
     /// A query of latency 13 (one record cycle) whose window's last 16 fragments each wrote
     /// 64 bits, their writes ready from 2 cycles before the end token a cycle apart (`k - 2`),
     /// then 16 fragments emitted from 4 cycles after it (`4 + k`), the first 4 reading. The
@@ -1556,11 +1744,14 @@ mod tests {
         let writes = LastWrites {
             share: 1.0,
             bits: 64,
+            colour_read_bits: 0,
             first_ready: -2.0,
             pace: 1.0,
         };
+        let formulas = O2Formulas::new(&unshared_o2(), 640, 480);
+        let port = |free: f64| PortOrder::free_from(free, &formulas, 0.0);
         let followed = |writes: LastWrites| {
-            let mut head = Head::new(13.0, 1.0, 0.0, writes, 256);
+            let mut head = Head::new(13.0, 1, port(0.0), writes);
             for k in 0..16 {
                 head.follow(4.0 + k as f64, k < 4);
             }
@@ -1569,7 +1760,7 @@ mod tests {
         assert_eq!(followed(writes), 16.0);
         assert_eq!(followed(LastWrites::default()), 13.0);
         // A port still 20 cycles behind at the token: every write and read after it.
-        let mut head = Head::new(13.0, 1.0, 20.0, writes, 256);
+        let mut head = Head::new(13.0, 1, port(20.0), writes);
         head.follow(4.0, true);
         // W0 in 20, R0 in 21, then W1..W4 packed in 22, ..., W13..W15 in 25.
         assert_eq!(head.latency(16), 25.0 + 2.0);
@@ -1616,25 +1807,29 @@ mod tests {
     /// `d` = 8, the port through the box's reads long before. Worked by hand:
     /// - emitted by `g` = 4 + 10 = 14; port = 10 reads + max(ceil(10 · 64 / 256) = 3,
     ///   min(10, 10)) = 20 cycles; depth 10; OccU 10; prefetch 10 · 3 / 16 = 1.9;
-    /// - the port takes the reads from their emission: through in max(0, 4) + 20 = 24, the
-    ///   last read's data in 24 + 2 = 26; the depth test, from `b` = max(8, 4) = 8, would be
-    ///   through in 8 + 10 = 18: `d` = 26 (queued behind the backlog, as the formulas
-    ///   had it, 8 + 20 = 28);
-    /// - the stream ends: latency `d - g` + 3 = 12 + 3 = 15 (17 before).
+    /// - the port takes the reads from their emission: through in max(0, 4) + 20 = 24, of
+    ///   which the writes of the stretch's last 16 fragments (all 10: 640 bits, 3 cycles
+    ///   packed) come after its last read, so that read's data comes in 24 - 3 + 2 = 23; the
+    ///   depth test, from `b` = max(8, 4) = 8, would be through in 8 + 10 = 18: `d` = 23
+    ///   (queued behind the backlog, as the formulas had it, 8 + 20 = 28; through only once
+    ///   the port was, 26);
+    /// - the stream ends: latency max(`d - g` + 3, the port through in 24 - 14) = 9 + 3 = 12
+    ///   (17, then 15, before).
     #[test]
     fn the_port_takes_a_stretchs_reads_while_the_depth_test_works_off_its_backlog() {
-        assert_eq!(drawn_after_the_box(DepthRead::PageHit), (14.0, 15.0));
+        assert_eq!(drawn_after_the_box(DepthRead::PageHit), (14.0, 12.0));
     }
 
     /// The same, but the last fragment's read, the port's last, is a page miss (8 cycles):
-    /// its data comes in 24 + 8 = 32 (the prefetch asked for it at its emission, in 14, and
-    /// the port grants it last, after the other nine); `d` = 32, latency 32 - 14 + 3 = 21.
+    /// its data comes in 24 - 3 + 8 = 29 (the prefetch asked for it at its emission, in 14,
+    /// and the port grants it after the other nine and the writes before it); `d` = 29,
+    /// latency 29 - 14 + 3 = 18.
     /// (A page hit's latency after the port, as the formulas had it, gives 15 again: on the
     /// full 1280x1024 demo at 4 engines on o2 a brief query whose last primitive read every
     /// fragment and ended on a page miss took the machine 23 cycles and the formulas 17.)
     #[test]
     fn the_last_read_comes_its_own_latency_after_the_port_is_through() {
-        assert_eq!(drawn_after_the_box(DepthRead::PageMiss), (14.0, 21.0));
+        assert_eq!(drawn_after_the_box(DepthRead::PageMiss), (14.0, 18.0));
     }
 
     /// The box's query, then 10 fragments drawn outside a query, each reading a new word,
