@@ -84,6 +84,18 @@ impl DepthBuffer {
         count_with!(Never, Less, Equal, Lequal, Greater, Notequal, Gequal, Always)
     }
 
+    /// How many of `span`'s last fragments (inside the buffer) pass a depth test by `func`
+    /// one after another, against the depths stored now: its fragments from the last back
+    /// to the first that fails.
+    #[inline]
+    pub fn passing_tail(&self, func: DepthFunc, span: Span) -> usize {
+        let start = span.y as usize * self.width as usize + span.x as usize;
+        let row = &self.depths[start..start + span.depths.len()];
+        (span.depths.iter().zip(row).rev())
+            .take_while(|(&z, &stored)| func.passes(z, stored))
+            .count()
+    }
+
     /// Start fetching the depths of pixels `first..=last` of row `y` into the cache: a span
     /// of a mid-sized triangle is a few cache lines a row apart, cold in a large buffer, and
     /// waiting for each row's first miss would dominate the depth test's cost.

@@ -18,13 +18,14 @@ pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// two dearer read costs as well ([`crate::trace::DENSE_READ_COSTS`]); version 10 adds the
 /// band index's blocks beside the window index's ([`crate::trace::bands`]); version 11
 /// gives query records the length of their tiles' bytes, and results their totals
-/// ([`crate::trace::TraceReader::skim_queries`]).
-pub const FORMAT_VERSION: u16 = 11;
+/// ([`crate::trace::TraceReader::skim_queries`]); version 12 gives every stretch its drawn
+/// tail ([`crate::trace::FragmentStretch::drawn_tail`]).
+pub const FORMAT_VERSION: u16 = 12;
 /// The first version whose indexed traces hold a band index ([`crate::trace::bands`]).
 pub const BANDS_VERSION: u16 = 10;
 /// The first version whose window index holds every count the O2 formulas take
 /// ([`crate::trace::TraceReader::index_has_every_count`]).
-pub const INDEX_COUNTS_VERSION: u16 = 9;
+pub const INDEX_COUNTS_VERSION: u16 = 12;
 /// The first version whose traces hold a window table ([`crate::trace::windows`]).
 pub const WINDOW_TABLE_VERSION: u16 = 8;
 /// The oldest version this code reads: version-1 traces replay as an open loop.

@@ -7,7 +7,8 @@ use super::bands::{FragmentBand, RowRun, BAND_RUNS};
 use super::dense_reads::{DenseRuns, ReadRun, DENSE_READ_COSTS};
 use super::header::StreamTally;
 use super::index::{
-    FragmentStretch, IndexItem, DENSE_RUNS_FLAG, ENDING_RUNS_FLAG, FIRST_READS_FLAG,
+    DrawnTail, FragmentStretch, IndexItem, DENSE_RUNS_FLAG, DRAWN_TAIL_FLAG, ENDING_RUNS_FLAG,
+    FIRST_READS_FLAG,
 };
 use crate::depth_layout::DepthRead;
 use crate::event::{Event, Fragment, GeometryBatch, HostWork, Span, DEPTH_ONE};
@@ -812,7 +813,8 @@ fn decode_stretch(c: &mut Cursor, out: &mut FragmentStretch) -> Result<(), Paylo
     out.passed = c.uv()?;
     let pos = c.pos;
     let code = c.byte()?;
-    out.last_read = match code & !(FIRST_READS_FLAG | DENSE_RUNS_FLAG | ENDING_RUNS_FLAG) {
+    let flags = FIRST_READS_FLAG | DENSE_RUNS_FLAG | ENDING_RUNS_FLAG | DRAWN_TAIL_FLAG;
+    out.last_read = match code & !flags {
         0 => DepthRead::SameWord,
         1 => DepthRead::PageHit,
         2 => DepthRead::PageMiss,
@@ -825,6 +827,13 @@ fn decode_stretch(c: &mut Cursor, out: &mut FragmentStretch) -> Result<(), Paylo
     };
     decode_runs(c, code & DENSE_RUNS_FLAG != 0, &mut out.dense)?;
     decode_runs(c, code & ENDING_RUNS_FLAG != 0, &mut out.ending)?;
+    out.drawn_tail = match code & DRAWN_TAIL_FLAG != 0 {
+        true => DrawnTail {
+            fragments: c.uv()?,
+            reads: c.uv()?,
+        },
+        false => DrawnTail::NONE,
+    };
     match out.problem() {
         Some(problem) => Err(bad(start, problem)),
         None => Ok(()),

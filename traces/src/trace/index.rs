@@ -18,7 +18,9 @@
 //! [`FragmentStretch::first_reads`] follows, from format version 6; plus
 //! [`DENSE_RUNS_FLAG`] when its [`FragmentStretch::dense`] runs follow, a varint count and a
 //! varint pair (reads, fragments) each, from format version 7; plus [`ENDING_RUNS_FLAG`]
-//! when its [`FragmentStretch::ending`] runs follow, coded alike, from format version 9).
+//! when its [`FragmentStretch::ending`] runs follow, coded alike, from format version 9;
+//! plus [`DRAWN_TAIL_FLAG`] when its [`FragmentStretch::drawn_tail`] follows, a varint pair
+//! (fragments, reads), from format version 12).
 //!
 //! A stretch keeps its `first_reads` only when it begins fewer than [`FIRST_READS_FRAGMENTS`]
 //! fragments after the last query end (else it is written 0): the O2-like machine's in-order
@@ -57,6 +59,53 @@ pub struct FragmentStretch {
     pub dense: DenseRuns,
     /// Its runs of reads that end at its last fragment ([`super::dense_reads::StretchRuns`]).
     pub ending: DenseRuns,
+    /// The fragments that draw one after another up to its last ([`DrawnTail`], from format
+    /// version 12).
+    pub drawn_tail: DrawnTail,
+}
+
+/// The fragments at the end of a run that draw, one after another (they pass the depth test,
+/// or meet it off, outside an occlusion-render-mode query), and the new words they read.
+/// Where a primitive's drawn fragments come together at its end (a triangle's last rows in
+/// front, the rest behind), its counts spread them over all its fragments; its drawn tail
+/// tells the O2-like machine's formulas that they come last, where under blending their
+/// port traffic holds the query's end back (`occsim_sim::levels::analytic::o2`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DrawnTail {
+    pub fragments: u64,
+    pub reads: u64,
+}
+
+impl DrawnTail {
+    pub const NONE: DrawnTail = DrawnTail {
+        fragments: 0,
+        reads: 0,
+    };
+
+    /// One more fragment: it draws or not, and reads a new word or not.
+    #[inline]
+    pub fn push(&mut self, draws: bool, reads: bool) {
+        *self = match draws {
+            true => DrawnTail {
+                fragments: self.fragments + 1,
+                reads: self.reads + reads as u64,
+            },
+            false => DrawnTail::NONE,
+        };
+    }
+
+    /// This tail, then a run of `fragments` fragments whose own tail is `next`: the run's
+    /// tail, continued by this one where the whole run draws.
+    #[inline]
+    pub fn then(self, next: DrawnTail, fragments: u64) -> DrawnTail {
+        match next.fragments == fragments {
+            true => DrawnTail {
+                fragments: self.fragments + next.fragments,
+                reads: self.reads + next.reads,
+            },
+            false => next,
+        }
+    }
 }
 
 /// Fragments of a stretch whose reads [`FragmentStretch::first_reads`] marks, and how far
@@ -72,6 +121,10 @@ pub(crate) const DENSE_RUNS_FLAG: u8 = 8;
 /// Added to a stretch record's last-read byte when its ending runs follow.
 pub(crate) const ENDING_RUNS_FLAG: u8 = 16;
 
+/// Added to a stretch record's last-read byte when its drawn tail follows (two varints:
+/// fragments, reads).
+pub(crate) const DRAWN_TAIL_FLAG: u8 = 32;
+
 impl FragmentStretch {
     /// No fragment yet.
     pub const EMPTY: FragmentStretch = FragmentStretch {
@@ -83,6 +136,7 @@ impl FragmentStretch {
         first_reads: 0,
         dense: DenseRuns::NONE,
         ending: DenseRuns::NONE,
+        drawn_tail: DrawnTail::NONE,
     };
 
     /// Count one fragment (inside the viewport) drawn under `state`: its depth read by the
@@ -100,6 +154,7 @@ impl FragmentStretch {
         self.fragments += 1;
         self.last_read = DepthRead::SameWord;
         if !state.depth_test {
+            self.drawn_tail.push(draws, false);
             return;
         }
         let (address, last_read) = depth;
@@ -111,12 +166,14 @@ impl FragmentStretch {
         if read != DepthRead::SameWord && self.fragments <= FIRST_READS_FRAGMENTS {
             self.first_reads |= 1 << (self.fragments - 1);
         }
-        self.passed += (draws && state.depth_func.passes(fragment.z, stored)) as u64;
+        let drawn = draws && state.depth_func.passes(fragment.z, stored);
+        self.passed += drawn as u64;
+        self.drawn_tail.push(drawn, read != DepthRead::SameWord);
     }
 
-    /// Bytes a stretch record takes at most: a tag, five 10-byte varints, a byte, and the
-    /// dense and ending runs' counts and pairs.
-    pub(crate) const MAX_BYTES: usize = 52 + 2 * (1 + 20 * DENSE_READ_COSTS.len());
+    /// Bytes a stretch record takes at most: a tag, five 10-byte varints, a byte, the dense
+    /// and ending runs' counts and pairs, and the drawn tail's two varints.
+    pub(crate) const MAX_BYTES: usize = 52 + 2 * (1 + 20 * DENSE_READ_COSTS.len()) + 20;
 
     pub(crate) fn encode(&self, out: &mut Vec<u8>) {
         out.push(tag::STRETCH);
@@ -134,6 +191,7 @@ impl FragmentStretch {
             (self.first_reads != 0, FIRST_READS_FLAG),
             (!dense.is_empty(), DENSE_RUNS_FLAG),
             (!ending.is_empty(), ENDING_RUNS_FLAG),
+            (self.drawn_tail.fragments > 0, DRAWN_TAIL_FLAG),
         ]
         .iter()
         .filter(|(present, _)| *present)
@@ -150,6 +208,10 @@ impl FragmentStretch {
                     put_uv(out, run.fragments.into());
                 }
             }
+        }
+        if self.drawn_tail.fragments > 0 {
+            put_uv(out, self.drawn_tail.fragments);
+            put_uv(out, self.drawn_tail.reads);
         }
     }
 
@@ -180,6 +242,10 @@ impl FragmentStretch {
             })
         {
             Some("a stretch whose dense run holds no read, or more reads or fragments than it")
+        } else if self.drawn_tail.fragments > self.fragments
+            || self.drawn_tail.reads > self.drawn_tail.fragments.min(self.depth_reads)
+        {
+            Some("a stretch whose drawn tail holds more fragments or reads than it")
         } else {
             None
         }
@@ -507,14 +573,17 @@ pub(super) mod tests {
         // against the 100 stored (LESS) and re-reads word 0 of page 0, after page 1's word:
         // a miss, the last fragment's own read. Both begin fewer than 64 fragments after
         // the query's end, so they keep their first reads: none, then fragment 0's.
+        // Drawn tails: the first stretch's 8 fragments all draw, reading 2 words; nothing
+        // draws under the brief query; the one fragment with the test off draws, reading
+        // nothing; the last fails.
         events.extend([
             Event::DepthTest(false),
             frag(3, 1, 5),
             Event::DepthTest(true),
         ]);
         events.push(frag(0, 0, 200));
-        let stretch = |fragments, depth_reads, page_misses, passed, last_read, first_reads| {
-            IndexItem::Stretch(FragmentStretch {
+        let stretch =
+            |fragments, depth_reads, page_misses, passed, last_read, first_reads| FragmentStretch {
                 fragments,
                 depth_reads,
                 page_misses,
@@ -523,19 +592,23 @@ pub(super) mod tests {
                 first_reads,
                 dense: DenseRuns::NONE,
                 ending: DenseRuns::NONE,
-            })
+                drawn_tail: DrawnTail::NONE,
+            };
+        let drawn = |stretch: FragmentStretch, fragments, reads| FragmentStretch {
+            drawn_tail: DrawnTail { fragments, reads },
+            ..stretch
         };
         let index = vec![
             IndexItem::Event(Event::DepthTest(true)),
             IndexItem::Event(Event::Primitive),
-            stretch(8, 2, 1, 8, DepthRead::SameWord, 0),
+            IndexItem::Stretch(drawn(stretch(8, 2, 1, 8, DepthRead::SameWord, 0), 8, 2)),
             IndexItem::Event(brief(7)),
-            stretch(2, 1, 1, 0, DepthRead::SameWord, 0),
+            IndexItem::Stretch(stretch(2, 1, 1, 0, DepthRead::SameWord, 0)),
             IndexItem::Event(Event::QueryEnd),
             IndexItem::Event(Event::DepthTest(false)),
-            stretch(1, 0, 0, 0, DepthRead::SameWord, 0),
+            IndexItem::Stretch(drawn(stretch(1, 0, 0, 0, DepthRead::SameWord, 0), 1, 0)),
             IndexItem::Event(Event::DepthTest(true)),
-            stretch(1, 1, 1, 0, DepthRead::PageMiss, 1),
+            IndexItem::Stretch(stretch(1, 1, 1, 0, DepthRead::PageMiss, 1)),
         ];
         (events, index)
     }
@@ -588,12 +661,71 @@ pub(super) mod tests {
             first_reads,
             dense: DenseRuns::NONE,
             ending: DenseRuns::NONE,
+            drawn_tail: DrawnTail::NONE,
         };
         assert_eq!(stretch(0b10).problem(), None);
         let problem =
             Some("a stretch whose first reads are more than its reads or past its fragments");
         assert_eq!(stretch(0b100).problem(), problem);
         assert_eq!(stretch(0b11).problem(), problem);
+    }
+
+    /// A drawn tail is what follows the last fragment that did not draw: pushed one by one,
+    /// "D.DDd" (D draws and reads, d draws without reading, . does not draw) leaves the
+    /// last three, two of them reading; a run of 4 that all draw continues it, one that
+    /// does not replaces it with its own.
+    #[test]
+    fn a_drawn_tail_is_the_fragments_after_the_last_that_did_not_draw() {
+        let mut tail = DrawnTail::NONE;
+        for c in "D.DDd".chars() {
+            tail.push(c != '.', c == 'D');
+        }
+        assert_eq!(
+            tail,
+            DrawnTail {
+                fragments: 3,
+                reads: 2
+            }
+        );
+        let whole = DrawnTail {
+            fragments: 4,
+            reads: 1,
+        };
+        assert_eq!(
+            tail.then(whole, 4),
+            DrawnTail {
+                fragments: 7,
+                reads: 3
+            }
+        );
+        let part = DrawnTail {
+            fragments: 2,
+            reads: 0,
+        };
+        assert_eq!(tail.then(part, 4), part);
+        assert_eq!(tail.then(DrawnTail::NONE, 4), DrawnTail::NONE);
+    }
+
+    /// A drawn tail longer than its stretch, or with more reads than its fragments or the
+    /// stretch's reads, is refused as the decoder checks a record.
+    #[test]
+    fn a_drawn_tail_beyond_its_stretch_is_a_problem() {
+        let stretch = |fragments, reads| FragmentStretch {
+            fragments: 10,
+            depth_reads: 4,
+            page_misses: 0,
+            passed: 6,
+            last_read: DepthRead::PageHit,
+            first_reads: 0,
+            dense: DenseRuns::NONE,
+            ending: DenseRuns::NONE,
+            drawn_tail: DrawnTail { fragments, reads },
+        };
+        assert_eq!(stretch(6, 4).problem(), None);
+        let problem = Some("a stretch whose drawn tail holds more fragments or reads than it");
+        for (fragments, reads) in [(11, 0), (6, 5), (2, 3)] {
+            assert_eq!(stretch(fragments, reads).problem(), problem);
+        }
     }
 
     /// A run, densest or ending, with no read or more reads or fragments than its stretch
@@ -614,6 +746,10 @@ pub(super) mod tests {
             first_reads: 0,
             dense: runs(4, 10),
             ending: runs(2, 3),
+            drawn_tail: DrawnTail {
+                fragments: 3,
+                reads: 2,
+            },
         };
         assert_eq!(stretch.problem(), None);
         let problem =
@@ -753,6 +889,7 @@ pub(super) mod tests {
             first_reads: 0,
             dense: DenseRuns::NONE,
             ending: DenseRuns::NONE,
+            drawn_tail: DrawnTail::NONE,
         };
         assert_eq!(
             bad.problem(),

@@ -1,14 +1,14 @@
 //! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
 //!
-//! # Layout (version 11; all integers little-endian; versions 1, without the closed loop's
+//! # Layout (version 12; all integers little-endian; versions 1, without the closed loop's
 //! records, 2, with verbose hits stored one by one, 3, without window-index blocks, 4,
 //! without depth-test blocks, 5, without the index's first reads, 6, without its densest
 //! runs of reads, 7, without the window table, 8, without the index's ending runs of
-//! reads, 9, without the band index, and 10, with query records whose tiles a reader
-//! cannot pass over, still read)
+//! reads, 9, without the band index, 10, with query records whose tiles a reader cannot
+//! pass over, and 11, without the index's drawn tails, still read)
 //!
 //! ```text
-//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 11 | flags u16 = 0
+//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 12 | flags u16 = 0
 //!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
 //!               (the CRC covers version .. end of JSON)
 //! event blocks  block header (20) | stored payload (stored_len), with window-index blocks
@@ -71,7 +71,7 @@ pub use error::{ReadError, TraceError};
 pub use header::{
     BlockCounts, ClosedLoopCounts, QueryModeCounts, TraceFeatures, TraceHeader, TraceSummary,
 };
-pub use index::{FragmentStretch, IndexItem, FIRST_READS_FRAGMENTS};
+pub use index::{DrawnTail, FragmentStretch, IndexItem, FIRST_READS_FRAGMENTS};
 pub use reader::TraceReader;
 pub use windows::{WindowScout, WindowSize};
 pub use writer::{TraceWriter, WriterOptions};

@@ -339,14 +339,14 @@ fn wrong_magic_is_named() {
 
 #[test]
 fn unknown_version_is_named() {
-    for version in [0u8, 12] {
+    for version in [0u8, 13] {
         let mut bytes = write_default(&every_kind());
         bytes[8] = version;
         let error = TraceReader::new(&bytes[..]).err().unwrap();
         assert!(
             matches!(
                 error,
-                TraceError::UnsupportedVersion { offset: 8, version: v, known: 11 } if v == version as u16
+                TraceError::UnsupportedVersion { offset: 8, version: v, known: 12 } if v == version as u16
             ),
             "{error}"
         );
