@@ -768,17 +768,17 @@ pub(super) mod tests {
         }
     }
 
-    /// A version-8 index keeps no ending runs, a
+    /// A version-11 index keeps no drawn tails, a version-8 one no ending runs, a
     /// version-6 one no dense runs and a version-5 one no first reads: their readers say
     /// so, and models decode the fragments instead.
     #[test]
-    fn an_index_before_version_9_lacks_counts() {
+    fn an_index_before_version_12_lacks_counts() {
         let (events, _) = worked_example();
         let bytes = indexed(&events);
         assert!(TraceReader::new(&bytes[..])
             .unwrap()
             .index_has_every_count());
-        for version in [5, 6, 7, 8] {
+        for version in [5, 6, 7, 8, 9, 10, 11] {
             let old = crate::trace::tests::as_version(bytes.clone(), version);
             let reader = TraceReader::new(&old[..]).unwrap();
             assert!(reader.has_depth_tests());

@@ -637,16 +637,18 @@ impl O2Formulas {
     /// through its last fragment before the port is through these: its write buffer holds
     /// them (`depth_write_buffer_entries` at most).
     fn trailing_write_cycles(&self, w: &StretchCounts, port_rate: f64) -> f64 {
-        let held = self.trailing_fragments() as f64;
-        let share = (held / w.fragments as f64).at_most(1.0);
-        let bits = self.entry_bits(w) as f64 * share;
-        let packed = (bits / self.arch.memory_port_bits_per_cycle as f64).ceil();
-        let colour_reads = (w.colour_reads as f64 * share).ceil();
-        let blended = match colour_reads > 0.0 {
-            true => colour_reads + 1.0,
-            false => 0.0,
+        // In integers, `ceil(bits · held / F / V)` and `ceil(B · held / F)`: a stretch's
+        // arithmetic stays off the floating-point rounding calls.
+        let fragments = w.fragments.max(1);
+        let held = self.trailing_fragments().min(fragments);
+        let port_bits = self.arch.memory_port_bits_per_cycle as u64;
+        let packed = (self.entry_bits(w) * held).div_ceil(fragments * port_bits);
+        let colour_reads = (w.colour_reads * held).div_ceil(fragments);
+        let blended = match colour_reads {
+            0 => 0,
+            reads => reads + 1,
         };
-        packed.at_least(blended) * port_rate
+        packed.max(blended) as f64 * port_rate
     }
 
     /// The least the depth test trails the rasterizer by after a stretch: its slowest
