@@ -143,10 +143,10 @@
 //! last departures at that pace, and its writes are the ones after the last read. On the
 //! random triangles at the full scale under blending on o2, queries whose last triangle
 //! ends in 54 to 218 drawn fragments took the machine 63 to 77 cycles and the formulas 17 to
-//! 27 (now 60 to 73); the class's analytic p95 latency error went from 57.7% to 17.3%, its
-//! mean from 10.9% to 3.4%, sampled:10's p95 from 5.8% to 1.9%. Without blending a drawn
-//! tail binds the port only where nearly every fragment reads: no query of the corpus
-//! without it moved.
+//! 27 (now 62 to 73); the class's analytic p95 latency error went from 57.7% to 17.3%, its
+//! mean from 10.9% to 3.4%, sampled:10's p95 from 5.8% to 1.9%. Only under blending:
+//! without it a tail's writes pack four to a port cycle, and a tail that binds the port by
+//! its reads (a drawn sliver) is its ending runs' ([`O2Formulas::drawn_tail`]).
 //!
 //! `T_w = g` when the end token is emitted; what is left, `d - T_w`, is the backlog ahead
 //! of the token, carried into the next window. A verbose query's hit words take the port
@@ -592,9 +592,14 @@ impl O2Formulas {
     /// drawn, the rest behind), its counts spread them over all its fragments: on the random
     /// triangles under blending, queries whose last triangle ends in 54 to 218 fragments that
     /// draw after a stretch where a quarter did took the machine 63 to 77 cycles where the
-    /// formulas, the port far from bound on average, gave 17 to 21.
+    /// formulas, the port far from bound on average, gave 17 to 27.
+    ///
+    /// Only under blending: without it a tail's writes pack four to a port cycle, and where
+    /// its reads bind the port (a drawn sliver), its ending runs of reads take it, with the
+    /// writes those reads split ([`Self::ending_runs`]). (Taken there too, the tail moved
+    /// the small 1x1 and 4x4 demos' analytic p95 latency from 0.07% to 3.12% off.)
     fn drawn_tail(&self, w: &StretchCounts, debt: f64) -> Option<TailTimes> {
-        if w.drawn_tail.fragments == 0 || w.colour_writes + w.depth_writes == 0 {
+        if w.drawn_tail.fragments == 0 || w.colour_reads == 0 {
             return None;
         }
         let run = self.drawn_tail_counts(w);
