@@ -269,7 +269,8 @@
 //! cycle whole, strands the colour read after it in a cycle of its own, `min(R, B)` more.
 //! (Packed with the writes as bits alone, the colour reads left the small hard cases on o2
 //! at 4 engines 27% short of the cycle level's cycles and the small demo 1.4%; every class
-//! of the small corpus there is now within 0.11%.)
+//! of the small corpus there was then within 0.11%, and is within 0.32% since the depth
+//! test runs ahead of the last writes.)
 //!
 //! The fluid replaced a per-window maximum of the blocks' throughputs with the FIFOs taken
 //! half full at every query's end: on the small corpus (o2 and ir2 at 4 engines) the worst
@@ -2045,7 +2046,8 @@ mod tests {
     /// min(100, 10 + 100) + min(10, 100)) = 10 + 110 = 120 cycles (packing the colour
     /// reads with the writes gave 10 + 38 = 48). On the small hard cases on o2 at 4
     /// engines under blending the cycle level took 121,560 cycles and the formulas 88,579
-    /// (27% short); now 0.11% off.
+    /// (27% short); with this, 0.11% off (0.32% since the depth test runs ahead of the last
+    /// writes, whose latencies it brought to the machine's).
     #[test]
     fn under_blending_a_fragments_write_waits_for_its_colour_read() {
         let formulas = O2Formulas::new(&unshared_o2_with(&["blending=true"]), 640, 480);
