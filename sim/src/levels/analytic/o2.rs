@@ -348,6 +348,16 @@ pub struct Downstream {
 /// the cycle model's latency exactly with 3, and 3 cycles more without).
 const OCCU_BOUND_TOKEN_OVERLAP_CYCLES: f64 = 3.0;
 
+/// The port's other clients' debt after the pipeline took `work` of `span` port cycles from
+/// `debt`, their share `f` and slack `σ`: `f` a cycle more, a cycle less each one they took,
+/// within `0..=σ` ([`O2Formulas::debt_after`], and the head's port between its grants).
+fn clients_debt_after(share: f64, slack: f64, debt: f64, work: f64, span: f64) -> f64 {
+    if share == 0.0 {
+        return 0.0;
+    }
+    (debt + work - (1.0 - share) * span).within(0.0, slack)
+}
+
 /// The O2 formulas over stretch counts.
 pub struct O2Formulas {
     arch: O2Arch,
@@ -507,10 +517,7 @@ impl O2Formulas {
     /// `span` cycles from `debt`: `f` a cycle more, a cycle less each idle one, within
     /// `0..=σ`.
     pub fn debt_after(&self, debt: f64, work: f64, span: f64) -> f64 {
-        if self.reserved_share == 0.0 {
-            return 0.0;
-        }
-        (debt + work - self.free_share() * span).within(0.0, self.slack)
+        clients_debt_after(self.reserved_share, self.slack, debt, work, span)
     }
 
     /// The other clients' debt after `cycles` idle port cycles from `debt`.
@@ -977,7 +984,7 @@ impl PortOrder {
         let mut cycle = (self.last_grant + 1.0).max(ready);
         if self.share > 0.0 {
             let idle = cycle - self.last_grant - 1.0;
-            self.debt = (self.debt - (1.0 - self.share) * idle).max(0.0);
+            self.debt = clients_debt_after(self.share, self.slack, self.debt, 0.0, idle);
             while self.debt + self.share > self.slack {
                 self.debt = (self.debt + self.share - 1.0).max(0.0);
                 cycle += 1.0;
@@ -1163,16 +1170,21 @@ impl O2Bottleneck {
         self.open = Some((service, shape.mode.is_occlusion_render_mode()));
     }
 
+    /// Passing fragments draw: no occlusion-render-mode query (brief, verbose) is open.
+    fn draws(&self) -> bool {
+        !self.open.is_some_and(|(_, mode)| mode)
+    }
+
     /// Count one fragment's work (before `functional` applies it).
     #[inline]
     pub(super) fn fragment(&mut self, fragment: Fragment, functional: &FunctionalModel) {
-        let mut stretch = FragmentStretch::EMPTY;
+        let (mut stretch, draws) = (FragmentStretch::EMPTY, self.draws());
         stretch.count_fragment(
             fragment,
             functional.state(),
             functional.depth_buffer().get(fragment.x, fragment.y),
             (&self.address, &mut self.last_read),
-            !self.open.is_some_and(|(_, mode)| mode),
+            draws,
         );
         self.dense.fragments(stretch.depth_reads > 0, 0);
         self.stretch(&stretch, functional.state());
@@ -1198,7 +1210,7 @@ impl O2Bottleneck {
             ending: DenseRuns::NONE,
             drawn_tail: DrawnTail::NONE,
         };
-        let draws = !self.open.is_some_and(|(_, mode)| mode);
+        let draws = self.draws();
         if !state.depth_test {
             self.dense.fragments(false, last as u64);
             if draws {
@@ -1254,6 +1266,7 @@ impl O2Bottleneck {
             return;
         }
         self.follow(n, stretch.first_reads);
+        let draws = self.draws();
         let arch = &self.formulas.arch;
         let w = &mut self.stretch;
         w.fragments += n;
@@ -1269,7 +1282,7 @@ impl O2Bottleneck {
         // A later run of the same stretch ends it (one with no read leaves none).
         w.ending = stretch.ending;
         w.drawn_tail = w.drawn_tail.then(stretch.drawn_tail, n);
-        if self.open.is_some_and(|(_, mode)| mode) {
+        if !draws {
             return;
         }
         // Outside an occlusion render mode: with the depth test off every fragment draws,
@@ -1434,21 +1447,19 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
     }
     // A drawn tail that binds the port leaves it behind too, and its fragments are what the
     // stretch ends with: the writes after its last read, the FIFO's last departures.
+    pipe.debt_at = port_from + span;
     let tail = formulas.drawn_tail(stretch, debt);
     if let Some(tail) = &tail {
         pipe.port_done = pipe.port_done.at_least(emitted + tail.port_lag);
         pipe.debt = pipe.debt.at_least(tail.owed);
+        // The port was busy through the tail: the clients are owed that much as it ends.
+        pipe.debt_at = pipe.debt_at.at_least(pipe.port_done);
     }
     // The last fragments' writes are the tail's where it holds all of them.
     let last = match &tail {
         Some(tail) if tail.fragments >= formulas.trailing_fragments() => &tail.counts,
         _ => stretch,
     };
-    pipe.debt_at = port_from + span;
-    if tail.is_some() {
-        // The port was busy through the tail: the clients are owed that much as it ends.
-        pipe.debt_at = pipe.debt_at.at_least(pipe.port_done);
-    }
     // Its last read's data comes its latency after the port is through: the last
     // fragment's, when it read (in order, the port's last), else a page hit's.
     let last_latency = match stretch.last_read_latency {
