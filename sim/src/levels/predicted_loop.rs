@@ -219,7 +219,15 @@ impl PredictedLoop {
     /// followed its end token at once; the last of a level's per-query latencies (whole
     /// cycles, rounded up) is then set to it. Called after every item the formulas count,
     /// with what they give (`Formulas::take_followed`).
+    #[inline]
     pub(crate) fn settle(&mut self, followed: Option<f64>, latencies: &mut [u64]) {
+        // Called after every item: nearly always with nothing to settle.
+        if followed.is_some() || self.amended.is_some() {
+            self.settle_latency(followed, latencies);
+        }
+    }
+
+    fn settle_latency(&mut self, followed: Option<f64>, latencies: &mut [u64]) {
         if let Some(latency) = followed {
             if let Some(id) = self.following.take() {
                 self.amend_latency(id, latency);

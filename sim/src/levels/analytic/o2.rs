@@ -336,7 +336,7 @@ pub struct Downstream {
     pub forced: bool,
     /// Fragments the FIFOs hold ahead of the bottleneck: `C1`, and `C2` too when the OccU
     /// binds (behind the depth pipeline).
-    pub queued: f64,
+    pub queued: u64,
     /// The OccU binds.
     pub occu_bound: bool,
 }
@@ -374,6 +374,12 @@ pub struct O2Formulas {
     cycles_per_read: f64,
     /// How far behind their share the other clients may fall (`σ`, port cycles).
     slack: f64,
+    /// `L` ([`Self::lookahead`]) and the counts of fragments drawn from it
+    /// ([`Self::trailing_fragments`], [`Self::head_fragments`]): constants of the
+    /// architecture, each a float's conversion at every stretch before.
+    lookahead: f64,
+    trailing_fragments: u64,
+    head_fragments: u64,
 }
 
 impl O2Formulas {
@@ -388,6 +394,9 @@ impl O2Formulas {
             0
         };
         let reserved_share = arch.reserved_port_share();
+        let lookahead = arch
+            .prefetch_depth_fragments
+            .min(arch.fifo_raster_to_depth_entries) as u64;
         O2Formulas {
             arch: arch.clone(),
             clear_words,
@@ -395,14 +404,15 @@ impl O2Formulas {
             longest_reserved_run: (reserved_share / (1.0 - reserved_share)).ceil(),
             cycles_per_read: 1.0 / (1.0 - reserved_share),
             slack: arch.other_clients_slack_cycles.max(1) as f64,
+            lookahead: lookahead as f64,
+            trailing_fragments: lookahead.min(arch.depth_write_buffer_entries as u64),
+            head_fragments: lookahead.min(FIRST_READS_FRAGMENTS),
         }
     }
 
     /// Lookahead `L`: fragments whose reads may be in flight.
     fn lookahead(&self) -> f64 {
-        self.arch
-            .prefetch_depth_fragments
-            .min(self.arch.fifo_raster_to_depth_entries) as f64
+        self.lookahead
     }
 
     /// OccU cycles per fragment under a query of `tiles` tiles.
@@ -477,7 +487,7 @@ impl O2Formulas {
     /// A lag, none below 0 and no more than the FIFO before the depth test holds (once it is
     /// full the rasterizer waits).
     fn queued_lag(&self, lag: f64) -> f64 {
-        lag.clamp(0.0, self.arch.fifo_raster_to_depth_entries as f64)
+        lag.within(0.0, self.arch.fifo_raster_to_depth_entries as f64)
     }
 
     /// The most cycles the dense runs of reads of stretch `w` leave the depth test behind
@@ -556,7 +566,7 @@ impl O2Formulas {
             port,
             work,
             forced,
-            queued: queued as f64,
+            queued: queued as u64,
             occu_bound: behind_depth,
         }
     }
@@ -586,7 +596,7 @@ impl O2Formulas {
     /// The fragments whose writes follow a stretch's last read: `min(L,
     /// depth_write_buffer_entries)` ([`Self::trailing_write_cycles`]).
     fn trailing_fragments(&self) -> u64 {
-        (self.lookahead() as u64).min(self.arch.depth_write_buffer_entries as u64)
+        self.trailing_fragments
     }
 
     /// What stretch `w`'s drawn tail leaves as it ends, the port's other clients `debt`
@@ -652,6 +662,10 @@ impl O2Formulas {
     fn trailing_write_cycles(&self, w: &StretchCounts, port_rate: f64) -> f64 {
         // In integers, `ceil(bits · held / F / V)` and `ceil(B · held / F)`: a stretch's
         // arithmetic stays off the floating-point rounding calls.
+        if w.write_entries() == 0 && w.colour_reads == 0 {
+            // Nothing follows the last read (and no division to find so).
+            return 0.0;
+        }
         let fragments = w.fragments.max(1);
         let held = self.trailing_fragments().min(fragments);
         let port_bits = self.arch.memory_port_bits_per_cycle as u64;
@@ -693,7 +707,7 @@ impl O2Formulas {
     /// Fragments after a query's end token whose depth reads the port may serve before the
     /// query's records: `L`, at most the [`FIRST_READS_FRAGMENTS`] an index marks.
     fn head_fragments(&self) -> u64 {
-        (self.lookahead() as u64).min(FIRST_READS_FRAGMENTS)
+        self.head_fragments
     }
 
     /// Latency of a query whose records are `record_words` words, after a window that
@@ -796,8 +810,10 @@ impl Pipe {
     /// The cycle the blocks behind the rasterizer start fragment `k`, if a recent stretch
     /// holds it.
     fn started(&self, k: u64) -> Option<f64> {
+        // The newest first: the fragment is most often in the stretch just closed.
         self.recent
             .iter()
+            .rev()
             .find(|s| (s.first..s.first + s.fragments).contains(&k))
             .map(|s| s.started(k))
     }
@@ -1503,32 +1519,40 @@ fn close_stretch(formulas: &O2Formulas, pipe: &mut Pipe, stretch: &StretchCounts
         fragments: last.fragments,
         pace: tail_pace,
     };
-    pipe.recent.push_back(StretchTimes {
+    let times = StretchTimes {
         first: pipe.emitted,
         fragments: n,
         begin,
         pace,
         tail: tail.as_ref().map_or(0, |tail| tail.fragments),
         tail_pace,
-    });
+    };
     pipe.emitted += n;
     // The last fragment waits for fragment `last - Q` to leave the FIFO: as it starts at the
     // OccU, which takes it from its own FIFO; at the end of its pace before the depth test,
     // which takes it once its read is in.
-    let queued = down.queued as u64 - (!down.occu_bound) as u64;
-    if let Some(blocking) = (pipe.emitted - 1).checked_sub(queued) {
-        if let Some(started) = pipe.started(blocking) {
-            pipe.raster = pipe.raster.at_least(started);
+    let queued = down.queued - (!down.occu_bound) as u64;
+    match (pipe.emitted - 1).checked_sub(queued) {
+        // Most often in this stretch: the older ones hold no fragment the next may wait for.
+        Some(blocking) if blocking >= times.first => {
+            pipe.raster = pipe.raster.at_least(times.started(blocking));
+            pipe.recent.clear();
         }
-        // Older stretches hold no fragment the next may wait for.
-        while pipe
-            .recent
-            .front()
-            .is_some_and(|s| s.first + s.fragments <= blocking)
-        {
-            pipe.recent.pop_front();
+        Some(blocking) => {
+            if let Some(started) = pipe.started(blocking) {
+                pipe.raster = pipe.raster.at_least(started);
+            }
+            while pipe
+                .recent
+                .front()
+                .is_some_and(|s| s.first + s.fragments <= blocking)
+            {
+                pipe.recent.pop_front();
+            }
         }
+        None => {}
     }
+    pipe.recent.push_back(times);
     // The last fragment's read is asked for when it is emitted, the cycle before the
     // rasterizer's clock.
     pipe.last_read_ready = if stretch.last_read_latency > 0 {
