@@ -48,7 +48,8 @@ pub struct RowRun {
 }
 
 /// Up to [`BAND_ROWS`] rows (and [`BAND_RUNS`] runs) of fragments, in the order they came.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Two bands are equal when they hold the same runs (what lies past them is room).
+#[derive(Clone, Copy, Debug)]
 pub struct FragmentBand {
     runs: [RowRun; BAND_RUNS],
     count: u8,
@@ -68,6 +69,17 @@ impl RowRun {
         }
     }
 }
+
+/// Why [`FragmentBand::try_push`] refuses a run that fits the viewport.
+const PAST_ROOM: &str = "a band run that continues the one before, or past 16 runs or 8 rows";
+
+impl PartialEq for FragmentBand {
+    fn eq(&self, other: &FragmentBand) -> bool {
+        self.runs() == other.runs() && (self.rows, self.last_row) == (other.rows, other.last_row)
+    }
+}
+
+impl Eq for FragmentBand {}
 
 impl Default for FragmentBand {
     fn default() -> FragmentBand {
@@ -94,6 +106,11 @@ impl FragmentBand {
 
     pub fn is_empty(&self) -> bool {
         self.count == 0
+    }
+
+    /// Empty it, its room kept as it is (a decoder refills one band record after record).
+    pub(crate) fn clear(&mut self) {
+        (self.count, self.rows, self.last_row) = (0, 0, 0);
     }
 
     /// Its runs, in order.
@@ -159,7 +176,10 @@ impl FragmentBand {
 
     /// Add `run` as read from a trace in a viewport of `width` by `height`, or say why a
     /// writer's band would not hold it: a run empty or outside the viewport, one that
-    /// continues the run before (a writer joins them), one past 16 runs or 8 rows.
+    /// continues the run before (a writer joins them), one past 16 runs or 8 rows. (The
+    /// checks [`Self::admits_run`] and [`Self::push_run`] make, each once: a band index
+    /// holds every run of a trace.)
+    #[inline]
     pub(crate) fn try_push(
         &mut self,
         run: RowRun,
@@ -169,10 +189,25 @@ impl FragmentBand {
         if run.len == 0 || run.x as u32 + run.len > width || run.y as u32 >= height {
             return Err("a band run empty or outside the viewport");
         }
-        if self.continues(&run) || !self.admits_run(&run) {
-            return Err("a band run that continues the one before, or past 16 runs or 8 rows");
+        let count = self.count as usize;
+        let new_row = match self.runs().last() {
+            Some(last) if last.y == run.y => {
+                if last.x as u32 + last.len == run.x as u32 && last.passes == run.passes {
+                    return Err(PAST_ROOM);
+                }
+                false
+            }
+            _ => true,
+        };
+        if count == BAND_RUNS || (new_row && self.rows as usize == BAND_ROWS) {
+            return Err(PAST_ROOM);
         }
-        self.push_run(run);
+        if new_row {
+            self.rows += 1;
+            self.last_row = self.count;
+        }
+        self.runs[count] = run;
+        self.count += 1;
         Ok(())
     }
 

@@ -786,7 +786,7 @@ fn decode_band(
     if passing_tag && passing == 0 {
         return Err(bad(start, "a band of passing runs with none passing"));
     }
-    *out = FragmentBand::EMPTY;
+    out.clear();
     let (mut x, mut y, mut len) = (0i64, 0i64, 0i64);
     for k in 0..count {
         x = x.saturating_add(c.zz()?);
