@@ -227,6 +227,7 @@ impl PredictedLoop {
         }
     }
 
+    /// [`Self::settle`] where there is something to settle.
     fn settle_latency(&mut self, followed: Option<f64>, latencies: &mut [u64]) {
         if let Some(latency) = followed {
             if let Some(id) = self.following.take() {

@@ -70,6 +70,17 @@ impl RowRun {
     }
 }
 
+/// Where a run goes in a band ([`FragmentBand::place`]).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Place {
+    /// Onto the last run, which it continues.
+    Joined,
+    /// A run of its own on the last run's row.
+    SameRow,
+    /// A run of its own on a new row.
+    NewRow,
+}
+
 /// Why [`FragmentBand::try_push`] refuses a run that fits the viewport.
 const PAST_ROOM: &str = "a band run that continues the one before, or past 16 runs or 8 rows";
 
@@ -132,36 +143,50 @@ impl FragmentBand {
         self.runs().iter().map(|run| run.len as u64).sum()
     }
 
-    /// Whether `run` continues its last run (on its row, from its end, passing alike).
-    fn continues(&self, run: &RowRun) -> bool {
-        self.runs().last().is_some_and(|last| {
-            last.y == run.y && last.x as u32 + last.len == run.x as u32 && last.passes == run.passes
-        })
-    }
-
-    /// Whether `run` fits: it continues the last run, or the band has a run to spare and,
-    /// where the run begins a row, a row to spare.
-    pub fn admits_run(&self, run: &RowRun) -> bool {
-        if self.continues(run) {
-            return true;
+    /// Where `run` would go: joined to the last run (on its row, from its end, passing
+    /// alike), else a run of its own on the last row or a new one, where the band has a
+    /// run and, for a new row, a row to spare; `None` where it has not.
+    #[inline(always)]
+    fn place(&self, run: &RowRun) -> Option<Place> {
+        let last = self.runs().last();
+        if let Some(last) = last.filter(|last| last.y == run.y) {
+            if last.x as u32 + last.len == run.x as u32 && last.passes == run.passes {
+                return Some(Place::Joined);
+            }
         }
-        let new_row = self.runs().last().is_none_or(|last| last.y != run.y);
-        (self.count as usize) < BAND_RUNS && !(new_row && self.rows as usize == BAND_ROWS)
+        let place = match last.is_some_and(|last| last.y == run.y) {
+            true => Place::SameRow,
+            false => Place::NewRow,
+        };
+        let rows_full = place == Place::NewRow && self.rows as usize == BAND_ROWS;
+        ((self.count as usize) < BAND_RUNS && !rows_full).then_some(place)
     }
 
-    /// Add `run` (which it [`Self::admits_run`]).
-    pub fn push_run(&mut self, run: RowRun) {
-        debug_assert!(self.admits_run(&run));
-        if self.continues(&run) {
+    /// Put `run` where [`Self::place`] says it goes.
+    #[inline(always)]
+    fn put(&mut self, run: RowRun, place: Place) {
+        if place == Place::Joined {
             self.runs[self.count as usize - 1].len += run.len;
             return;
         }
-        if self.runs().last().is_none_or(|last| last.y != run.y) {
+        if place == Place::NewRow {
             self.rows += 1;
             self.last_row = self.count;
         }
         self.runs[self.count as usize] = run;
         self.count += 1;
+    }
+
+    /// Whether `run` fits: it continues the last run, or the band has a run to spare and,
+    /// where the run begins a row, a row to spare.
+    pub fn admits_run(&self, run: &RowRun) -> bool {
+        self.place(run).is_some()
+    }
+
+    /// Add `run` (which it [`Self::admits_run`]).
+    pub fn push_run(&mut self, run: RowRun) {
+        let place = self.place(&run).expect("a run the band admits");
+        self.put(run, place);
     }
 
     /// [`Self::admits_run`] for a run at `x` of row `y` outside a verbose query.
@@ -176,9 +201,8 @@ impl FragmentBand {
 
     /// Add `run` as read from a trace in a viewport of `width` by `height`, or say why a
     /// writer's band would not hold it: a run empty or outside the viewport, one that
-    /// continues the run before (a writer joins them), one past 16 runs or 8 rows. (The
-    /// checks [`Self::admits_run`] and [`Self::push_run`] make, each once: a band index
-    /// holds every run of a trace.)
+    /// continues the run before (a writer joins them), one past 16 runs or 8 rows. (Each
+    /// question asked once: a band index holds every run of a trace.)
     #[inline]
     pub(crate) fn try_push(
         &mut self,
@@ -189,26 +213,14 @@ impl FragmentBand {
         if run.len == 0 || run.x as u32 + run.len > width || run.y as u32 >= height {
             return Err("a band run empty or outside the viewport");
         }
-        let count = self.count as usize;
-        let new_row = match self.runs().last() {
-            Some(last) if last.y == run.y => {
-                if last.x as u32 + last.len == run.x as u32 && last.passes == run.passes {
-                    return Err(PAST_ROOM);
-                }
-                false
+        match self.place(&run) {
+            // A writer joins a run that continues the one before.
+            Some(Place::Joined) | None => Err(PAST_ROOM),
+            Some(place) => {
+                self.put(run, place);
+                Ok(())
             }
-            _ => true,
-        };
-        if count == BAND_RUNS || (new_row && self.rows as usize == BAND_ROWS) {
-            return Err(PAST_ROOM);
         }
-        if new_row {
-            self.rows += 1;
-            self.last_row = self.count;
-        }
-        self.runs[count] = run;
-        self.count += 1;
-        Ok(())
     }
 
     pub(crate) fn encode(&self, out: &mut Vec<u8>) {

@@ -1327,7 +1327,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     fn the_vector_heights_are_the_column_by_column_heights() {
         // Random bands (up to 8 rows of up to 16 runs, some rows scattered, some columns
-        // shared by every row, 1, 2 and 4 boards): summed eight columns at a time, each
+        // shared by several rows, 1, 2 and 4 boards): summed eight columns at a time, each
         // column's height in slots, each board's fragments and the steps left zero must be
         // what the plain sum gives.
         if !std::arch::is_x86_feature_detected!("avx2") {

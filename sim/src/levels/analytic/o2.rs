@@ -810,7 +810,7 @@ impl Pipe {
     /// The cycle the blocks behind the rasterizer start fragment `k`, if a recent stretch
     /// holds it.
     fn started(&self, k: u64) -> Option<f64> {
-        // The newest first: the fragment is most often in the stretch just closed.
+        // The newest first: the fragment is most often in the latest stretch kept.
         self.recent
             .iter()
             .rev()
