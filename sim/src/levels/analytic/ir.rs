@@ -611,7 +611,7 @@ impl Columns {
 
     /// [`Self::heights_in_slots`] eight columns at a time ([`avx2::heights_in_slots`]; `pace`
     /// below `2^32`). (Column by column, the demo's band index on ir4 took 293 M
-    /// instructions, 280 M so.)
+    /// instructions, 281 M so.)
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
     fn heights_in_slots_avx2(
