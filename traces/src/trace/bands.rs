@@ -148,15 +148,14 @@ impl FragmentBand {
     /// run and, for a new row, a row to spare; `None` where it has not.
     #[inline(always)]
     fn place(&self, run: &RowRun) -> Option<Place> {
-        let last = self.runs().last();
-        if let Some(last) = last.filter(|last| last.y == run.y) {
-            if last.x as u32 + last.len == run.x as u32 && last.passes == run.passes {
-                return Some(Place::Joined);
+        let place = match self.runs().last() {
+            Some(last) if last.y == run.y => {
+                if last.x as u32 + last.len == run.x as u32 && last.passes == run.passes {
+                    return Some(Place::Joined);
+                }
+                Place::SameRow
             }
-        }
-        let place = match last.is_some_and(|last| last.y == run.y) {
-            true => Place::SameRow,
-            false => Place::NewRow,
+            _ => Place::NewRow,
         };
         let rows_full = place == Place::NewRow && self.rows as usize == BAND_ROWS;
         ((self.count as usize) < BAND_RUNS && !rows_full).then_some(place)

@@ -452,27 +452,33 @@ impl O2Formulas {
     /// through its last read `max(a · n - m, c · a · n - m - c · (σ - debt))` cycles after the
     /// run's last fragment is emitted (as [`Self::dense_read_lag`], at most `C1`).
     #[inline]
-    fn ending_runs(&self, w: &StretchCounts, debt: f64, writes: u64) -> EndingRuns {
-        if w.ending.runs().is_empty() {
-            return EndingRuns {
-                owed: 0.0,
-                port_lag: 0.0,
-            };
-        }
-        let f = 1.0 - self.free_share();
-        let c = self.cycles_per_read;
+    fn ending_runs(&self, w: &StretchCounts, debt: f64, writes: u64) -> RunEnd {
         let a = 1.0 + (writes as f64 / w.depth_reads.max(1) as f64).min(1.0);
-        let (mut owed, mut lag) = (0.0f64, 0.0f64);
+        let mut ending = RunEnd {
+            owed: 0.0,
+            port_lag: 0.0,
+        };
         for run in w.ending.runs() {
             let (n, m) = (a * f64::from(run.reads), f64::from(run.fragments));
-            owed = owed.max((n - (1.0 - f) * m).min(f * n));
-            lag = lag
-                .max(self.queued_lag(n - m))
-                .max(self.lag_past_slack(c * n - m, debt));
+            let end = self.run_end(n, m, debt);
+            ending.owed = ending.owed.max(end.owed);
+            ending.port_lag = ending.port_lag.max(self.queued_lag(end.port_lag));
         }
-        EndingRuns {
-            owed: owed.min(self.slack),
-            port_lag: lag,
+        ending
+    }
+
+    /// What a run of `m` fragments whose transfers keep the port busy `work` cycles leaves
+    /// as it ends, the other clients `debt` behind as it starts: they are at least
+    /// `min(work - (1 - f) · m, f · work)` behind (within `0..=σ`: at least that from no
+    /// debt), and the port is through it `max(work - m, c · work - m - c · (σ - debt))`
+    /// cycles after its last fragment's emission (past the slack, each cycle of its work
+    /// and the forced ones among them). The one rule of the ending runs of reads and the
+    /// drawn tail.
+    fn run_end(&self, work: f64, m: f64, debt: f64) -> RunEnd {
+        let (f, c) = (self.reserved_share, self.cycles_per_read);
+        RunEnd {
+            owed: (work - (1.0 - f) * m).min(f * work).within(0.0, self.slack),
+            port_lag: (work - m).max(c * work - m - c * (self.slack - debt)),
         }
     }
 
@@ -624,15 +630,14 @@ impl O2Formulas {
         let work = run.depth_reads as f64 + self.write_cycles(&run, self.write_bits(&run));
         let m = run.fragments as f64;
         let c = self.cycles_per_read;
-        let lag = (work - m).max(c * work - m - c * (self.slack - debt));
+        let end = self.run_end(work, m, debt);
         let forced = c * work - c * (self.slack - debt) > work;
-        let f = self.reserved_share;
-        (lag > 0.0).then(|| TailTimes {
+        (end.port_lag > 0.0).then(|| TailTimes {
             fragments: run.fragments,
-            port_lag: lag,
-            pace: (m + lag) / m,
+            port_lag: end.port_lag,
+            pace: (m + end.port_lag) / m,
             port_rate: if forced { c } else { 1.0 },
-            owed: (work - (1.0 - f) * m).min(f * work).within(0.0, self.slack),
+            owed: end.owed,
             counts: run,
         })
     }
@@ -1074,11 +1079,12 @@ struct TailTimes {
     counts: StretchCounts,
 }
 
-/// What a stretch's ending runs of reads leave as it ends ([`O2Formulas::ending_runs`]).
-struct EndingRuns {
+/// What a run of the port's work leaves as it ends ([`O2Formulas::run_end`]; a stretch's
+/// ending runs of reads, [`O2Formulas::ending_runs`]).
+struct RunEnd {
     /// The port's other clients' debt, at least.
     owed: f64,
-    /// Cycles from the last fragment's emission until the port is through its reads.
+    /// Cycles from the last fragment's emission until the port is through its work.
     port_lag: f64,
 }
 
