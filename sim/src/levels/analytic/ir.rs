@@ -83,7 +83,9 @@
 use super::{service_cycles, WindowEnd};
 use crate::arch::{Interleave, IrArch};
 use crate::blocks::interleave::FramebufferInterleave;
-use crate::blocks::merge_network::{delivered, merged_ready, Partial, ReportShape};
+use crate::blocks::merge_network::{
+    delivered, merged_ready, merged_ready_brief, Partial, ReportShape,
+};
 use crate::blocks::occlusion_engine::hit_room;
 use occsim_traces::golden::FunctionalModel;
 #[cfg(doc)]
@@ -154,15 +156,13 @@ enum Dealer {
 }
 
 impl Dealer {
-    /// Where Image Engine `engine` (board-major, `per_board` a board) is in the window's
-    /// clocks: unit `g = e · B + b` for engine `e` of board `b` under the columns
-    /// interleave, else `engine`.
-    fn index_of_engine(&self, engine: usize, per_board: usize) -> usize {
+    /// Where Image Engine `engine` of board `board` (`per_board` a board) is in the
+    /// window's clocks: unit `g = e · B + b` for engine `e` of board `b` under the columns
+    /// interleave, else `b · N + e` (board-major).
+    fn index_of_engine(&self, board: usize, engine: usize, per_board: usize) -> usize {
         match self {
-            Dealer::Columns(columns) => {
-                ((engine % per_board) << columns.board_shift) | (engine / per_board)
-            }
-            Dealer::Owners(..) => engine,
+            Dealer::Columns(columns) => (engine << columns.board_shift) | board,
+            Dealer::Owners(..) => board * per_board + engine,
         }
     }
 }
@@ -470,8 +470,12 @@ impl IrWindow {
 
     /// Each Image Engine's clock (`d_i`), board-major.
     fn engine_clocks(&self) -> impl Iterator<Item = u64> + '_ {
-        (0..self.through.len())
-            .map(|engine| self.through[self.dealer.index_of_engine(engine, self.per_board)])
+        let per_board = self.per_board;
+        (0..self.boards).flat_map(move |board| {
+            (0..per_board).map(move |engine| {
+                self.through[self.dealer.index_of_engine(board, engine, per_board)]
+            })
+        })
     }
 
     /// `T_w`: the window's cycles, the current stretch's work included.
@@ -945,6 +949,8 @@ pub(crate) struct IrBottleneck {
     open: Option<OpenQuery>,
     /// The host's first free cycle (software merges).
     host: u64,
+    /// Room for each Image Engine's ready cycle at a query's end.
+    ready: Vec<u64>,
 }
 
 impl IrBottleneck {
@@ -959,6 +965,7 @@ impl IrBottleneck {
             arch: arch.clone(),
             open: None,
             host: 0,
+            ready: Vec::new(),
         }
     }
 
@@ -1105,21 +1112,70 @@ impl IrBottleneck {
         // what came after the generators were done, so their backlog is that much shorter.
         let late = (release - pipe_done).max(0.0).round() as u64;
         let end_cycle = pipe_done.max(release).round() as u64;
-        let ready: Vec<u64> = self
-            .window
-            .backlogs(&self.arch, cycles, service)
-            .map(|backlog| end_cycle + 3 + backlog.saturating_sub(late))
-            .collect();
-        // Words as the machine moves them: 8 a tile from every Image Engine, and a verbose
-        // query's hits, each tile's within its buffer's room, merged within it.
-        let tiles = shape.tiles;
-        let report = ReportShape {
-            tiles: tiles as u64,
+        let shape = ReportShape {
+            tiles: shape.tiles as u64,
             room: match shape.mode {
                 QueryMode::Verbose => hit_room(shape.buffer_entries),
                 _ => u64::MAX,
             },
         };
+        // Each Image Engine's partial report is ready (board-major).
+        let mut ready = std::mem::take(&mut self.ready);
+        ready.clear();
+        ready.extend(
+            self.window
+                .backlogs(&self.arch, cycles, service)
+                .map(|backlog| end_cycle + 3 + backlog.saturating_sub(late)),
+        );
+        let merged = if hits_sent.is_empty() {
+            Partial::brief(self.merged_brief(&mut ready, shape.tiles))
+        } else {
+            self.merged_with_hits(&ready, &hits_sent, shape)
+        };
+        self.ready = ready;
+        let available = delivered(
+            &self.arch.global_merge_network(),
+            &merged,
+            shape,
+            self.arch.report_dma_bits_per_cycle,
+        );
+        self.window.restart_at(cycles);
+        let latency = (available - end_cycle) as f64;
+        WindowEnd {
+            cycles: cycles as f64,
+            latency,
+        }
+    }
+
+    /// The two merge stages' output for reports without hits, each Image Engine's ready in
+    /// `ready` (board-major, overwritten).
+    fn merged_brief(&mut self, ready: &mut [u64], tiles: u64) -> u64 {
+        let local = self.arch.local_merge_network();
+        let mut boards = [0; MAX_BOARDS];
+        for (board, engines) in ready
+            .chunks_mut(self.arch.image_engines_per_board)
+            .enumerate()
+        {
+            boards[board] = merged_ready_brief(&local, engines, tiles, &mut self.host);
+        }
+        let global = self.arch.global_merge_network();
+        merged_ready_brief(
+            &global,
+            &mut boards[..self.arch.boards],
+            tiles,
+            &mut self.host,
+        )
+    }
+
+    /// The two merge stages' output for a verbose query's reports: each Image Engine's
+    /// ready in `ready` (board-major) with the hits it sent, `hits_sent` (a tile's each).
+    fn merged_with_hits(
+        &mut self,
+        ready: &[u64],
+        hits_sent: &[u64],
+        shape: ReportShape,
+    ) -> Partial {
+        let tiles = shape.tiles as usize;
         let reports: Vec<Partial> = ready
             .iter()
             .enumerate()
@@ -1130,31 +1186,17 @@ impl IrBottleneck {
                     .map_or(Vec::new(), <[u64]>::to_vec),
             })
             .collect();
+        let local = self.arch.local_merge_network();
         let board_reports: Vec<Partial> = reports
             .chunks(self.arch.image_engines_per_board)
-            .map(|board| {
-                merged_ready(
-                    &self.arch.local_merge_network(),
-                    board,
-                    report,
-                    &mut self.host,
-                )
-            })
+            .map(|board| merged_ready(&local, board, shape, &mut self.host))
             .collect();
-        let global = self.arch.global_merge_network();
-        let merged = merged_ready(&global, &board_reports, report, &mut self.host);
-        let available = delivered(
-            &global,
-            &merged,
-            report,
-            self.arch.report_dma_bits_per_cycle,
-        );
-        self.window.restart_at(cycles);
-        let latency = (available - end_cycle) as f64;
-        WindowEnd {
-            cycles: cycles as f64,
-            latency,
-        }
+        merged_ready(
+            &self.arch.global_merge_network(),
+            &board_reports,
+            shape,
+            &mut self.host,
+        )
     }
 
     /// The pipe stood idle `cycles` before the window: the Image Engines worked through that
