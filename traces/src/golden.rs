@@ -499,8 +499,11 @@ impl OpenQuery {
             span.x as u32 + len as u32,
         )
         .unwrap_or(len..len);
+        // (A span inside its tile, as most are, has no part outside: nothing to test.)
         for outside in [0..inside.start, inside.end..len] {
-            depth.test_run_uncounted(test, span.part(outside));
+            if !outside.is_empty() {
+                depth.test_run_uncounted(test, span.part(outside));
+            }
         }
         if !inside.is_empty() {
             let run = span.part(inside);
