@@ -4,7 +4,7 @@
 use crate::depth_run::{test_and_write, with_kernel_in, KernelIsa, RunKernel, WithKernel};
 use crate::event::{Event, Fragment, GeometryBatch, Span, DEPTH_ONE};
 use crate::query::{verbose_hits_kept, QueryMode, QueryResult, QuerySpec, RunTally, TileResult};
-use crate::raster::{RasterProfile, RasterSink, Rasterizer};
+use crate::raster::{PlaneDepths, RasterProfile, RasterSink, Rasterizer};
 use crate::scene::Command;
 use crate::state::{DepthFunc, Rect, RenderState};
 use std::collections::HashMap;
@@ -716,6 +716,15 @@ pub trait EventSink {
         }
         Ok(())
     }
+
+    /// The primitive just begun (its `Primitive` event sent) has the depths of `plane` at
+    /// its pixels ([`crate::raster::RasterSink::depth_plane`]): not an event, a hint a
+    /// trace writer keeps in place of its fragments' depths. The default ignores it.
+    #[inline(always)]
+    fn depth_plane(&mut self, plane: &PlaneDepths) -> Result<(), Self::Error> {
+        let _ = plane;
+        Ok(())
+    }
 }
 
 /// The value of a result whose error cannot happen (a sink that cannot fail, as
@@ -830,6 +839,15 @@ impl<S: EventSink> RasterSink for Forward<'_, S> {
     fn fragment(&mut self, fragment: Fragment) {
         self.functional.fragment(fragment);
         self.send(&Event::Fragment(fragment));
+    }
+
+    #[inline(always)]
+    fn depth_plane(&mut self, plane: PlaneDepths) {
+        if self.error.is_none() {
+            if let Err(error) = self.sink.depth_plane(&plane) {
+                self.error = Some(error);
+            }
+        }
     }
 }
 

@@ -22,6 +22,7 @@ mod exact;
 mod llvmpipe;
 
 pub use exact::DEPTH_EXTRA_BITS;
+pub use llvmpipe::PlaneDepths;
 
 use crate::event::Fragment;
 use crate::state::RenderState;
@@ -118,6 +119,13 @@ pub trait RasterSink {
     #[inline(always)]
     fn next_span(&mut self, y: u16, first: u16, last: u16) {
         let _ = (y, first, last);
+    }
+    /// The primitive just begun has the depths of `plane` at its pixels (the llvmpipe
+    /// profile tells it; the others do not): a trace writer keeps the plane in place of
+    /// its fragments' depths. The default ignores it. Never changes what is emitted.
+    #[inline(always)]
+    fn depth_plane(&mut self, plane: PlaneDepths) {
+        let _ = plane;
     }
 }
 

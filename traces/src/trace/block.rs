@@ -19,8 +19,10 @@ pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// band index's blocks beside the window index's ([`crate::trace::bands`]); version 11
 /// gives query records the length of their tiles' bytes, and results their totals
 /// ([`crate::trace::TraceReader::skim_queries`]); version 12 gives every stretch its drawn
-/// tail ([`crate::trace::FragmentStretch::drawn_tail`]).
-pub const FORMAT_VERSION: u16 = 12;
+/// tail ([`crate::trace::FragmentStretch::drawn_tail`]); version 13 keeps a primitive's
+/// depth plane ([`crate::raster::PlaneDepths`]) where the rasterizer told it, and its spans
+/// whose depths the plane gives as plane spans, without their depths.
+pub const FORMAT_VERSION: u16 = 13;
 /// The first version whose indexed traces hold a band index ([`crate::trace::bands`]).
 pub const BANDS_VERSION: u16 = 10;
 /// The first version whose window index holds every count the O2 formulas take

@@ -20,6 +20,7 @@ use crate::query::{
     QueryMode, QueryResult, QueryShape, QuerySpec, QueryTotals, TileResult, MAX_BUFFER_ENTRIES,
     MAX_TILES,
 };
+use crate::raster::PlaneDepths;
 use crate::state::{DepthFunc, Rect};
 use span_depths::span_depths;
 
@@ -81,6 +82,15 @@ pub(crate) mod tag {
     /// the tiles, then a varint length and that many bytes of tile results. Version 11 on,
     /// in place of QUERY_RESULT.
     pub const QUERY_RESULT_TOTALED: u8 = 0x1A;
+    /// A primitive's depth plane ([`crate::raster::PlaneDepths`]): `a0`, `dzdx` and `dzdy`
+    /// as little-endian f32 bits, then a varint, 0 for rows as they are or the mirror + 1.
+    /// Not an event: the plane spans after it in its block take their depths from it.
+    /// Version 13 on.
+    pub const PLANE: u8 = 0x1B;
+    /// A run of fragments on one row whose depths are the block's last plane's at their
+    /// pixels: its row and column less the last span's and its length less one, as a
+    /// SPAN's, and no depths. Version 13 on.
+    pub const PLANE_SPAN: u8 = 0x1C;
 }
 
 /// Most fragments in one span: a row of the widest viewport.
@@ -94,6 +104,10 @@ pub const MAX_EVENT_BYTES: usize = 64 << 20;
 pub(crate) fn span_bytes_bound(fragments: usize) -> usize {
     1 + 4 * 10 + fragments.saturating_sub(1) * 10
 }
+
+/// Most bytes a plane record and a plane span after it take: tags, the plane's three f32s
+/// and mirror varint, the span's three header varints.
+pub(crate) const PLANE_AND_SPAN_BYTES: usize = 1 + 12 + 5 + 1 + 3 * 10;
 
 #[inline(always)]
 pub(crate) fn put_uv(out: &mut Vec<u8>, mut value: u64) {
@@ -221,6 +235,17 @@ impl<'a> Cursor<'a> {
             return None;
         }
         self.pos += 4;
+        Some(bytes)
+    }
+
+    /// The next three bytes if each is a whole varint: a plane span's usual header.
+    #[inline(always)]
+    fn three_one_byte_varints(&mut self) -> Option<[u8; 3]> {
+        let bytes: [u8; 3] = self.bytes.get(self.pos..self.pos + 3)?.try_into().ok()?;
+        if (bytes[0] | bytes[1] | bytes[2]) & 0x80 != 0 {
+            return None;
+        }
+        self.pos += 3;
         Some(bytes)
     }
 
@@ -374,6 +399,14 @@ impl SpanPredictor {
         self.z = z;
     }
 
+    /// A plane span starts at (x, y): the depths' predictions stay the last depth span's
+    /// (a plane span's depths are its plane's; a depth span after it is rare).
+    #[inline(always)]
+    fn moved(&mut self, x: i64, y: i64) {
+        self.x = x;
+        self.y = y;
+    }
+
     /// The span that began at depth `first` ended at depth `last` after `len` fragments.
     #[inline(always)]
     fn end(&mut self, first: i64, last: i64, len: usize) {
@@ -413,6 +446,33 @@ pub(crate) fn encode_span(
         previous = depth;
     }
     predictor.end(first, previous, depths.len());
+}
+
+/// Append a plane record.
+pub(crate) fn encode_plane(out: &mut Vec<u8>, plane: &PlaneDepths) {
+    out.push(tag::PLANE);
+    for value in [plane.a0, plane.dzdx, plane.dzdy] {
+        out.extend_from_slice(&value.to_bits().to_le_bytes());
+    }
+    put_uv(out, plane.mirror.map_or(0, |mirror| mirror as u64 + 1));
+}
+
+/// Append a plane span of `len` fragments at (x0, y), (x0+1, y), ...: their depths are the
+/// last plane record's.
+pub(crate) fn encode_plane_span(
+    out: &mut Vec<u8>,
+    predictor: &mut SpanPredictor,
+    x0: u16,
+    y: u16,
+    len: usize,
+) {
+    debug_assert!(len > 0 && len <= MAX_SPAN_FRAGMENTS);
+    let (x, y) = (x0 as i64, y as i64);
+    out.push(tag::PLANE_SPAN);
+    put_zz(out, y - predictor.y);
+    put_zz(out, x - predictor.x);
+    put_uv(out, len as u64 - 1);
+    predictor.moved(x, y);
 }
 
 /// Append a non-fragment event whose record is small and fixed in shape.
@@ -762,6 +822,26 @@ fn decode_present_runs(c: &mut Cursor, runs: &mut DenseRuns) -> Result<(), Paylo
     Ok(())
 }
 
+/// A plane record's plane (its tag read).
+fn plane_record(c: &mut Cursor) -> Result<PlaneDepths, PayloadError> {
+    let mut value = || -> Result<f32, PayloadError> {
+        let bytes: [u8; 4] = c.take(4)?.try_into().expect("four bytes");
+        Ok(f32::from_bits(u32::from_le_bytes(bytes)))
+    };
+    let (a0, dzdx, dzdy) = (value()?, value()?, value()?);
+    let pos = c.pos;
+    let mirror = match c.uv()? {
+        0 => None,
+        code => Some(u32::try_from(code - 1).map_err(|_| bad(pos, "a plane's mirror past 2^32"))?),
+    };
+    Ok(PlaneDepths {
+        a0,
+        dzdx,
+        dzdy,
+        mirror,
+    })
+}
+
 /// A stretch record into `out`, checked.
 /// A band record's runs (its tag, `BAND` or `BAND_PASSING`, read) into `out`, checked to
 /// be a band a writer makes in a viewport of `width` by `height`.
@@ -980,6 +1060,8 @@ fn hits<'c>(
 struct SpanProgress {
     /// Fragments of the span still to hand out.
     remaining: usize,
+    /// A plane span: its depths are [`BlockDecoder::plane`]'s at its pixels.
+    plane: bool,
     len: usize,
     x: u16,
     y: u16,
@@ -1001,6 +1083,8 @@ pub(crate) struct BlockDecoder {
     span_depths: Vec<u32>,
     /// The payload is a band-index block's: bands in place of fragments, not stretches.
     pub in_bands: bool,
+    /// The block's last plane record's plane (none before its first).
+    plane: Option<PlaneDepths>,
 }
 
 /// What the decoder needs beyond the payload: the viewport, the stream checks, and the bytes
@@ -1034,6 +1118,8 @@ enum Record {
     Span,
     /// Part of a large event was stored.
     Part,
+    /// A plane record was read: the plane spans after it take their depths from it.
+    Plane,
 }
 
 impl BlockDecoder {
@@ -1072,7 +1158,7 @@ impl BlockDecoder {
             }
             match self.record(payload, ctx)? {
                 Record::Event(event) => return Ok(Some(event)),
-                Record::Span | Record::Part => {}
+                Record::Span | Record::Part | Record::Plane => {}
                 Record::Shape(_) | Record::Totals(_) => unreachable!("{EVENTS_WHOLE}"),
             }
         }
@@ -1124,12 +1210,14 @@ impl BlockDecoder {
                 self.band_record(payload, (ctx.width, ctx.height), &mut band)?;
                 Ok(Some(IndexItem::Band(band)))
             }
-            tag::SPAN => Err(bad(self.pos, "a span in a window-index block")),
+            tag::SPAN | tag::PLANE_SPAN | tag::PLANE => {
+                Err(bad(self.pos, "a span or a plane in a window-index block"))
+            }
             _ => Ok(match self.record(payload, ctx)? {
                 Record::Event(event) => Some(IndexItem::Event(event)),
                 Record::Shape(shape) => Some(IndexItem::Shape(shape)),
                 Record::Totals(totals) => Some(IndexItem::Totals(totals)),
-                Record::Span | Record::Part => None,
+                Record::Span | Record::Part | Record::Plane => None,
             }),
         }
     }
@@ -1255,9 +1343,12 @@ impl BlockDecoder {
                 return Ok(false);
             }
             // Spans are most records: skip the general dispatch for them.
-            if t == tag::SPAN && ctx.assembly.is_empty() {
+            if (t == tag::SPAN || t == tag::PLANE_SPAN) && ctx.assembly.is_empty() {
                 let mut c = Cursor::new(payload, self.pos + 1);
-                let span = self.span_header(&mut c, ctx.width, ctx.height)?;
+                let span = match t {
+                    tag::SPAN => self.span_header(&mut c, ctx.width, ctx.height)?,
+                    _ => self.plane_span_header(&mut c, ctx.width, ctx.height)?,
+                };
                 self.pos = c.pos;
                 unreported += span.len as u64;
                 self.drain_span(payload, sink, span)?;
@@ -1267,7 +1358,7 @@ impl BlockDecoder {
             match self.record(payload, ctx)? {
                 Record::Event(event) => sink.event(&event).map_err(DrainError::Sink)?,
                 Record::Span => self.drain_span(payload, sink, self.span)?,
-                Record::Part => {}
+                Record::Part | Record::Plane => {}
                 Record::Shape(_) | Record::Totals(_) => unreachable!("{EVENTS_WHOLE}"),
             }
         }
@@ -1291,11 +1382,19 @@ impl BlockDecoder {
             return Ok(Record::Part);
         }
         let event = match t {
-            tag::SPAN => {
-                self.span = self.span_header(&mut c, ctx.width, ctx.height)?;
+            tag::SPAN | tag::PLANE_SPAN => {
+                self.span = match t {
+                    tag::SPAN => self.span_header(&mut c, ctx.width, ctx.height)?,
+                    _ => self.plane_span_header(&mut c, ctx.width, ctx.height)?,
+                };
                 ctx.tally.checked_fragments(self.span.len as u64);
                 self.pos = c.pos;
                 return Ok(Record::Span);
+            }
+            tag::PLANE => {
+                self.plane = Some(plane_record(&mut c)?);
+                self.pos = c.pos;
+                return Ok(Record::Plane);
             }
             tag::PART | tag::PART_END => {
                 let len = c.uv_max(MAX_EVENT_BYTES as u64, "part length")? as usize;
@@ -1443,6 +1542,7 @@ impl BlockDecoder {
         self.events += len as u64;
         Ok(SpanProgress {
             remaining: len,
+            plane: false,
             len,
             x: x as u16,
             y: y as u16,
@@ -1452,9 +1552,63 @@ impl BlockDecoder {
         })
     }
 
+    /// Read a plane span's header, check the span lies in a `width` x `height` viewport
+    /// and that a plane came before it in its block, and return it.
+    #[inline(always)]
+    fn plane_span_header(
+        &mut self,
+        c: &mut Cursor,
+        width: u32,
+        height: u32,
+    ) -> Result<SpanProgress, PayloadError> {
+        let start = c.pos - 1;
+        let (dy, dx, len) = match c.three_one_byte_varints() {
+            Some([dy, dx, more]) => (unzigzag(dy as u64), unzigzag(dx as u64), more as usize + 1),
+            None => {
+                let dy = c.zz()?;
+                let dx = c.zz()?;
+                let len = c.uv_max(MAX_SPAN_FRAGMENTS as u64 - 1, "span length")? as usize + 1;
+                (dy, dx, len)
+            }
+        };
+        let p = &mut self.predictor;
+        let (x, y) = (p.x.wrapping_add(dx), p.y.wrapping_add(dy));
+        if x < 0 || y < 0 || x + len as i64 > width as i64 || y >= height as i64 {
+            return Err(bad(
+                start,
+                format!(
+                    "span of {len} fragments at ({x}, {y}) outside the {width}x{height} viewport"
+                ),
+            ));
+        }
+        if self.plane.is_none() {
+            return Err(bad(start, "a plane span before any plane in its block"));
+        }
+        p.moved(x, y);
+        self.events += len as u64;
+        Ok(SpanProgress {
+            remaining: len,
+            plane: true,
+            len,
+            x: x as u16,
+            y: y as u16,
+            ..SpanProgress::default()
+        })
+    }
+
     /// One fragment of the current span (slow path, state kept in `self.span`).
     fn next_span_fragment(&mut self, payload: &[u8]) -> Result<Fragment, PayloadError> {
         let span = &mut self.span;
+        if span.plane {
+            let x = span.x + (span.len - span.remaining) as u16;
+            span.remaining -= 1;
+            let plane = self.plane.expect("a plane span's header found its plane");
+            return Ok(Fragment {
+                x,
+                y: span.y,
+                z: plane.depth(x, span.y),
+            });
+        }
         if span.remaining < span.len {
             let mut c = Cursor::new(payload, self.pos);
             let pos = c.pos;
@@ -1490,8 +1644,20 @@ impl BlockDecoder {
             y,
             first,
             slope,
+            plane,
             ..
         } = span;
+        if plane {
+            let plane = self.plane.expect("a plane span's header found its plane");
+            if self.span_depths.len() < len {
+                self.span_depths.resize(len, 0);
+            }
+            plane.fill(x, y, &mut self.span_depths[..len]);
+            let depths = &self.span_depths[..len];
+            sink.span(Span { x, y, depths }).map_err(DrainError::Sink)?;
+            self.span.remaining = 0;
+            return Ok(());
+        }
         let (pos, depth) =
             span_depths(payload, self.pos, len, first, slope, &mut self.span_depths)?;
         let depths = &self.span_depths[..len];

@@ -1,10 +1,12 @@
 use super::block::{BlockHeader, BLOCK_HEADER_BYTES};
+use super::codec::tag;
 use super::synthetic::{generate, SyntheticScene};
 use super::*;
 use crate::event::{Event, Fragment, GeometryBatch, HostWork, DEPTH_ONE};
 use crate::golden::{infallible, EventSink};
 use crate::hit_list::{listed_hits_per_tile, HitList};
 use crate::query::{QueryMode, QueryResult, QuerySpec, TileResult};
+use crate::raster::{PlaneDepths, RasterProfile};
 use crate::state::{DepthFunc, Rect};
 use proptest::prelude::*;
 use std::io::Cursor;
@@ -339,14 +341,14 @@ fn wrong_magic_is_named() {
 
 #[test]
 fn unknown_version_is_named() {
-    for version in [0u8, 13] {
+    for version in [0u8, 14] {
         let mut bytes = write_default(&every_kind());
         bytes[8] = version;
         let error = TraceReader::new(&bytes[..]).err().unwrap();
         assert!(
             matches!(
                 error,
-                TraceError::UnsupportedVersion { offset: 8, version: v, known: 12 } if v == version as u16
+                TraceError::UnsupportedVersion { offset: 8, version: v, known: 13 } if v == version as u16
             ),
             "{error}"
         );
@@ -663,14 +665,25 @@ proptest! {
 /// and stored uncompressed with a valid checksum, so the event decoder (not the checksum)
 /// meets the damage.
 fn with_payload_mutations(flips: &[(prop::sample::Index, u8)]) -> Vec<u8> {
-    let events = every_kind();
     let options = WriterOptions {
         block_bytes: 4096,
         zstd_level: 1,
         window_index: None,
     };
-    let clean = write(&TraceHeader::new(SIDE, SIDE), options, &events).0;
-    let block = first_block_offset(&clean);
+    let clean = write(&TraceHeader::new(SIDE, SIDE), options, &every_kind()).0;
+    with_first_payload(&clean, |payload, _| {
+        for (at, value) in flips {
+            let at = at.index(payload.len());
+            payload[at] = *value;
+        }
+    })
+}
+
+/// `clean` with its first block's decoded payload and event count changed by `change` and
+/// stored uncompressed with a valid checksum, so the event decoder (not the checksum) meets
+/// the change.
+fn with_first_payload(clean: &[u8], change: impl FnOnce(&mut Vec<u8>, &mut u32)) -> Vec<u8> {
+    let block = first_block_offset(clean);
     let fields: [u8; BLOCK_HEADER_BYTES] =
         clean[block..block + BLOCK_HEADER_BYTES].try_into().unwrap();
     let (header, _) = BlockHeader::parse(&fields).unwrap();
@@ -681,12 +694,11 @@ fn with_payload_mutations(flips: &[(prop::sample::Index, u8)]) -> Vec<u8> {
     } else {
         stored.to_vec()
     };
-    for (at, value) in flips {
-        let at = at.index(payload.len());
-        payload[at] = *value;
-    }
+    let mut events = header.events;
+    change(&mut payload, &mut events);
     let new_header = BlockHeader {
         codec: 0,
+        events,
         raw_len: payload.len() as u32,
         stored_len: payload.len() as u32,
         ..header
@@ -845,5 +857,208 @@ fn a_window_table_that_no_stream_makes_is_refused_with_its_offset() {
             assert!(reason.contains("host work"), "{reason}");
         }
         other => panic!("{other:?}"),
+    }
+}
+
+/// What a rasterizer tells a sink: its events, and before each primitive's fragments the
+/// depth plane it told (if any).
+#[derive(Default)]
+struct Told {
+    events: Vec<Event>,
+    planes: Vec<(usize, PlaneDepths)>,
+}
+
+impl EventSink for Told {
+    type Error = std::convert::Infallible;
+    fn event(&mut self, event: &Event) -> Result<(), Self::Error> {
+        self.events.push(event.clone());
+        Ok(())
+    }
+    fn depth_plane(&mut self, plane: &PlaneDepths) -> Result<(), Self::Error> {
+        self.planes.push((self.events.len(), *plane));
+        Ok(())
+    }
+}
+
+/// `scene` (a scene file's text) rasterized by `profile` into `sink`.
+fn rasterize<S: EventSink>(scene: &str, profile: RasterProfile, sink: &mut S) -> (u32, u32)
+where
+    S::Error: std::fmt::Debug,
+{
+    let lines = crate::scene::parse_scene(scene, "scene").unwrap();
+    let crate::scene::Command::Viewport { width, height } = lines[0].command else {
+        panic!("no viewport")
+    };
+    let mut golden = crate::golden::GoldenModel::with_profile(width, height, profile);
+    for line in &lines {
+        golden.execute(&line.command, sink).unwrap();
+    }
+    golden.finish(sink).unwrap();
+    (width, height)
+}
+
+/// A small random scene: 400 triangles, 20 queries.
+fn small_random_scene() -> String {
+    crate::builtin::random_scene(&crate::builtin::RandomOptions {
+        width: 320,
+        height: 240,
+        triangles: 400,
+        queries: 20,
+        mean_area_pixels: 600.0,
+        seed: 3,
+    })
+}
+
+#[test]
+fn an_llvmpipe_primitives_plane_gives_each_of_its_fragments_depth() {
+    // What plane spans rest on: the plane the rasterizer tells a primitive gives every one
+    // of its fragments its depth. The exact profile tells none.
+    let scenes = [small_random_scene(), crate::builtin::HARDCASES.to_owned()];
+    for scene in &scenes {
+        for profile in [RasterProfile::Llvmpipe, RasterProfile::LlvmpipeWindow] {
+            let mut told = Told::default();
+            rasterize(scene, profile, &mut told);
+            let (mut plane, mut next, mut checked) = (None, 0, 0);
+            for (at, event) in told.events.iter().enumerate() {
+                while told.planes.get(next).is_some_and(|&(from, _)| from <= at) {
+                    plane = Some(told.planes[next].1);
+                    next += 1;
+                }
+                match event {
+                    Event::Primitive => plane = None,
+                    Event::Fragment(f) => {
+                        let plane = plane.expect("a fragment's primitive told its plane");
+                        assert_eq!(plane.depth(f.x, f.y), f.z, "{profile:?} {f:?} {plane:?}");
+                        checked += 1;
+                    }
+                    _ => {}
+                }
+            }
+            assert!(checked > 1000, "{checked} fragments");
+        }
+        let mut told = Told::default();
+        rasterize(scene, RasterProfile::Exact, &mut told);
+        assert!(told.planes.is_empty(), "the exact profile told a plane");
+    }
+}
+
+/// The small random scene's trace, the rasterizer's planes told its writer (blocks of
+/// `block_bytes`), and its events.
+fn plane_trace(block_bytes: usize) -> (Vec<u8>, Vec<Event>) {
+    let scene = small_random_scene();
+    let mut told = Told::default();
+    let (width, height) = rasterize(&scene, RasterProfile::Llvmpipe, &mut told);
+    let options = WriterOptions {
+        block_bytes,
+        zstd_level: 1,
+        window_index: None,
+    };
+    let mut bytes = Vec::new();
+    let mut writer =
+        TraceWriter::with_options(&mut bytes, &TraceHeader::new(width, height), options).unwrap();
+    rasterize(&scene, RasterProfile::Llvmpipe, &mut writer);
+    writer.finish().unwrap();
+    (bytes, told.events)
+}
+
+#[test]
+fn plane_spans_read_back_by_both_paths_and_shrink_the_trace() {
+    for block_bytes in [4096, super::writer::DEFAULT_BLOCK_BYTES] {
+        let (bytes, events) = plane_trace(block_bytes);
+        for read in [read_bulk as ReadPath, read_one_by_one] {
+            assert_eq!(
+                read(&bytes).unwrap().0,
+                events,
+                "blocks of {block_bytes} bytes"
+            );
+        }
+        // The same events told no plane: every span keeps its depths.
+        let options = WriterOptions {
+            block_bytes,
+            zstd_level: 1,
+            window_index: None,
+        };
+        let (without, _) = write(&TraceHeader::new(320, 240), options, &events);
+        assert_eq!(read_bulk(&without).unwrap().0, events);
+        assert!(
+            bytes.len() * 2 < without.len(),
+            "with planes {} bytes, without {}",
+            bytes.len(),
+            without.len()
+        );
+    }
+}
+
+#[test]
+fn a_span_its_plane_does_not_give_keeps_its_depths() {
+    // One plane told; the first and last spans have its depths, the middle one differs at
+    // one pixel (a plane the rasterizer got wrong would: the trace stays exact).
+    let plane = PlaneDepths {
+        a0: 0.25,
+        dzdx: 0.001,
+        dzdy: -0.0005,
+        mirror: Some(99),
+    };
+    let row = |y: u16, odd: Option<u16>| -> Vec<Event> {
+        (10..40u16)
+            .map(|x| frag(x, y, plane.depth(x, y) + u32::from(Some(x) == odd)))
+            .collect()
+    };
+    let mut events = vec![Event::Primitive];
+    events.extend(row(5, None));
+    events.extend(row(6, Some(17)));
+    events.extend(row(7, None));
+    let mut bytes = Vec::new();
+    let mut writer = TraceWriter::new(&mut bytes, &TraceHeader::new(100, 100)).unwrap();
+    writer.write_event(&events[0]).unwrap();
+    writer.depth_plane(&plane).unwrap();
+    for event in &events[1..] {
+        writer.write_event(event).unwrap();
+    }
+    writer.finish().unwrap();
+    for read in [read_bulk as ReadPath, read_one_by_one] {
+        assert_eq!(read(&bytes).unwrap().0, events);
+    }
+}
+
+#[test]
+fn a_plane_span_before_any_plane_in_its_block_is_named_with_its_offset() {
+    // A block whose payload is one plane span of one fragment at (0, 0): tag, dy, dx and
+    // length less one, and no plane record before it.
+    let bytes = with_first_payload(&plane_trace(4096).0, |payload, events| {
+        *payload = vec![tag::PLANE_SPAN, 0, 0, 0];
+        *events = 1;
+    });
+    for read in [read_bulk as ReadPath, read_one_by_one] {
+        let error = read(&bytes).unwrap_err().to_string();
+        assert!(
+            error.contains("a plane span before any plane in its block"),
+            "{error}"
+        );
+        // The block's offset, and the span's tag the payload's first byte.
+        let at = format!(
+            "byte {}: corrupt block payload at decoded byte 0",
+            first_block_offset(&bytes)
+        );
+        assert!(error.contains(&at), "{error} (expected {at})");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    #[test]
+    fn damaged_plane_payloads_never_panic_and_both_read_paths_agree(
+        flips in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..4),
+    ) {
+        let bytes = with_first_payload(&plane_trace(4096).0, |payload, _| {
+            for (at, value) in &flips {
+                let at = at.index(payload.len());
+                payload[at] = *value;
+            }
+        });
+        read_anything(&bytes);
+        let outcome = |read: ReadPath| read(&bytes).map_err(|error| error.to_string());
+        prop_assert_eq!(outcome(read_bulk), outcome(read_one_by_one));
     }
 }

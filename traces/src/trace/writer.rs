@@ -3,8 +3,9 @@
 use super::bands::{FragmentBand, RowRun};
 use super::block::*;
 use super::codec::{
-    encode_large_event, encode_small_event, encode_span, put_uv, span_bytes_bound, tag,
-    SpanPredictor, MAX_EVENT_BYTES, MAX_SPAN_FRAGMENTS,
+    encode_large_event, encode_plane, encode_plane_span, encode_small_event, encode_span, put_uv,
+    span_bytes_bound, tag, SpanPredictor, MAX_EVENT_BYTES, MAX_SPAN_FRAGMENTS,
+    PLANE_AND_SPAN_BYTES,
 };
 use super::depth_tests::DepthTestBits;
 use super::header::{BlockCounts, StreamTally, TraceHeader, TraceSummary};
@@ -14,6 +15,7 @@ use super::TraceError;
 use crate::depth_layout::DepthLayout;
 use crate::event::{Event, Fragment};
 use crate::golden::EventSink;
+use crate::raster::PlaneDepths;
 use std::io::Write;
 
 /// Payload bytes a block holds at most by default: 64 KB, about 60,000 of the demo's
@@ -120,6 +122,12 @@ pub struct TraceWriter<W: Write> {
     span_y: u16,
     span_depths: Vec<u32>,
     max_span: usize,
+    /// The depth plane of the primitive being written, where the rasterizer told one
+    /// ([`EventSink::depth_plane`]); whether the open event block holds it yet; room for
+    /// the depths it gives a span.
+    plane: Option<PlaneDepths>,
+    plane_in_block: bool,
+    plane_depths: Vec<u32>,
     /// Scratch space for a large event's record, and for compressed output.
     large: Vec<u8>,
     stored: Vec<u8>,
@@ -216,6 +224,9 @@ impl<W: Write> TraceWriter<W> {
             span_y: 0,
             span_depths: Vec::new(),
             max_span: MAX_SPAN_FRAGMENTS.min((options.block_bytes - span_bytes_bound(1)) / 10),
+            plane: None,
+            plane_in_block: false,
+            plane_depths: Vec::new(),
             large: Vec::new(),
             stored: Vec::new(),
             tally: StreamTally::new(&header),
@@ -399,14 +410,25 @@ impl<W: Write> TraceWriter<W> {
         if self.span_depths.is_empty() {
             return Ok(());
         }
-        self.make_room(Lane::Events, span_bytes_bound(self.span_depths.len()))?;
-        encode_span(
-            &mut self.events.payload,
-            &mut self.predictor,
-            self.span_x,
-            self.span_y,
-            &self.span_depths,
-        );
+        if self.plane_gives_span() {
+            self.make_room(Lane::Events, PLANE_AND_SPAN_BYTES)?;
+            let (payload, plane) = (&mut self.events.payload, self.plane.as_ref());
+            if let Some(plane) = plane.filter(|_| !self.plane_in_block) {
+                encode_plane(payload, plane);
+                self.plane_in_block = true;
+            }
+            let len = self.span_depths.len();
+            encode_plane_span(payload, &mut self.predictor, self.span_x, self.span_y, len);
+        } else {
+            self.make_room(Lane::Events, span_bytes_bound(self.span_depths.len()))?;
+            encode_span(
+                &mut self.events.payload,
+                &mut self.predictor,
+                self.span_x,
+                self.span_y,
+                &self.span_depths,
+            );
+        }
         self.events.items += self.span_depths.len() as u32;
         self.span_depths.clear();
         if let Some(index) = &mut self.index {
@@ -416,6 +438,33 @@ impl<W: Write> TraceWriter<W> {
                 .for_each(|passed| index.depth_tests.push(passed));
         }
         Ok(())
+    }
+
+    /// Whether the gathered span's depths are the current plane's at its pixels, as a
+    /// reader evaluates them ([`PlaneDepths::fill`]): then the span is written as a plane
+    /// span, without them.
+    fn plane_gives_span(&mut self) -> bool {
+        let Some(plane) = &self.plane else {
+            return false;
+        };
+        let len = self.span_depths.len();
+        self.plane_depths.resize(len, 0);
+        plane.fill(self.span_x, self.span_y, &mut self.plane_depths);
+        self.plane_depths == self.span_depths
+    }
+
+    /// The primitive just begun has the depths of `plane` at its pixels: its spans that
+    /// have them are written as plane spans. (The span gathered before belongs to the
+    /// primitive before: it is written first.)
+    pub fn depth_plane(&mut self, plane: &PlaneDepths) -> Result<(), TraceError> {
+        if self.failed {
+            return Err(self.invalid("the writer stopped at an earlier error".to_owned()));
+        }
+        let result = self.flush_span();
+        self.failed = result.is_err();
+        self.plane = Some(*plane);
+        self.plane_in_block = false;
+        result
     }
 
     /// A query begin or result, into every lane.
@@ -483,6 +532,7 @@ impl<W: Write> TraceWriter<W> {
         let written = self.write_block(kind, items, &payload)?;
         if lane == Lane::Events {
             self.predictor = SpanPredictor::default();
+            self.plane_in_block = false;
             self.flush_depth_tests()?;
         }
         if let Some(block) = self.open_block(lane) {
@@ -615,6 +665,10 @@ impl<W: Write> EventSink for TraceWriter<W> {
     #[inline]
     fn event(&mut self, event: &Event) -> Result<(), TraceError> {
         self.write_event(event)
+    }
+
+    fn depth_plane(&mut self, plane: &PlaneDepths) -> Result<(), TraceError> {
+        TraceWriter::depth_plane(self, plane)
     }
 }
 

@@ -6,7 +6,7 @@ use crate::event::{Event, HostWork, DEPTH_ONE};
 use crate::geometry::to_clip;
 use crate::golden::{EventSink, GoldenModel};
 use crate::query::{QueryMode, QueryResult, QuerySpec, BRIEF_RECORD_ENTRIES};
-use crate::raster::RasterProfile;
+use crate::raster::{PlaneDepths, RasterProfile};
 use crate::scene::Command;
 use crate::state::{DepthFunc, Rect};
 use glam::Mat4;
@@ -44,6 +44,11 @@ impl<S: EventSink> EventSink for CountingSink<'_, S> {
             self.fragments += 1;
         }
         self.inner.event(event)
+    }
+
+    #[inline(always)]
+    fn depth_plane(&mut self, plane: &PlaneDepths) -> Result<(), S::Error> {
+        self.inner.depth_plane(plane)
     }
 }
 

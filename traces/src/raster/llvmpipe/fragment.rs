@@ -19,23 +19,97 @@ use crate::event::{Fragment, DEPTH_ONE};
 
 /// The depth plane of one primitive, with the row mapping of its framebuffer.
 pub(super) struct DepthPlane {
-    coefficients: PlaneCoefficients,
-    framebuffer: Framebuffer,
-    height: u32,
+    depths: PlaneDepths,
 }
 
 impl DepthPlane {
     /// From the window positions in the order llvmpipe hands them to setup.
     pub fn new(window: &[[f32; 3]; 3], framebuffer: Framebuffer, height: u32) -> DepthPlane {
+        let PlaneCoefficients { a0, dzdx, dzdy } = PlaneCoefficients::new(window);
+        // The framebuffer row is its own inverse mapping of the GL row.
+        let mirror = match framebuffer.gl_row(0, height) {
+            0 => None,
+            last => Some(last as u32),
+        };
         DepthPlane {
-            coefficients: PlaneCoefficients::new(window),
-            framebuffer,
-            height,
+            depths: PlaneDepths {
+                a0,
+                dzdx,
+                dzdy,
+                mirror,
+            },
+        }
+    }
+
+    /// What a sink is told of the plane ([`crate::raster::RasterSink::depth_plane`]).
+    pub fn depths(&self) -> PlaneDepths {
+        self.depths
+    }
+}
+
+/// A primitive's depth plane as llvmpipe's fragment shader evaluates it at a pixel
+/// ([`Self::depth`]): the f32 coefficients its setup made and how framebuffer rows map to
+/// GL rows. Every fragment of a primitive the llvmpipe profile rasterizes has the depth
+/// this gives at its pixel, so a trace may keep the plane in place of the depths
+/// ([`crate::trace`]'s plane spans), which its reader evaluates again.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaneDepths {
+    pub a0: f32,
+    pub dzdx: f32,
+    pub dzdy: f32,
+    /// Framebuffer row `y` is GL row `y`, or `mirror - y` where rows run the other way (a
+    /// window's framebuffer, `mirror` its height less one).
+    pub mirror: Option<u32>,
+}
+
+impl PlaneDepths {
+    /// The unorm24 depth at pixel `(x, y)` (framebuffer coordinates).
+    #[inline(always)]
+    pub fn depth(&self, x: u16, y: u16) -> u32 {
+        depth(&self.coefficients(), x as f32, self.gl_row(y))
+    }
+
+    /// The depths at pixels `x..x + out.len()` of row `y`, into `out`: each what
+    /// [`Self::depth`] gives (eight at a time with AVX2 and FMA, the same operations
+    /// rounded the same way).
+    #[inline]
+    pub fn fill(&self, x: u16, y: u16, out: &mut [u32]) {
+        #[cfg(target_arch = "x86_64")]
+        if avx2::available() {
+            // SAFETY: the processor has AVX2 and FMA (just checked).
+            return unsafe { avx2::fill(self, x, y, out) };
+        }
+        self.fill_one_by_one(x, y, out);
+    }
+
+    /// [`Self::fill`] a pixel at a time.
+    pub(crate) fn fill_one_by_one(&self, x: u16, y: u16, out: &mut [u32]) {
+        let (coefficients, row) = (self.coefficients(), self.gl_row(y));
+        for (k, depth_out) in out.iter_mut().enumerate() {
+            *depth_out = depth(&coefficients, (x as usize + k) as f32, row);
+        }
+    }
+
+    /// The GL row of framebuffer row `y`, as the shader takes it.
+    #[inline(always)]
+    fn gl_row(&self, y: u16) -> f32 {
+        match self.mirror {
+            Some(mirror) => (mirror as i64 - y as i64) as f32,
+            None => y as f32,
+        }
+    }
+
+    #[inline(always)]
+    fn coefficients(&self) -> PlaneCoefficients {
+        PlaneCoefficients {
+            a0: self.a0,
+            dzdx: self.dzdx,
+            dzdy: self.dzdy,
         }
     }
 }
 
-/// unorm24 depth of one pixel at framebuffer column `x`, row `row`.
+/// unorm24 depth of one pixel at framebuffer column `x`, GL row `row`.
 #[inline(always)]
 fn depth(plane: &PlaneCoefficients, x: f32, row: f32) -> u32 {
     let z = plane
@@ -43,6 +117,71 @@ fn depth(plane: &PlaneCoefficients, x: f32, row: f32) -> u32 {
         .mul_add(row, flush(plane.dzdx.mul_add(x, plane.a0)));
     let z = sse_max(sse_min(z, 1.0), 0.0);
     convert_nearest_even(z * DEPTH_ONE as f32) as u32
+}
+
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::PlaneDepths;
+    use crate::event::DEPTH_ONE;
+    use std::arch::x86_64::*;
+
+    const LANES: usize = 8;
+
+    /// AVX2 and FMA both: checked once, then a load.
+    pub fn available() -> bool {
+        static AVAILABLE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+        *AVAILABLE
+            .get_or_init(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
+    }
+
+    /// [`PlaneDepths::fill`] eight pixels at a time: `fmadd(dzdx, x, a0)` flushed as FTZ
+    /// would (a denormal becomes zero of its sign), `fmadd(dzdy, row, that)`, `minps` with 1
+    /// and `maxps` with 0 (a NaN gives the second operand, as `sse_min` and `sse_max`), times
+    /// 2^24 - 1 and converted with rounding to nearest even (the default rounding mode,
+    /// which nothing in the process changes). The last pixels, fewer than eight, are
+    /// computed as a whole vector and stored through a mask.
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn fill(plane: &PlaneDepths, x: u16, y: u16, out: &mut [u32]) {
+        let a0 = _mm256_set1_ps(plane.a0);
+        let dzdx = _mm256_set1_ps(plane.dzdx);
+        let dzdy = _mm256_set1_ps(plane.dzdy);
+        let row = _mm256_set1_ps(plane.gl_row(y));
+        let (one, zero) = (_mm256_set1_ps(1.0), _mm256_setzero_ps());
+        let scale = _mm256_set1_ps(DEPTH_ONE as f32);
+        let sign = _mm256_set1_ps(-0.0);
+        let smallest = _mm256_set1_ps(f32::MIN_POSITIVE);
+        let step = _mm256_set1_ps(LANES as f32);
+        // Pixel columns as f32, exact (below 2^24).
+        let mut columns = _mm256_add_ps(
+            _mm256_set1_ps(x as f32),
+            _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
+        );
+        let depths = |columns: __m256| {
+            let partial = _mm256_fmadd_ps(dzdx, columns, a0);
+            // |partial| below the least normal: a denormal (or a zero), kept as its sign.
+            let magnitude = _mm256_andnot_ps(sign, partial);
+            let denormal = _mm256_cmp_ps::<_CMP_LT_OQ>(magnitude, smallest);
+            let partial = _mm256_blendv_ps(partial, _mm256_and_ps(partial, sign), denormal);
+            let z = _mm256_fmadd_ps(dzdy, row, partial);
+            let z = _mm256_max_ps(_mm256_min_ps(z, one), zero);
+            _mm256_cvtps_epi32(_mm256_mul_ps(z, scale))
+        };
+        let mut chunks = out.chunks_exact_mut(LANES);
+        for chunk in &mut chunks {
+            // SAFETY: eight u32s in bounds; an unaligned store.
+            unsafe { _mm256_storeu_si256(chunk.as_mut_ptr().cast(), depths(columns)) };
+            columns = _mm256_add_ps(columns, step);
+        }
+        let rest = chunks.into_remainder();
+        if !rest.is_empty() {
+            // Lane k holds pixel k of the rest, stored where k is below its length.
+            let lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+            let stored = _mm256_cmpgt_epi32(_mm256_set1_epi32(rest.len() as i32), lanes);
+            // SAFETY: a masked store writes only the lanes of its mask, the slice's own
+            // elements (fewer than eight from its start).
+            unsafe { _mm256_maskstore_epi32(rest.as_mut_ptr().cast(), stored, depths(columns)) };
+        }
+    }
 }
 
 #[inline(always)]
@@ -80,22 +219,87 @@ fn emit_span_fma(
 impl SpanDepths for DepthPlane {
     #[inline(always)]
     fn emit(&self, py: i64, first: i64, last: i64, sink: &mut impl RasterSink) {
-        // The framebuffer row is its own inverse mapping of the GL row.
-        let row = self.framebuffer.gl_row(py, self.height) as f32;
         let y = py as u16;
+        let (coefficients, row) = (self.depths.coefficients(), self.depths.gl_row(y));
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("fma") {
             // SAFETY: the CPU has FMA, checked just above.
-            unsafe { emit_span_fma(&self.coefficients, row, y, first, last, sink) };
+            unsafe { emit_span_fma(&coefficients, row, y, first, last, sink) };
             return;
         }
-        emit_span(&self.coefficients, row, y, first, last, sink);
+        emit_span(&coefficients, row, y, first, last, sink);
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::rng::SplitMix64;
+
+    /// A coefficient: mostly an ordinary slope or offset, sometimes a value at an edge of
+    /// f32 (a NaN, an infinity, a denormal, the least normal, a huge or a tiny one).
+    fn coefficient(random: &mut SplitMix64) -> f32 {
+        const EDGES: [f32; 10] = [
+            f32::NAN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+            1.0e-40,
+            -0.0,
+            3.0e38,
+            1.0e-30,
+            0.5,
+        ];
+        match random.below(8) {
+            0 => EDGES[random.below(EDGES.len() as u64) as usize],
+            // Random bits: every exponent.
+            1 => f32::from_bits(random.next_u64() as u32),
+            _ => (random.below(1 << 24) as f32 / (1 << 22) as f32 - 2.0) / 1024.0,
+        }
+    }
+
+    #[test]
+    fn a_filled_row_has_each_pixels_depth() {
+        // The vector path (where the processor has AVX2 and FMA) against the pixel-by-pixel
+        // definition, over random planes and spans of every length up to five vectors.
+        let mut random = SplitMix64(2026);
+        let mut denormal_partials = 0;
+        for case in 0..20_000 {
+            let mut plane = PlaneDepths {
+                a0: coefficient(&mut random),
+                dzdx: coefficient(&mut random),
+                dzdy: coefficient(&mut random),
+                mirror: random.chance(50).then(|| random.below(70_000) as u32),
+            };
+            let len = 1 + random.below(40) as usize;
+            let x = random.below(65_536 - len as u64) as u16;
+            let y = random.below(65_536) as u16;
+            if case % 10 == 0 {
+                // A partial sum `dzdx · x + a0` that is a denormal (of either sign), which
+                // the shader flushes to zero.
+                plane.dzdx = if case % 20 == 0 { 1.0e-42 } else { -1.0e-42 };
+                plane.a0 = 0.0;
+                let partial = plane.dzdx.mul_add(x as f32, plane.a0);
+                denormal_partials += partial.is_subnormal() as u32;
+            }
+            let mut filled = vec![u32::MAX; len + 3];
+            plane.fill(x, y, &mut filled[..len]);
+            for (k, &depth) in filled[..len].iter().enumerate() {
+                let expected = plane.depth(x + k as u16, y);
+                assert_eq!(depth, expected, "{plane:?} at ({}, {y})", x as usize + k);
+            }
+            assert_eq!(
+                filled[len..],
+                [u32::MAX; 3],
+                "a fill writes past its pixels"
+            );
+        }
+        assert!(
+            denormal_partials > 100,
+            "{denormal_partials} denormal partial sums tried"
+        );
+    }
 
     #[test]
     fn depth_clamps_and_rounds_as_llvmpipe() {

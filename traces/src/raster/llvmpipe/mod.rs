@@ -30,6 +30,7 @@ mod vertex;
 
 use super::RasterSink;
 use crate::state::RenderState;
+pub use fragment::PlaneDepths;
 use vertex::{shade, Vertex, Viewport};
 
 /// What llvmpipe renders into.

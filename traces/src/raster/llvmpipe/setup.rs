@@ -79,6 +79,7 @@ pub(super) fn triangle(
     let order = if sign > 0 { [0, 1, 2] } else { [1, 0, 2] };
     sink.primitive();
     let plane = DepthPlane::new(&order.map(|i| v[i].window), framebuffer, state.height);
+    sink.depth_plane(plane.depths());
     let mut points = [0, 1, 2].map(|i| Point {
         x: x[i] as i64,
         y: gl_fixed_y(y[i], framebuffer, state.height),
@@ -137,6 +138,7 @@ pub(super) fn rectangle(
         columns.1.min(bounds.x as i64 + bounds.width as i64 - 1),
     );
     let plane = DepthPlane::new(&v.map(|v| v.window), framebuffer, state.height);
+    sink.depth_plane(plane.depths());
     coverage::walk_rows(gl_rows, |_| span, &plane, sink);
 }
 
