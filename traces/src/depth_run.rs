@@ -405,29 +405,35 @@ mod avx2 {
         stored: &mut [u32],
     ) -> RunTally {
         let len = depths.len();
+        let stored = &mut stored[..len];
         let whole = len / LANES * LANES;
         let mut tally = Tally::new();
-        for (block, (depths, stored)) in depths[..whole]
-            .chunks(BLOCK)
-            .zip(stored[..whole].chunks_mut(BLOCK))
-            .enumerate()
-        {
-            let mut passed = 0u64;
-            for (step, (z, s)) in depths
-                .chunks_exact(LANES)
-                .zip(stored.chunks_exact_mut(LANES))
-                .enumerate()
-            {
-                let z = load(z.try_into().expect("eight"));
-                let s: &mut [u32; LANES] = s.try_into().expect("eight");
-                let old = load(s);
-                let pass = passes::<FUNC>(z, old);
-                if WRITE {
-                    store(s, _mm256_blendv_epi8(old, z, pass));
-                }
-                passed |= (tally.add(z, pass) as u64) << (step * LANES);
+        // Steps of eight by index (a run is mostly a block or less: iterators over blocks
+        // and their steps cost more than the steps), each block's outcomes gathered in
+        // `passed` from bit 0 at `block`.
+        let (mut passed, mut block) = (0u64, 0);
+        let mut at = 0;
+        while at < whole {
+            // SAFETY: eight u32s from `at` in both slices (`at + 8 <= whole <= len`, the
+            // slices `len` long); unaligned loads and stores.
+            let (z, old) = unsafe {
+                (
+                    _mm256_loadu_si256(depths.as_ptr().add(at).cast()),
+                    _mm256_loadu_si256(stored.as_ptr().add(at).cast()),
+                )
+            };
+            let pass = passes::<FUNC>(z, old);
+            if WRITE {
+                let new = _mm256_blendv_epi8(old, z, pass);
+                // SAFETY: as the loads.
+                unsafe { _mm256_storeu_si256(stored.as_mut_ptr().add(at).cast(), new) };
             }
-            tally.note_passed(block * BLOCK, passed);
+            passed |= (tally.add(z, pass) as u64) << (at - block);
+            at += LANES;
+            if at - block == BLOCK {
+                tally.note_passed(block, passed);
+                (passed, block) = (0, at);
+            }
         }
         if whole < len {
             let (depths, stored) = (&depths[whole..], &mut stored[whole..]);
@@ -448,9 +454,10 @@ mod avx2 {
                 // `valid`: the slice's own elements.
                 unsafe { _mm256_maskstore_epi32(stored.as_mut_ptr().cast(), pass, z) };
             }
-            let passed = tally.add(z, pass);
-            tally.note_passed(whole, passed as u64);
+            // The block holds at most 56 fragments' bits: these fit after them.
+            passed |= (tally.add(z, pass) as u64) << (whole - block);
         }
+        tally.note_passed(block, passed);
         tally.finish(len)
     }
 
@@ -552,20 +559,6 @@ mod avx2 {
             GEQUAL => _mm256_cmpeq_epi32(_mm256_max_epu32(z, stored), z),
             _ => _mm256_set1_epi32(-1),
         }
-    }
-
-    #[inline]
-    #[target_feature(enable = "avx2")]
-    fn load(lanes: &[u32; LANES]) -> __m256i {
-        // SAFETY: the reference holds the 32 bytes read; an unaligned load needs no more.
-        unsafe { _mm256_loadu_si256(lanes.as_ptr().cast()) }
-    }
-
-    #[inline]
-    #[target_feature(enable = "avx2")]
-    fn store(out: &mut [u32; LANES], lanes: __m256i) {
-        // SAFETY: the reference holds the 32 bytes written; an unaligned store needs no more.
-        unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), lanes) }
     }
 }
 
