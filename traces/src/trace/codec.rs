@@ -1343,12 +1343,13 @@ impl BlockDecoder {
                 return Ok(false);
             }
             // Spans are most records: skip the general dispatch for them.
-            if (t == tag::SPAN || t == tag::PLANE_SPAN) && ctx.assembly.is_empty() {
+            if t == tag::PLANE_SPAN && ctx.assembly.is_empty() {
+                unreported += self.plane_spans(payload, ctx, sink, &enough)?;
+                continue;
+            }
+            if t == tag::SPAN && ctx.assembly.is_empty() {
                 let mut c = Cursor::new(payload, self.pos + 1);
-                let span = match t {
-                    tag::SPAN => self.span_header(&mut c, ctx.width, ctx.height)?,
-                    _ => self.plane_span_header(&mut c, ctx.width, ctx.height)?,
-                };
+                let span = self.span_header(&mut c, ctx.width, ctx.height)?;
                 self.pos = c.pos;
                 unreported += span.len as u64;
                 self.drain_span(payload, sink, span)?;
@@ -1561,6 +1562,26 @@ impl BlockDecoder {
         width: u32,
         height: u32,
     ) -> Result<SpanProgress, PayloadError> {
+        let (x, y, len) = self.plane_span_place(c, width, height)?;
+        Ok(SpanProgress {
+            remaining: len,
+            plane: true,
+            len,
+            x,
+            y,
+            ..SpanProgress::default()
+        })
+    }
+
+    /// A plane span's place (its header read and checked as [`Self::plane_span_header`]
+    /// says): its first pixel and length.
+    #[inline(always)]
+    fn plane_span_place(
+        &mut self,
+        c: &mut Cursor,
+        width: u32,
+        height: u32,
+    ) -> Result<(u16, u16, usize), PayloadError> {
         let start = c.pos - 1;
         let (dy, dx, len) = match c.three_one_byte_varints() {
             Some([dy, dx, more]) => (unzigzag(dy as u64), unzigzag(dx as u64), more as usize + 1),
@@ -1586,14 +1607,35 @@ impl BlockDecoder {
         }
         p.moved(x, y);
         self.events += len as u64;
-        Ok(SpanProgress {
-            remaining: len,
-            plane: true,
-            len,
-            x: x as u16,
-            y: y as u16,
-            ..SpanProgress::default()
-        })
+        Ok((x as u16, y as u16, len))
+    }
+
+    /// The plane spans from the decoder's position on (a primitive's rows), each to `sink`
+    /// whole, until another record or `enough(sink)`: as [`Self::drain_span`] would take
+    /// them one by one, in a loop of their own. Returns their fragments.
+    #[inline(always)]
+    fn plane_spans<S: EventSink>(
+        &mut self,
+        payload: &[u8],
+        ctx: &DecodeContext,
+        sink: &mut S,
+        enough: &impl Fn(&S) -> bool,
+    ) -> Result<u64, DrainError<S::Error>> {
+        let mut fragments = 0;
+        while payload.get(self.pos) == Some(&tag::PLANE_SPAN) && !enough(sink) {
+            let mut c = Cursor::new(payload, self.pos + 1);
+            let (x, y, len) = self.plane_span_place(&mut c, ctx.width, ctx.height)?;
+            self.pos = c.pos;
+            fragments += len as u64;
+            let plane = self.plane.expect("a plane span's place found its plane");
+            if self.span_depths.len() < len {
+                self.span_depths.resize(len, 0);
+            }
+            let depths = &mut self.span_depths[..len];
+            plane.fill(x, y, depths);
+            sink.span(Span { x, y, depths }).map_err(DrainError::Sink)?;
+        }
+        Ok(fragments)
     }
 
     /// One fragment of the current span (slow path, state kept in `self.span`).
