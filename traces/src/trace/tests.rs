@@ -1062,3 +1062,34 @@ proptest! {
         prop_assert_eq!(outcome(read_bulk), outcome(read_one_by_one));
     }
 }
+
+#[test]
+fn an_event_block_of_plane_spans_holds_at_most_its_events() {
+    // Plane spans take a few bytes a row, so 64 KB of them would hold hundreds of thousands
+    // of fragments: the writer cuts blocks at BLOCK_EVENTS events too.
+    let (bytes, events) = plane_trace(super::writer::DEFAULT_BLOCK_BYTES);
+    let counts: Vec<u32> = super::block::blocks_in(&bytes)
+        .filter(|(_, header)| header.kind == super::block::KIND_EVENTS)
+        .map(|(_, header)| header.events)
+        .collect();
+    let fragments = events
+        .iter()
+        .filter(|e| matches!(e, Event::Fragment(_)))
+        .count();
+    // The scene's fragments need two blocks at least (it has more than BLOCK_EVENTS).
+    assert!(
+        fragments > super::writer::BLOCK_EVENTS,
+        "{fragments} fragments"
+    );
+    assert!(counts.len() >= 2, "{counts:?}");
+    assert!(
+        counts
+            .iter()
+            .all(|&n| n as usize <= super::writer::BLOCK_EVENTS),
+        "{counts:?}"
+    );
+    assert_eq!(
+        counts.iter().map(|&n| n as u64).sum::<u64>(),
+        events.len() as u64
+    );
+}
