@@ -19,7 +19,8 @@ use crate::raster::PlaneDepths;
 use std::io::Write;
 
 /// Payload bytes a block holds at most by default: 64 KB, about 60,000 of the demo's
-/// fragments. A reader that starts mid-trace (the sampled level's machines) decodes the
+/// fragments as spans of depths (plane spans, a few bytes a row, end a block at
+/// [`BLOCK_EVENTS`] first). A reader that starts mid-trace (the sampled level's machines) decodes the
 /// block holding its first fragment from the block's start, so smaller blocks waste less;
 /// a block decoded whole also stays in a 2-core machine's cache. Measured against 1 MB
 /// blocks (`occsim replay T --fidelity sampled:10`, whole process): 256 KB took the demo
