@@ -822,6 +822,16 @@ fn decode_present_runs(c: &mut Cursor, runs: &mut DenseRuns) -> Result<(), Paylo
     Ok(())
 }
 
+/// A span header's row and column steps and its length, each a varint read the general way
+/// (a header's bytes not all one-byte varints).
+#[inline(never)]
+fn span_steps(c: &mut Cursor) -> Result<(i64, i64, usize), PayloadError> {
+    let dy = c.zz()?;
+    let dx = c.zz()?;
+    let len = c.uv_max(MAX_SPAN_FRAGMENTS as u64 - 1, "span length")? as usize + 1;
+    Ok((dy, dx, len))
+}
+
 /// A plane record's plane (its tag read).
 fn plane_record(c: &mut Cursor) -> Result<PlaneDepths, PayloadError> {
     let mut value = || -> Result<f32, PayloadError> {
@@ -1510,23 +1520,10 @@ impl BlockDecoder {
                 let (dy, dx) = (unzigzag(dy as u64), unzigzag(dx as u64));
                 (dy, dx, more as usize + 1)
             }
-            None => {
-                let dy = c.zz()?;
-                let dx = c.zz()?;
-                let len = c.uv_max(MAX_SPAN_FRAGMENTS as u64 - 1, "span length")? as usize + 1;
-                (dy, dx, len)
-            }
+            None => span_steps(c)?,
         };
+        let (x, y) = self.span_start(start, (dy, dx, len), (width, height))?;
         let p = &mut self.predictor;
-        let (x, y) = (p.x.wrapping_add(dx), p.y.wrapping_add(dy));
-        if x < 0 || y < 0 || x + len as i64 > width as i64 || y >= height as i64 {
-            return Err(bad(
-                start,
-                format!(
-                    "span of {len} fragments at ({x}, {y}) outside the {width}x{height} viewport"
-                ),
-            ));
-        }
         let (residual_pos, residual) = match first_residual {
             Some(read) => read,
             None => (c.pos, c.zz()?),
@@ -1551,6 +1548,28 @@ impl BlockDecoder {
             depth: first,
             slope,
         })
+    }
+
+    /// Where a span `dx` columns and `dy` rows from the last one starts, checked to lie
+    /// whole (`len` fragments) in a `width` x `height` viewport (its header at `start`).
+    #[inline(always)]
+    fn span_start(
+        &self,
+        start: usize,
+        (dy, dx, len): (i64, i64, usize),
+        (width, height): (u32, u32),
+    ) -> Result<(i64, i64), PayloadError> {
+        let p = &self.predictor;
+        let (x, y) = (p.x.wrapping_add(dx), p.y.wrapping_add(dy));
+        if x < 0 || y < 0 || x + len as i64 > width as i64 || y >= height as i64 {
+            return Err(bad(
+                start,
+                format!(
+                    "span of {len} fragments at ({x}, {y}) outside the {width}x{height} viewport"
+                ),
+            ));
+        }
+        Ok((x, y))
     }
 
     /// Read a plane span's header, check the span lies in a `width` x `height` viewport
@@ -1585,27 +1604,13 @@ impl BlockDecoder {
         let start = c.pos - 1;
         let (dy, dx, len) = match c.three_one_byte_varints() {
             Some([dy, dx, more]) => (unzigzag(dy as u64), unzigzag(dx as u64), more as usize + 1),
-            None => {
-                let dy = c.zz()?;
-                let dx = c.zz()?;
-                let len = c.uv_max(MAX_SPAN_FRAGMENTS as u64 - 1, "span length")? as usize + 1;
-                (dy, dx, len)
-            }
+            None => span_steps(c)?,
         };
-        let p = &mut self.predictor;
-        let (x, y) = (p.x.wrapping_add(dx), p.y.wrapping_add(dy));
-        if x < 0 || y < 0 || x + len as i64 > width as i64 || y >= height as i64 {
-            return Err(bad(
-                start,
-                format!(
-                    "span of {len} fragments at ({x}, {y}) outside the {width}x{height} viewport"
-                ),
-            ));
-        }
+        let (x, y) = self.span_start(start, (dy, dx, len), (width, height))?;
         if self.plane.is_none() {
             return Err(bad(start, "a plane span before any plane in its block"));
         }
-        p.moved(x, y);
+        self.predictor.moved(x, y);
         self.events += len as u64;
         Ok((x as u16, y as u16, len))
     }
