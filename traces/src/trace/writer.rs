@@ -299,6 +299,10 @@ impl<W: Write> TraceWriter<W> {
             return Ok(());
         }
         self.flush_span()?;
+        if *event == Event::Primitive {
+            // A new primitive's plane, if any, is told after its event.
+            self.plane = None;
+        }
         self.tally
             .event(event)
             .map_err(|reason| self.invalid(reason))?;
