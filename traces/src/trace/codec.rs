@@ -1632,15 +1632,21 @@ impl BlockDecoder {
             let (x, y, len) = self.plane_span_place(&mut c, ctx.width, ctx.height)?;
             self.pos = c.pos;
             fragments += len as u64;
-            let plane = self.plane.expect("a plane span's place found its plane");
-            if self.span_depths.len() < len {
-                self.span_depths.resize(len, 0);
-            }
-            let depths = &mut self.span_depths[..len];
-            plane.fill(x, y, depths);
+            let depths = self.plane_depths(x, y, len);
             sink.span(Span { x, y, depths }).map_err(DrainError::Sink)?;
         }
         Ok(fragments)
+    }
+
+    /// A plane span's depths (its place read, so its block's plane known), in the span room.
+    #[inline(always)]
+    fn plane_depths(&mut self, x: u16, y: u16, len: usize) -> &[u32] {
+        let plane = self.plane.expect("a plane span's place found its plane");
+        if self.span_depths.len() < len {
+            self.span_depths.resize(len, 0);
+        }
+        plane.fill(x, y, &mut self.span_depths[..len]);
+        &self.span_depths[..len]
     }
 
     /// One fragment of the current span (slow path, state kept in `self.span`).
@@ -1695,12 +1701,7 @@ impl BlockDecoder {
             ..
         } = span;
         if plane {
-            let plane = self.plane.expect("a plane span's header found its plane");
-            if self.span_depths.len() < len {
-                self.span_depths.resize(len, 0);
-            }
-            plane.fill(x, y, &mut self.span_depths[..len]);
-            let depths = &self.span_depths[..len];
+            let depths = self.plane_depths(x, y, len);
             sink.span(Span { x, y, depths }).map_err(DrainError::Sink)?;
             self.span.remaining = 0;
             return Ok(());
