@@ -274,6 +274,17 @@ impl IrWindow {
 
     /// [`Self::close_stretch`] with `band` its fragments.
     fn close_band(&mut self, band: &FragmentBand) {
+        if band.is_empty() {
+            // No engine is given work: the generators only set the primitive up (a
+            // stretch closes at every event, most with no fragments since the last).
+            if self.stretch_sets_up {
+                for generator in &mut self.generators[..self.boards] {
+                    *generator += self.setup;
+                }
+                self.stretch_sets_up = false;
+            }
+            return;
+        }
         match self.dealer {
             Dealer::Columns(_) => self.close_columns(band),
             Dealer::Owners(..) => self.close_owners(band),
@@ -469,13 +480,22 @@ impl IrWindow {
     }
 
     /// Each Image Engine's clock (`d_i`), board-major.
+    #[cfg(test)]
     fn engine_clocks(&self) -> impl Iterator<Item = u64> + '_ {
-        let per_board = self.per_board;
-        (0..self.boards).flat_map(move |board| {
-            (0..per_board).map(move |engine| {
-                self.through[self.dealer.index_of_engine(board, engine, per_board)]
-            })
-        })
+        (0..self.boards).flat_map(|board| self.board_clocks(board))
+    }
+
+    /// Board `board`'s Image Engines' clocks, in order: evenly spaced as
+    /// [`Dealer::index_of_engine`] numbers them (every `B`-th under the columns
+    /// interleave, else a run).
+    fn board_clocks(&self, board: usize) -> impl Iterator<Item = u64> + '_ {
+        let index = |engine| self.dealer.index_of_engine(board, engine, self.per_board);
+        let (first, stride) = (index(0), index(1) - index(0));
+        self.through[first..]
+            .iter()
+            .step_by(stride)
+            .take(self.per_board)
+            .copied()
     }
 
     /// `T_w`: the window's cycles, the current stretch's work included.
@@ -493,18 +513,16 @@ impl IrWindow {
             .max(hits.saturating_sub(hidden))
     }
 
-    /// Per Image Engine, the cycles after `t_end + 3` until its partial report is ready
-    /// (see the module docs), for a query of `service` OccU cycles a fragment.
-    fn backlogs<'a>(
-        &'a self,
-        arch: &'a IrArch,
-        end: u64,
-        service: u64,
-    ) -> impl Iterator<Item = u64> + 'a {
+    /// Per Image Engine (board-major), the cycles after `t_end + 3` until its partial
+    /// report is ready (see the module docs), for a query of `service` OccU cycles a
+    /// fragment: each given to `each`, board by board. (As an iterator chained over the
+    /// engines, the demo's end tokens on ir4 took 23 M instructions of the analytic
+    /// level's 262 M; so, 6 M.)
+    fn for_each_backlog(&self, arch: &IrArch, end: u64, service: u64, mut each: impl FnMut(u64)) {
         let tail = arch.image_engine_latency_cycles + service + 1;
-        self.engine_clocks()
-            .zip(&self.hit_words)
-            .map(move |(through, &hits)| {
+        for board in 0..self.boards {
+            let hit_words = &self.hit_words[board * self.per_board..][..self.per_board];
+            for (through, &hits) in self.board_clocks(board).zip(hit_words) {
                 // An engine given no work (or none left past the last window) has no last
                 // fragment to wait for.
                 let last_result = if through == 0 {
@@ -513,8 +531,9 @@ impl IrWindow {
                     (through.div_ceil(self.rate) + tail).saturating_sub(self.pace)
                 };
                 let hits_drained = hits + 1;
-                last_result.max(hits_drained).saturating_sub(end + 3)
-            })
+                each(last_result.max(hits_drained).saturating_sub(end + 3));
+            }
+        }
     }
 }
 
@@ -1122,11 +1141,10 @@ impl IrBottleneck {
         // Each Image Engine's partial report is ready (board-major).
         let mut ready = std::mem::take(&mut self.ready);
         ready.clear();
-        ready.extend(
-            self.window
-                .backlogs(&self.arch, cycles, service)
-                .map(|backlog| end_cycle + 3 + backlog.saturating_sub(late)),
-        );
+        self.window
+            .for_each_backlog(&self.arch, cycles, service, |backlog| {
+                ready.push(end_cycle + 3 + backlog.saturating_sub(late))
+            });
         let merged = if hits_sent.is_empty() {
             Partial::brief(self.merged_brief(&mut ready, shape.tiles))
         } else {
@@ -1220,10 +1238,11 @@ impl IrBottleneck {
         let mut window = self.window.clone();
         let cycles = window.cycles(&self.arch);
         let service = self.open.as_ref().map_or(1, |q| q.service);
-        let drain = 3 + window
-            .backlogs(&self.arch, cycles, service)
-            .max()
-            .unwrap_or(0);
+        let mut slowest = 0;
+        window.for_each_backlog(&self.arch, cycles, service, |backlog| {
+            slowest = slowest.max(backlog)
+        });
+        let drain = 3 + slowest;
         Some(WindowEnd {
             cycles: cycles as f64,
             latency: drain as f64,
@@ -1278,6 +1297,35 @@ mod tests {
             assert_eq!(
                 window.engine_clocks().collect::<Vec<_>>(),
                 [52, 32],
+                "by columns: {by_columns}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_primitive_without_fragments_still_takes_its_setup() {
+        // Two boards, the ir defaults: setup 4 cycles = 8 slots (2 fragments a cycle).
+        // Two primitives with no fragments, then one of a single fragment at pixel 0
+        // (board 0): board 0's generator is through the setups at slot 24 and emits the
+        // fragment in slot 25, 13 cycles (ceil(25 / 2)); with no setup for the empty
+        // ones, 5 (ceil(9 / 2)). Its engine is through at 24 + 1 + 22 = 47 slots.
+        let arch = columns_arch(2, 2);
+        for by_columns in [true, false] {
+            let mut window = IrWindow::new(&arch, 4);
+            if !by_columns {
+                window.dealer = looked_up(&arch);
+            }
+            window.primitive(0.0);
+            window.primitive(0.0);
+            let mut band = FragmentBand::EMPTY;
+            window.band(&band);
+            window.primitive(0.0);
+            band.push(0, 0, 1);
+            window.band(&band);
+            assert_eq!(window.cycles(&arch), 13, "by columns: {by_columns}");
+            assert_eq!(
+                window.engine_clocks().collect::<Vec<_>>(),
+                [47, 0, 0, 0],
                 "by columns: {by_columns}"
             );
         }
