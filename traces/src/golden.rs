@@ -724,6 +724,29 @@ pub trait EventSink {
         Ok(())
     }
 
+    /// A span of `len` fragments at `(x, y)` whose depths `plane` gives there (a trace's
+    /// plane span, format 13): by default evaluated into `room` and taken as a
+    /// [`Self::span`]. A sink may take them otherwise: evaluated where it keeps depths, or
+    /// not at all where it will not read them.
+    #[inline(always)]
+    fn plane_span(
+        &mut self,
+        (x, y): (u16, u16),
+        len: usize,
+        plane: &PlaneDepths,
+        room: &mut Vec<u32>,
+    ) -> Result<(), Self::Error> {
+        if room.len() < len {
+            room.resize(len, 0);
+        }
+        plane.fill(x, y, &mut room[..len]);
+        self.span(Span {
+            x,
+            y,
+            depths: &room[..len],
+        })
+    }
+
     /// The primitive just begun (its `Primitive` event sent) has the depths of `plane` at
     /// its pixels ([`crate::raster::RasterSink::depth_plane`]): not an event, a hint a
     /// trace writer keeps in place of its fragments' depths. The default ignores it.

@@ -1632,21 +1632,27 @@ impl BlockDecoder {
             let (x, y, len) = self.plane_span_place(&mut c, ctx.width, ctx.height)?;
             self.pos = c.pos;
             fragments += len as u64;
-            let depths = self.plane_depths(x, y, len);
-            sink.span(Span { x, y, depths }).map_err(DrainError::Sink)?;
+            self.plane_span(sink, (x, y), len)?;
         }
         Ok(fragments)
     }
 
-    /// A plane span's depths (its place read, so its block's plane known), in the span room.
+    /// A plane span (its place read, so its block's plane known) to `sink`, its depths
+    /// evaluated in the span room unless the sink takes them otherwise
+    /// ([`EventSink::plane_span`]).
     #[inline(always)]
-    fn plane_depths(&mut self, x: u16, y: u16, len: usize) -> &[u32] {
-        let plane = self.plane.expect("a plane span's place found its plane");
-        if self.span_depths.len() < len {
-            self.span_depths.resize(len, 0);
-        }
-        plane.fill(x, y, &mut self.span_depths[..len]);
-        &self.span_depths[..len]
+    fn plane_span<S: EventSink>(
+        &mut self,
+        sink: &mut S,
+        place: (u16, u16),
+        len: usize,
+    ) -> Result<(), DrainError<S::Error>> {
+        let plane = self
+            .plane
+            .as_ref()
+            .expect("a plane span's place found its plane");
+        sink.plane_span(place, len, plane, &mut self.span_depths)
+            .map_err(DrainError::Sink)
     }
 
     /// One fragment of the current span (slow path, state kept in `self.span`).
@@ -1701,8 +1707,7 @@ impl BlockDecoder {
             ..
         } = span;
         if plane {
-            let depths = self.plane_depths(x, y, len);
-            sink.span(Span { x, y, depths }).map_err(DrainError::Sink)?;
+            self.plane_span(sink, (x, y), len)?;
             self.span.remaining = 0;
             return Ok(());
         }

@@ -945,13 +945,21 @@ fn an_llvmpipe_primitives_plane_gives_each_of_its_fragments_depth() {
 /// The small random scene's trace, the rasterizer's planes told its writer (blocks of
 /// `block_bytes`), and its events.
 fn plane_trace(block_bytes: usize) -> (Vec<u8>, Vec<Event>) {
+    plane_trace_indexed(block_bytes, None)
+}
+
+/// [`plane_trace`] with a window index at `layout` (and so depth-test blocks) where given.
+fn plane_trace_indexed(
+    block_bytes: usize,
+    layout: Option<crate::depth_layout::DepthLayout>,
+) -> (Vec<u8>, Vec<Event>) {
     let scene = small_random_scene();
     let mut told = Told::default();
     let (width, height) = rasterize(&scene, RasterProfile::Llvmpipe, &mut told);
     let options = WriterOptions {
         block_bytes,
         zstd_level: 1,
-        window_index: None,
+        window_index: layout,
     };
     let mut bytes = Vec::new();
     let mut writer =
@@ -986,6 +994,61 @@ fn plane_spans_read_back_by_both_paths_and_shrink_the_trace() {
             bytes.len(),
             without.len()
         );
+    }
+}
+
+#[test]
+fn plane_spans_are_handed_out_from_any_fragment_on_with_their_depth_tests() {
+    // A reader that starts mid-block passes over the spans before its start (their depths
+    // neither kept nor evaluated): from anywhere, in pieces with gaps, it hands out the
+    // fragments a read from the start does, with the same results.
+    let layout = crate::depth_layout::DepthLayout {
+        tile_width_pixels: 32,
+        tile_height_pixels: 32,
+        pixels_per_word: 8,
+        banks: 2,
+    };
+    let (bytes, events) = plane_trace_indexed(4096, Some(layout));
+    let take = |fragments: &mut TestedFragments<&[u8]>, count, got: &mut Vec<(Fragment, bool)>| {
+        fragments
+            .take(count, |span, results| {
+                got.extend(
+                    span.fragments()
+                        .enumerate()
+                        .map(|(i, f)| (f, results.passed(i))),
+                );
+                Ok::<(), std::convert::Infallible>(())
+            })
+            .unwrap()
+    };
+    let fresh = || TestedFragments::new(TraceReader::new(&bytes[..]).unwrap()).unwrap();
+    let told: Vec<Fragment> = events
+        .iter()
+        .filter_map(|event| match event {
+            Event::Fragment(f) => Some(*f),
+            _ => None,
+        })
+        .collect();
+    let mut whole = Vec::new();
+    take(&mut fresh(), told.len() as u64, &mut whole);
+    let fragments: Vec<Fragment> = whole.iter().map(|&(f, _)| f).collect();
+    assert_eq!(fragments, told);
+    assert!(whole.iter().any(|&(_, passed)| passed) && whole.iter().any(|&(_, passed)| !passed));
+    let mut rng = crate::rng::SplitMix64(7);
+    let all = told.len() as u64;
+    for _ in 0..40 {
+        let mut fragments = fresh();
+        let mut at = rng.below(all);
+        fragments.skip(at);
+        while at < all {
+            let count = (1 + rng.below(500)).min(all - at);
+            let mut got = Vec::new();
+            take(&mut fragments, count, &mut got);
+            assert_eq!(got, whole[at as usize..(at + count) as usize], "from {at}");
+            let gap = rng.below(3000).min(all - at - count);
+            fragments.skip(gap);
+            at += count + gap;
+        }
     }
 }
 
