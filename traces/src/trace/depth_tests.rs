@@ -98,7 +98,7 @@ struct SpanAt {
 /// The loaded event block's fragments, gathered from the first one a reader may still ask
 /// for: the spans wholly before it (where a reader starts mid-block, most of what it
 /// decodes) are counted, their depths neither kept nor, for plane spans, evaluated. (The
-/// demo's sampled:100 on the O2 decoded ten spans for each its machines took; keeping
+/// demo's sampled:100 on the O2 decoded ten spans for each one its machines took; keeping
 /// them all took 64.7 M instructions in process, so 59.3 M; sampled:10 320.3 M -> 306.7 M.)
 #[derive(Default)]
 struct BlockFragments {

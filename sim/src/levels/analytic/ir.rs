@@ -516,8 +516,8 @@ impl IrWindow {
     /// Per Image Engine (board-major), the cycles after `t_end + 3` until its partial
     /// report is ready (see the module docs), for a query of `service` OccU cycles a
     /// fragment: each given to `each`, board by board. (As an iterator chained over the
-    /// engines, the demo's end tokens on ir4 took 23 M instructions of the analytic
-    /// level's 262 M; so, 6 M.)
+    /// engines, the demo's query ends on ir4 took 31.7 M instructions of the analytic
+    /// level's 262 M; so, 24.6 M.)
     fn for_each_backlog(&self, arch: &IrArch, end: u64, service: u64, mut each: impl FnMut(u64)) {
         let tail = arch.image_engine_latency_cycles + service + 1;
         for board in 0..self.boards {
