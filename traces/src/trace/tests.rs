@@ -1126,6 +1126,39 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(100))]
+
+    #[test]
+    fn damaged_plane_payloads_read_from_any_fragment_on_never_panic(
+        flips in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..4),
+        from in 0u64..3000,
+        count in 1u64..3000,
+    ) {
+        // The sampled level's reader, which passes over the spans before its start, meets
+        // damage in the block it starts in (the first, an event block of about 11,000
+        // fragments; a fifth of such damage is an error): fragments or an error, never a
+        // panic.
+        let layout = crate::depth_layout::DepthLayout {
+            tile_width_pixels: 32,
+            tile_height_pixels: 32,
+            pixels_per_word: 8,
+            banks: 2,
+        };
+        let clean = plane_trace_indexed(4096, Some(layout)).0;
+        let bytes = with_first_payload(&clean, |payload, _| {
+            for (at, value) in &flips {
+                let at = at.index(payload.len());
+                payload[at] = *value;
+            }
+        });
+        if let Ok(mut fragments) = TraceReader::new(&bytes[..]).and_then(TestedFragments::new) {
+            fragments.skip(from);
+            let _ = fragments.take(count, |_, _| Ok::<(), std::convert::Infallible>(()));
+        }
+    }
+}
+
 #[test]
 fn an_event_block_of_plane_spans_holds_at_most_its_events() {
     // Plane spans take a few bytes a row, so 64 KB of them would hold hundreds of thousands
