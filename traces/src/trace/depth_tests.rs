@@ -426,7 +426,7 @@ struct Pair {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::depth_layout::DepthLayout;
     use crate::event::Fragment;
@@ -539,7 +539,7 @@ mod tests {
     }
 
     /// The next `count` fragments of `fragments`, each with its result, onto `got`.
-    fn take_into(
+    pub(crate) fn take_into(
         fragments: &mut TestedFragments<&[u8]>,
         count: u64,
         got: &mut Vec<(Fragment, bool)>,

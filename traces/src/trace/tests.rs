@@ -969,6 +969,18 @@ fn plane_trace_indexed(
     (bytes, told.events)
 }
 
+/// [`plane_trace`] in blocks of 4 KB with a window index, so with depth-test blocks: what
+/// the sampled level's machines read from anywhere.
+fn plane_trace_with_depth_tests() -> (Vec<u8>, Vec<Event>) {
+    let layout = crate::depth_layout::DepthLayout {
+        tile_width_pixels: 32,
+        tile_height_pixels: 32,
+        pixels_per_word: 8,
+        banks: 2,
+    };
+    plane_trace_indexed(4096, Some(layout))
+}
+
 #[test]
 fn plane_spans_read_back_by_both_paths_and_shrink_the_trace() {
     for block_bytes in [4096, super::writer::DEFAULT_BLOCK_BYTES] {
@@ -1002,24 +1014,9 @@ fn plane_spans_are_handed_out_from_any_fragment_on_with_their_depth_tests() {
     // A reader that starts mid-block passes over the spans before its start (their depths
     // neither kept nor evaluated): from anywhere, in pieces with gaps, it hands out the
     // fragments a read from the start does, with the same results.
-    let layout = crate::depth_layout::DepthLayout {
-        tile_width_pixels: 32,
-        tile_height_pixels: 32,
-        pixels_per_word: 8,
-        banks: 2,
-    };
-    let (bytes, events) = plane_trace_indexed(4096, Some(layout));
+    let (bytes, events) = plane_trace_with_depth_tests();
     let take = |fragments: &mut TestedFragments<&[u8]>, count, got: &mut Vec<(Fragment, bool)>| {
-        fragments
-            .take(count, |span, results| {
-                got.extend(
-                    span.fragments()
-                        .enumerate()
-                        .map(|(i, f)| (f, results.passed(i))),
-                );
-                Ok::<(), std::convert::Infallible>(())
-            })
-            .unwrap()
+        super::depth_tests::tests::take_into(fragments, count, got).unwrap()
     };
     let fresh = || TestedFragments::new(TraceReader::new(&bytes[..]).unwrap()).unwrap();
     let told: Vec<Fragment> = events
@@ -1139,13 +1136,7 @@ proptest! {
         // damage in the block it starts in (the first, an event block of about 11,000
         // fragments; a fifth of such damage is an error): fragments or an error, never a
         // panic.
-        let layout = crate::depth_layout::DepthLayout {
-            tile_width_pixels: 32,
-            tile_height_pixels: 32,
-            pixels_per_word: 8,
-            banks: 2,
-        };
-        let clean = plane_trace_indexed(4096, Some(layout)).0;
+        let clean = plane_trace_with_depth_tests().0;
         let bytes = with_first_payload(&clean, |payload, _| {
             for (at, value) in &flips {
                 let at = at.index(payload.len());

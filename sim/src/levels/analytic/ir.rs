@@ -1274,6 +1274,15 @@ mod tests {
         Dealer::Owners(interleave, owners)
     }
 
+    /// A window of `arch` over a viewport `width` pixels wide with each dealer: by columns
+    /// (`true`) and looking each owner up.
+    fn both_dealers(arch: &IrArch, width: u32) -> [(bool, IrWindow); 2] {
+        let by_columns = IrWindow::new(arch, width);
+        let mut looking_up = by_columns.clone();
+        looking_up.dealer = looked_up(arch);
+        [(true, by_columns), (false, looking_up)]
+    }
+
     #[test]
     fn an_engine_whose_last_fragment_came_before_the_last_row_is_timed_from_that_row() {
         // One board of two Image Engines (U = 2: column x to engine x mod 2), the ir
@@ -1285,11 +1294,7 @@ mod tests {
         // fragment 2: through = max(8 + 22, 8 + 2 + 22) = 32 (31 if fragment 1 counted).
         // Engine 0: two fragments, its last fragment 3: max(8 + 44, 8 + 3 + 22) = 52.
         let arch = columns_arch(1, 2);
-        for by_columns in [true, false] {
-            let mut window = IrWindow::new(&arch, 4);
-            if !by_columns {
-                window.dealer = looked_up(&arch);
-            }
+        for (by_columns, mut window) in both_dealers(&arch, 4) {
             window.primitive(0.0);
             window.paced_along((1, 0), 2);
             window.paced_along((0, 1), 1);
@@ -1310,11 +1315,7 @@ mod tests {
         // fragment in slot 25, 13 cycles (ceil(25 / 2)); with no setup for the empty
         // ones, 5 (ceil(9 / 2)). Its engine is through at 24 + 1 + 22 = 47 slots.
         let arch = columns_arch(2, 2);
-        for by_columns in [true, false] {
-            let mut window = IrWindow::new(&arch, 4);
-            if !by_columns {
-                window.dealer = looked_up(&arch);
-            }
+        for (by_columns, mut window) in both_dealers(&arch, 4) {
             window.primitive(0.0);
             window.primitive(0.0);
             let mut band = FragmentBand::EMPTY;
@@ -1345,11 +1346,7 @@ mod tests {
         // by 8 + 15 + 22 = 45 at the latest. The window: ceil(127 / 2) = 64 cycles.
         let mut arch = columns_arch(1, 8);
         arch.image_engine_fifo_entries = 2;
-        for by_columns in [true, false] {
-            let mut window = IrWindow::new(&arch, 8);
-            if !by_columns {
-                window.dealer = looked_up(&arch);
-            }
+        for (by_columns, mut window) in both_dealers(&arch, 8) {
             window.primitive(0.0);
             for y in 0..7 {
                 window.paced_along((0, y), 1);
