@@ -712,11 +712,103 @@ fn close_lanes<const FOLDED: bool>(
     terms: &BoardTerms,
 ) -> [u64; MAX_BOARDS] {
     #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx512f") {
+        // SAFETY: the processor has AVX-512F (just checked), all the function needs.
+        return unsafe { avx512::close_lanes::<FOLDED>(slots, after, clocks, terms) };
+    }
+    #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2 (just checked), all the function needs.
         return unsafe { avx2::close_lanes::<FOLDED>(slots, after, clocks, terms) };
     }
     close_lanes_of::<FOLDED>(slots, after, clocks, terms)
+}
+
+/// [`close_lanes`] in AVX-512 vectors: a vector is [`LANES`] lanes, and the 64-bit
+/// maxima, minima and lane choices AVX2 builds from comparisons are single instructions.
+#[cfg(target_arch = "x86_64")]
+mod avx512 {
+    use super::{BoardTerms, LANES, MAX_BOARDS};
+    use std::arch::x86_64::*;
+
+    /// [`super::close_lanes_of`] a vector of eight lanes at a time (unsigned lanes, as the
+    /// plain loop's: an unknown `after`, `u64::MAX`, is past any last row).
+    #[target_feature(enable = "avx512f")]
+    pub(super) unsafe fn close_lanes<const FOLDED: bool>(
+        slots: &[u64],
+        after: &[u64],
+        clocks: &mut [u64],
+        terms: &BoardTerms,
+    ) -> [u64; MAX_BOARDS] {
+        let boards = (1 << terms.board_shift) - 1;
+        // Every vector starts at a multiple of 8, so lane k is board k mod B in each.
+        let of_lane = |terms: &[u64; MAX_BOARDS]| {
+            let lanes: [u64; LANES] = std::array::from_fn(|k| terms[k & boards]);
+            // SAFETY: eight u64s.
+            unsafe { _mm512_loadu_si512(lanes.as_ptr().cast()) }
+        };
+        let (starts, paced_ends, last_row) = (
+            of_lane(&terms.starts),
+            of_lane(&terms.paced_ends),
+            of_lane(&terms.last_row),
+        );
+        let row_first = _mm512_set1_epi64(terms.row.0 as i64);
+        let row_end = _mm512_set1_epi64(terms.row.1 as i64);
+        let row_last = _mm512_set1_epi64(terms.row.1 as i64 - 1);
+        let shift = _mm_cvtsi32_si128(terms.board_shift as i32);
+        let unknown = _mm512_set1_epi64(-1);
+        let zero = _mm512_setzero_si512();
+        let step = _mm512_set1_epi64(LANES as i64);
+        let from = terms.from as i64;
+        let mut x = _mm512_add_epi64(
+            _mm512_set1_epi64(from),
+            _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7),
+        );
+        let mut latest = zero;
+        debug_assert!(slots.len() == clocks.len() && slots.len().is_multiple_of(LANES));
+        debug_assert!(!FOLDED || after.len() == clocks.len());
+        for (chunk, clocks) in clocks.chunks_exact_mut(LANES).enumerate() {
+            let lanes = chunk * LANES..chunk * LANES + LANES;
+            // SAFETY: every chunk is eight u64s in bounds; unaligned loads and stores.
+            let (share, clock) = unsafe {
+                (
+                    _mm512_loadu_si512(slots[lanes.clone()].as_ptr().cast()),
+                    _mm512_loadu_si512(clocks.as_ptr().cast()),
+                )
+            };
+            let after = match FOLDED {
+                // SAFETY: as above.
+                true => unsafe { _mm512_loadu_si512(after[lanes].as_ptr().cast()) },
+                false => {
+                    let in_row =
+                        _mm512_cmpge_epi64_mask(x, row_first) & _mm512_cmplt_epi64_mask(x, row_end);
+                    let after = _mm512_srl_epi64(_mm512_sub_epi64(row_last, x), shift);
+                    _mm512_mask_blend_epi64(in_row, unknown, after)
+                }
+            };
+            let behind = _mm512_min_epu64(after, last_row);
+            let emitted = _mm512_sub_epi64(paced_ends, behind);
+            let done = _mm512_max_epu64(
+                _mm512_add_epi64(_mm512_max_epu64(starts, clock), share),
+                emitted,
+            );
+            let touched = _mm512_test_epi64_mask(share, share);
+            let clock = _mm512_mask_blend_epi64(touched, clock, done);
+            // SAFETY: as the loads.
+            unsafe { _mm512_storeu_si512(clocks.as_mut_ptr().cast(), clock) };
+            let holds = _mm512_add_epi64(done, behind);
+            latest = _mm512_mask_max_epu64(latest, touched, latest, holds);
+            x = _mm512_add_epi64(x, step);
+        }
+        let mut lanes = [0u64; LANES];
+        // SAFETY: eight u64s.
+        unsafe { _mm512_storeu_si512(lanes.as_mut_ptr().cast(), latest) };
+        let mut boards_latest = [0u64; MAX_BOARDS];
+        for (lane, latest) in lanes.into_iter().enumerate() {
+            boards_latest[lane & boards] = boards_latest[lane & boards].max(latest);
+        }
+        boards_latest
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -1363,8 +1455,9 @@ mod tests {
     fn the_vector_close_gives_the_clocks_the_lane_by_lane_close_gives() {
         // Random stretches (work with gaps, clocks before and after the boards' starts,
         // last rows anywhere among the columns, or an engine's last fragment given, 1, 2
-        // and 4 boards): the AVX2 close and the plain one must leave the same clocks and
-        // give the same latest, by columns and by units alike.
+        // and 4 boards): the AVX2 close, the AVX-512 one where the processor has it and
+        // the plain one must leave the same clocks and give the same latest, by columns
+        // and by units alike.
         if !std::arch::is_x86_feature_detected!("avx2") {
             return;
         }
@@ -1392,6 +1485,7 @@ mod tests {
                 from,
                 row: (row_first, row_end),
             };
+            let clocks_before = clocks.clone();
             let (mut plain, mut vector) = (clocks.clone(), clocks);
             let (expected, got) = match case % 2 == 0 {
                 true => (
@@ -1407,6 +1501,18 @@ mod tests {
             };
             assert_eq!(got, expected, "case {case}");
             assert_eq!(vector, plain, "case {case}");
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                let mut wide = clocks_before.clone();
+                // SAFETY: the processor has AVX-512F (just checked).
+                let got = unsafe {
+                    match case % 2 == 0 {
+                        true => avx512::close_lanes::<true>(&slots, &after, &mut wide, &terms),
+                        false => avx512::close_lanes::<false>(&slots, &[], &mut wide, &terms),
+                    }
+                };
+                assert_eq!(got, expected, "case {case}, AVX-512");
+                assert_eq!(wide, plain, "case {case}, AVX-512");
+            }
         }
     }
 
