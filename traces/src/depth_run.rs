@@ -1,7 +1,8 @@
 //! The depth test of a run of fragments of one row fused with the [`RunTally`] its tile
 //! keeps: one pass over the depths that tests, writes and reduces. On x86_64 it is written
-//! out with SIMD: AVX2, eight fragments a step, where the CPU has it (checked at run time),
-//! else SSE2, four a step. LLVM vectorises the test or the reduction alone, but not the two
+//! out with SIMD: AVX2, eight fragments a step, where the CPU has it (checked at run time;
+//! a run's last fragments through AVX-512's mask registers where it has those too,
+//! [`crate::masked_lanes`]), else SSE2, four a step. LLVM vectorises the test or the reduction alone, but not the two
 //! fused, and two passes cost a store and a reload of every outcome.
 
 use crate::query::RunTally;
@@ -40,6 +41,10 @@ enum Isa {
     /// AVX2 (with POPCNT): only where the CPU has both.
     #[cfg(target_arch = "x86_64")]
     Avx2,
+    /// AVX2 with AVX-512's masked moves for a run's last fragments
+    /// ([`crate::masked_lanes`]): only where the CPU has all of them.
+    #[cfg(target_arch = "x86_64")]
+    Avx2MaskRegisters,
 }
 
 impl Isa {
@@ -53,7 +58,10 @@ impl Isa {
     fn best() -> Isa {
         #[cfg(target_arch = "x86_64")]
         if avx2::available() {
-            return Isa::Avx2;
+            return match crate::masked_lanes::mask_registers_available() {
+                true => Isa::Avx2MaskRegisters,
+                false => Isa::Avx2,
+            };
         }
         Isa::BASELINE
     }
@@ -76,6 +84,12 @@ impl<const FUNC: u8, const WRITE: bool> RunKernel for Kernel<FUNC, WRITE> {
             // SAFETY: `Isa::Avx2` reaches a kernel only where the CPU has AVX2 and POPCNT
             // (`Isa::best`, or the tests, which check).
             Isa::Avx2 => unsafe { avx2::test_and_tally::<FUNC, WRITE>(depths, stored) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `Isa::Avx2MaskRegisters` reaches a kernel only where the CPU has AVX2,
+            // POPCNT, AVX-512F and AVX-512VL (`Isa::best`, or the tests, which check).
+            Isa::Avx2MaskRegisters => unsafe {
+                avx2::test_and_tally_mask_registers::<FUNC, WRITE>(depths, stored)
+            },
             #[cfg(all(target_arch = "x86_64", target_feature = "sse2"))]
             // SAFETY: the kernel needs SSE2, which the build targets (`target_feature = "sse2"`).
             Isa::Sse2 => unsafe { sse2::test_and_tally::<FUNC, WRITE>(depths, stored) },
@@ -378,6 +392,7 @@ mod sse2 {
 
 #[cfg(target_arch = "x86_64")]
 mod avx2 {
+    use crate::masked_lanes::{MaskMoves, MaskRegisters, MaskedLanes};
     use crate::query::RunTally;
     use crate::state::DepthFunc;
     use std::arch::x86_64::*;
@@ -393,14 +408,37 @@ mod avx2 {
         is_x86_feature_detected!("avx2") && is_x86_feature_detected!("popcnt")
     }
 
-    /// The kernel in AVX2: steps of eight, their outcomes gathered as bits a block at a time
-    /// (the passing count, first and last found once a block); then the last fragments,
-    /// fewer than eight, in one step loading (and storing) only their lanes. Depths compare
-    /// unsigned: AVX2 has unsigned minimum and maximum, and signed comparisons of depths
-    /// with their sign bit flipped.
+    /// The kernel in AVX2 ([`kernel`]), the last fragments through AVX2's masked moves.
     #[inline]
     #[target_feature(enable = "avx2,popcnt")]
     pub(super) fn test_and_tally<const FUNC: u8, const WRITE: bool>(
+        depths: &[u32],
+        stored: &mut [u32],
+    ) -> RunTally {
+        // SAFETY: compiled for AVX2 and POPCNT, all the kernel and its moves need.
+        unsafe { kernel::<FUNC, WRITE, MaskMoves>(depths, stored) }
+    }
+
+    /// The kernel in AVX2 ([`kernel`]), the last fragments through AVX-512's masked moves.
+    #[inline]
+    #[target_feature(enable = "avx2,popcnt,avx512f,avx512vl")]
+    pub(super) fn test_and_tally_mask_registers<const FUNC: u8, const WRITE: bool>(
+        depths: &[u32],
+        stored: &mut [u32],
+    ) -> RunTally {
+        // SAFETY: compiled for AVX2, POPCNT, AVX-512F and AVX-512VL, all the kernel and its
+        // moves need.
+        unsafe { kernel::<FUNC, WRITE, MaskRegisters>(depths, stored) }
+    }
+
+    /// The kernel: steps of eight, their outcomes gathered as bits a block at a time (the
+    /// passing count, first and last found once a block); then the last fragments, fewer
+    /// than eight, in one step loading (and storing) only their lanes, by `M`. Depths
+    /// compare unsigned: AVX2 has unsigned minimum and maximum, and signed comparisons of
+    /// depths with their sign bit flipped. Inlined into a function compiled for AVX2 and
+    /// POPCNT and what `M` needs.
+    #[inline(always)]
+    unsafe fn kernel<const FUNC: u8, const WRITE: bool, M: MaskedLanes>(
         depths: &[u32],
         stored: &mut [u32],
     ) -> RunTally {
@@ -444,15 +482,15 @@ mod avx2 {
             // elements (fewer than eight from their starts); the others read as zero.
             let (z, old) = unsafe {
                 (
-                    _mm256_maskload_epi32(depths.as_ptr().cast(), valid),
-                    _mm256_maskload_epi32(stored.as_ptr().cast(), valid),
+                    M::load(depths.as_ptr(), valid),
+                    M::load(stored.as_ptr(), valid),
                 )
             };
             let pass = _mm256_and_si256(passes::<FUNC>(z, old), valid);
             if WRITE {
                 // SAFETY: a masked store writes only the lanes of its mask, passing lanes of
                 // `valid`: the slice's own elements.
-                unsafe { _mm256_maskstore_epi32(stored.as_mut_ptr().cast(), pass, z) };
+                unsafe { M::store(stored.as_mut_ptr(), pass, z) };
             }
             // The block holds at most 56 fragments' bits: these fit after them.
             passed |= (tally.add(z, pass) as u64) << (whole - block);
@@ -603,6 +641,9 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         if avx2::available() {
             isas.push(Isa::Avx2);
+            if crate::masked_lanes::mask_registers_available() {
+                isas.push(Isa::Avx2MaskRegisters);
+            }
         }
         isas
     }

@@ -17,6 +17,8 @@ pub mod event;
 mod geometry;
 pub mod golden;
 pub mod hit_list;
+#[cfg(target_arch = "x86_64")]
+mod masked_lanes;
 pub mod query;
 pub mod raster;
 pub mod retile;

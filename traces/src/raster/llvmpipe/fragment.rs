@@ -75,9 +75,14 @@ impl PlaneDepths {
     #[inline]
     pub fn fill(&self, x: u16, y: u16, out: &mut [u32]) {
         #[cfg(target_arch = "x86_64")]
-        if avx2::available() {
+        match avx2::available() {
             // SAFETY: the processor has AVX2 and FMA (just checked).
-            return unsafe { avx2::fill(self, x, y, out) };
+            avx2::Available::Avx2 => return unsafe { avx2::fill(self, x, y, out) },
+            // SAFETY: the processor has AVX2, FMA, AVX-512F and AVX-512VL (just checked).
+            avx2::Available::WithMaskRegisters => {
+                return unsafe { avx2::fill_mask_registers(self, x, y, out) }
+            }
+            avx2::Available::No => {}
         }
         self.fill_one_by_one(x, y, out);
     }
@@ -123,15 +128,48 @@ fn depth(plane: &PlaneCoefficients, x: f32, row: f32) -> u32 {
 mod avx2 {
     use super::PlaneDepths;
     use crate::event::DEPTH_ONE;
+    use crate::masked_lanes::{mask_registers_available, MaskMoves, MaskRegisters, MaskedLanes};
     use std::arch::x86_64::*;
 
     const LANES: usize = 8;
 
-    /// AVX2 and FMA both: checked once, then a load.
-    pub fn available() -> bool {
-        static AVAILABLE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-        *AVAILABLE
-            .get_or_init(|| is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
+    /// Which of the kernels this processor runs.
+    #[derive(Clone, Copy, PartialEq, Eq, Debug)]
+    pub enum Available {
+        No,
+        /// AVX2 and FMA.
+        Avx2,
+        /// AVX2 and FMA, AVX-512F and AVX-512VL.
+        WithMaskRegisters,
+    }
+
+    /// Checked once, then a load.
+    pub fn available() -> Available {
+        static AVAILABLE: std::sync::OnceLock<Available> = std::sync::OnceLock::new();
+        *AVAILABLE.get_or_init(|| {
+            match (is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma"))
+                .then(mask_registers_available)
+            {
+                None => Available::No,
+                Some(false) => Available::Avx2,
+                Some(true) => Available::WithMaskRegisters,
+            }
+        })
+    }
+
+    /// [`fill_with`], the last pixels stored through AVX2's masked moves.
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn fill(plane: &PlaneDepths, x: u16, y: u16, out: &mut [u32]) {
+        // SAFETY: compiled for AVX2 and FMA, all the kernel and its moves need.
+        unsafe { fill_with::<MaskMoves>(plane, x, y, out) }
+    }
+
+    /// [`fill_with`], the last pixels stored through AVX-512's masked moves.
+    #[target_feature(enable = "avx2,fma,avx512f,avx512vl")]
+    pub unsafe fn fill_mask_registers(plane: &PlaneDepths, x: u16, y: u16, out: &mut [u32]) {
+        // SAFETY: compiled for AVX2, FMA, AVX-512F and AVX-512VL, all the kernel and its
+        // moves need.
+        unsafe { fill_with::<MaskRegisters>(plane, x, y, out) }
     }
 
     /// [`PlaneDepths::fill`] eight pixels at a time: `fmadd(dzdx, x, a0)` flushed as FTZ
@@ -139,37 +177,22 @@ mod avx2 {
     /// and `maxps` with 0 (a NaN gives the second operand, as `sse_min` and `sse_max`), times
     /// 2^24 - 1 and converted with rounding to nearest even (the default rounding mode,
     /// which nothing in the process changes). The last pixels, fewer than eight, are
-    /// computed as a whole vector and stored through a mask.
-    #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn fill(plane: &PlaneDepths, x: u16, y: u16, out: &mut [u32]) {
-        let a0 = _mm256_set1_ps(plane.a0);
-        let dzdx = _mm256_set1_ps(plane.dzdx);
-        let dzdy = _mm256_set1_ps(plane.dzdy);
-        let row = _mm256_set1_ps(plane.gl_row(y));
-        let (one, zero) = (_mm256_set1_ps(1.0), _mm256_setzero_ps());
-        let scale = _mm256_set1_ps(DEPTH_ONE as f32);
-        let sign = _mm256_set1_ps(-0.0);
-        let smallest = _mm256_set1_ps(f32::MIN_POSITIVE);
+    /// computed as a whole vector and stored through a mask, by `M`. Inlined into a
+    /// function compiled for AVX2 and FMA and what `M` needs.
+    #[inline(always)]
+    unsafe fn fill_with<M: MaskedLanes>(plane: &PlaneDepths, x: u16, y: u16, out: &mut [u32]) {
+        // SAFETY: the caller's: compiled for AVX2 and FMA.
+        let row = unsafe { RowDepths::new(plane, y) };
         let step = _mm256_set1_ps(LANES as f32);
         // Pixel columns as f32, exact (below 2^24).
         let mut columns = _mm256_add_ps(
             _mm256_set1_ps(x as f32),
             _mm256_setr_ps(0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0),
         );
-        let depths = |columns: __m256| {
-            let partial = _mm256_fmadd_ps(dzdx, columns, a0);
-            // |partial| below the least normal: a denormal (or a zero), kept as its sign.
-            let magnitude = _mm256_andnot_ps(sign, partial);
-            let denormal = _mm256_cmp_ps::<_CMP_LT_OQ>(magnitude, smallest);
-            let partial = _mm256_blendv_ps(partial, _mm256_and_ps(partial, sign), denormal);
-            let z = _mm256_fmadd_ps(dzdy, row, partial);
-            let z = _mm256_max_ps(_mm256_min_ps(z, one), zero);
-            _mm256_cvtps_epi32(_mm256_mul_ps(z, scale))
-        };
         let mut chunks = out.chunks_exact_mut(LANES);
         for chunk in &mut chunks {
-            // SAFETY: eight u32s in bounds; an unaligned store.
-            unsafe { _mm256_storeu_si256(chunk.as_mut_ptr().cast(), depths(columns)) };
+            // SAFETY: eight u32s in bounds; an unaligned store. Compiled for AVX2 and FMA.
+            unsafe { _mm256_storeu_si256(chunk.as_mut_ptr().cast(), row.depths(columns)) };
             columns = _mm256_add_ps(columns, step);
         }
         let rest = chunks.into_remainder();
@@ -178,8 +201,52 @@ mod avx2 {
             let lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
             let stored = _mm256_cmpgt_epi32(_mm256_set1_epi32(rest.len() as i32), lanes);
             // SAFETY: a masked store writes only the lanes of its mask, the slice's own
-            // elements (fewer than eight from its start).
-            unsafe { _mm256_maskstore_epi32(rest.as_mut_ptr().cast(), stored, depths(columns)) };
+            // elements (fewer than eight from its start). Compiled for AVX2 and FMA and
+            // what `M` needs.
+            unsafe { M::store(rest.as_mut_ptr(), stored, row.depths(columns)) };
+        }
+    }
+
+    /// A plane's terms for one row, in every lane.
+    struct RowDepths {
+        a0: __m256,
+        dzdx: __m256,
+        dzdy: __m256,
+        row: __m256,
+        scale: __m256,
+    }
+
+    impl RowDepths {
+        /// # Safety
+        /// The processor has AVX.
+        #[inline(always)]
+        unsafe fn new(plane: &PlaneDepths, y: u16) -> RowDepths {
+            RowDepths {
+                a0: _mm256_set1_ps(plane.a0),
+                dzdx: _mm256_set1_ps(plane.dzdx),
+                dzdy: _mm256_set1_ps(plane.dzdy),
+                row: _mm256_set1_ps(plane.gl_row(y)),
+                scale: _mm256_set1_ps(DEPTH_ONE as f32),
+            }
+        }
+
+        /// The depths at the pixel columns `columns` (inlined, as every method here, into
+        /// a function compiled for the instructions).
+        ///
+        /// # Safety
+        /// The processor has AVX and FMA.
+        #[inline(always)]
+        unsafe fn depths(&self, columns: __m256) -> __m256i {
+            let sign = _mm256_set1_ps(-0.0);
+            let partial = _mm256_fmadd_ps(self.dzdx, columns, self.a0);
+            // |partial| below the least normal: a denormal (or a zero), kept as its sign.
+            let magnitude = _mm256_andnot_ps(sign, partial);
+            let smallest = _mm256_set1_ps(f32::MIN_POSITIVE);
+            let denormal = _mm256_cmp_ps::<_CMP_LT_OQ>(magnitude, smallest);
+            let partial = _mm256_blendv_ps(partial, _mm256_and_ps(partial, sign), denormal);
+            let z = _mm256_fmadd_ps(self.dzdy, self.row, partial);
+            let z = _mm256_max_ps(_mm256_min_ps(z, _mm256_set1_ps(1.0)), _mm256_setzero_ps());
+            _mm256_cvtps_epi32(_mm256_mul_ps(z, self.scale))
         }
     }
 }
@@ -259,10 +326,34 @@ mod tests {
         }
     }
 
+    /// A row's depths filled by a path: `fill` and each vector path this processor has.
+    type Fill = fn(&PlaneDepths, u16, u16, &mut [u32]);
+
+    fn fills() -> Vec<(&'static str, Fill)> {
+        let mut fills: Vec<(&'static str, Fill)> = vec![("fill", PlaneDepths::fill)];
+        #[cfg(target_arch = "x86_64")]
+        {
+            use avx2::Available;
+            let available = avx2::available();
+            if available != Available::No {
+                // SAFETY: the processor has AVX2 and FMA (just checked).
+                fills.push(("AVX2", |p, x, y, out| unsafe { avx2::fill(p, x, y, out) }));
+            }
+            if available == Available::WithMaskRegisters {
+                // SAFETY: the processor has AVX2, FMA, AVX-512F and AVX-512VL (just checked).
+                fills.push(("AVX-512 masks", |p, x, y, out| unsafe {
+                    avx2::fill_mask_registers(p, x, y, out)
+                }));
+            }
+        }
+        fills
+    }
+
     #[test]
     fn a_filled_row_has_each_pixels_depth() {
-        // The vector path (where the processor has AVX2 and FMA) against the pixel-by-pixel
-        // definition, over random planes and spans of every length up to five vectors.
+        // Each vector path the processor has (AVX2 and FMA, with AVX2's masked moves or
+        // with AVX-512's) against the pixel-by-pixel definition, over random planes and
+        // spans of every length up to five vectors; and `fill`, whichever path it takes.
         let mut random = SplitMix64(2026);
         let mut denormal_partials = 0;
         for case in 0..20_000 {
@@ -283,17 +374,24 @@ mod tests {
                 let partial = plane.dzdx.mul_add(x as f32, plane.a0);
                 denormal_partials += partial.is_subnormal() as u32;
             }
-            let mut filled = vec![u32::MAX; len + 3];
-            plane.fill(x, y, &mut filled[..len]);
-            for (k, &depth) in filled[..len].iter().enumerate() {
-                let expected = plane.depth(x + k as u16, y);
-                assert_eq!(depth, expected, "{plane:?} at ({}, {y})", x as usize + k);
+            for (path, fill) in fills() {
+                let mut filled = vec![u32::MAX; len + 3];
+                fill(&plane, x, y, &mut filled[..len]);
+                for (k, &depth) in filled[..len].iter().enumerate() {
+                    let expected = plane.depth(x + k as u16, y);
+                    assert_eq!(
+                        depth,
+                        expected,
+                        "{path}: {plane:?} at ({}, {y})",
+                        x as usize + k
+                    );
+                }
+                assert_eq!(
+                    filled[len..],
+                    [u32::MAX; 3],
+                    "{path}: a fill writes past its pixels"
+                );
             }
-            assert_eq!(
-                filled[len..],
-                [u32::MAX; 3],
-                "a fill writes past its pixels"
-            );
         }
         assert!(
             denormal_partials > 100,
