@@ -742,10 +742,12 @@ mod avx512 {
     ) -> [u64; MAX_BOARDS] {
         let boards = (1 << terms.board_shift) - 1;
         // Every vector starts at a multiple of 8, so lane k is board k mod B in each.
+        let in_order = _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7);
+        let board_of_lane = _mm512_and_si512(in_order, _mm512_set1_epi64(boards as i64));
         let of_lane = |terms: &[u64; MAX_BOARDS]| {
-            let lanes: [u64; LANES] = std::array::from_fn(|k| terms[k & boards]);
-            // SAFETY: eight u64s.
-            unsafe { _mm512_loadu_si512(lanes.as_ptr().cast()) }
+            // SAFETY: four u64s.
+            let terms = unsafe { _mm256_loadu_si256(terms.as_ptr().cast()) };
+            _mm512_permutexvar_epi64(board_of_lane, _mm512_castsi256_si512(terms))
         };
         let (starts, paced_ends, last_row) = (
             of_lane(&terms.starts),
@@ -760,10 +762,7 @@ mod avx512 {
         let zero = _mm512_setzero_si512();
         let step = _mm512_set1_epi64(LANES as i64);
         let from = terms.from as i64;
-        let mut x = _mm512_add_epi64(
-            _mm512_set1_epi64(from),
-            _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7),
-        );
+        let mut x = _mm512_add_epi64(_mm512_set1_epi64(from), in_order);
         let mut latest = zero;
         debug_assert!(slots.len() == clocks.len() && slots.len().is_multiple_of(LANES));
         debug_assert!(!FOLDED || after.len() == clocks.len());
@@ -800,13 +799,24 @@ mod avx512 {
             latest = _mm512_mask_max_epu64(latest, touched, latest, holds);
             x = _mm512_add_epi64(x, step);
         }
-        let mut lanes = [0u64; LANES];
-        // SAFETY: eight u64s.
-        unsafe { _mm512_storeu_si512(lanes.as_mut_ptr().cast(), latest) };
-        let mut boards_latest = [0u64; MAX_BOARDS];
-        for (lane, latest) in lanes.into_iter().enumerate() {
-            boards_latest[lane & boards] = boards_latest[lane & boards].max(latest);
+        // Each board's latest: the lanes folded in halves down to one a board (lane k of
+        // the half is board k's), the lanes past the boards 0.
+        let mut width = LANES;
+        while width > boards + 1 {
+            width /= 2;
+            let half = _mm512_set1_epi64(width as i64);
+            let other = _mm512_permutexvar_epi64(_mm512_xor_si512(in_order, half), latest);
+            latest = _mm512_max_epu64(latest, other);
         }
+        let mut boards_latest = [0u64; MAX_BOARDS];
+        let latest = _mm512_maskz_mov_epi64((1 << (boards + 1)) - 1, latest);
+        // SAFETY: four u64s.
+        unsafe {
+            _mm256_storeu_si256(
+                boards_latest.as_mut_ptr().cast(),
+                _mm512_castsi512_si256(latest),
+            )
+        };
         boards_latest
     }
 }
