@@ -197,22 +197,31 @@ mod clip {
             let distance = |v: &[f32; 4]| {
                 plane[0] * v[0] + plane[1] * v[1] + plane[2] * v[2] + plane[3] * v[3]
             };
-            let vertices = self.vertices();
-            if vertices.iter().all(|v| distance(v) >= 0.0) {
+            // Each vertex's side, decided once (a NaN distance is outside).
+            let count = self.count;
+            let inside: [bool; MAX_VERTICES] =
+                std::array::from_fn(|i| i < count && distance(&self.vertices[i]) >= 0.0);
+            if inside[..count].iter().all(|&inside| inside) {
                 return true;
+            }
+            // A convex polygon gains at most one vertex a plane, so six planes leave a
+            // triangle at most nine; one that rounding has made crossing a plane more than
+            // twice could pass the room, and is dropped as the degenerate thing it is.
+            let crosses = |i: usize| inside[i] != inside[(i + 1) % count];
+            let kept = (0..count).filter(|&i| inside[i]).count();
+            if kept + (0..count).filter(|&i| crosses(i)).count() > MAX_VERTICES {
+                return false;
             }
             let mut out = [[0.0f32; 4]; MAX_VERTICES];
             let mut n = 0;
-            for i in 0..self.count {
+            for i in 0..count {
                 let current = self.vertices[i];
-                let next = self.vertices[(i + 1) % self.count];
-                let (dc, dn) = (distance(&current), distance(&next));
-                if dc >= 0.0 {
+                if inside[i] {
                     out[n] = current;
                     n += 1;
                 }
-                if (dc >= 0.0) != (dn >= 0.0) && n < MAX_VERTICES {
-                    out[n] = intersect(&current, &next, plane);
+                if crosses(i) {
+                    out[n] = intersect(&current, &self.vertices[(i + 1) % count], plane);
                     n += 1;
                 }
             }
@@ -338,7 +347,32 @@ impl SpanDepths for DepthPlane {
 
 #[cfg(test)]
 mod tests {
+    use super::clip::{GuardBand, Polygon};
     use super::*;
+
+    #[test]
+    fn a_triangle_that_rounding_makes_cross_a_plane_too_often_is_dropped_not_a_panic() {
+        // Found by feeding extreme finite coordinates to the rasterizer (scene line `tri
+        // -8e-22 0 0 -6e-25  1e37 0 1 1  -1 1 1 1e28` in a 256x256 viewport): its clipped
+        // points, put on one plane, fall on both sides of the next as rounded, so the
+        // polygon crosses a plane more than twice and would need a tenth vertex.
+        let triangle = [
+            [-8e-22, 0.0, 0.0, -6e-25],
+            [1e37, 0.0, 1.0, 1.0],
+            [-1.0, 1.0, 1.0, 1e28],
+        ];
+        assert!(!Polygon::from_triangle(&triangle).clip(&GuardBand::for_viewport(256, 256)));
+        struct Count(u64);
+        impl RasterSink for Count {
+            fn primitive(&mut self) {}
+            fn fragment(&mut self, _: Fragment) {
+                self.0 += 1;
+            }
+        }
+        let mut count = Count(0);
+        rasterize_triangle(&RenderState::new(256, 256), &triangle, &mut count);
+        assert_eq!(count.0, 0, "dropped");
+    }
 
     #[test]
     fn snap_subtracts_the_centre_offset_and_rounds_ties_to_even() {
