@@ -5,6 +5,8 @@ use occsim_sim::effects::EffectsChoice;
 use occsim_sim::replay::{max_query_tiles, replay, ReplayError, ReplayOptions};
 use occsim_sim::{Arch, Fidelity};
 use occsim_traces::builtin::HARDCASES;
+use occsim_traces::event::{Event, HostWork};
+use occsim_traces::golden::EventSink;
 use occsim_traces::golden::GoldenModel;
 use occsim_traces::retile::TileGrid;
 use occsim_traces::scene::parse_scene;
@@ -73,4 +75,54 @@ fn errors_come_by_stage() {
     // so it comes from a scan (hardcases' largest query has 5 tiles).
     let tiles = max_query_tiles(|| Ok(TraceReader::new(&trace[..])?), &arch).unwrap();
     assert_eq!(tiles, 5);
+}
+
+#[test]
+fn a_simulated_time_past_what_a_report_can_sum_is_an_error_not_a_wrapped_count() {
+    // The hard cases after host work of 2^32 - 1 nodes at 2^24 host cycles each, on a host
+    // of 0.001 MHz against a pipe of 100,000 MHz: 7.2e24 pipeline cycles, past 2^62 (each
+    // parameter within its range). Summed, the cycle counts had wrapped past 2^64 and been
+    // reported with exit 0.
+    let lines = parse_scene(HARDCASES, "hardcases").expect("parses");
+    let mut trace = Vec::new();
+    let mut writer = TraceWriter::new(&mut trace, &TraceHeader::new(64, 64)).expect("header");
+    let mut golden = GoldenModel::new(64, 64);
+    let work = HostWork {
+        nodes: u32::MAX,
+        ..HostWork::default()
+    };
+    writer.event(&Event::HostWork(work)).unwrap();
+    for line in &lines {
+        golden.execute(&line.command, &mut writer).unwrap();
+    }
+    golden.finish(&mut writer).unwrap();
+    writer.finish().expect("written");
+    let open = || Ok(TraceReader::new(&trace[..])?);
+    for machine in ["o2", "ir4"] {
+        let mut arch = Arch::builtin(machine).unwrap();
+        for setting in [
+            "host_clock_mhz=0.001",
+            "clock_mhz=100000",
+            "host_cycles_per_node=16777216",
+        ] {
+            arch.set(setting).unwrap();
+        }
+        for level in [
+            Fidelity::Analytic,
+            Fidelity::Cycle,
+            Fidelity::Sampled { every: 10 },
+        ] {
+            let error = replay(open, &arch, ReplayOptions::at(level))
+                .map(|result| result.total_cycles)
+                .expect_err("refused");
+            let source = std::error::Error::source(&error).map(ToString::to_string);
+            assert!(
+                source.as_deref().unwrap_or("").contains("past the 2^62"),
+                "{machine} {level:?}: {error}: {source:?}"
+            );
+        }
+        // Within range, the same trace replays.
+        let arch = Arch::builtin(machine).unwrap();
+        replay(open, &arch, ReplayOptions::at(Fidelity::Cycle)).expect("replays");
+    }
 }

@@ -39,9 +39,17 @@ impl HostCosts {
     }
 }
 
-/// `units` at `each` pipeline cycles, rounded to whole cycles.
+/// The most cycles a simulated clock may reach (2^62): the host's clock stops there, and a
+/// replay whose time reaches it is refused ([`crate::SimError::TimeOverflow`]) rather than
+/// reported, its sums past the range of a cycle count. Only parameters at the far ends of
+/// their ranges together get there (a host clock of 0.001 MHz against a pipe of 20 GHz, 2^24
+/// host cycles a vertex).
+pub const MAX_SIMULATED_CYCLES: u64 = 1 << 62;
+
+/// `units` at `each` pipeline cycles, rounded to whole cycles (at most
+/// [`MAX_SIMULATED_CYCLES`]).
 pub fn cost(units: u64, each: f64) -> u64 {
-    (units as f64 * each).round() as u64
+    ((units as f64 * each).round() as u64).min(MAX_SIMULATED_CYCLES)
 }
 
 pub struct Host {
@@ -86,10 +94,10 @@ impl Host {
             Track::Host,
             State::Busy,
             self.now,
-            self.now + cycles,
+            self.now.saturating_add(cycles),
         );
-        self.now += cycles;
-        self.busy_cycles += cycles;
+        self.now = self.now.saturating_add(cycles).min(MAX_SIMULATED_CYCLES);
+        self.busy_cycles = self.busy_cycles.saturating_add(cycles);
     }
 
     /// The traversal's work.

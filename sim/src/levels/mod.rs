@@ -24,6 +24,7 @@ pub use functional::FunctionalCore;
 pub use level::{Fidelity, FidelityParseError, LevelResult, QueryOutcome, SampledWindows};
 
 use crate::arch::Arch;
+use crate::blocks::host::MAX_SIMULATED_CYCLES;
 use crate::blocks::occu_stage::OccuModel;
 use crate::blocks::waveform::WaveformOptions;
 use crate::effects::{Effects, EffectsChoice};
@@ -163,6 +164,12 @@ impl LevelModel {
                 result
             }
         };
+        if let Some(cycles) = result
+            .total_cycles
+            .filter(|&cycles| cycles >= MAX_SIMULATED_CYCLES)
+        {
+            return Err(SimError::TimeOverflow { cycles });
+        }
         result.machine = name;
         result.arch = arch.report_entries();
         Ok(result)
