@@ -3,8 +3,8 @@
 
 use anyhow::{anyhow, Context, Result};
 use occsim_sweep::{
-    list_keys, merge_results, metric_chart, run_sweep, AxisValidator, Grid, Joining, Point,
-    PointRecord, Shard, StoredLine, SweepError, SweepOptions,
+    capped_jobs, list_keys, merge_results, metric_chart, run_sweep, AxisValidator, Grid, Joining,
+    Point, PointRecord, Shard, StoredLine, SweepError, SweepOptions,
 };
 use std::num::NonZeroUsize;
 use std::path::PathBuf;
@@ -280,17 +280,6 @@ pub fn run_with(
     let subject = format!("{trace}{retiled} on {arch}, {}", run.fidelity);
     write_plot(&run.plot, &grid, &outcome.lines, &subject)
 }
-
-/// Worker threads for `requested` jobs: no more than the points to run, nor than
-/// `JOBS_PER_CORE` a core (more only wait on one another and on memory).
-fn capped_jobs(requested: usize, points: usize, cores: usize) -> usize {
-    requested
-        .min(points.max(1))
-        .min(JOBS_PER_CORE * cores.max(1))
-}
-
-/// Most worker threads a core: points are CPU-bound, so beyond a few a core they only queue.
-const JOBS_PER_CORE: usize = 4;
 
 /// Runs `occsim sweep merge`.
 pub fn run_merge(args: &MergeArgs) -> Result<()> {

@@ -28,7 +28,9 @@ pub use error::{BoxError, Joining, SweepError};
 pub use grid::{Axis, AxisValidator, Grid, Point, Shard, MAX_GRID_POINTS};
 pub use merge::{list_keys, merge_results, MergeReport};
 pub use record::{PointRecord, StoredLine, SweepLine, FORMAT};
-pub use runner::{run_sweep, Evaluator, Pool, SweepOptions, SweepOutcome};
+pub use runner::{
+    capped_jobs, run_sweep, Evaluator, Pool, SweepOptions, SweepOutcome, JOBS_PER_CORE,
+};
 
 #[cfg(test)]
 mod tests;

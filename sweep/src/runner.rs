@@ -228,6 +228,18 @@ fn evaluate_points(
 /// their own: a pool of `jobs` threads, a progress bar (hidden off a terminal), and a failing
 /// or panicking point turned into [`SweepError::PointFailed`] naming it. The first failure
 /// stops the run.
+/// Worker threads for `requested` jobs: no more than the points to run, nor than
+/// [`JOBS_PER_CORE`] a core (more only wait on one another and on memory), and at least one.
+pub fn capped_jobs(requested: usize, points: usize, cores: usize) -> usize {
+    requested
+        .min(points.max(1))
+        .min(JOBS_PER_CORE * cores.max(1))
+        .max(1)
+}
+
+/// Most worker threads a core: points are CPU-bound, so beyond a few a core they only queue.
+pub const JOBS_PER_CORE: usize = 4;
+
 pub struct Pool<'g> {
     pub grid: &'g Grid,
     pub jobs: usize,
@@ -251,8 +263,9 @@ impl Pool<'_> {
             indices.len() + already_done,
             already_done,
         );
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
         let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(self.jobs)
+            .num_threads(capped_jobs(self.jobs, indices.len(), cores))
             .build()
             .map_err(SweepError::Threads)?;
         let run_one = |index: &usize| -> Result<()> {
@@ -333,4 +346,35 @@ fn progress_bar(wanted: bool, total: usize, position: usize) -> ProgressBar {
     let bar = crate::progress::bar(total as u64, "points");
     bar.set_position(position as u64);
     bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::Axis;
+
+    #[test]
+    fn a_pool_asked_for_more_jobs_than_any_machine_has_threads_runs_on_a_few() {
+        // --jobs 18446744073709551615 on `sensitivity` had asked rayon for as many threads
+        // and failed after 20 s ("cannot start the worker threads"); the pool takes at most
+        // JOBS_PER_CORE a core and no more than its points.
+        let grid = Grid::from_axes(vec![Axis {
+            key: "k".into(),
+            values: (0..5).map(|i| i.to_string()).collect(),
+        }])
+        .unwrap();
+        let pool = Pool {
+            grid: &grid,
+            jobs: usize::MAX,
+            show_progress: false,
+            failure: &|point: &Point| format!("point {}", point.index),
+        };
+        let values = pool
+            .collect(&|point: &Point| Ok(point.index * 2))
+            .expect("runs");
+        assert_eq!(values, vec![0, 2, 4, 6, 8]);
+        assert_eq!(capped_jobs(usize::MAX, 5, 64), 5);
+        assert_eq!(capped_jobs(usize::MAX, 1_000, 2), 2 * JOBS_PER_CORE);
+        assert_eq!(capped_jobs(0, 10, 2), 1);
+    }
 }
