@@ -214,8 +214,7 @@ mod clip {
             }
             let mut out = [[0.0f32; 4]; MAX_VERTICES];
             let mut n = 0;
-            for i in 0..count {
-                let current = self.vertices[i];
+            for (i, &current) in self.vertices[..count].iter().enumerate() {
                 if inside[i] {
                     out[n] = current;
                     n += 1;
