@@ -454,6 +454,45 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
         neither.contains("--corpus") || neither.contains("TRACE"),
         "{neither}"
     );
+    // What a file can say but not mean: no machine (the run had printed an empty table and
+    // exited 0), a name that is a path out of --traces-dir (its trace had been written
+    // there), a side past the viewport's, a built-in scene of 2^32 - 1 frames (its scene
+    // text, written whole, had asked for 4.5 GB).
+    let hardcases = "[[trace]]\nname = \"h\"\nclass = \"h\"\nscene = \"hardcases\"\n";
+    let demo = |size: &str| {
+        format!("machines = [\"o2\"]\nengines = [1]\n[[trace]]\nname = \"d\"\nclass = \"d\"\nscene = \"demo\"\nsmall = {{ {size} }}\n")
+    };
+    for (text, expected) in [
+        (
+            format!("machines = []\nengines = [1]\n{hardcases}"),
+            "`machines` names no machine".to_string(),
+        ),
+        (
+            "machines = [\"o2\"]\nengines = [1]\n[[trace]]\nname = \"../out\"\nclass = \"h\"\nscene = \"hardcases\"\n".to_string(),
+            "trace `../out`: a name is letters".to_string(),
+        ),
+        (
+            format!("machines = [\"o2\"]\nengines = [1]\n{hardcases}{}", hardcases.replace("class", "retile = \"1x1\"\nclass")),
+            "trace `h` named twice".to_string(),
+        ),
+        (demo("width = 100000"), "trace `d`: small: width = 100000".to_string()),
+        (demo("frames = 4294967295"), "frames = 4294967295: a built-in scene takes at most 64".to_string()),
+    ] {
+        let file = dir.join("meaningless.toml");
+        std::fs::write(&file, &text).unwrap();
+        let error = support::cli::stderr_of_failure(&[
+            "fidelity",
+            "--corpus",
+            "--scale",
+            "small",
+            "--corpus-file",
+            file.to_str().unwrap(),
+        ]);
+        assert!(
+            error.contains("meaningless.toml") && error.contains(&expected),
+            "{text}: {error}"
+        );
+    }
 }
 
 /// `--corpus` interrupted while it works leaves no scratch directory behind.

@@ -15,6 +15,7 @@ use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOption
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::retile::TileGrid;
 use occsim_traces::rng::Fnv1a;
+use occsim_traces::state::MAX_VIEWPORT_SIDE;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -91,6 +92,29 @@ struct Size {
     frames: Option<u32>,
 }
 
+/// Most frames a built-in scene recipe may ask for: its scene is written out whole before it
+/// is rasterized (a walk's frames stream, and its own flags bound them).
+const MAX_SCENE_FRAMES: u32 = 64;
+
+impl Size {
+    /// The sides within the viewport's, and a built-in scene's frames within
+    /// [`MAX_SCENE_FRAMES`].
+    fn check(&self, scene: bool) -> Result<(), String> {
+        for (key, side) in [("width", self.width), ("height", self.height)] {
+            if let Some(side) = side.filter(|side| !(1..=MAX_VIEWPORT_SIDE).contains(side)) {
+                return Err(format!("{key} = {side}: expected 1..={MAX_VIEWPORT_SIDE}"));
+            }
+        }
+        match self.frames {
+            Some(0) => Err("frames = 0: expected at least 1".into()),
+            Some(frames) if scene && frames > MAX_SCENE_FRAMES => Err(format!(
+                "frames = {frames}: a built-in scene takes at most {MAX_SCENE_FRAMES}"
+            )),
+            _ => Ok(()),
+        }
+    }
+}
+
 /// One class and level over the corpus.
 #[derive(Serialize)]
 struct ClassRow {
@@ -141,7 +165,38 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
         None => ("the built-in corpus".to_string(), BUILT_IN.to_string()),
     };
     let file: CorpusFile = toml::from_str(&text).with_context(|| name.clone())?;
-    for recipe in &file.trace {
+    anyhow::ensure!(
+        !file.machines.is_empty(),
+        "{name}: `machines` names no machine"
+    );
+    anyhow::ensure!(
+        !file.engines.is_empty(),
+        "{name}: `engines` names no engine count"
+    );
+    anyhow::ensure!(!file.trace.is_empty(), "{name}: no `[[trace]]` recipe");
+    for (k, recipe) in file.trace.iter().enumerate() {
+        // A recipe's name names its trace's file in --traces-dir: no path in it.
+        anyhow::ensure!(
+            !recipe.name.is_empty()
+                && !recipe.name.starts_with('.')
+                && recipe
+                    .name
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c)),
+            "{name}: trace `{}`: a name is letters, digits, `-`, `_` and `.` (not first)",
+            recipe.name
+        );
+        anyhow::ensure!(
+            !file.trace[..k]
+                .iter()
+                .any(|other| other.name == recipe.name),
+            "{name}: trace `{}` named twice",
+            recipe.name
+        );
+        for (scale, size) in [("full", recipe.full), ("small", recipe.small)] {
+            size.check(recipe.scene.is_some())
+                .map_err(|e| anyhow::anyhow!("{name}: trace `{}`: {scale}: {e}", recipe.name))?;
+        }
         anyhow::ensure!(
             recipe.scene.is_some() != recipe.walk.is_some(),
             "{name}: trace `{}` needs exactly one of `scene` and `walk`",
