@@ -837,3 +837,46 @@ fn replay_fast_forwards_a_lazy_grid_walk_to_the_exact_report() {
         );
     }
 }
+
+/// A settings file past 16 MiB (an architecture, a corpus, a camera path: each a few KB) is
+/// refused by its size, naming it, before it is read whole (/dev/zero as --arch-file had been
+/// read for 2 GB until memory ran out).
+#[test]
+fn a_settings_file_too_large_to_be_one_is_refused_by_its_size() {
+    let (dir, trace) = support::cli::hardcases_trace("large-settings");
+    let large = dir.join("large.toml");
+    std::fs::File::create(&large)
+        .unwrap()
+        .set_len((16 << 20) + 1)
+        .unwrap();
+    let large = large.to_str().unwrap();
+    for (args, what) in [
+        (
+            vec!["replay", &trace, "--arch-file", large],
+            "architecture file",
+        ),
+        (
+            vec!["fidelity", "--corpus", "--corpus-file", large],
+            "corpus file",
+        ),
+        (
+            vec![
+                "trace",
+                "gen",
+                "--scene",
+                "city",
+                "--camera-file",
+                large,
+                "-o",
+                "x.occt",
+            ],
+            "camera file",
+        ),
+    ] {
+        let error = support::cli::stderr_of_failure(&args);
+        assert!(
+            error.contains(&format!("{large}: larger than 16 MiB (is it the {what}?)")),
+            "{args:?}: {error}"
+        );
+    }
+}

@@ -72,8 +72,7 @@ pub fn describe(name: &str, file: Option<&Path>, sets: &[String]) -> String {
 pub fn resolve(name: &str, file: Option<&Path>, sets: &[String]) -> anyhow::Result<Arch> {
     let mut arch = match file {
         Some(path) => {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read architecture file {}", path.display()))?;
+            let text = super::read_settings_file(path, "architecture file")?;
             Arch::from_toml(&text)
                 .with_context(|| format!("{}: invalid architecture", path.display()))?
         }

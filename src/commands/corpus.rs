@@ -159,8 +159,7 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
     let (name, text) = match path {
         Some(path) => (
             path.display().to_string(),
-            std::fs::read_to_string(path)
-                .with_context(|| format!("cannot read {}", path.display()))?,
+            super::read_settings_file(path, "corpus file")?,
         ),
         None => ("the built-in corpus".to_string(), BUILT_IN.to_string()),
     };

@@ -14,3 +14,33 @@ pub mod sweep;
 pub mod timeline;
 pub mod trace;
 pub mod workload_args;
+
+/// The largest settings file (an architecture, a corpus, a camera path) read: each is a few
+/// KB, so a file past this is not one, and is refused before it fills memory (/dev/zero had
+/// been read for 2 GB).
+pub const MAX_SETTINGS_FILE_BYTES: u64 = 16 << 20;
+
+/// The UTF-8 text of the settings file `path` (`what` it is, for errors): at most
+/// [`MAX_SETTINGS_FILE_BYTES`].
+pub fn read_settings_file(path: &std::path::Path, what: &str) -> anyhow::Result<String> {
+    use anyhow::Context;
+    use std::io::Read;
+    let name = path.display();
+    let mut bytes = Vec::new();
+    std::fs::File::open(path)
+        .with_context(|| format!("cannot open {what} {name}"))?
+        .take(MAX_SETTINGS_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .with_context(|| format!("cannot read {what} {name}"))?;
+    anyhow::ensure!(
+        bytes.len() as u64 <= MAX_SETTINGS_FILE_BYTES,
+        "{name}: larger than {} MiB (is it the {what}?)",
+        MAX_SETTINGS_FILE_BYTES >> 20
+    );
+    String::from_utf8(bytes).map_err(|e| {
+        anyhow::anyhow!(
+            "{name}: not UTF-8 text at byte {} (is it the {what}?)",
+            e.utf8_error().valid_up_to()
+        )
+    })
+}

@@ -10,7 +10,6 @@ use occsim_traces::workloads::{
     DriverKind, DriverOptions, ForestOptions, GenerateError, ObjOptions, TrafficOptions, Walk,
     WorkloadError, WorkloadOption, WorkloadScene, WorkloadStats,
 };
-use std::io::Read;
 use std::path::Path;
 
 /// The scene, its camera and the walk.
@@ -146,9 +145,6 @@ fn parse_point(text: &str) -> Result<[f32; 3], String> {
     }
 }
 
-/// Largest camera file read, in bytes.
-const MAX_CAMERA_FILE_BYTES: u64 = 16 << 20;
-
 impl SceneArgs {
     pub fn walk(&self) -> Walk {
         Walk {
@@ -220,14 +216,11 @@ impl SceneArgs {
         let Some(file) = &self.camera_file else {
             return Ok(None);
         };
-        let name = file.display().to_string();
-        let mut text = String::new();
-        std::fs::File::open(file)
-            .with_context(|| format!("cannot open camera file {name}"))?
-            .take(MAX_CAMERA_FILE_BYTES)
-            .read_to_string(&mut text)
-            .with_context(|| format!("{name}: cannot read camera file (is it UTF-8 text?)"))?;
-        Ok(Some(CameraPath::from_toml(&text, &name)?))
+        let text = super::read_settings_file(file, "camera file")?;
+        Ok(Some(CameraPath::from_toml(
+            &text,
+            &file.display().to_string(),
+        )?))
     }
 
     /// A one-line account of the scene and walk, for trace headers and reports.

@@ -78,6 +78,15 @@ pub enum SweepError {
     #[error("{}:{line}: not UTF-8 text", path.display())]
     NotUtf8 { path: PathBuf, line: usize },
     #[error(
+        "{}:{line}: a line longer than {max} bytes: not a sweep results file",
+        path.display()
+    )]
+    LineTooLong {
+        path: PathBuf,
+        line: usize,
+        max: u64,
+    },
+    #[error(
         "{}:{line}: the line's digest does not match its content (edited, damaged, or not a sweep result line)",
         path.display()
     )]

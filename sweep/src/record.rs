@@ -9,6 +9,7 @@ use crate::grid::{Axis, Grid};
 use serde::{Deserialize, Serialize};
 use serde_json::Value;
 use std::collections::BTreeMap;
+use std::io::BufRead;
 use std::path::{Path, PathBuf};
 
 type Result<T, E = SweepError> = std::result::Result<T, E>;
@@ -109,22 +110,42 @@ pub struct StoredFile {
 /// interrupted append leaves, so it is dropped (and reported). A complete line that does not
 /// parse is corruption, reported with file and line number.
 pub fn read_results(path: &Path) -> Result<StoredFile> {
-    let bytes = std::fs::read(path).map_err(|source| SweepError::Read {
+    let read_error = |source| SweepError::Read {
         path: path.to_path_buf(),
         source,
-    })?;
-    let (complete, tail) = match bytes.iter().rposition(|&b| b == b'\n') {
-        Some(last_newline) => bytes.split_at(last_newline + 1),
-        None => bytes.split_at(0),
     };
+    let mut reader = std::io::BufReader::new(std::fs::File::open(path).map_err(read_error)?);
     let mut lines = Vec::new();
-    for (number, raw) in complete.split(|&b| b == b'\n').enumerate() {
-        // Blank lines carry nothing (the split also yields one empty piece after the last '\n').
+    let (mut raw, mut line, mut torn_tail_dropped) = (Vec::new(), 0, false);
+    loop {
+        raw.clear();
+        // Line by line, none past MAX_LINE_BYTES: memory follows the lines kept, not the
+        // file (a file of no newlines, /dev/zero, had been read whole).
+        let read = std::io::Read::take(&mut reader, MAX_LINE_BYTES + 1)
+            .read_until(b'\n', &mut raw)
+            .map_err(read_error)?;
+        if read == 0 {
+            break;
+        }
+        line += 1;
+        if raw.last() != Some(&b'\n') {
+            if raw.len() as u64 > MAX_LINE_BYTES {
+                return Err(SweepError::LineTooLong {
+                    path: path.to_path_buf(),
+                    line,
+                    max: MAX_LINE_BYTES,
+                });
+            }
+            // The file ends inside it: what an interrupted append leaves.
+            torn_tail_dropped = true;
+            break;
+        }
+        raw.pop();
+        // Blank lines carry nothing.
         if raw.is_empty() {
             continue;
         }
-        let line = number + 1;
-        let text = std::str::from_utf8(raw)
+        let text = std::str::from_utf8(&raw)
             .map_err(|_| SweepError::NotUtf8 {
                 path: path.to_path_buf(),
                 line,
@@ -155,9 +176,12 @@ pub fn read_results(path: &Path) -> Result<StoredFile> {
     }
     Ok(StoredFile {
         lines,
-        torn_tail_dropped: !tail.is_empty(),
+        torn_tail_dropped,
     })
 }
+
+/// The longest results line read (a point's line is a few hundred bytes to a few KB).
+pub const MAX_LINE_BYTES: u64 = 1 << 20;
 
 /// What a results line must match to belong to a sweep: its grid and trace digest. `joining`
 /// (a resume or a merge) shapes the messages.

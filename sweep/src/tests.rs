@@ -553,3 +553,18 @@ fn a_panicking_model_is_an_error_naming_the_point() {
         "{err}"
     );
 }
+
+#[test]
+fn a_results_file_without_newlines_is_refused_at_its_first_megabyte() {
+    // A file of 3 MB and no newline (as /dev/zero would give, which was read whole until
+    // memory ran out): refused as a line past MAX_LINE_BYTES, naming the file and line 1.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("not-results.jsonl");
+    std::fs::write(&path, vec![b'x'; 3 << 20]).unwrap();
+    let error = crate::record::read_results(&path).expect_err("refused");
+    let text = error.to_string();
+    assert!(
+        text.contains("not-results.jsonl:1") && text.contains("longer than 1048576 bytes"),
+        "{text}"
+    );
+}
