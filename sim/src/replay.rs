@@ -58,6 +58,10 @@ pub struct ReplayOptions {
     /// simulates (None: the machine's own, [`crate::levels::sampled::tail_fragments`];
     /// `Some(u64::MAX)`: every sampled window whole).
     pub tail_fragments: Option<u64>,
+    /// At the cycle and rtl levels, the report keeps every query's tiles' reports (their
+    /// bounding boxes and depth ranges): memory that grows with the queries' tiles, so only
+    /// where they are wanted (`replay --json`). Else each query's tile totals.
+    pub tile_reports: bool,
 }
 
 impl ReplayOptions {
@@ -72,6 +76,7 @@ impl ReplayOptions {
             window_index: true,
             warm_up_fragments: None,
             tail_fragments: None,
+            tile_reports: false,
         }
     }
 
@@ -88,6 +93,7 @@ impl ReplayOptions {
             window_index: true,
             warm_up_fragments: None,
             tail_fragments: None,
+            tile_reports: false,
         }
     }
 }
@@ -217,6 +223,8 @@ pub fn replay<R: Read>(
         options.timeline,
     )
     .map_err(ReplayError::Setup)?;
+    let mut model = model;
+    model.keep_tile_reports(options.tile_reports);
     let sink = feed_retiled(
         &mut reader,
         LevelSink::new(model),

@@ -216,7 +216,21 @@ pub struct QueryReport {
     pub available_cycle: u64,
     pub fragments: u64,
     pub overflowed_buffers: u32,
+    /// Every tile's report, or none where the machine keeps totals only
+    /// ([`crate::MachineBuilder::totals_only`]).
     pub tiles: Vec<TileReport>,
+    /// The tiles' totals, kept either way.
+    pub totals: TileTotals,
+}
+
+/// A query's tiles summed: what a level's result and the host's read-back take of them.
+#[derive(Clone, Copy, Debug, Default, Serialize, PartialEq, Eq)]
+pub struct TileTotals {
+    pub tiles: usize,
+    pub nohc: u64,
+    pub phc: u64,
+    /// Hit words written to the tile buffers.
+    pub hits_written: u64,
 }
 
 /// The latest query `id` among `queries`: the cycle its result is available and the record
@@ -233,8 +247,9 @@ impl QueryReport {
     /// The 32-bit words of the query's result records: a brief record a tile and the hits
     /// kept (what the host reads back).
     pub fn record_words(&self) -> u64 {
-        let hits: u64 = self.tiles.iter().map(|t| t.hits_written).sum();
-        self.tiles.len() as u64 * occsim_traces::query::BRIEF_RECORD_ENTRIES as u64 + hits
+        let totals = &self.totals;
+        totals.tiles as u64 * occsim_traces::query::BRIEF_RECORD_ENTRIES as u64
+            + totals.hits_written
     }
 }
 

@@ -85,6 +85,8 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
         waveform,
         timeline: timeline.as_ref().map(|t| t.0.clone()),
         window_index: !args.level.no_index,
+        // Every query's tiles' reports only where they are printed.
+        tile_reports: args.json,
         ..ReplayOptions::at(level)
     };
     let window = args

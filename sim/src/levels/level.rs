@@ -212,7 +212,7 @@ impl LevelResult {
             .queries
             .iter()
             .map(|q| {
-                let nohc: u64 = q.tiles.iter().map(|t| t.nohc).sum();
+                let nohc = q.totals.nohc;
                 QueryOutcome {
                     id: q.id,
                     mode: q.mode,
@@ -222,9 +222,9 @@ impl LevelResult {
                     } else {
                         nohc
                     },
-                    tiles: q.tiles.len(),
+                    tiles: q.totals.tiles,
                     nohc,
-                    phc: q.tiles.iter().map(|t| t.phc).sum(),
+                    phc: q.totals.phc,
                     overflowed_buffers: q.overflowed_buffers,
                     latency_cycles: Some(q.latency_cycles),
                 }

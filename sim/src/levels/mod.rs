@@ -176,6 +176,17 @@ impl LevelModel {
     }
 }
 
+impl LevelModel {
+    /// Whether the cycle and rtl levels' report keeps every query's tiles (by default), or
+    /// their totals only ([`crate::MachineBuilder::totals_only`]; the other levels report
+    /// totals only either way).
+    pub fn keep_tile_reports(&mut self, keep: bool) {
+        if let LevelModel::Cycle(machine, ..) = self {
+            machine.keep_tile_reports(keep);
+        }
+    }
+}
+
 /// Feeds a stream's events and spans to a [`LevelModel`]: how a decoded trace reaches a
 /// model. The model's first error stops the stream.
 pub struct LevelSink {

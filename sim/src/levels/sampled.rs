@@ -1095,7 +1095,9 @@ impl SampledModel {
         self.warm_start = None;
         // A machine still cooling down (a clear came before its cool-down's end) finishes.
         self.flush_run()?;
-        let builder = MachineBuilder::new(&self.arch).effects(self.effects);
+        let builder = MachineBuilder::new(&self.arch)
+            .effects(self.effects)
+            .totals_only();
         let state = self.core.functional.state();
         let mut machine = match &mut self.consistent {
             None => builder.resume(

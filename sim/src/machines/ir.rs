@@ -74,7 +74,7 @@ use crate::error::SimError;
 use crate::golden_check::merged_difference;
 use crate::golden_check::GoldenCheck;
 use crate::machines::builder::MachineBuilder;
-use crate::machines::o2::tile_report;
+use crate::machines::o2::tile_reports;
 use crate::report::{
     percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, RunTotals, StageReport,
     Summary, UnitSummary,
@@ -129,6 +129,8 @@ pub struct IrMachine {
     last_available: u64,
     /// Where the blocks' intervals go, if anywhere.
     timeline: Option<Timeline>,
+    /// Each query's report keeps every tile's ([`MachineBuilder::totals_only`]).
+    tile_reports: bool,
 }
 
 impl IrMachine {
@@ -148,6 +150,11 @@ impl IrMachine {
     pub fn finish_recycling(mut self) -> Result<(Report, DepthBuffer), SimError> {
         let depth = std::mem::replace(&mut self.depth, DepthBuffer::new(0, 0));
         Ok((self.finish()?, depth))
+    }
+
+    /// [`crate::MachineModel::keep_tile_reports`].
+    pub(crate) fn keep_tile_reports(&mut self, keep: bool) {
+        self.tile_reports = keep;
     }
 
     /// The one constructor: the blocks of `build`'s architecture, effects and OccU fidelity
@@ -203,6 +210,7 @@ impl IrMachine {
             primitives: 0,
             last_available: 0,
             timeline: build.timeline,
+            tile_reports: build.tile_reports,
         })
     }
 
@@ -475,6 +483,7 @@ impl IrMachine {
                 available_cycle: available,
             });
         }
+        let (tile_reports, totals) = tile_reports(&tiles, self.tile_reports);
         self.queries.push(QueryReport {
             id: spec.id,
             mode: spec.mode,
@@ -486,7 +495,8 @@ impl IrMachine {
             available_cycle: available,
             fragments: query.fragments,
             overflowed_buffers,
-            tiles: tiles.iter().map(tile_report).collect(),
+            tiles: tile_reports,
+            totals,
         });
         let result = QueryResult {
             id: spec.id,

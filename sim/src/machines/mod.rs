@@ -224,6 +224,15 @@ impl MachineModel {
         }
     }
 
+    /// Whether each query's report keeps every tile's (else the tiles' totals only, as
+    /// [`MachineBuilder::totals_only`] builds it).
+    pub fn keep_tile_reports(&mut self, keep: bool) {
+        match &mut self.pipe {
+            Pipe::O2(machine) => machine.keep_tile_reports(keep),
+            Pipe::Ir(machine) => machine.keep_tile_reports(keep),
+        }
+    }
+
     /// The depth buffer the machine's depth tests read and write. A machine started
     /// mid-stream may have a pixel's depth set before the pixel's first test
     /// ([`crate::levels::consistent_depths`]); the tests themselves happen as each fragment

@@ -74,7 +74,7 @@ use crate::golden_check::{first_difference, GoldenCheck};
 use crate::machines::builder::MachineBuilder;
 use crate::report::{
     percent, ArchEntry, EngineReport, PortReport, QueryReport, Report, RunTotals, StageReport,
-    Summary, TileReport,
+    Summary, TileReport, TileTotals,
 };
 use crate::timeline::{note, QuerySlice, State, Timeline, Track};
 use occsim_traces::golden::DepthBuffer;
@@ -151,6 +151,8 @@ pub struct O2Machine {
     effects: Effects,
     /// Where the blocks' intervals go, if anywhere.
     timeline: Option<Timeline>,
+    /// Each query's report keeps every tile's ([`MachineBuilder::totals_only`]).
+    tile_reports: bool,
     /// Fragments taken by a fast-forward ([`Self::span`]).
     fast_forwarded: u64,
     /// A fast-forward's scratch (kept to reuse its memory): the fragments the back end tests,
@@ -206,6 +208,11 @@ impl O2Machine {
         Ok((self.finish()?, depth))
     }
 
+    /// [`crate::MachineModel::keep_tile_reports`].
+    pub(crate) fn keep_tile_reports(&mut self, keep: bool) {
+        self.tile_reports = keep;
+    }
+
     /// The one constructor: the blocks of `build`'s architecture, effects and OccU fidelity
     /// for a `width` x `height` viewport, starting from `depth` and, when given, a
     /// functional model's render state (a warm start) instead of the reset state.
@@ -248,6 +255,7 @@ impl O2Machine {
             last_available: 0,
             effects,
             timeline: build.timeline,
+            tile_reports: build.tile_reports,
             fast_forwarded: 0,
             span_backs: Vec::new(),
             span_passed: Vec::new(),
@@ -850,6 +858,7 @@ impl O2Machine {
             });
         }
         self.last_available = self.last_available.max(available);
+        let (tile_reports, totals) = tile_reports(&tiles, self.tile_reports);
         self.queries.push(QueryReport {
             id: query.spec.id,
             mode: query.spec.mode,
@@ -861,7 +870,8 @@ impl O2Machine {
             available_cycle: available,
             fragments: query.fragments,
             overflowed_buffers,
-            tiles: tiles.iter().map(tile_report).collect(),
+            tiles: tile_reports,
+            totals,
         });
         let result = QueryResult {
             id: query.spec.id,
@@ -1033,7 +1043,23 @@ impl O2Machine {
     }
 }
 
-pub(crate) fn tile_report(tile: &TileResult) -> TileReport {
+/// A query's tiles as its report keeps them: every tile's report where `each` (else none),
+/// and their totals.
+pub(crate) fn tile_reports(tiles: &[TileResult], each: bool) -> (Vec<TileReport>, TileTotals) {
+    let totals = TileTotals {
+        tiles: tiles.len(),
+        nohc: tiles.iter().map(|tile| tile.nohc).sum(),
+        phc: tiles.iter().map(|tile| tile.phc).sum(),
+        hits_written: tiles.iter().map(|tile| tile.hits.len()).sum(),
+    };
+    let reports = match each {
+        true => tiles.iter().map(tile_report).collect(),
+        false => Vec::new(),
+    };
+    (reports, totals)
+}
+
+fn tile_report(tile: &TileResult) -> TileReport {
     TileReport {
         nohc: tile.nohc,
         phc: tile.phc,
