@@ -23,6 +23,7 @@ pub fn open_scene(scene: &str) -> anyhow::Result<SceneInput> {
             (Box::new(Cursor::new(text.into_bytes())), size)
         }
         None => {
+            occsim_sweep::output::note_input(std::path::Path::new(scene));
             let file = std::fs::File::open(scene).with_context(|| {
                 format!(
                     "cannot open scene `{scene}` (not a file, and not a built-in scene: {})",

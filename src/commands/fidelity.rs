@@ -304,6 +304,9 @@ fn compare_with(
 }
 
 pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
+    if let Some(trace) = &args.trace {
+        occsim_sweep::output::note_input(trace);
+    }
     let ladder = Ladder {
         sample_every: args.sample_every,
         effects: args.effects,

@@ -135,6 +135,7 @@ impl LatencyRow {
 }
 
 pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
+    occsim_sweep::output::note_input(&args.trace);
     if args.engines.is_empty() {
         bail!("--engines: give at least one engine count");
     }

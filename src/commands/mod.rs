@@ -26,6 +26,7 @@ pub fn read_settings_file(path: &std::path::Path, what: &str) -> anyhow::Result<
     use anyhow::Context;
     use std::io::Read;
     let name = path.display();
+    occsim_sweep::output::note_input(path);
     let mut bytes = Vec::new();
     std::fs::File::open(path)
         .with_context(|| format!("cannot open {what} {name}"))?

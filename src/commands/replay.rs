@@ -60,6 +60,8 @@ pub struct WaveformArgs {
 }
 
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
+    // Before any output is made: none may replace the trace.
+    occsim_sweep::output::note_input(&args.trace);
     let mut arch = args.arch.resolve()?;
     if let Some(engines) = args.engines {
         arch.set_value("engines", &engines.to_string())
@@ -231,6 +233,7 @@ fn opener_with_progress(
         let file = std::fs::File::open(path)
             .with_context(|| format!("cannot open trace {}", path.display()))
             .map_err(|e| ReplayError::Open(e.into()))?;
+        occsim_sweep::output::note_input(path);
         let bar = occsim_sweep::progress::bytes_bar(size);
         let name = path
             .file_name()

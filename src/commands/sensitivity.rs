@@ -232,6 +232,7 @@ impl CornerBands {
 }
 
 pub fn run(args: SensitivityArgs) -> anyhow::Result<()> {
+    occsim_sweep::output::note_input(&args.trace);
     anyhow::ensure!(
         args.fidelity != Fidelity::Functional,
         "sensitivity needs a level with time: analytic, sampled:K, cycle or rtl, not functional"

@@ -338,6 +338,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
         return run_merge(merge);
     }
     let trace = args.run.trace.clone().context("sweep needs a TRACE")?;
+    occsim_sweep::output::note_input(&trace);
     let base = super::arch::resolve(
         args.run.arch.as_deref().unwrap_or("o2"),
         args.run.arch_file.as_deref(),

@@ -71,6 +71,10 @@ pub fn run(command: TraceCommand) -> anyhow::Result<()> {
 }
 
 fn generate(args: GenArgs) -> anyhow::Result<()> {
+    if let Some(scene_file) = &args.scene_file {
+        // A built-in scene's name is no file: nothing noted.
+        occsim_sweep::output::note_input(Path::new(scene_file));
+    }
     let (summary, frames) = match &args.scene_file {
         Some(scene_file) => (
             generate_scene(scene_file, args.workload.scene.raster.profile, &args.output)?,
@@ -198,6 +202,7 @@ pub const TRACE_READ_BUFFER_BYTES: usize = 1 << 16;
 pub fn open_trace(path: &Path) -> anyhow::Result<TraceReader<std::io::BufReader<std::fs::File>>> {
     let file = std::fs::File::open(path)
         .with_context(|| format!("cannot open trace {}", path.display()))?;
+    occsim_sweep::output::note_input(path);
     TraceReader::new(std::io::BufReader::with_capacity(
         TRACE_READ_BUFFER_BYTES,
         file,
@@ -221,6 +226,7 @@ pub fn read_header_and_summary(
     }
     let file = std::fs::File::open(path)
         .with_context(|| format!("cannot open trace {}", path.display()))?;
+    occsim_sweep::output::note_input(path);
     TraceReader::read_summary(std::io::BufReader::new(file)).with_context(context)
 }
 
@@ -484,6 +490,7 @@ pub fn trace_digest(path: &Path) -> anyhow::Result<String> {
     use std::io::Read;
     let mut file = std::fs::File::open(path)
         .with_context(|| format!("cannot open trace {}", path.display()))?;
+    occsim_sweep::output::note_input(path);
     let mut hash = occsim_traces::rng::Fnv1a::default();
     let mut length: u64 = 0;
     let mut buffer = vec![0u8; 1 << 16];

@@ -241,6 +241,7 @@ impl SceneArgs {
 fn load_obj_file(path: &Path) -> anyhow::Result<WorkloadScene> {
     let file = std::fs::File::open(path)
         .with_context(|| format!("cannot open OBJ model {}", path.display()))?;
+    occsim_sweep::output::note_input(path);
     let reader = std::io::BufReader::with_capacity(1 << 16, file);
     Ok(load_obj(
         reader,

@@ -25,6 +25,13 @@ pub enum OutputError {
         #[source]
         source: std::io::Error,
     },
+    #[error(
+        "{}: not a regular file (a device, a pipe or a directory): outputs are written whole beside their path and renamed over it, which would replace it",
+        path.display()
+    )]
+    NotARegularFile { path: PathBuf },
+    #[error("{}: this command reads it: an output there would overwrite its own input", path.display())]
+    WouldOverwriteInput { path: PathBuf },
     #[error("cannot rename {} to {}", from.display(), to.display())]
     Rename {
         from: PathBuf,
@@ -37,6 +44,19 @@ pub enum OutputError {
 /// Temporary files being written now: what [`remove_temporaries`] removes when the process
 /// is interrupted (the binary calls it from its signal handler).
 static LIVE: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// The files this process reads (canonical paths): no output replaces one of them.
+static INPUTS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+
+/// `path` is an input of this process: an output to it is refused.
+pub fn note_input(path: &Path) {
+    if let Ok(path) = std::fs::canonicalize(path) {
+        let mut inputs = lock(&INPUTS);
+        if !inputs.contains(&path) {
+            inputs.push(path);
+        }
+    }
+}
 
 /// Scratch directories alive now, removed with the temporary files.
 static LIVE_DIRS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
@@ -145,6 +165,7 @@ impl AtomicFile {
     /// Temporaries that earlier, killed processes left beside `path` are removed first; the
     /// new one is listed for [`remove_temporaries`] until it is committed or dropped.
     pub fn create(path: &Path) -> Result<AtomicFile, OutputError> {
+        let path = &destination(path)?;
         let temp = temp_path_beside(path)?;
         remove_stale_temporaries(path);
         let mut live = lock(&LIVE);
@@ -210,6 +231,28 @@ impl Drop for AtomicFile {
     }
 }
 
+/// Where an output to `path` goes: a symbolic link's file (the link stays), and only a
+/// regular file or none (renamed over, a device such as /dev/full, written as root, had
+/// become a regular file).
+fn destination(path: &Path) -> Result<PathBuf, OutputError> {
+    let target = std::fs::canonicalize(path).unwrap_or_else(|_| {
+        // A link to a file not there yet is followed to where that file will be.
+        match std::fs::read_link(path) {
+            Ok(link) => path.parent().unwrap_or(Path::new("")).join(link),
+            Err(_) => path.to_path_buf(),
+        }
+    });
+    match std::fs::metadata(&target) {
+        Ok(metadata) if !metadata.is_file() => Err(OutputError::NotARegularFile {
+            path: path.to_path_buf(),
+        }),
+        Ok(_) if lock(&INPUTS).contains(&target) => Err(OutputError::WouldOverwriteInput {
+            path: path.to_path_buf(),
+        }),
+        _ => Ok(target),
+    }
+}
+
 /// Remove `.NAME.tmp-PID` files beside `path` whose process no longer exists (on systems
 /// with `/proc`, where that can be told; elsewhere nothing is removed).
 fn remove_stale_temporaries(path: &Path) {
@@ -268,6 +311,46 @@ fn temp_path_beside(path: &Path) -> Result<PathBuf, OutputError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    #[cfg(unix)]
+    fn a_device_is_refused_a_link_followed_and_an_input_kept() {
+        // Renamed over, /dev/full (written as root) had become a regular file; a pipe stands
+        // in for a device here.
+        let dir = tempfile::tempdir().unwrap();
+        let pipe = dir.path().join("pipe");
+        let made = std::process::Command::new("mkfifo").arg(&pipe).status();
+        if made.is_ok_and(|status| status.success()) {
+            let error = write_atomically(&pipe, b"x").expect_err("refused");
+            assert!(
+                matches!(error, OutputError::NotARegularFile { .. }),
+                "{error}"
+            );
+            assert!(!std::fs::metadata(&pipe).unwrap().is_file());
+        }
+        // A link, to a file not there yet and then to one that is: the file is written, the
+        // link stays a link.
+        let (file, link) = (dir.path().join("file"), dir.path().join("link"));
+        std::os::unix::fs::symlink(&file, &link).unwrap();
+        for contents in ["first", "second"] {
+            write_atomically(&link, contents.as_bytes()).unwrap();
+            assert_eq!(std::fs::read_to_string(&file).unwrap(), contents);
+            assert!(std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink());
+        }
+        // A file this process reads is not replaced, whatever path names it.
+        let input = dir.path().join("input");
+        std::fs::write(&input, "trace").unwrap();
+        note_input(&input);
+        let error = write_atomically(&dir.path().join(".").join("input"), b"x").expect_err("kept");
+        assert!(
+            matches!(error, OutputError::WouldOverwriteInput { .. }),
+            "{error}"
+        );
+        assert_eq!(std::fs::read_to_string(&input).unwrap(), "trace");
+    }
 
     #[test]
     fn replaces_contents_and_leaves_no_temporary_file() {
