@@ -8,7 +8,8 @@ use occsim_traces::trace::{TraceHeader, TraceSummary};
 use occsim_traces::workloads::{
     city, forest, generate_observed, load_obj, traffic, CameraPath, CityOptions, CommandObserver,
     DriverKind, DriverOptions, ForestOptions, GenerateError, ObjOptions, TrafficOptions, Walk,
-    WorkloadError, WorkloadOption, WorkloadScene, WorkloadStats,
+    WorkloadError, WorkloadOption, WorkloadScene, WorkloadStats, MAX_CARS_PER_BLOCK,
+    MAX_CITY_BLOCKS, MAX_CITY_DETAIL, MAX_CONE_SIDES, MAX_TREES,
 };
 use std::path::Path;
 
@@ -31,17 +32,18 @@ pub struct SceneArgs {
     /// Seed of the city's or forest's layout.
     #[arg(long, default_value_t = 1998)]
     pub seed: u64,
-    /// City and traffic: blocks along each side (default 6; triangles grow with its square).
-    #[arg(long)]
+    /// City and traffic: blocks along each side (default 6, at most 32; triangles grow with
+    /// its square).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=MAX_CITY_BLOCKS as i64))]
     pub blocks: Option<u32>,
-    /// Traffic: cars circling each block (default 3).
-    #[arg(long)]
+    /// Traffic: cars circling each block (default 3, at most 64).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=MAX_CARS_PER_BLOCK as i64))]
     pub cars_per_block: Option<u32>,
-    /// Forest: trees in all (default 3000).
-    #[arg(long)]
+    /// Forest: trees in all (default 3000, at most 100,000).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=MAX_TREES as i64))]
     pub trees: Option<u32>,
-    /// Detail: window sills per facade per floor (city and traffic, default 2) or sides per
-    /// crown cone (forest, default 10).
+    /// Detail: window sills per facade per floor (city and traffic, default 2, 0 to 16) or
+    /// sides per crown cone (forest, default 10, 3 to 32).
     #[arg(long)]
     pub detail: Option<u32>,
     /// Camera path start X,Y,Z in metres (with --camera-to); replaces the scene's walk.
@@ -169,6 +171,18 @@ impl SceneArgs {
         }
         if self.detail.is_some() && name.starts_with("obj:") {
             anyhow::bail!("--detail applies to the city and forest scenes, not to OBJ models");
+        }
+        if let Some(detail) = self.detail {
+            let range = match name {
+                "forest" => 3..=MAX_CONE_SIDES,
+                _ => 0..=MAX_CITY_DETAIL,
+            };
+            anyhow::ensure!(
+                range.contains(&detail),
+                "--detail {detail}: the {name} scene takes {} to {}",
+                range.start(),
+                range.end()
+            );
         }
         let city_options = || {
             let defaults = CityOptions::default();
@@ -512,6 +526,37 @@ mod tests {
             camera.contains("cannot open camera file /no/such/walk.toml"),
             "{camera}"
         );
+        // Sizes past what memory holds are refused, not clamped (--blocks 201 had become 200
+        // and taken 3.1 GB; --trees 1000000, under the old 4,000,000, 3.9 GB).
+        for (flags, expected) in [
+            (
+                &["--scene", "city", "--blocks", "33"][..],
+                "33 is not in 1..=32",
+            ),
+            (
+                &["--scene", "city", "--blocks", "0"][..],
+                "0 is not in 1..=32",
+            ),
+            (
+                &["--scene", "forest", "--trees", "100001"][..],
+                "not in 1..=100000",
+            ),
+            (
+                &["--scene", "traffic", "--cars-per-block", "65"][..],
+                "not in 0..=64",
+            ),
+            (
+                &["--scene", "forest", "--detail", "300"][..],
+                "the forest scene takes 3 to 32",
+            ),
+            (
+                &["--scene", "city", "--detail", "17"][..],
+                "the city scene takes 0 to 16",
+            ),
+        ] {
+            let error = resolve_error(flags);
+            assert!(error.contains(expected), "{flags:?}: {error}");
+        }
         let misplaced = resolve_error(&["--scene", "forest", "--blocks", "3"]);
         assert!(
             misplaced.contains("--blocks applies to the city"),

@@ -53,8 +53,11 @@ pub use collision::{collision_oracle, CollisionTest};
 pub use obj::{load_obj, ObjOptions};
 pub use oracle::full_render_visible_pixels;
 pub use render::CommandObserver;
-pub use scenes::{city, forest, CityOptions, ForestOptions};
-pub use traffic::{traffic, TrafficOptions};
+pub use scenes::{
+    city, forest, CityOptions, ForestOptions, MAX_CITY_BLOCKS, MAX_CITY_DETAIL, MAX_CONE_SIDES,
+    MAX_TREES,
+};
+pub use traffic::{traffic, TrafficOptions, MAX_CARS_PER_BLOCK};
 
 use crate::geometry::{look_at, perspective_gl, Aabb};
 use crate::golden::EventSink;

@@ -37,7 +37,8 @@ const _: () = assert!(LANE_OFFSET < StreetLayout::STREET_WIDTH * 0.5 + 0.5);
 /// Slowest and fastest car, metres per frame (a frame is a tenth of a second: 29 to 50 km/h).
 const SPEED_RANGE: (f32, f32) = (0.8, 1.4);
 /// Most cars a block (bounds memory).
-const MAX_CARS_PER_BLOCK: u32 = 64;
+/// Most cars a block (the command line refuses more; the generator clamps).
+pub const MAX_CARS_PER_BLOCK: u32 = 64;
 
 /// A car's surface at rest: centred on the origin in x and z, standing on y = 0, its length
 /// along +x. Every part is centred in x and z, so the box of any pose is centred on the car.
