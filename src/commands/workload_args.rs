@@ -323,9 +323,12 @@ pub fn flagged(error: WorkloadError) -> anyhow::Error {
 impl WorkloadArgs {
     /// The scene (camera on its path), the driver and the walk these arguments ask for.
     pub fn resolve(&self) -> anyhow::Result<(WorkloadScene, DriverOptions, Walk)> {
+        // Before the scene is built and a trace's header takes the viewport: the flags named.
+        let walk = self.scene.walk();
+        walk.validate().map_err(flagged)?;
         let driver = self.driver.options()?;
         let scene = self.scene.load_scene()?;
-        Ok((scene, driver, self.scene.walk()))
+        Ok((scene, driver, walk))
     }
 
     /// A one-line account for the trace header's scene field.
@@ -510,10 +513,14 @@ mod tests {
     fn bad_flags_are_refused_clearly() {
         assert!(resolve_error(&["--driver", "magic"]).contains("unknown driver `magic`"));
         assert!(resolve_error(&["--scene", "moon"]).contains("unknown scene `moon`"));
-        assert!(
-            resolve_error(&["--frames", "0"]).is_empty(),
-            "checked by generate"
-        );
+        // The walk's frames and viewport, before the scene is built and a trace's header
+        // takes the viewport (whose error had named neither flag nor file).
+        let frames = resolve_error(&["--frames", "0"]);
+        assert!(frames.contains("--frames 0"), "{frames}");
+        let wide = resolve_error(&["--width", "65535"]);
+        assert!(wide.contains("--width 65535 out of range"), "{wide}");
+        let flat = resolve_error(&["--height", "0"]);
+        assert!(flat.contains("--height 0 out of range"), "{flat}");
         assert!(resolve_error(&["--camera-from", "1,2"]).contains("expected three finite numbers"));
         assert!(resolve_error(&["--camera-from", "1,2,3"]).contains("--camera-to"));
         let missing = resolve_error(&["--scene", "obj:/no/such/model.obj"]);

@@ -363,7 +363,8 @@ pub struct Walk {
 }
 
 impl Walk {
-    fn validate(&self) -> Result<(), WorkloadError> {
+    /// Its frames and viewport within range (each error names its option).
+    pub fn validate(&self) -> Result<(), WorkloadError> {
         if self.frames == 0 {
             return Err(WorkloadError::Option {
                 option: WorkloadOption::Frames,
