@@ -225,6 +225,30 @@ fn bad_axes_are_rejected_by_name() {
         let stderr = String::from_utf8_lossy(&output.stderr);
         assert!(stderr.contains(expected), "{set}: {stderr}");
     }
+    // A plot's metric and x axis are checked before any point runs (they had been checked
+    // once every point had run), so no results file is made.
+    let plot = dir.join("p.svg");
+    for (flag, value, expected) in [
+        (
+            "--metric",
+            "nosuch",
+            "--metric nosuch: not a metric a sweep records",
+        ),
+        (
+            "--plot-x",
+            "boards",
+            "--plot-x boards: not a swept parameter (swept: engines)",
+        ),
+    ] {
+        let args = ["sweep", s(&trace), "--set", "engines=1,2", "--out", s(&out)];
+        let output = occsim(&[&args[..], &["--plot", s(&plot), flag, value]].concat());
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(
+            !output.status.success() && stderr.contains(expected),
+            "{stderr}"
+        );
+        assert!(!out.exists(), "{flag}: points ran");
+    }
 }
 
 #[test]

@@ -128,10 +128,10 @@ pub struct PlotArgs {
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
     /// Metric to plot.
-    #[arg(long, default_value = "total_cycles")]
+    #[arg(long, default_value = "total_cycles", requires = "plot")]
     pub metric: String,
     /// Swept parameter on the x axis [default: the last --set]; the others make the series.
-    #[arg(long, value_name = "KEY")]
+    #[arg(long, value_name = "KEY", requires = "plot")]
     pub plot_x: Option<String>,
 }
 
@@ -226,6 +226,7 @@ pub fn run_with(
     let run = &args.run;
     let out = run.out.as_deref().context("sweep needs --out FILE.jsonl")?;
     let grid = Grid::parse(&run.set, validate).map_err(in_cli_words)?;
+    check_plot(&run.plot, &grid, run.bands)?;
     let cores = std::thread::available_parallelism().map_or(1, NonZeroUsize::get);
     let points = grid.selected_indices(run.shard).len();
     let requested = run.jobs.map_or(cores, NonZeroUsize::get);
@@ -419,6 +420,50 @@ pub fn run(args: SweepArgs) -> Result<()> {
     run_with(&args, &evaluate, &digest, &validate)
 }
 
+/// Every metric a sweep records for a point at the cycle level ([`point_metrics`]; the levels
+/// below record fewer), each with `_band_low` and `_band_high` under `--bands`.
+const METRICS: [&str; 11] = [
+    "fragments",
+    "queries",
+    "total_cycles",
+    "latency_mean_cycles",
+    "latency_p95_cycles",
+    "frame_mean_cycles",
+    "frames_per_second",
+    "simulated_seconds",
+    "fragments_per_cycle",
+    "latency_p50_cycles",
+    "latency_max_cycles",
+];
+
+/// A plot's metric and x axis checked before any point runs (they had been checked after
+/// every point had).
+fn check_plot(plot: &PlotArgs, grid: &Grid, bands: bool) -> Result<()> {
+    if plot.plot.is_none() {
+        return Ok(());
+    }
+    let metric = plot.metric.as_str();
+    let base = metric
+        .strip_suffix("_band_low")
+        .or_else(|| metric.strip_suffix("_band_high"))
+        .filter(|_| bands)
+        .unwrap_or(metric);
+    anyhow::ensure!(
+        METRICS.contains(&base),
+        "--metric {metric}: not a metric a sweep records (one of {})",
+        METRICS.join(", ")
+    );
+    if let Some(x) = &plot.plot_x {
+        let swept: Vec<&str> = grid.axes().iter().map(|axis| axis.key.as_str()).collect();
+        anyhow::ensure!(
+            swept.contains(&x.as_str()),
+            "--plot-x {x}: not a swept parameter (swept: {})",
+            swept.join(", ")
+        );
+    }
+    Ok(())
+}
+
 /// The metrics a sweep records for one point (no wall times: results must not depend on the
 /// machine the sweep ran on). Levels below cycle predict fewer of them.
 fn point_metrics(
@@ -492,6 +537,31 @@ fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine], subject: &str)
 mod tests {
     use super::*;
     use clap::Parser;
+
+    #[test]
+    fn the_metrics_a_plot_may_name_are_those_a_cycle_point_records() {
+        // METRICS (checked before a sweep runs) and point_metrics (what a point records)
+        // must agree: a cycle replay of the hard cases gives every key, and only those.
+        let lines = occsim_traces::scene::parse_scene(occsim_traces::builtin::HARDCASES, "h")
+            .expect("parses");
+        let mut trace = Vec::new();
+        let header = occsim_traces::trace::TraceHeader::new(64, 64);
+        let mut writer = occsim_traces::trace::TraceWriter::new(&mut trace, &header).unwrap();
+        let mut golden = occsim_traces::golden::GoldenModel::new(64, 64);
+        for line in &lines {
+            golden.execute(&line.command, &mut writer).unwrap();
+        }
+        golden.finish(&mut writer).unwrap();
+        writer.finish().unwrap();
+        let open = || Ok(occsim_traces::trace::TraceReader::new(&trace[..])?);
+        let arch = occsim_sim::Arch::builtin("o2").unwrap();
+        let options = occsim_sim::replay::ReplayOptions::cycle(None);
+        let result = occsim_sim::replay::replay(open, &arch, options).unwrap();
+        let recorded: Vec<String> = point_metrics(&result).into_keys().collect();
+        let mut known: Vec<String> = METRICS.iter().map(|m| m.to_string()).collect();
+        known.sort();
+        assert_eq!(recorded, known);
+    }
 
     #[derive(clap::Parser, Debug)]
     struct Cli {
