@@ -880,3 +880,20 @@ fn a_settings_file_too_large_to_be_one_is_refused_by_its_size() {
         );
     }
 }
+
+/// A parameter set twice is refused, naming both, rather than the last one taken silently
+/// (`--set engines=4 --set engines=8` had run 8 engines; `--engines 8 --set engines=2`, 8).
+#[test]
+fn a_parameter_set_twice_is_refused() {
+    let (_dir, trace) = support::cli::hardcases_trace("set-twice");
+    let error = stderr_of_failure(&["replay", &trace, "--set", "engines=4", "--set", "engines=8"]);
+    assert!(
+        error.contains("--set engines=8: engines is set twice (--set engines=4)"),
+        "{error}"
+    );
+    let error = stderr_of_failure(&["replay", &trace, "--engines", "8", "--set", "engines=2"]);
+    assert!(
+        error.contains("--engines 8 and --set engines=2: give the engine count once"),
+        "{error}"
+    );
+}

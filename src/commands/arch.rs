@@ -78,10 +78,37 @@ pub fn resolve(name: &str, file: Option<&Path>, sets: &[String]) -> anyhow::Resu
         }
         None => Arch::builtin(name)?,
     };
-    for set in sets {
+    for (k, set) in sets.iter().enumerate() {
+        if let Some(earlier) = sets[..k]
+            .iter()
+            .find(|earlier| set_key(earlier) == set_key(set))
+        {
+            anyhow::bail!(
+                "--set {set}: {} is set twice (--set {earlier})",
+                set_key(set)
+            );
+        }
         arch.set(set).with_context(|| format!("--set {set}"))?;
     }
     Ok(arch)
+}
+
+/// The parameter a `--set KEY=VALUE` names.
+fn set_key(set: &str) -> &str {
+    set.split('=').next().unwrap_or(set).trim()
+}
+
+/// `--engines E`, shorthand for `--set engines=E`, applied to `arch` (resolved with `sets`):
+/// refused where a `--set engines=` says otherwise.
+pub fn set_engines(arch: &mut Arch, engines: Option<u64>, sets: &[String]) -> anyhow::Result<()> {
+    let Some(engines) = engines else {
+        return Ok(());
+    };
+    if let Some(set) = sets.iter().find(|set| set_key(set) == "engines") {
+        anyhow::bail!("--engines {engines} and --set {set}: give the engine count once");
+    }
+    arch.set_value("engines", &engines.to_string())
+        .context("--engines")
 }
 
 pub fn run(args: ArchArgs) -> anyhow::Result<()> {

@@ -324,10 +324,7 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
     };
     anyhow::ensure!(!args.corpus.corpus, "give a TRACE or --corpus, not both");
     let mut arch = args.arch.resolve()?;
-    if let Some(engines) = args.engines {
-        arch.set_value("engines", &engines.to_string())
-            .context("--engines")?;
-    }
+    super::arch::set_engines(&mut arch, args.engines, &args.arch.set)?;
     let path = trace.display().to_string();
     // One step a level (not a bar over bytes: drawing one would be timed with the level).
     let bar = occsim_sweep::progress::bar(ladder.levels().len() as u64, "levels");

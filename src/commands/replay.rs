@@ -63,10 +63,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     // Before any output is made: none may replace the trace.
     occsim_sweep::output::note_input(&args.trace);
     let mut arch = args.arch.resolve()?;
-    if let Some(engines) = args.engines {
-        arch.set_value("engines", &engines.to_string())
-            .context("--engines")?;
-    }
+    super::arch::set_engines(&mut arch, args.engines, &args.arch.set)?;
     let path = args.trace.display().to_string();
     let level = args.level.fidelity;
     let cli_words = |e| in_cli_words(&path, e);
