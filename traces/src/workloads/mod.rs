@@ -89,6 +89,9 @@ pub enum WorkloadError {
         line: u64,
         message: String,
     },
+    /// What the model holds, found once it is read (no one line says it).
+    #[error("{file}: {message}")]
+    ObjModel { file: String, message: String },
     #[error("{file}: {message}")]
     Camera { file: String, message: String },
 }

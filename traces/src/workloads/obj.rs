@@ -106,6 +106,10 @@ pub fn load_obj(
         line,
         message,
     };
+    let model_error = |message: String| WorkloadError::ObjModel {
+        file: file.to_owned(),
+        message,
+    };
     let mut counter = LineCounter {
         inner: reader,
         newlines: 0,
@@ -128,7 +132,6 @@ pub fn load_obj(
             .unwrap_or_else(|| (counter.current_line(), format!("{e}")));
         error(line, message)
     })?;
-    let lines = counter.newlines;
     let limit = options.max_triangles_per_object.max(1) as usize;
     let mut objects = Vec::new();
     for model in &models {
@@ -146,32 +149,39 @@ pub fn load_obj(
         for face in model.mesh.indices.chunks_exact(3) {
             let corners = [vertex(face[0]), vertex(face[1]), vertex(face[2])];
             let [Some(a), Some(b), Some(c)] = corners else {
-                return Err(error(
-                    lines,
-                    format!(
-                        "object `{}` has a vertex that is not a number within {MAX_COORDINATE:e} of the origin",
-                        model.name
-                    ),
-                ));
+                // The loader keeps no line of a vertex: its values name it.
+                let bad = face
+                    .iter()
+                    .zip(corners)
+                    .find_map(|(&index, corner)| corner.is_none().then_some(index as usize * 3));
+                let values = bad.map_or(String::new(), |i| {
+                    let value = |k: usize| match positions.get(i + k) {
+                        Some(v) if v.abs() >= 1e6 => format!("{v:e}"),
+                        Some(v) => v.to_string(),
+                        None => "?".into(),
+                    };
+                    format!(" (v {} {} {})", value(0), value(1), value(2))
+                });
+                return Err(model_error(format!(
+                    "object `{}` has a vertex{values} that is not a number within {MAX_COORDINATE:e} of the origin",
+                    model.name
+                )));
             };
             triangles.push([a, b, c]);
         }
         split_into_objects(triangles, limit, &mut objects);
     }
+    let no_faces =
+        "no faces: the model has no triangles to draw (a face has three corners or more)";
     let Some(bounds) = objects.iter().map(|o| o.bounds).reduce(Aabb::union) else {
-        return Err(error(
-            lines,
-            "no faces: the model has no triangles to draw".into(),
-        ));
+        return Err(model_error(no_faces.into()));
     };
     let Some(camera) = orbit(&bounds) else {
-        return Err(error(
-            lines,
+        return Err(model_error(
             "the model is too small for its distance from the origin to be seen".into(),
         ));
     };
-    WorkloadScene::new(file, objects, camera)
-        .ok_or_else(|| error(lines, "no faces: the model has no triangles to draw".into()))
+    WorkloadScene::new(file, objects, camera).ok_or_else(|| model_error(no_faces.into()))
 }
 
 /// Split `triangles` at the median centre along the longest axis until each part holds at
@@ -256,9 +266,18 @@ mod tests {
             "{}",
             error("v 0 0 0\nf 1 2 3\n")
         );
-        assert!(error("# nothing\n").contains("no triangles"));
-        assert!(error("v nan 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").contains("not a number within"));
-        assert!(error("v 1e30 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").contains("not a number within"));
+        assert_eq!(
+            error("# nothing\n"),
+            "bad.obj: no faces: the model has no triangles to draw (a face has three corners or more)"
+        );
+        // What the model holds, found once it is read, is named by its values, not by a
+        // line (the last line's number had been given, where no vertex was).
+        assert_eq!(
+            error("o a\nv 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n"),
+            "bad.obj: object `a` has a vertex (v NaN 1 0) that is not a number within 1e9 of the origin"
+        );
+        assert!(error("v 1e30 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+            .contains("(v 1e30 0 0) that is not a number within"));
         let tiny_and_far = "v 9e8 9e8 9e8\nv 9e8 9e8 9e8\nv 9e8 9e8 9e8\nf 1 2 3\n";
         assert!(
             error(tiny_and_far).contains("too small"),
