@@ -286,7 +286,7 @@ pub fn nearest_rank(sorted: &[u64], p: u64) -> u64 {
 }
 
 /// What the report says of a stream with no closed-loop record.
-pub(crate) const OPEN_LOOP_NOTE: &str = "open loop: the stream has no draws, host work, waits or frames (a version-1 trace), so nothing waits for an answer";
+pub(crate) const OPEN_LOOP_NOTE: &str = "open loop: the stream has no draws, host work, waits or frames (as a version-1 trace, or a scene of bare triangles), so nothing waits for an answer";
 
 /// What the frames table's columns are, at every level.
 pub(crate) const FRAMES_LEGEND: &str = "  in pipeline cycles (ms: simulated milliseconds): host busy (traversal, driver, result reads; on the O2 its software geometry too), geometry (the geometry stage busy), pixel busy (the rasterizer busy), waiting (the host blocked on answers), pipe wait (the host blocked at the frame's end)";

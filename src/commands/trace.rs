@@ -90,13 +90,14 @@ fn generate(args: GenArgs) -> anyhow::Result<()> {
     };
     let bytes = std::fs::metadata(&args.output)?.len();
     outln!(
-        "wrote {}: {frames}{} fragments, {} primitives, {} queries, {} bytes ({:.3} bytes/fragment)",
+        "wrote {}: {frames}{} fragments, {} primitives, {} queries, {} bytes{}",
         args.output.display(),
         summary.fragments,
         summary.primitives,
         summary.queries,
         bytes,
-        bytes as f64 / summary.fragments.max(1) as f64
+        bytes_per_fragment(bytes, summary.fragments)
+            .map_or(String::new(), |b| format!(" ({b:.3} bytes/fragment)"))
     );
     Ok(())
 }
@@ -233,12 +234,12 @@ pub fn read_header_and_summary(
 fn info(args: InfoArgs) -> anyhow::Result<()> {
     let (header, summary) = read_header_and_summary(&args.trace, args.scan)?;
     let bytes = std::fs::metadata(&args.trace)?.len();
-    let bytes_per_fragment = bytes as f64 / summary.fragments.max(1) as f64;
+    let per_fragment = bytes_per_fragment(bytes, summary.fragments);
     if args.json {
         let value = serde_json::json!({
             "file": args.trace.display().to_string(),
             "bytes": bytes,
-            "bytes_per_fragment": bytes_per_fragment,
+            "bytes_per_fragment": per_fragment,
             "header": header,
             "summary": summary,
         });
@@ -298,8 +299,11 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
         outln!("max tiles   {tiles} in one query");
     }
     outln!(
-        "bytes       {bytes} in {} blocks ({} before compression), {bytes_per_fragment:.3} bytes/fragment",
-        summary.blocks, summary.payload_bytes
+        "bytes       {bytes} in {} blocks ({} before compression){}",
+        summary.blocks,
+        summary.payload_bytes,
+        bytes_per_fragment(bytes, summary.fragments)
+            .map_or(String::new(), |b| format!(", {b:.3} bytes/fragment"))
     );
     match (header.window_index, summary.window_index) {
         (Some(layout), Some(index)) => outln!(
@@ -482,6 +486,11 @@ fn dump(args: DumpArgs) -> anyhow::Result<()> {
     }
     printer.out.flush()?;
     Ok(())
+}
+
+/// A trace's bytes a fragment: none for a trace of no fragments.
+fn bytes_per_fragment(bytes: u64, fragments: u64) -> Option<f64> {
+    (fragments > 0).then(|| bytes as f64 / fragments as f64)
 }
 
 /// A trace file's identity for sweep records: FNV-1a (64-bit) over its bytes, and its length.
