@@ -13,10 +13,18 @@ use occsim_traces::scene::parse_scene;
 use occsim_traces::trace::{TraceHeader, TraceReader, TraceWriter};
 
 fn hardcases_trace() -> Vec<u8> {
+    hardcases_trace_after(&[])
+}
+
+/// The hard cases' trace, `first` written before them.
+fn hardcases_trace_after(first: &[Event]) -> Vec<u8> {
     let lines = parse_scene(HARDCASES, "hardcases").expect("parses");
     let mut bytes = Vec::new();
     let mut writer = TraceWriter::new(&mut bytes, &TraceHeader::new(64, 64)).expect("header");
     let mut golden = GoldenModel::new(64, 64);
+    for event in first {
+        writer.event(event).unwrap();
+    }
     for line in &lines {
         golden.execute(&line.command, &mut writer).unwrap();
     }
@@ -83,20 +91,11 @@ fn a_simulated_time_past_what_a_report_can_sum_is_an_error_not_a_wrapped_count()
     // of 0.001 MHz against a pipe of 100,000 MHz: 7.2e24 pipeline cycles, past 2^62 (each
     // parameter within its range). Summed, the cycle counts had wrapped past 2^64 and been
     // reported with exit 0.
-    let lines = parse_scene(HARDCASES, "hardcases").expect("parses");
-    let mut trace = Vec::new();
-    let mut writer = TraceWriter::new(&mut trace, &TraceHeader::new(64, 64)).expect("header");
-    let mut golden = GoldenModel::new(64, 64);
     let work = HostWork {
         nodes: u32::MAX,
         ..HostWork::default()
     };
-    writer.event(&Event::HostWork(work)).unwrap();
-    for line in &lines {
-        golden.execute(&line.command, &mut writer).unwrap();
-    }
-    golden.finish(&mut writer).unwrap();
-    writer.finish().expect("written");
+    let trace = hardcases_trace_after(&[Event::HostWork(work)]);
     let open = || Ok(TraceReader::new(&trace[..])?);
     for machine in ["o2", "ir4"] {
         let mut arch = Arch::builtin(machine).unwrap();
