@@ -449,6 +449,19 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
         "no_such_key=1",
     ]);
     assert!(error.contains("no_such_key"), "{error}");
+    // Each run sets its own engine count: a --set engines= would be overridden unseen.
+    let error = support::cli::stderr_of_failure(&[
+        "fidelity",
+        "--corpus",
+        "--corpus-file",
+        one.to_str().unwrap(),
+        "--set",
+        "engines=2",
+    ]);
+    assert!(
+        error.contains("--set engines=2: a corpus run sets the engine count of each run"),
+        "{error}"
+    );
     let neither = support::cli::stderr_of_failure(&["fidelity"]);
     assert!(
         neither.contains("--corpus") || neither.contains("TRACE"),

@@ -94,7 +94,7 @@ pub fn resolve(name: &str, file: Option<&Path>, sets: &[String]) -> anyhow::Resu
 }
 
 /// The parameter a `--set KEY=VALUE` names.
-fn set_key(set: &str) -> &str {
+pub fn set_key(set: &str) -> &str {
     set.split('=').next().unwrap_or(set).trim()
 }
 

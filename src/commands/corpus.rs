@@ -312,6 +312,13 @@ pub fn run(
     json: bool,
 ) -> anyhow::Result<()> {
     anyhow::ensure!(args.corpus, "give a TRACE, or --corpus");
+    // Each run sets its own engine count (the corpus's, or --engines).
+    if let Some(set) = sets
+        .iter()
+        .find(|set| super::arch::set_key(set) == "engines")
+    {
+        anyhow::bail!("--set {set}: a corpus run sets the engine count of each run; use --engines");
+    }
     let corpus = load(args.corpus_file.as_deref())?;
     let machines = if args.machines.is_empty() {
         &corpus.machines
