@@ -440,28 +440,26 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
     )
     .unwrap();
     let one = dir.join("one.toml");
-    let error = support::cli::stderr_of_failure(&[
-        "fidelity",
-        "--corpus",
-        "--corpus-file",
-        one.to_str().unwrap(),
-        "--set",
-        "no_such_key=1",
-    ]);
-    assert!(error.contains("no_such_key"), "{error}");
-    // Each run sets its own engine count: a --set engines= would be overridden unseen.
-    let error = support::cli::stderr_of_failure(&[
-        "fidelity",
-        "--corpus",
-        "--corpus-file",
-        one.to_str().unwrap(),
-        "--set",
-        "engines=2",
-    ]);
-    assert!(
-        error.contains("--set engines=2: a corpus run sets the engine count of each run"),
-        "{error}"
-    );
+    for (set, expected) in [
+        ("no_such_key=1", "no_such_key"),
+        // Each run sets its own engine count: a --set engines= would be overridden unseen.
+        (
+            "engines=2",
+            "--set engines=2: a corpus run sets the engine count of each run",
+        ),
+    ] {
+        let corpus_file = one.to_str().unwrap();
+        let args = [
+            "fidelity",
+            "--corpus",
+            "--corpus-file",
+            corpus_file,
+            "--set",
+            set,
+        ];
+        let error = support::cli::stderr_of_failure(&args);
+        assert!(error.contains(expected), "{set}: {error}");
+    }
     let neither = support::cli::stderr_of_failure(&["fidelity"]);
     assert!(
         neither.contains("--corpus") || neither.contains("TRACE"),

@@ -217,7 +217,7 @@ pub struct QueryReport {
     pub fragments: u64,
     pub overflowed_buffers: u32,
     /// Every tile's report, or none where the machine keeps totals only
-    /// ([`crate::MachineBuilder::totals_only`]).
+    /// ([`crate::MachineModel::keep_tile_reports`]).
     pub tiles: Vec<TileReport>,
     /// The tiles' totals, kept either way.
     pub totals: TileTotals,

@@ -178,7 +178,7 @@ impl LevelModel {
 
 impl LevelModel {
     /// Whether the cycle and rtl levels' report keeps every query's tiles (by default), or
-    /// their totals only ([`crate::MachineBuilder::totals_only`]; the other levels report
+    /// their totals only ([`crate::MachineModel::keep_tile_reports`]; the other levels report
     /// totals only either way).
     pub fn keep_tile_reports(&mut self, keep: bool) {
         if let LevelModel::Cycle(machine, ..) = self {

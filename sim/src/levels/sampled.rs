@@ -1095,9 +1095,7 @@ impl SampledModel {
         self.warm_start = None;
         // A machine still cooling down (a clear came before its cool-down's end) finishes.
         self.flush_run()?;
-        let builder = MachineBuilder::new(&self.arch)
-            .effects(self.effects)
-            .totals_only();
+        let builder = MachineBuilder::new(&self.arch).effects(self.effects);
         let state = self.core.functional.state();
         let mut machine = match &mut self.consistent {
             None => builder.resume(
@@ -1122,6 +1120,8 @@ impl SampledModel {
                 builder.resume_with_depths(&state, depth)?
             }
         };
+        // The level's result takes the queries' tile totals only.
+        machine.keep_tile_reports(false);
         let open = self.open.as_ref().filter(|_| !self.window.query_ended);
         if let Some(spec) = open {
             machine.event(&Event::QueryBegin(spec.clone()))?;

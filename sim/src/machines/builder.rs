@@ -24,8 +24,6 @@ pub struct MachineBuilder<'a> {
     pub(crate) effects: Effects,
     pub(crate) occu: OccuModel,
     pub(crate) timeline: Option<Timeline>,
-    /// Each query's report keeps every tile's (else the tiles' totals only).
-    pub(crate) tile_reports: bool,
 }
 
 impl<'a> MachineBuilder<'a> {
@@ -36,17 +34,6 @@ impl<'a> MachineBuilder<'a> {
             effects: Effects::ALL,
             occu: OccuModel::Cycle,
             timeline: None,
-            tile_reports: true,
-        }
-    }
-
-    /// Keep each query's tile totals only, not every tile's report: what a level's result
-    /// takes, so that memory follows the queries, not their tiles (300 queries of 65,536
-    /// tiles each had taken the cycle level 1.1 GB where the functional level takes 17 MB).
-    pub fn totals_only(self) -> MachineBuilder<'a> {
-        MachineBuilder {
-            tile_reports: false,
-            ..self
         }
     }
 

@@ -129,7 +129,8 @@ pub struct IrMachine {
     last_available: u64,
     /// Where the blocks' intervals go, if anywhere.
     timeline: Option<Timeline>,
-    /// Each query's report keeps every tile's ([`MachineBuilder::totals_only`]).
+    /// Each query's report keeps every tile's, else the tiles' totals only
+    /// ([`crate::MachineModel::keep_tile_reports`]).
     tile_reports: bool,
 }
 
@@ -210,7 +211,7 @@ impl IrMachine {
             primitives: 0,
             last_available: 0,
             timeline: build.timeline,
-            tile_reports: build.tile_reports,
+            tile_reports: true,
         })
     }
 

@@ -151,7 +151,8 @@ pub struct O2Machine {
     effects: Effects,
     /// Where the blocks' intervals go, if anywhere.
     timeline: Option<Timeline>,
-    /// Each query's report keeps every tile's ([`MachineBuilder::totals_only`]).
+    /// Each query's report keeps every tile's, else the tiles' totals only
+    /// ([`crate::MachineModel::keep_tile_reports`]).
     tile_reports: bool,
     /// Fragments taken by a fast-forward ([`Self::span`]).
     fast_forwarded: u64,
@@ -255,7 +256,7 @@ impl O2Machine {
             last_available: 0,
             effects,
             timeline: build.timeline,
-            tile_reports: build.tile_reports,
+            tile_reports: true,
             fast_forwarded: 0,
             span_backs: Vec::new(),
             span_passed: Vec::new(),
