@@ -230,7 +230,6 @@ fn opener_with_progress(
         let file = std::fs::File::open(path)
             .with_context(|| format!("cannot open trace {}", path.display()))
             .map_err(|e| ReplayError::Open(e.into()))?;
-        occsim_sweep::output::note_input(path);
         let bar = occsim_sweep::progress::bytes_bar(size);
         let name = path
             .file_name()

@@ -71,10 +71,6 @@ pub fn run(command: TraceCommand) -> anyhow::Result<()> {
 }
 
 fn generate(args: GenArgs) -> anyhow::Result<()> {
-    if let Some(scene_file) = &args.scene_file {
-        // A built-in scene's name is no file: nothing noted.
-        occsim_sweep::output::note_input(Path::new(scene_file));
-    }
     let (summary, frames) = match &args.scene_file {
         Some(scene_file) => (
             generate_scene(scene_file, args.workload.scene.raster.profile, &args.output)?,
