@@ -117,6 +117,29 @@ fn a_parameter_outside_its_plausible_range_is_refused() {
 }
 
 #[test]
+fn a_variant_the_values_set_leave_no_room_for_is_named_as_the_studys() {
+    let (_dir, trace) = hardcases_trace("no-room");
+    // 330 Hz refreshes take 81.1% of the O2's port (sim's sensitivity tests derive it):
+    // possible beside the host's default 5%, not beside its high end, 15%.
+    let error = stderr_of_failure(&[
+        "sensitivity",
+        &trace,
+        "--arch",
+        "o2",
+        "--set",
+        "display_refresh_hz=330",
+    ]);
+    assert!(
+        error.contains("the study's variant host_memory_share=0.15 is impossible"),
+        "{error}"
+    );
+    assert!(
+        error.contains("bring them back toward their defaults"),
+        "{error}"
+    );
+}
+
+#[test]
 fn latency_and_sweep_print_a_band_that_holds_each_figure() {
     let (dir, trace) = hardcases_trace("figure-bands");
     let json = stdout_of(&[

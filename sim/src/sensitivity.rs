@@ -118,6 +118,15 @@ pub enum End {
 /// Parameters changed from a study's base: `(key, value)` in table order.
 pub type Changes = Vec<(&'static str, Value)>;
 
+/// `changes` as `key=value` pairs joined by commas, as `--set` takes them.
+pub fn describe_changes(changes: &[(&str, Value)]) -> String {
+    changes
+        .iter()
+        .map(|(key, value)| format!("{key}={value}"))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
 /// An architecture to replay and what it changes from the study's base.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Variant {
@@ -139,6 +148,13 @@ pub enum SensitivityError {
     },
     #[error(transparent)]
     Arch(#[from] ArchError),
+    /// A variant the study makes (a parameter at an end of its plausible range, or a
+    /// corner of several) is impossible with the rest of the base: the values set leave it
+    /// no room.
+    #[error(
+        "the study's variant {changes} is impossible with the rest of the architecture: {source}"
+    )]
+    ImpossibleVariant { changes: String, source: ArchError },
     /// The results handed back do not match the variants handed out.
     #[error("{0}")]
     Mismatch(String),
@@ -224,11 +240,17 @@ impl Study {
         self.varied.iter().map(|(p, _, _)| p.key)
     }
 
-    /// `arch` with `changes` applied, each checked as `set` checks it.
-    pub fn apply(arch: &Arch, changes: &[(&'static str, Value)]) -> Result<Arch, ArchError> {
+    /// `arch` with `changes` applied, each checked as `set` checks it (an impossible
+    /// result named by the whole variant, not by the base value it clashes with).
+    pub fn apply(arch: &Arch, changes: &[(&'static str, Value)]) -> Result<Arch, SensitivityError> {
         let mut arch = arch.clone();
         for (key, value) in changes {
-            arch.set_value(key, &value.to_string())?;
+            arch.set_value(key, &value.to_string()).map_err(|source| {
+                SensitivityError::ImpossibleVariant {
+                    changes: describe_changes(changes),
+                    source,
+                }
+            })?;
         }
         Ok(arch)
     }
@@ -406,6 +428,23 @@ mod tests {
         assert!(Study::new(&arch, &["page_hit_latency_cycles"]).is_err());
     }
 
+    #[test]
+    fn a_variant_the_base_leaves_no_room_for_is_named_as_the_studys_not_the_users() {
+        let mut arch = Arch::builtin("o2").unwrap();
+        // Possible on its own: 330 refreshes a second of 1280 x 1024 pixels of 32 bits read
+        // 13.84 G bits a second of the port's 256 bits x 66.67 MHz = 17.07 G, 81.1%, and
+        // host_memory_share's default 5% keeps the two within the 90% allowed. At
+        // host_memory_share's high end, 15%, they reserve 96.1%.
+        arch.set("display_refresh_hz=330").unwrap();
+        let study = Study::new(&arch, &[]).unwrap();
+        match study.one_at_a_time() {
+            Err(SensitivityError::ImpossibleVariant { changes, source }) => {
+                assert_eq!(changes, "host_memory_share=0.15");
+                assert!(matches!(source, ArchError::Impossible(_)), "{source:?}");
+            }
+            other => panic!("{other:?}"),
+        }
+    }
     #[test]
     fn every_inferred_parameter_but_the_fixed_ones_is_varied_at_the_ends_that_differ() {
         let arch = Arch::builtin("o2").unwrap();

@@ -9,7 +9,9 @@ use super::arch::ArchSelection;
 use super::replay::replay_trace;
 use anyhow::Context;
 use occsim_sim::arch::{Arch, Value};
-use occsim_sim::sensitivity::{corner_band, Band, Changes, End, Headlines, Metric, Study};
+use occsim_sim::sensitivity::{
+    corner_band, describe_changes, Band, Changes, End, Headlines, Metric, SensitivityError, Study,
+};
 use occsim_sim::Fidelity;
 use occsim_sweep::plot::{TornadoBar, TornadoChart, TornadoPanel};
 use occsim_sweep::{Axis, Grid, Point, Pool};
@@ -131,7 +133,7 @@ impl Replayer<'_> {
         let corner_archs = corners
             .iter()
             .map(|changes| {
-                let arch = Study::apply(base, changes)?;
+                let arch = Study::apply(base, changes).map_err(in_cli_words)?;
                 Ok((arch, format!("the corner {}", describe_changes(changes))))
             })
             .collect::<anyhow::Result<Vec<_>>>()?;
@@ -147,16 +149,14 @@ impl Replayer<'_> {
     }
 }
 
-fn describe_changes(changes: &[(&str, Value)]) -> String {
-    changes
-        .iter()
-        .map(|(k, v)| format!("{k}={v}"))
-        .collect::<Vec<_>>()
-        .join(",")
-}
-
-fn in_cli_words(error: occsim_sim::sensitivity::SensitivityError) -> anyhow::Error {
-    anyhow::anyhow!("{error} (change it with --set, or leave it at its default)")
+fn in_cli_words(error: SensitivityError) -> anyhow::Error {
+    let advice = match error {
+        SensitivityError::ImpossibleVariant { .. } => {
+            "the values you set leave it no room: bring them back toward their defaults"
+        }
+        _ => "change it with --set, or leave it at its default",
+    };
+    anyhow::anyhow!("{error} ({advice})")
 }
 
 /// `--bands` for a command that replays many architectures (`latency`, `sweep`): one study
@@ -216,7 +216,7 @@ impl CornerBands {
         Study::new(arch, &[]).map_err(in_cli_words)?;
         let mut results = Vec::with_capacity(self.corners.len());
         for changes in &self.corners {
-            let corner = Study::apply(arch, changes)?;
+            let corner = Study::apply(arch, changes).map_err(in_cli_words)?;
             let result = replay_trace(replayer.trace, &corner, replayer.retile, replayer.fidelity)
                 .with_context(|| format!("the corner {}", describe_changes(changes)))?;
             results.push(Headlines::of(&result, corner.clock_mhz()?));
