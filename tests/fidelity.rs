@@ -313,7 +313,21 @@ fn fidelity_takes_retile_and_engines_as_replay_does() {
     assert_ne!(rows[3]["total_cycles"], plain[3]["total_cycles"]);
     let text = stdout_of(&["fidelity", &trace, "--no-rtl", "--retile", "4x4"]);
     assert!(
-        text.starts_with(&format!("{trace} (retiled 4x4) on o2")),
+        text.starts_with(&format!("{trace} (retiled 4x4) on o2:")),
+        "{text}"
+    );
+    // The architecture as it was named (`ir2`, not the machine's `ir`), with the engines.
+    let text = stdout_of(&[
+        "fidelity",
+        &trace,
+        "--no-rtl",
+        "--arch",
+        "ir2",
+        "--engines",
+        "2",
+    ]);
+    assert!(
+        text.starts_with(&format!("{trace} on ir2, 2 engines:")),
         "{text}"
     );
     // Every timed level has a distribution of per-query errors, the reference's all 0.

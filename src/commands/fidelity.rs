@@ -335,32 +335,33 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
         Some(grid) => format!("{path} (retiled {grid})"),
         None => path.clone(),
     };
+    // As the user named it (`ir4`, not the machine's `ir`), with the engine count given.
+    let arch_name = match args.engines {
+        Some(engines) => format!("{}, {engines} engines", args.arch.describe()),
+        None => args.arch.describe(),
+    };
     if let Some(plot) = &args.plot {
-        error_chart(&rows, &what, &args.arch.describe(), reference_level)?
+        error_chart(&rows, &what, &arch_name, reference_level)?
             .write_svg(plot)
             .with_context(|| format!("cannot write {}", plot.display()))?;
     }
     if args.json {
         outln!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
-        out!("{}", table(&rows, &what, &arch, fragments, reference_level));
+        out!(
+            "{}",
+            table(&rows, &what, &arch_name, fragments, reference_level)
+        );
     }
     Ok(())
 }
 
-fn table(
-    rows: &[LevelRow],
-    path: &str,
-    arch: &Arch,
-    fragments: u64,
-    reference: Fidelity,
-) -> String {
+fn table(rows: &[LevelRow], path: &str, arch: &str, fragments: u64, reference: Fidelity) -> String {
     use std::fmt::Write as _;
     let mut out = String::new();
     let _ = writeln!(
         out,
-        "{path} on {}: {fragments} fragments; errors relative to {reference}",
-        arch.machine().name()
+        "{path} on {arch}: {fragments} fragments; errors relative to {reference}"
     );
     let _ = writeln!(
         out,
