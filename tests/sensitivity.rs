@@ -97,46 +97,29 @@ fn every_band_holds_its_default_and_jobs_do_not_change_the_output() {
     assert!(svg.contains("<svg") && svg.contains("latency p95") && svg.contains("engines 1..16"));
 }
 
+/// Values the study cannot take are refused, each error saying whose value it is.
 #[test]
-fn a_parameter_outside_its_plausible_range_is_refused() {
-    let (_dir, trace) = hardcases_trace("outside");
-    // Legal for a replay (1..=65536), but outside the plausible 6..10 of an inference.
-    let error = stderr_of_failure(&[
-        "sensitivity",
-        &trace,
-        "--arch",
-        "o2",
-        "--set",
-        "page_miss_latency_cycles=40",
-    ]);
-    assert!(
-        error.contains("'page_miss_latency_cycles' = 40 lies outside its plausible range 6..10"),
-        "{error}"
-    );
-    assert!(error.contains("--set"), "{error}");
-}
-
-#[test]
-fn a_variant_the_values_set_leave_no_room_for_is_named_as_the_studys() {
-    let (_dir, trace) = hardcases_trace("no-room");
-    // 330 Hz refreshes take 81.1% of the O2's port (sim's sensitivity tests derive it):
-    // possible beside the host's default 5%, not beside its high end, 15%.
-    let error = stderr_of_failure(&[
-        "sensitivity",
-        &trace,
-        "--arch",
-        "o2",
-        "--set",
-        "display_refresh_hz=330",
-    ]);
-    assert!(
-        error.contains("the study's variant host_memory_share=0.15 is impossible"),
-        "{error}"
-    );
-    assert!(
-        error.contains("bring them back toward their defaults"),
-        "{error}"
-    );
+fn a_value_the_study_cannot_take_is_refused_and_named() {
+    let (_dir, trace) = hardcases_trace("refused");
+    let cases = [
+        // Legal for a replay (1..=65536), but outside the plausible 6..10 of an inference.
+        (
+            "page_miss_latency_cycles=40",
+            "'page_miss_latency_cycles' = 40 lies outside its plausible range 6..10",
+            "change it with --set",
+        ),
+        // 330 Hz refreshes take 81.1% of the O2's port (sim's sensitivity tests derive
+        // it): possible beside the host's default 5%, not beside its high end, 15%.
+        (
+            "display_refresh_hz=330",
+            "the study's variant host_memory_share=0.15 is impossible",
+            "bring them back toward their defaults",
+        ),
+    ];
+    for (set, what, advice) in cases {
+        let error = stderr_of_failure(&["sensitivity", &trace, "--arch", "o2", "--set", set]);
+        assert!(error.contains(what) && error.contains(advice), "{error}");
+    }
 }
 
 #[test]
