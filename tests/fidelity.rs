@@ -106,6 +106,13 @@ fn replay_reports_its_level_and_the_active_effects() {
         analytic.contains("28 queries (their golden results, from the window index)"),
         "{analytic}"
     );
+    // The InfiniteReality-like machine's formulas read the band index instead.
+    let ir = stdout_of(&["replay", &trace, "--fidelity", "analytic", "--arch", "ir2"]);
+    assert!(
+        ir.contains("28 queries (their golden results, from the band index)")
+            && ir.contains("read from the band index: no fragment decoded"),
+        "{ir}"
+    );
     let decoded = stdout_of(&["replay", &trace, "--fidelity", "analytic", "--no-index"]);
     assert!(
         decoded.contains("28 queries (28 checked against golden results)"),
@@ -780,7 +787,7 @@ fn class_error(rows: &serde_json::Value, class: &str, level: &str, metric: &str)
 /// FIFO, not through the fragments its board emits after that one: their 28 queries give K =
 /// 100 one sampled window, a query of the whole 64x64 viewport whose end token the formulas
 /// then sent 14 cycles early (its drain 12 cycles long), and the regression moved every
-/// other query by that one query's error. Now 1.23%. On ir4 the random triangles' cycles
+/// other query by that one query's error. Now 1.19%. On ir4 the random triangles' cycles
 /// were 1.18% off (20 sampled windows of 2,000) until the IR's warm-up grew with K past 10
 /// (`warm_up_fragments`): 0.75% with 12,288 fragments, 0.71% since the generator hold.
 /// Measured 2026-12-06 (`occsim fidelity --corpus --scale small --machines o2,ir2,ir4

@@ -1,7 +1,7 @@
 //! What every fidelity level speaks: the level's name, and the common result each ends in
 //! (the vocabulary below the levels, so none of them depends on another to use it).
 
-use crate::arch::{ArchEntry, Value};
+use crate::arch::{ArchEntry, Machine, Value};
 use crate::effects::Effects;
 use crate::report::{nearest_rank, Report};
 use occsim_traces::QueryMode;
@@ -163,8 +163,9 @@ pub struct LevelResult {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fast_forwarded_fragments: Option<u64>,
     pub sampled_windows: Option<SampledWindows>,
-    /// Read from the trace's window index, not its fragments: the query results are the
-    /// stream's golden ones, taken, not checked (the analytic level on the O2).
+    /// Read from the trace's index (the window index; the band index on the
+    /// InfiniteReality-like machine), not its fragments: the query results are the stream's
+    /// golden ones, taken, not checked (the analytic and sampled levels).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub from_window_index: bool,
     /// The trace's format version when its window index lacks counts this level's formulas
@@ -186,6 +187,17 @@ pub struct LevelResult {
 }
 
 impl LevelResult {
+    /// The trace's index a level reads instead of the fragments on this machine
+    /// ([`LevelResult::from_window_index`]): the O2's formulas count the window index's
+    /// stretches, the InfiniteReality-like machine's the band index's runs.
+    fn index_name(&self) -> &'static str {
+        if self.machine == Machine::Ir.name() {
+            "band index"
+        } else {
+            "window index"
+        }
+    }
+
     /// Set the run's cycles and derive the latency statistics from the queries' latencies.
     pub(crate) fn set_timing(&mut self, total_cycles: u64) {
         self.total_cycles = Some(total_cycles);
@@ -321,18 +333,19 @@ impl LevelResult {
                 occsim_traces::trace::INDEX_COUNTS_VERSION
             );
         }
+        let index = self.index_name();
         match (self.from_window_index, self.sampled_windows) {
             (false, _) => {}
             (true, None) => {
                 let _ = writeln!(
                     out,
-                    "read from the window index: no fragment decoded; query results are the trace's golden ones"
+                    "read from the {index}: no fragment decoded; query results are the trace's golden ones"
                 );
             }
             (true, Some(_)) => {
                 let _ = writeln!(
                     out,
-                    "read from the window index: only the simulated windows' fragments decoded, \
+                    "read from the {index}: only the simulated windows' fragments decoded, \
                      their machines' depths made consistent with the trace's depth tests; query \
                      results are the trace's golden ones, {} checked by those machines",
                     self.checked_queries
@@ -385,11 +398,12 @@ impl LevelResult {
             self.queries.len(),
             if self.from_window_index && self.sampled_windows.is_some() {
                 format!(
-                    "their golden results, from the window index; {} checked by the simulated windows",
+                    "their golden results, from the {}; {} checked by the simulated windows",
+                    self.index_name(),
                     self.checked_queries
                 )
             } else if self.from_window_index {
-                "their golden results, from the window index".to_owned()
+                format!("their golden results, from the {}", self.index_name())
             } else {
                 format!("{} checked against golden results", self.checked_queries)
             },
