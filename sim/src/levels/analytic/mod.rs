@@ -255,6 +255,15 @@ impl Formulas {
     }
 }
 
+/// Whether a trace with `header` carries every query's golden result (or has no query),
+/// which a level reading an index takes for the results its fragments would give.
+fn carries_golden_results(header: &TraceHeader) -> bool {
+    header
+        .features
+        .as_ref()
+        .is_some_and(|features| features.query_results || features.query_modes.is_empty())
+}
+
 /// The analytic level's model.
 pub struct AnalyticModel {
     core: FunctionalCore,
@@ -275,17 +284,13 @@ impl AnalyticModel {
     /// index alone ([`occsim_traces::trace::index`]): the O2 formulas, whose counts a
     /// stretch holds, at the depth layout the index was counted at, on a trace whose header
     /// says it carries golden results (or has no query) to stand for the results fragments
-    /// would give. (The IR's formulas count each Image Engine's fragments, which depend on
-    /// its interleave: they decode the events.)
+    /// would give. (The IR's formulas count each Image Engine's fragments, which a window
+    /// index's stretches do not hold: they read the band index, [`Self::reads_band_index`].)
     pub fn reads_window_index(arch: &Arch, header: &TraceHeader) -> bool {
         let Some(layout) = header.window_index else {
             return false;
         };
-        let golden = header
-            .features
-            .as_ref()
-            .is_some_and(|features| features.query_results || features.query_modes.is_empty());
-        golden && arch.o2().is_ok_and(|o2| o2.depth_layout() == layout)
+        carries_golden_results(header) && arch.o2().is_ok_and(|o2| o2.depth_layout() == layout)
     }
 
     /// Whether the analytic level of `arch` can replay a trace with `header` from its band
@@ -294,11 +299,7 @@ impl AnalyticModel {
     /// its runs pass), on a trace whose header says it carries golden results (or has no
     /// query) to stand for the results fragments would give.
     pub fn reads_band_index(arch: &Arch, header: &TraceHeader, has_band_index: bool) -> bool {
-        let golden = header
-            .features
-            .as_ref()
-            .is_some_and(|features| features.query_results || features.query_modes.is_empty());
-        has_band_index && golden && arch.machine() == Machine::Ir
+        has_band_index && carries_golden_results(header) && arch.machine() == Machine::Ir
     }
 
     /// The model for a replay from the window index (see [`Self::reads_window_index`]):
