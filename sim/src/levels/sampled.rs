@@ -584,8 +584,11 @@ pub const QUERIES_PER_SLOWEST: usize = 15;
 /// more windows than every K-th; at K = 1 every window is simulated anyway). Not on the
 /// InfiniteReality-like machine: its latencies, hundreds of cycles, are ones its formulas
 /// extrapolate to within 1.7% at the p95 on every class of the small corpus at sampled:10
-/// (every machine and engine count), and its first pass would decode every fragment
-/// (sampled:10 on the demo on ir4 went from 3.0x to 1.6x the cycle level's rate with it).
+/// (every machine and engine count), and its first pass would run the formulas over the
+/// whole band index once more, about the analytic level's time (15.7 ms on the demo on
+/// ir4, against sampled:10's 56 ms). (Before the band index that pass decoded every
+/// fragment: sampled:10 on the demo on ir4 went from 3.0x to 1.6x the cycle level's rate
+/// with it.)
 pub fn simulates_slowest(every: u32, machine: Machine) -> bool {
     machine == Machine::O2 && (2..=QUERIES_PER_SLOWEST as u32).contains(&every)
 }
