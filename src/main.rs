@@ -92,10 +92,16 @@ fn main() -> std::process::ExitCode {
 }
 
 /// On SIGINT, SIGTERM or SIGHUP: remove the temporary files of the writes under way (they
-/// will never finish), then end as the signal would have ended the process.
+/// will never finish), then end as the signal would have ended the process. A signal the
+/// process was started ignoring stays ignored: `nohup` ignores SIGHUP, and a shell its
+/// scripts' background jobs' SIGINT, so that a long sweep outlives its terminal.
 fn remove_temporaries_on_interrupt() {
     use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
-    let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else {
+    let handled: Vec<i32> = [SIGINT, SIGTERM, SIGHUP]
+        .into_iter()
+        .filter(|&signal| !ignored_at_start(signal))
+        .collect();
+    let Ok(mut signals) = signal_hook::iterator::Signals::new(handled) else {
         // Without the handler an interrupt leaves its temporary; the next write removes it.
         return;
     };
@@ -106,6 +112,18 @@ fn remove_temporaries_on_interrupt() {
             std::process::exit(128 + signal);
         }
     });
+}
+
+/// Whether `signal`'s disposition is to be ignored (as the process was started, before it
+/// installs any handler).
+fn ignored_at_start(signal: i32) -> bool {
+    // SAFETY: with no new action given, sigaction only writes the current one into `current`,
+    // a plain C struct for which all zeroes is a valid value.
+    unsafe {
+        let mut current: libc::sigaction = std::mem::zeroed();
+        libc::sigaction(signal, std::ptr::null(), &mut current) == 0
+            && current.sa_sigaction == libc::SIG_IGN
+    }
 }
 
 fn is_broken_pipe(error: &anyhow::Error) -> bool {

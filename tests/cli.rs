@@ -610,6 +610,46 @@ fn an_interrupted_write_leaves_nothing_behind_and_ends_by_its_signal() {
     }
 }
 
+/// Started ignoring SIGHUP (as `nohup` starts it), a run outlives its terminal: the signal
+/// stays ignored, and the write finishes.
+#[test]
+fn a_signal_ignored_at_start_stays_ignored() {
+    use std::os::unix::process::CommandExt;
+    let dir = scratch_dir("nohup");
+    let out = dir.join("demo.occt");
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"));
+    command
+        .args(["trace", "gen", "demo", "-o", out.to_str().unwrap()])
+        .stdout(std::process::Stdio::null());
+    // SAFETY: between fork and exec the child only sets a signal's disposition, which is
+    // async-signal-safe.
+    unsafe {
+        command.pre_exec(|| {
+            libc::signal(libc::SIGHUP, libc::SIG_IGN);
+            Ok(())
+        });
+    }
+    let mut child = command.spawn().unwrap();
+    // Signal once the temporary exists, while the trace is being written.
+    let started = std::time::Instant::now();
+    while std::fs::read_dir(&dir).unwrap().count() == 0 {
+        assert!(started.elapsed().as_secs() < 20, "no temporary appeared");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let killed = std::process::Command::new("kill")
+        .args(["-HUP", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let status = child.wait().unwrap();
+    assert!(status.success(), "{status:?}");
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|entry| entry.unwrap().file_name())
+        .collect();
+    assert_eq!(left, ["demo.occt"]);
+}
+
 #[test]
 fn a_reader_that_stops_early_is_no_failure() {
     let dir = scratch_dir("closed-pipe");
