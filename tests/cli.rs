@@ -937,3 +937,47 @@ fn a_parameter_set_twice_is_refused() {
         "{error}"
     );
 }
+
+/// An output that cannot be written is refused before the work that makes it, named as the
+/// user gave it (not by the temporary written beside it).
+#[test]
+fn an_output_in_a_missing_directory_is_refused_before_the_work() {
+    let dir = scratch_dir("missing-output-dir");
+    let trace = dir.join("hc.occt");
+    let trace = trace.to_str().unwrap();
+    stdout_of(&["trace", "gen", "hardcases", "-o", trace]);
+    let missing = dir.join("no-such-dir");
+    let at = |name: &str| missing.join(name).to_str().unwrap().to_owned();
+    let (svg, jsonl, occt) = (at("x.svg"), at("s.jsonl"), at("x.occt"));
+    for (args, said) in [
+        (
+            vec!["latency", trace, "--plot", &svg],
+            format!("--plot: cannot create {svg}"),
+        ),
+        (
+            vec!["fidelity", trace, "--no-rtl", "--plot", &svg],
+            format!("--plot: cannot create {svg}"),
+        ),
+        (
+            vec!["sensitivity", trace, "--plot", &svg],
+            format!("--plot: cannot create {svg}"),
+        ),
+        (
+            vec!["sweep", trace, "--set", "engines=1,2", "--out", &jsonl],
+            format!("cannot create {jsonl}"),
+        ),
+        (
+            vec!["trace", "gen", "hardcases", "-o", &occt],
+            format!("cannot create {occt}"),
+        ),
+    ] {
+        // `--plot: ` is the check made at the start; the write at the end said `cannot
+        // create` and the temporary's name.
+        let error = stderr_of_failure(&args);
+        assert!(error.contains(&said), "{args:?}: {error}");
+    }
+    let directory = dir.to_str().unwrap();
+    let error = stderr_of_failure(&["sweep", trace, "--set", "engines=1,2", "--out", directory]);
+    assert!(error.contains("not a regular file"), "{error}");
+    assert!(!missing.exists());
+}

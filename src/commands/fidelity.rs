@@ -307,6 +307,7 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
     if let Some(trace) = &args.trace {
         occsim_sweep::output::note_input(trace);
     }
+    super::check_output(args.plot.as_deref(), "--plot")?;
     let ladder = Ladder {
         sample_every: args.sample_every,
         effects: args.effects,

@@ -136,6 +136,7 @@ impl LatencyRow {
 
 pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
     occsim_sweep::output::note_input(&args.trace);
+    super::check_output(args.plot.as_deref(), "--plot")?;
     if args.engines.is_empty() {
         bail!("--engines: give at least one engine count");
     }

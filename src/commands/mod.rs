@@ -15,6 +15,17 @@ pub mod timeline;
 pub mod trace;
 pub mod workload_args;
 
+/// `flag`'s output `path`, when given, checked before the work that makes it
+/// ([`occsim_sweep::output::check_writable`]): a missing directory is an error now, not after
+/// minutes of replays.
+pub fn check_output(path: Option<&std::path::Path>, flag: &str) -> anyhow::Result<()> {
+    use anyhow::Context;
+    match path {
+        Some(path) => occsim_sweep::output::check_writable(path).with_context(|| flag.to_string()),
+        None => Ok(()),
+    }
+}
+
 /// The largest settings file (an architecture, a corpus, a camera path) read: each is a few
 /// KB, so a file past this is not one, and is refused before it fills memory (/dev/zero had
 /// been read for 2 GB).

@@ -233,6 +233,7 @@ impl CornerBands {
 
 pub fn run(args: SensitivityArgs) -> anyhow::Result<()> {
     occsim_sweep::output::note_input(&args.trace);
+    super::check_output(args.plot.as_deref(), "--plot")?;
     anyhow::ensure!(
         args.fidelity != Fidelity::Functional,
         "sensitivity needs a level with time: analytic, sampled:K, cycle or rtl, not functional"

@@ -77,8 +77,9 @@ pub struct SweepRunArgs {
     /// Continue an interrupted sweep: keep the points already in --out, run the rest.
     #[arg(long)]
     pub resume: bool,
-    /// Replace --out when it already holds results (they are lost); without it a sweep
-    /// refuses such a file.
+    /// Replace --out when it already holds results (they are lost once the new sweep's
+    /// first point is kept, and their CSV with them); without it a sweep refuses such a
+    /// file.
     #[arg(long, conflicts_with = "resume")]
     pub force: bool,
     /// Replace every brief query's tiles by a G by H grid over the viewport (the golden
@@ -442,6 +443,7 @@ fn check_plot(plot: &PlotArgs, grid: &Grid, bands: bool) -> Result<()> {
     if plot.plot.is_none() {
         return Ok(());
     }
+    super::check_output(plot.plot.as_deref(), "--plot")?;
     let metric = plot.metric.as_str();
     let base = metric
         .strip_suffix("_band_low")

@@ -172,8 +172,9 @@ impl AtomicFile {
         if INTERRUPTED.load(Ordering::SeqCst) {
             return Err(interrupted(&temp));
         }
+        // Named by the path asked for: the temporary beside it is this module's business.
         let file = File::create(&temp).map_err(|source| OutputError::Create {
-            path: temp.clone(),
+            path: path.to_path_buf(),
             source,
         })?;
         live.push(temp.clone());
@@ -287,6 +288,29 @@ fn remove_stale_temporaries(path: &Path) {
     }
 }
 
+/// Whether an output could be written to `path`, asked before the work that makes it: a
+/// path [`AtomicFile::create`] takes (no device, no input of this process) in an existing
+/// directory. (Its directory's permissions are left to the write: root passes them.)
+pub fn check_writable(path: &Path) -> Result<(), OutputError> {
+    let path = destination(path)?;
+    temp_path_beside(&path)?;
+    let directory = match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent,
+        _ => Path::new("."),
+    };
+    match std::fs::metadata(directory) {
+        Ok(metadata) if metadata.is_dir() => Ok(()),
+        Ok(_) => Err(OutputError::Create {
+            path,
+            source: std::io::Error::new(
+                std::io::ErrorKind::NotADirectory,
+                "its parent is not a directory",
+            ),
+        }),
+        Err(source) => Err(OutputError::Create { path, source }),
+    }
+}
+
 /// Replace `path` with `contents` atomically.
 pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<(), OutputError> {
     write_atomically_with(path, |w| {
@@ -350,6 +374,34 @@ mod tests {
             "{error}"
         );
         assert_eq!(std::fs::read_to_string(&input).unwrap(), "trace");
+    }
+
+    #[test]
+    fn an_output_is_checked_before_the_work_naming_the_path_asked_for() {
+        let temp = crate::test_dir("check-writable");
+        let dir = temp.path();
+        assert!(check_writable(&dir.join("out.svg")).is_ok());
+        let missing = dir.join("no-such-dir").join("out.svg");
+        let error = check_writable(&missing).expect_err("no directory");
+        assert!(
+            matches!(&error, OutputError::Create { path, .. } if path == &missing),
+            "{error}"
+        );
+        let file = dir.join("a-file");
+        std::fs::write(&file, "x").unwrap();
+        let error = check_writable(&file.join("out.svg")).expect_err("a file's child");
+        assert!(matches!(error, OutputError::Create { .. }), "{error}");
+        let error = check_writable(dir).expect_err("a directory");
+        assert!(
+            matches!(error, OutputError::NotARegularFile { .. }),
+            "{error}"
+        );
+        // The write itself names the path asked for, not its temporary.
+        let error = write_atomically(&missing, b"x").expect_err("no directory");
+        assert!(
+            error.to_string().ends_with("no-such-dir/out.svg"),
+            "{error}"
+        );
     }
 
     #[test]

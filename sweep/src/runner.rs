@@ -9,7 +9,7 @@
 
 use crate::error::{BoxError, Joining, SweepError};
 use crate::grid::{Grid, Point, Shard};
-use crate::output::write_atomically;
+use crate::output::{check_writable, write_atomically};
 use crate::record::{
     check_line_belongs, csv_path_for, read_results, render_csv, render_jsonl, Expected,
     PointRecord, StoredLine, SweepLine, FORMAT,
@@ -65,6 +65,9 @@ pub struct SweepOutcome {
 /// Runs the sweep described by `options`, evaluating each point not yet done with `evaluate`.
 pub fn run_sweep(options: &SweepOptions<'_>, evaluate: Evaluator<'_>) -> Result<SweepOutcome> {
     let csv = csv_path_for(options.out)?;
+    // Both written at the end, after every point: a path that cannot take them is told now.
+    check_writable(options.out)?;
+    check_writable(&csv)?;
     if options.jobs == 0 {
         return Err(SweepError::NoWorkers);
     }
@@ -77,7 +80,7 @@ pub fn run_sweep(options: &SweepOptions<'_>, evaluate: Evaluator<'_>) -> Result<
         .filter(|i| !done.contains_key(i))
         .collect();
 
-    let fresh = evaluate_points(options, &todo, reused, evaluate)?;
+    let fresh = evaluate_points(options, &todo, reused, evaluate, &csv)?;
     let evaluated = fresh.len();
     done.extend(fresh.into_iter().map(|s| (s.line.point, s)));
     if done.len() != selected.len() {
@@ -115,7 +118,8 @@ fn load_previous(
     }
     if !options.resume {
         if options.replace {
-            write_atomically(out, b"")?;
+            // Replaced once the first new point is kept ([`ResultsFile::keep`]): until then
+            // an interrupted or failing run leaves the old results as they were.
             return Ok((done, false));
         }
         return Err(SweepError::AlreadyHoldsResults {
@@ -163,6 +167,57 @@ fn load_previous(
     Ok((done, file.torn_tail_dropped))
 }
 
+/// The results file a run appends its points to, opened when the first is kept: a run
+/// interrupted before it leaves no file (or, replacing, the old one as it was), and a run
+/// that replaces old results removes their CSV view with them, so that the two never tell
+/// different sweeps.
+struct ResultsFile<'a> {
+    out: &'a Path,
+    csv: &'a Path,
+    /// Whether the file's old results go (`--force`) rather than grow (a new or resumed run).
+    replace: bool,
+    file: Option<std::fs::File>,
+}
+
+impl ResultsFile<'_> {
+    fn append(&mut self, text: &str) -> Result<()> {
+        let file = match &mut self.file {
+            Some(file) => file,
+            None => self.file.insert(self.open()?),
+        };
+        file.write_all(format!("{text}\n").as_bytes())
+            .and_then(|()| file.flush())
+            .map_err(|source| SweepError::Append {
+                path: self.out.to_path_buf(),
+                source,
+            })
+    }
+
+    fn open(&self) -> Result<std::fs::File> {
+        if self.replace {
+            match std::fs::remove_file(self.csv) {
+                Err(source) if source.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(SweepError::OpenForAppend {
+                        path: self.csv.to_path_buf(),
+                        source,
+                    })
+                }
+                _ => {}
+            }
+        }
+        std::fs::OpenOptions::new()
+            .create(true)
+            .append(!self.replace)
+            .write(true)
+            .truncate(self.replace)
+            .open(self.out)
+            .map_err(|source| SweepError::OpenForAppend {
+                path: self.out.to_path_buf(),
+                source,
+            })
+    }
+}
+
 /// Evaluates `todo` on a pool of `options.jobs` threads, appending each result to the file as
 /// soon as it is known. Stops at the first failing point; finished points stay in the file.
 fn evaluate_points(
@@ -170,16 +225,15 @@ fn evaluate_points(
     todo: &[usize],
     already_done: usize,
     evaluate: Evaluator<'_>,
+    csv: &Path,
 ) -> Result<Vec<StoredLine>> {
-    let file = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(options.out)
-        .map_err(|source| SweepError::OpenForAppend {
-            path: options.out.to_path_buf(),
-            source,
-        })?;
-    let sink = Mutex::new((file, Vec::with_capacity(todo.len())));
+    let results = ResultsFile {
+        out: options.out,
+        csv,
+        replace: options.replace && !options.resume,
+        file: None,
+    };
+    let sink = Mutex::new((results, Vec::with_capacity(todo.len())));
     let keep = |point: &Point, record: PointRecord| -> Result<()> {
         let line = line_for(point, options, record);
         let text = line.to_json()?;
@@ -190,13 +244,8 @@ fn evaluate_points(
         }
         .compact();
         let mut guard = sink.lock().map_err(|_| SweepError::Poisoned)?;
-        let (file, lines) = &mut *guard;
-        file.write_all(format!("{}\n", stored.text).as_bytes())
-            .and_then(|()| file.flush())
-            .map_err(|source| SweepError::Append {
-                path: options.out.to_path_buf(),
-                source,
-            })?;
+        let (results, lines) = &mut *guard;
+        results.append(&stored.text)?;
         lines.push(stored);
         Ok(())
     };

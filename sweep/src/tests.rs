@@ -233,6 +233,48 @@ fn a_sweep_replaces_its_results_file_only_when_told_to() {
     assert_eq!(read(&out), jsonl);
 }
 
+/// A run that stops early leaves what a reader can trust: no results file where it kept no
+/// point, the old results and their CSV whole where it was to replace them and kept none,
+/// and, once it kept one, its own points without the old results' CSV beside them.
+#[test]
+fn a_run_stopped_early_leaves_no_empty_file_and_no_stale_csv() {
+    let temp = test_dir("sweep-stopped");
+    let dir = temp.path();
+    let g = twelve_points();
+    let out = dir.join("out.jsonl");
+    let csv = dir.join("out.csv");
+    let log = Mutex::new(Vec::new());
+    assert!(run_sweep(&options(&g, &out, 1), &crashing_machine(&log, 0)).is_err());
+    assert!(
+        !out.exists(),
+        "a run that kept no point made a results file"
+    );
+
+    let old_grid = grid(&["boards=1,2,4", "engines=1,2,4"]);
+    run_sweep(&options(&old_grid, &out, 1), &fake_machine).unwrap();
+    let (old, old_csv) = (read(&out), read(&csv));
+    let mut replacing = options(&g, &out, 1);
+    replacing.replace = true;
+    assert!(run_sweep(&replacing, &crashing_machine(&log, 0)).is_err());
+    assert_eq!(
+        (read(&out), read(&csv)),
+        (old, old_csv),
+        "replaced by nothing"
+    );
+
+    let log = Mutex::new(Vec::new());
+    assert!(run_sweep(&replacing, &crashing_machine(&log, 3)).is_err());
+    assert_eq!(read(&out).lines().count(), 3, "the new run's points alone");
+    assert!(
+        !csv.exists(),
+        "the old grid's CSV beside the new grid's points"
+    );
+    let mut resuming = options(&g, &out, 1);
+    resuming.resume = true;
+    let outcome = run_sweep(&resuming, &fake_machine).unwrap();
+    assert_eq!((outcome.evaluated, outcome.reused), (9, 3));
+}
+
 #[test]
 fn merge_accepts_identical_duplicates_and_rejects_conflicts() {
     let temp = test_dir("merge-duplicates");
