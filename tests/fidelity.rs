@@ -564,6 +564,56 @@ fn an_interrupted_corpus_leaves_no_scratch_behind() {
     assert!(left.is_empty(), "left behind: {left:?}");
 }
 
+/// What a killed corpus run can leave is dealt with by the next: a scratch directory of a
+/// process that is gone is removed, and a kept trace cut short is made again, not refused.
+#[test]
+fn a_corpus_run_clears_what_a_killed_one_left() {
+    let temp = support::cli::scratch_dir("corpus-leftovers");
+    // No process has this id (above Linux's largest, 2^22).
+    let stale = temp.join("occsim-corpus-4999999");
+    std::fs::create_dir_all(&stale).unwrap();
+    std::fs::write(stale.join("demo.occt"), "half a trace").unwrap();
+    let kept = temp.join("kept");
+    let run = |traces_dir: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
+            .args(["fidelity", "--corpus", "--scale", "small", "--no-rtl"])
+            .args([
+                "--classes",
+                "hardcases",
+                "--machines",
+                "o2",
+                "--engines",
+                "4",
+            ])
+            .args(traces_dir)
+            .env("TMPDIR", &*temp)
+            .output()
+            .unwrap()
+    };
+    let scratch = run(&[]);
+    let stderr = String::from_utf8_lossy(&scratch.stderr);
+    assert!(scratch.status.success(), "{stderr}");
+    let left: Vec<_> = std::fs::read_dir(&*temp).unwrap().flatten().collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+
+    let keeping = ["--traces-dir", kept.to_str().unwrap()];
+    let first = run(&keeping);
+    assert!(first.status.success());
+    let traces: Vec<_> = std::fs::read_dir(&kept).unwrap().flatten().collect();
+    assert_eq!(traces.len(), 1, "{traces:?}");
+    let trace = traces[0].path();
+    let whole = std::fs::read(&trace).unwrap();
+    std::fs::write(&trace, &whole[..whole.len() / 2]).unwrap();
+    let second = run(&keeping);
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert!(second.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("making") && stderr.contains("again"),
+        "{stderr}"
+    );
+    assert_eq!(std::fs::read(&trace).unwrap(), whole);
+}
+
 /// `fidelity --corpus` at the small scale on `machines` with 4 engines, without rtl, `more`
 /// arguments added: its rows as JSON.
 fn small_corpus_at_4_engines(scratch: &str, machines: &str, more: &[&str]) -> serde_json::Value {

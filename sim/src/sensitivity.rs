@@ -152,9 +152,9 @@ pub enum SensitivityError {
     /// corner of several) is impossible with the rest of the base: the values set leave it
     /// no room.
     #[error(
-        "the study's variant {changes} is impossible with the rest of the architecture: {source}"
+        "the study's variant {changes} is impossible with the rest of the architecture: {error}"
     )]
-    ImpossibleVariant { changes: String, source: ArchError },
+    ImpossibleVariant { changes: String, error: ArchError },
     /// The results handed back do not match the variants handed out.
     #[error("{0}")]
     Mismatch(String),
@@ -245,10 +245,10 @@ impl Study {
     pub fn apply(arch: &Arch, changes: &[(&'static str, Value)]) -> Result<Arch, SensitivityError> {
         let mut arch = arch.clone();
         for (key, value) in changes {
-            arch.set_value(key, &value.to_string()).map_err(|source| {
+            arch.set_value(key, &value.to_string()).map_err(|error| {
                 SensitivityError::ImpossibleVariant {
                     changes: describe_changes(changes),
-                    source,
+                    error,
                 }
             })?;
         }
@@ -438,9 +438,9 @@ mod tests {
         arch.set("display_refresh_hz=330").unwrap();
         let study = Study::new(&arch, &[]).unwrap();
         match study.one_at_a_time() {
-            Err(SensitivityError::ImpossibleVariant { changes, source }) => {
+            Err(SensitivityError::ImpossibleVariant { changes, error }) => {
                 assert_eq!(changes, "host_memory_share=0.15");
-                assert!(matches!(source, ArchError::Impossible(_)), "{source:?}");
+                assert!(matches!(error, ArchError::Impossible(_)), "{error:?}");
             }
             other => panic!("{other:?}"),
         }

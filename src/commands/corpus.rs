@@ -16,6 +16,7 @@ use occsim_traces::raster::RasterProfile;
 use occsim_traces::retile::TileGrid;
 use occsim_traces::rng::Fnv1a;
 use occsim_traces::state::MAX_VIEWPORT_SIDE;
+use occsim_traces::trace::TraceReader;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -337,21 +338,23 @@ pub fn run(
     );
     let dir = match &args.traces_dir {
         Some(dir) => {
+            anyhow::ensure!(
+                !dir.exists() || dir.is_dir(),
+                "--traces-dir {}: not a directory",
+                dir.display()
+            );
             std::fs::create_dir_all(dir)
                 .with_context(|| format!("cannot create {}", dir.display()))?;
             TraceDir::Kept(dir.clone())
         }
-        None => TraceDir::Scratch(ScratchDir::create(&format!(
-            "occsim-corpus-{}",
-            std::process::id()
-        ))?),
+        None => TraceDir::Scratch(ScratchDir::create("occsim-corpus")?),
     };
     let mut runs: Vec<Run> = Vec::new();
     let steps = recipes.len() * machines.len() * engine_counts.len();
     let bar = occsim_sweep::progress::bar(steps as u64, "runs");
     for recipe in recipes {
         let trace = recipe.file_in(dir.path(), args.scale);
-        if !trace.exists() {
+        if !whole_trace_at(&trace) {
             bar.set_message(format!("making {}", recipe.name));
             recipe.make(args.scale, &trace)?;
         }
@@ -394,6 +397,23 @@ pub fn run(
         );
     }
     Ok(())
+}
+
+/// Whether a trace kept at `path` (by `--traces-dir`) can be replayed again: there, with its
+/// header, trailer and summary whole. One cut short or damaged there (a copy that stopped,
+/// a disk that filled) is made anew rather than failing the corpus; damage inside a block
+/// is still found by its checksum when the run reads it.
+fn whole_trace_at(path: &Path) -> bool {
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    match TraceReader::read_summary(std::io::BufReader::new(file)) {
+        Ok(_) => true,
+        Err(error) => {
+            eprintln!("occsim: making {} again: {error}", path.display());
+            false
+        }
+    }
 }
 
 /// A built-in machine with `sets` applied and `engines` occlusion engines.

@@ -176,7 +176,7 @@ fn band_corners(
     args: &CompareArgs,
     machines: &[(String, occsim_sim::Arch)],
 ) -> anyhow::Result<Vec<Vec<occsim_sim::Arch>>> {
-    let scratch = ScratchDir::create(&format!("occsim-bands-{}", std::process::id()))?;
+    let scratch = ScratchDir::create("occsim-bands")?;
     let trace = scratch.path().join("reference-walk.occt");
     let mut walk = parse_workload_flags(["--driver", BAND_REFERENCE_DRIVER])?;
     walk.scene = args.scene.clone();

@@ -174,7 +174,8 @@ pub fn in_cli_words(error: SweepError) -> anyhow::Error {
             joining: Joining::Resume,
         } => anyhow!(
             "{at}: results are for trace digest {found}, but this sweep has trace digest \
-             {expected}: they belong to another trace; {RESUME_ADVICE}"
+             {expected}: they belong to {}; {RESUME_ADVICE}",
+            occsim_sweep::whose_results(&found, &expected)
         ),
         SweepError::ForeignGrid {
             at,

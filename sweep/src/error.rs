@@ -107,8 +107,9 @@ pub enum SweepError {
     /// A results line (at `at`, `FILE:LINE`) made on another trace.
     #[error(
         "{at}: results are for trace digest {found}, but {} has trace digest {expected}: \
-         they belong to another trace; {}",
+         they belong to {}; {}",
         joining.reference(),
+        whose_results(found, expected),
         joining.advice()
     )]
     ForeignTrace {
@@ -243,5 +244,19 @@ impl Joining {
             Joining::Resume => "choose another results file, or remove this one to start over",
             Joining::Merge { .. } => "only shards of one sweep can be merged",
         }
+    }
+}
+
+/// Whose results a line with trace digest `found` holds, for a sweep of digest `expected`:
+/// a digest is the trace's `sha256:HEX`, then what replays it otherwise (`:retile=GxH`,
+/// `:fidelity=LEVEL`, `:bands`), so the same hash means the same trace replayed otherwise.
+pub fn whose_results(found: &str, expected: &str) -> &'static str {
+    fn trace(digest: &str) -> Vec<&str> {
+        digest.splitn(3, ':').take(2).collect()
+    }
+    if trace(found) == trace(expected) {
+        "the same trace replayed otherwise (another --retile, --fidelity or --bands)"
+    } else {
+        "another trace"
     }
 }

@@ -105,9 +105,14 @@ pub struct ScratchDir {
 }
 
 impl ScratchDir {
-    /// A new directory `name` under the system's temporary directory.
-    pub fn create(name: &str) -> Result<ScratchDir, OutputError> {
-        let path = std::env::temp_dir().join(name);
+    /// A new directory `PREFIX-PID` under the system's temporary directory; those that
+    /// earlier, killed processes left there under the same prefix are removed first.
+    pub fn create(prefix: &str) -> Result<ScratchDir, OutputError> {
+        let temp = std::env::temp_dir();
+        let path = temp.join(format!("{prefix}-{}", std::process::id()));
+        remove_left_by_gone_processes(&temp, &format!("{prefix}-"), |dir| {
+            let _ = std::fs::remove_dir_all(dir);
+        });
         let mut live = lock(&LIVE_DIRS);
         if INTERRUPTED.load(Ordering::SeqCst) {
             return Err(interrupted(&path));
@@ -215,6 +220,8 @@ impl AtomicFile {
         if outcome.is_err() {
             // Best effort: the original error matters more.
             let _ = std::fs::remove_file(&self.temp);
+        } else {
+            sync_directory_of(&self.target);
         }
         outcome
     }
@@ -229,6 +236,22 @@ impl Drop for AtomicFile {
             // Uncommitted (an error or a panic): best effort, nothing left behind.
             let _ = std::fs::remove_file(&self.temp);
         }
+    }
+}
+
+/// Flush `path`'s directory to disk, so that a rename into it outlives a power loss as the
+/// file's contents do (best effort: not every system opens a directory as a file).
+fn sync_directory_of(path: &Path) {
+    if let Ok(directory) = File::open(directory_of(path)) {
+        let _ = directory.sync_all();
+    }
+}
+
+/// The directory `path` is in (`.` for a bare file name).
+fn directory_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(parent) if !parent.as_os_str().is_empty() => parent,
+        _ => Path::new("."),
     }
 }
 
@@ -257,18 +280,21 @@ fn destination(path: &Path) -> Result<PathBuf, OutputError> {
 /// Remove `.NAME.tmp-PID` files beside `path` whose process no longer exists (on systems
 /// with `/proc`, where that can be told; elsewhere nothing is removed).
 fn remove_stale_temporaries(path: &Path) {
-    let (Some(name), Some(dir)) = (path.file_name(), path.parent()) else {
+    let Some(name) = path.file_name() else {
         return;
     };
+    let prefix = format!(".{}.tmp-", name.to_string_lossy());
+    remove_left_by_gone_processes(directory_of(path), &prefix, |file| {
+        let _ = std::fs::remove_file(file);
+    });
+}
+
+/// `remove` each entry of `dir` named `PREFIX` and a process id whose process no longer
+/// exists (on systems with `/proc`, where that can be told; elsewhere none).
+fn remove_left_by_gone_processes(dir: &Path, prefix: &str, remove: impl Fn(&Path)) {
     if !Path::new("/proc/self").exists() {
         return;
     }
-    let dir = if dir.as_os_str().is_empty() {
-        Path::new(".")
-    } else {
-        dir
-    };
-    let prefix = format!(".{}.tmp-", name.to_string_lossy());
     let Ok(entries) = std::fs::read_dir(dir) else {
         return;
     };
@@ -276,14 +302,14 @@ fn remove_stale_temporaries(path: &Path) {
         let file_name = entry.file_name();
         let Some(pid) = file_name
             .to_str()
-            .and_then(|n| n.strip_prefix(&prefix))
+            .and_then(|n| n.strip_prefix(prefix))
             .and_then(|pid| pid.parse::<u32>().ok())
         else {
             continue;
         };
         let alive = pid == std::process::id() || Path::new(&format!("/proc/{pid}")).exists();
         if !alive {
-            let _ = std::fs::remove_file(entry.path());
+            remove(&entry.path());
         }
     }
 }
@@ -294,11 +320,7 @@ fn remove_stale_temporaries(path: &Path) {
 pub fn check_writable(path: &Path) -> Result<(), OutputError> {
     let path = destination(path)?;
     temp_path_beside(&path)?;
-    let directory = match path.parent() {
-        Some(parent) if !parent.as_os_str().is_empty() => parent,
-        _ => Path::new("."),
-    };
-    match std::fs::metadata(directory) {
+    match std::fs::metadata(directory_of(&path)) {
         Ok(metadata) if metadata.is_dir() => Ok(()),
         Ok(_) => Err(OutputError::Create {
             path,

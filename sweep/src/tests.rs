@@ -503,6 +503,15 @@ fn resume_refuses_results_of_another_trace_or_shard() {
         "{err}"
     );
     assert!(err.contains("belong to another trace"), "{err}");
+    // The same trace at another level: the digest's hash is the same.
+    o.trace_digest = "sha256:0123abcd:fidelity=analytic";
+    let err = chain(&run_sweep(&o, &fake_machine).unwrap_err());
+    assert!(
+        err.contains(
+            "belong to the same trace replayed otherwise (another --retile, --fidelity or --bands)"
+        ),
+        "{err}"
+    );
 
     o.trace_digest = DIGEST;
     o.shard = Some(Shard {

@@ -90,12 +90,10 @@ pub enum SceneError {
         line: u32,
         message: String,
     },
-    #[error("{file}: {source}")]
-    Io {
-        file: String,
-        #[source]
-        source: std::io::Error,
-    },
+    /// The I/O error's words in the message, not also as its source (printed whole, the
+    /// chain would say them twice).
+    #[error("{file}: {io}")]
+    Io { file: String, io: std::io::Error },
 }
 
 /// Longest scene line accepted, in bytes: no command needs more than a few hundred, and a
@@ -146,9 +144,9 @@ impl<R: BufRead> SceneReader<R> {
         let mut limited = std::io::Read::take(&mut self.input, MAX_LINE_BYTES as u64 + 1);
         let n = limited
             .read_until(b'\n', &mut self.buffer)
-            .map_err(|source| SceneError::Io {
+            .map_err(|io| SceneError::Io {
                 file: self.file.clone(),
-                source,
+                io,
             })?;
         if n == 0 {
             return Ok(false);

@@ -5,12 +5,10 @@ use thiserror::Error;
 
 #[derive(Debug, Error)]
 pub enum TraceError {
-    #[error("byte {offset}: {source}")]
-    Io {
-        offset: u64,
-        #[source]
-        source: std::io::Error,
-    },
+    /// The I/O error's words in the message, not also as its source: an error chain printed
+    /// whole (`anyhow`'s `{:#}`) had said "No space left on device" twice.
+    #[error("byte {offset}: {io}")]
+    Io { offset: u64, io: std::io::Error },
     #[error("byte {offset}: trace truncated (file ends inside {inside})")]
     Truncated { offset: u64, inside: &'static str },
     #[error("byte 0: not an occsim trace (wrong magic number)")]
@@ -69,6 +67,36 @@ impl ReadError<std::convert::Infallible> {
         match self {
             ReadError::Trace(error) => error,
             ReadError::Sink(never) => match never {},
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::SceneError;
+
+    /// Printed whole, as the command line prints an error and its sources, an I/O error's
+    /// words come once (a full disk had said "No space left on device" twice).
+    #[test]
+    fn an_io_error_is_told_once_in_its_chain() {
+        let full = || std::io::Error::from_raw_os_error(28);
+        let trace = TraceError::Io {
+            offset: 5,
+            io: full(),
+        };
+        let scene = SceneError::Io {
+            file: "s.scene".into(),
+            io: full(),
+        };
+        for error in [&trace as &dyn std::error::Error, &scene] {
+            let mut chain = error.to_string();
+            let mut source = error.source();
+            while let Some(cause) = source {
+                chain += &format!(": {cause}");
+                source = cause.source();
+            }
+            assert_eq!(chain.matches(&full().to_string()).count(), 1, "{chain}");
         }
     }
 }

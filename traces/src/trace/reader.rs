@@ -150,9 +150,9 @@ impl<R: Read> TraceReader<R> {
                 self.offset += buf_len as u64;
                 Ok(())
             }
-            Err(source) => Err(TraceError::Io {
+            Err(io) => Err(TraceError::Io {
                 offset: self.offset + buf.len() as u64,
-                source,
+                io,
             }),
         }
     }
@@ -467,10 +467,10 @@ impl<R: Read> TraceReader<R> {
             match self.input.read(&mut extra) {
                 Ok(n) => break n,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(source) => {
+                Err(io) => {
                     return Err(TraceError::Io {
                         offset: self.offset,
-                        source,
+                        io,
                     })
                 }
             }
@@ -810,7 +810,7 @@ impl<R: Read + Seek> TraceReader<R> {
     pub fn read_summary(input: R) -> Result<(TraceHeader, TraceSummary), TraceError> {
         let mut reader = TraceReader::new(input)?;
         let header_end = reader.offset;
-        let io = |offset: u64| move |source| TraceError::Io { offset, source };
+        let io = |offset: u64| move |io| TraceError::Io { offset, io };
         let end = reader
             .input
             .seek(SeekFrom::End(0))

@@ -164,9 +164,9 @@ fn header_bytes(json: &[u8]) -> Vec<u8> {
 }
 
 fn write_at(out: &mut impl Write, offset: &mut u64, bytes: &[u8]) -> Result<(), TraceError> {
-    out.write_all(bytes).map_err(|source| TraceError::Io {
+    out.write_all(bytes).map_err(|io| TraceError::Io {
         offset: *offset,
-        source,
+        io,
     })?;
     *offset += bytes.len() as u64;
     Ok(())
@@ -640,7 +640,7 @@ impl<W: Write> TraceWriter<W> {
         let offset = self.offset;
         self.out
             .flush()
-            .map_err(|source| TraceError::Io { offset, source })?;
+            .map_err(|io| TraceError::Io { offset, io })?;
         Ok(summary)
     }
 }
@@ -652,7 +652,7 @@ impl<W: Write + std::io::Seek> TraceWriter<W> {
         let summary = self.finish_stream()?;
         let mut header = self.header.clone();
         header.features = Some(summary.features.clone());
-        let io = |source| TraceError::Io { offset: 0, source };
+        let io = |io| TraceError::Io { offset: 0, io };
         let mut json = serde_json::to_vec(&header).map_err(|e| TraceError::BadHeader {
             offset: 0,
             reason: e.to_string(),
