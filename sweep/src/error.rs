@@ -255,7 +255,7 @@ pub fn whose_results(found: &str, expected: &str) -> &'static str {
         digest.splitn(3, ':').take(2).collect()
     }
     if trace(found) == trace(expected) {
-        "the same trace replayed otherwise (another --retile, --fidelity or --bands)"
+        "the same trace replayed otherwise (another tile grid, level or band study)"
     } else {
         "another trace"
     }

@@ -508,7 +508,7 @@ fn resume_refuses_results_of_another_trace_or_shard() {
     let err = chain(&run_sweep(&o, &fake_machine).unwrap_err());
     assert!(
         err.contains(
-            "belong to the same trace replayed otherwise (another --retile, --fidelity or --bands)"
+            "belong to the same trace replayed otherwise (another tile grid, level or band study)"
         ),
         "{err}"
     );
