@@ -354,7 +354,16 @@ pub fn run(
     let bar = occsim_sweep::progress::bar(steps as u64, "runs");
     for recipe in recipes {
         let trace = recipe.file_in(dir.path(), args.scale);
-        if !whole_trace_at(&trace) {
+        let remake = match trace_at(&trace) {
+            Kept::Whole => false,
+            Kept::Missing => true,
+            Kept::Damaged(error) => {
+                // Above the bar on a terminal, and said off one too (`println` is not).
+                bar.suspend(|| eprintln!("occsim: making {} again: {error}", trace.display()));
+                true
+            }
+        };
+        if remake {
             bar.set_message(format!("making {}", recipe.name));
             recipe.make(args.scale, &trace)?;
         }
@@ -399,20 +408,24 @@ pub fn run(
     Ok(())
 }
 
-/// Whether a trace kept at `path` (by `--traces-dir`) can be replayed again: there, with its
-/// header, trailer and summary whole. One cut short or damaged there (a copy that stopped,
-/// a disk that filled) is made anew rather than failing the corpus; damage inside a block
-/// is still found by its checksum when the run reads it.
-fn whole_trace_at(path: &Path) -> bool {
+/// A corpus trace where it is kept (by `--traces-dir`, or in the scratch directory).
+enum Kept {
+    /// There with its header, trailer and summary whole: replayed again. (Damage inside a
+    /// block is still found by its checksum when a run reads it.)
+    Whole,
+    Missing,
+    /// Cut short or damaged (a copy that stopped, a disk that filled): made anew rather
+    /// than failing the corpus.
+    Damaged(occsim_traces::trace::TraceError),
+}
+
+fn trace_at(path: &Path) -> Kept {
     let Ok(file) = std::fs::File::open(path) else {
-        return false;
+        return Kept::Missing;
     };
     match TraceReader::read_summary(std::io::BufReader::new(file)) {
-        Ok(_) => true,
-        Err(error) => {
-            eprintln!("occsim: making {} again: {error}", path.display());
-            false
-        }
+        Ok(_) => Kept::Whole,
+        Err(error) => Kept::Damaged(error),
     }
 }
 

@@ -118,7 +118,7 @@ fn load_previous(
     }
     if !options.resume {
         if options.replace {
-            // Replaced once the first new point is kept ([`ResultsFile::keep`]): until then
+            // Replaced once the first new point is kept ([`ResultsFile::append`]): until then
             // an interrupted or failing run leaves the old results as they were.
             return Ok((done, false));
         }
