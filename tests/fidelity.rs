@@ -384,6 +384,7 @@ small = { width = 64, height = 48, frames = 1 }
     )
     .unwrap();
     let scratch = support::cli::scratch_dir("corpus-tmp");
+    let chart = dir.join("price.svg");
     let stdout = support::cli::stdout_with_temp_dir(
         &[
             "fidelity",
@@ -396,9 +397,17 @@ small = { width = 64, height = 48, frames = 1 }
             "--json",
             "--machines",
             "o2",
+            "--plot",
+            chart.to_str().unwrap(),
         ],
         &scratch,
     );
+    // The price of accuracy drawn too (it had been left undrawn, with exit 0): a series a
+    // class.
+    let svg = std::fs::read_to_string(&chart).expect("--plot with --corpus draws a chart");
+    for class in ["hard", "random", "walk"] {
+        assert!(svg.contains(&format!(">\n{class}\n<")), "no series {class}");
+    }
     let rows: serde_json::Value = serde_json::from_slice(&stdout).unwrap();
     let rows = rows.as_array().unwrap();
     // 3 classes x 4 levels; --machines o2 leaves 2 engine counts: a random row holds

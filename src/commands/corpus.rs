@@ -5,12 +5,15 @@
 //! class (the worst run of the class, and every query's latency error pooled) with each
 //! level's speed against cycle.
 
-use super::fidelity::{distribution, percent, ErrorDistribution, Ladder, LevelRow};
+use super::fidelity::{
+    distribution, percent, ErrorDistribution, Ladder, LevelRow, ERROR_FLOOR_PERCENT,
+};
 use super::workload_args::{parse_workload_flags, write_workload_trace};
 use anyhow::Context;
 use occsim_sim::levels::Fidelity;
 use occsim_sim::Arch;
 use occsim_sweep::output::ScratchDir;
+use occsim_sweep::plot::{LineChart, Scale as PlotScale, Series};
 use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::retile::TileGrid;
@@ -59,6 +62,16 @@ pub enum Scale {
     Small,
     #[default]
     Full,
+}
+
+impl Scale {
+    /// As `--scale` takes it.
+    fn name(self) -> &'static str {
+        match self {
+            Scale::Small => "small",
+            Scale::Full => "full",
+        }
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -310,7 +323,7 @@ pub fn run(
     ladder: &Ladder,
     engines: Option<u64>,
     sets: &[String],
-    json: bool,
+    (json, plot): (bool, Option<&Path>),
 ) -> anyhow::Result<()> {
     anyhow::ensure!(args.corpus, "give a TRACE, or --corpus");
     // Each run sets its own engine count (the corpus's, or --engines).
@@ -391,6 +404,11 @@ pub fn run(
     }
     bar.finish_and_clear();
     let rows = by_class(&runs);
+    if let Some(path) = plot {
+        price_of_accuracy(&rows, args.scale, ladder.reference())
+            .write_svg(path)
+            .with_context(|| format!("cannot write {}", path.display()))?;
+    }
     if json {
         outln!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
@@ -406,6 +424,42 @@ pub fn run(
         );
     }
     Ok(())
+}
+
+/// `--plot` with `--corpus`: per class, each timed level's worst error (the larger of total
+/// cycles and p95 latency, the two the bounds hold) against its speed, log-log, a line
+/// through the levels from the cheapest to the reference.
+fn price_of_accuracy(rows: &[ClassRow], scale: Scale, reference: Fidelity) -> LineChart {
+    let mut series: Vec<Series> = Vec::new();
+    for row in rows {
+        let (Some(speed), Some(cycles), Some(p95)) =
+            (row.speed_vs_cycle, row.cycles_error, row.latency_p95_error)
+        else {
+            continue;
+        };
+        let error = (100.0 * cycles.max(p95)).max(ERROR_FLOOR_PERCENT);
+        match series.iter_mut().find(|s| s.name == row.class) {
+            Some(class) => class.points.push((speed, error)),
+            None => series.push(Series {
+                name: row.class.clone(),
+                points: vec![(speed, error)],
+            }),
+        }
+    }
+    LineChart {
+        title: format!(
+            "The price of accuracy: the {} corpus, each class's levels (an error of 0 drawn at {ERROR_FLOOR_PERCENT}%)",
+            scale.name()
+        ),
+        x_label: "speed against the cycle level (its wall time over the level's)".to_string(),
+        y_label: format!(
+            "worst run's error vs {reference} (%, the worse of total cycles and p95 latency)"
+        ),
+        x_scale: PlotScale::Log10,
+        y_scale: PlotScale::Log10,
+        x_ticks: None,
+        series,
+    }
 }
 
 /// A corpus trace where it is kept (by `--traces-dir`, or in the scratch directory).
@@ -532,10 +586,7 @@ fn table(
     let _ = writeln!(
         out,
         "fidelity corpus ({} scale) on {} with {} engines; errors relative to {reference}",
-        match scale {
-            Scale::Small => "small",
-            Scale::Full => "full",
-        },
+        scale.name(),
         machines.join(", "),
         engines.join(", "),
     );

@@ -320,7 +320,7 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
             &ladder,
             args.engines,
             &args.arch.set,
-            args.json,
+            (args.json, args.plot.as_deref()),
         );
     };
     anyhow::ensure!(!args.corpus.corpus, "give a TRACE or --corpus, not both");
@@ -439,7 +439,7 @@ pub fn distribution(errors: Option<ErrorDistribution>) -> String {
 
 /// The error drawn for a level whose error is 0 (the reference), so a log axis can show it,
 /// in percent as the table prints errors.
-const ERROR_FLOOR_PERCENT: f64 = 0.01;
+pub(super) const ERROR_FLOOR_PERCENT: f64 = 0.01;
 
 /// Error in percent (the larger of total-cycle and mean-latency error) against wall time,
 /// log-log; one single-point series per timed level.
