@@ -3,8 +3,8 @@
 
 use anyhow::{anyhow, Context, Result};
 use occsim_sweep::{
-    capped_jobs, list_keys, merge_results, metric_chart, run_sweep, AxisValidator, Grid, Joining,
-    Point, PointRecord, Shard, StoredLine, SweepError, SweepOptions,
+    capped_jobs, kept_points, list_keys, merge_results, metric_chart, run_sweep, AxisValidator,
+    Grid, Joining, Point, PointRecord, Shard, StoredLine, SweepError, SweepOptions,
 };
 use std::num::NonZeroUsize;
 use std::path::PathBuf;
@@ -192,11 +192,12 @@ pub fn in_cli_words(error: SweepError) -> anyhow::Error {
         SweepError::SweepPointFailed {
             index,
             key,
+            kept,
             kept_in,
             source,
         } => anyhow::Error::from_boxed(source).context(format!(
-            "point {index} ({key}) failed; finished points are kept in {}, rerun with --resume",
-            kept_in.display()
+            "point {index} ({key}) failed; {}",
+            kept_points(kept, &kept_in, "(rerun with --resume)")
         )),
         SweepError::NoInputs => anyhow!("sweep merge needs at least one shard file to read"),
         SweepError::BadGrid { at, source } => {
@@ -676,11 +677,22 @@ mod tests {
             words(SweepError::SweepPointFailed {
                 index: 3,
                 key: "engines=8".into(),
-                kept_in: path,
+                kept: 2,
+                kept_in: path.clone(),
                 source: anyhow::anyhow!("cause").context("context").into(),
             }),
-            "point 3 (engines=8) failed; finished points are kept in r.jsonl, rerun with --resume: \
-             context: cause"
+            "point 3 (engines=8) failed; the 2 points finished are kept in r.jsonl \
+             (rerun with --resume): context: cause"
+        );
+        assert_eq!(
+            words(SweepError::SweepPointFailed {
+                index: 0,
+                key: "engines=1".into(),
+                kept: 0,
+                kept_in: path,
+                source: anyhow::anyhow!("cause").into(),
+            }),
+            "point 0 (engines=1) failed; no point had finished: cause"
         );
         assert_eq!(
             words(SweepError::BadGrid {

@@ -176,11 +176,13 @@ pub enum SweepError {
         crate::merge::list_keys(missing)
     )]
     MissingPoints { missing: Vec<String>, total: usize },
-    /// A point of a sweep failed; the points finished before it are in `kept_in`.
-    #[error("point {index} ({key}) failed; finished points are kept in {} for a resumed run", kept_in.display())]
+    /// A point of a sweep failed; the `kept` points of this sweep finished before it are in
+    /// `kept_in` (none: no file was written).
+    #[error("point {index} ({key}) failed; {}", kept_points(*kept, kept_in, "for a resumed run"))]
     SweepPointFailed {
         index: usize,
         key: String,
+        kept: usize,
         kept_in: PathBuf,
         #[source]
         source: BoxError,
@@ -244,6 +246,19 @@ impl Joining {
             Joining::Resume => "choose another results file, or remove this one to start over",
             Joining::Merge { .. } => "only shards of one sweep can be merged",
         }
+    }
+}
+
+/// What a failed sweep left: its `kept` finished points in `file`, `then` what to do with
+/// them, or that none had finished.
+pub fn kept_points(kept: usize, file: &std::path::Path, then: &str) -> String {
+    match kept {
+        0 => "no point had finished".to_string(),
+        1 => format!("the 1 point finished is kept in {} {then}", file.display()),
+        _ => format!(
+            "the {kept} points finished are kept in {} {then}",
+            file.display()
+        ),
     }
 }
 

@@ -24,7 +24,7 @@ mod record;
 mod runner;
 
 pub use chart::metric_chart;
-pub use error::{whose_results, BoxError, Joining, SweepError};
+pub use error::{kept_points, whose_results, BoxError, Joining, SweepError};
 pub use grid::{Axis, AxisValidator, Grid, Point, Shard, MAX_GRID_POINTS};
 pub use merge::{list_keys, merge_results, MergeReport};
 pub use record::{PointRecord, StoredLine, SweepLine, FORMAT};

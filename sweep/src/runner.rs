@@ -264,6 +264,7 @@ fn evaluate_points(
                     .point(index)
                     .map(|p| p.key())
                     .unwrap_or_default(),
+                kept: already_done + sink.lock().map_or(0, |guard| guard.1.len()),
                 kept_in: options.out.to_path_buf(),
                 source,
             },
