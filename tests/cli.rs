@@ -981,3 +981,39 @@ fn an_output_in_a_missing_directory_is_refused_before_the_work() {
     assert!(error.contains("not a regular file"), "{error}");
     assert!(!missing.exists());
 }
+
+/// `arch list` and `arch show` print JSON for scripts, with the figures their text gives.
+#[test]
+fn arch_list_and_show_print_json() {
+    let list: serde_json::Value =
+        serde_json::from_str(&stdout_of(&["arch", "list", "--json"])).unwrap();
+    let names: Vec<&str> = (list.as_array().unwrap().iter())
+        .map(|arch| arch["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["o2", "ir", "ir1", "ir2", "ir4"], "{list}");
+    // ir2: the InfiniteReality-like machine with 2 boards; the O2 has none.
+    assert_eq!(list[3]["boards"], 2);
+    assert!(list[0]["boards"].is_null());
+    let show = stdout_of(&["arch", "show", "ir2", "--set", "engines=2", "--json"]);
+    let show: serde_json::Value = serde_json::from_str(&show).unwrap();
+    assert_eq!(show["machine"], "ir");
+    let param = |key: &str| {
+        (show["parameters"].as_array().unwrap().iter())
+            .find(|p| p["key"] == key)
+            .unwrap_or_else(|| panic!("no {key} in {show}"))
+            .clone()
+    };
+    assert_eq!(param("boards")["value"], 2);
+    assert_eq!(param("engines")["value"], 2);
+    // As `arch show` prints it: `clock_mhz = 100.0 # [MHz] ... (I 75.0..150.0: ...)`.
+    let clock = param("clock_mhz");
+    assert_eq!(
+        (&clock["unit"], &clock["provenance"], &clock["plausible"]),
+        (
+            &"MHz".into(),
+            &"I".into(),
+            &serde_json::json!([75.0, 150.0])
+        )
+    );
+    assert!(param("boards")["plausible"].is_null());
+}

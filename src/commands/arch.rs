@@ -17,7 +17,12 @@ pub enum ArchCommand {
     /// Print an architecture as a TOML file, each parameter with its unit and meaning.
     Show(ShowArgs),
     /// List the built-in architectures.
-    List,
+    List {
+        /// Print the list as JSON: per architecture `name`, `machine`, `title` and `boards`
+        /// (null on a machine without boards).
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 #[derive(clap::Args)]
@@ -31,6 +36,11 @@ pub struct ShowArgs {
     /// Override one parameter (repeatable), e.g. --set engines=8.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Print the architecture as JSON instead: `machine`, `title` and per parameter `key`,
+    /// `value`, `default`, `unit`, `meaning`, `provenance` (V, V2 or I), `source` and
+    /// `plausible` (an I parameter's `[low, high]`, else null).
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// How a command that runs a machine picks its architecture.
@@ -56,6 +66,30 @@ impl ArchSelection {
     pub fn describe(&self) -> String {
         describe(&self.arch, self.arch_file.as_deref(), &self.set)
     }
+}
+
+/// `arch show --json`: every parameter as the TOML's comments give it, in fields.
+fn arch_json(arch: &Arch) -> serde_json::Value {
+    let parameters: Vec<serde_json::Value> = arch
+        .entries()
+        .map(|(param, value)| {
+            serde_json::json!({
+                "key": param.key,
+                "value": value,
+                "default": param.default,
+                "unit": param.unit,
+                "meaning": param.meaning,
+                "provenance": param.provenance.mark.name(),
+                "source": param.provenance.source,
+                "plausible": param.provenance.plausible.map(|(low, high)| [low, high]),
+            })
+        })
+        .collect();
+    serde_json::json!({
+        "machine": arch.machine().name(),
+        "title": arch.machine().title(),
+        "parameters": parameters,
+    })
 }
 
 /// A built-in name or a file, with its overrides: `o2 (engines=2, counter_bits=16)`.
@@ -115,19 +149,35 @@ pub fn run(args: ArchArgs) -> anyhow::Result<()> {
     match args.command {
         ArchCommand::Show(show) => {
             let arch = resolve(&show.name, show.arch_file.as_deref(), &show.set)?;
-            out!("{}", arch.to_documented_toml());
+            match show.json {
+                true => outln!("{}", serde_json::to_string_pretty(&arch_json(&arch))?),
+                false => out!("{}", arch.to_documented_toml()),
+            }
         }
-        ArchCommand::List => {
+        ArchCommand::List { json } => {
+            let mut listed = Vec::new();
             for name in BUILTIN_ARCHS {
                 let arch = Arch::builtin(name)?;
-                let boards = arch
-                    .get("boards")
+                let boards = arch.get("boards");
+                if json {
+                    listed.push(serde_json::json!({
+                        "name": name,
+                        "machine": arch.machine().name(),
+                        "title": arch.machine().title(),
+                        "boards": boards,
+                    }));
+                    continue;
+                }
+                let boards = boards
                     .map(|boards| match boards.to_string().as_str() {
                         "1" => " (1 board)".to_string(),
                         n => format!(" ({n} boards)"),
                     })
                     .unwrap_or_default();
                 outln!("{name:<8} {}{boards}", arch.machine().title());
+            }
+            if json {
+                outln!("{}", serde_json::to_string_pretty(&listed)?);
             }
         }
     }
