@@ -2,7 +2,9 @@
 
 mod support;
 
-use support::cli::{occsim, scratch_dir, stderr_of_failure, stdout_of};
+use support::cli::{
+    hardcases_trace, occsim, scratch_dir, signal_when, stderr_of_failure, stdout_of,
+};
 
 /// The hand-worked counts of tests/../traces/src/builtin/hardcases.scene (see its comments).
 #[test]
@@ -588,17 +590,8 @@ fn an_interrupted_write_leaves_nothing_behind_and_ends_by_its_signal() {
             .spawn()
             .unwrap();
         // Signal once the temporary exists (the demo trace takes about a second to write).
-        let started = std::time::Instant::now();
-        while std::fs::read_dir(&dir).unwrap().count() == 0 {
-            assert!(started.elapsed().as_secs() < 20, "no temporary appeared");
-            std::thread::sleep(std::time::Duration::from_millis(2));
-        }
-        let killed = std::process::Command::new("kill")
-            .args([&format!("-{name}"), &child.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(killed.success());
-        let status = child.wait().unwrap();
+        let written = || std::fs::read_dir(&dir).unwrap().count() > 0;
+        let status = signal_when(&mut child, written, (20, "no temporary appeared"), name);
         let left: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
         if status.success() {
             // The write finished before the signal came: only the finished file is there.
@@ -631,17 +624,8 @@ fn a_signal_ignored_at_start_stays_ignored() {
     }
     let mut child = command.spawn().unwrap();
     // Signal once the temporary exists, while the trace is being written.
-    let started = std::time::Instant::now();
-    while std::fs::read_dir(&dir).unwrap().count() == 0 {
-        assert!(started.elapsed().as_secs() < 20, "no temporary appeared");
-        std::thread::sleep(std::time::Duration::from_millis(2));
-    }
-    let killed = std::process::Command::new("kill")
-        .args(["-HUP", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(killed.success());
-    let status = child.wait().unwrap();
+    let written = || std::fs::read_dir(&dir).unwrap().count() > 0;
+    let status = signal_when(&mut child, written, (20, "no temporary appeared"), "HUP");
     assert!(status.success(), "{status:?}");
     let left: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
@@ -942,10 +926,8 @@ fn a_parameter_set_twice_is_refused() {
 /// user gave it (not by the temporary written beside it).
 #[test]
 fn an_output_in_a_missing_directory_is_refused_before_the_work() {
-    let dir = scratch_dir("missing-output-dir");
-    let trace = dir.join("hc.occt");
-    let trace = trace.to_str().unwrap();
-    stdout_of(&["trace", "gen", "hardcases", "-o", trace]);
+    let (dir, trace) = hardcases_trace("missing-output-dir");
+    let trace = trace.as_str();
     let missing = dir.join("no-such-dir");
     let at = |name: &str| missing.join(name).to_str().unwrap().to_owned();
     let (svg, jsonl, occt) = (at("x.svg"), at("s.jsonl"), at("x.occt"));

@@ -548,26 +548,18 @@ fn an_interrupted_corpus_leaves_no_scratch_behind() {
         .spawn()
         .unwrap();
     // Signal once the scratch directory holds a trace (the first takes well under a second).
-    let started = std::time::Instant::now();
     let holds_a_file = || {
         std::fs::read_dir(&*temp)
             .unwrap()
             .flatten()
             .any(|dir| std::fs::read_dir(dir.path()).is_ok_and(|mut files| files.next().is_some()))
     };
-    while !holds_a_file() {
-        assert!(
-            started.elapsed().as_secs() < 60,
-            "no scratch trace appeared"
-        );
-        std::thread::sleep(std::time::Duration::from_millis(5));
-    }
-    let killed = std::process::Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(killed.success());
-    let status = child.wait().unwrap();
+    let status = support::cli::signal_when(
+        &mut child,
+        holds_a_file,
+        (60, "no scratch trace appeared"),
+        "INT",
+    );
     assert_eq!(status.signal(), Some(2), "{status:?}");
     let left: Vec<_> = std::fs::read_dir(&*temp).unwrap().collect();
     assert!(left.is_empty(), "left behind: {left:?}");

@@ -80,3 +80,25 @@ pub fn hardcases_trace(name: &str) -> (Scratch, String) {
     stdout_of(&["trace", "gen", "hardcases", "-o", &trace]);
     (dir, trace)
 }
+
+/// Wait until `ready` says the child is where a test wants to interrupt it (at most
+/// `seconds`, failing with `what` past them), then send it signal `name` (`INT`, `HUP`...)
+/// and wait for it to end.
+pub fn signal_when(
+    child: &mut std::process::Child,
+    ready: impl Fn() -> bool,
+    (seconds, what): (u64, &str),
+    name: &str,
+) -> std::process::ExitStatus {
+    let started = std::time::Instant::now();
+    while !ready() {
+        assert!(started.elapsed().as_secs() < seconds, "{what}");
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    let sent = std::process::Command::new("kill")
+        .args([&format!("-{name}"), &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(sent.success(), "kill -{name}");
+    child.wait().expect("the child ends")
+}
