@@ -64,7 +64,8 @@ pub struct FidelityArgs {
     /// Leave out the rtl level (slowest): errors are then relative to cycle.
     #[arg(long)]
     pub no_rtl: bool,
-    /// Draw error against wall time (log-log) as SVG.
+    /// Draw error against wall time (log-log) as SVG; with --corpus, each class's worst
+    /// error against its speed over cycle, a line through its levels.
     #[arg(long, value_name = "F.svg")]
     pub plot: Option<PathBuf>,
     /// Print the table as JSON.
