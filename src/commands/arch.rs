@@ -113,10 +113,7 @@ pub fn resolve(name: &str, file: Option<&Path>, sets: &[String]) -> anyhow::Resu
         None => Arch::builtin(name)?,
     };
     for (k, set) in sets.iter().enumerate() {
-        if let Some(earlier) = sets[..k]
-            .iter()
-            .find(|earlier| set_key(earlier) == set_key(set))
-        {
+        if let Some(earlier) = set_of(&sets[..k], set_key(set)) {
             anyhow::bail!(
                 "--set {set}: {} is set twice (--set {earlier})",
                 set_key(set)
@@ -132,13 +129,18 @@ pub fn set_key(set: &str) -> &str {
     set.split('=').next().unwrap_or(set).trim()
 }
 
+/// The `--set` of `sets` that names `key`, if one does.
+pub fn set_of<'a>(sets: &'a [String], key: &str) -> Option<&'a String> {
+    sets.iter().find(|set| set_key(set) == key)
+}
+
 /// `--engines E`, shorthand for `--set engines=E`, applied to `arch` (resolved with `sets`):
 /// refused where a `--set engines=` says otherwise.
 pub fn set_engines(arch: &mut Arch, engines: Option<u64>, sets: &[String]) -> anyhow::Result<()> {
     let Some(engines) = engines else {
         return Ok(());
     };
-    if let Some(set) = sets.iter().find(|set| set_key(set) == "engines") {
+    if let Some(set) = set_of(sets, "engines") {
         anyhow::bail!("--engines {engines} and --set {set}: give the engine count once");
     }
     arch.set_value("engines", &engines.to_string())

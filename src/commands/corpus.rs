@@ -327,10 +327,7 @@ pub fn run(
 ) -> anyhow::Result<()> {
     anyhow::ensure!(args.corpus, "give a TRACE, or --corpus");
     // Each run sets its own engine count (the corpus's, or --engines).
-    if let Some(set) = sets
-        .iter()
-        .find(|set| super::arch::set_key(set) == "engines")
-    {
+    if let Some(set) = super::arch::set_of(sets, "engines") {
         anyhow::bail!("--set {set}: a corpus run sets the engine count of each run; use --engines");
     }
     let corpus = load(args.corpus_file.as_deref())?;

@@ -65,6 +65,14 @@ pub enum SweepError {
         #[source]
         source: std::io::Error,
     },
+    /// The CSV view of results a `--force` run replaces, which would otherwise stand beside
+    /// the new sweep's points.
+    #[error("cannot remove {}, the view of the results being replaced", path.display())]
+    RemoveStaleView {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("cannot repair the torn last line of {}", path.display())]
     RepairTornLine {
         path: PathBuf,

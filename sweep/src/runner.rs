@@ -197,7 +197,7 @@ impl ResultsFile<'_> {
         if self.replace {
             match std::fs::remove_file(self.csv) {
                 Err(source) if source.kind() != std::io::ErrorKind::NotFound => {
-                    return Err(SweepError::OpenForAppend {
+                    return Err(SweepError::RemoveStaleView {
                         path: self.csv.to_path_buf(),
                         source,
                     })
