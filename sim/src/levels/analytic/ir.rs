@@ -268,6 +268,12 @@ impl IrWindow {
     /// stretch starts, and is through no sooner than a pace after its board's generator
     /// emitted its last fragment.
     fn close_stretch(&mut self) {
+        if self.band.is_empty() {
+            // Read from a band index, every stretch closes so: no band to move out (a
+            // band is most of a kilobyte, and a stretch closes at every primitive).
+            self.close_band(&FragmentBand::EMPTY);
+            return;
+        }
         let band = std::mem::take(&mut self.band);
         self.close_band(&band);
     }
