@@ -184,3 +184,69 @@ fn replay_json_has_the_documented_fields() {
     // The machine counted every fragment the trace writer counted.
     assert_eq!(report["summary"]["fragments"], trace_fragments);
 }
+
+/// Where `lower` holds a key (in objects, and item by item in arrays), `cycle` holds it
+/// too, of the same JSON type (or null at either).
+fn assert_keys_held(path: &str, lower: &serde_json::Value, cycle: &serde_json::Value) {
+    use serde_json::Value;
+    match (lower, cycle) {
+        (Value::Null, _) | (_, Value::Null) => {}
+        (Value::Object(lower), Value::Object(cycle)) => {
+            for (key, value) in lower {
+                let held = cycle
+                    .get(key)
+                    .unwrap_or_else(|| panic!("{path}.{key} missing at the cycle level"));
+                assert_keys_held(&format!("{path}.{key}"), value, held);
+            }
+        }
+        (Value::Array(lower), Value::Array(cycle)) => {
+            assert_eq!(lower.len(), cycle.len(), "{path}'s length");
+            for (k, (value, held)) in lower.iter().zip(cycle).enumerate() {
+                assert_keys_held(&format!("{path}[{k}]"), value, held);
+            }
+        }
+        (Value::Number(_), Value::Number(_))
+        | (Value::String(_), Value::String(_))
+        | (Value::Bool(_), Value::Bool(_)) => {}
+        _ => panic!("{path}: {lower} below the cycle level, {cycle} at it"),
+    }
+}
+
+#[test]
+fn replay_json_reads_the_same_keys_at_every_level() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("levels.occt");
+    std::fs::write(&path, builtin_trace("hardcases")).unwrap();
+    for arch in ["o2", "ir2"] {
+        let json_at = |level: &str| -> serde_json::Value {
+            let output = Process::new(env!("CARGO_BIN_EXE_occsim"))
+                .args(["replay", path.to_str().unwrap(), "--arch", arch])
+                .args(["--fidelity", level, "--json"])
+                .output()
+                .unwrap();
+            assert!(output.status.success(), "{arch} {level}");
+            serde_json::from_slice(&output.stdout).unwrap()
+        };
+        let cycle = json_at("cycle");
+        for level in ["functional", "analytic", "sampled:2"] {
+            assert_keys_held(&format!("{arch} {level}"), &json_at(level), &cycle);
+        }
+        // The run's figures at the top level are the report's.
+        let summary = &cycle["summary"];
+        assert_eq!(cycle["total_cycles"], summary["cycles"], "{arch}");
+        assert_eq!(cycle["latency_p95_cycles"], summary["latency_p95_cycles"]);
+        assert_eq!(cycle["fragments"], summary["fragments"]);
+        let queries = cycle["queries"].as_array().unwrap();
+        for query in queries {
+            let tiles = query["tiles"].as_array().unwrap();
+            assert_eq!(query["tile_count"], tiles.len(), "{arch}: {query}");
+        }
+        // Query 1 of the hard cases is a full-screen quad of the 64x64 viewport drawn once:
+        // every pixel passes, 64 * 64 = 4096 (its comment in hardcases.scene).
+        let first = queries.iter().find(|q| q["id"] == 1).unwrap();
+        assert_eq!(
+            (&first["value"], &first["nohc"]),
+            (&4096.into(), &4096.into())
+        );
+    }
+}

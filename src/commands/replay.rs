@@ -156,9 +156,11 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// A result as `--json` prints it: at the cycle and rtl levels the machine's report with its
-/// level, the effect models that were built and the fragments fast-forwarded; below, the
-/// level's own result.
+/// A result as `--json` prints it: the level's own result, in its fields' order; at the
+/// cycle and rtl levels the machine's report, with its `level`, the effect models that were
+/// built and the fragments fast-forwarded, and every key of the level's result it lacks (the
+/// run's `total_cycles`, `latency_*_cycles` and `frame_cycles`, each query's `value`,
+/// `nohc` and `phc`), so that a script reads the same keys at every level.
 pub fn result_json(result: &LevelResult) -> anyhow::Result<String> {
     Ok(match &result.report {
         Some(report) => {
@@ -168,11 +170,36 @@ pub fn result_json(result: &LevelResult) -> anyhow::Result<String> {
             if let Some(fast_forwarded) = result.fast_forwarded_fragments {
                 json["fast_forwarded_fragments"] = fast_forwarded.into();
             }
+            add_missing_keys(&mut json, serde_json::to_value(result)?);
             serde_json::to_string_pretty(&json)?
         }
-        // In its fields' order.
         None => serde_json::to_string_pretty(result)?,
     })
+}
+
+/// Add to `json` every key of `more` it lacks: in objects key by key, in arrays of the same
+/// length (the queries) item by item; where both hold a value that is neither, `json`'s
+/// stands.
+fn add_missing_keys(json: &mut serde_json::Value, more: serde_json::Value) {
+    use serde_json::Value;
+    match (json, more) {
+        (Value::Object(json), Value::Object(more)) => {
+            for (key, value) in more {
+                match json.get_mut(&key) {
+                    Some(held) => add_missing_keys(held, value),
+                    None => {
+                        json.insert(key, value);
+                    }
+                }
+            }
+        }
+        (Value::Array(json), Value::Array(more)) if json.len() == more.len() => {
+            for (held, value) in json.iter_mut().zip(more) {
+                add_missing_keys(held, value);
+            }
+        }
+        _ => {}
+    }
 }
 
 /// A `--window` that starts at or after the run's last cycle would show nothing: an error.

@@ -95,7 +95,9 @@ pub struct QueryOutcome {
     pub fragments: u64,
     /// The value a GL program reads ([`occsim_traces::QueryResult::value`]).
     pub value: u64,
-    /// The query's tiles (1 for a samples or any query).
+    /// The query's tiles (1 for a samples or any query). `tile_count` in JSON: at the cycle
+    /// and rtl levels a query's `tiles` are its tiles' reports.
+    #[serde(rename = "tile_count")]
     pub tiles: usize,
     /// NOHC and PHC summed over the tiles.
     pub nohc: u64,
