@@ -29,28 +29,46 @@ struct TileRegisters {
     hits_sent: u64,
 }
 
-/// One tile's registers inside an engine whose tiles a locator names: its counters from
-/// the first fragment inside it on, `TileResult::default()` until then (what OccU Control
-/// reports for a tile no engine hands it). Held in place for every tile of a query, an
-/// InfiniteReality-like machine's 320 units kept about 86 bytes each a tile, counted or
-/// not: 236 MB at ir4's cycle level for the `hom` driver's 8,000-tile queries.
-#[derive(Clone, Debug)]
-struct LocatedTile {
-    index: usize,
-    rect: Tile,
-    counters: Option<Box<(TileResult, u64)>>,
+/// The tiles a located engine holds ([`OcclusionEngine::load`]): each one's position in the
+/// query's list and its rectangle, and the locator that names the few that may hold a
+/// pixel. The same for every unit that loads the query (its engines deal the tiles alike),
+/// so built once and shared ([`crate::blocks::occlusion_unit::QueryLocators`]).
+#[derive(Debug)]
+pub struct LocatedTiles {
+    outlines: Vec<(usize, Tile)>,
+    locator: TileLocator,
 }
+
+/// A located tile's counters, from the first fragment inside it on (before it, its result
+/// is `TileResult::default()`, what OccU Control reports for a tile no engine hands it).
+/// Held in place for every tile of a query, an InfiniteReality-like machine's 320 units
+/// kept about 86 bytes each a tile, counted or not: 236 MB at ir4's cycle level for the
+/// `hom` driver's 8,000-tile queries; with the counters made on first use but an outline
+/// in every unit, 97 MB.
+#[derive(Clone, Debug)]
+struct CountedTile {
+    /// Its position among the engine's tiles ([`LocatedTiles::outlines`]).
+    position: u32,
+    result: TileResult,
+    /// Hits sent to OccU Control (at most `hit_room`).
+    hits_sent: u64,
+}
+
+/// [`OcclusionEngine::slots`]' mark of a tile with no counters yet.
+const UNCOUNTED: u32 = u32::MAX;
 
 #[derive(Clone, Debug, Default)]
 pub struct OcclusionEngine {
     /// The loaded query's tiles where the engine scans them...
     tiles: Vec<TileRegisters>,
-    /// ...or where its locator names them (one of the two is empty).
-    located: Vec<LocatedTile>,
-    /// Which tiles may hold a pixel, where the engine holds more than [`SCAN_TILES`] of the
-    /// loaded query's (not hardware: the comparators still decide, and every count equals a
-    /// scan's; none where it scans; shared with the other units that load the same tiles).
-    locator: Option<Arc<TileLocator>>,
+    /// ...or where a locator names them, when it holds more than [`SCAN_TILES`] (not
+    /// hardware: the comparators still decide, and every count equals a scan's; shared
+    /// with the other units that load the same tiles).
+    located: Option<Arc<LocatedTiles>>,
+    /// Per located tile, where its counters are in `counted` ([`UNCOUNTED`]: none yet).
+    slots: Vec<u32>,
+    /// The located tiles a fragment fell in, in the order they were first counted.
+    counted: Vec<CountedTile>,
     verbose: bool,
     hit_room: u64,
     /// Hits each tile's result lists (`QuerySpec::listed_hits_per_tile`).
@@ -65,9 +83,9 @@ pub struct OcclusionEngine {
 impl OcclusionEngine {
     /// Load the tiles of a new query: `(index in the query, rectangle)`. `verbose` queries
     /// send hits while a tile's buffer has `hit_room` entries for them, listing the first
-    /// `hit_list_cap` of a tile's hits in its result. `locator` is the tiles' locator where
-    /// given (another unit's, built for the same tiles:
-    /// [`crate::blocks::occlusion_unit::QueryLocators`]), else built here.
+    /// `hit_list_cap` of a tile's hits in its result. `shared` is what another unit made of
+    /// the same tiles where given ([`Self::located_tiles`]:
+    /// [`crate::blocks::occlusion_unit::QueryLocators`]), else the engine makes it here.
     pub fn load(
         &mut self,
         tiles: impl Iterator<Item = (usize, Tile)>,
@@ -75,57 +93,72 @@ impl OcclusionEngine {
         hit_room: u64,
         hit_list_cap: usize,
         counter_max: u64,
-        locator: Option<&Option<Arc<TileLocator>>>,
+        shared: Option<&Option<Arc<LocatedTiles>>>,
     ) {
         self.verbose = verbose;
         self.hit_room = hit_room;
         self.hit_list_cap = hit_list_cap;
         self.counter_max = counter_max;
         self.tiles.clear();
-        self.located.clear();
-        self.located.extend(tiles.map(|(index, rect)| LocatedTile {
+        self.counted.clear();
+        let scanned = |(index, rect)| TileRegisters {
             index,
             rect,
-            counters: None,
-        }));
-        self.locator = match locator {
-            Some(locator) => locator.clone(),
-            None if self.located.len() > SCAN_TILES => {
-                let rects: Vec<[u32; 4]> = (self.located.iter())
-                    .map(|t| [t.rect.x, t.rect.y, t.rect.width, t.rect.height])
-                    .collect();
-                let mut locator = TileLocator::default();
-                locator.build(&rects).then(|| Arc::new(locator))
-            }
-            None => None,
+            result: TileResult::default(),
+            hits_sent: 0,
         };
-        if self.locator.is_none() {
-            // Scanned: the counters in place, tested tile after tile for every fragment.
-            self.tiles
-                .extend(self.located.drain(..).map(|t| TileRegisters {
-                    index: t.index,
-                    rect: t.rect,
-                    result: TileResult::default(),
-                    hits_sent: 0,
-                }));
+        self.located = match shared {
+            Some(Some(located)) => Some(located.clone()),
+            // Another unit scans these tiles: so does this one.
+            Some(None) => {
+                self.tiles.extend(tiles.map(scanned));
+                None
+            }
+            None => match Self::locate(tiles.collect()) {
+                Ok(located) => Some(located),
+                Err(outlines) => {
+                    self.tiles.extend(outlines.into_iter().map(scanned));
+                    None
+                }
+            },
+        };
+        if let Some(located) = &self.located {
+            self.slots.clear();
+            self.slots.resize(located.outlines.len(), UNCOUNTED);
         }
     }
 
-    /// The loaded tiles' locator (none where they are scanned).
-    pub fn locator(&self) -> &Option<Arc<TileLocator>> {
-        &self.locator
+    /// `outlines` located, where they are more than [`SCAN_TILES`] and a locator can be
+    /// built for them; else given back, to be scanned.
+    fn locate(outlines: Vec<(usize, Tile)>) -> Result<Arc<LocatedTiles>, Vec<(usize, Tile)>> {
+        if outlines.len() <= SCAN_TILES {
+            return Err(outlines);
+        }
+        let rects: Vec<[u32; 4]> = (outlines.iter())
+            .map(|(_, rect)| [rect.x, rect.y, rect.width, rect.height])
+            .collect();
+        let mut locator = TileLocator::default();
+        match locator.build(&rects) {
+            true => Ok(Arc::new(LocatedTiles { outlines, locator })),
+            false => Err(outlines),
+        }
+    }
+
+    /// The loaded tiles as located (none where they are scanned).
+    pub fn located_tiles(&self) -> &Option<Arc<LocatedTiles>> {
+        &self.located
     }
 
     /// Tiles held: the cycles one fragment costs (one tile per cycle).
     pub fn tile_count(&self) -> usize {
-        self.tiles.len() + self.located.len()
+        self.tiles.len() + self.located.as_ref().map_or(0, |l| l.outlines.len())
     }
 
     /// Count one fragment in every tile that holds it (those the locator names, else every
     /// tile tested); returns the hit words sent to OccU Control.
     #[inline]
     pub fn fragment(&mut self, fragment: Fragment, passed: bool) -> u32 {
-        if self.locator.is_some() {
+        if self.located.is_some() {
             return self.located_fragment(fragment, passed);
         }
         self.scanned_fragment(fragment, passed)
@@ -134,7 +167,7 @@ impl OcclusionEngine {
     /// Whether the loaded query's tiles are located (else [`Self::scanned_fragment`] is
     /// [`Self::fragment`]).
     pub fn is_located(&self) -> bool {
-        self.locator.is_some()
+        self.located.is_some()
     }
 
     /// [`Self::fragment`] with every tile tested: for an engine whose query is not located
@@ -188,30 +221,30 @@ impl OcclusionEngine {
         );
         let (x, y) = (fragment.x as u32, fragment.y as u32);
         let mut hit_words = 0;
-        let Some(locator) = &self.locator else {
+        let Some(located) = &self.located else {
             return 0;
         };
-        for t in locator.candidates(x, y, 0, u64::MAX) {
-            hit_words += Self::count_in(&mut self.located[t as usize], fragment, passed, query);
+        for t in located.locator.candidates(x, y, 0, u64::MAX) {
+            if located.outlines[t as usize].1.contains(x, y) {
+                let tile = counters_of(&mut self.slots, &mut self.counted, t as u32);
+                hit_words += Self::count_in(tile, fragment, passed, query);
+            }
         }
         hit_words
     }
 
-    /// Count a fragment in `tile` if it holds it: PHC, and if it passed, NOHC, the box, the
-    /// depth range and a verbose query's hit (`(counter_max, verbose, hit_room,
-    /// hit_list_cap)`); returns the hit words sent.
+    /// Count a fragment inside `tile`: PHC, and if it passed, NOHC, the box, the depth
+    /// range and a verbose query's hit (`(counter_max, verbose, hit_room, hit_list_cap)`);
+    /// returns the hit words sent.
     #[inline(always)]
     fn count_in(
-        tile: &mut LocatedTile,
+        tile: &mut CountedTile,
         fragment: Fragment,
         passed: bool,
         (counter_max, verbose, hit_room, hit_list_cap): (u64, bool, u64, usize),
     ) -> u32 {
         let (x, y) = (fragment.x as u32, fragment.y as u32);
-        if !tile.rect.contains(x, y) {
-            return 0;
-        }
-        let (r, hits_sent) = &mut **tile.counters.get_or_insert_with(Box::default);
+        let r = &mut tile.result;
         r.phc = (r.phc + 1).min(counter_max);
         if !passed {
             return 0;
@@ -226,8 +259,8 @@ impl OcclusionEngine {
         if !verbose {
             return 0;
         }
-        if *hits_sent < hit_room {
-            *hits_sent += 1;
+        if tile.hits_sent < hit_room {
+            tile.hits_sent += 1;
             r.hits.push((fragment.x, fragment.y), hit_list_cap);
             1
         } else {
@@ -243,7 +276,7 @@ impl OcclusionEngine {
     pub fn count_span(&mut self, span: Span, passed: &[bool]) {
         debug_assert!(!self.verbose, "a verbose query's hits are sent one by one");
         let counter_max = self.counter_max;
-        let Some(locator) = &self.locator else {
+        let Some(located) = &self.located else {
             for tile in &mut self.tiles {
                 if let Some((from, pieces)) = run_inside(tile.rect, span) {
                     tile.result.record_run(
@@ -259,7 +292,7 @@ impl OcclusionEngine {
         };
         // The span cut where the locator's buckets end; in each piece, the tiles of its
         // bucket (a tile listed in several buckets counts each piece once).
-        let side = locator.bucket_side();
+        let side = located.locator.bucket_side();
         let (mut at, end) = (span.x as u32, span.x as u32 + span.depths.len() as u32);
         while at < end {
             let to = ((at / side + 1) * side).min(end);
@@ -269,11 +302,10 @@ impl OcclusionEngine {
                 y: span.y,
                 depths: &span.depths[first..last],
             };
-            for t in locator.candidates(at, span.y as u32, 0, u64::MAX) {
-                let tile = &mut self.located[t as usize];
-                if let Some((from, pieces)) = run_inside(tile.rect, piece) {
-                    let (result, _) = &mut **tile.counters.get_or_insert_with(Box::default);
-                    result.record_run(
+            for t in located.locator.candidates(at, span.y as u32, 0, u64::MAX) {
+                if let Some((from, pieces)) = run_inside(located.outlines[t as usize].1, piece) {
+                    let tile = counters_of(&mut self.slots, &mut self.counted, t as u32);
+                    tile.result.record_run(
                         from,
                         piece.y,
                         &piece.depths[pieces.clone()],
@@ -287,13 +319,35 @@ impl OcclusionEngine {
     }
 
     /// Hand the tiles' results to OccU Control: `(index in the query, result)`, a located
-    /// tile's only where a fragment fell in it (every other's is `TileResult::default()`).
+    /// tile's only where a fragment fell in it (every other's is `TileResult::default()`),
+    /// in the order the engine holds them.
     pub fn drain(&mut self) -> impl Iterator<Item = (usize, TileResult)> + '_ {
         let scanned = self.tiles.drain(..).map(|t| (t.index, t.result));
-        let located = (self.located.drain(..))
-            .filter_map(|t| t.counters.map(|counters| (t.index, counters.0)));
+        self.counted.sort_unstable_by_key(|tile| tile.position);
+        let outlines = self.located.as_ref().map_or(&[][..], |l| &l.outlines[..]);
+        let located =
+            (self.counted.drain(..)).map(|tile| (outlines[tile.position as usize].0, tile.result));
         scanned.chain(located)
     }
+}
+
+/// The counters of located tile `position`, made at its first fragment.
+#[inline(always)]
+fn counters_of<'a>(
+    slots: &mut [u32],
+    counted: &'a mut Vec<CountedTile>,
+    position: u32,
+) -> &'a mut CountedTile {
+    let slot = &mut slots[position as usize];
+    if *slot == UNCOUNTED {
+        *slot = counted.len() as u32;
+        counted.push(CountedTile {
+            position,
+            result: TileResult::default(),
+            hits_sent: 0,
+        });
+    }
+    &mut counted[*slot as usize]
 }
 
 /// Where `span` runs inside `rect`: its first pixel's x there and the span's fragments
@@ -362,8 +416,8 @@ mod tests {
         assert!(engine.is_located());
         assert_eq!(engine.tile_count(), 20, "every tile loaded costs its cycle");
         engine.fragment(Fragment { x: 9, y: 9, z: 5 }, true);
-        let counted = engine.located.iter().filter(|t| t.counters.is_some());
-        assert_eq!(counted.count(), 1);
+        assert_eq!(engine.counted.len(), 1);
+        assert_eq!(engine.slots.iter().filter(|&&s| s != UNCOUNTED).count(), 1);
         let handed: Vec<(usize, TileResult)> = engine.drain().collect();
         assert_eq!(handed.len(), 1);
         assert_eq!((handed[0].0, handed[0].1.phc, handed[0].1.nohc), (11, 1, 1));
@@ -387,9 +441,10 @@ mod tests {
             let mut located = OcclusionEngine::default();
             let dealt = tiles.iter().copied().enumerate();
             located.load(dealt, verbose, room, cap, max, None);
-            let locator = located.locator().clone().expect("located");
+            let tiles_located = located.located_tiles().clone().expect("located");
             // Spans cross buckets (a wrapping tile's extent makes one bucket of it all).
-            assert_eq!(locator.bucket_side() < 64, !wraps, "seed {seed}");
+            let side = tiles_located.locator.bucket_side();
+            assert_eq!(side < 64, !wraps, "seed {seed}");
             let mut alone: Vec<OcclusionEngine> = tiles
                 .iter()
                 .enumerate()

@@ -11,22 +11,23 @@
 //! FIFO entry (frees its slot) in `o_i`.
 
 use crate::arch::O2Arch;
-use crate::blocks::occlusion_engine::{hit_room, OcclusionEngine};
-use occsim_rtl::tile_locator::TileLocator;
+use crate::blocks::occlusion_engine::{hit_room, LocatedTiles, OcclusionEngine};
 use occsim_traces::{Fragment, QueryMode, QuerySpec, Span, TileResult};
 use std::sync::Arc;
 
-/// The tile locators of a query's engines, built by the first unit that loads the query and
-/// taken by the rest: every Image Engine of the InfiniteReality-like machine deals the same
-/// tiles to its engines, and building a query of hundreds of tiles' locators in each of
-/// 320 units had been an eighth of the cycle level's time on a lazy-grid walk of the city on
-/// ir4. (Not hardware: the comparators still decide; the locator only names the
-/// candidates.)
+/// The located tiles of a query's engines (their outlines and locators), made by the first
+/// unit that loads the query and taken by the rest: every Image Engine of the
+/// InfiniteReality-like machine deals the same tiles to its engines. Building a query of
+/// hundreds of tiles' locators in each of 320 units had been an eighth of the cycle level's
+/// time on a lazy-grid walk of the city on ir4, and an outline of each tile in each unit
+/// most of the memory of the `hom` driver's 8,000-tile queries. (Not hardware: the
+/// comparators still decide; the locator only names the candidates.)
 #[derive(Default)]
 pub struct QueryLocators {
-    /// The query they were built for, and each engine's (none where it scans).
+    /// The query they were built for, and each engine's tiles as located (none where it
+    /// scans).
     query: Option<u64>,
-    locators: Vec<Option<Arc<TileLocator>>>,
+    located: Vec<Option<Arc<LocatedTiles>>>,
 }
 
 pub struct OcclusionUnit {
@@ -95,7 +96,7 @@ impl OcclusionUnit {
             None => (None, 0),
         };
         let built = shared.as_ref().is_some_and(|shared| {
-            shared.query == Some(generation) && shared.locators.len() == count
+            shared.query == Some(generation) && shared.located.len() == count
         });
         let verbose = spec.mode == QueryMode::Verbose;
         let room = if verbose {
@@ -112,7 +113,7 @@ impl OcclusionUnit {
                 .skip(e)
                 .step_by(count);
             let locator = match (&shared, built) {
-                (Some(shared), true) => Some(&shared.locators[e]),
+                (Some(shared), true) => Some(&shared.located[e]),
                 _ => None,
             };
             let cap = spec.listed_hits_per_tile();
@@ -120,7 +121,11 @@ impl OcclusionUnit {
         }
         if let (Some(shared), false) = (shared, built) {
             shared.query = Some(generation);
-            shared.locators = self.engines.iter().map(|e| e.locator().clone()).collect();
+            shared.located = self
+                .engines
+                .iter()
+                .map(|e| e.located_tiles().clone())
+                .collect();
         }
         self.engine_cycles =
             engine_service_cycles(spec.tiles.len(), count, self.all_tiles_one_cycle);
@@ -301,11 +306,12 @@ mod tests {
     }
 
     #[test]
-    fn units_loading_one_query_share_its_locators_and_count_as_a_unit_alone() {
+    fn units_loading_one_query_share_its_located_tiles_and_count_as_a_unit_alone() {
         // Three units of 4 engines load a query of 200 tiles (50 an engine: located)
-        // through one `QueryLocators`: the second and third take the first's locators (the
-        // same ones, not copies), and each counts the same fragments as a unit that loaded
-        // the query alone. A second query (another generation) is built again.
+        // through one `QueryLocators`: the second and third take the first's outlines and
+        // locators (the same ones, not copies), and each counts the same fragments as a
+        // unit that loaded the query alone. A second query (another generation) is built
+        // again.
         let mut rng = SplitMix64(11);
         let mut shared = QueryLocators::default();
         for generation in [1, 2] {
@@ -321,7 +327,9 @@ mod tests {
             assert!(units[0].located, "generation {generation}");
             for unit in &units[1..] {
                 for (engine, first) in unit.engines.iter().zip(&units[0].engines) {
-                    let (Some(taken), Some(built)) = (engine.locator(), first.locator()) else {
+                    let (Some(taken), Some(built)) =
+                        (engine.located_tiles(), first.located_tiles())
+                    else {
                         panic!("an engine of 50 tiles is located");
                     };
                     assert!(Arc::ptr_eq(taken, built), "generation {generation}");
