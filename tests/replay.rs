@@ -4,6 +4,8 @@
 //! quarter of its triangles and queries): the same kinds of query and tile, a sixteenth of
 //! the fragments.
 
+mod support;
+
 use occsim_sim::{Arch, MachineModel};
 use occsim_traces::builtin::{demo_scene, random_scene, scene_text, DemoOptions, RandomOptions};
 use occsim_traces::golden::{EventSink, GoldenModel};
@@ -186,7 +188,7 @@ fn replay_json_has_the_documented_fields() {
 }
 
 /// Where `lower` holds a key (in objects, and item by item in arrays), `cycle` holds it
-/// too, of the same JSON type (or null at either).
+/// too, of the same JSON type (or null at either, or an empty list below the cycle level).
 fn assert_keys_held(path: &str, lower: &serde_json::Value, cycle: &serde_json::Value) {
     use serde_json::Value;
     match (lower, cycle) {
@@ -199,6 +201,8 @@ fn assert_keys_held(path: &str, lower: &serde_json::Value, cycle: &serde_json::V
                 assert_keys_held(&format!("{path}.{key}"), value, held);
             }
         }
+        // An empty list: the level has none (the functional level times no frame).
+        (Value::Array(lower), Value::Array(_)) if lower.is_empty() => {}
         (Value::Array(lower), Value::Array(cycle)) => {
             assert_eq!(lower.len(), cycle.len(), "{path}'s length");
             for (k, (value, held)) in lower.iter().zip(cycle).enumerate() {
@@ -214,13 +218,13 @@ fn assert_keys_held(path: &str, lower: &serde_json::Value, cycle: &serde_json::V
 
 #[test]
 fn replay_json_reads_the_same_keys_at_every_level() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("levels.occt");
-    std::fs::write(&path, builtin_trace("hardcases")).unwrap();
+    // Made by `trace gen`, with its window and band indexes: the analytic and sampled
+    // levels read them, and say so (`from_window_index`).
+    let (_dir, path) = support::cli::hardcases_trace("json-keys");
     for arch in ["o2", "ir2"] {
         let json_at = |level: &str| -> serde_json::Value {
             let output = Process::new(env!("CARGO_BIN_EXE_occsim"))
-                .args(["replay", path.to_str().unwrap(), "--arch", arch])
+                .args(["replay", &path, "--arch", arch])
                 .args(["--fidelity", level, "--json"])
                 .output()
                 .unwrap();
@@ -229,8 +233,17 @@ fn replay_json_reads_the_same_keys_at_every_level() {
         };
         let cycle = json_at("cycle");
         for level in ["functional", "analytic", "sampled:2"] {
-            assert_keys_held(&format!("{arch} {level}"), &json_at(level), &cycle);
+            let lower = json_at(level);
+            assert_keys_held(&format!("{arch} {level}"), &lower, &cycle);
+            let (lower_keys, cycle_keys) = (lower.as_object().unwrap(), cycle.as_object().unwrap());
+            for key in ["from_window_index", "frame_cycles", "frames_per_second"] {
+                assert!(lower_keys.contains_key(key), "{arch} {level}: {key}");
+                assert!(cycle_keys.contains_key(key), "{arch} cycle: {key}");
+            }
+            let from_index = level != "functional";
+            assert_eq!(lower["from_window_index"], from_index, "{arch} {level}");
         }
+        assert_eq!(cycle["from_window_index"], false);
         // The run's figures at the top level are the report's.
         let summary = &cycle["summary"];
         assert_eq!(cycle["total_cycles"], summary["cycles"], "{arch}");

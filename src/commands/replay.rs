@@ -158,9 +158,9 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
 
 /// A result as `--json` prints it: the level's own result, in its fields' order; at the
 /// cycle and rtl levels the machine's report, with its `level`, the effect models that were
-/// built and the fragments fast-forwarded, and every key of the level's result it lacks (the
-/// run's `total_cycles`, `latency_*_cycles` and `frame_cycles`, each query's `value`,
-/// `nohc` and `phc`), so that a script reads the same keys at every level.
+/// built and the fragments fast-forwarded, and every key of the level's result it lacks
+/// (among them the run's `total_cycles` and each query's `value`), so that a script reads
+/// the same keys at every level.
 pub fn result_json(result: &LevelResult) -> anyhow::Result<String> {
     Ok(match &result.report {
         Some(report) => {

@@ -24,7 +24,7 @@
 use crate::arch::{IrArch, OCCU_WORD_BITS};
 use crate::blocks::fifo::Fifo;
 use crate::blocks::memory_port::MemoryPort;
-use crate::blocks::occlusion_unit::{OccuStats, QueryLocators};
+use crate::blocks::occlusion_unit::{OccuStats, SharedLocatedTiles};
 use crate::blocks::occu_stage::{OccuModel, OccuStage};
 use crate::error::SimError;
 use occsim_traces::{Fragment, QuerySpec, TileResult};
@@ -84,10 +84,10 @@ impl ImageEngine {
         self.fifo.slot_free_cycle()
     }
 
-    /// Make sure the Occlusion Unit holds query `generation`'s tiles (`spec`), their
-    /// locators shared with the other Image Engines through `shared`.
+    /// Make sure the Occlusion Unit holds query `generation`'s tiles (`spec`), located
+    /// (their outlines and locators) once for all the Image Engines through `shared`.
     #[inline]
-    pub fn load(&mut self, generation: u64, spec: &QuerySpec, shared: &mut QueryLocators) {
+    pub fn load(&mut self, generation: u64, spec: &QuerySpec, shared: &mut SharedLocatedTiles) {
         if self.loaded_query != generation {
             self.occu.begin_sharing(spec, shared, generation);
             self.loaded_query = generation;

@@ -32,7 +32,12 @@ struct TileRegisters {
 /// The tiles a located engine holds ([`OcclusionEngine::load`]): each one's position in the
 /// query's list and its rectangle, and the locator that names the few that may hold a
 /// pixel. The same for every unit that loads the query (its engines deal the tiles alike),
-/// so built once and shared ([`crate::blocks::occlusion_unit::QueryLocators`]).
+/// so built once and shared ([`crate::blocks::occlusion_unit::SharedLocatedTiles`]); each
+/// engine keeps beside them only the counters of the tiles a fragment fell in
+/// ([`CountedTile`]). On the InfiniteReality-like machine's 320 units, the `hom` driver's
+/// 8,000-tile queries at ir4's cycle level took 236 MB with every tile's registers in every
+/// unit, 97 MB with an outline of every tile in every unit and counters made on first use,
+/// and 29 MB so.
 #[derive(Debug)]
 pub struct LocatedTiles {
     outlines: Vec<(usize, Tile)>,
@@ -41,10 +46,6 @@ pub struct LocatedTiles {
 
 /// A located tile's counters, from the first fragment inside it on (before it, its result
 /// is `TileResult::default()`, what OccU Control reports for a tile no engine hands it).
-/// Held in place for every tile of a query, an InfiniteReality-like machine's 320 units
-/// kept about 86 bytes each a tile, counted or not: 236 MB at ir4's cycle level for the
-/// `hom` driver's 8,000-tile queries; with the counters made on first use but an outline
-/// in every unit, 97 MB.
 #[derive(Clone, Debug)]
 struct CountedTile {
     /// Its position among the engine's tiles ([`LocatedTiles::outlines`]).
@@ -85,7 +86,7 @@ impl OcclusionEngine {
     /// send hits while a tile's buffer has `hit_room` entries for them, listing the first
     /// `hit_list_cap` of a tile's hits in its result. `shared` is what another unit made of
     /// the same tiles where given ([`Self::located_tiles`]:
-    /// [`crate::blocks::occlusion_unit::QueryLocators`]), else the engine makes it here.
+    /// [`crate::blocks::occlusion_unit::SharedLocatedTiles`]), else the engine makes it here.
     pub fn load(
         &mut self,
         tiles: impl Iterator<Item = (usize, Tile)>,
@@ -108,7 +109,10 @@ impl OcclusionEngine {
             hits_sent: 0,
         };
         self.located = match shared {
-            Some(Some(located)) => Some(located.clone()),
+            Some(Some(located)) => {
+                debug_assert_eq!(tiles.count(), located.outlines.len(), "another query's");
+                Some(located.clone())
+            }
             // Another unit scans these tiles: so does this one.
             Some(None) => {
                 self.tiles.extend(tiles.map(scanned));
@@ -319,11 +323,10 @@ impl OcclusionEngine {
     }
 
     /// Hand the tiles' results to OccU Control: `(index in the query, result)`, a located
-    /// tile's only where a fragment fell in it (every other's is `TileResult::default()`),
-    /// in the order the engine holds them.
+    /// tile's only where a fragment fell in it (every other's is `TileResult::default()`).
+    /// In no particular order: OccU Control places each result at its index.
     pub fn drain(&mut self) -> impl Iterator<Item = (usize, TileResult)> + '_ {
         let scanned = self.tiles.drain(..).map(|t| (t.index, t.result));
-        self.counted.sort_unstable_by_key(|tile| tile.position);
         let outlines = self.located.as_ref().map_or(&[][..], |l| &l.outlines[..]);
         let located =
             (self.counted.drain(..)).map(|tile| (outlines[tile.position as usize].0, tile.result));
@@ -421,6 +424,42 @@ mod tests {
         let handed: Vec<(usize, TileResult)> = engine.drain().collect();
         assert_eq!(handed.len(), 1);
         assert_eq!((handed[0].0, handed[0].1.phc, handed[0].1.nohc), (11, 1, 1));
+    }
+
+    /// One engine reloaded query after query, located and scanned in turn and with fewer
+    /// and more tiles, counts as a fresh engine loaded with each query alone: nothing of a
+    /// query's counters or slots is left to the next.
+    #[test]
+    fn a_reloaded_engine_counts_as_a_fresh_one() {
+        let mut rng = SplitMix64(7);
+        let mut reused = OcclusionEngine::default();
+        // 30 tiles (located), 5 (scanned), 12 and 60 (located), 3 (scanned), 30 again.
+        for (query, count) in [30, 5, 12, 60, 3, 30].into_iter().enumerate() {
+            let tiles = random_tiles(&mut rng, count, false);
+            let verbose = query % 2 == 1;
+            let mut fresh = OcclusionEngine::default();
+            for engine in [&mut reused, &mut fresh] {
+                let dealt = tiles.iter().copied().enumerate();
+                engine.load(dealt, verbose, 5, 4, 1000, None);
+            }
+            assert_eq!(reused.is_located(), count > SCAN_TILES, "query {query}");
+            for _ in 0..500 {
+                let fragment = Fragment {
+                    x: rng.below(320) as u16,
+                    y: rng.below(220) as u16,
+                    z: rng.below(1 << 24) as u32,
+                };
+                let passed = rng.below(3) > 0;
+                let words = reused.fragment(fragment, passed);
+                assert_eq!(words, fresh.fragment(fragment, passed), "query {query}");
+            }
+            let by_index = |engine: &mut OcclusionEngine| {
+                let mut results: Vec<(usize, TileResult)> = engine.drain().collect();
+                results.sort_by_key(|(index, _)| *index);
+                results
+            };
+            assert_eq!(by_index(&mut reused), by_index(&mut fresh), "query {query}");
+        }
     }
 
     #[test]

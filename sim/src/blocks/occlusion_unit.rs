@@ -23,7 +23,7 @@ use std::sync::Arc;
 /// most of the memory of the `hom` driver's 8,000-tile queries. (Not hardware: the
 /// comparators still decide; the locator only names the candidates.)
 #[derive(Default)]
-pub struct QueryLocators {
+pub struct SharedLocatedTiles {
     /// The query they were built for, and each engine's tiles as located (none where it
     /// scans).
     query: Option<u64>,
@@ -87,9 +87,13 @@ impl OcclusionUnit {
         self.begin_sharing(spec, None);
     }
 
-    /// [`Self::begin`], the engines' locators taken from `shared` where it holds query
-    /// `generation`'s for as many engines, else built and left there.
-    pub fn begin_sharing(&mut self, spec: &QuerySpec, shared: Option<(&mut QueryLocators, u64)>) {
+    /// [`Self::begin`], the engines' located tiles taken from `shared` where it holds query
+    /// `generation`'s for as many engines, else made and left there.
+    pub fn begin_sharing(
+        &mut self,
+        spec: &QuerySpec,
+        shared: Option<(&mut SharedLocatedTiles, u64)>,
+    ) {
         let count = self.engines.len();
         let (shared, generation) = match shared {
             Some((shared, generation)) => (Some(shared), generation),
@@ -308,12 +312,12 @@ mod tests {
     #[test]
     fn units_loading_one_query_share_its_located_tiles_and_count_as_a_unit_alone() {
         // Three units of 4 engines load a query of 200 tiles (50 an engine: located)
-        // through one `QueryLocators`: the second and third take the first's outlines and
+        // through one `SharedLocatedTiles`: the second and third take the first's outlines and
         // locators (the same ones, not copies), and each counts the same fragments as a
         // unit that loaded the query alone. A second query (another generation) is built
         // again.
         let mut rng = SplitMix64(11);
-        let mut shared = QueryLocators::default();
+        let mut shared = SharedLocatedTiles::default();
         for generation in [1, 2] {
             let spec = query(&mut rng, 200);
             let mut alone = OcclusionUnit::with_engines(4, false, 1 << 20);

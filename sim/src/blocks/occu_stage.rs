@@ -9,7 +9,7 @@
 use crate::arch::{IrArch, O2Arch};
 use crate::blocks::memory_port::MemoryPort;
 use crate::blocks::occlusion_unit::OcclusionUnit;
-use crate::blocks::occlusion_unit::{OccuStats, QueryLocators};
+use crate::blocks::occlusion_unit::{OccuStats, SharedLocatedTiles};
 use crate::blocks::occu_control::OccuControl;
 use crate::blocks::rtl_occu::RtlOccu;
 use crate::blocks::waveform::WaveformOptions;
@@ -71,10 +71,15 @@ impl OccuStage {
         }
     }
 
-    /// [`Self::begin`] for query `generation`, its tiles' locators shared with the other
-    /// units through `shared` ([`QueryLocators`]; the register-transfer model builds its
-    /// own).
-    pub fn begin_sharing(&mut self, spec: &QuerySpec, shared: &mut QueryLocators, generation: u64) {
+    /// [`Self::begin`] for query `generation`, its located tiles shared with the other
+    /// units through `shared` ([`SharedLocatedTiles`]; the register-transfer model locates
+    /// its own).
+    pub fn begin_sharing(
+        &mut self,
+        spec: &QuerySpec,
+        shared: &mut SharedLocatedTiles,
+        generation: u64,
+    ) {
         match self {
             OccuStage::Cycle { occu, .. } => occu.begin_sharing(spec, Some((shared, generation))),
             OccuStage::Rtl(rtl) => rtl.begin(spec),

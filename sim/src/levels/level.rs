@@ -162,26 +162,23 @@ pub struct LevelResult {
     /// The effect models the cycle model built (cycle and sampled levels).
     pub effects: Option<Effects>,
     /// Fragments the cycle model fast-forwarded ([`crate::effects`]; cycle and rtl levels).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// Every field is in the JSON at every level (null, false or empty where the level has
+    /// none), so that a script reads the same keys whatever the level.
     pub fast_forwarded_fragments: Option<u64>,
     pub sampled_windows: Option<SampledWindows>,
     /// Read from the trace's index (the window index; the band index on the
     /// InfiniteReality-like machine), not its fragments: the query results are the stream's
     /// golden ones, taken, not checked (the analytic and sampled levels).
-    #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub from_window_index: bool,
     /// The trace's format version when its window index lacks counts this level's formulas
     /// take (before [`occsim_traces::trace::INDEX_COUNTS_VERSION`]), so its fragments were
     /// decoded instead.
-    #[serde(skip_serializing_if = "Option::is_none")]
     pub older_index: Option<u16>,
     pub queries: Vec<QueryOutcome>,
     /// Each frame's cycles, for a closed-loop stream at a level that times frames (empty
     /// otherwise).
-    #[serde(skip_serializing_if = "Vec::is_empty")]
     pub frame_cycles: Vec<u64>,
     /// Frames over the run's time, when frames were timed.
-    #[serde(skip_serializing_if = "Option::is_none")]
     pub frames_per_second: Option<f64>,
     /// The full cycle-level report (cycle level only).
     #[serde(skip)]

@@ -66,7 +66,7 @@ use crate::blocks::image_engine::ImageEngine;
 use crate::blocks::interleave::FramebufferInterleave;
 use crate::blocks::merge_network::{delivered, merge_partial, merged_ready, Partial, ReportShape};
 use crate::blocks::occlusion_engine::hit_room;
-use crate::blocks::occlusion_unit::{OccuStats, QueryLocators};
+use crate::blocks::occlusion_unit::{OccuStats, SharedLocatedTiles};
 use crate::blocks::occu_stage::OccuModel;
 use crate::effects::Effects;
 use crate::error::check_spec;
@@ -111,8 +111,9 @@ pub struct IrMachine {
     generators: Vec<FragmentGenerator>,
     /// Board-major: Image Engine `i` of board `b` is `b * N + i`.
     image_engines: Vec<ImageEngine>,
-    /// The open query's tile locators, built once for every Image Engine.
-    locators: QueryLocators,
+    /// The open query's located tiles (outlines and locators), built once for every Image
+    /// Engine.
+    located: SharedLocatedTiles,
     state: RenderState,
     depth: DepthBuffer,
     open: Option<OpenQuery>,
@@ -194,7 +195,7 @@ impl IrMachine {
                 })
                 .collect(),
             image_engines: image_engines(&ir, occu, effects),
-            locators: QueryLocators::default(),
+            located: SharedLocatedTiles::default(),
             arch: ir,
             arch_entries,
             width,
@@ -357,7 +358,7 @@ impl IrMachine {
             .then(|| self.generators[board].free_cycle());
         let emitted = self.generators[board].emit(engine.slot_free_cycle());
         if let Some(query) = &mut self.open {
-            engine.load(query.generation, &query.spec, &mut self.locators);
+            engine.load(query.generation, &query.spec, &mut self.located);
             query.fragments += 1;
         }
         engine.fragment(fragment, passed, emitted, self.open.is_some());

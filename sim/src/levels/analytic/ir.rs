@@ -270,7 +270,7 @@ impl IrWindow {
     fn close_stretch(&mut self) {
         if self.band.is_empty() {
             // Read from a band index, every stretch closes so: no band to move out (a
-            // band is most of a kilobyte, and a stretch closes at every primitive).
+            // band is about 200 bytes, and a stretch closes at every primitive and event).
             self.close_band(&FragmentBand::EMPTY);
             return;
         }
