@@ -34,7 +34,7 @@ struct TileRegisters {
 /// pixel. The same for every unit that loads the query (its engines deal the tiles alike),
 /// so built once and shared ([`crate::blocks::occlusion_unit::SharedLocatedTiles`]); each
 /// engine keeps beside them only the counters of the tiles a fragment fell in
-/// ([`CountedTile`]). On the InfiniteReality-like machine's 320 units, the `hom` driver's
+/// (`CountedTile`). On the InfiniteReality-like machine's 320 units, the `hom` driver's
 /// 8,000-tile queries at ir4's cycle level took 236 MB with every tile's registers in every
 /// unit, 97 MB with an outline of every tile in every unit and counters made on first use,
 /// and 29 MB so.
