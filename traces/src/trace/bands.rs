@@ -387,11 +387,17 @@ mod tests {
             .unwrap();
         assert!(error.contains("a band in a window-index block"), "{error}");
         assert!(error.contains(&at.to_string()), "{error}");
-        // Runs no writer makes: past the viewport (16 wide), or continuing the run before.
+        // Runs no writer makes: past the viewport (16 wide), continuing the run before, or
+        // at an x, row or length no viewport has (below 0 or from 2^16 on: in one step of
+        // 70,000, or in one of 65,530 from row 15).
         for (runs, why) in [
-            (&[(10u16, 0u16, 7u32)][..], "outside the viewport"),
+            (&[(10i64, 0i64, 7i64)][..], "outside the viewport"),
             (&[(0, 0, 2), (2, 0, 1)][..], "continues the one before"),
             (&[(0, 0, 1)][..], "with none passing"),
+            (&[(-1, 0, 1)][..], "out of range"),
+            (&[(0, 70_000, 1)][..], "out of range"),
+            (&[(0, 15, 1), (0, 65_545, 1)][..], "out of range"),
+            (&[(0, 0, 70_000)][..], "out of range"),
         ] {
             let mut payload = vec![tag::BAND, runs.len() as u8];
             if why == "with none passing" {
@@ -400,14 +406,10 @@ mod tests {
             }
             let mut before = (0i64, 0i64, 0i64);
             for &(x, y, len) in runs {
-                for (value, was) in [
-                    (x as i64, before.0),
-                    (y as i64, before.1),
-                    (len as i64, before.2),
-                ] {
+                for (value, was) in [(x, before.0), (y, before.1), (len, before.2)] {
                     crate::trace::codec::put_zz(&mut payload, value - was);
                 }
-                before = (x as i64, y as i64, len as i64);
+                before = (x, y, len);
             }
             let (bad, at) = with_block_first(clean.clone(), KIND_BANDS, &payload);
             let error = band_items(&bad).unwrap_err().to_string();
