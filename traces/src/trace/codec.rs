@@ -879,11 +879,11 @@ fn decode_band(
     out.clear();
     let out_of_range = || bad(start, "a band run's x, row or length out of range");
     // Each of a run's x, row and length is below 2^16 (a viewport's side is at most
-    // `MAX_VIEWPORT_SIDE`, 16,384) or the band is refused, so a step of 2^16 or more (a zigzag varint of 2^17 or more) is out of
-    // range whatever came before, and within that the sums cannot overflow an i32. (With
-    // saturating i64 sums each converted on its own, the IR's analytic level took the demo
-    // in 15.2 ms on ir4 and the lazy-grid walk in 19.4, in one process, best of 7; so, 14.9
-    // and 18.9.)
+    // `MAX_VIEWPORT_SIDE`, 16,384) or the band is refused, so a zigzag varint of 2^17 or
+    // more (a step of more than 2^16) is out of range whatever came before, and the steps
+    // below it cannot overflow an i32. (With saturating i64 sums each converted on its own,
+    // the IR's analytic level took the demo in 15.2 ms on ir4 and the lazy-grid walk in
+    // 19.4, in one process, best of 7; so, 14.9 and 18.9.)
     let (mut x, mut y, mut len) = (0i32, 0i32, 0i32);
     for k in 0..count {
         let (dx, dy, dlen) = (c.uv()?, c.uv()?, c.uv()?);
