@@ -60,7 +60,7 @@ pub struct FragmentBand {
     /// is read: summed from the runs each time, the IR's analytic level took the demo on
     /// ir4 in 14.87 ms and the lazy-grid walk in 18.79, in one process, best of 9; so,
     /// 14.72 and 18.45).
-    fragments: u32,
+    fragments: u64,
 }
 
 impl RowRun {
@@ -146,7 +146,7 @@ impl FragmentBand {
     }
 
     pub fn fragments(&self) -> u64 {
-        self.fragments as u64
+        self.fragments
     }
 
     /// Where `run` would go: joined to the last run (on its row, from its end, passing
@@ -172,7 +172,7 @@ impl FragmentBand {
     fn put(&mut self, run: RowRun, place: Place) {
         if place == Place::Joined {
             self.runs[self.count as usize - 1].len += run.len;
-            self.fragments += run.len;
+            self.fragments += run.len as u64;
             return;
         }
         if place == Place::NewRow {
@@ -181,7 +181,7 @@ impl FragmentBand {
         }
         self.runs[self.count as usize] = run;
         self.count += 1;
-        self.fragments += run.len;
+        self.fragments += run.len as u64;
     }
 
     /// Whether `run` fits: it continues the last run, or the band has a run to spare and,
