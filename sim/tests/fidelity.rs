@@ -935,3 +935,57 @@ fn a_predicted_window_ends_no_earlier_than_its_last_primitive_arrives() {
         "analytic frame {analytic} against cycle's {cycle}"
     );
 }
+
+/// A scene of `frames` frames on a 256x256 viewport, each a brief query of 256 tiles (a
+/// 16x16 grid of 16x16 tiles) over a small triangle, then a one-tile query over another,
+/// then a swap.
+fn many_tile_queries_then_swaps(frames: u32) -> String {
+    let grid: String = (0..256)
+        .map(|k| format!(" tile={},{},16,16", k % 16 * 16, k / 16 * 16))
+        .collect();
+    let triangle = "tri -1 -1 0 1  -0.9 -1 0 1  -0.9 -0.9 0 1\n";
+    let mut scene = String::from("viewport 256 256\n");
+    for frame in 0..frames {
+        scene += &format!(
+            "clear\nbegin {} brief{grid}\n{triangle}end\n",
+            2 * frame + 1
+        );
+        scene += &format!("begin {} brief\n{triangle}end\nswap\n", 2 * frame + 2);
+    }
+    scene
+}
+
+#[test]
+fn a_merge_that_outlasts_the_windows_after_it_holds_the_frame_and_the_run_at_every_level() {
+    // On ir4 a 256-tile query's report crosses both merge stages: 256 tiles x 8 words from
+    // each of 320 Image Engines, some 21,000 cycles (README, Latency), where its window and
+    // the one-tile query's after it take a few hundred. The cycle level ends each frame,
+    // and the run, when that merge is done; the analytic and sampled levels had ended them
+    // at the last query's answer (the one-tile query's, thousands of cycles earlier) or,
+    // sampled, at the last window's cost: 4,644 cycles for three such frames at sampled:2,
+    // where the machine takes 68,286, and double those at sampled:3 (110,620).
+    let stream = scene_events(&many_tile_queries_then_swaps(3));
+    let arch = Arch::builtin("ir4").unwrap();
+    let cycle = run_at("cycle", &arch, &stream);
+    let cycle_total = cycle.total_cycles.unwrap() as f64;
+    assert!(cycle_total > 3.0 * 20_000.0, "{cycle_total}");
+    let cycle_frames = cycle.frame_cycles.clone();
+    assert_eq!(cycle_frames.len(), 3);
+    for level in ["analytic", "sampled:2", "sampled:3", "sampled:10"] {
+        let result = run_at(level, &arch, &stream);
+        let total = result.total_cycles.unwrap() as f64;
+        assert!(
+            (total - cycle_total).abs() <= 0.01 * cycle_total,
+            "{level}: {total} cycles against {cycle_total}"
+        );
+        let frames = result.frame_cycles;
+        assert_eq!(frames.len(), cycle_frames.len(), "{level}");
+        for (frame, cycle_frame) in frames.iter().zip(&cycle_frames) {
+            let (frame, cycle_frame) = (*frame as f64, *cycle_frame as f64);
+            assert!(
+                (frame - cycle_frame).abs() <= 0.01 * cycle_frame,
+                "{level}: frames {frames:?} against {cycle_frames:?}"
+            );
+        }
+    }
+}

@@ -27,7 +27,9 @@
 //!   query that never ended counts as answered at 0).
 //! - `swap` closes the window it falls in (its work so far predicted as if the stream ended
 //!   there, `T` and its drain `D`) and ends the frame when the host has issued it and the
-//!   pipe is done: `max(h, e + D)`.
+//!   pipe is done: `max(h, e + D, a)`, with `a` the latest answer of the queries so far (on
+//!   the IR a many-tile query's merge can outlast the queries after it). The window takes
+//!   the wait: the next starts no earlier.
 //!
 //! With no closed-loop record, every `r_w` is 0 and `e_w = Σ T_w`: the open-loop prediction.
 
@@ -52,6 +54,10 @@ pub(crate) struct PredictedLoop {
     idle: f64,
     /// Each query's predicted answer: available cycle and record words.
     answers: HashMap<u32, (u64, u64)>,
+    /// The last query's id, whose answer a followed latency may still move, and the latest
+    /// answer of the queries before it.
+    last_answered: Option<u32>,
+    latest_settled_answer: u64,
     /// The cycle the last query's end token entered.
     last_token: f64,
     /// The last query's id, until a pause or the next window's first primitive.
@@ -73,6 +79,8 @@ impl PredictedLoop {
             tail: 0.0,
             idle: 0.0,
             answers: HashMap::new(),
+            last_answered: None,
+            latest_settled_answer: 0,
             last_token: 0.0,
             followed: None,
             following: None,
@@ -130,6 +138,11 @@ impl PredictedLoop {
                 }
                 let idle = self.idle_cycle();
                 self.front.swap(idle);
+                // The frame's end waits for the pipe to be through everything: the window
+                // the swap closed takes the drain, and the next starts after it.
+                self.pipe_end = self.pipe_end.max(idle.idle_cycle as f64);
+                self.tail = 0.0;
+                self.window_start = None;
             }
             other => self.front.command(other),
         }
@@ -191,7 +204,9 @@ impl PredictedLoop {
             + result.held_hits;
         let token = self.pipe_end.max(self.front.command_release() as f64);
         let available = (token + end.latency).ceil() as u64;
+        self.latest_settled_answer = self.latest_answer();
         self.answers.insert(result.id, (available, words));
+        self.last_answered = Some(result.id);
         self.last_token = token;
         self.followed = Some(result.id);
         self.following = None;
@@ -239,9 +254,21 @@ impl PredictedLoop {
         }
     }
 
+    /// The cycle the last of the queries ended so far is answered.
+    fn latest_answer(&self) -> u64 {
+        let last = self.last_answered.and_then(|id| self.answers.get(&id));
+        last.map_or(0, |&(available, _)| available)
+            .max(self.latest_settled_answer)
+    }
+
+    /// The cycle the pipe is through everything given it: its last window's work and drain,
+    /// and every query's answer (on the IR an earlier query's merge can outlast a later
+    /// one's: a 64-tile query of the hard cases retiled 8x8 on ir2 answered at cycle 42,963,
+    /// the query after it at 39,384, where the run had ended).
     fn idle_cycle(&self) -> PipeState {
+        let drained = (self.pipe_end + self.tail).round() as u64;
         PipeState {
-            idle_cycle: (self.pipe_end + self.tail).round() as u64,
+            idle_cycle: drained.max(self.latest_answer()),
             // The level predicts no busy split.
             raster_busy_cycles: 0,
         }

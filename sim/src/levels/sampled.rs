@@ -99,7 +99,11 @@
 //!   the window before it in the same machine (the final window: the machine's total cycles
 //!   minus that); its query's latency is the machine's.
 //! - A `swap` also ends a window (a sampled one costs up to the machine's frame end), so
-//!   frames are sums of windows: each frame's time is its windows' costs.
+//!   frames are sums of windows: each frame's time is its windows' costs, laid end to end in
+//!   stream order, and a frame's end, and the run's, wait for every query answered so far,
+//!   each its latency after its end token (`timeline`; an extrapolated window's swap
+//!   takes the wait the formulas' timeline gives it, the answers' calibrated latencies may
+//!   lengthen it).
 //! - Every other window (warm-up ones included) costs `gap + pipe'`. The window's
 //!   time on the analytic level's timeline ([`crate::levels::predicted_loop`]) is split
 //!   into `pipe`, the formulas' `T_w` (the pipe's own work), and `gap`, the rest: the
@@ -377,6 +381,44 @@ struct Closed {
     /// A sampled window's head, cut while its machine ran: the cycle the machine's next
     /// event would have entered the pipe at the cut, where the tail's measured cost begins.
     mark: Option<u64>,
+    /// Where it comes in the stream among the closed windows (a cut window's head before
+    /// its tail).
+    order: u64,
+}
+
+/// A window on the level's timeline: measured (sampled) or extrapolated.
+struct Timed {
+    order: u64,
+    frame: u64,
+    frame_ended: bool,
+    /// Its cycles from the end of the window before.
+    cost: f64,
+    /// Its query (the index in the run's queries) and the cycles into the window its end
+    /// token entered.
+    token: Option<(usize, f64)>,
+}
+
+/// The run's cycles from its windows in stream order, each frame's into `frame_cycles`: a
+/// window's cost after the one before, its query answered its latency (`latencies`, by
+/// query) after its end token; a frame's end, and the run's, wait for every answer so far
+/// (on the IR a query's merge can outlast the windows after it: a 256-tile query of a
+/// one-frame scene on ir4 answered 21,214 cycles after its token, where the windows' costs
+/// ended the frame at 3,890).
+fn timeline(windows: &[Timed], latencies: &[Option<u64>], frame_cycles: &mut [f64]) -> f64 {
+    let (mut now, mut answered) = (0.0f64, 0.0f64);
+    for (k, window) in windows.iter().enumerate() {
+        let start = now;
+        now += window.cost;
+        if let Some((index, token)) = window.token {
+            let latency = latencies[index].unwrap_or(0) as f64;
+            answered = answered.max(start + token + latency);
+        }
+        if window.frame_ended || k + 1 == windows.len() {
+            now = now.max(answered);
+        }
+        frame_cycles[window.frame as usize] += now - start;
+    }
+    now
 }
 
 /// Sampled windows' figures, measured (m) beside the formulas' prediction (p) for each (a
@@ -662,8 +704,8 @@ pub struct SampledModel {
     latency_by_class: BTreeMap<Class, Calibration>,
     /// The sampled queries' measured latencies by class and the formulas' latency.
     donors: Donors,
-    /// Σ cost of the sampled windows (final included).
-    sampled_cycles: u64,
+    /// Windows closed so far (heads of cut windows included).
+    closed: u64,
     /// Windows to extrapolate.
     extrapolated: Vec<Closed>,
     /// Per query (in order): its latency if sampled.
@@ -676,8 +718,8 @@ pub struct SampledModel {
     frames: u64,
     /// Whether the stream has closed-loop records (frames are timed only then).
     closed_loop: bool,
-    /// The sampled windows' measured costs, with their frames.
-    sampled_costs: Vec<(u64, u64)>,
+    /// The sampled windows, measured.
+    measured: Vec<Timed>,
     width: u32,
     height: u32,
     /// Read from a window index: the machines' depths are made consistent with the trace's
@@ -779,14 +821,14 @@ impl SampledModel {
             pipe_by_class: BTreeMap::new(),
             latency_by_class: BTreeMap::new(),
             donors: Donors::default(),
-            sampled_cycles: 0,
+            closed: 0,
             extrapolated: Vec::new(),
             latencies: Vec::new(),
             calibrating_latencies: Vec::new(),
             predicted_latencies: Vec::new(),
             frames: 0,
             closed_loop: false,
-            sampled_costs: Vec::new(),
+            measured: Vec::new(),
             width,
             height,
             consistent,
@@ -1031,7 +1073,9 @@ impl SampledModel {
             frame: self.frames,
             frame_ended: false,
             mark: None,
+            order: self.closed,
         };
+        self.closed += 1;
         match &mut self.run {
             Some(run) => run.windows.push(Closed {
                 mark: Some(run.machine.entry_cycle()),
@@ -1455,7 +1499,9 @@ impl SampledModel {
             frame: self.frames,
             frame_ended: self.window.frame_ended,
             mark: None,
+            order: self.closed,
         };
+        self.closed += 1;
         self.frames += self.window.frame_ended as u64;
         self.windows += 1;
         match &mut self.run {
@@ -1500,8 +1546,16 @@ impl SampledModel {
                     _ => report.summary.cycles,
                 };
                 let cost = end.saturating_sub(previous_end);
-                self.sampled_cycles += cost;
-                self.sampled_costs.push((window.frame, cost));
+                let token = query.zip(window.query).map(|(q, (index, _))| {
+                    (index, q.end_cycle.saturating_sub(previous_end) as f64)
+                });
+                self.measured.push(Timed {
+                    order: window.order,
+                    frame: window.frame,
+                    frame_ended: window.frame_ended,
+                    cost: cost as f64,
+                    token,
+                });
                 if let (Some(q), Some((index, _))) = (query, window.query) {
                     self.latencies[index] = Some(q.latency_cycles);
                 }
@@ -1580,13 +1634,8 @@ impl SampledModel {
             pooled
         };
         let slope = common_slope(self.latency_by_class.values());
-        let mut total = self.sampled_cycles as f64;
         let mut filled = self.latencies.clone();
-        // Each frame's cycles: its windows' costs (the final window's drain in the last).
-        let mut frame_cycles = vec![0f64; self.frames as usize + 1];
-        for &(frame, cost) in &self.sampled_costs {
-            frame_cycles[frame as usize] += cost as f64;
-        }
+        let mut timed = std::mem::take(&mut self.measured);
         // Each extrapolated query's latency by regression, and its donor's, if it has one.
         let regressed: Vec<Option<(f64, Option<u64>)>> = self
             .extrapolated
@@ -1619,8 +1668,14 @@ impl SampledModel {
         }
         for (window, regressed) in self.extrapolated.iter().zip(regressed) {
             let cost = window.work.host_gap + pipe_cycles(&window.class, window.work.pipe);
-            total += cost;
-            frame_cycles[window.frame as usize] += cost;
+            timed.push(Timed {
+                order: window.order,
+                frame: window.frame,
+                frame_ended: window.frame_ended,
+                cost,
+                // Its end token enters as its work ends.
+                token: window.query.map(|(index, _)| (index, cost)),
+            });
             if let (Some((index, _)), Some((latency, donor))) = (window.query, regressed) {
                 // The donor's difference from its cell's donated mean, on the regression.
                 let latency = donor.map_or(latency, |donor| {
@@ -1628,13 +1683,11 @@ impl SampledModel {
                     (latency + donor as f64 - sum / count).max(0.0)
                 });
                 filled[index] = Some(latency.round() as u64);
-                // The final window's drain: its query's latency.
-                if window.last {
-                    total += latency;
-                    frame_cycles[window.frame as usize] += latency;
-                }
             }
         }
+        timed.sort_unstable_by_key(|window| window.order);
+        let mut frame_cycles = vec![0f64; self.frames as usize + 1];
+        let total = timeline(&timed, &filled, &mut frame_cycles);
         let windows = SampledWindows {
             simulated: self.sampled,
             slowest: self.sampled_slowest,

@@ -10,7 +10,8 @@
 //!   words), then the two merge stages.
 //!
 //! Total cycles = `Σ_w T_w` + the last window's tail (the last query's latency, or the pipe's
-//! drain when the stream ends without a query end), in an open loop; in a closed loop the
+//! drain when the stream ends without a query end), or the latest query's answer where that
+//! is later (an earlier query's merge on the IR), in an open loop; in a closed loop the
 //! windows start no earlier than the host and geometry stage release them and frames are
 //! timed ([`crate::levels::predicted_loop`]). Costs: the functional model plus a few
 //! integer operations per fragment.
