@@ -712,7 +712,7 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
     // 10.53% -> 0%, sampled 5.26% -> 0%; every class's sampled:10 p95 within 0.62%, its
     // analytic p95 within 1.3% (the hard cases'); measured 2026-12-05.
     #[rustfmt::skip]
-    let bounds: [(&str, f64, f64, f64, f64); 10] = [
+    let bounds: [ClassBounds; 10] = [
         ("demo",              0.05,  0.10,  0.01,  0.03),  // every target (l)
         ("retiled-1x1-4x4",   0.05,  0.10,  0.01,  0.03),  // every target (m)
         ("retiled-32x32",     0.05,  0.10,  0.01,  0.03),  // every target
@@ -724,9 +724,22 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
         ("walk-adaptive",     0.05,  0.10,  0.01,  0.03),  // every target (l)
         ("walk-grids",        0.05,  0.10,  0.01,  0.03),  // every target (g)
     ];
-    let error = |class: &str, level: &str, metric: &str| class_error(&rows, class, level, metric);
+    let over = over_bounds(&rows, &bounds);
+    assert!(
+        over.is_empty(),
+        "errors over their bounds:\n{}",
+        over.join("\n")
+    );
+}
+
+/// (class, analytic cycles, analytic p95, sampled:10 cycles, sampled:10 p95): bounds on a
+/// class's errors, as fractions.
+type ClassBounds = (&'static str, f64, f64, f64, f64);
+
+/// The errors of `rows` (a corpus run's) over their `bounds`, one line each.
+fn over_bounds(rows: &serde_json::Value, bounds: &[ClassBounds]) -> Vec<String> {
     let mut over = Vec::new();
-    for (class, analytic_cycles, analytic_p95, sampled_cycles, sampled_p95) in bounds {
+    for &(class, analytic_cycles, analytic_p95, sampled_cycles, sampled_p95) in bounds {
         for (level, metric, bound) in [
             ("analytic", "cycles_error", analytic_cycles),
             ("analytic", "frame_error", analytic_cycles),
@@ -734,17 +747,72 @@ fn the_ladder_errors_stay_within_their_bounds_on_every_class() {
             ("sampled:10", "cycles_error", sampled_cycles),
             ("sampled:10", "latency_p95_error", sampled_p95),
         ] {
-            let value = error(class, level, metric);
+            let value = class_error(rows, class, level, metric);
             if value > bound {
                 over.push(format!("{class} {level} {metric}: {value:.4} > {bound}"));
             }
         }
     }
-    assert!(
-        over.is_empty(),
-        "errors over their bounds:\n{}",
-        over.join("\n")
-    );
+    over
+}
+
+/// Under the blocks and morton interleaves, with FIFOs of 2 entries in front of the Image
+/// Engines (a block's share of a row, 4 fragments, then fills an engine's FIFO and holds
+/// its board's generator back), every class of the small corpus on ir2 at 4 engines is
+/// held to issue 15's targets. The formulas had dealt a stretch to its engines as under
+/// the columns interleave, every engine starting at once, and restarted every board
+/// together at each query's end (the machine's end token holds no board back): on the demo
+/// at 1280x1024 on ir4 with the morton interleave and FIFOs of 2, the analytic level took
+/// 16.1 M cycles where the machine takes 28.7 M (43.8% short), sampled:10 22.9 M (20.3%);
+/// on the small corpus the hard cases' p95 latency was 25.2% off at both levels. Measured
+/// 2026-12-07: every error within 1.2% (the 32x32-retiled demo's analytic cycles under
+/// morton), the rest within 0.82%.
+#[test]
+fn the_ladder_errors_stay_within_the_targets_under_the_blocks_and_morton_interleaves() {
+    let dir = support::cli::scratch_dir("interleaves");
+    let traces = dir.join("traces");
+    let targets: Vec<ClassBounds> = [
+        "demo",
+        "retiled-1x1-4x4",
+        "retiled-32x32",
+        "hardcases",
+        "random",
+        "walk-frustum",
+        "walk-hierarchical",
+        "walk-quadtree",
+        "walk-adaptive",
+        "walk-grids",
+    ]
+    .into_iter()
+    .map(|class| (class, 0.05, 0.10, 0.01, 0.03))
+    .collect();
+    // ir4 with the default FIFOs: its sampled machines, started mid-trace with every board
+    // level, had measured windows whose boards the trace had left apart (the hard cases
+    // under the blocks interleave: sampled:10 5.83% over on cycles).
+    for (machine, interleave, fifo) in [
+        ("ir2", "blocks", 2),
+        ("ir2", "morton", 2),
+        ("ir4", "blocks", 8),
+    ] {
+        let rows = small_corpus_at_4_engines(
+            "interleaves",
+            machine,
+            &[
+                "--traces-dir",
+                traces.to_str().unwrap(),
+                "--set",
+                &format!("interleave={interleave}"),
+                "--set",
+                &format!("image_engine_fifo_entries={fifo}"),
+            ],
+        );
+        let over = over_bounds(&rows, &targets);
+        assert!(
+            over.is_empty(),
+            "{machine}, {interleave}, FIFOs of {fifo}: errors over their bounds:\n{}",
+            over.join("\n")
+        );
+    }
 }
 
 /// `--json` names the run each of a class's worst errors is from, and that run alone

@@ -80,6 +80,29 @@ impl FramebufferInterleave {
         }
     }
 
+    /// The units owning pixels `x..x + len` of row `y`, in order, as runs: each unit with
+    /// the pixels it owns in a row before the next pixel's owner differs (a block's share
+    /// of the row under `blocks` and `morton`, one pixel under `columns`).
+    #[inline]
+    pub fn for_each_block_along(
+        &self,
+        x: u16,
+        y: u16,
+        len: usize,
+        mut each: impl FnMut(usize, u64),
+    ) {
+        if self.kind == Interleave::Columns {
+            return self.for_each_unit_along(x, y, len, |unit| each(unit, 1));
+        }
+        let end = x as u32 + len as u32;
+        let mut at = x as u32;
+        while at < end {
+            let block_end = ((at / self.block_width + 1) * self.block_width).min(end);
+            each(self.unit(at as u16, y), (block_end - at) as u64);
+            at = block_end;
+        }
+    }
+
     /// The board and Image Engine owning pixel `(x, y)`.
     #[inline]
     pub fn owner(&self, x: u16, y: u16) -> PixelOwner {
@@ -137,6 +160,28 @@ mod tests {
                 for (x, y, len) in [(0, 0, 17), (5, 3, 700), (1021, 77, 3), (2, 9, 0)] {
                     let mut along = Vec::new();
                     interleave.for_each_unit_along(x, y, len, |g| along.push(g));
+                    let each: Vec<usize> =
+                        (0..len).map(|i| interleave.unit(x + i as u16, y)).collect();
+                    assert_eq!(along, each, "{kind:?} {boards}x{per_board} at ({x}, {y})");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn blocks_along_a_row_are_its_pixels_units_in_runs() {
+        for kind in [Interleave::Columns, Interleave::Blocks, Interleave::Morton] {
+            for (boards, per_board, block_width) in [(2, 3, 2), (4, 5, 3), (1, 1, 1), (4, 80, 4)] {
+                let interleave = FramebufferInterleave {
+                    block_width,
+                    ..interleave(kind, boards, per_board)
+                };
+                for (x, y, len) in [(0, 0, 17), (5, 3, 700), (1021, 77, 3), (2, 9, 0)] {
+                    let mut along = Vec::new();
+                    interleave.for_each_block_along(x, y, len, |g, count| {
+                        assert!(count > 0);
+                        along.extend(std::iter::repeat_n(g, count as usize));
+                    });
                     let each: Vec<usize> =
                         (0..len).map(|i| interleave.unit(x + i as u16, y)).collect();
                     assert_eq!(along, each, "{kind:?} {boards}x{per_board} at ({x}, {y})");

@@ -156,9 +156,10 @@ impl PredictedLoop {
     }
 
     /// The release of the open window's last primitive so far, in cycles from the window's
-    /// start (0 for its first: the window starts at it).
+    /// start: negative where the host released it before the pipe was through the window
+    /// before (the window starts at the later of the two).
     pub(crate) fn release_in_window(&self) -> f64 {
-        (self.last_release - self.window_start()).max(0.0)
+        self.last_release - self.window_start()
     }
 
     /// The host and geometry stage, as at the cycle level.

@@ -1177,7 +1177,8 @@ impl SampledModel {
         // starting where the formulas have the window's work so far (after the begin
         // above, whose host work was done long before).
         let origin = self.work_so_far().1.round() as u64;
-        let start = machine.resume_front(self.predicted.front(), origin)?;
+        let leads = self.formulas.board_leads();
+        let start = machine.resume_front(self.predicted.front(), origin, &leads)?;
         self.run = Some(Run {
             start,
             machine,

@@ -257,6 +257,15 @@ impl IrMachine {
         self.generators.iter_mut().for_each(|g| g.release(cycle));
     }
 
+    /// Board `b`'s Fragment Generator can start nothing before `cycle - leads[b]` (a board
+    /// without a lead given, before `cycle`).
+    pub fn release_boards(&mut self, cycle: u64, leads: &[u64]) {
+        for (board, generator) in self.generators.iter_mut().enumerate() {
+            let lead = leads.get(board).copied().unwrap_or(0);
+            generator.release(cycle.saturating_sub(lead));
+        }
+    }
+
     /// The cycle by which every block is idle (everything is timed as it is fed).
     pub fn drain(&mut self) -> Result<u64, SimError> {
         Ok(self.idle_cycle())

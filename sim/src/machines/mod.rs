@@ -317,13 +317,25 @@ impl MachineModel {
     /// machine's pipe starting at `origin` on `front`'s timeline
     /// ([`ClosedLoop::resume_from`]). Its clock counts from the earlier of `origin` and the
     /// host's clock there (a host ahead of the pipe keeps its lead), and nothing enters its
-    /// pipe before `origin` does: the cycle returned, in its own clock.
-    pub fn resume_front(&mut self, front: &ClosedLoop, origin: u64) -> Result<u64, SimError> {
-        let base = origin.min(front.host_now());
+    /// pipe before `origin` does: the cycle returned, in its own clock. On the
+    /// InfiniteReality-like machine board `b`'s Fragment Generator starts `board_leads[b]`
+    /// cycles sooner (a board through its work before the others keeps its lead: the end
+    /// token holds no board back), and the clock counts from early enough for the lead.
+    pub fn resume_front(
+        &mut self,
+        front: &ClosedLoop,
+        origin: u64,
+        board_leads: &[u64],
+    ) -> Result<u64, SimError> {
+        let lead = board_leads.iter().copied().max().unwrap_or(0);
+        let base = origin.saturating_sub(lead).min(front.host_now());
         self.front.resume_from(front, base);
         self.resumed.get_or_insert_with(Resumed::default).base = base;
         let start = origin - base;
-        self.pipe.release(start)?;
+        match &mut self.pipe {
+            Pipe::Ir(machine) => machine.release_boards(start, board_leads),
+            pipe => pipe.release(start)?,
+        }
         Ok(start)
     }
 
@@ -404,7 +416,7 @@ mod tests {
             .resume_with_depths(&state, DepthBuffer::unset(8, 8))
             .unwrap();
         // The pipe starts 400 cycles after the host's clock: the clock counts from the host's.
-        assert_eq!(machine.resume_front(&front, base + 400).unwrap(), 400);
+        assert_eq!(machine.resume_front(&front, base + 400, &[]).unwrap(), 400);
         assert_eq!(machine.front.host_now(), 0);
         // Query 7 answered 1,000 cycles past the host's clock, 2 words.
         machine.take_answer(7, (base + 1_000, 2));

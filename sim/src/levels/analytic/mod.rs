@@ -236,6 +236,16 @@ impl Formulas {
         }
     }
 
+    /// On the InfiniteReality-like machine, the cycles each board's Fragment Generator is
+    /// through its work before the last board's ([`ir::IrWindow::board_leads`]); none on
+    /// the O2.
+    pub(crate) fn board_leads(&self) -> Vec<u64> {
+        match self {
+            Formulas::O2(_) => Vec::new(),
+            Formulas::Ir(ir) => ir.board_leads(),
+        }
+    }
+
     /// The stream ended: the last window's prediction, if it holds any work.
     pub(crate) fn finish(&self) -> Option<WindowEnd> {
         match self {

@@ -1176,6 +1176,8 @@ impl O2Bottleneck {
     /// A primitive released `release` cycles after the window's start: the rasterizer sets
     /// it up no earlier.
     pub(super) fn primitive(&mut self, release: f64) {
+        // One pipe: it takes no primitive before the window starts.
+        let release = release.at_least(0.0);
         self.close_stretch();
         if release > self.pipe.raster {
             self.close_head();
