@@ -32,6 +32,8 @@ pub enum OutputError {
     NotARegularFile { path: PathBuf },
     #[error("{}: this command reads it: an output there would overwrite its own input", path.display())]
     WouldOverwriteInput { path: PathBuf },
+    #[error("{}: two of this command's outputs are asked for there: give each its own path", path.display())]
+    TwoOutputsOnePath { path: PathBuf },
     #[error("cannot rename {} to {}", from.display(), to.display())]
     Rename {
         from: PathBuf,
@@ -176,6 +178,13 @@ impl AtomicFile {
         let mut live = lock(&LIVE);
         if INTERRUPTED.load(Ordering::SeqCst) {
             return Err(interrupted(&temp));
+        }
+        if live.contains(&temp) {
+            // Another output of this process is being written there (its temporary is
+            // named by the path): the later rename would replace it.
+            return Err(OutputError::TwoOutputsOnePath {
+                path: path.to_path_buf(),
+            });
         }
         // Named by the path asked for: the temporary beside it is this module's business.
         let file = File::create(&temp).map_err(|source| OutputError::Create {
@@ -454,6 +463,28 @@ mod tests {
         assert_eq!(failed.unwrap_err().to_string(), "interrupted");
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "old");
         assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
+    }
+
+    #[test]
+    fn a_second_output_to_the_same_path_is_refused_and_the_first_stays_whole() {
+        // `replay --vcd same.out --fst same.out` had written both through one temporary:
+        // the first renamed it over same.out, the second found it gone and failed, leaving
+        // same.out behind from a failed command.
+        let temp = crate::test_dir("atomic-twice");
+        let dir = temp.path();
+        let path = dir.join("same.out");
+        let first = AtomicFile::create(&path).unwrap();
+        let second = AtomicFile::create(&dir.join(".").join("same.out"));
+        assert!(matches!(
+            second.err(),
+            Some(OutputError::TwoOutputsOnePath { .. })
+        ));
+        first.handle().unwrap().write_all(b"first").unwrap();
+        first.commit().unwrap();
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), "first");
+        assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
+        // Once the first is through, the path is free again.
+        AtomicFile::create(&path).unwrap();
     }
 
     #[test]

@@ -28,6 +28,13 @@
 //! After a hardware global merge the final report goes to host memory by DMA, `x(W)` cycles
 //! at the DMA's width ([`delivered`]); a software merge has it in the host already. With
 //! unlimited links (`x = 0`), the rules are those of a merge that moves no words.
+//!
+//! Links carry one report at a time, in order: a report ready in `r` crosses its link from
+//! `max(r, f)`, `f` the cycle the link's report before it (an earlier query's) has crossed,
+//! and the DMA likewise ([`MergeState`], which the machine carries from query to query).
+//! (Without it, back-to-back queries of 256 tiles on ir4 crossed the same links at full
+//! rate at once, each answered some 21,000 cycles after its end whether the one before had
+//! been or not.)
 
 use crate::arch::{MergeKind, MergeNetwork, OCCU_WORD_BITS};
 use occsim_traces::hit_list::listed_hits_per_tile;
@@ -107,48 +114,190 @@ pub fn transfer_cycles(words: u64, bits_per_cycle: u64) -> u64 {
     }
 }
 
-/// A stage's merged report (ready cycle and hits), given its inputs in order. `host` is the
-/// host's first free cycle (software merges advance it).
+/// When each link of a merge stage is free: the cycle the last report over it has crossed
+/// (numbered as the stage's rules meet them: a tree's level by level, each input's link to
+/// its pair, a chain's the carried report's link into input `i`).
+#[derive(Clone, Debug, Default)]
+pub struct MergeLinks {
+    free: Vec<u64>,
+}
+
+impl MergeLinks {
+    /// A report ready in `ready` crosses link `link` in `cycles`, after the link's report
+    /// before it: the cycle it has crossed.
+    fn cross(&mut self, link: usize, ready: u64, cycles: u64) -> u64 {
+        if link >= self.free.len() {
+            self.free.resize(link + 1, 0);
+        }
+        let crossed = ready.max(self.free[link]) + cycles;
+        self.free[link] = crossed;
+        crossed
+    }
+}
+
+/// What the two merge stages carry from query to query: the host's first free cycle
+/// (software merges advance it), each board's stage-one links, stage two's, and when the
+/// DMA to host memory is free.
+#[derive(Clone, Debug, Default)]
+pub struct MergeState {
+    pub host: u64,
+    local: Vec<MergeLinks>,
+    global: MergeLinks,
+    dma: u64,
+}
+
+impl MergeState {
+    /// Board `board`'s stage one over its Image Engines' reports (in order).
+    pub fn local(
+        &mut self,
+        network: &MergeNetwork,
+        board: usize,
+        inputs: &[Partial],
+        shape: ReportShape,
+    ) -> Partial {
+        self.grow_to(board);
+        merged_ready(
+            network,
+            inputs,
+            shape,
+            &mut self.host,
+            &mut self.local[board],
+        )
+    }
+
+    /// [`Self::local`] of reports without hits, given their ready cycles (overwritten).
+    pub fn local_brief(
+        &mut self,
+        network: &MergeNetwork,
+        board: usize,
+        ready: &mut [u64],
+        tiles: u64,
+    ) -> u64 {
+        self.grow_to(board);
+        merged_ready_brief(
+            network,
+            ready,
+            tiles,
+            &mut self.host,
+            &mut self.local[board],
+        )
+    }
+
+    /// Stage two over the boards' merged reports (in board order).
+    pub fn global(
+        &mut self,
+        network: &MergeNetwork,
+        inputs: &[Partial],
+        shape: ReportShape,
+    ) -> Partial {
+        merged_ready(network, inputs, shape, &mut self.host, &mut self.global)
+    }
+
+    /// [`Self::global`] of reports without hits, given their ready cycles (overwritten).
+    pub fn global_brief(&mut self, network: &MergeNetwork, ready: &mut [u64], tiles: u64) -> u64 {
+        merged_ready_brief(network, ready, tiles, &mut self.host, &mut self.global)
+    }
+
+    /// The cycle the final report is in host memory ([`delivered`]), the DMA taking one
+    /// report at a time.
+    pub fn deliver(
+        &mut self,
+        global: &MergeNetwork,
+        merged: &Partial,
+        shape: ReportShape,
+        dma_bits_per_cycle: u64,
+    ) -> u64 {
+        let ready = Partial {
+            ready: merged.ready.max(self.dma),
+            hits: merged.hits.clone(),
+        };
+        let available = delivered(global, &ready, shape, dma_bits_per_cycle);
+        if global.kind != MergeKind::Software {
+            self.dma = available;
+        }
+        available.max(merged.ready)
+    }
+
+    /// The same state on a clock `base` cycles later (a machine started mid-trace counts
+    /// from there): every cycle `base` sooner, none before 0.
+    pub fn moved_back(&self, base: u64) -> MergeState {
+        let back = |cycle: &u64| cycle.saturating_sub(base);
+        let links = |links: &MergeLinks| MergeLinks {
+            free: links.free.iter().map(back).collect(),
+        };
+        MergeState {
+            host: back(&self.host),
+            local: self.local.iter().map(links).collect(),
+            global: links(&self.global),
+            dma: back(&self.dma),
+        }
+    }
+
+    /// Room for board `board`'s stage-one links.
+    fn grow_to(&mut self, board: usize) {
+        if board >= self.local.len() {
+            self.local.resize_with(board + 1, MergeLinks::default);
+        }
+    }
+}
+
+/// A stage's merged report (ready cycle and hits), given its inputs in order, over `links`
+/// (each report after the one before it on its link). `host` is the host's first free
+/// cycle (software merges advance it).
 pub fn merged_ready(
     network: &MergeNetwork,
     inputs: &[Partial],
     shape: ReportShape,
     host: &mut u64,
+    links: &mut MergeLinks,
 ) -> Partial {
-    let crossed =
-        |p: &Partial| p.ready + transfer_cycles(p.words(shape.tiles), network.link_bits_per_cycle);
+    let crossing = |p: &Partial| transfer_cycles(p.words(shape.tiles), network.link_bits_per_cycle);
     if inputs.iter().all(|p| p.hits.is_empty()) {
         let mut ready: Vec<u64> = inputs.iter().map(|p| p.ready).collect();
-        return Partial::brief(merged_ready_brief(network, &mut ready, shape.tiles, host));
+        let ready = merged_ready_brief(network, &mut ready, shape.tiles, host, links);
+        return Partial::brief(ready);
     }
     match network.kind {
         MergeKind::Tree => {
             let mut level = inputs.to_vec();
+            let mut first_link = 0;
             while level.len() > 1 {
-                level = level
+                let next = level
                     .chunks(2)
-                    .map(|pair| match pair {
-                        [left, right] => Partial {
-                            ready: crossed(left).max(crossed(right)) + network.hop_latency_cycles,
-                            hits: left.merged_hits(right, shape.room),
-                        },
+                    .enumerate()
+                    .map(|(pair_index, pair)| match pair {
+                        [left, right] => {
+                            let link = first_link + 2 * pair_index;
+                            let left_in = links.cross(link, left.ready, crossing(left));
+                            let right_in = links.cross(link + 1, right.ready, crossing(right));
+                            Partial {
+                                ready: left_in.max(right_in) + network.hop_latency_cycles,
+                                hits: left.merged_hits(right, shape.room),
+                            }
+                        }
                         [single] => single.clone(),
                         _ => unreachable!("chunks of two"),
                     })
                     .collect();
+                first_link += level.len();
+                level = next;
             }
             level.pop().unwrap_or(Partial::brief(0))
         }
-        MergeKind::Chain => inputs
-            .iter()
-            .cloned()
-            .reduce(|carried, input| Partial {
-                ready: input
-                    .ready
-                    .max(crossed(&carried) + network.hop_latency_cycles),
-                hits: carried.merged_hits(&input, shape.room),
-            })
-            .unwrap_or(Partial::brief(0)),
+        MergeKind::Chain => {
+            let mut inputs = inputs.iter().cloned().enumerate();
+            let Some((_, mut carried)) = inputs.next() else {
+                return Partial::brief(0);
+            };
+            for (link, input) in inputs {
+                let arrived = links.cross(link, carried.ready, crossing(&carried));
+                carried = Partial {
+                    ready: input.ready.max(arrived + network.hop_latency_cycles),
+                    hits: carried.merged_hits(&input, shape.room),
+                };
+            }
+            carried
+        }
         MergeKind::Software => {
             let mut merged = Partial::brief(0);
             for input in inputs {
@@ -171,32 +320,45 @@ pub fn merged_ready_brief(
     ready: &mut [u64],
     tiles: u64,
     host: &mut u64,
+    links: &mut MergeLinks,
 ) -> u64 {
     let words = tiles * BRIEF_RECORD_ENTRIES as u64;
     let crossing = transfer_cycles(words, network.link_bits_per_cycle);
+    let hop = network.hop_latency_cycles;
     match network.kind {
         MergeKind::Tree => {
             // Every report crosses a link in the same cycles: the tree's levels as ready
             // cycles alone, each merged in place.
-            let hop = crossing + network.hop_latency_cycles;
-            let mut len = ready.len();
+            let (mut len, mut first_link) = (ready.len(), 0);
             while len > 1 {
                 let merged = len.div_ceil(2);
                 for i in 0..merged {
                     ready[i] = match (2 * i + 1 < len).then(|| ready[2 * i + 1]) {
-                        Some(right) => ready[2 * i].max(right) + hop,
+                        Some(right) => {
+                            let link = first_link + 2 * i;
+                            let left_in = links.cross(link, ready[2 * i], crossing);
+                            let right_in = links.cross(link + 1, right, crossing);
+                            left_in.max(right_in) + hop
+                        }
                         None => ready[2 * i],
                     };
                 }
+                first_link += len;
                 len = merged;
             }
             ready.first().copied().unwrap_or(0)
         }
-        MergeKind::Chain => ready
-            .iter()
-            .copied()
-            .reduce(|carried, input| input.max(carried + crossing + network.hop_latency_cycles))
-            .unwrap_or(0),
+        MergeKind::Chain => {
+            let Some((&first, rest)) = ready.split_first() else {
+                return 0;
+            };
+            let mut carried = first;
+            for (index, &input) in rest.iter().enumerate() {
+                let arrived = links.cross(index + 1, carried, crossing);
+                carried = input.max(arrived + hop);
+            }
+            carried
+        }
         MergeKind::Software => {
             for &input in ready.iter() {
                 *host = (*host).max(input)
@@ -253,7 +415,16 @@ mod tests {
     fn hand_worked_merge_times() {
         let inputs = ready(&[5, 30, 7, 8, 9]);
         let mut host = 0;
-        let at = |kind, host: &mut u64| merged_ready(&network(kind), &inputs, ONE_TILE, host).ready;
+        let at = |kind, host: &mut u64| {
+            merged_ready(
+                &network(kind),
+                &inputs,
+                ONE_TILE,
+                host,
+                &mut MergeLinks::default(),
+            )
+            .ready
+        };
         // Tree: (5,30)->40, (7,8)->18, 9 -> [40, 18, 9] -> (40,18)->50, 9 -> 60.
         assert_eq!(at(MergeKind::Tree, &mut host), 60);
         // Chain: 5, max(30, 15)=30, max(7, 40)=40, 50, 60.
@@ -267,6 +438,7 @@ mod tests {
             &ready(&[17]),
             ONE_TILE,
             &mut host,
+            &mut MergeLinks::default(),
         );
         assert_eq!(single.ready, 17);
     }
@@ -287,13 +459,31 @@ mod tests {
         let inputs = ready(&[0, 0, 0, 0]);
         let mut host = 0;
         // Tree: two levels of (8 + 10): 18, then 36.
-        let tree = merged_ready(&links(MergeKind::Tree), &inputs, two_tiles, &mut host);
+        let tree = merged_ready(
+            &links(MergeKind::Tree),
+            &inputs,
+            two_tiles,
+            &mut host,
+            &mut MergeLinks::default(),
+        );
         assert_eq!(tree.ready, 36);
         // Chain: 0, 0+8+10=18, 36, 54.
-        let chain = merged_ready(&links(MergeKind::Chain), &inputs, two_tiles, &mut host);
+        let chain = merged_ready(
+            &links(MergeKind::Chain),
+            &inputs,
+            two_tiles,
+            &mut host,
+            &mut MergeLinks::default(),
+        );
         assert_eq!(chain.ready, 54);
         // Software: each read 100 + 3 * 16 = 148: 148, 296, 444, 592.
-        let software = merged_ready(&links(MergeKind::Software), &inputs, two_tiles, &mut host);
+        let software = merged_ready(
+            &links(MergeKind::Software),
+            &inputs,
+            two_tiles,
+            &mut host,
+            &mut MergeLinks::default(),
+        );
         assert_eq!(software.ready, 592);
         // Twice the tiles, twice the words: 16 cycles a crossing, the tree 2 * (16 + 10) = 52.
         let four_tiles = ReportShape {
@@ -301,7 +491,13 @@ mod tests {
             ..two_tiles
         };
         let mut host = 0;
-        let tree = merged_ready(&links(MergeKind::Tree), &inputs, four_tiles, &mut host);
+        let tree = merged_ready(
+            &links(MergeKind::Tree),
+            &inputs,
+            four_tiles,
+            &mut host,
+            &mut MergeLinks::default(),
+        );
         assert_eq!(tree.ready, 52);
         // Verbose hits add words: one tile with 24 hits in each of two inputs, room 40:
         // each input 8 + 24 = 32 words (16 cycles on 64 bits); the merged holds min(48, 40).
@@ -312,7 +508,13 @@ mod tests {
             })
             .collect();
         let shape = ReportShape { tiles: 1, room: 40 };
-        let merged = merged_ready(&links(MergeKind::Tree), &verbose, shape, &mut host);
+        let merged = merged_ready(
+            &links(MergeKind::Tree),
+            &verbose,
+            shape,
+            &mut host,
+            &mut MergeLinks::default(),
+        );
         assert_eq!((merged.ready, merged.hits.clone()), (16 + 10, vec![40]));
         assert_eq!(merged.words(1), 48);
         // On a 32-bit link a word a cycle: 32 + 10.
@@ -320,7 +522,17 @@ mod tests {
             link_bits_per_cycle: 32,
             ..links(MergeKind::Tree)
         };
-        assert_eq!(merged_ready(&narrow, &verbose, shape, &mut host).ready, 42);
+        assert_eq!(
+            merged_ready(
+                &narrow,
+                &verbose,
+                shape,
+                &mut host,
+                &mut MergeLinks::default()
+            )
+            .ready,
+            42
+        );
     }
 
     #[test]
@@ -345,10 +557,84 @@ mod tests {
                 })
                 .collect();
             let mut host = 0;
-            let short = merged_ready(&links, &brief, shape, &mut host).ready;
-            let long = merged_ready(&links, &counted, shape, &mut host).ready;
+            let short =
+                merged_ready(&links, &brief, shape, &mut host, &mut MergeLinks::default()).ready;
+            let long = merged_ready(
+                &links,
+                &counted,
+                shape,
+                &mut host,
+                &mut MergeLinks::default(),
+            )
+            .ready;
             assert_eq!(short, long, "{count} reports");
         }
+    }
+
+    #[test]
+    fn a_report_crosses_its_link_after_the_one_before_it() {
+        // Two inputs, one tile (8 words) each, 32-bit links (8 cycles a crossing), hop 10.
+        // Query 1's reports are ready in 0 and 0: both links busy 0-8, merged in 18. Query
+        // 2's are ready in 4 and 20: the first waits for its link until 8 (in 16), the
+        // second crosses 20-28; merged in 38. On fresh links the first would have been in
+        // by 12 and the merge the same, 38; ready in 4 and 5, it is 16 + 10 = 26 against
+        // fresh links' 13 + 10 = 23.
+        let tree = MergeNetwork {
+            link_bits_per_cycle: 32,
+            ..network(MergeKind::Tree)
+        };
+        let (mut host, mut links) = (0, MergeLinks::default());
+        let mut merge = |ready: &[u64], links: &mut MergeLinks| {
+            merged_ready(
+                &tree,
+                &super::tests::ready(ready),
+                ONE_TILE,
+                &mut host,
+                links,
+            )
+            .ready
+        };
+        assert_eq!(merge(&[0, 0], &mut links), 18);
+        let mut after = links.clone();
+        assert_eq!(merge(&[4, 20], &mut links), 38);
+        assert_eq!(merge(&[4, 5], &mut after), 26);
+        assert_eq!(merge(&[4, 5], &mut MergeLinks::default()), 23);
+        // The brief path keeps the same links: the same cycles.
+        let mut brief_links = MergeLinks::default();
+        let brief = |ready: &[u64], links: &mut MergeLinks| {
+            merged_ready_brief(&tree, &mut ready.to_vec(), 1, &mut 0, links)
+        };
+        assert_eq!(brief(&[0, 0], &mut brief_links), 18);
+        assert_eq!(brief(&[4, 5], &mut brief_links), 26);
+        // A chain's carried report crosses into input 1, then 2: 8 + 10 each. Query 1 from
+        // 0, 0, 0: in by 8, merged 18; in by 26, merged 36. Query 2 ready in 1, 1, 1: its
+        // first crossing waits for 8 (in 16, merged 26), its second for 26 (in 34, 44).
+        let chain = MergeNetwork {
+            link_bits_per_cycle: 32,
+            ..network(MergeKind::Chain)
+        };
+        let mut chain_links = MergeLinks::default();
+        for (ready, merged) in [([0, 0, 0], 36), ([1, 1, 1], 44)] {
+            let reports = super::tests::ready(&ready);
+            let long = merged_ready(&chain, &reports, ONE_TILE, &mut 0, &mut chain_links.clone());
+            let short =
+                merged_ready_brief(&chain, &mut ready.to_vec(), 1, &mut 0, &mut chain_links);
+            assert_eq!((long.ready, short), (merged, merged));
+        }
+    }
+
+    #[test]
+    fn the_dma_takes_one_report_at_a_time() {
+        // 8 words at 16 bits a cycle: 16 cycles each. Two reports merged by 10 and 12:
+        // in host memory by 26, then 42.
+        let global = MergeNetwork {
+            link_bits_per_cycle: 32,
+            ..network(MergeKind::Tree)
+        };
+        let mut state = MergeState::default();
+        let first = state.deliver(&global, &Partial::brief(10), ONE_TILE, 16);
+        let second = state.deliver(&global, &Partial::brief(12), ONE_TILE, 16);
+        assert_eq!((first, second), (26, 42));
     }
 
     #[test]
@@ -368,7 +654,14 @@ mod tests {
         for kind in [MergeKind::Tree, MergeKind::Chain, MergeKind::Software] {
             let mut host = 0;
             assert_eq!(
-                merged_ready(&free(kind), &inputs, shape, &mut host).ready,
+                merged_ready(
+                    &free(kind),
+                    &inputs,
+                    shape,
+                    &mut host,
+                    &mut MergeLinks::default()
+                )
+                .ready,
                 30
             );
         }

@@ -1178,7 +1178,8 @@ impl SampledModel {
         // above, whose host work was done long before).
         let origin = self.work_so_far().1.round() as u64;
         let leads = self.formulas.board_leads();
-        let start = machine.resume_front(self.predicted.front(), origin, &leads)?;
+        let merges = self.formulas.merges();
+        let start = machine.resume_front(self.predicted.front(), origin, &leads, merges)?;
         self.run = Some(Run {
             start,
             machine,

@@ -34,7 +34,9 @@
 //!    `local_merge_link_bits_per_cycle` and `global_merge_link_bits_per_cycle`, or read by
 //!    the host at `result_read_cycles_per_word` a word in a software merge. After a
 //!    hardware stage two the final report goes to host memory by DMA at
-//!    `report_dma_bits_per_cycle`; the result is available when it is there. Latency =
+//!    `report_dma_bits_per_cycle`; the result is available when it is there. A link and the
+//!    DMA carry one report at a time, in order: a query's report waits for an earlier
+//!    query's to have crossed ([`crate::blocks::merge_network::MergeState`]). Latency =
 //!    available - `t_end` = drain + local + global, with drain = `max r - t_end`, local =
 //!    `max_b board_b - max r`, global = available - `max_b board_b` (the DMA included).
 //! 6. State changes, `begin` and `clear` take no cycles; every Image Engine sees them (the
@@ -64,7 +66,7 @@ use crate::arch::{Arch, IrArch};
 use crate::blocks::fragment_generator::FragmentGenerator;
 use crate::blocks::image_engine::ImageEngine;
 use crate::blocks::interleave::FramebufferInterleave;
-use crate::blocks::merge_network::{delivered, merge_partial, merged_ready, Partial, ReportShape};
+use crate::blocks::merge_network::{merge_partial, MergeState, Partial, ReportShape};
 use crate::blocks::occlusion_engine::hit_room;
 use crate::blocks::occlusion_unit::{OccuStats, SharedLocatedTiles};
 use crate::blocks::occu_stage::OccuModel;
@@ -118,8 +120,9 @@ pub struct IrMachine {
     depth: DepthBuffer,
     open: Option<OpenQuery>,
     generation: u64,
-    /// The host's first free cycle (software merges).
-    host: u64,
+    /// The merge stages' links and DMA, and the host of software merges, carried from query
+    /// to query ([`MergeState`]: a report crosses a link after the one before it).
+    merges: MergeState,
     /// The result of the query that just ended, waiting for the stream's golden result.
     golden: GoldenCheck,
     /// The merged result of the last query that ended (hit lists included).
@@ -204,7 +207,7 @@ impl IrMachine {
             depth,
             open: None,
             generation: 0,
-            host: 0,
+            merges: MergeState::default(),
             golden: GoldenCheck::default(),
             last_result: None,
             queries: Vec::new(),
@@ -255,6 +258,12 @@ impl IrMachine {
     #[inline]
     pub fn release(&mut self, cycle: u64) {
         self.generators.iter_mut().for_each(|g| g.release(cycle));
+    }
+
+    /// The merge stages take up from `merges` (their links still busy with earlier queries'
+    /// reports, on this machine's clock).
+    pub fn take_merges(&mut self, merges: MergeState) {
+        self.merges = merges;
     }
 
     /// Board `b`'s Fragment Generator can start nothing before `cycle - leads[b]` (a board
@@ -441,9 +450,9 @@ impl IrMachine {
             room: room as u64,
         };
         let verbose = spec.mode == QueryMode::Verbose;
-        for board in self.image_engines.chunks_mut(per_board) {
+        for (board, engines) in self.image_engines.chunks_mut(per_board).enumerate() {
             let mut reports = Vec::with_capacity(per_board);
-            for engine in board {
+            for engine in engines {
                 let (r, partial) = engine.end(end_cycle, query.generation, spec.tiles.len());
                 // Every Image Engine sends a record a tile; a verbose one its hits too (one
                 // per passing fragment, up to the room).
@@ -461,7 +470,7 @@ impl IrMachine {
             let board_drained = reports.iter().map(|p| p.ready).max().unwrap_or(0);
             last_drained = last_drained.max(board_drained);
             let local = self.arch.local_merge_network();
-            let merged = merged_ready(&local, &reports, shape, &mut self.host);
+            let merged = self.merges.local(&local, board, &reports, shape);
             let lane = Track::LocalMerge(board_reports.len() as u32);
             note(
                 &self.timeline,
@@ -478,8 +487,10 @@ impl IrMachine {
             .max()
             .unwrap_or(last_drained);
         let global = self.arch.global_merge_network();
-        let merged = merged_ready(&global, &board_reports, shape, &mut self.host);
-        let available = delivered(&global, &merged, shape, self.arch.report_dma_bits_per_cycle);
+        let merged = self.merges.global(&global, &board_reports, shape);
+        let available =
+            self.merges
+                .deliver(&global, &merged, shape, self.arch.report_dma_bits_per_cycle);
         let overflowed_buffers = finish_verbose(spec, &mut tiles);
         self.last_available = self.last_available.max(available);
         if let Some(timeline) = &self.timeline {

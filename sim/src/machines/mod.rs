@@ -11,6 +11,7 @@ pub use builder::MachineBuilder;
 use crate::arch::{Arch, Machine};
 use crate::blocks::geometry::Geometry;
 use crate::blocks::host::{Host, HostCosts};
+use crate::blocks::merge_network::MergeState;
 use crate::error::SimError;
 use crate::machines::closed_loop::{ClosedLoop, PipeState};
 use crate::machines::ir::IrMachine;
@@ -320,12 +321,14 @@ impl MachineModel {
     /// pipe before `origin` does: the cycle returned, in its own clock. On the
     /// InfiniteReality-like machine board `b`'s Fragment Generator starts `board_leads[b]`
     /// cycles sooner (a board through its work before the others keeps its lead: the end
-    /// token holds no board back), and the clock counts from early enough for the lead.
+    /// token holds no board back), and the clock counts from early enough for the lead;
+    /// its merge stages take up from `merges` (on `front`'s timeline), where given.
     pub fn resume_front(
         &mut self,
         front: &ClosedLoop,
         origin: u64,
         board_leads: &[u64],
+        merges: Option<&MergeState>,
     ) -> Result<u64, SimError> {
         let lead = board_leads.iter().copied().max().unwrap_or(0);
         let base = origin.saturating_sub(lead).min(front.host_now());
@@ -333,7 +336,12 @@ impl MachineModel {
         self.resumed.get_or_insert_with(Resumed::default).base = base;
         let start = origin - base;
         match &mut self.pipe {
-            Pipe::Ir(machine) => machine.release_boards(start, board_leads),
+            Pipe::Ir(machine) => {
+                machine.release_boards(start, board_leads);
+                if let Some(merges) = merges {
+                    machine.take_merges(merges.moved_back(base));
+                }
+            }
             pipe => pipe.release(start)?,
         }
         Ok(start)
@@ -416,7 +424,10 @@ mod tests {
             .resume_with_depths(&state, DepthBuffer::unset(8, 8))
             .unwrap();
         // The pipe starts 400 cycles after the host's clock: the clock counts from the host's.
-        assert_eq!(machine.resume_front(&front, base + 400, &[]).unwrap(), 400);
+        assert_eq!(
+            machine.resume_front(&front, base + 400, &[], None).unwrap(),
+            400
+        );
         assert_eq!(machine.front.host_now(), 0);
         // Query 7 answered 1,000 cycles past the host's clock, 2 words.
         machine.take_answer(7, (base + 1_000, 2));

@@ -80,7 +80,8 @@
 //! late). The two merge stages then run on the
 //! `r_i` exactly as the machine runs them, moving the same words (8 a tile from every Image
 //! Engine; [`crate::blocks::merge_network::merged_ready`], then the DMA to host memory; the
-//! host of software merges is carried from query to query), and latency = available −
+//! links, the DMA and the host of software merges carried from query to query, a
+//! [`crate::blocks::merge_network::MergeState`] as the machine's), and latency = available −
 //! `t_end`. A verbose query's hits are counted per Image Engine and tile, each within the
 //! tile buffer's room as the machine's Occlusion Unit sends them, and merged within it.
 //! (Uncapped, one bucket an engine, the demo at 1280x1024 on ir1 had a verbose query whose
@@ -89,9 +90,7 @@
 use super::{service_cycles, WindowEnd};
 use crate::arch::{Interleave, IrArch};
 use crate::blocks::interleave::FramebufferInterleave;
-use crate::blocks::merge_network::{
-    delivered, merged_ready, merged_ready_brief, Partial, ReportShape,
-};
+use crate::blocks::merge_network::{MergeState, Partial, ReportShape};
 use crate::blocks::occlusion_engine::hit_room;
 use occsim_traces::golden::FunctionalModel;
 #[cfg(doc)]
@@ -1192,8 +1191,9 @@ pub(crate) struct IrBottleneck {
     owners: Vec<(usize, usize)>,
     window: IrWindow,
     open: Option<OpenQuery>,
-    /// The host's first free cycle (software merges).
-    host: u64,
+    /// The merge stages' links and DMA, and the host of software merges, as the machine
+    /// carries them from query to query.
+    merges: MergeState,
     /// Room for each Image Engine's ready cycle at a query's end.
     ready: Vec<u64>,
 }
@@ -1209,7 +1209,7 @@ impl IrBottleneck {
             window: IrWindow::new(arch, width),
             arch: arch.clone(),
             open: None,
-            host: 0,
+            merges: MergeState::default(),
             ready: Vec::new(),
         }
     }
@@ -1220,6 +1220,10 @@ impl IrBottleneck {
 
     pub(super) fn board_leads(&self) -> Vec<u64> {
         self.window.board_leads()
+    }
+
+    pub(super) fn merges(&self) -> &MergeState {
+        &self.merges
     }
 
     pub(super) fn begin(&mut self, spec: &QuerySpec) {
@@ -1381,7 +1385,7 @@ impl IrBottleneck {
             self.merged_with_hits(&ready, &hits_sent, shape)
         };
         self.ready = ready;
-        let available = delivered(
+        let available = self.merges.deliver(
             &self.arch.global_merge_network(),
             &merged,
             shape,
@@ -1404,15 +1408,11 @@ impl IrBottleneck {
             .chunks_mut(self.arch.image_engines_per_board)
             .enumerate()
         {
-            boards[board] = merged_ready_brief(&local, engines, tiles, &mut self.host);
+            boards[board] = self.merges.local_brief(&local, board, engines, tiles);
         }
         let global = self.arch.global_merge_network();
-        merged_ready_brief(
-            &global,
-            &mut boards[..self.arch.boards],
-            tiles,
-            &mut self.host,
-        )
+        self.merges
+            .global_brief(&global, &mut boards[..self.arch.boards], tiles)
     }
 
     /// The two merge stages' output for a verbose query's reports: each Image Engine's
@@ -1437,14 +1437,11 @@ impl IrBottleneck {
         let local = self.arch.local_merge_network();
         let board_reports: Vec<Partial> = reports
             .chunks(self.arch.image_engines_per_board)
-            .map(|board| merged_ready(&local, board, shape, &mut self.host))
+            .enumerate()
+            .map(|(board, reports)| self.merges.local(&local, board, reports, shape))
             .collect();
-        merged_ready(
-            &self.arch.global_merge_network(),
-            &board_reports,
-            shape,
-            &mut self.host,
-        )
+        self.merges
+            .global(&self.arch.global_merge_network(), &board_reports, shape)
     }
 
     /// The pipe stood idle `cycles` before the window: the Image Engines worked through that

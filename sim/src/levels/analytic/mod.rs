@@ -246,6 +246,15 @@ impl Formulas {
         }
     }
 
+    /// On the InfiniteReality-like machine, the merge stages' state the formulas carry
+    /// ([`crate::blocks::merge_network::MergeState`]); none on the O2.
+    pub(crate) fn merges(&self) -> Option<&crate::blocks::merge_network::MergeState> {
+        match self {
+            Formulas::O2(_) => None,
+            Formulas::Ir(ir) => Some(ir.merges()),
+        }
+    }
+
     /// The stream ended: the last window's prediction, if it holds any work.
     pub(crate) fn finish(&self) -> Option<WindowEnd> {
         match self {
