@@ -35,7 +35,7 @@ struct Cli {
 enum Command {
     /// Run the built-in demo scene end to end and print what its queries cost.
     Demo(commands::demo::DemoArgs),
-    /// Run a scene through the golden model and print every samples query's count.
+    /// Run a scene through the golden model and print every query's answer (a samples query's count, an any query's 0 or 1, a brief or verbose query's tiles).
     Count(commands::count::CountArgs),
     /// Make, inspect and dump fragment traces (.occt).
     #[command(subcommand)]

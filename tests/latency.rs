@@ -187,3 +187,33 @@ fn the_analytic_and_sampled_levels_give_latency_without_a_split() {
         "{stderr}"
     );
 }
+
+#[test]
+fn the_o2_shows_no_merge_stages() {
+    // The O2 has one pipe and no merge: its rows and query lines show `-` (null in JSON)
+    // for the local and global merges, where they had shown 0.
+    let (_dir, trace) = hardcases_trace("o2-merges");
+    let json = stdout_of(&[
+        "latency",
+        &trace,
+        "--arch",
+        "o2",
+        "--engines",
+        "4",
+        "--json",
+    ]);
+    let rows: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let row = &rows.as_array().unwrap()[0];
+    assert!(row["local_merge_mean_cycles"].is_null(), "{row}");
+    assert!(row["global_merge_mean_cycles"].is_null(), "{row}");
+    assert!(row["drain_mean_cycles"].as_f64().unwrap() > 0.0, "{row}");
+    let queries = stdout_of(&["replay", &trace, "--arch", "o2", "--queries"]);
+    // index, id, mode, tiles, latency, drain, local, global, ...
+    let first = queries
+        .lines()
+        .find(|line| line.split_whitespace().nth(1) == Some("1"))
+        .unwrap();
+    let columns: Vec<&str> = first.split_whitespace().collect();
+    assert_eq!(&columns[6..8], ["-", "-"], "{first}");
+    assert_ne!(columns[5], "-", "{first}");
+}

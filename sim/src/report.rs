@@ -405,7 +405,7 @@ impl Report {
         let p = &self.memory_port;
         let _ = writeln!(
             out,
-            "\nmemory port: {} bits/cycle; busy {} cycles ({:.1}% of the run: cycles it carried any bits), utilization {:.1}% (bits carried over the bits it could have carried), max {} bits in a cycle",
+            "\nmemory port: {} bits/cycle; busy {} cycles ({:.1}% of the run: cycles it carried the pixel pipeline's bits; the display refresh's and the host's are below), utilization {:.1}% (the pixel pipeline's bits over the bits the port could have carried), max {} bits in a cycle",
             p.bits_per_cycle, p.busy_cycles, p.busy_percent, p.utilization_percent, p.max_bits_in_one_cycle
         );
         let _ = writeln!(

@@ -94,6 +94,7 @@ impl LatencyRow {
             .filter_map(|q| q.latency_cycles)
             .collect();
         latencies.sort_unstable();
+        let merges = result.machine != "o2";
         let mean = |part: &dyn Fn(&occsim_sim::report::QueryReport) -> u64| {
             result.report.as_ref().map(|report: &Report| {
                 let queries = &report.queries;
@@ -118,8 +119,9 @@ impl LatencyRow {
             latency_p95_us: us(p95),
             latency_max_us: us(max),
             drain_mean_cycles: mean(&|q| q.drain_cycles),
-            local_merge_mean_cycles: mean(&|q| q.local_merge_cycles),
-            global_merge_mean_cycles: mean(&|q| q.global_merge_cycles),
+            // The O2 has no merge: `-` (null), as for any figure a machine has not.
+            local_merge_mean_cycles: mean(&|q| q.local_merge_cycles).filter(|_| merges),
+            global_merge_mean_cycles: mean(&|q| q.global_merge_cycles).filter(|_| merges),
             total_cycles,
             fragments_per_cycle: if total_cycles == 0 {
                 0.0

@@ -137,6 +137,12 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
                 path.display(),
                 file_size(path)
             );
+            let bytes = std::fs::metadata(path).map_or(0, |m| m.len());
+            if bytes > TIMELINE_VIEWER_BYTES && args.waveform.window.is_none() {
+                eprintln!(
+                    "occsim: a trace viewer in a browser (Perfetto, chrome://tracing) may not open a timeline this large; --window START..END writes only those cycles"
+                );
+            }
         }
     }
     let queries = result.queries.len() as u64;
@@ -216,6 +222,11 @@ fn check_window(window: Option<&std::ops::Range<u64>>, result: &LevelResult) -> 
 }
 
 /// `1234 bytes`, or `?` bytes when the file cannot be read.
+/// A timeline larger than this many bytes gets a hint to narrow it: I, plausible 100 MB..2 GB;
+/// browser trace viewers hold the whole JSON in memory, and Perfetto's in-browser limit is
+/// about 2 GB (a demo frame's whole timeline is 765 MB).
+const TIMELINE_VIEWER_BYTES: u64 = 256 << 20;
+
 fn file_size(path: &Path) -> String {
     std::fs::metadata(path).map_or("? bytes".to_string(), |m| format!("{} bytes", m.len()))
 }

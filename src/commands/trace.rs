@@ -342,6 +342,9 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
             "windows     no table (the sampled level finds the windows' sizes by reading the trace a second time)"
         ),
     }
+    if args.scan {
+        outln!("scanned     every block read, its checksum and payload checked, and the summary against them");
+    }
     Ok(())
 }
 
