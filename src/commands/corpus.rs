@@ -262,7 +262,7 @@ impl Recipe {
             let args = parse_workload_flags(&flags)
                 .map_err(|e| anyhow::anyhow!("walk `{walk}`: {e}"))
                 .with_context(context)?;
-            write_workload_trace(&args, output).with_context(context)?;
+            write_workload_trace(&args, output, |_, _| Ok(())).with_context(context)?;
             return Ok(());
         }
         let text = match self.scene.as_deref() {

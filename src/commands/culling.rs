@@ -180,7 +180,7 @@ fn band_corners(
     let trace = scratch.path().join("reference-walk.occt");
     let mut walk = parse_workload_flags(["--driver", BAND_REFERENCE_DRIVER])?;
     walk.scene = args.scene.clone();
-    write_workload_trace(&walk, &trace)?;
+    write_workload_trace(&walk, &trace, |_, _| Ok(()))?;
     let replayer = Replayer {
         trace: &trace,
         retile: None,

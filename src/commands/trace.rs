@@ -77,11 +77,13 @@ fn generate(args: GenArgs) -> anyhow::Result<()> {
             String::new(),
         ),
         None => {
-            let (summary, stats) =
-                super::workload_args::write_workload_trace(&args.workload, &args.output)?;
-            print_collisions(&stats.frames)?;
-            print_rays(&stats.frames)?;
-            (summary, format!("{} frames, ", stats.frames.len()))
+            let collision = args.workload.is_collision();
+            let (summary, frames) = super::workload_args::write_workload_trace(
+                &args.workload,
+                &args.output,
+                |frame, stats| print_frame(frame, stats, collision),
+            )?;
+            (summary, format!("{frames} frames, "))
         }
     };
     let bytes = std::fs::metadata(&args.output)?.len();
@@ -98,46 +100,44 @@ fn generate(args: GenArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The collision driver's tests, a line a frame: the figure 7 area, the step and the tiles
-/// that collide (nothing for other drivers).
-fn print_collisions(frames: &[occsim_traces::workloads::FrameStats]) -> anyhow::Result<()> {
-    for (frame, stats) in frames.iter().enumerate() {
-        let Some(test) = &stats.collision else {
-            if frames.iter().any(|f| f.collision.is_some()) {
-                outln!("frame {frame}: heading not testable from this image (backward or still)");
-            }
-            continue;
-        };
-        let hits: Vec<String> = (test.tiles.iter().enumerate())
-            .filter(|(_, &(_, hit))| hit)
-            .map(|(k, _)| k.to_string())
-            .collect();
-        outln!(
-            "frame {frame}: step {:.2} m into area column {} row {}: {}",
-            test.step,
-            test.area.0,
-            test.area.1,
-            if hits.is_empty() {
-                format!("free ({} tiles)", test.tiles.len())
-            } else {
-                format!(
-                    "collision in tiles {} of {}",
-                    hits.join(","),
-                    test.tiles.len()
-                )
-            }
-        );
-    }
-    Ok(())
-}
-
-/// The raycast driver's rays, a line a frame: cast, against a cast through every pixel,
-/// and the bricks whose verbose buffers overflowed (nothing for other drivers).
-fn print_rays(frames: &[occsim_traces::workloads::FrameStats]) -> anyhow::Result<()> {
-    for (frame, stats) in frames.iter().enumerate() {
-        if stats.rays_full_screen == 0 {
-            continue;
+/// A frame's lines, printed as the frame ends: the collision driver's test (the figure 7
+/// area, the step and the tiles that collide; `collision` says the walk is that driver's,
+/// whose frames without a test say so) and the raycast driver's rays (cast, against a
+/// cast through every pixel, and the bricks whose verbose buffers overflowed). Nothing
+/// for other drivers.
+fn print_frame(
+    frame: u64,
+    stats: &occsim_traces::workloads::FrameStats,
+    collision: bool,
+) -> std::io::Result<()> {
+    match &stats.collision {
+        Some(test) => {
+            let hits: Vec<String> = (test.tiles.iter().enumerate())
+                .filter(|(_, &(_, hit))| hit)
+                .map(|(k, _)| k.to_string())
+                .collect();
+            outln!(
+                "frame {frame}: step {:.2} m into area column {} row {}: {}",
+                test.step,
+                test.area.0,
+                test.area.1,
+                if hits.is_empty() {
+                    format!("free ({} tiles)", test.tiles.len())
+                } else {
+                    format!(
+                        "collision in tiles {} of {}",
+                        hits.join(","),
+                        test.tiles.len()
+                    )
+                }
+            );
         }
+        None if collision => {
+            outln!("frame {frame}: heading not testable from this image (backward or still)")
+        }
+        None => {}
+    }
+    if stats.rays_full_screen > 0 {
         outln!(
             "frame {frame}: {} rays cast of {} for the full screen ({:.1}% saved); verbose buffers overflowed: {} (those bricks cast through the box of their hits)",
             stats.rays_cast,

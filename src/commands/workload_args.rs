@@ -7,8 +7,8 @@ use occsim_sweep::output::write_atomically_with;
 use occsim_traces::trace::{TraceHeader, TraceSummary};
 use occsim_traces::workloads::{
     city, forest, generate_observed, load_obj, traffic, CameraPath, CityOptions, CommandObserver,
-    DriverKind, DriverOptions, ForestOptions, GenerateError, ObjOptions, TrafficOptions, Walk,
-    WorkloadError, WorkloadOption, WorkloadScene, WorkloadStats, MAX_CARS_PER_BLOCK,
+    DriverKind, DriverOptions, ForestOptions, FrameStats, GenerateError, ObjOptions,
+    TrafficOptions, Walk, WorkloadError, WorkloadOption, WorkloadScene, MAX_CARS_PER_BLOCK,
     MAX_CITY_BLOCKS, MAX_CITY_DETAIL, MAX_CONE_SIDES, MAX_TREES,
 };
 use std::path::Path;
@@ -332,6 +332,11 @@ impl WorkloadArgs {
     }
 
     /// A one-line account for the trace header's scene field.
+    /// Whether the walk is the collision driver's (whose frames each print a test).
+    pub fn is_collision(&self) -> bool {
+        matches!(self.driver.driver.parse(), Ok(DriverKind::Collision))
+    }
+
     pub fn describe(&self, scene: &WorkloadScene, driver: &DriverOptions) -> String {
         format!("{} driver {}", self.scene.describe(scene), driver.label())
     }
@@ -355,21 +360,30 @@ where
 
 /// `trace gen` for a workload: walk the scene with the driver, writing the golden model's
 /// events to `output` (atomically). The header's scene field describes the workload.
+/// Its frames' statistics go to `each_frame` as they end, frame by frame, and are not kept:
+/// memory stays flat however many frames it runs. Returns the trace's summary and the
+/// number of frames.
 pub fn write_workload_trace(
     args: &WorkloadArgs,
     output: &Path,
-) -> anyhow::Result<(TraceSummary, WorkloadStats)> {
+    each_frame: impl FnMut(u64, &FrameStats) -> std::io::Result<()>,
+) -> anyhow::Result<(TraceSummary, u64)> {
     let (scene, driver, walk) = args.resolve()?;
     let header = TraceHeader::new(walk.width, walk.height)
         .with_scene(args.describe(&scene, &driver))
         .with_raster(walk.raster);
-    let mut frames = FrameProgress(occsim_sweep::progress::bar(walk.frames as u64, "frames"));
+    let mut frames = FrameProgress {
+        bar: occsim_sweep::progress::bar(walk.frames as u64, "frames"),
+        frames: 0,
+        each_frame,
+        failed: None,
+    };
     frames
-        .0
+        .bar
         .set_message(format!("{} walkthrough", driver.label()));
-    let written = write_atomically_with(output, |file| {
+    let written: anyhow::Result<TraceSummary> = write_atomically_with(output, |file| {
         let mut writer = super::trace::indexed_writer(file, &header)?;
-        let stats = generate_observed(&scene, &driver, &walk, &mut writer, &mut frames).map_err(
+        generate_observed(&scene, &driver, &walk, &mut writer, &mut frames).map_err(
             |e| match e {
                 GenerateError::Workload(e) => flagged(e),
                 GenerateError::Sink(e) => anyhow::Error::new(e)
@@ -379,20 +393,39 @@ pub fn write_workload_trace(
         let summary = writer
             .finish_seekable()
             .with_context(|| format!("{}: cannot write trace", output.display()))?;
-        Ok((summary, stats))
+        Ok(summary)
     });
-    frames.0.finish_and_clear();
-    written
+    frames.bar.finish_and_clear();
+    let summary = written?;
+    if let Some(error) = frames.failed {
+        return Err(error.into());
+    }
+    Ok((summary, frames.frames))
 }
 
-/// Moves a progress bar a step at each frame's end.
-struct FrameProgress(occsim_sweep::progress::ProgressBar);
+/// Moves a progress bar a step at each frame's end, and hands each frame's statistics on
+/// (keeping none).
+struct FrameProgress<F> {
+    bar: occsim_sweep::progress::ProgressBar,
+    frames: u64,
+    each_frame: F,
+    /// The first error `each_frame` gave (printing to a closed pipe): it is given no more.
+    failed: Option<std::io::Error>,
+}
 
-impl CommandObserver for FrameProgress {
+impl<F: FnMut(u64, &FrameStats) -> std::io::Result<()>> CommandObserver for FrameProgress<F> {
     fn command(&mut self, command: &occsim_traces::Command) {
         if let occsim_traces::Command::Swap = command {
-            self.0.inc(1);
+            self.bar.inc(1);
         }
+    }
+
+    fn frame(&mut self, stats: &FrameStats) -> bool {
+        if self.failed.is_none() {
+            self.failed = (self.each_frame)(self.frames, stats).err();
+        }
+        self.frames += 1;
+        false
     }
 }
 
@@ -487,14 +520,19 @@ mod tests {
         .unwrap();
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("walk.occt");
-        let (summary, stats) = write_workload_trace(&args, &path).unwrap();
-        let fragments: u64 = stats
-            .frames
+        let mut frames = Vec::new();
+        let (summary, count) = write_workload_trace(&args, &path, |_, stats| {
+            frames.push(stats.clone());
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!((count, frames.len()), (2, 2));
+        let fragments: u64 = frames
             .iter()
             .map(|f| f.draw_fragments + f.query_fragments)
             .sum();
         assert_eq!(summary.fragments, fragments);
-        let queries: u64 = stats.frames.iter().map(|f| f.queries).sum();
+        let queries: u64 = frames.iter().map(|f| f.queries).sum();
         assert_eq!(summary.queries, queries);
         let mut reader = super::super::trace::open_trace(&path).unwrap();
         assert!(

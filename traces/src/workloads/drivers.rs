@@ -146,8 +146,10 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
         }
         renderer.swap()?;
         let (frame_stats, timing) = renderer.finish_frame(started);
-        stats.frames.push(frame_stats);
-        stats.timing.push(timing);
+        if renderer.observe_frame(&frame_stats) {
+            stats.frames.push(frame_stats);
+            stats.timing.push(timing);
+        }
     }
     Ok(stats)
 }

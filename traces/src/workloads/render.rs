@@ -12,9 +12,17 @@ use crate::state::{DepthFunc, Rect};
 use glam::Mat4;
 use std::time::{Duration, Instant};
 
-/// Sees every scene command a driver executes, in order.
+/// Sees every scene command a driver executes, in order, and each frame's statistics as
+/// the frame ends.
 pub trait CommandObserver {
     fn command(&mut self, command: &Command);
+
+    /// A frame ended with `stats`: whether the walkthrough keeps them (and the frame's
+    /// timing) in its [`super::WorkloadStats`]. An observer that takes what it needs here
+    /// says no, and the walkthrough's memory stays flat however many frames it runs.
+    fn frame(&mut self, _stats: &FrameStats) -> bool {
+        true
+    }
 }
 
 /// Observes nothing.
@@ -158,6 +166,11 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
     }
 
     /// The frame's statistics and the time spent in the golden model.
+    /// The observer's [`CommandObserver::frame`] on a frame's statistics.
+    pub(crate) fn observe_frame(&mut self, stats: &FrameStats) -> bool {
+        self.observer.frame(stats)
+    }
+
     pub(crate) fn finish_frame(&mut self, started: Instant) -> (FrameStats, FrameTiming) {
         let timing = FrameTiming {
             total: started.elapsed(),
