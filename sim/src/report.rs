@@ -289,7 +289,7 @@ pub fn nearest_rank(sorted: &[u64], p: u64) -> u64 {
 pub(crate) const OPEN_LOOP_NOTE: &str = "open loop: the stream has no draws, host work, waits or frames (as a version-1 trace, or a scene of bare triangles), so nothing waits for an answer";
 
 /// What the frames table's columns are, at every level.
-pub(crate) const FRAMES_LEGEND: &str = "  in pipeline cycles (ms: simulated milliseconds): host busy (traversal, driver, result reads; on the O2 its software geometry too), geometry (the geometry stage busy), pixel busy (the rasterizer busy), waiting (the host blocked on answers), pipe wait (the host blocked at the frame's end)";
+pub(crate) const FRAMES_LEGEND: &str = "  in pipeline cycles (ms: simulated milliseconds): host busy (traversal, driver, result reads; on the O2 its software geometry too), geometry (the geometry stage busy, summed over its Geometry Engines: several engines can pass the frame's cycles), pixel busy (the rasterizer busy), waiting (the host blocked on answers), pipe wait (the host blocked at the frame's end)";
 
 /// The frames table's heading, at every level.
 pub(crate) const FRAMES_HEADING: &str = "frame        cycles         ms    host busy     geometry   pixel busy      waiting    pipe wait";

@@ -484,7 +484,8 @@ fn print_frame_time(report: &CompareReport, out: &mut dyn Write) -> std::io::Res
     writeln!(
         out,
         "  on the simulated machine, per frame: host busy (traversal, driver, result reads), \
-         waiting (the host blocked on answers), geometry (the geometry stage busy), pixel busy \
+         waiting (the host blocked on answers), geometry (the geometry stage busy, summed over its \
+         Geometry Engines: several engines can pass the frame's cycles), pixel busy \
          (the rasterizer busy), in the machine's pipeline cycles{}",
         if banded {
             "; ms/frame band: the frame time at the corners of a sensitivity study around the \
