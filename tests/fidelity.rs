@@ -518,6 +518,25 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
         ),
         (demo("width = 100000"), "trace `d`: small: width = 100000".to_string()),
         (demo("frames = 4294967295"), "frames = 4294967295: a built-in scene takes at most 64".to_string()),
+        // Found only once a run came to them, after the traces before were made, and named
+        // without the file (an unknown scene as a Rust debug string, a machine blamed on
+        // --machines): refused as the file is read.
+        (
+            format!("machines = [\"o2\"]\nengines = [0]\n{hardcases}"),
+            "`machines` and `engines`: o2 with 0 engines".to_string(),
+        ),
+        (
+            format!("machines = [\"o9\"]\nengines = [1]\n{hardcases}"),
+            "machine `o9`: unknown architecture".to_string(),
+        ),
+        (
+            format!("{}{}", demo("width = 64"), hardcases.replace("hardcases", "nosuch")),
+            "trace `h`: unknown scene `nosuch`".to_string(),
+        ),
+        (
+            format!("{}[[trace]]\nname = \"w\"\nclass = \"w\"\nwalk = \"--driver nosuch\"\n", demo("width = 64")),
+            "trace `w`: walk `--driver nosuch`: unknown driver `nosuch`".to_string(),
+        ),
     ] {
         let file = dir.join("meaningless.toml");
         std::fs::write(&file, &text).unwrap();

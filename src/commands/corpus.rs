@@ -219,9 +219,37 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
             grid.parse::<TileGrid>()
                 .map_err(|e| anyhow::anyhow!("{name}: trace `{}`: retile: {e}", recipe.name))?;
         }
+        // Before any trace is made: a recipe's scene or walk is known or the file is refused.
+        if let Some(scene) = &recipe.scene {
+            anyhow::ensure!(
+                BUILT_IN_SCENES.contains(&scene.as_str()),
+                "{name}: trace `{}`: unknown scene `{scene}` (demo, random or hardcases)",
+                recipe.name
+            );
+        }
+        if let Some(walk) = &recipe.walk {
+            let flags: Vec<&str> = walk.split_whitespace().collect();
+            let walk_error = |e: &dyn std::fmt::Display| {
+                anyhow::anyhow!("{name}: trace `{}`: walk `{walk}`: {e}", recipe.name)
+            };
+            let args = parse_workload_flags(&flags).map_err(|e| walk_error(&e))?;
+            args.driver
+                .driver
+                .parse::<occsim_traces::workloads::DriverKind>()
+                .map_err(|e| walk_error(&e))?;
+        }
+    }
+    for machine in &file.machines {
+        for &engines in &file.engines {
+            machine_with(machine, engines, &[])
+                .with_context(|| format!("{name}: `machines` and `engines`"))?;
+        }
     }
     Ok(file)
 }
+
+/// The scenes a recipe's `scene` may name.
+const BUILT_IN_SCENES: [&str; 3] = ["demo", "random", "hardcases"];
 
 impl Recipe {
     fn size(&self, scale: Scale) -> Size {
@@ -284,9 +312,11 @@ impl Recipe {
                 })
             }
             Some("hardcases") => HARDCASES.to_owned(),
+            // `load` refused every other name.
             other => anyhow::bail!(
-                "corpus trace `{}`: unknown scene {other:?} (demo, random or hardcases)",
-                self.name
+                "corpus trace `{}`: unknown scene `{}` (demo, random or hardcases)",
+                self.name,
+                other.unwrap_or("")
             ),
         };
         let scene = output.with_extension("scene");
@@ -337,6 +367,16 @@ pub fn run(
         &args.machines
     };
     let engine_counts = engines.map_or(corpus.engines.clone(), |e| vec![e]);
+    // Every run's machine before any trace is made.
+    let source = match args.machines.is_empty() {
+        true => "the corpus's `machines`",
+        false => "--machines",
+    };
+    for machine in machines {
+        for &engines in &engine_counts {
+            machine_with(machine, engines, sets).with_context(|| source)?;
+        }
+    }
     let recipes: Vec<&Recipe> = corpus
         .trace
         .iter()
@@ -483,7 +523,7 @@ fn trace_at(path: &Path) -> Kept {
 /// A built-in machine with `sets` applied and `engines` occlusion engines.
 fn machine_with(name: &str, engines: u64, sets: &[String]) -> anyhow::Result<Arch> {
     let mut arch =
-        super::arch::resolve(name, None, sets).with_context(|| format!("--machines {name}"))?;
+        super::arch::resolve(name, None, sets).with_context(|| format!("machine `{name}`"))?;
     arch.set_value("engines", &engines.to_string())
         .with_context(|| format!("{name} with {engines} engines"))?;
     Ok(arch)
