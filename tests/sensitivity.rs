@@ -106,7 +106,7 @@ fn a_value_the_study_cannot_take_is_refused_and_named() {
         (
             "page_miss_latency_cycles=40",
             "'page_miss_latency_cycles' = 40 lies outside its plausible range 6..10",
-            "change it with --set",
+            "bring it within that range, or leave it at its default",
         ),
         // 330 Hz refreshes take 81.1% of the O2's port (sim's sensitivity tests derive
         // it): possible beside the host's default 5%, not beside its high end, 15%.

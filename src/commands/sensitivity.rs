@@ -154,7 +154,8 @@ fn in_cli_words(error: SensitivityError) -> anyhow::Error {
         SensitivityError::ImpossibleVariant { .. } => {
             "the values you set leave it no room: bring them back toward their defaults"
         }
-        _ => "change it with --set, or leave it at its default",
+        // Whether the value came from --set or an architecture file, the range is the fix.
+        _ => "bring it within that range, or leave it at its default",
     };
     anyhow::anyhow!("{error} ({advice})")
 }
