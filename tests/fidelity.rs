@@ -778,7 +778,7 @@ fn over_bounds(rows: &serde_json::Value, bounds: &[ClassBounds]) -> Vec<String> 
 /// Under the blocks and morton interleaves, with FIFOs of 2 entries in front of the Image
 /// Engines (a block's share of a row, 4 fragments, then fills an engine's FIFO and holds
 /// its board's generator back), every class of the small corpus on ir2 at 4 engines is
-/// held to issue 15's targets. The formulas had dealt a stretch to its engines as under
+/// held to issue 15's targets, and on ir4 at 4 engines under blocks with the default FIFOs. The formulas had dealt a stretch to its engines as under
 /// the columns interleave, every engine starting at once, and restarted every board
 /// together at each query's end (the machine's end token holds no board back): on the demo
 /// at 1280x1024 on ir4 with the morton interleave and FIFOs of 2, the analytic level took

@@ -57,7 +57,7 @@ fn the_text_starts_with_the_level_and_summary_lines_and_has_every_table() {
     // Every table says what its columns are, with units.
     for legend in [
         "  busy, stall: cycles, summed over a stage's units where it has several",
-        "(bits carried over the bits it could have carried)",
+        "(the pixel pipeline's bits over the bits the port could have carried)",
         "  engine E of the Occlusion Unit: busy: cycles testing fragments",
         "nohc, phc: passing and projected fragments summed over the tiles",
     ] {

@@ -256,7 +256,7 @@ fn table(rows: &[LatencyRow]) -> String {
     }
     let _ = writeln!(
         out,
-        "latency in cycles; drain, local and global are mean cycles per query (they add up to the mean latency; - where the level predicts latency whole); frame cyc is the mean frame time of a closed-loop trace (- for an open loop or a level that does not time frames)"
+        "latency in cycles; drain, local and global are mean cycles per query (they add up to the mean latency; - where the level predicts latency whole, and the O2's local and global: it has no merge); frame cyc is the mean frame time of a closed-loop trace (- for an open loop or a level that does not time frames)"
     );
     if rows.iter().any(|r| r.bands.is_some()) {
         let _ = writeln!(

@@ -221,12 +221,12 @@ fn check_window(window: Option<&std::ops::Range<u64>>, result: &LevelResult) -> 
     Ok(())
 }
 
-/// `1234 bytes`, or `?` bytes when the file cannot be read.
 /// A timeline larger than this many bytes gets a hint to narrow it: I, plausible 100 MB..2 GB;
 /// browser trace viewers hold the whole JSON in memory, and Perfetto's in-browser limit is
 /// about 2 GB (a demo frame's whole timeline is 765 MB).
 const TIMELINE_VIEWER_BYTES: u64 = 256 << 20;
 
+/// `1234 bytes`, or `?` bytes when the file cannot be read.
 fn file_size(path: &Path) -> String {
     std::fs::metadata(path).map_or("? bytes".to_string(), |m| format!("{} bytes", m.len()))
 }

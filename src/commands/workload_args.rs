@@ -331,12 +331,12 @@ impl WorkloadArgs {
         Ok((scene, driver, walk))
     }
 
-    /// A one-line account for the trace header's scene field.
     /// Whether the walk is the collision driver's (whose frames each print a test).
     pub fn is_collision(&self) -> bool {
         matches!(self.driver.driver.parse(), Ok(DriverKind::Collision))
     }
 
+    /// A one-line account for the trace header's scene field.
     pub fn describe(&self, scene: &WorkloadScene, driver: &DriverOptions) -> String {
         format!("{} driver {}", self.scene.describe(scene), driver.label())
     }
@@ -390,17 +390,17 @@ pub fn write_workload_trace(
                     .context(format!("{}: cannot write trace", output.display())),
             },
         )?;
+        if let Some(error) = frames.failed.take() {
+            // A frame's lines could not be printed: the command fails, and writes nothing.
+            return Err(error.into());
+        }
         let summary = writer
             .finish_seekable()
             .with_context(|| format!("{}: cannot write trace", output.display()))?;
         Ok(summary)
     });
     frames.bar.finish_and_clear();
-    let summary = written?;
-    if let Some(error) = frames.failed {
-        return Err(error.into());
-    }
-    Ok((summary, frames.frames))
+    Ok((written?, frames.frames))
 }
 
 /// Moves a progress bar a step at each frame's end, and hands each frame's statistics on

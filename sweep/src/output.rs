@@ -272,7 +272,12 @@ fn destination(path: &Path) -> Result<PathBuf, OutputError> {
         // A link to a file not there yet is followed to where that file will be.
         match std::fs::read_link(path) {
             Ok(link) => path.parent().unwrap_or(Path::new("")).join(link),
-            Err(_) => path.to_path_buf(),
+            // A new file: its directory's canonical path and its name, so that one file
+            // spelt two ways (`same.out`, `./same.out`) is one destination.
+            Err(_) => match (std::fs::canonicalize(directory_of(path)), path.file_name()) {
+                (Ok(directory), Some(name)) => directory.join(name),
+                _ => path.to_path_buf(),
+            },
         }
     });
     match std::fs::metadata(&target) {
@@ -474,7 +479,10 @@ mod tests {
         let dir = temp.path();
         let path = dir.join("same.out");
         let first = AtomicFile::create(&path).unwrap();
-        let second = AtomicFile::create(&dir.join(".").join("same.out"));
+        // The same file spelt another way: through a link to its directory (as `./same.out`
+        // beside `same.out`, a new file's path had been taken as spelt).
+        std::os::unix::fs::symlink(dir, dir.join("here")).unwrap();
+        let second = AtomicFile::create(&dir.join("here").join("same.out"));
         assert!(matches!(
             second.err(),
             Some(OutputError::TwoOutputsOnePath { .. })
@@ -482,7 +490,11 @@ mod tests {
         first.handle().unwrap().write_all(b"first").unwrap();
         first.commit().unwrap();
         assert_eq!(std::fs::read_to_string(&path).unwrap(), "first");
-        assert_eq!(std::fs::read_dir(dir).unwrap().count(), 1);
+        assert_eq!(
+            std::fs::read_dir(dir).unwrap().count(),
+            2,
+            "same.out and the link"
+        );
         // Once the first is through, the path is free again.
         AtomicFile::create(&path).unwrap();
     }

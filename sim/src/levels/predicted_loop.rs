@@ -172,6 +172,11 @@ impl PredictedLoop {
         self.answers.get(&id).copied()
     }
 
+    /// The cycle the last query's end token entered the pipe.
+    pub(crate) fn last_token(&self) -> f64 {
+        self.last_token
+    }
+
     /// `e` of the last window closed.
     pub(crate) fn pipe_end(&self) -> f64 {
         self.pipe_end

@@ -706,6 +706,11 @@ pub struct SampledModel {
     donors: Donors,
     /// Windows closed so far (heads of cut windows included).
     closed: u64,
+    /// Where the last window ended on the predicted timeline: its query's end token's
+    /// entry (the machine measures its windows from token to token; a query that draws no
+    /// primitive ends its window at its token, after the host's time, where the pipe's
+    /// work ended long before), or the frame's end at a swap.
+    boundary: f64,
     /// Windows to extrapolate.
     extrapolated: Vec<Closed>,
     /// Per query (in order): its latency if sampled.
@@ -822,6 +827,7 @@ impl SampledModel {
             latency_by_class: BTreeMap::new(),
             donors: Donors::default(),
             closed: 0,
+            boundary: 0.0,
             extrapolated: Vec::new(),
             latencies: Vec::new(),
             calibrating_latencies: Vec::new(),
@@ -1045,6 +1051,14 @@ impl SampledModel {
             .map(|_| head)
     }
 
+    /// A window ending at `end` on the predicted timeline, `cycles` of it the pipe's: its
+    /// work from the last window's end on, which then moves to `end`.
+    fn work_to(&mut self, end: f64, cycles: f64) -> Work {
+        let work = Work::of(end - self.boundary, cycles);
+        self.boundary = self.boundary.max(end);
+        work
+    }
+
     /// The formulas' work in the open window so far (its pipe cycles), and where on the
     /// predicted timeline the window would end were that all its work.
     fn work_so_far(&self) -> (f64, f64) {
@@ -1060,7 +1074,7 @@ impl SampledModel {
         self.window.head_fragments = self.window.fragments;
         self.tails += 1;
         let (cycles, end) = self.work_so_far();
-        let head = Work::of(end - self.predicted.pipe_end(), cycles);
+        let head = Work::of(end - self.boundary, cycles);
         self.window.head = Some(head);
         let closed = Closed {
             work: head,
@@ -1233,7 +1247,6 @@ impl SampledModel {
         }
         self.formulas.before_event(event);
         self.settle();
-        let before = self.predicted.pipe_end();
         let formulas = &mut self.formulas;
         let mut cut_cycles = 0.0;
         self.predicted.event(event, || {
@@ -1242,7 +1255,7 @@ impl SampledModel {
             cut
         });
         if matches!(event, Event::Swap) {
-            self.window.work = Work::of(self.predicted.pipe_end() - before, cut_cycles);
+            self.window.work = self.work_to(self.predicted.pipe_end(), cut_cycles);
         }
         self.formulas.idle(self.predicted.take_idle());
         self.settle();
@@ -1278,13 +1291,14 @@ impl SampledModel {
             let predicted = self.open.take().map_or(0, |spec| {
                 let start = self.predicted.window_start();
                 let release = self.predicted.command_release();
-                let before = self.predicted.pipe_end();
                 let end = self
                     .formulas
                     .end_query(&spec.shape(), &result, start, release);
                 self.predicted.end_query(end, &result);
-                // The window's work: its time on the predicted timeline, host gaps and all.
-                self.window.work = Work::of(self.predicted.pipe_end() - before, end.cycles);
+                // The window's work: its time on the predicted timeline, host gaps and all, up
+                // to its end token's entry, where the machine's measured windows end too.
+                let token = self.predicted.last_token();
+                self.window.work = self.work_to(token, end.cycles);
                 end.latency.ceil() as u64
             });
             self.predicted_latencies.push(predicted);
@@ -1473,9 +1487,9 @@ impl SampledModel {
     fn close_window(&mut self, last: bool) {
         if last && !self.window.query_ended && !self.window.frame_ended {
             // On the predicted timeline: from the last window's end to this one's.
-            let (start, end) = (self.predicted.window_start(), self.predicted.pipe_end());
+            let start = self.predicted.window_start();
             self.window.work = self.formulas.finish().map_or(Work::default(), |w| {
-                Work::of(start + w.cycles - end, w.cycles)
+                Work::of(start + w.cycles - self.boundary, w.cycles)
             });
         }
         let query = self

@@ -165,12 +165,12 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
         Ok(())
     }
 
-    /// The frame's statistics and the time spent in the golden model.
     /// The observer's [`CommandObserver::frame`] on a frame's statistics.
     pub(crate) fn observe_frame(&mut self, stats: &FrameStats) -> bool {
         self.observer.frame(stats)
     }
 
+    /// The frame's statistics and the time spent in the golden model.
     pub(crate) fn finish_frame(&mut self, started: Instant) -> (FrameStats, FrameTiming) {
         let timing = FrameTiming {
             total: started.elapsed(),
