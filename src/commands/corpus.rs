@@ -80,6 +80,9 @@ struct CorpusFile {
     machines: Vec<String>,
     engines: Vec<u64>,
     trace: Vec<Recipe>,
+    /// The file's name, or the built-in corpus's, for its errors.
+    #[serde(skip)]
+    source: String,
 }
 
 #[derive(Debug, Deserialize, Serialize)]
@@ -239,13 +242,10 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
                 .map_err(|e| walk_error(&e))?;
         }
     }
-    for machine in &file.machines {
-        for &engines in &file.engines {
-            machine_with(machine, engines, &[])
-                .with_context(|| format!("{name}: `machines` and `engines`"))?;
-        }
-    }
-    Ok(file)
+    Ok(CorpusFile {
+        source: name,
+        ..file
+    })
 }
 
 /// The scenes a recipe's `scene` may name.
@@ -367,14 +367,17 @@ pub fn run(
         &args.machines
     };
     let engine_counts = engines.map_or(corpus.engines.clone(), |e| vec![e]);
-    // Every run's machine before any trace is made.
+    // Every run's machine, made before any trace is: a bad name or engine count is refused
+    // first, named by where it came from.
     let source = match args.machines.is_empty() {
-        true => "the corpus's `machines`",
-        false => "--machines",
+        true => format!("{}: `machines` and `engines`", corpus.source),
+        false => "--machines".to_string(),
     };
+    let mut archs = Vec::with_capacity(machines.len() * engine_counts.len());
     for machine in machines {
         for &engines in &engine_counts {
-            machine_with(machine, engines, sets).with_context(|| source)?;
+            let arch = machine_with(machine, engines, sets).with_context(|| source.clone())?;
+            archs.push((machine, engines, arch));
         }
     }
     let recipes: Vec<&Recipe> = corpus
@@ -400,7 +403,7 @@ pub fn run(
         None => TraceDir::Scratch(ScratchDir::create("occsim-corpus")?),
     };
     let mut runs: Vec<Run> = Vec::new();
-    let steps = recipes.len() * machines.len() * engine_counts.len();
+    let steps = recipes.len() * archs.len();
     let bar = occsim_sweep::progress::bar(steps as u64, "runs");
     for recipe in recipes {
         let trace = recipe.file_in(dir.path(), args.scale);
@@ -421,22 +424,19 @@ pub fn run(
         if let Some(grid) = &recipe.retile {
             ladder.retile = Some(grid.parse().map_err(|e| anyhow::anyhow!("{e}"))?);
         }
-        for machine in machines {
-            for &engines in &engine_counts {
-                let arch = machine_with(machine, engines, sets)?;
-                let hidden = occsim_sweep::progress::ProgressBar::hidden();
-                let name = run_name(&recipe.name, machine, engines);
-                bar.set_message(name.clone());
-                let (rows, _) = ladder
-                    .run(&arch, &trace, &hidden)
-                    .with_context(|| name.clone())?;
-                runs.push(Run {
-                    class: recipe.class.clone(),
-                    name,
-                    rows,
-                });
-                bar.inc(1);
-            }
+        for (machine, engines, arch) in &archs {
+            let hidden = occsim_sweep::progress::ProgressBar::hidden();
+            let name = run_name(&recipe.name, machine, *engines);
+            bar.set_message(name.clone());
+            let (rows, _) = ladder
+                .run(arch, &trace, &hidden)
+                .with_context(|| name.clone())?;
+            runs.push(Run {
+                class: recipe.class.clone(),
+                name,
+                rows,
+            });
+            bar.inc(1);
         }
     }
     bar.finish_and_clear();

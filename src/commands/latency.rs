@@ -94,7 +94,7 @@ impl LatencyRow {
             .filter_map(|q| q.latency_cycles)
             .collect();
         latencies.sort_unstable();
-        let merges = result.machine != "o2";
+        let merges = result.has_merge_stages();
         let mean = |part: &dyn Fn(&occsim_sim::report::QueryReport) -> u64| {
             result.report.as_ref().map(|report: &Report| {
                 let queries = &report.queries;
@@ -119,7 +119,7 @@ impl LatencyRow {
             latency_p95_us: us(p95),
             latency_max_us: us(max),
             drain_mean_cycles: mean(&|q| q.drain_cycles),
-            // The O2 has no merge: `-` (null), as for any figure a machine has not.
+            // `-` (null) where the machine has no merge, as for any figure it has not.
             local_merge_mean_cycles: mean(&|q| q.local_merge_cycles).filter(|_| merges),
             global_merge_mean_cycles: mean(&|q| q.global_merge_cycles).filter(|_| merges),
             total_cycles,

@@ -26,7 +26,7 @@
 //!   The host is one reader for both stages and all queries, so its reads never overlap.
 //!
 //! After a hardware global merge the final report goes to host memory by DMA, `x(W)` cycles
-//! at the DMA's width ([`delivered`]); a software merge has it in the host already. With
+//! at the DMA's width ([`MergeState::deliver`]); a software merge has it in the host already. With
 //! unlimited links (`x = 0`), the rules are those of a merge that moves no words.
 //!
 //! Links carry one report at a time, in order: a report ready in `r` crosses its link from
@@ -198,8 +198,9 @@ impl MergeState {
         merged_ready_brief(network, ready, tiles, &mut self.host, &mut self.global)
     }
 
-    /// The cycle the final report is in host memory ([`delivered`]), the DMA taking one
-    /// report at a time.
+    /// The cycle the final report is in host memory: after a hardware stage two, its output
+    /// written by DMA in `x(W)` cycles at `dma_bits_per_cycle`, once the DMA is through the
+    /// report before it; a software merge's is the host's already.
     pub fn deliver(
         &mut self,
         global: &MergeNetwork,
@@ -207,15 +208,14 @@ impl MergeState {
         shape: ReportShape,
         dma_bits_per_cycle: u64,
     ) -> u64 {
-        let ready = Partial {
-            ready: merged.ready.max(self.dma),
-            hits: merged.hits.clone(),
-        };
-        let available = delivered(global, &ready, shape, dma_bits_per_cycle);
-        if global.kind != MergeKind::Software {
-            self.dma = available;
+        match global.kind {
+            MergeKind::Software => merged.ready,
+            MergeKind::Tree | MergeKind::Chain => {
+                let writing = transfer_cycles(merged.words(shape.tiles), dma_bits_per_cycle);
+                self.dma = merged.ready.max(self.dma) + writing;
+                self.dma
+            }
         }
-        available.max(merged.ready)
     }
 
     /// The same state on a clock `base` cycles later (a machine started mid-trace counts
@@ -366,23 +366,6 @@ pub fn merged_ready_brief(
                     + network.read_cycles_per_word * words;
             }
             *host
-        }
-    }
-}
-
-/// The cycle the final report is in host memory: after a hardware global merge, its output
-/// written by DMA in `x(W)` cycles at `dma_bits_per_cycle`; a software merge's is the host's
-/// already.
-pub fn delivered(
-    global: &MergeNetwork,
-    merged: &Partial,
-    shape: ReportShape,
-    dma_bits_per_cycle: u64,
-) -> u64 {
-    match global.kind {
-        MergeKind::Software => merged.ready,
-        MergeKind::Tree | MergeKind::Chain => {
-            merged.ready + transfer_cycles(merged.words(shape.tiles), dma_bits_per_cycle)
         }
     }
 }

@@ -186,6 +186,12 @@ pub struct LevelResult {
 }
 
 impl LevelResult {
+    /// Whether the machine merges its queries' partial reports (the InfiniteReality-like
+    /// one's two stages; the O2 has one pipe and no merge, its figures `-`).
+    pub fn has_merge_stages(&self) -> bool {
+        self.machine != Machine::O2.name()
+    }
+
     /// The trace's index a level reads instead of the fragments on this machine
     /// ([`LevelResult::from_window_index`]): the O2's formulas count the window index's
     /// stretches, the InfiniteReality-like machine's the band index's runs.
@@ -488,8 +494,7 @@ impl LevelResult {
         );
         let reported = self.report.as_ref().map(|r| &r.queries);
         let dash = |v: Option<u64>| v.map_or("-".to_string(), |v| v.to_string());
-        // The O2 has no merge stages: `-`, as for any figure a machine has not.
-        let merges = self.machine != "o2";
+        let merges = self.has_merge_stages();
         for (index, q) in self.queries.iter().enumerate() {
             let split = reported.and_then(|r| r.get(index));
             let _ = writeln!(
