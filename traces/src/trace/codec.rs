@@ -1129,6 +1129,16 @@ pub(crate) struct DecodeContext<'a> {
     pub skim_queries: bool,
 }
 
+/// Account an index record's `count` fragments in the tally, as the events they stand for
+/// would have been: a trace read by its index is then checked against its summary on every
+/// count the events would give but their number (a summary forged to claim 2^40 queries
+/// had passed every level that reads an index).
+fn tally_fragments(ctx: &mut DecodeContext, count: u64) {
+    if !ctx.unchecked_events {
+        ctx.tally.checked_fragments(count);
+    }
+}
+
 /// Why an event reader never meets a skimmed query: only the index lanes' readers skim
 /// ([`crate::trace::TraceReader::skim_queries`]).
 const EVENTS_WHOLE: &str = "a reader of events reads its queries whole";
@@ -1228,12 +1238,12 @@ impl BlockDecoder {
             }
             tag::STRETCH => {
                 let mut stretch = FragmentStretch::EMPTY;
-                self.stretch_record(payload, &mut stretch)?;
+                self.stretch_record(payload, ctx, &mut stretch)?;
                 Ok(Some(IndexItem::Stretch(stretch)))
             }
             tag::BAND | tag::BAND_PASSING => {
                 let mut band = FragmentBand::EMPTY;
-                self.band_record(payload, (ctx.width, ctx.height), &mut band)?;
+                self.band_record(payload, ctx, &mut band)?;
                 Ok(Some(IndexItem::Band(band)))
             }
             tag::SPAN | tag::PLANE_SPAN | tag::PLANE => {
@@ -1253,12 +1263,14 @@ impl BlockDecoder {
     fn stretch_record(
         &mut self,
         payload: &[u8],
+        ctx: &mut DecodeContext,
         out: &mut FragmentStretch,
     ) -> Result<(), PayloadError> {
         let mut c = Cursor::new(payload, self.pos + 1);
         decode_stretch(&mut c, out)?;
         self.pos = c.pos;
         self.events += 1;
+        tally_fragments(ctx, out.fragments);
         Ok(())
     }
 
@@ -1267,13 +1279,14 @@ impl BlockDecoder {
     fn band_record(
         &mut self,
         payload: &[u8],
-        viewport: (u32, u32),
+        ctx: &mut DecodeContext,
         out: &mut FragmentBand,
     ) -> Result<(), PayloadError> {
         let mut c = Cursor::new(payload, self.pos + 1);
-        decode_band(&mut c, viewport, out)?;
+        decode_band(&mut c, (ctx.width, ctx.height), out)?;
         self.pos = c.pos;
         self.events += 1;
+        tally_fragments(ctx, out.fragments());
         Ok(())
     }
 
@@ -1297,12 +1310,12 @@ impl BlockDecoder {
         while let Some(&t) = payload.get(self.pos) {
             match (t, &mut item) {
                 (tag::STRETCH, IndexItem::Stretch(stretch)) => {
-                    self.stretch_record(payload, stretch)?;
+                    self.stretch_record(payload, ctx, stretch)?;
                     visit(&item).map_err(DrainError::Sink)?;
                     continue;
                 }
                 (tag::BAND | tag::BAND_PASSING, IndexItem::Band(band)) => {
-                    self.band_record(payload, (ctx.width, ctx.height), band)?;
+                    self.band_record(payload, ctx, band)?;
                     visit(&item).map_err(DrainError::Sink)?;
                     continue;
                 }

@@ -66,7 +66,7 @@ impl TraceHeader {
             subpixel_bits: crate::raster::SUBPIXEL_BITS,
             fill_rule: crate::raster::FILL_RULE.to_owned(),
             raster: RasterProfile::default(),
-            depth_format: "unorm24".to_owned(),
+            depth_format: DEPTH_FORMAT.to_owned(),
             generator: crate::GENERATOR_VERSION.to_owned(),
             scene: String::new(),
             features: None,
@@ -99,11 +99,34 @@ impl TraceHeader {
                 self.width, self.height
             ));
         }
+        if self.depth_format != DEPTH_FORMAT {
+            // The depths are compared and cleared as 24-bit unsigned normalized values: any
+            // other encoding would be read as garbage.
+            return Some(format!(
+                "depth format {:?}: occsim reads {DEPTH_FORMAT:?} depths only",
+                self.depth_format
+            ));
+        }
+        if self.subpixel_bits > MAX_SUBPIXEL_BITS {
+            return Some(format!(
+                "{} sub-pixel bits: more than {MAX_SUBPIXEL_BITS}, which no rasterizer snaps to",
+                self.subpixel_bits
+            ));
+        }
         self.window_index
             .and_then(|layout| layout.problem())
             .map(|problem| format!("window index layout: {problem}"))
     }
 }
+
+/// The depth encoding of every trace: 24-bit unsigned normalized (`DEPTH_ONE` is 1.0).
+const DEPTH_FORMAT: &str = "unorm24";
+
+/// Sub-pixel bits a header may claim at most: the fragments do not depend on the figure
+/// (it says how they were made, and another rasterizer's trace may claim another), but a
+/// rasterizer's snapping keeps at most 16 fraction bits (GL and Vulkan implementations
+/// keep 4 to 8; occsim's profiles keep 8), so more is a damaged header.
+const MAX_SUBPIXEL_BITS: u32 = 16;
 
 /// Traces from before the header named its profile were rasterized exactly.
 fn profile_of_unmarked_traces() -> RasterProfile {

@@ -47,6 +47,10 @@ pub struct TraceReader<R: Read> {
     /// The block loaded is a window-index or band-index block (read by
     /// [`TraceReader::next_index_item`] or [`TraceReader::for_each_band_item`]).
     in_index_block: bool,
+    /// Index blocks decoded to their end, of the window index or the band index (a trace
+    /// is read by one of them): all of them, and the tally has every event but the
+    /// fragments, and the fragments as the index counts them.
+    index_blocks_read: u64,
     summary: Option<TraceSummary>,
     failed: bool,
     /// The file's format version.
@@ -94,6 +98,7 @@ impl<R: Read> TraceReader<R> {
             window_table: BlockCounts::default(),
             bands: BlockCounts::default(),
             in_index_block: false,
+            index_blocks_read: 0,
             summary: None,
             failed: false,
             version: FORMAT_VERSION,
@@ -438,6 +443,7 @@ impl<R: Read> TraceReader<R> {
     /// The current block is fully decoded: check its event count.
     fn end_block(&mut self) -> Result<(), TraceError> {
         self.in_block = false;
+        self.index_blocks_read += self.in_index_block as u64;
         if self.decoder.events != self.block_events as u64 {
             return Err(TraceError::Corrupt {
                 offset: self.block_offset,
@@ -480,7 +486,12 @@ impl<R: Read> TraceReader<R> {
                 offset: self.offset,
             });
         }
-        let mut found = if self.skipped {
+        let mut found = if self.skipped && self.read_whole_index() {
+            // Every count but the events' number, which the block headers claim.
+            let mut by_index = self.tally.summary();
+            by_index.events = self.claimed_events;
+            by_index
+        } else if self.skipped {
             let mut partial = stored.clone();
             partial.events = self.claimed_events;
             partial
@@ -524,6 +535,13 @@ impl<R: Read> TraceReader<R> {
         }
         self.summary = Some(stored);
         Ok(())
+    }
+
+    /// Whether the trace was read by its window index or its band index, every block of it
+    /// to its end: then the tally has counted every event the summary counts.
+    fn read_whole_index(&self) -> bool {
+        let read = self.index_blocks_read;
+        read > 0 && (read == self.index.blocks || read == self.bands.blocks)
     }
 
     /// Run `step`, and stop the reader for good if it fails.

@@ -1180,3 +1180,132 @@ fn an_event_block_of_plane_spans_holds_at_most_its_events() {
         events.len() as u64
     );
 }
+
+/// `bytes` with its summary's JSON changed by `edit` and its checksum made right again, as
+/// a forger would (the summary block is stored, not compressed).
+fn with_forged_summary(bytes: &[u8], edit: impl FnOnce(&mut serde_json::Value)) -> Vec<u8> {
+    let trailer_at = bytes.len() - block::TRAILER_BYTES;
+    let summary_at = u64::from_le_bytes(bytes[trailer_at..trailer_at + 8].try_into().unwrap());
+    let at = summary_at as usize;
+    let header_bytes: [u8; BLOCK_HEADER_BYTES] =
+        bytes[at..at + BLOCK_HEADER_BYTES].try_into().unwrap();
+    let (mut header, _) = BlockHeader::parse(&header_bytes).unwrap();
+    let json_at = at + BLOCK_HEADER_BYTES;
+    let mut summary: serde_json::Value =
+        serde_json::from_slice(&bytes[json_at..json_at + header.stored_len as usize]).unwrap();
+    edit(&mut summary);
+    let json = serde_json::to_vec(&summary).unwrap();
+    (header.raw_len, header.stored_len) = (json.len() as u32, json.len() as u32);
+    let mut forged = bytes[..at].to_vec();
+    forged.extend_from_slice(&header.fields());
+    forged.extend_from_slice(&header.checksum(&json).to_le_bytes());
+    forged.extend_from_slice(&json);
+    forged.extend_from_slice(&(summary_at).to_le_bytes());
+    forged.extend_from_slice(&block::END_MAGIC);
+    forged
+}
+
+/// A summary forged to claim other counts, its checksum made right: a trace read by its
+/// window index or by its band index is refused as one read by its events is, naming the
+/// count. (The index readers had taken the summary as written: one claiming 2^40 queries
+/// passed the analytic and sampled levels.) The stream: a brief query over two primitives
+/// of 3 and 2 fragments: 5 fragments, 2 primitives, 1 query.
+#[test]
+fn a_forged_summary_is_refused_by_every_reading() {
+    let frag = |x, y| Event::Fragment(Fragment { x, y, z: 100 });
+    let query = QuerySpec {
+        id: 1,
+        mode: QueryMode::Brief,
+        buffer_entries: 8,
+        tiles: vec![Rect::new(0, 0, 16, 16)],
+    };
+    let events = [
+        Event::QueryBegin(query),
+        Event::Primitive,
+        frag(0, 0),
+        frag(1, 0),
+        frag(2, 0),
+        Event::Primitive,
+        frag(4, 4),
+        frag(4, 5),
+        Event::QueryEnd,
+    ];
+    let bytes = super::index::tests::indexed(&events);
+    let by_events = |bytes: &[u8]| {
+        TraceReader::new(bytes).and_then(|mut reader| {
+            reader
+                .read_into(&mut Vec::new())
+                .map_err(ReadError::into_trace)
+        })
+    };
+    let by_index = |bytes: &[u8]| {
+        TraceReader::new(bytes).and_then(|mut reader| {
+            reader
+                .for_each_index_item(|_| Ok::<(), std::convert::Infallible>(()))
+                .map_err(ReadError::into_trace)?;
+            reader.skip_to_summary()
+        })
+    };
+    let by_bands = |bytes: &[u8]| {
+        TraceReader::new(bytes).and_then(|mut reader| {
+            reader
+                .for_each_band_item(|_| Ok::<(), std::convert::Infallible>(()))
+                .map_err(ReadError::into_trace)?;
+            reader.skip_to_summary()
+        })
+    };
+    let truth = by_events(&bytes).unwrap();
+    assert_eq!(
+        (truth.fragments, truth.primitives, truth.queries),
+        (5, 2, 1)
+    );
+    assert_eq!(by_index(&bytes).unwrap(), truth);
+    assert_eq!(by_bands(&bytes).unwrap(), truth);
+    for (field, claim) in [("queries", 1u64 << 40), ("fragments", 6), ("primitives", 3)] {
+        let forged = with_forged_summary(&bytes, |summary| summary[field] = claim.into());
+        let wanted = format!("disagrees with the trace on {field}");
+        for (reading, result) in [
+            ("events", by_events(&forged).map(|_| ())),
+            ("window index", by_index(&forged).map(|_| ())),
+            ("band index", by_bands(&forged).map(|_| ())),
+        ] {
+            let error = result.expect_err(reading).to_string();
+            assert!(error.contains(&wanted), "{reading}: {error}");
+        }
+    }
+}
+
+/// A header whose depth format occsim does not read, or whose sub-pixel bits no rasterizer
+/// keeps, is refused at offset 16 (the header JSON), its checksum right: the depths would
+/// be read as unorm24 whatever the header said.
+#[test]
+fn a_header_of_another_depth_format_or_absurd_sub_pixel_bits_is_refused() {
+    let header = |edit: &dyn Fn(&mut TraceHeader)| {
+        let mut header = TraceHeader::new(16, 16);
+        edit(&mut header);
+        block::file_header_bytes(FORMAT_VERSION, &serde_json::to_vec(&header).unwrap())
+    };
+    let read = |bytes: Vec<u8>| TraceReader::new(&bytes[..]).map(|_| ());
+    // The header as written reads (the blocks after it are not read yet), and so do 4 and
+    // 16 sub-pixel bits, another rasterizer's.
+    assert!(read(header(&|_| {})).is_ok());
+    assert!(read(header(&|h| h.subpixel_bits = 4)).is_ok());
+    assert!(read(header(&|h| h.subpixel_bits = 16)).is_ok());
+    for (edit, wanted) in [
+        (
+            &(|h: &mut TraceHeader| h.depth_format = "float32".to_owned()) as &dyn Fn(&mut _),
+            "depth format \"float32\": occsim reads \"unorm24\" depths only",
+        ),
+        (
+            &|h: &mut TraceHeader| h.subpixel_bits = 200,
+            "200 sub-pixel bits: more than 16",
+        ),
+    ] {
+        let error = read(header(edit)).unwrap_err();
+        assert!(
+            matches!(error, TraceError::BadHeader { offset: 16, .. }),
+            "{error:?}"
+        );
+        assert!(error.to_string().contains(wanted), "{error}");
+    }
+}
