@@ -1005,3 +1005,72 @@ fn arch_list_and_show_print_json() {
     );
     assert!(param("boards")["plausible"].is_null());
 }
+
+/// A viewport whose depth buffer the process may not have is a clear error naming the scene
+/// or the trace, and leaves nothing behind: 16384x16384 depths are 1 GiB, and the commands
+/// run under a 600 MB address-space limit (`ulimit -v`; they need about 400 MB for a small
+/// scene). `trace gen` had aborted on the allocation and left its temporary file.
+#[test]
+fn a_viewport_too_large_for_the_memory_limit_is_an_error_that_leaves_nothing() {
+    use occsim_traces::trace::{TraceHeader, TraceWriter};
+    use occsim_traces::{Event, Fragment};
+    let dir = scratch_dir("memory-limit");
+    std::fs::write(
+        dir.join("huge.scene"),
+        "viewport 16384 16384\nclear\nbegin 1\ntri -0.01 -0.01 0.5 1  0.01 -0.01 0.5 1  0 0.01 0.5 1\nend\n",
+    )
+    .unwrap();
+    // A trace at that viewport written here, without an index (whose writer keeps depths).
+    let mut trace = std::fs::File::create(dir.join("huge.occt")).unwrap();
+    let mut writer = TraceWriter::new(&mut trace, &TraceHeader::new(16384, 16384)).unwrap();
+    for event in [
+        Event::Primitive,
+        Event::Fragment(Fragment { x: 5, y: 7, z: 9 }),
+    ] {
+        writer.write_event(&event).unwrap();
+    }
+    writer.finish().unwrap();
+    let limited = |args: &[&str]| {
+        std::process::Command::new("sh")
+            .args(["-c", "ulimit -v 600000 && exec \"$0\" \"$@\""])
+            .arg(env!("CARGO_BIN_EXE_occsim"))
+            .args(args)
+            .current_dir(&dir)
+            .output()
+            .expect("sh runs")
+    };
+    let too_large = "the 16384x16384 viewport's depth buffer (1024 MiB) could not be allocated";
+    for (args, names) in [
+        (
+            &["trace", "gen", "huge.scene", "-o", "out.occt"][..],
+            "out.occt: cannot write trace",
+        ),
+        (&["count", "huge.scene"], "huge.scene"),
+        (&["replay", "huge.occt"], "huge.occt"),
+        (
+            &[
+                "replay",
+                "huge.occt",
+                "--arch",
+                "ir2",
+                "--fidelity",
+                "functional",
+            ],
+            "huge.occt",
+        ),
+    ] {
+        let output = limited(args);
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert_eq!(output.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(names) && stderr.contains(too_large),
+            "{args:?}: {stderr}"
+        );
+        let mut left: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|entry| entry.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, ["huge.occt", "huge.scene"], "{args:?} left a file");
+    }
+}

@@ -291,3 +291,18 @@ fn sweeps_run_at_any_fidelity_and_rtl_agrees_with_cycle() {
     assert!(!output.status.success());
     assert!(String::from_utf8_lossy(&output.stderr).contains("not functional"));
 }
+
+/// `trace gen` and `sweep` name their output alike: `-o`, `--output` and `--out` on both
+/// (`trace gen -o` beside `sweep --out` had each refused the other's spelling).
+#[test]
+fn trace_gen_and_sweep_take_the_same_output_flags() {
+    let dir = scratch("output-flags");
+    for (k, flag) in ["-o", "--output", "--out"].into_iter().enumerate() {
+        let trace = dir.join(format!("hard{k}.occt"));
+        ok(&["trace", "gen", "hardcases", flag, s(&trace)]);
+        assert!(trace.exists(), "trace gen {flag}");
+        let results = dir.join(format!("r{k}.jsonl"));
+        ok(&["sweep", s(&trace), flag, s(&results), "--set", "engines=1"]);
+        assert!(results.exists(), "sweep {flag}");
+    }
+}

@@ -1,6 +1,7 @@
 //! `occsim count SCENE`: the golden model's answer to every query.
 
 use crate::scene_input::open_scene;
+use anyhow::Context;
 use occsim_traces::golden::{infallible, Discard, GoldenModel};
 use occsim_traces::QueryMode;
 use std::io::Write;
@@ -22,7 +23,8 @@ pub struct CountArgs {
 /// ones with `hits H` kept (and `overflowed` when the buffer overflowed).
 pub fn run(args: CountArgs) -> anyhow::Result<()> {
     let mut scene = open_scene(&args.scene)?;
-    let mut golden = GoldenModel::with_profile(scene.width, scene.height, args.raster.profile);
+    let mut golden = GoldenModel::try_with_profile(scene.width, scene.height, args.raster.profile)
+        .with_context(|| args.scene.clone())?;
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     // The JSON array is written result by result, so memory does not grow with the queries.

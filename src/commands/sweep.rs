@@ -95,7 +95,13 @@ pub struct SweepRunArgs {
     #[arg(long)]
     pub bands: bool,
     /// Results file (one JSON line per point); the CSV view is written beside it.
-    #[arg(long, value_name = "FILE.jsonl", required = true)]
+    #[arg(
+        short = 'o',
+        long,
+        value_name = "FILE.jsonl",
+        required = true,
+        visible_alias = "output"
+    )]
     pub out: Option<PathBuf>,
     /// Also print every point's results line (as --out holds them) as one JSON array on
     /// standard output.

@@ -31,7 +31,7 @@ pub struct GenArgs {
     #[arg(value_name = "SCENE")]
     pub scene_file: Option<String>,
     /// The trace file to write (written atomically).
-    #[arg(short, long)]
+    #[arg(short, long, visible_alias = "out")]
     pub output: PathBuf,
     #[command(flatten)]
     pub workload: super::workload_args::WorkloadArgs,
@@ -153,6 +153,7 @@ fn print_frame(
 /// default depth layout, so that the analytic level on the O2 reads no fragment.
 pub(crate) fn indexed_writer<W: Write>(
     out: W,
+    output: &Path,
     header: &TraceHeader,
 ) -> anyhow::Result<TraceWriter<W>> {
     let layout = Arch::builtin("o2")?.o2()?.depth_layout();
@@ -160,7 +161,8 @@ pub(crate) fn indexed_writer<W: Write>(
         window_index: Some(layout),
         ..WriterOptions::default()
     };
-    Ok(TraceWriter::with_options(out, header, options)?)
+    TraceWriter::with_options(out, header, options)
+        .with_context(|| format!("{}: cannot write trace", output.display()))
 }
 
 /// A scene file or built-in scene through the rasterizer and golden model into a trace.
@@ -174,8 +176,9 @@ pub(crate) fn generate_scene(
         .with_scene(scene.name.clone())
         .with_raster(raster);
     write_atomically_with(output, |file| {
-        let mut writer = indexed_writer(file, &header)?;
-        let mut golden = GoldenModel::with_profile(scene.width, scene.height, raster);
+        let mut writer = indexed_writer(file, output, &header)?;
+        let mut golden = GoldenModel::try_with_profile(scene.width, scene.height, raster)
+            .with_context(|| scene_file.to_owned())?;
         let cannot_write = || format!("{}: cannot write trace", output.display());
         for line in &mut scene.reader {
             golden

@@ -382,7 +382,7 @@ pub fn write_workload_trace(
         .bar
         .set_message(format!("{} walkthrough", driver.label()));
     let written: anyhow::Result<TraceSummary> = write_atomically_with(output, |file| {
-        let mut writer = super::trace::indexed_writer(file, &header)?;
+        let mut writer = super::trace::indexed_writer(file, output, &header)?;
         generate_observed(&scene, &driver, &walk, &mut writer, &mut frames).map_err(
             |e| match e {
                 GenerateError::Workload(e) => flagged(e),

@@ -17,8 +17,50 @@ pub struct DepthBuffer {
     depths: Vec<u32>,
 }
 
+/// A depth buffer the allocator would not give: the viewport a user asked for needs more
+/// memory than the process may have (a 16384x16384 viewport's buffer is 1 GiB).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "the {width}x{height} viewport's depth buffer ({} MiB) could not be allocated: not enough memory for this process (a smaller viewport, or a higher memory limit)",
+    depth_buffer_bytes(*width, *height) >> 20
+)]
+pub struct DepthBufferTooLarge {
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Bytes of a `width` x `height` depth buffer.
+fn depth_buffer_bytes(width: u32, height: u32) -> u64 {
+    width as u64 * height as u64 * std::mem::size_of::<u32>() as u64
+}
+
 impl DepthBuffer {
-    /// A buffer cleared to 1.0.
+    /// A buffer cleared to 1.0, or the error when the allocator will not give it. Every
+    /// buffer of a viewport a user chose is made so (or by [`Self::try_unset`]), so that a
+    /// process under a memory limit stops with an error, its outputs removed, where it had
+    /// aborted and left a temporary file behind.
+    pub fn try_new(width: u32, height: u32) -> Result<DepthBuffer, DepthBufferTooLarge> {
+        DepthBuffer::fits(width, height)?;
+        Ok(DepthBuffer::new(width, height))
+    }
+
+    /// [`Self::unset`], or the error when the allocator will not give it.
+    pub fn try_unset(width: u32, height: u32) -> Result<DepthBuffer, DepthBufferTooLarge> {
+        DepthBuffer::fits(width, height)?;
+        Ok(DepthBuffer::unset(width, height))
+    }
+
+    /// Whether the allocator gives a buffer of `width` x `height` depths: asked for the
+    /// room and given it back untouched (no stable allocation is both fallible and zeroed
+    /// lazily, as `unset`'s must be; a room reserved and never written maps no page).
+    fn fits(width: u32, height: u32) -> Result<(), DepthBufferTooLarge> {
+        let mut room: Vec<u32> = Vec::new();
+        room.try_reserve_exact(width as usize * height as usize)
+            .map_err(|_| DepthBufferTooLarge { width, height })
+    }
+
+    /// A buffer cleared to 1.0, for a viewport known to be small (tests, fixed sizes): a
+    /// failed allocation aborts, as any collection's does ([`Self::try_new`] for a user's).
     pub fn new(width: u32, height: u32) -> DepthBuffer {
         DepthBuffer {
             width,
@@ -27,7 +69,8 @@ impl DepthBuffer {
     }
 
     /// A buffer of zeros, for a user that sets every pixel before reading it: its pages are
-    /// mapped only as they are first touched (a cleared one is written whole up front).
+    /// mapped only as they are first touched (a cleared one is written whole up front). For
+    /// a viewport known to be small ([`Self::try_unset`] for a user's).
     pub fn unset(width: u32, height: u32) -> DepthBuffer {
         DepthBuffer {
             width,
@@ -591,11 +634,23 @@ pub struct FunctionalModel {
 }
 
 impl FunctionalModel {
+    /// A model over a viewport known to be small (tests, fixed sizes; [`Self::try_new`]
+    /// for a user's).
     pub fn new(width: u32, height: u32) -> FunctionalModel {
+        FunctionalModel::with_depth(width, height, DepthBuffer::new(width, height))
+    }
+
+    /// A model over a user's viewport, or the error when its depth buffer cannot be had.
+    pub fn try_new(width: u32, height: u32) -> Result<FunctionalModel, DepthBufferTooLarge> {
+        let depth = DepthBuffer::try_new(width, height)?;
+        Ok(FunctionalModel::with_depth(width, height, depth))
+    }
+
+    fn with_depth(width: u32, height: u32, depth: DepthBuffer) -> FunctionalModel {
         let state = RenderState::new(width, height);
         FunctionalModel {
             state,
-            depth: DepthBuffer::new(width, height),
+            depth,
             query: None,
             passed: Vec::new(),
             plan: SpanPlan::Uncounted(RunTest::new(&state, true)),
@@ -887,9 +942,25 @@ impl GoldenModel {
         GoldenModel::with_profile(width, height, RasterProfile::default())
     }
 
+    /// A model over a viewport known to be small (tests, fixed sizes;
+    /// [`Self::try_with_profile`] for a user's).
     pub fn with_profile(width: u32, height: u32, profile: RasterProfile) -> GoldenModel {
+        GoldenModel::with_functional(FunctionalModel::new(width, height), profile)
+    }
+
+    /// A model over a user's viewport, or the error when its depth buffer cannot be had.
+    pub fn try_with_profile(
+        width: u32,
+        height: u32,
+        profile: RasterProfile,
+    ) -> Result<GoldenModel, DepthBufferTooLarge> {
+        let functional = FunctionalModel::try_new(width, height)?;
+        Ok(GoldenModel::with_functional(functional, profile))
+    }
+
+    fn with_functional(functional: FunctionalModel, profile: RasterProfile) -> GoldenModel {
         GoldenModel {
-            functional: FunctionalModel::new(width, height),
+            functional,
             rasterizer: Rasterizer::new(profile),
             draw: DrawCount::default(),
             passed: HashMap::new(),

@@ -25,6 +25,8 @@ pub enum RetileError {
     },
     #[error("tile grid {columns}x{rows} has more than {max} tiles")]
     TooMany { columns: u32, rows: u32, max: usize },
+    #[error(transparent)]
+    DepthBuffer(#[from] crate::golden::DepthBufferTooLarge),
 }
 
 /// A grid of `columns` x `rows` tiles covering the viewport.
@@ -106,7 +108,7 @@ impl<S: EventSink> Retile<S> {
     ) -> Result<Retile<S>, RetileError> {
         Ok(Retile {
             tiles: grid.tiles(width, height)?,
-            golden: FunctionalModel::new(width, height),
+            golden: FunctionalModel::try_new(width, height)?,
             inner,
         })
     }

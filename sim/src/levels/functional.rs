@@ -43,7 +43,7 @@ impl FunctionalCore {
     pub fn new(width: u32, height: u32) -> Result<FunctionalCore, SimError> {
         crate::error::check_viewport(width, height)?;
         Ok(FunctionalCore::with_model(
-            FunctionalModel::new(width, height),
+            FunctionalModel::try_new(width, height)?,
             width,
             height,
             ResultSource::Computed,

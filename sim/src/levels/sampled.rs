@@ -1169,10 +1169,10 @@ impl SampledModel {
                 // not matter. (The core's model has a one-pixel viewport.)
                 consistent.restart();
                 let (width, height) = (self.width, self.height);
-                let depth = self
-                    .spare_depth
-                    .take()
-                    .unwrap_or_else(|| DepthBuffer::unset(width, height));
+                let depth = match self.spare_depth.take() {
+                    Some(depth) => depth,
+                    None => DepthBuffer::try_unset(width, height)?,
+                };
                 let state = RenderState {
                     width,
                     height,

@@ -164,13 +164,11 @@ impl<'a> MachineBuilder<'a> {
         depth: &DepthBuffer,
         storage: Option<DepthBuffer>,
     ) -> Result<MachineModel, SimError> {
-        let copy = match storage {
-            Some(mut storage) => {
-                storage.copy_from(depth);
-                storage
-            }
-            None => depth.clone(),
+        let mut copy = match storage {
+            Some(storage) => storage,
+            None => DepthBuffer::try_unset(state.width, state.height)?,
         };
+        copy.copy_from(depth);
         self.resume_with_depths(state, copy)
     }
 
@@ -197,7 +195,8 @@ impl<'a> MachineBuilder<'a> {
     /// The O2-like machine at reset (an error when the architecture names another).
     pub fn o2(self, width: u32, height: u32) -> Result<O2Machine, SimError> {
         crate::error::check_viewport(width, height)?;
-        O2Machine::assemble(self, width, height, DepthBuffer::new(width, height), None)
+        let depth = DepthBuffer::try_new(width, height)?;
+        O2Machine::assemble(self, width, height, depth, None)
     }
 
     /// The InfiniteReality-like machine at reset (an error when the architecture names
@@ -205,7 +204,8 @@ impl<'a> MachineBuilder<'a> {
     pub fn ir(self, width: u32, height: u32) -> Result<IrMachine, SimError> {
         self.arch.ir()?;
         crate::error::check_viewport(width, height)?;
-        IrMachine::assemble(self, width, height, DepthBuffer::new(width, height), None)
+        let depth = DepthBuffer::try_new(width, height)?;
+        IrMachine::assemble(self, width, height, depth, None)
     }
 }
 

@@ -23,6 +23,9 @@ pub enum TraceError {
     },
     #[error("byte {offset}: bad trace header: {reason}")]
     BadHeader { offset: u64, reason: String },
+    /// The window index's depth buffer, for the header's viewport (the writer's).
+    #[error(transparent)]
+    DepthBuffer(#[from] crate::golden::DepthBufferTooLarge),
     #[error("byte {offset}: bad block header: {reason}")]
     BadBlock { offset: u64, reason: String },
     #[error(

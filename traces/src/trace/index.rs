@@ -33,7 +33,7 @@ use super::codec::{put_uv, tag};
 use super::dense_reads::{DenseReadFinder, DenseRuns, DENSE_READ_COSTS};
 use crate::depth_layout::{DepthAddress, DepthLayout, DepthRead, LastRead};
 use crate::event::{Event, Fragment};
-use crate::golden::FunctionalModel;
+use crate::golden::{DepthBufferTooLarge, FunctionalModel};
 use crate::query::{QueryShape, QueryTotals};
 use crate::state::RenderState;
 
@@ -284,9 +284,13 @@ pub(crate) struct WindowIndexer {
 }
 
 impl WindowIndexer {
-    pub(crate) fn new(layout: &DepthLayout, width: u32, height: u32) -> WindowIndexer {
-        WindowIndexer {
-            functional: FunctionalModel::new(width, height),
+    pub(crate) fn new(
+        layout: &DepthLayout,
+        width: u32,
+        height: u32,
+    ) -> Result<WindowIndexer, DepthBufferTooLarge> {
+        Ok(WindowIndexer {
+            functional: FunctionalModel::try_new(width, height)?,
             address: DepthAddress::new(layout, width),
             last_read: LastRead::new(layout.banks),
             occlusion_mode: false,
@@ -294,7 +298,7 @@ impl WindowIndexer {
             stretch: FragmentStretch::EMPTY,
             dense: DenseReadFinder::default(),
             since_end: FIRST_READS_FRAGMENTS,
-        }
+        })
     }
 
     /// Count a fragment (inside the viewport) and apply it; returns whether it passes the

@@ -207,6 +207,10 @@ impl<W: Write> TraceWriter<W> {
                 json.len()
             )));
         }
+        let indexer = match options.window_index {
+            Some(layout) => Some(WindowIndexer::new(&layout, header.width, header.height)?),
+            None => None,
+        };
         let bytes = header_bytes(&json);
         let mut offset = 0;
         write_at(&mut out, &mut offset, &bytes)?;
@@ -214,8 +218,8 @@ impl<W: Write> TraceWriter<W> {
             .map_err(|e| bad_header(format!("zstd level {}: {e}", options.zstd_level)))?;
         Ok(TraceWriter {
             out,
-            index: options.window_index.map(|layout| IndexLane {
-                indexer: Box::new(WindowIndexer::new(&layout, header.width, header.height)),
+            index: indexer.map(|indexer| IndexLane {
+                indexer: Box::new(indexer),
                 block: OpenBlock::new(KIND_INDEX),
                 bands: OpenBlock::new(KIND_BANDS),
                 band: FragmentBand::EMPTY,

@@ -84,10 +84,11 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
     scene: &WorkloadScene,
     options: &DriverOptions,
     walk: &Walk,
+    golden: crate::golden::GoldenModel,
     sink: &mut S,
     observer: &mut O,
 ) -> Result<WorkloadStats, S::Error> {
-    let mut renderer = Renderer::new(walk.width, walk.height, walk.raster, sink, observer);
+    let mut renderer = Renderer::new(golden, sink, observer);
     renderer.set_waits_for_answers(options.query_delay_frames == 0);
     let mut states = DriverStates::new(options, scene, walk);
     let mut dynamic_grid =

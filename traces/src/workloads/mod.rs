@@ -94,6 +94,8 @@ pub enum WorkloadError {
     ObjModel { file: String, message: String },
     #[error("{file}: {message}")]
     Camera { file: String, message: String },
+    #[error(transparent)]
+    DepthBuffer(#[from] crate::golden::DepthBufferTooLarge),
 }
 
 /// The options of a walkthrough and its driver that can be out of range.
@@ -941,7 +943,9 @@ pub fn generate_observed<S: EventSink>(
     walk.validate()?;
     driver.validate()?;
     check_grid_size(driver, walk)?;
-    drivers::run(scene, driver, walk, sink, commands).map_err(GenerateError::Sink)
+    let golden = crate::golden::GoldenModel::try_with_profile(walk.width, walk.height, walk.raster)
+        .map_err(WorkloadError::from)?;
+    drivers::run(scene, driver, walk, golden, sink, commands).map_err(GenerateError::Sink)
 }
 
 /// One probe query may name every cell, so a grid may hold at most `MAX_TILES` cells.

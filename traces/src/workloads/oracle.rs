@@ -20,7 +20,7 @@ pub fn full_render_visible_pixels(
     walk.validate()?;
     let view = scene.frame_view(frame, walk);
     let scene = scene.posed(frame);
-    let mut golden = GoldenModel::with_profile(walk.width, walk.height, walk.raster);
+    let mut golden = GoldenModel::try_with_profile(walk.width, walk.height, walk.raster)?;
     for command in [
         Command::Clear,
         Command::Cull(true),

@@ -204,7 +204,6 @@ impl RaycastDriver {
 mod tests {
     use super::*;
     use crate::golden::{infallible, Discard};
-    use crate::raster::RasterProfile;
     use crate::workloads::render::screen_quad;
 
     /// An 8 x 8 screen. A wall at depth 1/4 covers columns 0..4 (x < 4); a brick's face at
@@ -213,7 +212,8 @@ mod tests {
     fn brick_behind_a_wall(buffer_entries: u32) -> TileResult {
         let mut sink = Discard;
         let mut observer = ();
-        let mut renderer = Renderer::new(8, 8, RasterProfile::default(), &mut sink, &mut observer);
+        let golden = crate::golden::GoldenModel::new(8, 8);
+        let mut renderer = Renderer::new(golden, &mut sink, &mut observer);
         infallible(renderer.start_frame());
         let quarter = crate::event::DEPTH_ONE / 4;
         // The wall as an object whose world coordinates are its clip coordinates (w = 1),

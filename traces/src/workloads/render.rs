@@ -6,7 +6,7 @@ use crate::event::{Event, HostWork, DEPTH_ONE};
 use crate::geometry::to_clip;
 use crate::golden::{EventSink, GoldenModel};
 use crate::query::{QueryMode, QueryResult, QuerySpec, BRIEF_RECORD_ENTRIES};
-use crate::raster::{PlaneDepths, RasterProfile};
+use crate::raster::PlaneDepths;
 use crate::scene::Command;
 use crate::state::{DepthFunc, Rect};
 use glam::Mat4;
@@ -77,15 +77,12 @@ pub(crate) struct Renderer<'s, S, O> {
 }
 
 impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
-    pub(crate) fn new(
-        width: u32,
-        height: u32,
-        raster: RasterProfile,
-        sink: &'s mut S,
-        observer: &'s mut O,
-    ) -> Self {
+    /// A renderer drawing through `golden` (made for the walk's viewport by its caller,
+    /// where its depth buffer's allocation can fail with a workload's error).
+    pub(crate) fn new(golden: GoldenModel, sink: &'s mut S, observer: &'s mut O) -> Self {
+        let crate::state::RenderState { width, height, .. } = *golden.state();
         Renderer {
-            golden: GoldenModel::with_profile(width, height, raster),
+            golden,
             sink: CountingSink {
                 inner: sink,
                 fragments: 0,
@@ -329,8 +326,7 @@ mod tests {
         for filled in [9u32, 1000, 1 << 20, 12_345_678, DEPTH_ONE - 9] {
             let mut sink = Discard;
             let mut observer = ();
-            let mut renderer =
-                Renderer::new(37, 23, RasterProfile::default(), &mut sink, &mut observer);
+            let mut renderer = Renderer::new(GoldenModel::new(37, 23), &mut sink, &mut observer);
             infallible(renderer.start_frame());
             for triangle in screen_quad(tile, filled, 37, 23) {
                 infallible(renderer.execute(&Command::Tri(triangle)));
