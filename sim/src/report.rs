@@ -208,10 +208,11 @@ pub struct QueryReport {
     /// The part of the latency until the last pixel pipeline holds its partial result (the
     /// whole latency on the O2-like machine).
     pub drain_cycles: u64,
-    /// The part spent merging the Image Engines' results within the boards (stage one).
-    pub local_merge_cycles: u64,
-    /// The part spent merging the boards' results (stage two).
-    pub global_merge_cycles: u64,
+    /// The part spent merging the Image Engines' results within the boards (stage one);
+    /// None (null) on a machine without merge stages, the O2-like one.
+    pub local_merge_cycles: Option<u64>,
+    /// The part spent merging the boards' results (stage two); None as the first.
+    pub global_merge_cycles: Option<u64>,
     pub end_cycle: u64,
     pub available_cycle: u64,
     pub fragments: u64,

@@ -120,8 +120,10 @@ impl LatencyRow {
             latency_max_us: us(max),
             drain_mean_cycles: mean(&|q| q.drain_cycles),
             // `-` (null) where the machine has no merge, as for any figure it has not.
-            local_merge_mean_cycles: mean(&|q| q.local_merge_cycles).filter(|_| merges),
-            global_merge_mean_cycles: mean(&|q| q.global_merge_cycles).filter(|_| merges),
+            local_merge_mean_cycles: mean(&|q| q.local_merge_cycles.unwrap_or(0))
+                .filter(|_| merges),
+            global_merge_mean_cycles: mean(&|q| q.global_merge_cycles.unwrap_or(0))
+                .filter(|_| merges),
             total_cycles,
             fragments_per_cycle: if total_cycles == 0 {
                 0.0

@@ -494,7 +494,6 @@ impl LevelResult {
         );
         let reported = self.report.as_ref().map(|r| &r.queries);
         let dash = |v: Option<u64>| v.map_or("-".to_string(), |v| v.to_string());
-        let merges = self.has_merge_stages();
         for (index, q) in self.queries.iter().enumerate() {
             let split = reported.and_then(|r| r.get(index));
             let _ = writeln!(
@@ -506,8 +505,8 @@ impl LevelResult {
                 q.tiles,
                 dash(q.latency_cycles),
                 dash(split.map(|s| s.drain_cycles)),
-                dash(split.filter(|_| merges).map(|s| s.local_merge_cycles)),
-                dash(split.filter(|_| merges).map(|s| s.global_merge_cycles)),
+                dash(split.and_then(|s| s.local_merge_cycles)),
+                dash(split.and_then(|s| s.global_merge_cycles)),
                 q.overflowed_buffers,
                 q.nohc,
                 q.phc,
