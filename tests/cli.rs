@@ -985,6 +985,8 @@ fn arch_list_and_show_print_json() {
     let show = stdout_of(&["arch", "show", "ir2", "--set", "engines=2", "--json"]);
     let show: serde_json::Value = serde_json::from_str(&show).unwrap();
     assert_eq!(show["machine"], "ir");
+    // Named as `arch list` and a chart's title name it, with the override.
+    assert_eq!(show["name"], "ir2 (engines=2)");
     let param = |key: &str| {
         (show["parameters"].as_array().unwrap().iter())
             .find(|p| p["key"] == key)

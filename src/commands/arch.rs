@@ -36,7 +36,8 @@ pub struct ShowArgs {
     /// Override one parameter (repeatable), e.g. --set engines=8.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
-    /// Print the architecture as JSON instead: `machine`, `title` and per parameter `key`,
+    /// Print the architecture as JSON instead: `name` (`ir4`, `my.toml`, `o2 (engines=2)`),
+    /// `machine`, `title` and per parameter `key`,
     /// `value`, `default`, `unit`, `meaning`, `provenance` (V, V2 or I), `source` and
     /// `plausible` (an I parameter's `[low, high]`, else null).
     #[arg(long)]
@@ -68,8 +69,9 @@ impl ArchSelection {
     }
 }
 
-/// `arch show --json`: every parameter as the TOML's comments give it, in fields.
-fn arch_json(arch: &Arch) -> serde_json::Value {
+/// `arch show --json`: the architecture's `name` (as a chart's title names it:
+/// [`describe`]) and every parameter as the TOML's comments give it, in fields.
+fn arch_json(name: &str, arch: &Arch) -> serde_json::Value {
     let parameters: Vec<serde_json::Value> = arch
         .entries()
         .map(|(param, value)| {
@@ -86,6 +88,7 @@ fn arch_json(arch: &Arch) -> serde_json::Value {
         })
         .collect();
     serde_json::json!({
+        "name": name,
         "machine": arch.machine().name(),
         "title": arch.machine().title(),
         "parameters": parameters,
@@ -152,7 +155,13 @@ pub fn run(args: ArchArgs) -> anyhow::Result<()> {
         ArchCommand::Show(show) => {
             let arch = resolve(&show.name, show.arch_file.as_deref(), &show.set)?;
             match show.json {
-                true => outln!("{}", serde_json::to_string_pretty(&arch_json(&arch))?),
+                true => {
+                    let name = describe(&show.name, show.arch_file.as_deref(), &show.set);
+                    outln!(
+                        "{}",
+                        serde_json::to_string_pretty(&arch_json(&name, &arch))?
+                    )
+                }
                 false => out!("{}", arch.to_documented_toml()),
             }
         }
