@@ -160,6 +160,16 @@ fn culling_compare_bands_hold_every_frame_time_and_leave_nothing_behind() {
         let low = time["ms_per_frame_band"][0].as_f64().unwrap();
         let high = time["ms_per_frame_band"][1].as_f64().unwrap();
         assert!(low <= ms && ms <= high && low < high, "{driver}");
+        // The split sums to the frame: host busy + waiting + pipe wait cycles are the
+        // frame's: its ms at the O2's 66.67 MHz, 66,670 cycles a ms (means over 2 frames).
+        let cycles = |key: &str| time[key].as_f64().unwrap();
+        let split =
+            cycles("host_busy_cycles") + cycles("waiting_cycles") + cycles("pipe_wait_cycles");
+        let frame = ms * 66.67e3;
+        assert!(
+            (split - frame).abs() < 1.0,
+            "{split} against {frame}: {driver}"
+        );
         let at = time["ms_per_frame_at_variants"].as_array().unwrap().len();
         assert_eq!(
             *corners.get_or_insert(at),

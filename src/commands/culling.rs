@@ -311,6 +311,7 @@ impl FrameCycleModel for MachineFrames {
             geometry_busy: sum(&|f| f.geometry_busy),
             pixel_busy: sum(&|f| f.pixel_busy),
             waiting: sum(&|f| f.waiting),
+            pipe_wait: sum(&|f| f.pipe_wait),
             variant_seconds: reports[1..]
                 .iter()
                 .map(|r| r.summary.simulated_seconds)
@@ -450,13 +451,14 @@ fn print_frame_time(report: &CompareReport, out: &mut dyn Write) -> std::io::Res
         .any(|m| m.ms_per_frame_band.is_some());
     write!(
         out,
-        "\n{:<24} {:<8} {:>9} {:>10} {:>12} {:>12} {:>12} {:>12}",
+        "\n{:<24} {:<8} {:>9} {:>10} {:>12} {:>12} {:>12} {:>12} {:>12}",
         "frame time",
         "machine",
         "frames/s",
         "ms/frame",
         "host busy",
         "waiting",
+        "pipe wait",
         "geometry",
         "pixel busy"
     )?;
@@ -465,13 +467,14 @@ fn print_frame_time(report: &CompareReport, out: &mut dyn Write) -> std::io::Res
         for m in &d.frame_time {
             write!(
                 out,
-                "{:<24} {:<8} {:>9.2} {:>10.2} {:>12.0} {:>12.0} {:>12.0} {:>12.0}",
+                "{:<24} {:<8} {:>9.2} {:>10.2} {:>12.0} {:>12.0} {:>12.0} {:>12.0} {:>12.0}",
                 d.driver,
                 m.machine,
                 m.frames_per_second,
                 m.ms_per_frame,
                 m.host_busy_cycles,
                 m.waiting_cycles,
+                m.pipe_wait_cycles,
                 m.geometry_busy_cycles,
                 m.pixel_busy_cycles
             )?;
@@ -484,7 +487,9 @@ fn print_frame_time(report: &CompareReport, out: &mut dyn Write) -> std::io::Res
     writeln!(
         out,
         "  on the simulated machine, per frame: host busy (traversal, driver, result reads), \
-         waiting (the host blocked on answers), geometry (the geometry stage busy, summed over its \
+         waiting (the host blocked on answers), pipe wait (the host idle, the pipe still busy with \
+         the frame's work: host busy + waiting + pipe wait = the frame's cycles), geometry (the \
+         geometry stage busy, summed over its \
          Geometry Engines: several engines can pass the frame's cycles), pixel busy \
          (the rasterizer busy), in the machine's pipeline cycles{}",
         if banded {

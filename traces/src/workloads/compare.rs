@@ -50,6 +50,9 @@ pub struct FrameCost {
     pub geometry_busy: u64,
     pub pixel_busy: u64,
     pub waiting: u64,
+    /// The host idle, the pipe still busy with work it released (`host_busy + waiting +
+    /// pipe_wait = cycles`).
+    pub pipe_wait: u64,
     /// The frame's seconds on each of the machine's variants a sensitivity band is taken
     /// over (the corners of a study), in the same order every frame; empty without bands.
     pub variant_seconds: Vec<f64>,
@@ -65,6 +68,7 @@ pub struct MachineFrameTime {
     pub geometry_busy_cycles: f64,
     pub pixel_busy_cycles: f64,
     pub waiting_cycles: f64,
+    pub pipe_wait_cycles: f64,
     /// With variants: the band of `ms_per_frame` over the machine and its variants,
     /// `(low, high)`.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -92,6 +96,7 @@ impl MachineFrameTime {
             geometry_busy_cycles: mean(&|f| f.geometry_busy),
             pixel_busy_cycles: mean(&|f| f.pixel_busy),
             waiting_cycles: mean(&|f| f.waiting),
+            pipe_wait_cycles: mean(&|f| f.pipe_wait),
             ms_per_frame_band: None,
             ms_per_frame_at_variants: mean_ms_at_variants(frames),
         }
