@@ -325,8 +325,8 @@ impl LevelResult {
         if let Some(windows) = self.sampled_windows {
             let _ = writeln!(
                 out,
-                "sampled windows: {} of {} simulated ({} of them only as one of the slowest predicted, {} over their last fragments alone)",
-                windows.simulated, windows.total, windows.slowest, windows.tails
+                "sampled windows: {} of {} simulated; of those {}, {} only as one of the slowest predicted and, of either kind, {} over their last fragments alone",
+                windows.simulated, windows.total, windows.simulated, windows.slowest, windows.tails
             );
         }
         if let Some(version) = self.older_index {
