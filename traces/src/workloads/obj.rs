@@ -30,7 +30,13 @@ const MAX_COORDINATE: f32 = 1e9;
 /// Longest OBJ line accepted, in bytes (bounds memory on hostile input).
 const MAX_LINE_BYTES: usize = 1 << 20;
 
-/// Counts the lines a reader has handed out, and refuses overlong lines.
+/// Bytes of a line kept to check it as a vertex: far more than three numbers take.
+const VERTEX_LINE_BYTES: usize = 256;
+
+/// Counts the lines a reader has handed out, refuses overlong lines, and finds the first
+/// vertex line whose position is not a number within [`MAX_COORDINATE`] of the origin (the
+/// loader keeps no vertex's line: found afterwards, such a vertex was named by its values
+/// alone).
 struct LineCounter<R> {
     inner: R,
     /// Newlines consumed so far.
@@ -39,6 +45,10 @@ struct LineCounter<R> {
     line_bytes: usize,
     /// The line we refused and why, once a line grew too long.
     refused: Option<(u64, String)>,
+    /// The current line's first bytes, as far as [`VERTEX_LINE_BYTES`].
+    line: Vec<u8>,
+    /// The first vertex out of range: its line and its text.
+    bad_vertex: Option<(u64, String)>,
 }
 
 impl<R: BufRead> Read for LineCounter<R> {
@@ -69,7 +79,15 @@ impl<R: BufRead> BufRead for LineCounter<R> {
                 if byte == b'\n' {
                     self.newlines += 1;
                     self.line_bytes = 0;
+                    if self.bad_vertex.is_none() {
+                        self.bad_vertex =
+                            vertex_out_of_range(&self.line).map(|text| (self.newlines, text));
+                    }
+                    self.line.clear();
                 } else {
+                    if self.line.len() < VERTEX_LINE_BYTES {
+                        self.line.push(byte);
+                    }
                     self.line_bytes += 1;
                     if self.line_bytes > MAX_LINE_BYTES && self.refused.is_none() {
                         let message = format!("line longer than {MAX_LINE_BYTES} bytes");
@@ -80,6 +98,20 @@ impl<R: BufRead> BufRead for LineCounter<R> {
         }
         self.inner.consume(amount);
     }
+}
+
+/// The line's text when it is a vertex whose position is not a number within
+/// [`MAX_COORDINATE`] of the origin (a line that is no vertex, or whose numbers do not
+/// parse, is the loader's to judge).
+fn vertex_out_of_range(line: &[u8]) -> Option<String> {
+    let text = std::str::from_utf8(line).ok()?;
+    let mut words = text.split_whitespace();
+    if words.next() != Some("v") {
+        return None;
+    }
+    let numbers: Vec<f32> = words.take(3).map_while(|w| w.parse().ok()).collect();
+    (numbers.len() == 3 && !numbers.iter().all(|v| v.abs() <= MAX_COORDINATE))
+        .then(|| text.trim().to_owned())
 }
 
 impl<R> LineCounter<R> {
@@ -115,6 +147,8 @@ pub fn load_obj(
         newlines: 0,
         line_bytes: 0,
         refused: None,
+        line: Vec::new(),
+        bad_vertex: None,
     };
     let load_options = tobj::LoadOptions {
         triangulate: true,
@@ -132,6 +166,17 @@ pub fn load_obj(
             .unwrap_or_else(|| (counter.current_line(), format!("{e}")));
         error(line, message)
     })?;
+    if counter.bad_vertex.is_none() {
+        // The last line, without its newline.
+        let last = counter.newlines + 1;
+        counter.bad_vertex = vertex_out_of_range(&counter.line).map(|text| (last, text));
+    }
+    if let Some((line, text)) = counter.bad_vertex {
+        return Err(error(
+            line,
+            format!("vertex `{text}` is not a number within {MAX_COORDINATE:e} of the origin"),
+        ));
+    }
     let limit = options.max_triangles_per_object.max(1) as usize;
     let mut objects = Vec::new();
     for model in &models {
@@ -149,7 +194,9 @@ pub fn load_obj(
         for face in model.mesh.indices.chunks_exact(3) {
             let corners = [vertex(face[0]), vertex(face[1]), vertex(face[2])];
             let [Some(a), Some(b), Some(c)] = corners else {
-                // The loader keeps no line of a vertex: its values name it.
+                // A vertex line too long to have been checked as it was read (past
+                // `VERTEX_LINE_BYTES`): the loader keeps no line of a vertex, its values
+                // name it.
                 let bad = face
                     .iter()
                     .zip(corners)
@@ -270,14 +317,33 @@ mod tests {
             error("# nothing\n"),
             "bad.obj: no faces: the model has no triangles to draw (a face has three corners or more)"
         );
-        // What the model holds, found once it is read, is named by its values, not by a
-        // line (the last line's number had been given, where no vertex was).
+        // A vertex that is not a number, or is one beyond 1e9, is named by its line as it
+        // is written, used by a face or not, the last line too.
         assert_eq!(
             error("o a\nv 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n"),
-            "bad.obj: object `a` has a vertex (v NaN 1 0) that is not a number within 1e9 of the origin"
+            "bad.obj:4: vertex `v nan 1 0` is not a number within 1e9 of the origin"
         );
-        assert!(error("v 1e30 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
-            .contains("(v 1e30 0 0) that is not a number within"));
+        assert_eq!(
+            error("v 1e30 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n"),
+            "bad.obj:1: vertex `v 1e30 0 0` is not a number within 1e9 of the origin"
+        );
+        assert_eq!(
+            error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv\t0 inf 0"),
+            "bad.obj:5: vertex `v\t0 inf 0` is not a number within 1e9 of the origin"
+        );
+        // A vertex of four numbers (w) or with a colour is checked on its position alone;
+        // 1e9 itself is in range.
+        for model in [
+            "v 0 0 0 1\nv 1 0 0 1\nv 0 1 0 1e30\nf 1 2 3\n",
+            "v 0 0 0 0.5 0.5 0.5\nv 1 0 0 0.5 0.5 0.5\nv 0 1 0 0.5 0.5 nan\nf 1 2 3\n",
+        ] {
+            assert_eq!(error(model), "", "{model}");
+        }
+        assert_eq!(vertex_out_of_range(b"v 1e9 -1e9 0"), None);
+        assert_eq!(
+            vertex_out_of_range(b" v 1e9 -1.1e9 0 ").as_deref(),
+            Some("v 1e9 -1.1e9 0")
+        );
         let tiny_and_far = "v 9e8 9e8 9e8\nv 9e8 9e8 9e8\nv 9e8 9e8 9e8\nf 1 2 3\n";
         assert!(
             error(tiny_and_far).contains("too small"),
