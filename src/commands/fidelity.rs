@@ -156,7 +156,7 @@ pub fn replay_level(
     };
     replay(opener(path), arch, options)
         .map_err(|e| in_cli_words(&name, e))
-        .with_context(|| format!("{name}: {level}"))
+        .with_context(|| level.to_string())
 }
 
 /// A level's result and wall seconds: the fastest of repeated runs within about 0.3 s
