@@ -19,6 +19,9 @@
 //! shortcut [`tile_locator`] (not hardware); waveforms: [`wave`]
 //! (the one writer: declarations and change detection) with two encoders, [`vcd`] and [`fst`].
 
+// The docs explain how the public items work, linking the private items that do it: read
+// them with `cargo doc --document-private-items` (CI builds them so, every link checked).
+#![allow(rustdoc::private_intra_doc_links)]
 #![deny(clippy::float_arithmetic)]
 #![forbid(unsafe_code)]
 

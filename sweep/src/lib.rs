@@ -13,6 +13,10 @@
 //! parameter chart), `plot` (SVG line charts and tornado charts through plotters), `output` (atomic file
 //! writes), `error` (what can go wrong).
 
+// The docs explain how the public items work, linking the private items that do it: read
+// them with `cargo doc --document-private-items` (CI builds them so, every link checked).
+#![allow(rustdoc::private_intra_doc_links)]
+
 mod chart;
 mod error;
 mod grid;

@@ -1,6 +1,6 @@
 //! Loading and storing only some lanes of a 256-bit vector: a run's last fragments, fewer
 //! than a vector, in the AVX2 kernels (the depth test, [`crate::depth_run`], and the
-//! planes' depths, [`crate::raster::llvmpipe::fragment`]). AVX2's own masked moves
+//! planes' depths, `raster/llvmpipe/fragment.rs`). AVX2's own masked moves
 //! (`vpmaskmovd`) store slowly on AMD's processors; AVX-512's, under a mask register, do
 //! not. A kernel is written once over [`MaskedLanes`] and compiled for each, the AVX-512
 //! one where the processor has AVX-512F and AVX-512VL ([`mask_registers_available`]).
