@@ -1060,6 +1060,42 @@ fn a_viewport_too_large_for_the_memory_limit_is_an_error_that_leaves_nothing() {
             ],
             "huge.occt",
         ),
+        (
+            &["replay", "huge.occt", "--fidelity", "sampled:2"],
+            "huge.occt",
+        ),
+        // The trace named once, after the level that failed.
+        (
+            &["fidelity", "huge.occt", "--no-rtl"],
+            "functional: huge.occt: cannot replay",
+        ),
+        // A walkthrough's viewport is its flags'.
+        (
+            &[
+                "trace",
+                "gen",
+                "--scene",
+                "city",
+                "--blocks",
+                "1",
+                "--frames",
+                "1",
+                "--width",
+                "16384",
+                "--height",
+                "16384",
+                "-o",
+                "walk.occt",
+            ],
+            "walk.occt: cannot write trace",
+        ),
+        (
+            &[
+                "culling", "compare", "--scene", "city", "--blocks", "1", "--frames", "1",
+                "--width", "16384", "--height", "16384",
+            ],
+            "--width 16384 --height 16384",
+        ),
     ] {
         let output = limited(args);
         let stderr = String::from_utf8_lossy(&output.stderr);
@@ -1067,6 +1103,10 @@ fn a_viewport_too_large_for_the_memory_limit_is_an_error_that_leaves_nothing() {
         assert!(
             stderr.contains(names) && stderr.contains(too_large),
             "{args:?}: {stderr}"
+        );
+        assert!(
+            stderr.matches("huge.occt").count() <= 1,
+            "named twice: {stderr}"
         );
         let mut left: Vec<String> = std::fs::read_dir(&dir)
             .unwrap()

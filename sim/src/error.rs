@@ -10,7 +10,7 @@ pub enum SimError {
     #[error(transparent)]
     Arch(#[from] ArchError),
     #[error(transparent)]
-    DepthBuffer(#[from] occsim_traces::golden::DepthBufferTooLarge),
+    ViewportBuffer(#[from] occsim_traces::golden::ViewportBufferTooLarge),
     #[error("the simulated time reaches {cycles} cycles, past the 2^62 a report can sum: the host's or the geometry stage's costs in pipeline cycles are too large for this trace (their cycles a step times clock_mhz over host_clock_mhz or geometry_engine_clock_mhz)")]
     TimeOverflow { cycles: u64 },
     #[error("viewport {width}x{height}: each side must be in 1..={max}")]

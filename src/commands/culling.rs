@@ -180,7 +180,8 @@ fn band_corners(
     let trace = scratch.path().join("reference-walk.occt");
     let mut walk = parse_workload_flags(["--driver", BAND_REFERENCE_DRIVER])?;
     walk.scene = args.scene.clone();
-    write_workload_trace(&walk, &trace, |_, _| Ok(()))?;
+    write_workload_trace(&walk, &trace, |_, _| Ok(()))
+        .context("--bands: the sensitivity study's reference walk")?;
     let replayer = Replayer {
         trace: &trace,
         retile: None,

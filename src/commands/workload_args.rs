@@ -316,6 +316,12 @@ pub fn flagged(error: WorkloadError) -> anyhow::Error {
             };
             anyhow::anyhow!("{flag} {detail}")
         }
+        // The viewport the flags asked for, too large for this process.
+        WorkloadError::ViewportBuffer(too_large) => anyhow::anyhow!(
+            "--width {} --height {}: {too_large}",
+            too_large.width,
+            too_large.height
+        ),
         other => other.into(),
     }
 }

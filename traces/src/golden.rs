@@ -17,46 +17,62 @@ pub struct DepthBuffer {
     depths: Vec<u32>,
 }
 
-/// A depth buffer the allocator would not give: the viewport a user asked for needs more
-/// memory than the process may have (a 16384x16384 viewport's buffer is 1 GiB).
+/// A buffer the size of a user's viewport that the allocator would not give: the viewport
+/// needs more memory than the process may have (a 16384x16384 viewport's depth buffer is
+/// 1 GiB).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "the {width}x{height} viewport's depth buffer ({} MiB) could not be allocated: not enough memory for this process (a smaller viewport, or a higher memory limit)",
-    depth_buffer_bytes(*width, *height) >> 20
+    "the {width}x{height} viewport's {buffer} ({} MiB) could not be allocated: not enough memory for this process (a smaller viewport, or a higher memory limit)",
+    bytes >> 20
 )]
-pub struct DepthBufferTooLarge {
+pub struct ViewportBufferTooLarge {
+    /// What the buffer is: `depth buffer`, `ray mask`.
+    pub buffer: &'static str,
     pub width: u32,
     pub height: u32,
+    pub bytes: u64,
 }
 
-/// Bytes of a `width` x `height` depth buffer.
-fn depth_buffer_bytes(width: u32, height: u32) -> u64 {
-    width as u64 * height as u64 * std::mem::size_of::<u32>() as u64
+/// Whether the allocator gives `count` items of `T` for the `buffer` of a `width` x
+/// `height` viewport: asked for the room and given it back untouched (no stable
+/// allocation is both fallible and zeroed lazily, as a buffer whose pages are mapped only
+/// as they are first touched must be; a room reserved and never written maps no page).
+/// Every buffer the size of a user's viewport is asked for so before it is made, so that a
+/// process under a memory limit stops with an error, its outputs removed, where it had
+/// aborted and left a temporary file behind.
+pub fn ask_for_viewport_buffer<T>(
+    buffer: &'static str,
+    (width, height): (u32, u32),
+    count: usize,
+) -> Result<(), ViewportBufferTooLarge> {
+    let mut room: Vec<T> = Vec::new();
+    room.try_reserve_exact(count)
+        .map_err(|_| ViewportBufferTooLarge {
+            buffer,
+            width,
+            height,
+            bytes: (count as u64).saturating_mul(std::mem::size_of::<T>() as u64),
+        })
 }
 
 impl DepthBuffer {
-    /// A buffer cleared to 1.0, or the error when the allocator will not give it. Every
-    /// buffer of a viewport a user chose is made so (or by [`Self::try_unset`]), so that a
-    /// process under a memory limit stops with an error, its outputs removed, where it had
-    /// aborted and left a temporary file behind.
-    pub fn try_new(width: u32, height: u32) -> Result<DepthBuffer, DepthBufferTooLarge> {
+    /// A buffer cleared to 1.0, or the error when the allocator will not give it (every
+    /// depth buffer of a user's viewport is made so, or by [`Self::try_unset`]:
+    /// [`ask_for_viewport_buffer`]).
+    pub fn try_new(width: u32, height: u32) -> Result<DepthBuffer, ViewportBufferTooLarge> {
         DepthBuffer::fits(width, height)?;
         Ok(DepthBuffer::new(width, height))
     }
 
     /// [`Self::unset`], or the error when the allocator will not give it.
-    pub fn try_unset(width: u32, height: u32) -> Result<DepthBuffer, DepthBufferTooLarge> {
+    pub fn try_unset(width: u32, height: u32) -> Result<DepthBuffer, ViewportBufferTooLarge> {
         DepthBuffer::fits(width, height)?;
         Ok(DepthBuffer::unset(width, height))
     }
 
-    /// Whether the allocator gives a buffer of `width` x `height` depths: asked for the
-    /// room and given it back untouched (no stable allocation is both fallible and zeroed
-    /// lazily, as `unset`'s must be; a room reserved and never written maps no page).
-    fn fits(width: u32, height: u32) -> Result<(), DepthBufferTooLarge> {
-        let mut room: Vec<u32> = Vec::new();
-        room.try_reserve_exact(width as usize * height as usize)
-            .map_err(|_| DepthBufferTooLarge { width, height })
+    fn fits(width: u32, height: u32) -> Result<(), ViewportBufferTooLarge> {
+        let pixels = width as usize * height as usize;
+        ask_for_viewport_buffer::<u32>("depth buffer", (width, height), pixels)
     }
 
     /// A buffer cleared to 1.0, for a viewport known to be small (tests, fixed sizes): a
@@ -641,7 +657,7 @@ impl FunctionalModel {
     }
 
     /// A model over a user's viewport, or the error when its depth buffer cannot be had.
-    pub fn try_new(width: u32, height: u32) -> Result<FunctionalModel, DepthBufferTooLarge> {
+    pub fn try_new(width: u32, height: u32) -> Result<FunctionalModel, ViewportBufferTooLarge> {
         let depth = DepthBuffer::try_new(width, height)?;
         Ok(FunctionalModel::with_depth(width, height, depth))
     }
@@ -953,7 +969,7 @@ impl GoldenModel {
         width: u32,
         height: u32,
         profile: RasterProfile,
-    ) -> Result<GoldenModel, DepthBufferTooLarge> {
+    ) -> Result<GoldenModel, ViewportBufferTooLarge> {
         let functional = FunctionalModel::try_new(width, height)?;
         Ok(GoldenModel::with_functional(functional, profile))
     }

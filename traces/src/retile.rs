@@ -26,7 +26,7 @@ pub enum RetileError {
     #[error("tile grid {columns}x{rows} has more than {max} tiles")]
     TooMany { columns: u32, rows: u32, max: usize },
     #[error(transparent)]
-    DepthBuffer(#[from] crate::golden::DepthBufferTooLarge),
+    ViewportBuffer(#[from] crate::golden::ViewportBufferTooLarge),
 }
 
 /// A grid of `columns` x `rows` tiles covering the viewport.

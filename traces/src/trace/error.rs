@@ -23,9 +23,9 @@ pub enum TraceError {
     },
     #[error("byte {offset}: bad trace header: {reason}")]
     BadHeader { offset: u64, reason: String },
-    /// The window index's depth buffer, for the header's viewport (the writer's).
+    /// A buffer of the header's viewport (the window index's depths, the writer's).
     #[error(transparent)]
-    DepthBuffer(#[from] crate::golden::DepthBufferTooLarge),
+    ViewportBuffer(#[from] crate::golden::ViewportBufferTooLarge),
     #[error("byte {offset}: bad block header: {reason}")]
     BadBlock { offset: u64, reason: String },
     #[error(

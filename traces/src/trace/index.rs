@@ -33,7 +33,7 @@ use super::codec::{put_uv, tag};
 use super::dense_reads::{DenseReadFinder, DenseRuns, DENSE_READ_COSTS};
 use crate::depth_layout::{DepthAddress, DepthLayout, DepthRead, LastRead};
 use crate::event::{Event, Fragment};
-use crate::golden::{DepthBufferTooLarge, FunctionalModel};
+use crate::golden::{FunctionalModel, ViewportBufferTooLarge};
 use crate::query::{QueryShape, QueryTotals};
 use crate::state::RenderState;
 
@@ -288,7 +288,7 @@ impl WindowIndexer {
         layout: &DepthLayout,
         width: u32,
         height: u32,
-    ) -> Result<WindowIndexer, DepthBufferTooLarge> {
+    ) -> Result<WindowIndexer, ViewportBufferTooLarge> {
         Ok(WindowIndexer {
             functional: FunctionalModel::try_new(width, height)?,
             address: DepthAddress::new(layout, width),

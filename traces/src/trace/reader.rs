@@ -47,9 +47,12 @@ pub struct TraceReader<R: Read> {
     /// The block loaded is a window-index or band-index block (read by
     /// [`TraceReader::next_index_item`] or [`TraceReader::for_each_band_item`]).
     in_index_block: bool,
-    /// Index blocks decoded to their end, of the window index or the band index (a trace
-    /// is read by one of them): all of them, and the tally has every event but the
-    /// fragments, and the fragments as the index counts them.
+    /// What the reader has read by: its events, its window index or its band index (the
+    /// first asked for), and whether it was asked for another since.
+    read_by: Option<Wanted>,
+    read_by_several: bool,
+    /// Index blocks decoded to their end, of the lane read by: all of them, and the tally
+    /// has every event but the fragments, and the fragments as the index counts them.
     index_blocks_read: u64,
     summary: Option<TraceSummary>,
     failed: bool,
@@ -98,6 +101,8 @@ impl<R: Read> TraceReader<R> {
             window_table: BlockCounts::default(),
             bands: BlockCounts::default(),
             in_index_block: false,
+            read_by: None,
+            read_by_several: false,
             index_blocks_read: 0,
             summary: None,
             failed: false,
@@ -245,6 +250,12 @@ impl<R: Read> TraceReader<R> {
     /// checksums checked); with `Wanted::Nothing`, pass one block. Returns false at the
     /// summary (the end).
     fn load_block(&mut self, wanted: Wanted) -> Result<bool, TraceError> {
+        if matches!(wanted, Wanted::Events | Wanted::Index | Wanted::Bands) {
+            // Noted before the first block, so that a lane with no block at all is known
+            // as read (whole) when the summary comes.
+            self.read_by_several |= self.read_by.is_some_and(|read_by| read_by != wanted);
+            self.read_by.get_or_insert(wanted);
+        }
         let header = loop {
             let header = self.read_block()?;
             match header.kind {
@@ -487,6 +498,9 @@ impl<R: Read> TraceReader<R> {
             });
         }
         let mut found = if self.skipped && self.read_whole_index() {
+            if !self.assembly.is_empty() {
+                return Err(bad("the trace ends inside a multi-block event".to_owned()));
+            }
             // Every count but the events' number, which the block headers claim.
             let mut by_index = self.tally.summary();
             by_index.events = self.claimed_events;
@@ -540,8 +554,16 @@ impl<R: Read> TraceReader<R> {
     /// Whether the trace was read by its window index or its band index, every block of it
     /// to its end: then the tally has counted every event the summary counts.
     fn read_whole_index(&self) -> bool {
-        let read = self.index_blocks_read;
-        read > 0 && (read == self.index.blocks || read == self.bands.blocks)
+        // (A trace without the lane has no items: whoever asked reads it otherwise.)
+        let passed = match self.read_by {
+            Some(Wanted::Index) if self.header.window_index.is_some() => self.index.blocks,
+            Some(Wanted::Bands) if self.has_band_index() => self.bands.blocks,
+            _ => return false,
+        };
+        // A lane with no block at all is read whole too: its tally, empty, must then agree
+        // with a summary of nothing (an index cut out of a trace whose summary still
+        // counts its queries had replayed as zero cycles and zero queries).
+        !self.read_by_several && self.index_blocks_read == passed
     }
 
     /// Run `step`, and stop the reader for good if it fails.

@@ -1254,25 +1254,73 @@ fn a_forged_summary_is_refused_by_every_reading() {
             reader.skip_to_summary()
         })
     };
+    // The O2's analytic level reads the window index with its queries skimmed.
+    let by_index_skimmed = |bytes: &[u8]| {
+        TraceReader::new(bytes).and_then(|mut reader| {
+            reader.skim_queries();
+            reader
+                .for_each_index_item(|_| Ok::<(), std::convert::Infallible>(()))
+                .map_err(ReadError::into_trace)?;
+            reader.skip_to_summary()
+        })
+    };
     let truth = by_events(&bytes).unwrap();
     assert_eq!(
         (truth.fragments, truth.primitives, truth.queries),
         (5, 2, 1)
     );
     assert_eq!(by_index(&bytes).unwrap(), truth);
+    assert_eq!(by_index_skimmed(&bytes).unwrap(), truth);
     assert_eq!(by_bands(&bytes).unwrap(), truth);
+    let refused = |bytes: &[u8], readings: &[&str], wanted: &str| {
+        for &reading in readings {
+            let result = match reading {
+                "events" => by_events(bytes),
+                "window index" => by_index(bytes),
+                "window index skimmed" => by_index_skimmed(bytes),
+                _ => by_bands(bytes),
+            };
+            let error = result.expect_err(reading).to_string();
+            assert!(error.contains(wanted), "{reading}: {error}");
+        }
+    };
+    let indexes = ["window index", "window index skimmed", "band index"];
     for (field, claim) in [("queries", 1u64 << 40), ("fragments", 6), ("primitives", 3)] {
         let forged = with_forged_summary(&bytes, |summary| summary[field] = claim.into());
         let wanted = format!("disagrees with the trace on {field}");
-        for (reading, result) in [
-            ("events", by_events(&forged).map(|_| ())),
-            ("window index", by_index(&forged).map(|_| ())),
-            ("band index", by_bands(&forged).map(|_| ())),
-        ] {
-            let error = result.expect_err(reading).to_string();
-            assert!(error.contains(&wanted), "{reading}: {error}");
+        refused(&forged, &["events"], &wanted);
+        refused(&forged, &indexes, &wanted);
+    }
+    // Both indexes cut out, and the summary's count of their blocks made 0: read by either
+    // index, nothing is read, and the summary's counts are refused (the trace had replayed
+    // as 0 cycles of 0 queries); read by events, the trace is what it says.
+    let cut = with_forged_summary(&without_index_blocks(&bytes), |summary| {
+        let none = serde_json::json!({"blocks": 0, "payload_bytes": 0, "stored_bytes": 0});
+        summary["window_index"] = none.clone();
+        summary["bands"] = none;
+    });
+    assert_eq!(by_events(&cut).unwrap().queries, 1);
+    refused(&cut, &indexes, "fragments (summary 5, trace 0)");
+}
+
+/// `bytes` without its window-index and band-index blocks (the trailer pointed at the
+/// summary again; the summary itself as it was).
+fn without_index_blocks(bytes: &[u8]) -> Vec<u8> {
+    let mut out = bytes[..block::first_block_offset(bytes).unwrap()].to_vec();
+    for (at, header) in block::blocks_in(bytes) {
+        let end = at + BLOCK_HEADER_BYTES + header.stored_len as usize;
+        if header.kind == block::KIND_SUMMARY {
+            let summary_at = out.len() as u64;
+            out.extend_from_slice(&bytes[at..end]);
+            out.extend_from_slice(&summary_at.to_le_bytes());
+            out.extend_from_slice(&block::END_MAGIC);
+            return out;
+        }
+        if header.kind != block::KIND_INDEX && header.kind != block::KIND_BANDS {
+            out.extend_from_slice(&bytes[at..end]);
         }
     }
+    panic!("no summary block");
 }
 
 /// A header whose depth format occsim does not read, or whose sub-pixel bits no rasterizer

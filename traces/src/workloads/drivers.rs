@@ -10,7 +10,7 @@ use super::hom::HomDriver;
 use super::large::LargeOccluderDriver;
 use super::occlusion_buffer_grid::OcclusionBufferGrid;
 use super::project::Frustum;
-use super::raycast::RaycastDriver;
+use super::raycast::{RayMask, RaycastDriver};
 use super::render::{CommandObserver, Renderer};
 use super::{
     DriverKind, DriverOptions, FrameView, GridVariant, Walk, WorkloadScene, WorkloadStats,
@@ -80,20 +80,44 @@ impl DriverStates {
     }
 }
 
+/// The buffers of a walk the size of its viewport, each asked of the allocator by the
+/// caller ([`crate::golden::ask_for_viewport_buffer`]): the golden model's depths, and the
+/// raycast driver's mask.
+pub(crate) struct ViewportBuffers {
+    pub golden: crate::golden::GoldenModel,
+    pub rays: Option<RayMask>,
+}
+
+impl ViewportBuffers {
+    pub(crate) fn for_walk(
+        walk: &Walk,
+        kind: DriverKind,
+    ) -> Result<ViewportBuffers, crate::golden::ViewportBufferTooLarge> {
+        let golden =
+            crate::golden::GoldenModel::try_with_profile(walk.width, walk.height, walk.raster)?;
+        let rays = match kind {
+            DriverKind::Raycast => Some(RayMask::try_new(walk.width, walk.height)?),
+            _ => None,
+        };
+        Ok(ViewportBuffers { golden, rays })
+    }
+}
+
 pub(crate) fn run<S: EventSink, O: CommandObserver>(
     scene: &WorkloadScene,
     options: &DriverOptions,
     walk: &Walk,
-    golden: crate::golden::GoldenModel,
+    buffers: ViewportBuffers,
     sink: &mut S,
     observer: &mut O,
 ) -> Result<WorkloadStats, S::Error> {
+    let ViewportBuffers { golden, rays } = buffers;
     let mut renderer = Renderer::new(golden, sink, observer);
     renderer.set_waits_for_answers(options.query_delay_frames == 0);
     let mut states = DriverStates::new(options, scene, walk);
     let mut dynamic_grid =
         (options.kind == DriverKind::DynamicGrid).then(|| DynamicGridDriver::new(options, scene));
-    let raycast = RaycastDriver::new(options);
+    let mut raycast = rays.map(|rays| RaycastDriver::new(options, rays));
     let mut stats = WorkloadStats {
         scene_triangles: scene.triangle_count(),
         ..WorkloadStats::default()
@@ -142,7 +166,9 @@ pub(crate) fn run<S: EventSink, O: CommandObserver>(
             }
             DriverKind::Raycast => {
                 s.hierarchical.frame(frame, &posed, &view, &mut renderer)?;
-                raycast.frame(&posed, &view, &mut renderer)?;
+                if let Some(raycast) = raycast.as_mut() {
+                    raycast.frame(&posed, &view, &mut renderer)?;
+                }
             }
         }
         renderer.swap()?;

@@ -95,7 +95,7 @@ pub enum WorkloadError {
     #[error("{file}: {message}")]
     Camera { file: String, message: String },
     #[error(transparent)]
-    DepthBuffer(#[from] crate::golden::DepthBufferTooLarge),
+    ViewportBuffer(#[from] crate::golden::ViewportBufferTooLarge),
 }
 
 /// The options of a walkthrough and its driver that can be out of range.
@@ -943,9 +943,9 @@ pub fn generate_observed<S: EventSink>(
     walk.validate()?;
     driver.validate()?;
     check_grid_size(driver, walk)?;
-    let golden = crate::golden::GoldenModel::try_with_profile(walk.width, walk.height, walk.raster)
-        .map_err(WorkloadError::from)?;
-    drivers::run(scene, driver, walk, golden, sink, commands).map_err(GenerateError::Sink)
+    let buffers =
+        drivers::ViewportBuffers::for_walk(walk, driver.kind).map_err(WorkloadError::from)?;
+    drivers::run(scene, driver, walk, buffers, sink, commands).map_err(GenerateError::Sink)
 }
 
 /// One probe query may name every cell, so a grid may hold at most `MAX_TILES` cells.

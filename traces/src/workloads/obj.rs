@@ -78,11 +78,13 @@ impl<R: BufRead> BufRead for LineCounter<R> {
             for &byte in &buffer[..amount.min(buffer.len())] {
                 if byte == b'\n' {
                     self.newlines += 1;
-                    self.line_bytes = 0;
-                    if self.bad_vertex.is_none() {
+                    // A line longer than the bytes kept is left to the model's check
+                    // (its numbers may run past them).
+                    if self.bad_vertex.is_none() && self.line_bytes <= VERTEX_LINE_BYTES {
                         self.bad_vertex =
                             vertex_out_of_range(&self.line).map(|text| (self.newlines, text));
                     }
+                    self.line_bytes = 0;
                     self.line.clear();
                 } else {
                     if self.line.len() < VERTEX_LINE_BYTES {
@@ -166,7 +168,7 @@ pub fn load_obj(
             .unwrap_or_else(|| (counter.current_line(), format!("{e}")));
         error(line, message)
     })?;
-    if counter.bad_vertex.is_none() {
+    if counter.bad_vertex.is_none() && counter.line_bytes <= VERTEX_LINE_BYTES {
         // The last line, without its newline.
         let last = counter.newlines + 1;
         counter.bad_vertex = vertex_out_of_range(&counter.line).map(|text| (last, text));
@@ -339,6 +341,11 @@ mod tests {
         ] {
             assert_eq!(error(model), "", "{model}");
         }
+        // A vertex line longer than the bytes kept is not judged on its first ones (this
+        // one's third number is 1.0, written with 250 zeros).
+        let long_one = format!("1{}e-250", "0".repeat(250));
+        let model = format!("v 0 0 0\nv 1 0 0\nv 0 0 {long_one}\nf 1 2 3\n");
+        assert_eq!(error(&model), "");
         assert_eq!(vertex_out_of_range(b"v 1e9 -1e9 0"), None);
         assert_eq!(
             vertex_out_of_range(b" v 1e9 -1.1e9 0 ").as_deref(),

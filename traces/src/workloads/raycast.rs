@@ -25,7 +25,7 @@ use super::project::{project_box, BoxView, Frustum};
 use super::render::{CommandObserver, Renderer};
 use super::{DriverOptions, FrameView, WorkloadScene};
 use crate::geometry::{to_clip, Aabb};
-use crate::golden::EventSink;
+use crate::golden::{ask_for_viewport_buffer, EventSink, ViewportBufferTooLarge};
 use crate::query::TileResult;
 use crate::state::Rect;
 use glam::Vec3;
@@ -40,8 +40,24 @@ impl RayMask {
     pub(crate) fn new(width: u32, height: u32) -> RayMask {
         RayMask {
             width,
-            bits: vec![0; (width as usize * height as usize).div_ceil(64)],
+            bits: vec![0; RayMask::words(width, height)],
         }
+    }
+
+    /// A mask for a user's viewport, or the error when the allocator will not give it.
+    pub(crate) fn try_new(width: u32, height: u32) -> Result<RayMask, ViewportBufferTooLarge> {
+        let words = RayMask::words(width, height);
+        ask_for_viewport_buffer::<u64>("ray mask", (width, height), words)?;
+        Ok(RayMask::new(width, height))
+    }
+
+    fn words(width: u32, height: u32) -> usize {
+        (width as usize * height as usize).div_ceil(64)
+    }
+
+    /// No pixel with a ray (a new frame's).
+    fn clear(&mut self) {
+        self.bits.fill(0);
     }
 
     fn set(&mut self, x: u32, y: u32) {
@@ -118,13 +134,17 @@ pub(crate) fn choose_rays(tile: &TileResult, rays: &mut RayMask) -> RayChoice {
 pub(crate) struct RaycastDriver {
     bricks: u32,
     buffer_entries: u32,
+    /// The frame's rays, one mask for the walk (made by the caller, where its allocation
+    /// can fail with a workload's error).
+    rays: RayMask,
 }
 
 impl RaycastDriver {
-    pub(crate) fn new(options: &DriverOptions) -> RaycastDriver {
+    pub(crate) fn new(options: &DriverOptions, rays: RayMask) -> RaycastDriver {
         RaycastDriver {
             bricks: options.volume_bricks,
             buffer_entries: options.verbose_buffer_entries,
+            rays,
         }
     }
 
@@ -152,16 +172,18 @@ impl RaycastDriver {
 
     /// After the polygons: each brick in verbose mode, and the rays its hits choose.
     pub(crate) fn frame<S: EventSink, O: CommandObserver>(
-        &self,
+        &mut self,
         scene: &WorkloadScene,
         view: &FrameView,
         renderer: &mut Renderer<S, O>,
     ) -> Result<(), S::Error> {
         let frustum = Frustum::new(&view.view_projection);
         let vp = &view.view_projection;
-        let mut rays = RayMask::new(view.width, view.height);
+        let bricks = self.bricks(&scene.volume, view.eye);
+        let rays = &mut self.rays;
+        rays.clear();
         let (mut segments, mut overflows) = (0u64, 0u64);
-        for brick in self.bricks(&scene.volume, view.eye) {
+        for brick in bricks {
             renderer.visit_node();
             if !frustum.may_see(&brick) {
                 continue;
@@ -180,7 +202,7 @@ impl RaycastDriver {
                         .into_iter()
                         .map(|t| t.map(|p| to_clip(vp, p)));
                     match renderer.verbose_query(vec![rect], self.buffer_entries, triangles)? {
-                        Some(answer) => choose_rays(&answer.tiles[0], &mut rays),
+                        Some(answer) => choose_rays(&answer.tiles[0], rays),
                         // No answer to read: every pixel of the rectangle may see the brick.
                         None => {
                             rays.set_rect(rect);
