@@ -490,6 +490,21 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
         let error = support::cli::stderr_of_failure(&args);
         assert!(error.contains(expected), "{set}: {error}");
     }
+    // One trace's machine, which the corpus run had passed over unsaid, running every
+    // machine of the corpus.
+    for arch in [
+        &["--arch", "ir2"][..],
+        &["--arch-file", one.to_str().unwrap()],
+    ] {
+        let args = [&["fidelity", "--corpus", "--scale", "small"][..], arch].concat();
+        let error = support::cli::stderr_of_failure(&args);
+        assert!(
+            error.contains(
+                "--arch and --arch-file choose one trace's machine; with --corpus, --machines"
+            ),
+            "{arch:?}: {error}"
+        );
+    }
     let neither = support::cli::stderr_of_failure(&["fidelity"]);
     assert!(
         neither.contains("--corpus") || neither.contains("TRACE"),

@@ -45,10 +45,13 @@ pub struct ShowArgs {
 }
 
 /// How a command that runs a machine picks its architecture.
+/// The built-in architecture a command takes when given none.
+pub const DEFAULT_ARCH: &str = "o2";
+
 #[derive(clap::Args, Clone, Debug)]
 pub struct ArchSelection {
     /// A built-in architecture (see `occsim arch list`).
-    #[arg(long, default_value = "o2")]
+    #[arg(long, default_value = DEFAULT_ARCH)]
     pub arch: String,
     /// Load the architecture from this TOML file instead (see `occsim arch show`).
     #[arg(long, value_name = "FILE", conflicts_with = "arch")]

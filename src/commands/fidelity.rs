@@ -316,6 +316,12 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
         rtl: !args.no_rtl,
     };
     let Some(trace) = &args.trace else {
+        // The corpus names its machines; --arch would have been passed over unsaid.
+        let (arch, file) = (&args.arch.arch, &args.arch.arch_file);
+        anyhow::ensure!(
+            arch == super::arch::DEFAULT_ARCH && file.is_none(),
+            "--arch and --arch-file choose one trace's machine; with --corpus, --machines {arch} runs the corpus on built-in machines of your choice"
+        );
         return super::corpus::run(
             &args.corpus,
             &ladder,
