@@ -222,6 +222,48 @@ pub struct TraceSummary {
     pub bands: Option<BlockCounts>,
 }
 
+impl TraceSummary {
+    /// Why these counts cannot be one trace's, if they cannot: what a reader of the summary
+    /// alone (`trace info`) can check before printing them (a summary claiming 2^40 queries
+    /// of which 3 had a mode had been printed as it said).
+    pub(crate) fn problem(&self) -> Option<String> {
+        let q = &self.queries_by_mode;
+        let by_mode = [q.samples, q.any, q.brief, q.verbose]
+            .iter()
+            .try_fold(0u64, |sum, &n| sum.checked_add(n));
+        if by_mode != Some(self.queries) {
+            return Some(format!(
+                "{} queries, but {} by mode",
+                self.queries,
+                by_mode.map_or("more than 2^64".to_owned(), |n| n.to_string())
+            ));
+        }
+        if self.query_results > self.queries {
+            return Some(format!(
+                "{} query results of {} queries",
+                self.query_results, self.queries
+            ));
+        }
+        // Every fragment, primitive and query begin is an event of its own.
+        let least_events = [self.fragments, self.primitives, self.queries]
+            .iter()
+            .try_fold(0u64, |sum, &n| sum.checked_add(n));
+        if least_events.is_none_or(|least| self.events < least) {
+            return Some(format!(
+                "{} events, fewer than its {} fragments, {} primitives and {} queries",
+                self.events, self.fragments, self.primitives, self.queries
+            ));
+        }
+        let loop_counts = &self.closed_loop;
+        (loop_counts.discarded_draws > loop_counts.draws).then(|| {
+            format!(
+                "{} draws discarded of {}",
+                loop_counts.discarded_draws, loop_counts.draws
+            )
+        })
+    }
+}
+
 /// Blocks of one kind and their bytes (the summary's `window_index` counts the window
 /// index's, [`crate::trace::index`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]

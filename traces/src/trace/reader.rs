@@ -472,8 +472,7 @@ impl<R: Read> TraceReader<R> {
     fn finish_at_summary(&mut self) -> Result<(), TraceError> {
         let offset = self.block_offset;
         let bad = |reason: String| TraceError::BadSummary { offset, reason };
-        let stored: TraceSummary =
-            serde_json::from_slice(&self.stored).map_err(|e| bad(e.to_string()))?;
+        let stored = parse_summary(&self.stored, offset)?;
         let trailer: [u8; TRAILER_BYTES] = self.read_array("the trailer")?;
         let pointer = u64::from_le_bytes(trailer[..8].try_into().unwrap_or_default());
         if trailer[8..] != END_MAGIC || pointer != offset {
@@ -893,11 +892,7 @@ impl<R: Read + Seek> TraceReader<R> {
                 reason,
             });
         }
-        let summary =
-            serde_json::from_slice(&reader.stored).map_err(|e| TraceError::BadSummary {
-                offset: summary_at,
-                reason: e.to_string(),
-            })?;
+        let summary = parse_summary(&reader.stored, summary_at)?;
         Ok((reader.header, summary))
     }
 }
@@ -907,6 +902,16 @@ impl<R: Read> Iterator for TraceReader<R> {
 
     fn next(&mut self) -> Option<Self::Item> {
         self.next_event().transpose()
+    }
+}
+
+/// The summary block's JSON at file offset `offset`, its counts checked against each other.
+fn parse_summary(json: &[u8], offset: u64) -> Result<TraceSummary, TraceError> {
+    let bad = |reason: String| TraceError::BadSummary { offset, reason };
+    let summary: TraceSummary = serde_json::from_slice(json).map_err(|e| bad(e.to_string()))?;
+    match summary.problem() {
+        Some(problem) => Err(bad(problem)),
+        None => Ok(summary),
     }
 }
 

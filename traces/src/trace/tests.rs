@@ -1285,12 +1285,28 @@ fn a_forged_summary_is_refused_by_every_reading() {
         }
     };
     let indexes = ["window index", "window index skimmed", "band index"];
+    // Forged consistently (2^40 brief queries, and events enough for them), so that only
+    // what was read can refuse them.
     for (field, claim) in [("queries", 1u64 << 40), ("fragments", 6), ("primitives", 3)] {
-        let forged = with_forged_summary(&bytes, |summary| summary[field] = claim.into());
-        let wanted = format!("disagrees with the trace on {field}");
+        let forged = with_forged_summary(&bytes, |summary| {
+            summary[field] = claim.into();
+            if field == "queries" {
+                summary["queries_by_mode"]["brief"] = claim.into();
+                summary["events"] = (1u64 << 41).into();
+            }
+        });
+        let wanted = format!("{field} (summary {claim}, trace ");
         refused(&forged, &["events"], &wanted);
         refused(&forged, &indexes, &wanted);
     }
+    // Forged carelessly, the summary disagrees with itself: refused whoever reads it, the
+    // summary alone too (`trace info`, which had printed 2^40 queries, 1 of them brief).
+    let careless = with_forged_summary(&bytes, |summary| summary["queries"] = (1u64 << 40).into());
+    let wanted = "1099511627776 queries, but 1 by mode";
+    refused(&careless, &["events"], wanted);
+    refused(&careless, &indexes, wanted);
+    let alone = TraceReader::read_summary(Cursor::new(&careless)).unwrap_err();
+    assert!(alone.to_string().contains(wanted), "{alone}");
     // Both indexes cut out, and the summary's count of their blocks made 0: read by either
     // index, nothing is read, and the summary's counts are refused (the trace had replayed
     // as 0 cycles of 0 queries); read by events, the trace is what it says.
