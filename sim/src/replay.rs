@@ -127,6 +127,18 @@ pub enum ReplayError {
     },
 }
 
+impl ReplayError {
+    /// The error of `machine`'s model: a buffer of the viewport it could not have (a
+    /// sampled window's machine, started mid-stream) is the replay's setup failing, as at
+    /// the other levels, not the stream's.
+    fn of_model(machine: &'static str, source: SimError) -> ReplayError {
+        match source {
+            SimError::ViewportBuffer(_) => ReplayError::Setup(source),
+            source => ReplayError::Model { machine, source },
+        }
+    }
+}
+
 impl From<std::io::Error> for ReplayError {
     fn from(error: std::io::Error) -> ReplayError {
         ReplayError::Open(Box::new(error))
@@ -158,10 +170,7 @@ pub fn replay<R: Read>(
     )?;
     let mut reader = open()?;
     let (width, height) = (reader.header().width, reader.header().height);
-    let model_error = |source| ReplayError::Model {
-        machine: arch.machine().name(),
-        source,
-    };
+    let model_error = |source| ReplayError::of_model(arch.machine().name(), source);
     let older_index = older_index(&reader, arch, &options);
     if let (Fidelity::Analytic, Some(index)) = (options.level, index_read(&reader, arch, &options))
     {
@@ -315,10 +324,7 @@ fn run_sampled<R: Read>(
     configure: impl FnOnce(SampledModel) -> Result<SampledModel, SimError>,
 ) -> Result<Box<SampledModel>, ReplayError> {
     let (width, height) = (reader.header().width, reader.header().height);
-    let model_error = |source| ReplayError::Model {
-        machine: arch.machine().name(),
-        source,
-    };
+    let model_error = |source| ReplayError::of_model(arch.machine().name(), source);
     let index = index_read(&reader, arch, options).filter(|_| reader.has_depth_tests());
     if let Some(index) = index {
         let model = SampledModel::from_window_index(arch, width, height, effects, every)
