@@ -1231,60 +1231,23 @@ fn a_forged_summary_is_refused_by_every_reading() {
         Event::QueryEnd,
     ];
     let bytes = super::index::tests::indexed(&events);
-    let by_events = |bytes: &[u8]| {
-        TraceReader::new(bytes).and_then(|mut reader| {
-            reader
-                .read_into(&mut Vec::new())
-                .map_err(ReadError::into_trace)
-        })
-    };
-    let by_index = |bytes: &[u8]| {
-        TraceReader::new(bytes).and_then(|mut reader| {
-            reader
-                .for_each_index_item(|_| Ok::<(), std::convert::Infallible>(()))
-                .map_err(ReadError::into_trace)?;
-            reader.skip_to_summary()
-        })
-    };
-    let by_bands = |bytes: &[u8]| {
-        TraceReader::new(bytes).and_then(|mut reader| {
-            reader
-                .for_each_band_item(|_| Ok::<(), std::convert::Infallible>(()))
-                .map_err(ReadError::into_trace)?;
-            reader.skip_to_summary()
-        })
-    };
-    // The O2's analytic level reads the window index with its queries skimmed.
-    let by_index_skimmed = |bytes: &[u8]| {
-        TraceReader::new(bytes).and_then(|mut reader| {
-            reader.skim_queries();
-            reader
-                .for_each_index_item(|_| Ok::<(), std::convert::Infallible>(()))
-                .map_err(ReadError::into_trace)?;
-            reader.skip_to_summary()
-        })
-    };
-    let truth = by_events(&bytes).unwrap();
+    let truth = read_whole_as("events", &bytes).unwrap();
     assert_eq!(
         (truth.fragments, truth.primitives, truth.queries),
         (5, 2, 1)
     );
-    assert_eq!(by_index(&bytes).unwrap(), truth);
-    assert_eq!(by_index_skimmed(&bytes).unwrap(), truth);
-    assert_eq!(by_bands(&bytes).unwrap(), truth);
+    let indexes = ["window index", "window index skimmed", "band index"];
+    for reading in indexes {
+        assert_eq!(read_whole_as(reading, &bytes).unwrap(), truth, "{reading}");
+    }
     let refused = |bytes: &[u8], readings: &[&str], wanted: &str| {
         for &reading in readings {
-            let result = match reading {
-                "events" => by_events(bytes),
-                "window index" => by_index(bytes),
-                "window index skimmed" => by_index_skimmed(bytes),
-                _ => by_bands(bytes),
-            };
-            let error = result.expect_err(reading).to_string();
+            let error = read_whole_as(reading, bytes)
+                .expect_err(reading)
+                .to_string();
             assert!(error.contains(wanted), "{reading}: {error}");
         }
     };
-    let indexes = ["window index", "window index skimmed", "band index"];
     // Forged consistently (2^40 brief queries, and events enough for them), so that only
     // what was read can refuse them.
     for (field, claim) in [("queries", 1u64 << 40), ("fragments", 6), ("primitives", 3)] {
@@ -1315,8 +1278,30 @@ fn a_forged_summary_is_refused_by_every_reading() {
         summary["window_index"] = none.clone();
         summary["bands"] = none;
     });
-    assert_eq!(by_events(&cut).unwrap().queries, 1);
+    assert_eq!(read_whole_as("events", &cut).unwrap().queries, 1);
     refused(&cut, &indexes, "fragments (summary 5, trace 0)");
+}
+
+/// `bytes` read whole as `reading` reads them (`events`, `window index`, `window index
+/// skimmed`, as the O2's analytic level reads it, or `band index`), to the summary.
+fn read_whole_as(reading: &str, bytes: &[u8]) -> Result<TraceSummary, TraceError> {
+    let mut reader = TraceReader::new(bytes)?;
+    let nothing = |_: &IndexItem| Ok::<(), std::convert::Infallible>(());
+    match reading {
+        "events" => {
+            return reader
+                .read_into(&mut Vec::new())
+                .map_err(ReadError::into_trace)
+        }
+        "window index skimmed" => {
+            reader.skim_queries();
+            reader.for_each_index_item(nothing)
+        }
+        "window index" => reader.for_each_index_item(nothing),
+        _ => reader.for_each_band_item(nothing),
+    }
+    .map_err(ReadError::into_trace)?;
+    reader.skip_to_summary()
 }
 
 /// `bytes` without its window-index and band-index blocks (the trailer pointed at the
