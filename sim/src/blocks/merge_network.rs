@@ -385,6 +385,16 @@ mod tests {
         }
     }
 
+    /// [`merged_ready`] on links that carry no other report (the query merged alone).
+    fn merged_alone(
+        network: &MergeNetwork,
+        inputs: &[Partial],
+        shape: ReportShape,
+        host: &mut u64,
+    ) -> Partial {
+        merged_ready(network, inputs, shape, host, &mut MergeLinks::default())
+    }
+
     fn ready(cycles: &[u64]) -> Vec<Partial> {
         cycles.iter().map(|&r| Partial::brief(r)).collect()
     }
@@ -398,16 +408,7 @@ mod tests {
     fn hand_worked_merge_times() {
         let inputs = ready(&[5, 30, 7, 8, 9]);
         let mut host = 0;
-        let at = |kind, host: &mut u64| {
-            merged_ready(
-                &network(kind),
-                &inputs,
-                ONE_TILE,
-                host,
-                &mut MergeLinks::default(),
-            )
-            .ready
-        };
+        let at = |kind, host: &mut u64| merged_alone(&network(kind), &inputs, ONE_TILE, host).ready;
         // Tree: (5,30)->40, (7,8)->18, 9 -> [40, 18, 9] -> (40,18)->50, 9 -> 60.
         assert_eq!(at(MergeKind::Tree, &mut host), 60);
         // Chain: 5, max(30, 15)=30, max(7, 40)=40, 50, 60.
@@ -416,12 +417,11 @@ mod tests {
         // Software: 105, 205, 305, 405, 505.
         assert_eq!(at(MergeKind::Software, &mut host), 505);
         assert_eq!(host, 505);
-        let single = merged_ready(
+        let single = merged_alone(
             &network(MergeKind::Tree),
             &ready(&[17]),
             ONE_TILE,
             &mut host,
-            &mut MergeLinks::default(),
         );
         assert_eq!(single.ready, 17);
     }
@@ -442,31 +442,13 @@ mod tests {
         let inputs = ready(&[0, 0, 0, 0]);
         let mut host = 0;
         // Tree: two levels of (8 + 10): 18, then 36.
-        let tree = merged_ready(
-            &links(MergeKind::Tree),
-            &inputs,
-            two_tiles,
-            &mut host,
-            &mut MergeLinks::default(),
-        );
+        let tree = merged_alone(&links(MergeKind::Tree), &inputs, two_tiles, &mut host);
         assert_eq!(tree.ready, 36);
         // Chain: 0, 0+8+10=18, 36, 54.
-        let chain = merged_ready(
-            &links(MergeKind::Chain),
-            &inputs,
-            two_tiles,
-            &mut host,
-            &mut MergeLinks::default(),
-        );
+        let chain = merged_alone(&links(MergeKind::Chain), &inputs, two_tiles, &mut host);
         assert_eq!(chain.ready, 54);
         // Software: each read 100 + 3 * 16 = 148: 148, 296, 444, 592.
-        let software = merged_ready(
-            &links(MergeKind::Software),
-            &inputs,
-            two_tiles,
-            &mut host,
-            &mut MergeLinks::default(),
-        );
+        let software = merged_alone(&links(MergeKind::Software), &inputs, two_tiles, &mut host);
         assert_eq!(software.ready, 592);
         // Twice the tiles, twice the words: 16 cycles a crossing, the tree 2 * (16 + 10) = 52.
         let four_tiles = ReportShape {
@@ -474,13 +456,7 @@ mod tests {
             ..two_tiles
         };
         let mut host = 0;
-        let tree = merged_ready(
-            &links(MergeKind::Tree),
-            &inputs,
-            four_tiles,
-            &mut host,
-            &mut MergeLinks::default(),
-        );
+        let tree = merged_alone(&links(MergeKind::Tree), &inputs, four_tiles, &mut host);
         assert_eq!(tree.ready, 52);
         // Verbose hits add words: one tile with 24 hits in each of two inputs, room 40:
         // each input 8 + 24 = 32 words (16 cycles on 64 bits); the merged holds min(48, 40).
@@ -491,13 +467,7 @@ mod tests {
             })
             .collect();
         let shape = ReportShape { tiles: 1, room: 40 };
-        let merged = merged_ready(
-            &links(MergeKind::Tree),
-            &verbose,
-            shape,
-            &mut host,
-            &mut MergeLinks::default(),
-        );
+        let merged = merged_alone(&links(MergeKind::Tree), &verbose, shape, &mut host);
         assert_eq!((merged.ready, merged.hits.clone()), (16 + 10, vec![40]));
         assert_eq!(merged.words(1), 48);
         // On a 32-bit link a word a cycle: 32 + 10.
@@ -505,17 +475,7 @@ mod tests {
             link_bits_per_cycle: 32,
             ..links(MergeKind::Tree)
         };
-        assert_eq!(
-            merged_ready(
-                &narrow,
-                &verbose,
-                shape,
-                &mut host,
-                &mut MergeLinks::default()
-            )
-            .ready,
-            42
-        );
+        assert_eq!(merged_alone(&narrow, &verbose, shape, &mut host).ready, 42);
     }
 
     #[test]
@@ -540,16 +500,8 @@ mod tests {
                 })
                 .collect();
             let mut host = 0;
-            let short =
-                merged_ready(&links, &brief, shape, &mut host, &mut MergeLinks::default()).ready;
-            let long = merged_ready(
-                &links,
-                &counted,
-                shape,
-                &mut host,
-                &mut MergeLinks::default(),
-            )
-            .ready;
+            let short = merged_alone(&links, &brief, shape, &mut host).ready;
+            let long = merged_alone(&links, &counted, shape, &mut host).ready;
             assert_eq!(short, long, "{count} reports");
         }
     }
@@ -637,14 +589,7 @@ mod tests {
         for kind in [MergeKind::Tree, MergeKind::Chain, MergeKind::Software] {
             let mut host = 0;
             assert_eq!(
-                merged_ready(
-                    &free(kind),
-                    &inputs,
-                    shape,
-                    &mut host,
-                    &mut MergeLinks::default()
-                )
-                .ready,
+                merged_alone(&free(kind), &inputs, shape, &mut host).ready,
                 30
             );
         }
