@@ -203,6 +203,28 @@ fn sweep_charts_say_what_they_show() {
     let text = std::fs::read_to_string(&merged_svg).unwrap();
     assert!(text.contains("1 shards of trace fnv1a64:"), "{text}");
     assert!(text.contains(" on o2"), "{text}");
+    // A merge whose chart cannot be drawn writes none of its outputs (the merge and its CSV
+    // had been written before the chart failed): they come into place together or not at all.
+    let (unplotted, unplotted_svg) = (dir.join("u.jsonl"), dir.join("u.svg"));
+    let output = occsim(&[
+        "sweep",
+        "merge",
+        s(&unplotted),
+        s(&out),
+        "--plot",
+        s(&unplotted_svg),
+        "--plot-x",
+        "boards",
+    ]);
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("boards"), "{stderr}");
+    let left: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|entry| entry.unwrap().file_name().into_string().unwrap())
+        .filter(|name| name.starts_with("u.") || name.starts_with(".u."))
+        .collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
 }
 
 #[test]

@@ -10,6 +10,7 @@ use occsim_sim::levels::{Fidelity, LevelResult};
 use occsim_sim::replay::{max_query_tiles, replay, ReplayError, ReplayOptions};
 use occsim_sim::timeline::Timeline;
 use occsim_sim::{Arch, WaveformOptions};
+use occsim_sweep::output::{commit_together, Finished};
 use occsim_traces::retile::TileGrid;
 use occsim_traces::trace::TraceReader;
 use std::path::{Path, PathBuf};
@@ -101,7 +102,17 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             check_window(window.as_ref(), &result)?;
             Ok(result)
         });
-    let result = close_waveform(outputs, outcome)?;
+    let (result, mut files) = close_waveform(outputs, outcome)?;
+    if let Some((recorder, file)) = timeline {
+        recorder.flush();
+        let report = result
+            .report
+            .as_ref()
+            .context("the cycle and rtl levels give a report")?;
+        files.push(file.finish(report)?);
+    }
+    // The waveforms and the timeline come into place together, or none of them.
+    commit_together(files)?;
     let total = result.total_cycles.unwrap_or(0);
     let covered = window.clone().unwrap_or(0..total);
     let covered = format!(
@@ -124,25 +135,17 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
             );
         }
     }
-    if let Some((recorder, file)) = timeline {
-        recorder.flush();
-        let report = result
-            .report
-            .as_ref()
-            .context("the cycle and rtl levels give a report")?;
-        file.finish(report)?;
-        if let Some(path) = &args.waveform.timeline {
+    if let Some(path) = &args.waveform.timeline {
+        eprintln!(
+            "occsim: wrote {}: timeline of {covered}, {}",
+            path.display(),
+            file_size(path)
+        );
+        let bytes = std::fs::metadata(path).map_or(0, |m| m.len());
+        if bytes > TIMELINE_VIEWER_BYTES && args.waveform.window.is_none() {
             eprintln!(
-                "occsim: wrote {}: timeline of {covered}, {}",
-                path.display(),
-                file_size(path)
+                "occsim: a trace viewer in a browser (Perfetto, chrome://tracing) may not open a timeline this large; --window START..END writes only those cycles"
             );
-            let bytes = std::fs::metadata(path).map_or(0, |m| m.len());
-            if bytes > TIMELINE_VIEWER_BYTES && args.waveform.window.is_none() {
-                eprintln!(
-                    "occsim: a trace viewer in a browser (Perfetto, chrome://tracing) may not open a timeline this large; --window START..END writes only those cycles"
-                );
-            }
         }
     }
     let queries = result.queries.len() as u64;
@@ -399,7 +402,7 @@ impl std::io::Write for VcdSender {
 /// The channel to the thread writing a VCD, and the thread.
 type VcdThread = (
     std::sync::mpsc::SyncSender<VcdChunk>,
-    std::thread::JoinHandle<anyhow::Result<()>>,
+    std::thread::JoinHandle<anyhow::Result<Finished>>,
 );
 
 /// Where a waveform goes: the thread writing the VCD, the FST's file (written by the model
@@ -451,7 +454,7 @@ fn waveform(
 fn vcd_thread(path: PathBuf) -> (Box<dyn std::io::Write + Send>, VcdThread) {
     let (sender, receiver) = std::sync::mpsc::sync_channel::<VcdChunk>(4);
     let thread = std::thread::spawn(move || {
-        occsim_sweep::output::write_atomically_with(&path, |file| {
+        let written = occsim_sweep::output::write_finished_with(&path, |file| {
             use std::io::Write;
             loop {
                 match receiver.recv() {
@@ -460,8 +463,10 @@ fn vcd_thread(path: PathBuf) -> (Box<dyn std::io::Write + Send>, VcdThread) {
                     Err(_) => return Err(anyhow::Error::new(ReplayStopped)),
                 }
             }
-        })
-        .with_context(|| format!("cannot write the waveform {}", path.display()))
+        });
+        written
+            .map(|((), file)| file)
+            .with_context(|| format!("cannot write the waveform {}", path.display()))
     });
     let out = Box::new(VcdSender {
         chunks: sender.clone(),
@@ -482,32 +487,36 @@ impl std::fmt::Display for ReplayStopped {
 
 impl std::error::Error for ReplayStopped {}
 
-/// Keep or drop the waveform files after the replay's `outcome`.
+/// Keep or drop the waveform files after the replay's `outcome`: kept, written whole beside
+/// their paths, to be renamed into place with the replay's other outputs.
 fn close_waveform<T>(
     outputs: Option<WaveformOutputs>,
     outcome: anyhow::Result<T>,
-) -> anyhow::Result<T> {
+) -> anyhow::Result<(T, Vec<Finished>)> {
     let Some(WaveformOutputs { vcd, fst }) = outputs else {
-        return outcome;
+        return outcome.map(|value| (value, Vec::new()));
     };
-    let outcome = close_vcd(vcd, outcome);
-    match (fst, outcome) {
-        (Some((file, path)), Ok(value)) => {
-            // The model finished (and flushed) the FST; an error dropped the file.
-            file.commit()
-                .with_context(|| format!("cannot write the waveform {}", path.display()))?;
-            Ok(value)
-        }
-        (_, outcome) => outcome,
+    let (value, vcd) = close_vcd(vcd, outcome)?;
+    let mut files: Vec<Finished> = vcd.into_iter().collect();
+    if let Some((file, path)) = fst {
+        // The model finished (and flushed) the FST; an error dropped the file.
+        let finished = file
+            .finish()
+            .with_context(|| format!("cannot write the waveform {}", path.display()))?;
+        files.push(finished);
     }
+    Ok((value, files))
 }
 
 /// Keep or drop the VCD file after the replay's `outcome`. When the writer failed (it
 /// could not create or write the file), its error, which names the file, is the one to
 /// report: the replay only saw the writer stop.
-fn close_vcd<T>(vcd: Option<VcdThread>, outcome: anyhow::Result<T>) -> anyhow::Result<T> {
+fn close_vcd<T>(
+    vcd: Option<VcdThread>,
+    outcome: anyhow::Result<T>,
+) -> anyhow::Result<(T, Option<Finished>)> {
     let Some((sender, thread)) = vcd else {
-        return outcome;
+        return outcome.map(|value| (value, None));
     };
     if outcome.is_ok() {
         // The receiver only stops early after a write error, which the join reports.
@@ -518,11 +527,11 @@ fn close_vcd<T>(vcd: Option<VcdThread>, outcome: anyhow::Result<T>) -> anyhow::R
         .join()
         .map_err(|_| anyhow::anyhow!("the waveform writer panicked"))?;
     match (outcome, written) {
-        (Ok(value), Ok(())) => Ok(value),
+        (Ok(value), Ok(file)) => Ok((value, Some(file))),
         (Err(replay), Err(writer)) if writer.chain().any(|c| c.is::<ReplayStopped>()) => {
             Err(replay)
         }
         (_, Err(writer)) => Err(writer),
-        (Err(replay), Ok(())) => Err(replay),
+        (Err(replay), Ok(_)) => Err(replay),
     }
 }

@@ -3,7 +3,7 @@
 
 use anyhow::{anyhow, Context, Result};
 use occsim_sweep::{
-    capped_jobs, kept_points, list_keys, merge_results, metric_chart, run_sweep, AxisValidator,
+    capped_jobs, kept_points, list_keys, merge_pending, metric_chart, run_sweep, AxisValidator,
     Grid, Joining, Point, PointRecord, Shard, StoredLine, SweepError, SweepOptions,
 };
 use std::num::NonZeroUsize;
@@ -288,13 +288,30 @@ pub fn run_with(
         .retile
         .map_or(String::new(), |grid| format!(" retiled {grid}"));
     let subject = format!("{trace}{retiled} on {arch}, {}", run.fidelity);
-    write_plot(&run.plot, &grid, &outcome.lines, &subject)
+    // The results file is the sweep's own record, kept point by point (a resumed sweep
+    // starts from it): the chart of it follows alone.
+    let plot = plot_file(&run.plot, &grid, &outcome.lines, &subject)?;
+    occsim_sweep::output::commit_together(plot.into_iter().collect())?;
+    report_plot(&run.plot);
+    Ok(())
 }
 
 /// Runs `occsim sweep merge`.
 pub fn run_merge(args: &MergeArgs) -> Result<()> {
-    let report = merge_results(&args.out, &args.shards, args.allow_missing, args.force)
+    let mut report = merge_pending(&args.out, &args.shards, args.allow_missing, args.force)
         .map_err(in_cli_words)?;
+    let subject = match report.lines.first() {
+        Some(first) => format!(
+            "{} shards of trace {} on {}",
+            args.shards.len(),
+            first.line.trace_digest,
+            machine_of(&first.text)
+        ),
+        None => "nothing merged".to_string(),
+    };
+    // The merge, its CSV view and its chart come into place together, or none of them.
+    let plot = plot_file(&args.plot, &report.grid, &report.lines, &subject)?;
+    report.commit(plot)?;
     for torn in &report.torn_inputs {
         eprintln!(
             "sweep merge: {} ends in a torn line (its point is missing)",
@@ -315,16 +332,8 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         args.out.display(),
         report.csv.display()
     );
-    let subject = match report.lines.first() {
-        Some(first) => format!(
-            "{} shards of trace {} on {}",
-            args.shards.len(),
-            first.line.trace_digest,
-            machine_of(&first.text)
-        ),
-        None => "nothing merged".to_string(),
-    };
-    write_plot(&args.plot, &report.grid, &report.lines, &subject)
+    report_plot(&args.plot);
+    Ok(())
 }
 
 /// The machine a results line's resolved architecture is of: the InfiniteReality-like one
@@ -526,9 +535,16 @@ fn point_metrics(
     metrics
 }
 
-fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine], subject: &str) -> Result<()> {
+/// The chart `args` asks for, drawn and written beside its path, to be renamed into place
+/// with the command's other outputs.
+fn plot_file(
+    args: &PlotArgs,
+    grid: &Grid,
+    lines: &[StoredLine],
+    subject: &str,
+) -> Result<Option<occsim_sweep::output::Finished>> {
     let Some(path) = args.plot.as_deref() else {
-        return Ok(());
+        return Ok(None);
     };
     let chart = metric_chart(
         grid.axes(),
@@ -538,9 +554,18 @@ fn write_plot(args: &PlotArgs, grid: &Grid, lines: &[StoredLine], subject: &str)
         subject,
     )
     .map_err(in_cli_words)?;
-    chart.write_svg(path)?;
-    eprintln!("sweep: plot -> {}", path.display());
-    Ok(())
+    let svg = chart.to_svg()?;
+    Ok(Some(occsim_sweep::output::write_finished(
+        path,
+        svg.as_bytes(),
+    )?))
+}
+
+/// Say where the chart went, once it is there.
+fn report_plot(args: &PlotArgs) {
+    if let Some(path) = &args.plot {
+        eprintln!("sweep: plot -> {}", path.display());
+    }
 }
 
 #[cfg(test)]

@@ -10,7 +10,7 @@
 use anyhow::Context;
 use occsim_sim::timeline::{PortLane, QuerySlice, Slice, TimelineSink, Track};
 use occsim_sim::Report;
-use occsim_sweep::output::AtomicFile;
+use occsim_sweep::output::{AtomicFile, Finished};
 use std::collections::BTreeSet;
 use std::io::{BufWriter, Write};
 use std::ops::Range;
@@ -189,9 +189,9 @@ impl TimelineFile {
         Ok((timeline, sink))
     }
 
-    /// After a successful replay: a slice per frame, then the file is closed and renamed
-    /// into place.
-    pub fn finish(self, report: &Report) -> anyhow::Result<()> {
+    /// After a successful replay: a slice per frame, then the file is closed, to be renamed
+    /// into place with the replay's other outputs.
+    pub fn finish(self, report: &Report) -> anyhow::Result<Finished> {
         let cannot = || format!("cannot write the timeline {}", self.path.display());
         let mut writer = self.writer.lock().unwrap_or_else(|e| e.into_inner());
         let window = self.window.clone();
@@ -220,6 +220,6 @@ impl TimelineFile {
             .and_then(|()| out.flush())
             .with_context(cannot)?;
         drop(writer);
-        self.file.commit().with_context(cannot)
+        self.file.finish().with_context(cannot)
     }
 }

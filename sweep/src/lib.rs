@@ -30,7 +30,7 @@ mod runner;
 pub use chart::metric_chart;
 pub use error::{kept_points, whose_results, BoxError, Joining, SweepError};
 pub use grid::{Axis, AxisValidator, Grid, Point, Shard, MAX_GRID_POINTS};
-pub use merge::{list_keys, merge_results, MergeReport};
+pub use merge::{list_keys, merge_pending, merge_results, MergeReport};
 pub use record::{PointRecord, StoredLine, SweepLine, FORMAT};
 pub use runner::{
     capped_jobs, run_sweep, Evaluator, Pool, SweepOptions, SweepOutcome, JOBS_PER_CORE,

@@ -6,7 +6,7 @@
 
 use crate::error::{Joining, SweepError};
 use crate::grid::Grid;
-use crate::output::write_atomically;
+use crate::output::{commit_together, write_finished, Finished, OutputError};
 use crate::record::{
     check_line_belongs, csv_path_for, read_results, render_csv, render_jsonl, Expected, StoredLine,
 };
@@ -29,6 +29,20 @@ pub struct MergeReport {
     /// Inputs whose unterminated last line was dropped (an interrupted shard).
     pub torn_inputs: Vec<PathBuf>,
     pub csv: PathBuf,
+    /// The results file and its CSV view, written and flushed, not yet in place
+    /// ([`MergeReport::commit`]).
+    written: Vec<Finished>,
+}
+
+impl MergeReport {
+    /// Rename the merged results, their CSV view and the command's `other` outputs (a
+    /// chart of them) into place together ([`commit_together`]): an interrupted merge
+    /// leaves none of them.
+    pub fn commit(&mut self, other: impl IntoIterator<Item = Finished>) -> Result<(), OutputError> {
+        let mut files = std::mem::take(&mut self.written);
+        files.extend(other);
+        commit_together(files)
+    }
 }
 
 /// Merges `inputs` into `out` (and its CSV view). Missing points are an error listing them
@@ -37,6 +51,19 @@ pub struct MergeReport {
 /// is an error unless `replace`: a merge never silently replaces results. (The inputs are
 /// read before `out` is written, so `out` may be one of them.)
 pub fn merge_results(
+    out: &Path,
+    inputs: &[PathBuf],
+    allow_missing: bool,
+    replace: bool,
+) -> Result<MergeReport> {
+    let mut report = merge_pending(out, inputs, allow_missing, replace)?;
+    report.commit([])?;
+    Ok(report)
+}
+
+/// [`merge_results`], its outputs written beside their paths, to be renamed into place with
+/// the command's others by [`MergeReport::commit`] (dropped uncommitted, they are removed).
+pub fn merge_pending(
     out: &Path,
     inputs: &[PathBuf],
     allow_missing: bool,
@@ -105,14 +132,17 @@ pub fn merge_results(
 
     let lines: Vec<StoredLine> = by_point.into_values().collect();
     let refs: Vec<&StoredLine> = lines.iter().collect();
-    write_atomically(out, render_jsonl(&refs).as_bytes())?;
-    write_atomically(&csv, render_csv(grid.axes(), &refs).as_bytes())?;
+    let written = vec![
+        write_finished(out, render_jsonl(&refs).as_bytes())?,
+        write_finished(&csv, render_csv(grid.axes(), &refs).as_bytes())?,
+    ];
     Ok(MergeReport {
         lines,
         grid,
         missing,
         torn_inputs,
         csv,
+        written,
     })
 }
 

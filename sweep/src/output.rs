@@ -148,6 +148,17 @@ pub fn write_atomically_with<T, E: From<OutputError>>(
     path: &Path,
     fill: impl FnOnce(&mut BufWriter<File>) -> Result<T, E>,
 ) -> Result<T, E> {
+    let (value, file) = write_finished_with(path, fill)?;
+    commit_together(vec![file])?;
+    Ok(value)
+}
+
+/// [`write_atomically_with`] but for the rename: the file, written and flushed to disk, to
+/// be renamed into place with the command's other outputs ([`commit_together`]).
+pub fn write_finished_with<T, E: From<OutputError>>(
+    path: &Path,
+    fill: impl FnOnce(&mut BufWriter<File>) -> Result<T, E>,
+) -> Result<(T, Finished), E> {
     let file = AtomicFile::create(path)?;
     let mut writer = BufWriter::with_capacity(1 << 20, file.handle()?);
     let value = fill(&mut writer)?;
@@ -155,8 +166,7 @@ pub fn write_atomically_with<T, E: From<OutputError>>(
         path: file.temp.clone(),
         source: e.into_error(),
     })?;
-    file.commit()?;
-    Ok(value)
+    Ok((value, file.finish()?))
 }
 
 /// A file that becomes `path` only when committed, for a writer that must own its
@@ -211,33 +221,114 @@ impl AtomicFile {
 
     /// Flush the file to disk and rename it over the target (the writers through
     /// [`AtomicFile::handle`] must have flushed).
-    pub fn commit(mut self) -> Result<(), OutputError> {
-        let file = self.file.take().expect("an uncommitted file");
-        let outcome = file
-            .sync_all()
-            .map_err(|source| OutputError::Write {
-                path: self.temp.clone(),
-                source,
-            })
-            .and_then(|()| {
-                std::fs::rename(&self.temp, &self.target).map_err(|source| OutputError::Rename {
-                    from: self.temp.clone(),
-                    to: self.target.clone(),
-                    source,
-                })
-            });
-        if outcome.is_err() {
-            // Best effort: the original error matters more.
-            let _ = std::fs::remove_file(&self.temp);
-        } else {
-            sync_directory_of(&self.target);
-        }
-        outcome
+    pub fn commit(self) -> Result<(), OutputError> {
+        commit_together(vec![self.finish()?])
     }
+
+    /// Flush the file to disk, to be renamed over the target with the command's other
+    /// outputs ([`commit_together`]) once they are all written too (the writers through
+    /// [`AtomicFile::handle`] must have flushed).
+    pub fn finish(mut self) -> Result<Finished, OutputError> {
+        let file = self.file.take().expect("an uncommitted file");
+        // Taken out, the path is left for [`Finished`] to remove or rename.
+        let temp = std::mem::take(&mut self.temp);
+        let finished = Finished {
+            temp,
+            target: std::mem::take(&mut self.target),
+        };
+        file.sync_all().map_err(|source| OutputError::Write {
+            path: finished.temp.clone(),
+            source,
+        })?;
+        Ok(finished)
+    }
+}
+
+/// An output written whole and flushed to disk, waiting beside its path to be renamed over
+/// it with the command's other outputs ([`commit_together`]); dropped uncommitted (an
+/// error, or another output that failed), it is removed.
+#[derive(Debug)]
+pub struct Finished {
+    temp: PathBuf,
+    target: PathBuf,
+}
+
+impl Finished {
+    /// The path it becomes.
+    pub fn target(&self) -> &Path {
+        &self.target
+    }
+}
+
+impl Drop for Finished {
+    fn drop(&mut self) {
+        if self.temp.as_os_str().is_empty() {
+            return; // renamed into place
+        }
+        if let Ok(mut live) = LIVE.lock() {
+            live.retain(|p| p != &self.temp);
+        }
+        let _ = std::fs::remove_file(&self.temp);
+    }
+}
+
+/// Rename every one of a command's outputs over its target, all or none as far as an
+/// interrupt goes: under the lock [`remove_temporaries`] takes first, so that a signal that
+/// comes before finds them all still temporaries (and removes them), and one that comes
+/// during waits until they are all in place. (Renamed one by one as each was done, an
+/// interrupt between two renames had left the first output without the others.) A rename
+/// that fails stops the rest, which are removed; those before it stay in place.
+pub fn commit_together(files: Vec<Finished>) -> Result<(), OutputError> {
+    if files.is_empty() {
+        return Ok(());
+    }
+    // Out of their guards, whose drop would take the lock held below.
+    let files: Vec<(PathBuf, PathBuf)> = files
+        .into_iter()
+        .map(|mut file| {
+            (
+                std::mem::take(&mut file.temp),
+                std::mem::take(&mut file.target),
+            )
+        })
+        .collect();
+    let mut live = lock(&LIVE);
+    live.retain(|listed| files.iter().all(|(temp, _)| temp != listed));
+    let mut outcome = match INTERRUPTED.load(Ordering::SeqCst) {
+        true => Err(interrupted(files.first().map_or(Path::new(""), |f| &f.1))),
+        false => Ok(()),
+    };
+    let mut renamed = Vec::with_capacity(files.len());
+    for (temp, target) in files {
+        if outcome.is_ok() {
+            match std::fs::rename(&temp, &target) {
+                Ok(()) => {
+                    renamed.push(target);
+                    continue;
+                }
+                Err(source) => {
+                    outcome = Err(OutputError::Rename {
+                        from: temp.clone(),
+                        to: target,
+                        source,
+                    })
+                }
+            }
+        }
+        let _ = std::fs::remove_file(&temp);
+    }
+    drop(live);
+    for target in &renamed {
+        sync_directory_of(target);
+    }
+    outcome
 }
 
 impl Drop for AtomicFile {
     fn drop(&mut self) {
+        if self.file.is_none() {
+            return; // finished: its temporary is [`Finished`]'s
+        }
         if let Ok(mut live) = LIVE.lock() {
             live.retain(|p| p != &self.temp);
         }
@@ -349,12 +440,19 @@ pub fn check_writable(path: &Path) -> Result<(), OutputError> {
 
 /// Replace `path` with `contents` atomically.
 pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<(), OutputError> {
-    write_atomically_with(path, |w| {
+    commit_together(vec![write_finished(path, contents)?])
+}
+
+/// `contents` written beside `path` and flushed to disk, to be renamed into place with the
+/// command's other outputs ([`commit_together`]).
+pub fn write_finished(path: &Path, contents: &[u8]) -> Result<Finished, OutputError> {
+    let ((), file) = write_finished_with(path, |w| {
         w.write_all(contents).map_err(|source| OutputError::Write {
             path: path.to_path_buf(),
             source,
         })
-    })
+    })?;
+    Ok(file)
 }
 
 /// `dir/.name.tmp-PID`: hidden, unique per process, in the target's own directory.

@@ -9,7 +9,7 @@
 
 use crate::error::{BoxError, Joining, SweepError};
 use crate::grid::{Grid, Point, Shard};
-use crate::output::{check_writable, write_atomically};
+use crate::output::{check_writable, commit_together, write_atomically, write_finished};
 use crate::record::{
     check_line_belongs, csv_path_for, read_results, render_csv, render_jsonl, Expected,
     PointRecord, StoredLine, SweepLine, FORMAT,
@@ -93,8 +93,11 @@ pub fn run_sweep(options: &SweepOptions<'_>, evaluate: Evaluator<'_>) -> Result<
 
     let lines: Vec<StoredLine> = done.into_values().collect();
     let refs: Vec<&StoredLine> = lines.iter().collect();
-    write_atomically(options.out, render_jsonl(&refs).as_bytes())?;
-    write_atomically(&csv, render_csv(options.grid.axes(), &refs).as_bytes())?;
+    // The results in point order and their CSV view, in place together.
+    commit_together(vec![
+        write_finished(options.out, render_jsonl(&refs).as_bytes())?,
+        write_finished(&csv, render_csv(options.grid.axes(), &refs).as_bytes())?,
+    ])?;
     Ok(SweepOutcome {
         lines,
         evaluated,
