@@ -111,18 +111,28 @@ pub struct SweepRunArgs {
     pub plot: PlotArgs,
 }
 
-/// `occsim sweep merge OUT.jsonl SHARD1.jsonl SHARD2.jsonl ...`
+/// `occsim sweep merge OUT.jsonl SHARD1.jsonl SHARD2.jsonl ...`, or with the merged file
+/// named as `sweep` and `trace gen` name their outputs, `occsim sweep merge -o OUT.jsonl
+/// SHARD1.jsonl ...`
 #[derive(clap::Args, Debug)]
 pub struct MergeArgs {
-    /// Merged results file (its CSV view is written beside it).
-    pub out: PathBuf,
-    /// Shard results files.
-    #[arg(required = true)]
-    pub shards: Vec<PathBuf>,
+    /// The merged results file (its CSV view is written beside it), then the shard results
+    /// files; with -o/--out, the shard results files alone.
+    #[arg(required = true, value_name = "FILE.jsonl")]
+    pub paths: Vec<PathBuf>,
+    /// Merged results file (its CSV view is written beside it), instead of the first path.
+    #[arg(
+        short = 'o',
+        long = "out",
+        visible_alias = "output",
+        value_name = "FILE.jsonl"
+    )]
+    pub out: Option<PathBuf>,
     /// Write the merge even if points are missing (they are still listed).
     #[arg(long)]
     pub allow_missing: bool,
-    /// Replace OUT when it exists; without it a merge refuses to touch an existing file.
+    /// Replace the merged results file when it exists; without it a merge refuses to touch an
+    /// existing file.
     #[arg(long)]
     pub force: bool,
     #[command(flatten)]
@@ -298,12 +308,13 @@ pub fn run_with(
 
 /// Runs `occsim sweep merge`.
 pub fn run_merge(args: &MergeArgs) -> Result<()> {
-    let mut report = merge_pending(&args.out, &args.shards, args.allow_missing, args.force)
-        .map_err(in_cli_words)?;
+    let (out, shards) = args.out_and_shards();
+    let mut report =
+        merge_pending(out, shards, args.allow_missing, args.force).map_err(in_cli_words)?;
     let subject = match report.lines.first() {
         Some(first) => format!(
             "{} shards of trace {} on {}",
-            args.shards.len(),
+            shards.len(),
             first.line.trace_digest,
             machine_of(&first.text)
         ),
@@ -329,11 +340,23 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
     eprintln!(
         "sweep merge: {} points -> {}, {}",
         report.lines.len(),
-        args.out.display(),
+        out.display(),
         report.csv.display()
     );
     report_plot(&args.plot);
     Ok(())
+}
+
+impl MergeArgs {
+    /// The merged file and the shards: `-o`'s and every path, or the first path and the
+    /// rest (none, where only the merged file is named: merging nothing is refused).
+    fn out_and_shards(&self) -> (&std::path::Path, &[PathBuf]) {
+        match &self.out {
+            Some(out) => (out, &self.paths),
+            // `paths` is required: clap gives at least one.
+            None => (&self.paths[0], &self.paths[1..]),
+        }
+    }
 }
 
 /// The machine a results line's resolved architecture is of: the InfiniteReality-like one
@@ -661,11 +684,24 @@ mod tests {
         let Some(SweepCommand::Merge(merge)) = args.command else {
             panic!("expected merge, got {args:?}");
         };
+        let shards = [PathBuf::from("a.jsonl"), PathBuf::from("b.jsonl")];
         assert_eq!(
-            merge.shards,
-            [PathBuf::from("a.jsonl"), PathBuf::from("b.jsonl")]
+            merge.out_and_shards(),
+            (std::path::Path::new("all.jsonl"), &shards[..])
         );
         assert!(merge.allow_missing);
+        // The merged file named as sweep's and trace gen's outputs are, by any of their flags.
+        for flag in ["-o", "--out", "--output"] {
+            let args = parse(&["merge", "a.jsonl", flag, "all.jsonl", "b.jsonl"]).unwrap();
+            let Some(SweepCommand::Merge(merge)) = args.command else {
+                panic!("expected merge, got {args:?}");
+            };
+            assert_eq!(
+                merge.out_and_shards(),
+                (std::path::Path::new("all.jsonl"), &shards[..]),
+                "{flag}"
+            );
+        }
     }
 
     #[test]
