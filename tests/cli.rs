@@ -148,6 +148,35 @@ fn count_matches_a_scene_file_written_by_hand() {
     );
 }
 
+/// A run without a query has no latency to report: `-` in the table and null in JSON at
+/// every level with time (they had been 0, as if every query took no time).
+#[test]
+fn a_trace_without_queries_reports_no_latency() {
+    let dir = scratch_dir("no-queries");
+    let (scene, trace) = (dir.join("drawn.scene"), dir.join("drawn.occt"));
+    std::fs::write(&scene, "viewport 4 4\ntri -1 -1 0 1  1 -1 0 1  1 1 0 1\n").unwrap();
+    let trace = trace.to_str().unwrap();
+    stdout_of(&["trace", "gen", scene.to_str().unwrap(), "-o", trace]);
+    for level in ["analytic", "sampled:10", "cycle"] {
+        let replay = ["replay", trace, "--fidelity", level];
+        let text = stdout_of(&replay);
+        assert!(
+            text.contains("latency p50 - p95 - max - cycles"),
+            "{level}: {text}"
+        );
+        let json: serde_json::Value =
+            serde_json::from_str(&stdout_of(&[&replay[..], &["--json"]].concat())).unwrap();
+        for key in ["mean", "p50", "p95", "max"] {
+            let field = format!("latency_{key}_cycles");
+            assert!(
+                json[&field].is_null(),
+                "{level}: {field} = {}",
+                json[&field]
+            );
+        }
+    }
+}
+
 #[test]
 fn bad_scenes_name_file_and_line_and_exit_non_zero() {
     let dir = scratch_dir("bad");
@@ -200,6 +229,13 @@ fn trace_gen_info_dump_round_trip() {
         serde_json::from_str(&stdout_of(&["trace", "info", trace, "--json"])).unwrap();
     assert_eq!(json["header"]["scene"], "hardcases");
     assert_eq!(json["summary"]["queries"], 28);
+    assert_eq!(json["scanned"], false);
+    let json: serde_json::Value =
+        serde_json::from_str(&stdout_of(&["trace", "info", trace, "--json", "--scan"])).unwrap();
+    assert_eq!(
+        json["scanned"], true,
+        "the JSON says what the table's last line says"
+    );
     let dump = stdout_of(&["trace", "dump", trace, "--limit", "3"]);
     let lines: Vec<&str> = dump.lines().collect();
     assert_eq!(lines.len(), 4, "{dump}");
@@ -831,6 +867,15 @@ fn demo_json_is_the_replay_report() {
     assert_eq!(report["machine"], "o2");
     assert_eq!(report["viewport_width"], 1280);
     assert!(report["summary"]["frames_per_second"].as_f64().unwrap() > 0.0);
+    // Every query's tiles' reports, as `replay --json` gives them (they had been empty).
+    for query in report["queries"].as_array().unwrap() {
+        let tiles = query["tiles"].as_array().unwrap();
+        assert_eq!(
+            Some(tiles.len() as u64),
+            query["tile_count"].as_u64(),
+            "{query}"
+        );
+    }
 }
 
 /// Fast-forward ([`occsim_sim::effects`]) changes no report on a lazy-grid walk, and `replay`

@@ -128,6 +128,13 @@ fn bad_options_are_rejected_with_a_clear_message() {
             && stderr.contains("expected one of columns, blocks, morton"),
         "{stderr}"
     );
+    // Each row sets its own engine count: a --set engines= had been overridden unsaid.
+    let output = occsim(&["latency", &trace, "--engines", "1", "--set", "engines=8"]);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        !output.status.success() && stderr.contains("--set engines=8"),
+        "{stderr}"
+    );
     let output = occsim(&["replay", &trace, "--arch", "ir4", "--retile", "5000x1"]);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(

@@ -124,6 +124,25 @@ fn results_files_are_replaced_only_with_force() {
         before,
         "the same sweep again"
     );
+
+    // A merge into one of its own shards (README: the one output that may name an input):
+    // refused without --force; with it, the shard is read whole first and the merge holds
+    // its points beside the other shard's.
+    let into_shard = |extra: &[&str]| {
+        let mut args = vec![
+            "sweep",
+            "merge",
+            s(&shards[0]),
+            s(&shards[0]),
+            s(&shards[1]),
+        ];
+        args.extend(extra);
+        occsim(&args)
+    };
+    assert!(!into_shard(&[]).status.success());
+    assert!(into_shard(&["--force"]).status.success());
+    let merged = std::fs::read_to_string(&shards[0]).unwrap();
+    assert_eq!(merged.lines().count(), 2, "both shards' points: {merged}");
 }
 
 /// `--json` prints the lines `--out` holds, as one array.
@@ -270,6 +289,18 @@ fn bad_axes_are_rejected_by_name() {
             "{stderr}"
         );
         assert!(!out.exists(), "{flag}: points ran");
+    }
+    // A chart at the results file's path or its CSV view's is refused before any point runs
+    // (it had replaced the results, the run ending with status 0).
+    for plot in [out.clone(), out.with_extension("csv")] {
+        let args = ["sweep", s(&trace), "--set", "engines=1,2", "--out", s(&out)];
+        let output = occsim(&[&args[..], &["--plot", s(&plot)]].concat());
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(
+            !output.status.success() && stderr.contains("two of this command's outputs"),
+            "{stderr}"
+        );
+        assert!(!out.exists(), "{}: points ran", plot.display());
     }
 }
 

@@ -116,6 +116,9 @@ fn culling_compare_takes_arch_and_set() {
         wrong.contains("--arch o2") && wrong.contains("boards"),
         "{wrong}"
     );
+    // A machine named twice would be two columns of one name, and JSON keys given twice.
+    let twice = stderr_of_failure(&[&walk[..], &["--arch", "o2,o2"]].concat());
+    assert!(twice.contains("o2 appears twice"), "{twice}");
 }
 
 /// `--bands`: every frame time gets a band that holds it, over corners that are the same for

@@ -50,10 +50,15 @@ fn main() {
             fragments / cpu_seconds / 1e6,
             report.summary.cycles,
             report.summary.fragments_per_cycle,
-            report.summary.latency_p50_cycles,
-            report.summary.latency_p95_cycles
+            latency_figure(report.summary.latency_p50_cycles),
+            latency_figure(report.summary.latency_p95_cycles)
         );
     }
+}
+
+/// A latency figure, `-` for none (a run without a query).
+fn latency_figure(cycles: Option<u64>) -> String {
+    cycles.map_or("-".to_string(), |cycles| cycles.to_string())
 }
 
 /// Replay `FRAMES` copies of `frame` on `arch`: the report and the run's on-CPU seconds.

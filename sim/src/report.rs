@@ -1,5 +1,6 @@
 //! The replay report: what a run measured, as data (serde) and as text.
 
+use occsim_traces::words::counted;
 use occsim_traces::QueryMode;
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -89,10 +90,11 @@ pub struct Summary {
     pub queries: u64,
     /// Queries whose result was compared with a golden result in the stream.
     pub checked_queries: u64,
-    /// Nearest-rank percentiles of the query latencies (0 without queries).
-    pub latency_p50_cycles: u64,
-    pub latency_p95_cycles: u64,
-    pub latency_max_cycles: u64,
+    /// Nearest-rank percentiles of the query latencies (none without a query: null in
+    /// JSON, as the level's own figures).
+    pub latency_p50_cycles: Option<u64>,
+    pub latency_p95_cycles: Option<u64>,
+    pub latency_max_cycles: Option<u64>,
     /// Frames over the run's time (closed-loop streams only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub frames_per_second: Option<f64>,
@@ -126,9 +128,9 @@ impl Summary {
             },
             queries: run.queries.len() as u64,
             checked_queries: run.checked_queries,
-            latency_p50_cycles: nearest_rank(&latencies, 50),
-            latency_p95_cycles: nearest_rank(&latencies, 95),
-            latency_max_cycles: latencies.last().copied().unwrap_or(0),
+            latency_p50_cycles: (!latencies.is_empty()).then(|| nearest_rank(&latencies, 50)),
+            latency_p95_cycles: (!latencies.is_empty()).then(|| nearest_rank(&latencies, 95)),
+            latency_max_cycles: latencies.last().copied(),
             frames_per_second: None,
         }
     }
@@ -359,8 +361,8 @@ impl Report {
         };
         let _ = writeln!(
             out,
-            "\n{} frames, {fps:.2} frames/s; on the host's timeline busy + waiting + pipe wait = cycles",
-            self.frames.len()
+            "\n{}, {fps:.2} frames/s; on the host's timeline busy + waiting + pipe wait = cycles",
+            counted(self.frames.len() as u64, "frame", "frames")
         );
         let _ = writeln!(out, "{FRAMES_LEGEND}");
         let _ = writeln!(out, "{FRAMES_HEADING}");

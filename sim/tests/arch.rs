@@ -109,6 +109,10 @@ fn unknown_keys_name_the_close_ones() {
     let err = arch.set("engine=3").unwrap_err();
     assert!(matches!(err, ArchError::UnknownKey { .. }));
     assert!(err.to_string().contains("did you mean engines"), "{err}");
+    // No key at all: the assignment's shape, not every key as "did you mean" (an empty key
+    // is in every name).
+    let err = arch.set("=4").unwrap_err();
+    assert_eq!(err.to_string(), "expected key=value, got '=4'");
     let err = Arch::from_toml("machine = \"o2\"\n[o2]\ncounter_bit = 3\n").unwrap_err();
     assert!(err.to_string().contains("counter_bits"), "{err}");
     assert!(err.to_string().starts_with("line 3: "), "{err}");

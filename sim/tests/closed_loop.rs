@@ -342,7 +342,7 @@ fn with_a_free_host_and_no_waits_frame_time_is_the_open_loop_cycle_count() {
         assert!(
             occsim_sim::LevelResult::from_report(closed.clone(), occsim_sim::Effects::ALL)
                 .to_text(false)
-                .contains("1 frames"),
+                .contains("\n1 frame, "),
             "{name}"
         );
         assert_eq!(closed.frames.len(), 1, "{name}");

@@ -80,6 +80,17 @@ impl CompareArgs {
             });
             machines.push((name, arch));
         }
+        // A column a machine: two of one name would print twice and give JSON keys twice.
+        if let Some((twice, _)) = machines
+            .iter()
+            .enumerate()
+            .find(|(i, (name, _))| machines[..*i].iter().any(|(other, _)| other == name))
+            .map(|(_, machine)| machine)
+        {
+            anyhow::bail!(
+                "--arch/--arch-file: {twice} appears twice (each machine is a column, named by its --arch name or its file's stem)"
+            );
+        }
         Ok(machines)
     }
 }

@@ -67,8 +67,13 @@ pub fn run(args: DemoArgs) -> anyhow::Result<()> {
         };
         Ok(TraceReader::new(counted)?)
     };
-    let result = replay(open, &arch, ReplayOptions::cycle(None))
-        .map_err(|e| super::replay::in_cli_words("demo", e))?;
+    let options = ReplayOptions {
+        // Every query's tiles' reports where they are printed, as `replay --json` gives them.
+        tile_reports: args.json,
+        ..ReplayOptions::cycle(None)
+    };
+    let result =
+        replay(open, &arch, options).map_err(|e| super::replay::in_cli_words("demo", e))?;
     if args.json {
         outln!("{}", super::replay::result_json(&result)?);
     } else {

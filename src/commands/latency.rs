@@ -144,6 +144,10 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
     if args.engines.is_empty() {
         bail!("--engines: give at least one engine count");
     }
+    if let Some(set) = super::arch::set_of(&args.arch.set, "engines") {
+        // Every row sets its own count: the --set would be overridden without a word.
+        bail!("--set {set}: latency replays once per --engines count; give the counts there");
+    }
     let base = args.arch.resolve()?;
     anyhow::ensure!(
         args.fidelity != Fidelity::Functional,

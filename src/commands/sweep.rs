@@ -6,6 +6,7 @@ use occsim_sweep::{
     capped_jobs, kept_points, list_keys, merge_pending, metric_chart, run_sweep, AxisValidator,
     Grid, Joining, Point, PointRecord, Shard, StoredLine, SweepError, SweepOptions,
 };
+use occsim_traces::words::counted;
 use std::num::NonZeroUsize;
 use std::path::PathBuf;
 
@@ -246,8 +247,17 @@ pub fn run_with(
     let out = run.out.as_deref().context("sweep needs --out FILE.jsonl")?;
     let grid = Grid::parse(&run.set, validate).map_err(in_cli_words)?;
     check_plot(&run.plot, &grid, run.bands)?;
+    check_outputs_apart(out, &run.plot)?;
     let cores = std::thread::available_parallelism().map_or(1, NonZeroUsize::get);
     let points = grid.selected_indices(run.shard).len();
+    if let (0, Some(shard)) = (points, run.shard) {
+        // Not an error: a cluster's fixed shard count may pass a small grid's size, and the
+        // merge takes the empty file.
+        eprintln!(
+            "sweep: shard {shard} holds none of the grid's {}: its results file is empty",
+            counted(grid.len() as u64, "point", "points")
+        );
+    }
     let requested = run.jobs.map_or(cores, NonZeroUsize::get);
     let jobs = capped_jobs(requested, points, cores);
     if jobs < requested && run.jobs.is_some() {
@@ -274,8 +284,8 @@ pub fn run_with(
         );
     }
     eprintln!(
-        "sweep: {} points ({} run, {} resumed) -> {}, {}",
-        outcome.lines.len(),
+        "sweep: {} ({} run, {} resumed) -> {}, {}",
+        counted(outcome.lines.len() as u64, "point", "points"),
         outcome.evaluated,
         outcome.reused,
         out.display(),
@@ -309,6 +319,7 @@ pub fn run_with(
 /// Runs `occsim sweep merge`.
 pub fn run_merge(args: &MergeArgs) -> Result<()> {
     let (out, shards) = args.out_and_shards();
+    check_outputs_apart(out, &args.plot)?;
     let mut report =
         merge_pending(out, shards, args.allow_missing, args.force).map_err(in_cli_words)?;
     let subject = match report.lines.first() {
@@ -338,8 +349,8 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         );
     }
     eprintln!(
-        "sweep merge: {} points -> {}, {}",
-        report.lines.len(),
+        "sweep merge: {} -> {}, {}",
+        counted(report.lines.len() as u64, "point", "points"),
         out.display(),
         report.csv.display()
     );
@@ -479,6 +490,16 @@ const METRICS: [&str; 11] = [
 
 /// A plot's metric and x axis checked before any point runs (they had been checked after
 /// every point had).
+/// The results file, its CSV view and the chart each at its own path (a chart at the
+/// results' path had replaced them, the run saying it had written both).
+fn check_outputs_apart(out: &std::path::Path, plot: &PlotArgs) -> Result<()> {
+    let csv = occsim_sweep::csv_path_for(out).map_err(in_cli_words)?;
+    let mut outputs = vec![out, csv.as_path()];
+    outputs.extend(plot.plot.as_deref());
+    occsim_sweep::output::check_distinct(&outputs)
+        .context("the results file (--out), its CSV view (beside it, .csv) and --plot")
+}
+
 fn check_plot(plot: &PlotArgs, grid: &Grid, bands: bool) -> Result<()> {
     if plot.plot.is_none() {
         return Ok(());

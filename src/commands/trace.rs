@@ -9,6 +9,7 @@ use occsim_traces::raster::RasterProfile;
 use occsim_traces::trace::{
     ReadError, TraceHeader, TraceReader, TraceSummary, TraceWriter, WriterOptions,
 };
+use occsim_traces::words::counted;
 use occsim_traces::{Event, QueryResult, QuerySpec};
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -83,16 +84,16 @@ fn generate(args: GenArgs) -> anyhow::Result<()> {
                 &args.output,
                 |frame, stats| print_frame(frame, stats, collision),
             )?;
-            (summary, format!("{frames} frames, "))
+            (summary, format!("{}, ", counted(frames, "frame", "frames")))
         }
     };
     let bytes = std::fs::metadata(&args.output)?.len();
     outln!(
-        "wrote {}: {frames}{} fragments, {} primitives, {} queries, {} bytes{}",
+        "wrote {}: {frames}{}, {}, {}, {} bytes{}",
         args.output.display(),
-        summary.fragments,
-        summary.primitives,
-        summary.queries,
+        counted(summary.fragments, "fragment", "fragments"),
+        counted(summary.primitives, "primitive", "primitives"),
+        counted(summary.queries, "query", "queries"),
         bytes,
         bytes_per_fragment(bytes, summary.fragments)
             .map_or(String::new(), |b| format!(" ({b:.3} bytes/fragment)"))
@@ -241,18 +242,16 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
             "bytes_per_fragment": per_fragment,
             "header": header,
             "summary": summary,
+            // As the table's `scanned` line: every block read and checked, not the summary
+            // alone.
+            "scanned": args.scan,
         });
         outln!("{}", serde_json::to_string_pretty(&value)?);
         return Ok(());
     }
-    // The features used: the header has them when the trace was written to a file; the
-    // summary always does (and a --scan checks it against the blocks).
-    let f = header.features.as_ref().unwrap_or(&summary.features);
-    anyhow::ensure!(
-        header.features.is_none() || header.features.as_ref() == Some(&summary.features),
-        "{}: the header's features differ from the summary's",
-        args.trace.display()
-    );
+    // The features used: the summary's (the header's copy, where there is one, was checked
+    // to be the same as the summary was read; a --scan checks it against the blocks).
+    let f = &summary.features;
     let modes: Vec<&str> = f.query_modes.iter().map(|m| m.name()).collect();
     let funcs: Vec<&str> = f.depth_funcs.iter().map(|m| m.name()).collect();
     let flags: Vec<&str> = [
@@ -298,16 +297,16 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
         outln!("max tiles   {tiles} in one query");
     }
     outln!(
-        "bytes       {bytes} in {} blocks ({} before compression){}",
-        summary.blocks,
+        "bytes       {bytes} in {} ({} before compression){}",
+        counted(summary.blocks, "block", "blocks"),
         summary.payload_bytes,
         bytes_per_fragment(bytes, summary.fragments)
             .map_or(String::new(), |b| format!(", {b:.3} bytes/fragment"))
     );
     match (header.window_index, summary.window_index) {
         (Some(layout), Some(index)) => outln!(
-            "index       window index in {} blocks, {} bytes stored ({} before compression), at depth tiles {}x{} pixels, {} pixels a word, {} banks",
-            index.blocks,
+            "index       window index in {}, {} bytes stored ({} before compression), at depth tiles {}x{} pixels, {} pixels a word, {} banks",
+            counted(index.blocks, "block", "blocks"),
             index.stored_bytes,
             index.payload_bytes,
             layout.tile_width_pixels,
@@ -319,8 +318,8 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
     }
     match summary.bands {
         Some(bands) => outln!(
-            "bands       every run of fragments as bands of rows in {} blocks, {} bytes stored ({} before compression): the IR's analytic and sampled levels read them instead of the fragments",
-            bands.blocks,
+            "bands       every run of fragments as bands of rows in {}, {} bytes stored ({} before compression): the IR's analytic and sampled levels read them instead of the fragments",
+            counted(bands.blocks, "block", "blocks"),
             bands.stored_bytes,
             bands.payload_bytes
         ),
@@ -328,8 +327,8 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
     }
     match summary.depth_tests {
         Some(tests) => outln!(
-            "depth tests each fragment's result in {} blocks, {} bytes stored ({} before compression): the sampled level starts its machines mid-trace",
-            tests.blocks,
+            "depth tests each fragment's result in {}, {} bytes stored ({} before compression): the sampled level starts its machines mid-trace",
+            counted(tests.blocks, "block", "blocks"),
             tests.stored_bytes,
             tests.payload_bytes
         ),
@@ -337,8 +336,8 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
     }
     match summary.window_table {
         Some(table) => outln!(
-            "windows     every window's size in {} blocks, {} bytes stored: the sampled level reads them instead of the trace a second time",
-            table.blocks,
+            "windows     every window's size in {}, {} bytes stored: the sampled level reads them instead of the trace a second time",
+            counted(table.blocks, "block", "blocks"),
             table.stored_bytes
         ),
         None => outln!(

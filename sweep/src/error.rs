@@ -177,13 +177,19 @@ pub enum SweepError {
         #[source]
         source: Box<SweepError>,
     },
-    /// Points of the grid no shard holds (their keys, in point order).
+    /// Points of the grid no shard holds (their keys, in point order); `torn`, the shards
+    /// whose torn last line was dropped (an interrupted shard: its last point is among them).
     #[error(
-        "{} of {total} points are missing from the shards: {}; nothing written",
+        "{} of {total} points are missing from the shards: {}{}; nothing written",
         missing.len(),
-        crate::merge::list_keys(missing)
+        crate::merge::list_keys(missing),
+        torn_shards(torn)
     )]
-    MissingPoints { missing: Vec<String>, total: usize },
+    MissingPoints {
+        missing: Vec<String>,
+        total: usize,
+        torn: Vec<PathBuf>,
+    },
     /// A point of a sweep failed; the `kept` points of this sweep finished before it are in
     /// `kept_in` (none: no file was written).
     #[error("point {index} ({key}) failed; {}", kept_points(*kept, kept_in, "for a resumed run"))]
@@ -281,5 +287,23 @@ pub fn whose_results(found: &str, expected: &str) -> &'static str {
         "the same trace replayed otherwise (another tile grid, level or band study)"
     } else {
         "another trace"
+    }
+}
+
+/// `(a.jsonl ends in a torn line, its point dropped)` for the shards `torn`, or nothing.
+fn torn_shards(torn: &[PathBuf]) -> String {
+    match torn {
+        [] => String::new(),
+        [one] => format!(
+            " ({} ends in a torn line, its point dropped)",
+            one.display()
+        ),
+        many => {
+            let names: Vec<String> = many.iter().map(|p| p.display().to_string()).collect();
+            format!(
+                " ({} end in torn lines, their points dropped)",
+                names.join(", ")
+            )
+        }
     }
 }

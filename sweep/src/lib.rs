@@ -31,7 +31,7 @@ pub use chart::metric_chart;
 pub use error::{kept_points, whose_results, BoxError, Joining, SweepError};
 pub use grid::{Axis, AxisValidator, Grid, Point, Shard, MAX_GRID_POINTS};
 pub use merge::{list_keys, merge_pending, merge_results, MergeReport};
-pub use record::{PointRecord, StoredLine, SweepLine, FORMAT};
+pub use record::{csv_path_for, PointRecord, StoredLine, SweepLine, FORMAT};
 pub use runner::{
     capped_jobs, run_sweep, Evaluator, Pool, SweepOptions, SweepOutcome, JOBS_PER_CORE,
 };

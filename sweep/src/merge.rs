@@ -127,6 +127,7 @@ pub fn merge_pending(
         return Err(SweepError::MissingPoints {
             missing,
             total: grid.len(),
+            torn: torn_inputs,
         });
     }
 

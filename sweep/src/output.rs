@@ -438,6 +438,23 @@ pub fn check_writable(path: &Path) -> Result<(), OutputError> {
     }
 }
 
+/// Refuse two of a command's outputs at one path, however each is spelt, before the work
+/// that makes them: written one after the other, the later would replace the earlier (a
+/// sweep's chart had replaced its own results file). Each path as [`check_writable`] takes it.
+pub fn check_distinct(paths: &[&Path]) -> Result<(), OutputError> {
+    let mut destinations = Vec::with_capacity(paths.len());
+    for path in paths {
+        let destination = destination(path)?;
+        if destinations.contains(&destination) {
+            return Err(OutputError::TwoOutputsOnePath {
+                path: path.to_path_buf(),
+            });
+        }
+        destinations.push(destination);
+    }
+    Ok(())
+}
+
 /// Replace `path` with `contents` atomically.
 pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<(), OutputError> {
     commit_together(vec![write_finished(path, contents)?])

@@ -167,6 +167,23 @@ fn merge_reports_missing_points_then_resume_fills_them() {
     );
     assert!(!merged.exists());
 
+    // A shard cut inside its last line (interrupted): the point is missing, and the error
+    // says which shard lost it (it had listed the point alone).
+    let all = [shards.clone(), vec![run_shard(dir, &g, 2, 3)]].concat();
+    let text = read(&all[0]);
+    let last_line_start = text.trim_end().rfind('\n').unwrap() + 1;
+    std::fs::write(&all[0], &text[..last_line_start + 40]).unwrap();
+    let err = chain(&merge_results(&merged, &all, false, false).unwrap_err());
+    let torn = format!(
+        "({} ends in a torn line, its point dropped)",
+        all[0].display()
+    );
+    assert!(
+        err.starts_with("1 of 12 points are missing from the shards: '") && err.contains(&torn),
+        "{err}"
+    );
+    std::fs::write(&all[0], text).unwrap();
+
     let report = merge_results(&merged, &shards, true, false).unwrap();
     assert_eq!(report.missing.len(), 4);
     assert_eq!(read(&merged).lines().count(), 8);

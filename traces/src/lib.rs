@@ -31,6 +31,7 @@ pub mod rounds;
 pub mod scene;
 pub mod state;
 pub mod trace;
+pub mod words;
 pub mod workloads;
 
 pub use event::{Event, Fragment, GeometryBatch, HostWork, Span};

@@ -94,6 +94,9 @@ pub enum SceneError {
     /// chain would say them twice).
     #[error("{file}: {io}")]
     Io { file: String, io: std::io::Error },
+    /// No command at all (an empty file, or comments alone): no line to name.
+    #[error("{file}: empty scene: expected `viewport W H` first")]
+    Empty { file: String },
 }
 
 /// Longest scene line accepted, in bytes: no command needs more than a few hundred, and a
@@ -186,7 +189,10 @@ impl<R: BufRead> SceneReader<R> {
             )));
         }
         if self.viewport.is_none() {
-            return Err(self.error("empty scene: expected `viewport W H`"));
+            // Any command but `viewport` first is refused on its line: none came.
+            return Err(SceneError::Empty {
+                file: self.file.clone(),
+            });
         }
         Ok(None)
     }
@@ -291,6 +297,22 @@ impl<R: BufRead> SceneReader<R> {
         })
     }
 
+    fn buffer_out_of_range(&self, written: &str) -> SceneError {
+        self.error(format!(
+            "buffer={written} out of range: expected {BRIEF_RECORD_ENTRIES} (the brief record) to {MAX_BUFFER_ENTRIES} entries"
+        ))
+    }
+
+    /// A whole number as written, however large (past `u64`, `u64::MAX`), for a caller that
+    /// checks its own range and says it: "expected a whole number from 0 to 4294967295"
+    /// had answered a viewport side of 99999999999, whose range is 1 to 16384.
+    fn parse_whole(&self, what: &str, word: &str) -> Result<u64, SceneError> {
+        if !word.is_empty() && word.bytes().all(|b| b.is_ascii_digit()) {
+            return Ok(word.parse::<u64>().unwrap_or(u64::MAX));
+        }
+        Err(self.error(format!("{what}: expected a whole number, found `{word}`")))
+    }
+
     fn parse_flag(&self, keyword: &str, args: &[&str]) -> Result<bool, SceneError> {
         self.expect_args(keyword, args, 1, &format!("{keyword} 0|1"))?;
         match args[0] {
@@ -305,15 +327,19 @@ impl<R: BufRead> SceneReader<R> {
             return Err(self.error("second `viewport`: a scene has one viewport, given first"));
         }
         self.expect_args("viewport", args, 2, "viewport W H")?;
-        let width = self.parse_u32("viewport width", args[0])?;
-        let height = self.parse_u32("viewport height", args[1])?;
-        for (name, side) in [("width", width), ("height", height)] {
-            if side == 0 || side > MAX_VIEWPORT_SIDE {
-                return Err(self.error(format!(
-                    "viewport {name} {side} out of range: expected 1 to {MAX_VIEWPORT_SIDE}"
-                )));
-            }
+        let mut sides = [0u32; 2];
+        for ((name, word), side) in ["width", "height"].into_iter().zip(args).zip(&mut sides) {
+            let whole = self.parse_whole(&format!("viewport {name}"), word)?;
+            *side = match u32::try_from(whole) {
+                Ok(whole) if (1..=MAX_VIEWPORT_SIDE).contains(&whole) => whole,
+                _ => {
+                    return Err(self.error(format!(
+                        "viewport {name} {word} out of range: expected 1 to {MAX_VIEWPORT_SIDE}"
+                    )))
+                }
+            };
         }
+        let [width, height] = sides;
         self.viewport = Some((width, height));
         Ok(Command::Viewport { width, height })
     }
@@ -350,7 +376,11 @@ impl<R: BufRead> SceneReader<R> {
                 if buffer.is_some() {
                     return Err(self.error("`buffer=` given twice"));
                 }
-                buffer = Some(self.parse_u32("buffer size", value)?);
+                let whole = self.parse_whole("buffer size", value)?;
+                match u32::try_from(whole) {
+                    Ok(entries) => buffer = Some(entries),
+                    Err(_) => return Err(self.buffer_out_of_range(value)),
+                }
             } else if let Some(value) = word.strip_prefix("tile=") {
                 if tiles.len() == MAX_TILES {
                     return Err(self.error(format!("more than {MAX_TILES} tiles in one query")));
@@ -380,9 +410,7 @@ impl<R: BufRead> SceneReader<R> {
             _ => DEFAULT_BRIEF_BUFFER,
         });
         if !(BRIEF_RECORD_ENTRIES..=MAX_BUFFER_ENTRIES).contains(&buffer_entries) {
-            return Err(self.error(format!(
-                "buffer={buffer_entries} out of range: expected {BRIEF_RECORD_ENTRIES} (the brief record) to {MAX_BUFFER_ENTRIES} entries"
-            )));
+            return Err(self.buffer_out_of_range(&buffer_entries.to_string()));
         }
         for tile in &tiles {
             if tile.x as u64 + tile.width as u64 > width as u64
@@ -432,7 +460,7 @@ impl<R: BufRead> SceneReader<R> {
             let why = if self.open_query == Some(id) {
                 "is still open (`end` it first)"
             } else {
-                "has not ended yet"
+                "has not been begun and ended above"
             };
             return Err(self.error(format!(
                 "`{keyword} {id}`: query {id} {why}, so it has no result"
@@ -644,6 +672,14 @@ mod tests {
         );
         assert!(error_of("viewport 0 4\n").contains("out of range"));
         assert!(error_of("viewport 16385 4\n").contains("out of range"));
+        // Past u32 too, in the range's words (not the type's, 0 to 4294967295).
+        assert_eq!(
+            error_of("viewport 4 99999999999\n"),
+            "s.scene:1: viewport height 99999999999 out of range: expected 1 to 16384"
+        );
+        assert!(error_of("viewport -4 4\n").contains("viewport width: expected a whole number"));
+        assert!(error_of("viewport 4 4\nbegin 1 brief buffer=99999999999\n")
+            .contains("buffer=99999999999 out of range: expected 8 (the brief record) to"));
         assert!(error_of("viewport 4 4\nbegin 1\nbegin 2\n")
             .starts_with("s.scene:3: `begin` inside query 1"));
         assert!(
@@ -659,7 +695,12 @@ mod tests {
             .contains("outside the 4x4 viewport"));
         assert!(error_of("viewport 4 4\nbegin 1 brief tile=0,0,0,1\n").contains("empty"));
         assert!(error_of("viewport 4 4\ndepth_mask 2\n").contains("takes 0 or 1"));
-        assert!(error_of("").contains("empty scene"));
+        // No line to name: the file alone (it had been `s.scene:0:`), comments alone too.
+        assert_eq!(
+            error_of(""),
+            "s.scene: empty scene: expected `viewport W H` first"
+        );
+        assert!(error_of("# a comment\n\n").starts_with("s.scene: empty scene"));
     }
 
     #[test]
@@ -706,13 +747,14 @@ mod tests {
     fn closed_loop_mistakes_are_named() {
         assert_eq!(
             error_of("viewport 4 4\nwait 3\n"),
-            "s.scene:2: `wait 3`: query 3 has not ended yet, so it has no result"
+            "s.scene:2: `wait 3`: query 3 has not been begun and ended above, so it has no result"
         );
         assert_eq!(
             error_of("viewport 4 4\nbegin 3\nwait 3\n"),
             "s.scene:3: `wait 3`: query 3 is still open (`end` it first), so it has no result"
         );
-        assert!(error_of("viewport 4 4\nbegin_conditional 1\n").contains("has not ended"));
+        assert!(error_of("viewport 4 4\nbegin_conditional 1\n")
+            .contains("has not been begun and ended above"));
         assert!(
             error_of("viewport 4 4\nbegin 1\nend\nbegin_conditional 1\nbegin_conditional 1\n")
                 .starts_with("s.scene:5: `begin_conditional` inside `begin_conditional 1`")

@@ -500,9 +500,11 @@ fn bad_options_are_refused_clearly() {
         "model.obj",
         &ObjOptions::default(),
     );
-    // A face of two corners is no triangle: the model has none, which no line says (the
-    // last line's number had been given).
-    assert!(obj.is_err_and(|e| e.to_string().starts_with("model.obj: no faces")));
+    // A face of two corners is no triangle: refused on its line (the loader had dropped it,
+    // and the model, left with none, was refused for having no faces).
+    assert!(obj.is_err_and(|e| e
+        .to_string()
+        .starts_with("model.obj:2: face `f 1 1` has 2 corners")));
     let camera = CameraPath::from_toml("[[keyframe]]\neye = [1, 2]\n", "walk.toml").unwrap_err();
     assert!(camera.to_string().starts_with("walk.toml: "), "{camera}");
 }

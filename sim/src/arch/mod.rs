@@ -584,6 +584,7 @@ impl Arch {
     pub fn set(&mut self, assignment: &str) -> Result<(), ArchError> {
         let (key, value) = assignment
             .split_once('=')
+            .filter(|(key, _)| !key.trim().is_empty())
             .ok_or_else(|| ArchError::BadAssignment(assignment.to_string()))?;
         self.set_value(key.trim(), value.trim())
     }

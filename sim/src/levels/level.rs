@@ -4,6 +4,7 @@
 use crate::arch::{ArchEntry, Machine, Value};
 use crate::effects::Effects;
 use crate::report::{nearest_rank, Report};
+use occsim_traces::words::counted;
 use occsim_traces::QueryMode;
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -203,7 +204,9 @@ impl LevelResult {
         }
     }
 
-    /// Set the run's cycles and derive the latency statistics from the queries' latencies.
+    /// Set the run's cycles and derive the latency statistics from the queries' latencies
+    /// (none without a query: `-` in the table, null in JSON, as for any figure a run has
+    /// not; they had been 0).
     pub(crate) fn set_timing(&mut self, total_cycles: u64) {
         self.total_cycles = Some(total_cycles);
         let mut latencies: Vec<u64> = self
@@ -212,14 +215,14 @@ impl LevelResult {
             .filter_map(|q| q.latency_cycles)
             .collect();
         latencies.sort_unstable();
-        self.latency_mean_cycles = Some(if latencies.is_empty() {
-            0.0
-        } else {
-            latencies.iter().sum::<u64>() as f64 / latencies.len() as f64
-        });
+        let Some(&max) = latencies.last() else {
+            return;
+        };
+        let mean = latencies.iter().sum::<u64>() as f64 / latencies.len() as f64;
+        self.latency_mean_cycles = Some(mean);
         self.latency_p50_cycles = Some(nearest_rank(&latencies, 50));
         self.latency_p95_cycles = Some(nearest_rank(&latencies, 95));
-        self.latency_max_cycles = Some(latencies.last().copied().unwrap_or(0));
+        self.latency_max_cycles = Some(max);
     }
 
     /// From a cycle-level report (the level is `cycle`; [`crate::LevelModel::finish`] says
@@ -427,9 +430,13 @@ impl LevelResult {
         };
         let most = self.queries.iter().map(|q| q.tiles as u64).max()?;
         (engines > most).then(|| {
+            let idle = match engines - most {
+                1 => "1 engine gets no tile and changes".to_string(),
+                idle => format!("{idle} engines get no tile and change"),
+            };
             format!(
-                "note: {engines} engines, but no query has more than {most} tiles: {} engines get no tile and change nothing here",
-                engines - most
+                "note: {engines} engines, but no query has more than {}: {idle} nothing here",
+                counted(most, "tile", "tiles"),
             )
         })
     }
@@ -447,8 +454,8 @@ impl LevelResult {
         };
         let _ = writeln!(
             out,
-            "\n{} frames, {fps:.2} frames/s; host busy, geometry, pixel busy, waiting, pipe wait: - (the cycle and rtl levels split a frame)",
-            self.frame_cycles.len()
+            "\n{}, {fps:.2} frames/s; host busy, geometry, pixel busy, waiting, pipe wait: - (the cycle and rtl levels split a frame)",
+            counted(self.frame_cycles.len() as u64, "frame", "frames")
         );
         let _ = writeln!(out, "{}", crate::report::FRAMES_LEGEND);
         let _ = writeln!(out, "{}", crate::report::FRAMES_HEADING);

@@ -534,17 +534,8 @@ impl<R: Read> TraceReader<R> {
                 differing_fields(&stored, &found)
             )));
         }
-        // The header's copy of the features (a replay may have trusted it, say to choose its
-        // effect models) must be the trace's too.
-        if self
-            .header
-            .features
-            .as_ref()
-            .is_some_and(|features| *features != stored.features)
-        {
-            return Err(bad(
-                "the header's features disagree with the trace's summary".to_owned(),
-            ));
+        if let Some(reason) = features_disagree(&self.header, &stored) {
+            return Err(bad(reason));
         }
         self.summary = Some(stored);
         Ok(())
@@ -844,6 +835,16 @@ fn checked_context<'a>(
     }
 }
 
+/// Why the header's copy of the features is not the summary's (a replay may have trusted
+/// it, say to choose its effect models), or none: a header without them agrees.
+fn features_disagree(header: &TraceHeader, summary: &TraceSummary) -> Option<String> {
+    header
+        .features
+        .as_ref()
+        .is_some_and(|features| *features != summary.features)
+        .then(|| "the header's features disagree with the trace's summary".to_owned())
+}
+
 impl<R: Read + Seek> TraceReader<R> {
     /// Read the header and the summary only, seeking to the summary through the trailer.
     pub fn read_summary(input: R) -> Result<(TraceHeader, TraceSummary), TraceError> {
@@ -869,10 +870,16 @@ impl<R: Read + Seek> TraceReader<R> {
         reader.offset = trailer_at;
         let trailer: [u8; TRAILER_BYTES] = reader.read_array("the trailer")?;
         let summary_at = u64::from_le_bytes(trailer[..8].try_into().unwrap_or_default());
-        if trailer[8..] != END_MAGIC
-            || summary_at < header_end
-            || summary_at > trailer_at - BLOCK_HEADER_BYTES as u64
-        {
+        if trailer[8..] != END_MAGIC {
+            // Read from its start, such a file ends inside a block or its trailer: what
+            // is known here is only that its last bytes are no trailer.
+            return Err(TraceError::BadSummary {
+                offset: end,
+                reason: "the file does not end in a trailer (cut short, or never finished)"
+                    .to_owned(),
+            });
+        }
+        if summary_at < header_end || summary_at > trailer_at - BLOCK_HEADER_BYTES as u64 {
             let reason = "the trailer does not point at a summary".to_owned();
             return Err(TraceError::BadSummary {
                 offset: trailer_at,
@@ -893,6 +900,12 @@ impl<R: Read + Seek> TraceReader<R> {
             });
         }
         let summary = parse_summary(&reader.stored, summary_at)?;
+        if let Some(reason) = features_disagree(&reader.header, &summary) {
+            return Err(TraceError::BadSummary {
+                offset: summary_at,
+                reason,
+            });
+        }
         Ok((reader.header, summary))
     }
 }

@@ -457,6 +457,16 @@ fn truncation_at_every_offset_is_a_clean_error() {
         assert!(read_bulk(&bytes[..len]).is_err(), "cut at {len} read fine");
         let skipped = TraceReader::new(&bytes[..len]).and_then(|mut r| r.skip_to_summary());
         assert!(skipped.is_err(), "cut at {len} read fine");
+        // The summary alone (`trace info`): past the header, the error is at the cut and
+        // says the file ends in no trailer (it had named the 16 bytes before the end).
+        let summary = TraceReader::read_summary(std::io::Cursor::new(&bytes[..len]));
+        let error = summary
+            .err()
+            .unwrap_or_else(|| panic!("cut at {len} read fine"));
+        if let TraceError::BadSummary { offset, reason } = &error {
+            assert_eq!(*offset, len as u64, "cut at {len}: {error}");
+            assert!(reason.contains("does not end in a trailer"), "{error}");
+        }
     }
     let mut longer = bytes.clone();
     longer.push(0);
@@ -741,6 +751,48 @@ fn a_seekable_trace_records_its_features_in_the_header() {
         .header()
         .features
         .is_none());
+
+    // A header whose features are not the summary's is refused by a reading of the summary
+    // alone (`trace info`, which had checked it in its table but not in its JSON, naming no
+    // offset) at the summary, as by a reading of the whole trace. The forgery claims one
+    // tile more a query.
+    let mut forged = reader.header().clone();
+    let tiles = forged.features.as_ref().and_then(|f| f.max_query_tiles);
+    assert!(tiles.is_some());
+    if let Some(features) = &mut forged.features {
+        features.max_query_tiles = tiles.map(|t| t + 1);
+    }
+    // As the writer pads it to the room it kept (it wrote the header before the features).
+    let json = |header: &TraceHeader, room: usize| {
+        let mut json = serde_json::to_vec(header).unwrap();
+        json.resize(room, b' ');
+        json
+    };
+    let room = (0..512)
+        .map(|extra| serde_json::to_vec(reader.header()).unwrap().len() + extra)
+        .find(|&room| {
+            bytes.starts_with(&block::file_header_bytes(
+                FORMAT_VERSION,
+                &json(reader.header(), room),
+            ))
+        })
+        .expect("the header as the writer wrote it");
+    let written = block::file_header_bytes(FORMAT_VERSION, &json(reader.header(), room));
+    let mut edited = block::file_header_bytes(FORMAT_VERSION, &json(&forged, room));
+    assert_eq!(edited.len(), written.len());
+    edited.extend_from_slice(&bytes[written.len()..]);
+    let error = TraceReader::read_summary(Cursor::new(&edited[..])).unwrap_err();
+    let trailer = &bytes[bytes.len() - 16..];
+    let summary_at = u64::from_le_bytes(trailer[..8].try_into().unwrap());
+    assert!(
+        matches!(&error, TraceError::BadSummary { offset, .. } if *offset == summary_at),
+        "{error:?}"
+    );
+    assert!(
+        error.to_string().contains("the header's features disagree"),
+        "{error}"
+    );
+    assert!(read_bulk(&edited).is_err());
 }
 
 /// Every window's size as the trace's window table gives it, and the table's blocks.

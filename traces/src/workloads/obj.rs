@@ -30,13 +30,14 @@ const MAX_COORDINATE: f32 = 1e9;
 /// Longest OBJ line accepted, in bytes (bounds memory on hostile input).
 const MAX_LINE_BYTES: usize = 1 << 20;
 
-/// Bytes of a line kept to check it as a vertex: far more than three numbers take.
+/// Bytes of a line kept to check it as a vertex or a face: far more than three numbers take.
 const VERTEX_LINE_BYTES: usize = 256;
 
 /// Counts the lines a reader has handed out, refuses overlong lines, and finds the first
-/// vertex line whose position is not a number within [`MAX_COORDINATE`] of the origin (the
-/// loader keeps no vertex's line: found afterwards, such a vertex was named by its values
-/// alone).
+/// line the model's checks would refuse without its line: a vertex whose position is not a
+/// number within [`MAX_COORDINATE`] of the origin, a face of fewer than three corners (the
+/// loader keeps no line: found afterwards, such a vertex was named by its values alone, and
+/// such a face dropped without a word).
 struct LineCounter<R> {
     inner: R,
     /// Newlines consumed so far.
@@ -47,8 +48,8 @@ struct LineCounter<R> {
     refused: Option<(u64, String)>,
     /// The current line's first bytes, as far as [`VERTEX_LINE_BYTES`].
     line: Vec<u8>,
-    /// The first vertex out of range: its line and its text.
-    bad_vertex: Option<(u64, String)>,
+    /// The first line refused ([`line_problem`]): its number and why.
+    bad_line: Option<(u64, String)>,
 }
 
 impl<R: BufRead> Read for LineCounter<R> {
@@ -80,9 +81,8 @@ impl<R: BufRead> BufRead for LineCounter<R> {
                     self.newlines += 1;
                     // A line longer than the bytes kept is left to the model's check
                     // (its numbers may run past them).
-                    if self.bad_vertex.is_none() && self.line_bytes <= VERTEX_LINE_BYTES {
-                        self.bad_vertex =
-                            vertex_out_of_range(&self.line).map(|text| (self.newlines, text));
+                    if self.bad_line.is_none() && self.line_bytes <= VERTEX_LINE_BYTES {
+                        self.bad_line = line_problem(&self.line).map(|why| (self.newlines, why));
                     }
                     self.line_bytes = 0;
                     self.line.clear();
@@ -102,18 +102,34 @@ impl<R: BufRead> BufRead for LineCounter<R> {
     }
 }
 
-/// The line's text when it is a vertex whose position is not a number within
-/// [`MAX_COORDINATE`] of the origin (a line that is no vertex, or whose numbers do not
-/// parse, is the loader's to judge).
-fn vertex_out_of_range(line: &[u8]) -> Option<String> {
+/// Why the line is refused, when it is a vertex whose position is not a number within
+/// [`MAX_COORDINATE`] of the origin or a face of fewer than three corners (any other line,
+/// or one whose numbers do not parse, is the loader's to judge).
+fn line_problem(line: &[u8]) -> Option<String> {
     let text = std::str::from_utf8(line).ok()?;
     let mut words = text.split_whitespace();
-    if words.next() != Some("v") {
-        return None;
+    match words.next() {
+        Some("v") => {
+            let numbers: Vec<f32> = words.take(3).map_while(|w| w.parse().ok()).collect();
+            (numbers.len() == 3 && !numbers.iter().all(|v| v.abs() <= MAX_COORDINATE)).then(|| {
+                format!(
+                    "vertex `{}` is not a number within {MAX_COORDINATE:e} of the origin",
+                    text.trim()
+                )
+            })
+        }
+        Some("f") => {
+            let corners = words.count();
+            (corners < 3).then(|| {
+                format!(
+                    "face `{}` has {corners} corner{}: a face has three or more",
+                    text.trim(),
+                    if corners == 1 { "" } else { "s" }
+                )
+            })
+        }
+        _ => None,
     }
-    let numbers: Vec<f32> = words.take(3).map_while(|w| w.parse().ok()).collect();
-    (numbers.len() == 3 && !numbers.iter().all(|v| v.abs() <= MAX_COORDINATE))
-        .then(|| text.trim().to_owned())
 }
 
 impl<R> LineCounter<R> {
@@ -150,7 +166,7 @@ pub fn load_obj(
         line_bytes: 0,
         refused: None,
         line: Vec::new(),
-        bad_vertex: None,
+        bad_line: None,
     };
     let load_options = tobj::LoadOptions {
         triangulate: true,
@@ -168,16 +184,13 @@ pub fn load_obj(
             .unwrap_or_else(|| (counter.current_line(), format!("{e}")));
         error(line, message)
     })?;
-    if counter.bad_vertex.is_none() && counter.line_bytes <= VERTEX_LINE_BYTES {
+    if counter.bad_line.is_none() && counter.line_bytes <= VERTEX_LINE_BYTES {
         // The last line, without its newline.
         let last = counter.newlines + 1;
-        counter.bad_vertex = vertex_out_of_range(&counter.line).map(|text| (last, text));
+        counter.bad_line = line_problem(&counter.line).map(|why| (last, why));
     }
-    if let Some((line, text)) = counter.bad_vertex {
-        return Err(error(
-            line,
-            format!("vertex `{text}` is not a number within {MAX_COORDINATE:e} of the origin"),
-        ));
+    if let Some((line, why)) = counter.bad_line {
+        return Err(error(line, why));
     }
     let limit = options.max_triangles_per_object.max(1) as usize;
     let mut objects = Vec::new();
@@ -346,11 +359,22 @@ mod tests {
         let long_one = format!("1{}e-250", "0".repeat(250));
         let model = format!("v 0 0 0\nv 1 0 0\nv 0 0 {long_one}\nf 1 2 3\n");
         assert_eq!(error(&model), "");
-        assert_eq!(vertex_out_of_range(b"v 1e9 -1e9 0"), None);
+        assert_eq!(line_problem(b"v 1e9 -1e9 0"), None);
         assert_eq!(
-            vertex_out_of_range(b" v 1e9 -1.1e9 0 ").as_deref(),
-            Some("v 1e9 -1.1e9 0")
+            line_problem(b" v 1e9 -1.1e9 0 ").as_deref(),
+            Some("vertex `v 1e9 -1.1e9 0` is not a number within 1e9 of the origin")
         );
+        // A face of fewer than three corners is named by its line (the loader had dropped
+        // it, and with no other face said only "no faces").
+        assert_eq!(
+            error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\nf 1 2 3\n"),
+            "bad.obj:4: face `f 1 2` has 2 corners: a face has three or more"
+        );
+        assert_eq!(
+            line_problem(b"f 7").as_deref(),
+            Some("face `f 7` has 1 corner: a face has three or more")
+        );
+        assert_eq!(line_problem(b"f 1/1 2/2 3/3 4/4"), None);
         let tiny_and_far = "v 9e8 9e8 9e8\nv 9e8 9e8 9e8\nv 9e8 9e8 9e8\nf 1 2 3\n";
         assert!(
             error(tiny_and_far).contains("too small"),
