@@ -253,13 +253,6 @@ pub struct Finished {
     target: PathBuf,
 }
 
-impl Finished {
-    /// The path it becomes.
-    pub fn target(&self) -> &Path {
-        &self.target
-    }
-}
-
 impl Drop for Finished {
     fn drop(&mut self) {
         if self.temp.as_os_str().is_empty() {
