@@ -175,6 +175,9 @@ fn a_trace_without_queries_reports_no_latency() {
             );
         }
     }
+    // `latency`, whose rows are latencies, refuses it (it had printed rows of 0).
+    let error = stderr_of_failure(&["latency", trace]);
+    assert!(error.contains("the trace has no query"), "{error}");
 }
 
 #[test]

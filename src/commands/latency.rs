@@ -148,6 +148,12 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
         // Every row sets its own count: the --set would be overridden without a word.
         bail!("--set {set}: latency replays once per --engines count; give the counts there");
     }
+    let (_, summary) = super::trace::read_header_and_summary(&args.trace, false)?;
+    anyhow::ensure!(
+        summary.queries > 0,
+        "{}: the trace has no query, so no latency to show (`occsim replay` times its cycles)",
+        args.trace.display()
+    );
     let base = args.arch.resolve()?;
     anyhow::ensure!(
         args.fidelity != Fidelity::Functional,
