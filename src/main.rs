@@ -80,6 +80,15 @@ fn main() -> std::process::ExitCode {
         Command::Culling(CullingCommand::Compare(args)) => commands::culling::run(*args),
         Command::Fidelity(args) => commands::fidelity::run(args),
     };
+    if occsim_sweep::output::stopping() {
+        // A signal came: its handler has removed the temporaries and is ending the process
+        // by the signal. Whatever the command came to meanwhile (its outputs in place, or
+        // a write refused as the process stops) is not its to report: it had exited 1
+        // with "the process is stopping", or 0, racing the handler.
+        loop {
+            std::thread::park();
+        }
+    }
     match outcome {
         Ok(()) => std::process::ExitCode::SUCCESS,
         // A closed pipe (`occsim count ... | head`) is the reader's choice, not a failure.

@@ -157,7 +157,7 @@ fn a_trace_without_queries_reports_no_latency() {
     std::fs::write(&scene, "viewport 4 4\ntri -1 -1 0 1  1 -1 0 1  1 1 0 1\n").unwrap();
     let trace = trace.to_str().unwrap();
     stdout_of(&["trace", "gen", scene.to_str().unwrap(), "-o", trace]);
-    for level in ["analytic", "sampled:10", "cycle"] {
+    for level in ["analytic", "sampled:10", "cycle", "rtl"] {
         let replay = ["replay", trace, "--fidelity", level];
         let text = stdout_of(&replay);
         assert!(
@@ -174,10 +174,27 @@ fn a_trace_without_queries_reports_no_latency() {
                 json[&field]
             );
         }
+        // The cycle report's own summary (cycle and rtl) says the same.
+        if ["cycle", "rtl"].contains(&level) {
+            for key in ["p50", "p95", "max"] {
+                let field = format!("/summary/latency_{key}_cycles");
+                let value = json.pointer(&field);
+                assert!(
+                    value.is_some_and(|v| v.is_null()),
+                    "{level}: {field} = {value:?}"
+                );
+            }
+        }
     }
     // `latency`, whose rows are latencies, refuses it (it had printed rows of 0).
     let error = stderr_of_failure(&["latency", trace]);
     assert!(error.contains("the trace has no query"), "{error}");
+    // `fidelity --plot` draws each level by the error it has, its cycles' (it had drawn no
+    // point and failed, every level's latency error being none).
+    let chart = dir.join("price.svg");
+    stdout_of(&["fidelity", trace, "--plot", chart.to_str().unwrap()]);
+    let svg = std::fs::read_to_string(&chart).unwrap();
+    assert!(svg.contains("analytic"), "{svg}");
 }
 
 #[test]

@@ -220,7 +220,7 @@ fn sweep_charts_say_what_they_show() {
         s(&merged_svg),
     ]);
     let text = std::fs::read_to_string(&merged_svg).unwrap();
-    assert!(text.contains("1 shards of trace fnv1a64:"), "{text}");
+    assert!(text.contains("1 shard of trace fnv1a64:"), "{text}");
     assert!(text.contains(" on o2"), "{text}");
     // A merge whose chart cannot be drawn writes none of its outputs (the merge and its CSV
     // had been written before the chart failed): they come into place together or not at all.

@@ -21,7 +21,6 @@
 
 use crate::arch::{Arch, ArchError, Mark, Param, Value};
 use crate::levels::LevelResult;
-use crate::report::nearest_rank;
 use serde::Serialize;
 
 /// The headline results, in the order bands are reported.
@@ -74,26 +73,24 @@ impl Metric {
 pub struct Headlines {
     pub cycles: f64,
     pub frame_ms: Option<f64>,
-    pub latency_p50_cycles: f64,
-    pub latency_p95_cycles: f64,
+    /// None without a query.
+    pub latency_p50_cycles: Option<f64>,
+    pub latency_p95_cycles: Option<f64>,
 }
 
 impl Headlines {
     /// The headline results of one replay at a level with time, its clock `clock_mhz`.
     pub fn of(result: &LevelResult, clock_mhz: f64) -> Headlines {
-        let mut latencies: Vec<u64> = result
-            .queries
-            .iter()
-            .filter_map(|q| q.latency_cycles)
-            .collect();
-        latencies.sort_unstable();
+        // The level's own percentiles (none without a query), not a third computation of
+        // them (which had given 0).
+        let cycles = |figure: Option<u64>| figure.map(|cycles| cycles as f64);
         Headlines {
             cycles: result.total_cycles.unwrap_or(0) as f64,
             frame_ms: result
                 .frame_mean_cycles()
                 .map(|cycles| cycles / (clock_mhz * 1e3)),
-            latency_p50_cycles: nearest_rank(&latencies, 50) as f64,
-            latency_p95_cycles: nearest_rank(&latencies, 95) as f64,
+            latency_p50_cycles: cycles(result.latency_p50_cycles),
+            latency_p95_cycles: cycles(result.latency_p95_cycles),
         }
     }
 
@@ -101,8 +98,8 @@ impl Headlines {
         match metric {
             Metric::Cycles => Some(self.cycles),
             Metric::FrameTime => self.frame_ms,
-            Metric::LatencyP50 => Some(self.latency_p50_cycles),
-            Metric::LatencyP95 => Some(self.latency_p95_cycles),
+            Metric::LatencyP50 => self.latency_p50_cycles,
+            Metric::LatencyP95 => self.latency_p95_cycles,
         }
     }
 }
@@ -405,8 +402,8 @@ mod tests {
         Headlines {
             cycles,
             frame_ms: None,
-            latency_p50_cycles: 0.0,
-            latency_p95_cycles: p95,
+            latency_p50_cycles: Some(0.0),
+            latency_p95_cycles: Some(p95),
         }
     }
 

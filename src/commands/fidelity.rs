@@ -460,7 +460,9 @@ fn error_chart(
         .iter()
         .filter_map(|row| {
             let seconds = row.wall_seconds?;
-            let error = 100.0 * row.cycles_error?.max(row.latency_error?);
+            // A run without a query has a cycles error and no latency to err: it is drawn
+            // by the one it has (it had been left out, and the chart with it).
+            let error = 100.0 * row.cycles_error?.max(row.latency_error.unwrap_or(0.0));
             let (y, name) = if error > 0.0 {
                 (error, row.level.clone())
             } else {

@@ -367,6 +367,9 @@ enum VcdChunk {
     Data(Vec<u8>),
     /// The replay succeeded: keep the file.
     Done,
+    /// The replay failed, or never ran: drop the file (sent, not left to the channel's
+    /// closing, since the model may still hold a sender).
+    Stopped,
 }
 
 /// The waveform's destination: 1 MiB chunks handed to a thread that writes the file
@@ -399,11 +402,38 @@ impl std::io::Write for VcdSender {
     }
 }
 
-/// The channel to the thread writing a VCD, and the thread.
-type VcdThread = (
-    std::sync::mpsc::SyncSender<VcdChunk>,
-    std::thread::JoinHandle<anyhow::Result<Finished>>,
-);
+/// The channel to the thread writing a VCD, and the thread. Dropped before the replay is
+/// through (an error on the way), it tells the thread to stop and waits for it, so that
+/// its unfinished file is removed: returned at once, the process had exited before the
+/// thread could remove it, leaving its temporary behind.
+struct VcdThread {
+    sender: std::sync::mpsc::SyncSender<VcdChunk>,
+    thread: Option<std::thread::JoinHandle<anyhow::Result<Finished>>>,
+}
+
+impl VcdThread {
+    /// End the thread with `last` (`Done` keeps the file, `Stopped` drops it) and take its
+    /// outcome.
+    fn end(&mut self, last: VcdChunk) -> anyhow::Result<anyhow::Result<Finished>> {
+        // The receiver only stops early after a write error, which the join reports.
+        let _ = self.sender.send(last);
+        let thread = self
+            .thread
+            .take()
+            .context("the waveform writer ended twice")?;
+        thread
+            .join()
+            .map_err(|_| anyhow::anyhow!("the waveform writer panicked"))
+    }
+}
+
+impl Drop for VcdThread {
+    fn drop(&mut self) {
+        if self.thread.is_some() {
+            let _ = self.end(VcdChunk::Stopped);
+        }
+    }
+}
 
 /// Where a waveform goes: the thread writing the VCD, the FST's file (written by the model
 /// through a handle, kept only when the replay succeeds) and its path.
@@ -460,7 +490,9 @@ fn vcd_thread(path: PathBuf) -> (Box<dyn std::io::Write + Send>, VcdThread) {
                 match receiver.recv() {
                     Ok(VcdChunk::Data(data)) => file.write_all(&data)?,
                     Ok(VcdChunk::Done) => return Ok(()),
-                    Err(_) => return Err(anyhow::Error::new(ReplayStopped)),
+                    Ok(VcdChunk::Stopped) | Err(_) => {
+                        return Err(anyhow::Error::new(ReplayStopped))
+                    }
                 }
             }
         });
@@ -472,7 +504,11 @@ fn vcd_thread(path: PathBuf) -> (Box<dyn std::io::Write + Send>, VcdThread) {
         chunks: sender.clone(),
         buffer: Vec::with_capacity(1 << 20),
     });
-    (out, (sender, thread))
+    let thread = VcdThread {
+        sender,
+        thread: Some(thread),
+    };
+    (out, thread)
 }
 
 /// The replay stopped before the waveform was complete (its own error says why).
@@ -515,17 +551,13 @@ fn close_vcd<T>(
     vcd: Option<VcdThread>,
     outcome: anyhow::Result<T>,
 ) -> anyhow::Result<(T, Option<Finished>)> {
-    let Some((sender, thread)) = vcd else {
+    let Some(mut vcd) = vcd else {
         return outcome.map(|value| (value, None));
     };
-    if outcome.is_ok() {
-        // The receiver only stops early after a write error, which the join reports.
-        let _ = sender.send(VcdChunk::Done);
-    }
-    drop(sender);
-    let written = thread
-        .join()
-        .map_err(|_| anyhow::anyhow!("the waveform writer panicked"))?;
+    let written = vcd.end(match outcome {
+        Ok(_) => VcdChunk::Done,
+        Err(_) => VcdChunk::Stopped,
+    })?;
     match (outcome, written) {
         (Ok(value), Ok(file)) => Ok((value, Some(file))),
         (Err(replay), Err(writer)) if writer.chain().any(|c| c.is::<ReplayStopped>()) => {

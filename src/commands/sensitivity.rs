@@ -173,21 +173,24 @@ pub struct FigureBands {
     pub cycles: (f64, f64),
     #[serde(skip_serializing_if = "Option::is_none")]
     pub frame_ms: Option<(f64, f64)>,
-    pub latency_p50_cycles: (f64, f64),
-    pub latency_p95_cycles: (f64, f64),
+    /// None without a query.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub latency_p50_cycles: Option<(f64, f64)>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub latency_p95_cycles: Option<(f64, f64)>,
 }
 
 impl FigureBands {
     pub fn text(&self) -> String {
-        let mut out = format!(
-            "cycles {:.0}..{:.0}, p50 {:.0}..{:.0}, p95 {:.0}..{:.0}",
-            self.cycles.0,
-            self.cycles.1,
-            self.latency_p50_cycles.0,
-            self.latency_p50_cycles.1,
-            self.latency_p95_cycles.0,
-            self.latency_p95_cycles.1
-        );
+        let mut out = format!("cycles {:.0}..{:.0}", self.cycles.0, self.cycles.1);
+        for (name, band) in [
+            ("p50", self.latency_p50_cycles),
+            ("p95", self.latency_p95_cycles),
+        ] {
+            if let Some((lo, hi)) = band {
+                let _ = write!(out, ", {name} {lo:.0}..{hi:.0}");
+            }
+        }
         if let Some((lo, hi)) = self.frame_ms {
             let _ = write!(out, ", frame {lo:.2}..{hi:.2} ms");
         }
@@ -226,8 +229,8 @@ impl CornerBands {
         Ok(FigureBands {
             cycles: band(Metric::Cycles).unwrap_or_default(),
             frame_ms: band(Metric::FrameTime),
-            latency_p50_cycles: band(Metric::LatencyP50).unwrap_or_default(),
-            latency_p95_cycles: band(Metric::LatencyP95).unwrap_or_default(),
+            latency_p50_cycles: band(Metric::LatencyP50),
+            latency_p95_cycles: band(Metric::LatencyP95),
         })
     }
 }

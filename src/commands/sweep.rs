@@ -324,8 +324,8 @@ pub fn run_merge(args: &MergeArgs) -> Result<()> {
         merge_pending(out, shards, args.allow_missing, args.force).map_err(in_cli_words)?;
     let subject = match report.lines.first() {
         Some(first) => format!(
-            "{} shards of trace {} on {}",
-            shards.len(),
+            "{} of trace {} on {}",
+            counted(shards.len() as u64, "shard", "shards"),
             first.line.trace_digest,
             machine_of(&first.text)
         ),
@@ -455,8 +455,8 @@ pub fn run(args: SweepArgs) -> Result<()> {
             for (name, band) in [
                 ("total_cycles", Some(bands.cycles)),
                 ("frame_ms", bands.frame_ms),
-                ("latency_p50_cycles", Some(bands.latency_p50_cycles)),
-                ("latency_p95_cycles", Some(bands.latency_p95_cycles)),
+                ("latency_p50_cycles", bands.latency_p50_cycles),
+                ("latency_p95_cycles", bands.latency_p95_cycles),
             ] {
                 if let Some((low, high)) = band {
                     metrics.insert(format!("{name}_band_low"), serde_json::json!(low));
@@ -488,8 +488,6 @@ const METRICS: [&str; 11] = [
     "latency_max_cycles",
 ];
 
-/// A plot's metric and x axis checked before any point runs (they had been checked after
-/// every point had).
 /// The results file, its CSV view and the chart each at its own path (a chart at the
 /// results' path had replaced them, the run saying it had written both).
 fn check_outputs_apart(out: &std::path::Path, plot: &PlotArgs) -> Result<()> {
@@ -497,9 +495,11 @@ fn check_outputs_apart(out: &std::path::Path, plot: &PlotArgs) -> Result<()> {
     let mut outputs = vec![out, csv.as_path()];
     outputs.extend(plot.plot.as_deref());
     occsim_sweep::output::check_distinct(&outputs)
-        .context("the results file (--out), its CSV view (beside it, .csv) and --plot")
+        .context("the results file, its CSV view (beside it, .csv) and --plot")
 }
 
+/// A plot's metric and x axis checked before any point runs (they had been checked after
+/// every point had).
 fn check_plot(plot: &PlotArgs, grid: &Grid, bands: bool) -> Result<()> {
     if plot.plot.is_none() {
         return Ok(());

@@ -169,7 +169,10 @@ pub enum SweepError {
     },
     #[error("a merge needs at least one shard file to read")]
     NoInputs,
-    #[error("no results in {inputs} input files; nothing to merge")]
+    #[error(
+        "no results in {inputs} input file{}; nothing to merge",
+        if *inputs == 1 { "" } else { "s" }
+    )]
     NothingToMerge { inputs: usize },
     #[error("{at}: bad grid")]
     BadGrid {

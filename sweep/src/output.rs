@@ -67,6 +67,11 @@ static LIVE_DIRS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 /// created from then on.
 static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
+/// Whether [`remove_temporaries`] has begun: the process is being ended by a signal.
+pub fn stopping() -> bool {
+    INTERRUPTED.load(Ordering::SeqCst)
+}
+
 /// `list` locked, whatever a panicking holder left.
 fn lock(list: &Mutex<Vec<PathBuf>>) -> MutexGuard<'_, Vec<PathBuf>> {
     list.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
@@ -352,18 +357,7 @@ fn directory_of(path: &Path) -> &Path {
 /// regular file or none (renamed over, a device such as /dev/full, written as root, had
 /// become a regular file).
 fn destination(path: &Path) -> Result<PathBuf, OutputError> {
-    let target = std::fs::canonicalize(path).unwrap_or_else(|_| {
-        // A link to a file not there yet is followed to where that file will be.
-        match std::fs::read_link(path) {
-            Ok(link) => path.parent().unwrap_or(Path::new("")).join(link),
-            // A new file: its directory's canonical path and its name, so that one file
-            // spelt two ways (`same.out`, `./same.out`) is one destination.
-            Err(_) => match (std::fs::canonicalize(directory_of(path)), path.file_name()) {
-                (Ok(directory), Some(name)) => directory.join(name),
-                _ => path.to_path_buf(),
-            },
-        }
-    });
+    let target = std::fs::canonicalize(path).unwrap_or_else(|_| not_there_yet(path));
     match std::fs::metadata(&target) {
         Ok(metadata) if !metadata.is_file() => Err(OutputError::NotARegularFile {
             path: path.to_path_buf(),
@@ -372,6 +366,28 @@ fn destination(path: &Path) -> Result<PathBuf, OutputError> {
             path: path.to_path_buf(),
         }),
         _ => Ok(target),
+    }
+}
+
+/// Links followed to a file not there yet, at most: as many as the system follows.
+const MAX_LINKS: usize = 40;
+
+/// Where a file not there yet will be: links to it followed (a link's target taken from the
+/// link's directory), then its directory's canonical path and its name, so that one file
+/// spelt two ways (`same.out`, `./same.out`, a link to it) is one destination. (A link's
+/// target had been taken as written: `lnk -> r.jsonl` and `r.jsonl` were two destinations,
+/// and a sweep's chart through the link replaced its results.)
+fn not_there_yet(path: &Path) -> PathBuf {
+    let mut path = path.to_path_buf();
+    for _ in 0..MAX_LINKS {
+        match std::fs::read_link(&path) {
+            Ok(link) => path = directory_of(&path).join(link),
+            Err(_) => break,
+        }
+    }
+    match (std::fs::canonicalize(directory_of(&path)), path.file_name()) {
+        (Ok(directory), Some(name)) => directory.join(name),
+        _ => path,
     }
 }
 
@@ -479,6 +495,37 @@ fn temp_path_beside(path: &Path) -> Result<PathBuf, OutputError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    #[cfg(unix)]
+    fn two_outputs_at_one_file_are_refused_however_spelt_links_not_there_yet_too() {
+        let dir = tempfile::tempdir().unwrap();
+        let results = dir.path().join("r.jsonl");
+        // Links to a file not there yet: by a name relative to the link, through a
+        // directory and back, and through another link.
+        std::fs::create_dir(dir.path().join("sub")).unwrap();
+        let links = [("lnk.svg", "r.jsonl"), ("back.svg", "sub/../r.jsonl")];
+        for (link, to) in links {
+            std::os::unix::fs::symlink(to, dir.path().join(link)).unwrap();
+        }
+        std::os::unix::fs::symlink("lnk.svg", dir.path().join("chain.svg")).unwrap();
+        for spelt in [
+            "lnk.svg",
+            "back.svg",
+            "chain.svg",
+            "./r.jsonl",
+            "sub/../r.jsonl",
+        ] {
+            let other = dir.path().join(spelt);
+            let error = check_distinct(&[&results, &other]).expect_err(spelt);
+            assert!(
+                matches!(error, OutputError::TwoOutputsOnePath { .. }),
+                "{spelt}: {error}"
+            );
+        }
+        let apart = dir.path().join("r.svg");
+        assert!(check_distinct(&[&results, &apart]).is_ok());
+    }
 
     #[test]
     #[cfg(unix)]
