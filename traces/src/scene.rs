@@ -307,8 +307,10 @@ impl<R: BufRead> SceneReader<R> {
     /// checks its own range and says it: "expected a whole number from 0 to 4294967295"
     /// had answered a viewport side of 99999999999, whose range is 1 to 16384.
     fn parse_whole(&self, what: &str, word: &str) -> Result<u64, SceneError> {
-        if !word.is_empty() && word.bytes().all(|b| b.is_ascii_digit()) {
-            return Ok(word.parse::<u64>().unwrap_or(u64::MAX));
+        // As `u32`'s parse reads the scene's other numbers: a `+` may lead.
+        let digits = word.strip_prefix('+').unwrap_or(word);
+        if !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()) {
+            return Ok(digits.parse::<u64>().unwrap_or(u64::MAX));
         }
         Err(self.error(format!("{what}: expected a whole number, found `{word}`")))
     }
@@ -678,6 +680,10 @@ mod tests {
             "s.scene:1: viewport height 99999999999 out of range: expected 1 to 16384"
         );
         assert!(error_of("viewport -4 4\n").contains("viewport width: expected a whole number"));
+        assert!(
+            parse_scene("viewport +4 4\n", "s").is_ok(),
+            "a + leads as elsewhere"
+        );
         assert!(error_of("viewport 4 4\nbegin 1 brief buffer=99999999999\n")
             .contains("buffer=99999999999 out of range: expected 8 (the brief record) to"));
         assert!(error_of("viewport 4 4\nbegin 1\nbegin 2\n")
