@@ -494,8 +494,14 @@ fn check_outputs_apart(out: &std::path::Path, plot: &PlotArgs) -> Result<()> {
     let csv = occsim_sweep::csv_path_for(out).map_err(in_cli_words)?;
     let mut outputs = vec![out, csv.as_path()];
     outputs.extend(plot.plot.as_deref());
-    occsim_sweep::output::check_distinct(&outputs)
-        .context("the results file, its CSV view (beside it, .csv) and --plot")
+    occsim_sweep::output::check_distinct(&outputs).map_err(|error| match error {
+        two @ occsim_sweep::output::OutputError::TwoOutputsOnePath { .. } => {
+            anyhow::Error::new(two)
+                .context("the results file, its CSV view (beside it, .csv) and --plot")
+        }
+        // One path's own fault (an input, a device): the error names it.
+        other => anyhow::Error::new(other),
+    })
 }
 
 /// A plot's metric and x axis checked before any point runs (they had been checked after
