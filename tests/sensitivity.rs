@@ -122,6 +122,29 @@ fn a_value_the_study_cannot_take_is_refused_and_named() {
     }
 }
 
+/// `--engines E` is `--set engines=E`, as on replay, fidelity and latency (it had been an
+/// unknown flag here), and given with it, refused.
+#[test]
+fn engines_is_shorthand_for_setting_them() {
+    let (_dir, trace) = hardcases_trace("engines");
+    let study = |how: &[&str]| {
+        let args = [&["sensitivity", &trace, "--arch", "o2", "--json"][..], how].concat();
+        stdout_of(&args)
+    };
+    let by_flag = study(&["--engines", "2"]);
+    assert_eq!(by_flag, study(&["--set", "engines=2"]));
+    assert_ne!(by_flag, study(&[]), "the default point is another");
+    let twice = stderr_of_failure(&[
+        "sensitivity",
+        &trace,
+        "--engines",
+        "2",
+        "--set",
+        "engines=4",
+    ]);
+    assert!(twice.contains("give the engine count once"), "{twice}");
+}
+
 #[test]
 fn latency_and_sweep_print_a_band_that_holds_each_figure() {
     let (dir, trace) = hardcases_trace("figure-bands");

@@ -116,6 +116,15 @@ fn culling_compare_takes_arch_and_set() {
         wrong.contains("--arch o2") && wrong.contains("boards"),
         "{wrong}"
     );
+    // `--engines E` is `--set engines=E` for every machine, as on replay.
+    let by_flag = run(&["--arch", "ir2,o2", "--engines", "1"]);
+    for column in 0..2 {
+        assert_eq!(
+            cycles_of(&by_flag, column),
+            cycles_of(&two, column),
+            "{by_flag}"
+        );
+    }
     // A machine named twice would be two columns of one name, and JSON keys given twice.
     let twice = stderr_of_failure(&[&walk[..], &["--arch", "o2,o2"]].concat());
     assert!(twice.contains("o2 appears twice"), "{twice}");

@@ -70,6 +70,18 @@ impl ArchSelection {
     pub fn describe(&self) -> String {
         describe(&self.arch, self.arch_file.as_deref(), &self.set)
     }
+
+    /// The architecture resolved with `--engines E` applied ([`set_engines`]), and as a
+    /// chart's title names it then (`ir4, 2 engines`).
+    pub fn resolve_with_engines(&self, engines: Option<u64>) -> anyhow::Result<(Arch, String)> {
+        let mut arch = self.resolve()?;
+        set_engines(&mut arch, engines, &self.set)?;
+        let name = match engines {
+            Some(engines) => format!("{}, {engines} engines", self.describe()),
+            None => self.describe(),
+        };
+        Ok((arch, name))
+    }
 }
 
 /// `arch show --json`: the architecture's `name` (as a chart's title names it:

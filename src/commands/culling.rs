@@ -47,6 +47,9 @@ pub struct CompareArgs {
     /// Override one parameter of every machine (repeatable), e.g. --set engines=8.
     #[arg(long = "set", value_name = "KEY=VALUE")]
     pub set: Vec<String>,
+    /// Occlusion engines of every machine (shorthand for --set engines=E).
+    #[arg(long, value_name = "E")]
+    pub engines: Option<u64>,
     /// Print a sensitivity band beside each frame time: every driver's frames also timed at
     /// the corners a sensitivity study around each machine finds on the hierarchical
     /// driver's walk (see `occsim sensitivity`).
@@ -69,12 +72,14 @@ impl CompareArgs {
         };
         let mut machines = Vec::new();
         for name in names {
-            let arch = super::arch::resolve(name, None, &self.set)
+            let mut arch = super::arch::resolve(name, None, &self.set)
                 .with_context(|| format!("--arch {name}"))?;
+            super::arch::set_engines(&mut arch, self.engines, &self.set)?;
             machines.push((name.clone(), arch));
         }
         for file in &self.arch_file {
-            let arch = super::arch::resolve("", Some(file), &self.set)?;
+            let mut arch = super::arch::resolve("", Some(file), &self.set)?;
+            super::arch::set_engines(&mut arch, self.engines, &self.set)?;
             let name = file.file_stem().map_or(file.display().to_string(), |s| {
                 s.to_string_lossy().into_owned()
             });

@@ -331,8 +331,8 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
         );
     };
     anyhow::ensure!(!args.corpus.corpus, "give a TRACE or --corpus, not both");
-    let mut arch = args.arch.resolve()?;
-    super::arch::set_engines(&mut arch, args.engines, &args.arch.set)?;
+    // As the user named it (`ir4`, not the machine's `ir`), with the engine count given.
+    let (arch, arch_name) = args.arch.resolve_with_engines(args.engines)?;
     let path = trace.display().to_string();
     // One step a level (not a bar over bytes: drawing one would be timed with the level).
     let bar = occsim_sweep::progress::bar(ladder.levels().len() as u64, "levels");
@@ -342,11 +342,6 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
     let what = match args.retile {
         Some(grid) => format!("{path} (retiled {grid})"),
         None => path.clone(),
-    };
-    // As the user named it (`ir4`, not the machine's `ir`), with the engine count given.
-    let arch_name = match args.engines {
-        Some(engines) => format!("{}, {engines} engines", args.arch.describe()),
-        None => args.arch.describe(),
     };
     if let Some(plot) = &args.plot {
         error_chart(&rows, &what, &arch_name, reference_level)?

@@ -26,6 +26,10 @@ pub struct SensitivityArgs {
     pub trace: PathBuf,
     #[command(flatten)]
     pub arch: ArchSelection,
+    /// Occlusion engines of the default point (shorthand for --set engines=E; the study
+    /// still varies them over their range).
+    #[arg(long, value_name = "E")]
+    pub engines: Option<u64>,
     /// Replace every brief query's tiles by a G by H grid over the viewport, e.g. --retile 8x8.
     #[arg(long, value_name = "GxH")]
     pub retile: Option<TileGrid>,
@@ -243,7 +247,7 @@ pub fn run(args: SensitivityArgs) -> anyhow::Result<()> {
         "sensitivity needs a level with time: analytic, sampled:K, cycle or rtl, not functional"
     );
     anyhow::ensure!(args.jobs >= 1, "--jobs: give at least 1");
-    let base = args.arch.resolve()?;
+    let (base, arch_name) = args.arch.resolve_with_engines(args.engines)?;
     let replayer = Replayer {
         trace: &args.trace,
         retile: args.retile,
@@ -263,14 +267,12 @@ pub fn run(args: SensitivityArgs) -> anyhow::Result<()> {
         out!("{}", table(&outcome, args.top));
     }
     if let Some(path) = &args.plot {
-        let arch = match &args.arch.arch_file {
-            Some(file) => file.display().to_string(),
-            None => args.arch.arch.clone(),
-        };
+        // As the user named the machine, its --set and --engines too (the title had given
+        // the built-in's name alone).
         tornado(
             &outcome.bands,
             args.top,
-            &format!("{} on {arch}", args.trace.display()),
+            &format!("{} on {arch_name}", args.trace.display()),
         )
         .write_svg(path)
         .with_context(|| format!("cannot write plot {}", path.display()))?;
