@@ -44,10 +44,10 @@ pub struct ShowArgs {
     pub json: bool,
 }
 
-/// How a command that runs a machine picks its architecture.
 /// The built-in architecture a command takes when given none.
 pub const DEFAULT_ARCH: &str = "o2";
 
+/// How a command that runs a machine picks its architecture.
 #[derive(clap::Args, Clone, Debug)]
 pub struct ArchSelection {
     /// A built-in architecture (see `occsim arch list`).
