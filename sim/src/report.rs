@@ -116,6 +116,8 @@ impl Summary {
     pub fn of(run: RunTotals<'_>) -> Summary {
         let mut latencies: Vec<u64> = run.queries.iter().map(|q| q.latency_cycles).collect();
         latencies.sort_unstable();
+        let [latency_p50_cycles, latency_p95_cycles, latency_max_cycles] =
+            latency_figures(&latencies);
         Summary {
             cycles: run.cycles,
             simulated_seconds: run.cycles as f64 / (run.clock_mhz * 1e6),
@@ -128,9 +130,9 @@ impl Summary {
             },
             queries: run.queries.len() as u64,
             checked_queries: run.checked_queries,
-            latency_p50_cycles: (!latencies.is_empty()).then(|| nearest_rank(&latencies, 50)),
-            latency_p95_cycles: (!latencies.is_empty()).then(|| nearest_rank(&latencies, 95)),
-            latency_max_cycles: latencies.last().copied(),
+            latency_p50_cycles,
+            latency_p95_cycles,
+            latency_max_cycles,
             frames_per_second: None,
         }
     }
@@ -276,6 +278,20 @@ pub fn percent(part: u64, whole: u64) -> f64 {
         0.0
     } else {
         100.0 * part as f64 / whole as f64
+    }
+}
+
+/// The p50 and p95 (nearest rank) and the largest of `sorted` latencies, none of them
+/// without one: the one definition of the figures a run's latency is summed up by, its
+/// report's summary's and every level's result's.
+pub fn latency_figures(sorted: &[u64]) -> [Option<u64>; 3] {
+    match sorted.last() {
+        None => [None; 3],
+        Some(&max) => [
+            Some(nearest_rank(sorted, 50)),
+            Some(nearest_rank(sorted, 95)),
+            Some(max),
+        ],
     }
 }
 

@@ -9,10 +9,9 @@ use super::replay::replay_trace;
 use super::sensitivity::{CornerBands, FigureBands, Replayer};
 use anyhow::{bail, Context};
 use occsim_sim::levels::LevelResult;
-use occsim_sim::report::nearest_rank;
+use occsim_sim::report::QueryReport;
 use occsim_sim::sensitivity::Headlines;
 use occsim_sim::Fidelity;
-use occsim_sim::Report;
 use occsim_sweep::plot::{LineChart, Scale, Series};
 use occsim_sweep::{Axis, Grid, Point, Pool};
 use occsim_traces::retile::TileGrid;
@@ -88,27 +87,23 @@ pub struct LatencyRow {
 
 impl LatencyRow {
     fn of(engines: u64, result: &LevelResult, clock_mhz: f64) -> LatencyRow {
-        let mut latencies: Vec<u64> = result
-            .queries
-            .iter()
-            .filter_map(|q| q.latency_cycles)
-            .collect();
-        latencies.sort_unstable();
-        let merges = result.has_merge_stages();
-        let mean = |part: &dyn Fn(&occsim_sim::report::QueryReport) -> u64| {
-            result.report.as_ref().map(|report: &Report| {
-                let queries = &report.queries;
-                if queries.is_empty() {
-                    0.0
-                } else {
-                    queries.iter().map(part).sum::<u64>() as f64 / queries.len() as f64
-                }
-            })
+        // A part of the queries' latency, their mean: none below the cycle level (no report)
+        // and none for a part the machine has not (the O2's merges: `-`, null in JSON).
+        let mean = |part: &dyn Fn(&QueryReport) -> Option<u64>| -> Option<f64> {
+            let queries = &result.report.as_ref()?.queries;
+            let parts: Vec<u64> = queries.iter().map(part).collect::<Option<_>>()?;
+            (!parts.is_empty()).then(|| parts.iter().sum::<u64>() as f64 / parts.len() as f64)
         };
         let total_cycles = result.total_cycles.unwrap_or(0);
         let us = |cycles: u64| cycles as f64 / clock_mhz;
-        let (p50, p95) = (nearest_rank(&latencies, 50), nearest_rank(&latencies, 95));
-        let max = latencies.last().copied().unwrap_or(0);
+        // The level's own figures: a trace without a query, which has none, is refused
+        // before any replay.
+        let [p50, p95, max] = [
+            result.latency_p50_cycles,
+            result.latency_p95_cycles,
+            result.latency_max_cycles,
+        ]
+        .map(|figure| figure.unwrap_or_default());
         LatencyRow {
             engines,
             queries: result.queries.len() as u64,
@@ -118,12 +113,9 @@ impl LatencyRow {
             latency_p50_us: us(p50),
             latency_p95_us: us(p95),
             latency_max_us: us(max),
-            drain_mean_cycles: mean(&|q| q.drain_cycles),
-            // `-` (null) where the machine has no merge, as for any figure it has not.
-            local_merge_mean_cycles: mean(&|q| q.local_merge_cycles.unwrap_or(0))
-                .filter(|_| merges),
-            global_merge_mean_cycles: mean(&|q| q.global_merge_cycles.unwrap_or(0))
-                .filter(|_| merges),
+            drain_mean_cycles: mean(&|q| Some(q.drain_cycles)),
+            local_merge_mean_cycles: mean(&|q| q.local_merge_cycles),
+            global_merge_mean_cycles: mean(&|q| q.global_merge_cycles),
             total_cycles,
             fragments_per_cycle: if total_cycles == 0 {
                 0.0

@@ -3,7 +3,7 @@
 
 use crate::arch::{ArchEntry, Machine, Value};
 use crate::effects::Effects;
-use crate::report::{nearest_rank, Report};
+use crate::report::{latency_figures, Report};
 use occsim_traces::words::counted;
 use occsim_traces::QueryMode;
 use serde::Serialize;
@@ -187,12 +187,6 @@ pub struct LevelResult {
 }
 
 impl LevelResult {
-    /// Whether the machine merges its queries' partial reports (the InfiniteReality-like
-    /// one's two stages; the O2 has one pipe and no merge, its figures `-`).
-    pub fn has_merge_stages(&self) -> bool {
-        self.machine != Machine::O2.name()
-    }
-
     /// The trace's index a level reads instead of the fragments on this machine
     /// ([`LevelResult::from_window_index`]): the O2's formulas count the window index's
     /// stretches, the InfiniteReality-like machine's the band index's runs.
@@ -215,14 +209,13 @@ impl LevelResult {
             .filter_map(|q| q.latency_cycles)
             .collect();
         latencies.sort_unstable();
-        let Some(&max) = latencies.last() else {
-            return;
-        };
-        let mean = latencies.iter().sum::<u64>() as f64 / latencies.len() as f64;
-        self.latency_mean_cycles = Some(mean);
-        self.latency_p50_cycles = Some(nearest_rank(&latencies, 50));
-        self.latency_p95_cycles = Some(nearest_rank(&latencies, 95));
-        self.latency_max_cycles = Some(max);
+        [
+            self.latency_p50_cycles,
+            self.latency_p95_cycles,
+            self.latency_max_cycles,
+        ] = latency_figures(&latencies);
+        self.latency_mean_cycles = (!latencies.is_empty())
+            .then(|| latencies.iter().sum::<u64>() as f64 / latencies.len() as f64);
     }
 
     /// From a cycle-level report (the level is `cycle`; [`crate::LevelModel::finish`] says
