@@ -86,12 +86,8 @@ impl CompareArgs {
             machines.push((name, arch));
         }
         // A column a machine: two of one name would print twice and give JSON keys twice.
-        if let Some((twice, _)) = machines
-            .iter()
-            .enumerate()
-            .find(|(i, (name, _))| machines[..*i].iter().any(|(other, _)| other == name))
-            .map(|(_, machine)| machine)
-        {
+        let names: Vec<&String> = machines.iter().map(|(name, _)| name).collect();
+        if let Some(twice) = super::first_repeated(&names) {
             anyhow::bail!(
                 "--arch/--arch-file: {twice} appears twice (each machine is a column, named by its --arch name or its file's stem)"
             );

@@ -155,13 +155,8 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
         Some(occsim_sim::arch::Value::Float(mhz)) => mhz,
         _ => bail!("the architecture has no clock_mhz"),
     };
-    if let Some(twice) = args
-        .engines
-        .iter()
-        .enumerate()
-        .find(|&(i, e)| args.engines[..i].contains(e))
-    {
-        bail!("--engines: {} appears twice", twice.1);
+    if let Some(twice) = super::first_repeated(&args.engines) {
+        bail!("--engines: {twice} appears twice");
     }
     // A sweep over one axis, engines, through the sweep engine's pool (with its progress bar).
     let grid = Grid::from_axes(vec![Axis {

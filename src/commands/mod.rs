@@ -15,6 +15,14 @@ pub mod timeline;
 pub mod trace;
 pub mod workload_args;
 
+/// The first of `items` that repeats an earlier one: in a list given on the command line
+/// where each must come once (`latency --engines`, `culling compare`'s machines).
+pub fn first_repeated<T: PartialEq>(items: &[T]) -> Option<&T> {
+    let mut seen = items.iter().enumerate();
+    seen.find(|&(i, item)| items[..i].contains(item))
+        .map(|(_, item)| item)
+}
+
 /// `flag`'s output `path`, when given, checked before the work that makes it
 /// ([`occsim_sweep::output::check_writable`]): a missing directory is an error now, not after
 /// minutes of replays.
