@@ -41,6 +41,7 @@ use crate::query::{
     MAX_BUFFER_ENTRIES, MAX_TILES,
 };
 use crate::state::{DepthFunc, Rect, MAX_VIEWPORT_SIDE};
+use crate::words::counted;
 use std::collections::BTreeSet;
 use std::io::BufRead;
 
@@ -280,8 +281,8 @@ impl<R: BufRead> SceneReader<R> {
     ) -> Result<(), SceneError> {
         if args.len() != count {
             return Err(self.error(format!(
-                "`{keyword}` takes {count} argument{}, found {}: expected `{usage}`",
-                if count == 1 { "" } else { "s" },
+                "`{keyword}` takes {}, found {}: expected `{usage}`",
+                counted(count as u64, "argument", "arguments"),
                 args.len()
             )));
         }

@@ -5,6 +5,7 @@
 use super::camera::{CameraKeyframe, CameraPath};
 use super::{SceneObject, WorkloadError, WorkloadScene};
 use crate::geometry::Aabb;
+use crate::words::counted;
 use glam::Vec3;
 use std::io::{BufRead, Read};
 
@@ -122,9 +123,9 @@ fn line_problem(line: &[u8]) -> Option<String> {
             let corners = words.count();
             (corners < 3).then(|| {
                 format!(
-                    "face `{}` has {corners} corner{}: a face has three or more",
+                    "face `{}` has {}: a face has three or more",
                     text.trim(),
-                    if corners == 1 { "" } else { "s" }
+                    counted(corners as u64, "corner", "corners")
                 )
             })
         }
