@@ -1,7 +1,7 @@
 //! Resolving a SCENE argument: a built-in name or a scene file, read as a stream.
 
 use anyhow::Context;
-use occsim_traces::builtin;
+use occsim_traces::builtin::{self, BuiltinChoices};
 use occsim_traces::scene::{Command, SceneReader};
 use std::io::{BufRead, BufReader, Cursor, Read};
 
@@ -14,10 +14,18 @@ pub struct SceneInput {
     pub reader: SceneReader<Box<dyn BufRead>>,
 }
 
-/// Open SCENE: a built-in name (`demo`, `hardcases`) or a path to a scene file.
+/// Open SCENE: a built-in name (`demo`, `hardcases`, `random`), made as `choices` ask, or a
+/// path to a scene file (which takes no choice: its first line sets its viewport).
 /// A progress bar over its bytes is drawn on a terminal while it is read (`count`, `trace gen`).
-pub fn open_scene(scene: &str) -> anyhow::Result<SceneInput> {
-    let (input, size): (Box<dyn Read>, u64) = match builtin::scene_text(scene) {
+pub fn open_scene(scene: &str, choices: &BuiltinChoices) -> anyhow::Result<SceneInput> {
+    let text =
+        builtin::scene_text_with(scene, choices).with_context(|| format!("scene `{scene}`"))?;
+    if let (None, Some((choice, _))) = (&text, choices.given().next()) {
+        anyhow::bail!(
+            "--{choice}: scene file `{scene}` is made as it is written (--width, --height, --frames and --seed choose a walkthrough's, or the built-in demo's or random scene's)"
+        );
+    }
+    let (input, size): (Box<dyn Read>, u64) = match text {
         Some(text) => {
             let size = text.len() as u64;
             (Box::new(Cursor::new(text.into_bytes())), size)

@@ -148,6 +148,100 @@ fn count_matches_a_scene_file_written_by_hand() {
     );
 }
 
+/// `trace gen demo` and `trace gen random` take the viewport, the demo its frames and both
+/// a seed, as the corpus makes them (they had been ignored without a word: `trace gen demo
+/// --width 640` wrote the 1280x1024 demo); a scene file and the hard cases take none, and
+/// no built-in scene takes a walkthrough's flags.
+#[test]
+fn built_in_scenes_take_their_choices_and_refuse_the_rest() {
+    use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions};
+    let dir = scratch_dir("choices");
+    let path = |name: &str| dir.join(name).to_str().unwrap().to_owned();
+    let info = |trace: &str| -> serde_json::Value {
+        serde_json::from_str(&stdout_of(&["trace", "info", trace, "--json"])).unwrap()
+    };
+    // The same scene as the library makes with those options, written out as a file.
+    let demo = DemoOptions {
+        width: 160,
+        height: 128,
+        frames: 1,
+        seed: 7,
+        ..DemoOptions::default()
+    };
+    let random = RandomOptions {
+        width: 96,
+        height: 64,
+        seed: 5,
+        ..RandomOptions::default()
+    };
+    for (name, flags, text) in [
+        (
+            "demo",
+            &[
+                "--width", "160", "--height", "128", "--frames", "1", "--seed", "7",
+            ][..],
+            demo_scene(&demo),
+        ),
+        (
+            "random",
+            &["--width", "96", "--height", "64", "--seed", "5"][..],
+            random_scene(&random),
+        ),
+    ] {
+        let chosen = path(&format!("{name}.occt"));
+        stdout_of(&[&["trace", "gen", name, "-o", &chosen][..], flags].concat());
+        let file = path(&format!("{name}.scene"));
+        std::fs::write(&file, text).unwrap();
+        let written = path(&format!("{name}-file.occt"));
+        stdout_of(&["trace", "gen", &file, "-o", &written]);
+        let (chosen, written) = (info(&chosen), info(&written));
+        assert_eq!(chosen["summary"], written["summary"], "{name}");
+        for side in ["width", "height"] {
+            assert_eq!(chosen["header"][side], written["header"][side], "{name}");
+        }
+    }
+    assert_eq!(info(&path("demo.occt"))["header"]["width"], 160);
+    assert_eq!(info(&path("random.occt"))["header"]["height"], 64);
+    // Refused, each naming what it refuses, with no file written.
+    let refused = path("refused.occt");
+    let hard_file = path("plain.scene");
+    std::fs::write(&hard_file, "viewport 8 8\n").unwrap();
+    for (args, says) in [
+        (
+            &["hardcases", "--width", "64"][..],
+            "hardcases scene has no width",
+        ),
+        (
+            &["random", "--frames", "2"][..],
+            "random scene has no frames",
+        ),
+        (
+            &["demo", "--frames", "65"][..],
+            "frames 65: expected 1 to 64",
+        ),
+        (
+            &["demo", "--height", "0"][..],
+            "height 0: expected 1 to 16384",
+        ),
+        (
+            &[hard_file.as_str(), "--seed", "3"][..],
+            "--seed: scene file",
+        ),
+        (
+            &["demo", "--driver", "frustum"][..],
+            "cannot be used with '--driver",
+        ),
+        (
+            &["random", "--scene", "forest"][..],
+            "cannot be used with '--scene",
+        ),
+    ] {
+        let error = stderr_of_failure(&[&["trace", "gen", "-o", &refused][..], args].concat());
+        assert!(error.contains(says), "{args:?}: {error}");
+        assert!(!std::path::Path::new(&refused).exists(), "{args:?}");
+    }
+}
+
 /// A run without a query has no latency to report: `-` in the table and null in JSON at
 /// every level with time (they had been 0, as if every query took no time).
 #[test]

@@ -539,8 +539,14 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
             format!("machines = [\"o2\"]\nengines = [1]\n{hardcases}{}", hardcases.replace("class", "retile = \"1x1\"\nclass")),
             "trace `h` named twice".to_string(),
         ),
-        (demo("width = 100000"), "trace `d`: small: width = 100000".to_string()),
-        (demo("frames = 4294967295"), "frames = 4294967295: a built-in scene takes at most 64".to_string()),
+        (demo("width = 100000"), "trace `d`: small: width 100000: expected 1 to 16384".to_string()),
+        (demo("frames = 4294967295"), "frames 4294967295: expected 1 to 64".to_string()),
+        // A size the scene cannot take (the hard cases' had been ignored, the random
+        // triangles' frames too), refused as `trace gen` refuses it.
+        (
+            format!("machines = [\"o2\"]\nengines = [1]\n{hardcases}full = {{ width = 128 }}\n"),
+            "trace `h`: full: the built-in hardcases scene has no width".to_string(),
+        ),
         // Found only once a run came to them, after the traces before were made, and named
         // without the file (an unknown scene as a Rust debug string, a machine blamed on
         // --machines): refused as the file is read.

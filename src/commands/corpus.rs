@@ -14,7 +14,7 @@ use occsim_sim::levels::Fidelity;
 use occsim_sim::Arch;
 use occsim_sweep::output::ScratchDir;
 use occsim_sweep::plot::{LineChart, Scale as PlotScale, Series};
-use occsim_traces::builtin::{demo_scene, random_scene, DemoOptions, RandomOptions, HARDCASES};
+use occsim_traces::builtin::{self, BuiltinChoices};
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::retile::TileGrid;
 use occsim_traces::rng::Fnv1a;
@@ -109,14 +109,10 @@ struct Size {
     frames: Option<u32>,
 }
 
-/// Most frames a built-in scene recipe may ask for: its scene is written out whole before it
-/// is rasterized (a walk's frames stream, and its own flags bound them).
-const MAX_SCENE_FRAMES: u32 = 64;
-
 impl Size {
-    /// The sides within the viewport's, and a built-in scene's frames within
-    /// [`MAX_SCENE_FRAMES`].
-    fn check(&self, scene: bool) -> Result<(), String> {
+    /// A walk's sides within the viewport's and its frames at least 1 (its own flags bound
+    /// the rest).
+    fn check_walk(&self) -> Result<(), String> {
         for (key, side) in [("width", self.width), ("height", self.height)] {
             if let Some(side) = side.filter(|side| !(1..=MAX_VIEWPORT_SIDE).contains(side)) {
                 return Err(format!("{key} = {side}: expected 1..={MAX_VIEWPORT_SIDE}"));
@@ -124,10 +120,17 @@ impl Size {
         }
         match self.frames {
             Some(0) => Err("frames = 0: expected at least 1".into()),
-            Some(frames) if scene && frames > MAX_SCENE_FRAMES => Err(format!(
-                "frames = {frames}: a built-in scene takes at most {MAX_SCENE_FRAMES}"
-            )),
             _ => Ok(()),
+        }
+    }
+
+    /// As a built-in scene's choices.
+    fn choices(&self) -> BuiltinChoices {
+        BuiltinChoices {
+            width: self.width,
+            height: self.height,
+            frames: self.frames,
+            seed: None,
         }
     }
 }
@@ -209,10 +212,6 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
             "{name}: trace `{}` named twice",
             recipe.name
         );
-        for (scale, size) in [("full", recipe.full), ("small", recipe.small)] {
-            size.check(recipe.scene.is_some())
-                .map_err(|e| anyhow::anyhow!("{name}: trace `{}`: {scale}: {e}", recipe.name))?;
-        }
         anyhow::ensure!(
             recipe.scene.is_some() != recipe.walk.is_some(),
             "{name}: trace `{}` needs exactly one of `scene` and `walk`",
@@ -225,10 +224,19 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
         // Before any trace is made: a recipe's scene or walk is known or the file is refused.
         if let Some(scene) = &recipe.scene {
             anyhow::ensure!(
-                BUILT_IN_SCENES.contains(&scene.as_str()),
-                "{name}: trace `{}`: unknown scene `{scene}` (demo, random or hardcases)",
-                recipe.name
+                builtin::NAMES.contains(&scene.as_str()),
+                "{name}: trace `{}`: unknown scene `{scene}` ({})",
+                recipe.name,
+                builtin::NAMES.join(", ")
             );
+        }
+        for (scale, size) in [("full", recipe.full), ("small", recipe.small)] {
+            let checked = match &recipe.scene {
+                Some(scene) => size.choices().check(scene).map_err(|e| e.to_string()),
+                None => size.check_walk(),
+            };
+            checked
+                .map_err(|e| anyhow::anyhow!("{name}: trace `{}`: {scale}: {e}", recipe.name))?;
         }
         if let Some(walk) = &recipe.walk {
             let flags: Vec<&str> = walk.split_whitespace().collect();
@@ -247,9 +255,6 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
         ..file
     })
 }
-
-/// The scenes a recipe's `scene` may name.
-const BUILT_IN_SCENES: [&str; 3] = ["demo", "random", "hardcases"];
 
 impl Recipe {
     fn size(&self, scale: Scale) -> Size {
@@ -293,41 +298,11 @@ impl Recipe {
             write_workload_trace(&args, output, |_, _| Ok(())).with_context(context)?;
             return Ok(());
         }
-        let text = match self.scene.as_deref() {
-            Some("demo") => {
-                let defaults = DemoOptions::default();
-                demo_scene(&DemoOptions {
-                    width: size.width.unwrap_or(defaults.width),
-                    height: size.height.unwrap_or(defaults.height),
-                    frames: size.frames.unwrap_or(defaults.frames),
-                    ..defaults
-                })
-            }
-            Some("random") => {
-                let defaults = RandomOptions::default();
-                random_scene(&RandomOptions {
-                    width: size.width.unwrap_or(defaults.width),
-                    height: size.height.unwrap_or(defaults.height),
-                    ..defaults
-                })
-            }
-            Some("hardcases") => HARDCASES.to_owned(),
-            // `load` refused every other name.
-            other => anyhow::bail!(
-                "corpus trace `{}`: unknown scene `{}` (demo, random or hardcases)",
-                self.name,
-                other.unwrap_or("")
-            ),
-        };
-        let scene = output.with_extension("scene");
-        occsim_sweep::output::write_atomically(&scene, text.as_bytes())?;
-        let made = super::trace::generate_scene(
-            &scene.display().to_string(),
-            RasterProfile::Llvmpipe,
-            output,
-        );
-        let _ = std::fs::remove_file(&scene);
-        made.with_context(context).map(|_| ())
+        // `load` refused every other recipe: a scene of its own is a built-in one.
+        let scene = self.scene.as_deref().unwrap_or_default();
+        super::trace::generate_scene(scene, &size.choices(), RasterProfile::Llvmpipe, output)
+            .with_context(context)
+            .map(|_| ())
     }
 }
 

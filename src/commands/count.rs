@@ -22,7 +22,7 @@ pub struct CountArgs {
 /// brief and verbose queries one line a tile, `query ID MODE tile K nohc N phc P`, verbose
 /// ones with `hits H` kept (and `overflowed` when the buffer overflowed).
 pub fn run(args: CountArgs) -> anyhow::Result<()> {
-    let mut scene = open_scene(&args.scene)?;
+    let mut scene = open_scene(&args.scene, &Default::default())?;
     let mut golden = GoldenModel::try_with_profile(scene.width, scene.height, args.raster.profile)
         .with_context(|| args.scene.clone())?;
     let stdout = std::io::stdout();

@@ -158,7 +158,7 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
         false => vec![Vec::new(); machines.len()],
     };
     // One step a frame a machine a driver (on a terminal).
-    let steps = drivers_to_compare(&args).len() * args.scene.frames as usize * machines.len();
+    let steps = drivers_to_compare(&args).len() * args.scene.frames() as usize * machines.len();
     let bar = occsim_sweep::progress::bar(steps as u64, "frames timed");
     bar.set_message("culling compare");
     let mut models: Vec<Box<dyn FrameCycleModel>> = Vec::new();

@@ -4,6 +4,7 @@ use crate::scene_input::open_scene;
 use anyhow::Context;
 use occsim_sim::arch::Arch;
 use occsim_sweep::output::write_atomically_with;
+use occsim_traces::builtin::BuiltinChoices;
 use occsim_traces::golden::{EventSink, GoldenModel};
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::trace::{
@@ -27,9 +28,10 @@ pub enum TraceCommand {
 /// `trace gen SCENE -o FILE`, or a walkthrough: `trace gen --scene city --driver NAME -o FILE`.
 #[derive(clap::Args)]
 pub struct GenArgs {
-    /// A scene file, or a built-in scene: demo, hardcases, random. Leave it out to make a
+    /// A scene file, or a built-in scene: demo (which takes --width, --height, --frames and
+    /// --seed), random (--width, --height and --seed) or hardcases. Leave it out to make a
     /// walkthrough of --scene (city, forest, obj:PATH) driven by --driver instead.
-    #[arg(value_name = "SCENE")]
+    #[arg(value_name = "SCENE", conflicts_with_all = super::workload_args::WALK_ONLY)]
     pub scene_file: Option<String>,
     /// The trace file to write (written atomically).
     #[arg(short, long, visible_alias = "out")]
@@ -73,10 +75,12 @@ pub fn run(command: TraceCommand) -> anyhow::Result<()> {
 
 fn generate(args: GenArgs) -> anyhow::Result<()> {
     let (summary, frames) = match &args.scene_file {
-        Some(scene_file) => (
-            generate_scene(scene_file, args.workload.scene.raster.profile, &args.output)?,
-            String::new(),
-        ),
+        Some(scene_file) => {
+            let scene = &args.workload.scene;
+            let choices = scene.builtin_choices();
+            let summary = generate_scene(scene_file, &choices, scene.raster.profile, &args.output)?;
+            (summary, String::new())
+        }
         None => {
             let collision = args.workload.is_collision();
             let (summary, frames) = super::workload_args::write_workload_trace(
@@ -166,13 +170,15 @@ pub(crate) fn indexed_writer<W: Write>(
         .with_context(|| format!("{}: cannot write trace", output.display()))
 }
 
-/// A scene file or built-in scene through the rasterizer and golden model into a trace.
+/// A scene file or built-in scene (made as `choices` ask) through the rasterizer and golden
+/// model into a trace.
 pub(crate) fn generate_scene(
     scene_file: &str,
+    choices: &BuiltinChoices,
     raster: RasterProfile,
     output: &Path,
 ) -> anyhow::Result<TraceSummary> {
-    let mut scene = open_scene(scene_file)?;
+    let mut scene = open_scene(scene_file, choices)?;
     let header = TraceHeader::new(scene.width, scene.height)
         .with_scene(scene.name.clone())
         .with_raster(raster);

@@ -4,6 +4,7 @@
 
 use anyhow::Context;
 use occsim_sweep::output::write_atomically_with;
+use occsim_traces::builtin::BuiltinChoices;
 use occsim_traces::trace::{TraceHeader, TraceSummary};
 use occsim_traces::workloads::{
     city, forest, generate_observed, load_obj, traffic, CameraPath, CityOptions, CommandObserver,
@@ -20,18 +21,19 @@ pub struct SceneArgs {
     /// or `obj:PATH` for a Wavefront OBJ model.
     #[arg(long, default_value = "city")]
     pub scene: String,
-    /// Frames of the walkthrough.
-    #[arg(long, default_value_t = 8)]
-    pub frames: u32,
-    /// Viewport width in pixels.
-    #[arg(long, default_value_t = 1280)]
-    pub width: u32,
-    /// Viewport height in pixels.
-    #[arg(long, default_value_t = 1024)]
-    pub height: u32,
-    /// Seed of the city's or forest's layout.
-    #[arg(long, default_value_t = 1998)]
-    pub seed: u64,
+    /// Frames of the walkthrough (default 8; the built-in demo's default 4).
+    #[arg(long)]
+    pub frames: Option<u32>,
+    /// Viewport width in pixels (default 1280).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Viewport height in pixels (default 1024).
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Seed of the city's, forest's or built-in demo's layout (default 1998), or of the
+    /// built-in random triangles (default 1).
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// City and traffic: blocks along each side (default 6, at most 32; triangles grow with
     /// its square).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=MAX_CITY_BLOCKS as i64))]
@@ -147,13 +149,65 @@ fn parse_point(text: &str) -> Result<[f32; 3], String> {
     }
 }
 
+/// The flags of a walkthrough alone: a scene file or built-in scene refuses them (each is
+/// its clap id, the field's name). The viewport, frames, seed and rasterizer are not among
+/// them: a built-in scene takes those it has ([`BuiltinChoices`]).
+pub const WALK_ONLY: [&str; 25] = [
+    "scene",
+    "blocks",
+    "cars_per_block",
+    "trees",
+    "detail",
+    "camera_from",
+    "camera_to",
+    "camera_target",
+    "camera_file",
+    "driver",
+    "query_delay",
+    "quadtree_levels",
+    "adaptive_threshold",
+    "grid_cell_pixels",
+    "variant",
+    "collision_tiles",
+    "collision_step",
+    "virtual_occlusion_buffer",
+    "occlusion_map_cell_pixels",
+    "opacity_threshold",
+    "occluder_triangles",
+    "grid_resolution",
+    "flat_grid",
+    "volume_bricks",
+    "verbose_buffer",
+];
+
 impl SceneArgs {
+    /// Frames of the walk (8 unless given).
+    pub fn frames(&self) -> u32 {
+        self.frames.unwrap_or(8)
+    }
+
+    /// Seed of the scene's layout (1998 unless given).
+    pub fn seed(&self) -> u64 {
+        self.seed.unwrap_or(1998)
+    }
+
     pub fn walk(&self) -> Walk {
         Walk {
-            frames: self.frames,
+            frames: self.frames(),
+            width: self.width.unwrap_or(1280),
+            height: self.height.unwrap_or(1024),
+            raster: self.raster.profile,
+        }
+    }
+
+    /// What a built-in scene is asked for: the viewport, frames and seed given, none
+    /// otherwise (each scene keeps its own defaults).
+    pub fn builtin_choices(&self) -> BuiltinChoices {
+        BuiltinChoices {
             width: self.width,
             height: self.height,
-            raster: self.raster.profile,
+            frames: self.frames,
+            seed: self.seed,
         }
     }
 
@@ -189,7 +243,7 @@ impl SceneArgs {
             CityOptions {
                 blocks: self.blocks.unwrap_or(defaults.blocks),
                 detail: self.detail.unwrap_or(defaults.detail),
-                seed: self.seed,
+                seed: self.seed(),
             }
         };
         let scene = match name {
@@ -205,7 +259,7 @@ impl SceneArgs {
                 forest(&ForestOptions {
                     trees: self.trees.unwrap_or(defaults.trees),
                     detail: self.detail.unwrap_or(defaults.detail),
-                    seed: self.seed,
+                    seed: self.seed(),
                 })
             }
             other => match other.strip_prefix("obj:") {
@@ -239,15 +293,16 @@ impl SceneArgs {
 
     /// A one-line account of the scene and walk, for trace headers and reports.
     pub fn describe(&self, scene: &WorkloadScene) -> String {
+        let walk = self.walk();
         format!(
             "{} ({} objects, {} triangles, seed {}) {} frames at {}x{}",
             self.scene,
             scene.object_count(),
             scene.triangle_count(),
-            self.seed,
-            self.frames,
-            self.width,
-            self.height
+            self.seed(),
+            walk.frames,
+            walk.width,
+            walk.height
         )
     }
 }
