@@ -696,9 +696,12 @@ fn workload_option_errors_name_their_flags() {
     };
     let error = with(&["--frames", "0"]);
     assert!(
-        error.contains("--frames 0: a walkthrough needs at least 1 frame"),
+        error.contains("--frames 0 out of range: a walkthrough has 1 to 1000000 frames"),
         "{error}"
     );
+    // Past the most (a walk of 4 billion frames had grown without end, then aborted).
+    let error = with(&["--frames", "1000001"]);
+    assert!(error.contains("--frames 1000001 out of range"), "{error}");
     let error = with(&["--driver", "lazy-grid", "--query-delay", "1"]);
     assert!(
         error.contains("--query-delay applies to the frustum"),
@@ -717,6 +720,25 @@ fn workload_option_errors_name_their_flags() {
         ),
         "{error}"
     );
+    // A grid's or the collision test's option on another driver (they had been taken and
+    // left unused), as --variant and --quadtree-levels are.
+    for (flags, says) in [
+        (
+            &["--driver", "frustum", "--grid-cell-pixels", "8"][..],
+            "--grid-cell-pixels applies to the lazy-grid and busy-grid drivers only",
+        ),
+        (
+            &["--driver", "lazy-grid", "--collision-tiles", "3"],
+            "--collision-tiles applies to the collision driver only",
+        ),
+        (
+            &["--driver", "frustum", "--collision-step", "5"],
+            "--collision-step applies to the collision driver only",
+        ),
+    ] {
+        let error = with(flags);
+        assert!(error.contains(says), "{flags:?}: {error}");
+    }
     let error = with(&["--driver", "hierarchical", "--quadtree-levels", "9"]);
     assert!(
         error.contains("--quadtree-levels 9 out of range"),
@@ -1154,6 +1176,10 @@ fn arch_list_and_show_print_json() {
     };
     assert_eq!(param("boards")["value"], 2);
     assert_eq!(param("engines")["value"], 2);
+    // A built-in beside --arch-file is refused, as elsewhere (the file had been shown and
+    // the name passed over).
+    let both = stderr_of_failure(&["arch", "show", "ir4", "--arch-file", "my.toml"]);
+    assert!(both.contains("cannot be used with"), "{both}");
     // As `arch show` prints it: `clock_mhz = 100.0 # [MHz] ... (I 75.0..150.0: ...)`.
     let clock = param("clock_mhz");
     assert_eq!(

@@ -177,6 +177,24 @@ fn bad_levels_fail_clearly() {
     );
     let output = occsim(&["replay", &trace, "--effects", "some"]);
     assert!(!output.status.success());
+    // An option beside a level it does not apply to (both had been passed over unsaid).
+    for (args, says) in [
+        (
+            &["--fidelity", "cycle", "--no-index"][..],
+            "--no-index applies to the analytic and sampled levels",
+        ),
+        (
+            &["--fidelity", "functional", "--effects", "all"],
+            "the functional level has none",
+        ),
+        (
+            &["--fidelity", "analytic", "--effects", "auto"],
+            "the analytic level has none",
+        ),
+    ] {
+        let error = support::cli::stderr_of_failure(&[&["replay", &trace][..], args].concat());
+        assert!(error.contains(says), "{args:?}: {error}");
+    }
 }
 
 #[test]
@@ -498,6 +516,49 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
         let error = support::cli::stderr_of_failure(&args);
         assert!(error.contains(expected), "{set}: {error}");
     }
+    // A class that is none of the corpus's (a typo beside a good one had been dropped
+    // unsaid), a machine, engine count or class named twice (run and reported twice), and
+    // --retile, which the corpus run had passed over unsaid: refused before any trace.
+    for (flags, expected) in [
+        (
+            &["--classes", "hardcases,nosuch"][..],
+            "no recipe is of class `nosuch` (its classes: demo, retiled-1x1-4x4,",
+        ),
+        (&["--machines", "o2,o2"], "--machines: `o2` is named twice"),
+        (&["--engines", "4,4"], "--engines: `4` is named twice"),
+        (
+            &["--classes", "random,random"],
+            "--classes: `random` is named twice",
+        ),
+        (&["--retile", "2x2"], "--retile retiles one trace"),
+    ] {
+        let args = [&["fidelity", "--corpus", "--scale", "small"][..], flags].concat();
+        let error = support::cli::stderr_of_failure(&args);
+        assert!(error.contains(expected), "{flags:?}: {error}");
+    }
+    // --engines takes a list with --corpus (the corpus file's counts replaced), one count
+    // for one trace.
+    let two_counts = support::cli::stdout_of(&[
+        "fidelity",
+        "--corpus",
+        "--corpus-file",
+        one.to_str().unwrap(),
+        "--engines",
+        "1,4",
+        "--no-rtl",
+    ]);
+    assert!(
+        two_counts.contains("on o2 with 1, 4 engines"),
+        "{two_counts}"
+    );
+    let line = two_counts.lines().find(|l| l.contains("analytic")).unwrap();
+    assert_eq!(
+        line.split_whitespace().nth(2),
+        Some("2"),
+        "two runs: {line}"
+    );
+    let error = support::cli::stderr_of_failure(&["fidelity", "any.occt", "--engines", "1,4"]);
+    assert!(error.contains("one engine count for one trace"), "{error}");
     // One trace's machine, which the corpus run had passed over unsaid, running every
     // machine of the corpus.
     for arch in [
@@ -566,6 +627,11 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
             format!("{}[[trace]]\nname = \"w\"\nclass = \"w\"\nwalk = \"--driver nosuch\"\n", demo("width = 64")),
             "trace `w`: walk `--driver nosuch`: unknown driver `nosuch`".to_string(),
         ),
+        // A flag the walk does not have, in one line (clap's usage of `occsim` had followed).
+        (
+            format!("{}[[trace]]\nname = \"w\"\nclass = \"w\"\nwalk = \"--bogus 3\"\n", demo("width = 64")),
+            "walk `--bogus 3`: unexpected argument '--bogus' found; tip:".to_string(),
+        ),
     ] {
         let file = dir.join("meaningless.toml");
         std::fs::write(&file, &text).unwrap();
@@ -581,6 +647,7 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
             error.contains("meaningless.toml") && error.contains(&expected),
             "{text}: {error}"
         );
+        assert!(!error.contains("Usage:"), "{text}: {error}");
     }
 }
 

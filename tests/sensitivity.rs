@@ -120,6 +120,9 @@ fn a_value_the_study_cannot_take_is_refused_and_named() {
         let error = stderr_of_failure(&["sensitivity", &trace, "--arch", "o2", "--set", set]);
         assert!(error.contains(what) && error.contains(advice), "{error}");
     }
+    // No parameter listed had printed "moved most by" nothing.
+    let error = stderr_of_failure(&["sensitivity", &trace, "--top", "0"]);
+    assert!(error.contains("'0' for '--top <TOP>'"), "{error}");
 }
 
 /// `--engines E` is `--set engines=E`, as on replay, fidelity and latency (it had been an

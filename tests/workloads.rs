@@ -111,6 +111,14 @@ fn culling_compare_takes_arch_and_set() {
     // The lazy grid's queries have many tiles (the outdated cells a box covers); one engine
     // tests them one after another, four share them.
     assert!(cycles_of(&two, 1) > cycles_of(&one, 0), "{one}\n{two}");
+    // A threshold twice would be two rows (and two JSON drivers) of one name.
+    for flag in ["--adaptive-threshold", "--opacity-threshold"] {
+        let twice = stderr_of_failure(&[&walk[..], &[flag, "0.5,0.5"]].concat());
+        assert!(
+            twice.contains(&format!("{flag}: 0.5 is named twice")),
+            "{twice}"
+        );
+    }
     let wrong = stderr_of_failure(&[&walk[..], &["--arch", "o2", "--set", "boards=2"]].concat());
     assert!(
         wrong.contains("--arch o2") && wrong.contains("boards"),

@@ -119,6 +119,14 @@ fn unknown_keys_name_the_close_ones() {
     let err =
         Arch::from_toml("machine = \"o2\"\n\n[o2]\nengines = 2\nengines_x = 0\n").unwrap_err();
     assert!(err.to_string().starts_with("line 5: "), "{err}");
+    // A table of the unknown name is named by its header's line (it had had none).
+    let err =
+        Arch::from_toml("machine = \"o2\"\n[o2]\nengines = 2\n\n[o2.extra]\nx = 1\n").unwrap_err();
+    assert!(
+        err.to_string()
+            .starts_with("line 5: unknown parameter 'extra'"),
+        "{err}"
+    );
     let err = Arch::from_toml("machine = \"o2\"\n[o2]\nengines = \"four\"\n").unwrap_err();
     assert!(
         err.to_string()

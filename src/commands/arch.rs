@@ -27,9 +27,9 @@ pub enum ArchCommand {
 
 #[derive(clap::Args)]
 pub struct ShowArgs {
-    /// A built-in architecture.
-    #[arg(default_value = "o2")]
-    pub name: String,
+    /// A built-in architecture (o2 unless given; not beside --arch-file).
+    #[arg(conflicts_with = "arch_file")]
+    pub name: Option<String>,
     /// Load the architecture from this TOML file instead.
     #[arg(long, value_name = "FILE")]
     pub arch_file: Option<PathBuf>,
@@ -168,10 +168,11 @@ pub fn set_engines(arch: &mut Arch, engines: Option<u64>, sets: &[String]) -> an
 pub fn run(args: ArchArgs) -> anyhow::Result<()> {
     match args.command {
         ArchCommand::Show(show) => {
-            let arch = resolve(&show.name, show.arch_file.as_deref(), &show.set)?;
+            let builtin = show.name.as_deref().unwrap_or(DEFAULT_ARCH);
+            let arch = resolve(builtin, show.arch_file.as_deref(), &show.set)?;
             match show.json {
                 true => {
-                    let name = describe(&show.name, show.arch_file.as_deref(), &show.set);
+                    let name = describe(builtin, show.arch_file.as_deref(), &show.set);
                     outln!(
                         "{}",
                         serde_json::to_string_pretty(&arch_json(&name, &arch))?

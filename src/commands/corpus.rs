@@ -8,7 +8,7 @@
 use super::fidelity::{
     distribution, percent, ErrorDistribution, Ladder, LevelRow, ERROR_FLOOR_PERCENT,
 };
-use super::workload_args::{parse_workload_flags, write_workload_trace};
+use super::workload_args::{in_one_line, parse_workload_flags, write_workload_trace};
 use anyhow::Context;
 use occsim_sim::levels::Fidelity;
 use occsim_sim::Arch;
@@ -174,6 +174,17 @@ struct Run {
     rows: Vec<LevelRow>,
 }
 
+impl CorpusFile {
+    /// Its recipes' classes, each once, in the order they first come.
+    fn classes(&self) -> Vec<&str> {
+        first_seen(self.trace.iter().map(|recipe| recipe.class.as_str()))
+    }
+
+    fn has_class(&self, class: &str) -> bool {
+        self.trace.iter().any(|recipe| recipe.class == class)
+    }
+}
+
 /// Parse the corpus file (the built-in one without a path), naming the file in errors.
 fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
     let (name, text) = match path {
@@ -243,7 +254,7 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
             let walk_error = |e: &dyn std::fmt::Display| {
                 anyhow::anyhow!("{name}: trace `{}`: walk `{walk}`: {e}", recipe.name)
             };
-            let args = parse_workload_flags(&flags).map_err(|e| walk_error(&e))?;
+            let args = parse_workload_flags(&flags).map_err(|e| walk_error(&in_one_line(&e)))?;
             args.driver
                 .driver
                 .parse::<occsim_traces::workloads::DriverKind>()
@@ -293,7 +304,7 @@ impl Recipe {
                 }
             }
             let args = parse_workload_flags(&flags)
-                .map_err(|e| anyhow::anyhow!("walk `{walk}`: {e}"))
+                .map_err(|e| anyhow::anyhow!("walk `{walk}`: {}", in_one_line(&e)))
                 .with_context(context)?;
             write_workload_trace(&args, output, |_, _| Ok(())).with_context(context)?;
             return Ok(());
@@ -326,7 +337,7 @@ impl TraceDir {
 pub fn run(
     args: &CorpusArgs,
     ladder: &Ladder,
-    engines: Option<u64>,
+    engines: &[u64],
     sets: &[String],
     (json, plot): (bool, Option<&Path>),
 ) -> anyhow::Result<()> {
@@ -341,7 +352,30 @@ pub fn run(
     } else {
         &args.machines
     };
-    let engine_counts = engines.map_or(corpus.engines.clone(), |e| vec![e]);
+    let engine_counts = match engines {
+        [] => corpus.engines.clone(),
+        given => given.to_vec(),
+    };
+    // A run twice would be reported as two runs of its class.
+    for (flag, repeated) in [
+        ("--machines", super::first_repeated(&args.machines).cloned()),
+        (
+            "--engines",
+            super::first_repeated(engines).map(u64::to_string),
+        ),
+        ("--classes", super::first_repeated(&args.classes).cloned()),
+    ] {
+        if let Some(repeated) = repeated {
+            anyhow::bail!("{flag}: `{repeated}` is named twice");
+        }
+    }
+    if let Some(unknown) = (args.classes.iter()).find(|class| !corpus.has_class(class)) {
+        anyhow::bail!(
+            "--classes: {}: no recipe is of class `{unknown}` (its classes: {})",
+            corpus.source,
+            corpus.classes().join(", ")
+        );
+    }
     // Every run's machine, made before any trace is: a bad name or engine count is refused
     // first, named by where it came from.
     let source = match args.machines.is_empty() {
@@ -360,10 +394,6 @@ pub fn run(
         .iter()
         .filter(|r| args.classes.is_empty() || args.classes.contains(&r.class))
         .collect();
-    anyhow::ensure!(
-        !recipes.is_empty(),
-        "--classes: no recipe of the corpus is of these classes"
-    );
     let dir = match &args.traces_dir {
         Some(dir) => {
             anyhow::ensure!(
@@ -505,6 +535,17 @@ fn machine_with(name: &str, engines: u64, sets: &[String]) -> anyhow::Result<Arc
     Ok(arch)
 }
 
+/// `names`, each once, in the order they first come.
+fn first_seen<'a>(names: impl Iterator<Item = &'a str>) -> Vec<&'a str> {
+    let mut seen: Vec<&str> = Vec::new();
+    for name in names {
+        if !seen.contains(&name) {
+            seen.push(name);
+        }
+    }
+    seen
+}
+
 /// A run's name: `trace on machine, E engines`.
 fn run_name(trace: &str, machine: &str, engines: u64) -> String {
     let unit = if engines == 1 { "engine" } else { "engines" };
@@ -514,12 +555,7 @@ fn run_name(trace: &str, machine: &str, engines: u64) -> String {
 /// Per class (in first-seen order) and level: the worst run's errors and which run each is
 /// from, every query's latency error pooled, and the speed against cycle over the runs.
 fn by_class(runs: &[Run]) -> Vec<ClassRow> {
-    let mut classes: Vec<&str> = Vec::new();
-    for run in runs {
-        if !classes.contains(&run.class.as_str()) {
-            classes.push(&run.class);
-        }
-    }
+    let classes = first_seen(runs.iter().map(|run| run.class.as_str()));
     let mut rows = Vec::new();
     for class in classes {
         let members: Vec<&Run> = runs.iter().filter(|run| run.class == class).collect();

@@ -152,6 +152,16 @@ fn seed_drivers(args: &CompareArgs, list: &mut Vec<DriverOptions>) {
 /// its corners).
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
     anyhow::ensure!(args.jobs >= 1, "--jobs: give at least 1");
+    // A driver a threshold: one given twice would be two rows, and two JSON drivers, of one
+    // name.
+    for (flag, thresholds) in [
+        ("--adaptive-threshold", &args.adaptive_threshold),
+        ("--opacity-threshold", &args.opacity_threshold),
+    ] {
+        if let Some(twice) = super::first_repeated(thresholds) {
+            anyhow::bail!("{flag}: {twice} is named twice");
+        }
+    }
     let machines = args.machines()?;
     let variants = match args.bands {
         true => band_corners(&args, &machines)?,

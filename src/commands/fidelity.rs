@@ -27,15 +27,36 @@ pub struct FidelityArg {
     /// cycle or rtl.
     #[arg(long, value_name = "LEVEL", default_value = "cycle")]
     pub fidelity: Fidelity,
-    /// Effect models: auto (only those the trace can observe: same results and cycles) or
-    /// all.
-    #[arg(long, value_name = "auto|all", default_value = "auto")]
-    pub effects: EffectsChoice,
+    /// Effect models of the cycle and sampled levels: auto (only those the trace can
+    /// observe: same results and cycles; the default) or all.
+    #[arg(long, value_name = "auto|all")]
+    pub effects: Option<EffectsChoice>,
     /// At the analytic and sampled levels, decode every fragment even where the trace's
     /// window index (and its depth-test blocks) would do (the same result, slower: for
     /// checking and timing the index).
     #[arg(long)]
     pub no_index: bool,
+}
+
+impl FidelityArg {
+    /// The effects chosen (auto unless given), or why the level takes no choice: `--effects`
+    /// and `--no-index` beside a level they do not apply to had been passed over unsaid.
+    pub fn effects(&self) -> anyhow::Result<EffectsChoice> {
+        let level = self.fidelity;
+        anyhow::ensure!(
+            !self.no_index || matches!(level, Fidelity::Analytic | Fidelity::Sampled { .. }),
+            "--no-index applies to the analytic and sampled levels, which read the trace's index (the {level} level decodes every fragment)"
+        );
+        match self.effects {
+            // The rtl level builds every model whatever is chosen.
+            Some(_) if matches!(level, Fidelity::Functional | Fidelity::Analytic) => {
+                anyhow::bail!(
+                    "--effects chooses the cycle, sampled and rtl levels' effect models; the {level} level has none"
+                )
+            }
+            chosen => Ok(chosen.unwrap_or(EffectsChoice::Auto)),
+        }
+    }
 }
 
 #[derive(clap::Args)]
@@ -45,9 +66,10 @@ pub struct FidelityArgs {
     pub trace: Option<PathBuf>,
     #[command(flatten)]
     pub arch: ArchSelection,
-    /// Occlusion engines (shorthand for --set engines=E).
-    #[arg(long, value_name = "E")]
-    pub engines: Option<u64>,
+    /// Occlusion engines (shorthand for --set engines=E); with --corpus, the engine counts
+    /// to run instead of the corpus's (comma separated).
+    #[arg(long, value_name = "E", value_delimiter = ',')]
+    pub engines: Vec<u64>,
     /// Replace every brief query's tiles by a G by H grid over the viewport (the golden
     /// results are recomputed), e.g. --retile 8x8.
     #[arg(long, value_name = "GxH")]
@@ -322,17 +344,27 @@ pub fn run(args: FidelityArgs) -> anyhow::Result<()> {
             arch == super::arch::DEFAULT_ARCH && file.is_none(),
             "--arch and --arch-file choose one trace's machine; with --corpus, --machines {arch} runs the corpus on built-in machines of your choice"
         );
+        // The corpus's recipes retile their own traces (its `retile` classes).
+        anyhow::ensure!(
+            args.retile.is_none(),
+            "--retile retiles one trace; with --corpus, the corpus's recipes name their grids (`retile = \"GxH\"`, the retiled classes)"
+        );
         return super::corpus::run(
             &args.corpus,
             &ladder,
-            args.engines,
+            &args.engines,
             &args.arch.set,
             (args.json, args.plot.as_deref()),
         );
     };
     anyhow::ensure!(!args.corpus.corpus, "give a TRACE or --corpus, not both");
     // As the user named it (`ir4`, not the machine's `ir`), with the engine count given.
-    let (arch, arch_name) = args.arch.resolve_with_engines(args.engines)?;
+    let engines = match args.engines[..] {
+        [] => None,
+        [engines] => Some(engines),
+        _ => anyhow::bail!("--engines: one engine count for one trace (a list is for --corpus)"),
+    };
+    let (arch, arch_name) = args.arch.resolve_with_engines(engines)?;
     let path = trace.display().to_string();
     // One step a level (not a bar over bytes: drawing one would be timed with the level).
     let bar = occsim_sweep::progress::bar(ladder.levels().len() as u64, "levels");

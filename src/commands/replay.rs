@@ -67,6 +67,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     super::arch::set_engines(&mut arch, args.engines, &args.arch.set)?;
     let path = args.trace.display().to_string();
     let level = args.level.fidelity;
+    let effects = args.level.effects()?;
     let cli_words = |e| in_cli_words(&path, e);
     let (waveform, outputs) = match waveform(&args.waveform, level, || {
         // Every slot a query fills is shown: a retiled brief query has the grid's tiles.
@@ -80,7 +81,7 @@ pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     let timeline = timeline(&args.waveform, level, &arch)?;
     let options = ReplayOptions {
         level,
-        effects: args.level.effects,
+        effects,
         retile: args.retile,
         waveform,
         timeline: timeline.as_ref().map(|t| t.0.clone()),

@@ -36,7 +36,8 @@ pub struct SensitivityArgs {
     /// Level of detail: analytic, sampled:K, cycle or rtl (a level with time).
     #[arg(long, value_name = "LEVEL", default_value = "cycle")]
     pub fidelity: Fidelity,
-    /// Replays run at once (the output is the same for any number).
+    /// Replays run at once, at most 4 a core and one a variant (the output is the same for
+    /// any number).
     #[arg(long, default_value_t = default_jobs())]
     pub jobs: usize,
     /// Print the bands as JSON: per result `metric`, `default`, `low`, `high` and the
@@ -46,9 +47,10 @@ pub struct SensitivityArgs {
     /// Also draw a tornado chart of the bands as SVG.
     #[arg(long, value_name = "FILE.svg")]
     pub plot: Option<PathBuf>,
-    /// Parameters listed per result in the table and the chart (the JSON lists all).
-    #[arg(long, default_value_t = 8)]
-    pub top: usize,
+    /// Parameters listed per result in the table and the chart, at least 1 (the JSON lists
+    /// all).
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..))]
+    pub top: u32,
     /// Print to stderr the replays made and the sum of their wall times (for benchmarks;
     /// never part of the results).
     #[arg(long)]
@@ -264,14 +266,14 @@ pub fn run(args: SensitivityArgs) -> anyhow::Result<()> {
     if args.json {
         outln!("{}", serde_json::to_string_pretty(&outcome.bands)?);
     } else {
-        out!("{}", table(&outcome, args.top));
+        out!("{}", table(&outcome, args.top as usize));
     }
     if let Some(path) = &args.plot {
         // As the user named the machine, its --set and --engines too (the title had given
         // the built-in's name alone).
         tornado(
             &outcome.bands,
-            args.top,
+            args.top as usize,
             &format!("{} on {arch_name}", args.trace.display()),
         )
         .write_svg(path)

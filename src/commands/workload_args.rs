@@ -84,7 +84,7 @@ pub struct DriverArgs {
     #[arg(long)]
     pub adaptive_threshold: Option<f32>,
     /// Grids: cell side in pixels.
-    #[arg(long, default_value_t = 32)]
+    #[arg(long, default_value_t = occsim_traces::workloads::DEFAULT_GRID_CELL_PIXELS)]
     pub grid_cell_pixels: u32,
     /// Grids: what a cell keeps: z-buffer (the farthest depth of its pixels, any
     /// front-to-back order) or occlusion-buffer (whether all its pixels are drawn; boxes are
@@ -92,7 +92,7 @@ pub struct DriverArgs {
     #[arg(long, default_value = "z-buffer")]
     pub variant: String,
     /// Collision: tiles a side the check area is cut into (1 to 16).
-    #[arg(long, default_value_t = 2)]
+    #[arg(long, default_value_t = occsim_traces::workloads::DEFAULT_COLLISION_TILES)]
     pub collision_tiles: u32,
     /// Collision: the step's length in metres, the customised frustum's far plane (default:
     /// the distance to the next frame's eye).
@@ -308,8 +308,18 @@ impl SceneArgs {
 }
 
 fn load_obj_file(path: &Path) -> anyhow::Result<WorkloadScene> {
+    anyhow::ensure!(
+        !path.as_os_str().is_empty(),
+        "--scene obj:PATH: give the OBJ model's path after `obj:`"
+    );
     let file = std::fs::File::open(path)
         .with_context(|| format!("cannot open OBJ model {}", path.display()))?;
+    // A directory opens, and its first read fails as the loader's "read error" on line 1.
+    anyhow::ensure!(
+        !file.metadata().is_ok_and(|m| m.is_dir()),
+        "cannot read OBJ model {}: it is a directory",
+        path.display()
+    );
     occsim_sweep::output::note_input(path);
     let reader = std::io::BufReader::with_capacity(1 << 16, file);
     Ok(load_obj(
@@ -417,6 +427,19 @@ where
         workload: WorkloadArgs,
     }
     <Flags as clap::Parser>::try_parse_from(flags).map(|f| f.workload)
+}
+
+/// A flag parser's error as one line: its message and tip, without the usage and help lines
+/// a command line's error prints (a corpus recipe's `walk` is not a command line, and they
+/// named a usage of `occsim` it does not have).
+pub fn in_one_line(error: &clap::Error) -> String {
+    let text = error.to_string();
+    let said: Vec<&str> = (text.lines().map(str::trim))
+        .filter(|line| !line.is_empty())
+        .take_while(|line| !line.starts_with("Usage:"))
+        .map(|line| line.strip_prefix("error: ").unwrap_or(line))
+        .collect();
+    said.join("; ")
 }
 
 /// `trace gen` for a workload: walk the scene with the driver, writing the golden model's
@@ -627,6 +650,10 @@ mod tests {
             missing.contains("cannot open OBJ model /no/such/model.obj"),
             "{missing}"
         );
+        let nothing = resolve_error(&["--scene", "obj:"]);
+        assert!(nothing.contains("give the OBJ model's path"), "{nothing}");
+        let directory = resolve_error(&["--scene", "obj:/"]);
+        assert!(directory.contains("/: it is a directory"), "{directory}");
         let camera = resolve_error(&["--camera-file", "/no/such/walk.toml"]);
         assert!(
             camera.contains("cannot open camera file /no/such/walk.toml"),

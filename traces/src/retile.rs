@@ -43,10 +43,13 @@ impl FromStr for TileGrid {
         let syntax = || RetileError::Syntax(text.to_string());
         let (columns, rows) = text.trim().split_once(['x', 'X']).ok_or_else(syntax)?;
         let parse = |s: &str| s.trim().parse::<u32>().ok().filter(|&n| n > 0);
-        Ok(TileGrid {
+        let grid = TileGrid {
             columns: parse(columns).ok_or_else(syntax)?,
             rows: parse(rows).ok_or_else(syntax)?,
-        })
+        };
+        // Refused as the flag is read: found at the first query, after the replay's machine
+        // was made, a grid of too many tiles over a large viewport had taken 1 GB first.
+        grid.count_checked()
     }
 }
 
@@ -57,6 +60,18 @@ impl std::fmt::Display for TileGrid {
 }
 
 impl TileGrid {
+    /// The grid, if it has at most [`MAX_TILES`] tiles (what one query holds).
+    fn count_checked(self) -> Result<TileGrid, RetileError> {
+        match self.columns as u64 * self.rows as u64 > MAX_TILES as u64 {
+            true => Err(RetileError::TooMany {
+                columns: self.columns,
+                rows: self.rows,
+                max: MAX_TILES,
+            }),
+            false => Ok(self),
+        }
+    }
+
     /// The tiles, row by row from the bottom: tile `(c, r)` spans x in
     /// `c*W/G .. (c+1)*W/G` and y in `r*H'/H .. (r+1)*H'/H` (integer division, so the grid
     /// covers the viewport exactly and no tile is empty).
@@ -70,13 +85,7 @@ impl TileGrid {
                 height,
             });
         }
-        if columns as u64 * rows as u64 > MAX_TILES as u64 {
-            return Err(RetileError::TooMany {
-                columns,
-                rows,
-                max: MAX_TILES,
-            });
-        }
+        self.count_checked()?;
         let edge = |i: u32, n: u32, side: u32| (i as u64 * side as u64 / n as u64) as u32;
         Ok((0..rows)
             .flat_map(|r| {
@@ -187,6 +196,17 @@ mod tests {
         assert!("3".parse::<TileGrid>().is_err());
         assert!("0x2".parse::<TileGrid>().is_err());
         assert!("ax2".parse::<TileGrid>().is_err());
+        // Too many tiles for one query (65,536) is refused as the flag is read, before any
+        // viewport is known; 256x256 is the most.
+        assert_eq!(
+            "1024x1024".parse::<TileGrid>(),
+            Err(RetileError::TooMany {
+                columns: 1024,
+                rows: 1024,
+                max: 65_536
+            })
+        );
+        assert!("256x256".parse::<TileGrid>().is_ok());
         let tiles = TileGrid {
             columns: 3,
             rows: 2,

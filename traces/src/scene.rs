@@ -202,6 +202,12 @@ impl<R: BufRead> SceneReader<R> {
         let mut words = text.split_whitespace();
         let keyword = words.next().unwrap_or("");
         let args: Vec<&str> = words.collect();
+        if keyword.starts_with("OCCT") && self.viewport.is_none() {
+            // A trace's magic number (`OCCT\r\n...`) where a scene's first line goes.
+            return Err(self.error(
+                "an occsim trace, not a scene: `replay`, `trace info` and `trace dump` read traces; `count` and `trace gen` read scenes".to_string(),
+            ));
+        }
         if keyword != "viewport" && self.viewport.is_none() {
             return Err(self.error(format!(
                 "`{keyword}` before `viewport`: a scene starts with `viewport W H`"
@@ -670,6 +676,11 @@ mod tests {
     #[test]
     fn rejects_structural_mistakes() {
         assert!(error_of("clear\n").starts_with("s.scene:1: `clear` before `viewport`"));
+        // A trace given as a scene is named as one (its magic had been taken for a command).
+        assert_eq!(
+            error_of("OCCT\r\n\x1a\nbinary"),
+            "s.scene:1: an occsim trace, not a scene: `replay`, `trace info` and `trace dump` read traces; `count` and `trace gen` read scenes"
+        );
         assert!(
             error_of("viewport 4 4\nviewport 4 4\n").starts_with("s.scene:2: second `viewport`")
         );

@@ -6,7 +6,7 @@ use occsim_traces::raster::RasterProfile;
 use occsim_traces::workloads::{
     city, collision_oracle, forest, full_render_visible_pixels, generate, load_obj, traffic,
     CameraPath, CityOptions, DriverKind, DriverOptions, ForestOptions, GridVariant, ObjOptions,
-    TrafficOptions, Walk, WorkloadScene,
+    TrafficOptions, Walk, WorkloadScene, MAX_WALK_FRAMES,
 };
 use occsim_traces::Event;
 
@@ -456,8 +456,13 @@ fn bad_options_are_refused_clearly() {
     let lazy = DriverOptions::new(DriverKind::LazyGrid);
     assert_eq!(
         error(&lazy, &Walk { frames: 0, ..WALK }),
-        "frames 0: a walkthrough needs at least 1 frame"
+        "frames 0 out of range: a walkthrough has 1 to 1000000 frames"
     );
+    let endless = Walk {
+        frames: MAX_WALK_FRAMES + 1,
+        ..WALK
+    };
+    assert!(error(&lazy, &endless).starts_with("frames 1000001 out of range"));
     assert!(error(&lazy, &Walk { width: 0, ..WALK }).contains("width 0 out of range"));
     let mut delayed_grid = lazy.clone();
     delayed_grid.query_delay_frames = 1;

@@ -765,7 +765,8 @@ impl Arch {
 }
 
 /// The 1-based line where `key` is assigned in a TOML text, at the start of a line or inside
-/// an inline table (0 when not found).
+/// an inline table, or opens a table (`[o2.key]`, which had been named with no line; 0 when
+/// not found).
 fn line_of_key(text: &str, key: &str) -> usize {
     let assigns = |line: &str| {
         line.match_indices(key).any(|(at, _)| {
@@ -774,7 +775,13 @@ fn line_of_key(text: &str, key: &str) -> usize {
             word_start && line[at + key.len()..].trim_start().starts_with('=')
         })
     };
-    text.lines().position(assigns).map_or(0, |index| index + 1)
+    let opens = |line: &str| {
+        let header = line.trim().trim_start_matches('[');
+        let header = header.split(']').next().unwrap_or_default();
+        line.trim().starts_with('[') && header.rsplit('.').next().map(str::trim) == Some(key)
+    };
+    let names = |line: &str| assigns(line) || opens(line);
+    text.lines().position(names).map_or(0, |index| index + 1)
 }
 
 /// " (did you mean a, b?)" for the keys close to `key`, or the list of all keys.

@@ -27,7 +27,9 @@ pub struct CameraPath {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct CameraFile {
-    metres_per_frame: Option<f32>,
+    /// Read as TOML writes it, so that a value no f32 holds is named as written (1e-300
+    /// had been refused as `0`, 1e300 as `inf`).
+    metres_per_frame: Option<f64>,
     #[serde(default)]
     keyframe: Vec<CameraKeyframe>,
 }
@@ -113,11 +115,25 @@ impl CameraPath {
     /// target = [0.0, 1.7, 0.0]
     /// ```
     pub fn from_toml(text: &str, file: &str) -> Result<CameraPath, WorkloadError> {
-        let parsed: CameraFile = toml::from_str(text).map_err(|error| WorkloadError::Camera {
+        let fail = |message: String| WorkloadError::Camera {
             file: file.to_owned(),
-            message: error.to_string().trim_end().replace('\n', " "),
-        })?;
-        CameraPath::new(parsed.keyframe, parsed.metres_per_frame, file)
+            message,
+        };
+        let parsed: CameraFile = toml::from_str(text)
+            .map_err(|error| fail(error.to_string().trim_end().replace('\n', " ")))?;
+        let step = match parsed.metres_per_frame {
+            Some(step) if !(step > 0.0 && step <= MAX_COORDINATE as f64 && step as f32 > 0.0) => {
+                let written = match step.abs() {
+                    a if a != 0.0 && !(1e-4..1e9).contains(&a) => format!("{step:e}"),
+                    _ => step.to_string(),
+                };
+                return Err(fail(format!(
+                    "metres_per_frame = {written}: expected a positive distance, at most {MAX_COORDINATE:e} metres"
+                )));
+            }
+            step => step.map(|step| step as f32),
+        };
+        CameraPath::new(parsed.keyframe, step, file)
     }
 
     pub fn keyframes(&self) -> &[CameraKeyframe] {
@@ -206,9 +222,15 @@ mod tests {
         assert!(
             error("[[keyframe]]\neye = [0, 0, 0]\ntarget = [0, 0, 1]\nfov = 3\n").contains("fov")
         );
-        assert!(error(
-            "metres_per_frame = -1\n[[keyframe]]\neye = [0, 0, 0]\ntarget = [0, 0, 1]\n"
-        )
-        .contains("positive"));
+        // A step no f32 holds is named as written (it had been `0` and `inf`).
+        for (step, named) in [("-1", "-1"), ("1e-300", "1e-300"), ("1e300", "1e300")] {
+            let text = format!(
+                "metres_per_frame = {step}\n[[keyframe]]\neye = [0, 0, 0]\ntarget = [0, 0, 1]\n"
+            );
+            assert_eq!(
+                error(&text),
+                format!("cam.toml: metres_per_frame = {named}: expected a positive distance, at most 1e9 metres")
+            );
+        }
     }
 }

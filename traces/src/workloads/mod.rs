@@ -354,6 +354,19 @@ pub(crate) struct FrameView {
     pub(crate) height: u32,
 }
 
+/// The grids' cell side in pixels, where none is given (the lazy-grid and busy-grid
+/// drivers').
+pub const DEFAULT_GRID_CELL_PIXELS: u32 = 32;
+
+/// Tiles a side of the collision driver's check area, where none is given.
+pub const DEFAULT_COLLISION_TILES: u32 = 2;
+
+/// Most frames a walkthrough may have: an hour at 30 frames a second, ten times over.
+/// `culling compare` keeps each frame's statistics for its report (a few hundred bytes a
+/// frame and driver), so its memory grows with the frames; a walk of 4 billion frames of a
+/// small OBJ model had grown past 900 MB before its first frame was reported.
+pub const MAX_WALK_FRAMES: u32 = 1_000_000;
+
 /// The frames and viewport of a walkthrough.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Walk {
@@ -370,10 +383,13 @@ pub struct Walk {
 impl Walk {
     /// Its frames and viewport within range (each error names its option).
     pub fn validate(&self) -> Result<(), WorkloadError> {
-        if self.frames == 0 {
+        if !(1..=MAX_WALK_FRAMES).contains(&self.frames) {
             return Err(WorkloadError::Option {
                 option: WorkloadOption::Frames,
-                detail: "0: a walkthrough needs at least 1 frame".into(),
+                detail: format!(
+                    "{} out of range: a walkthrough has 1 to {MAX_WALK_FRAMES} frames",
+                    self.frames
+                ),
             });
         }
         for (option, side) in [
@@ -567,9 +583,9 @@ impl DriverOptions {
             query_delay_frames: 0,
             quadtree_levels: 0,
             adaptive_threshold: None,
-            grid_cell_pixels: 32,
+            grid_cell_pixels: DEFAULT_GRID_CELL_PIXELS,
             grid_variant: GridVariant::ZBuffer,
-            collision_tiles: 2,
+            collision_tiles: DEFAULT_COLLISION_TILES,
             collision_step: None,
             virtual_occlusion_buffer: false,
             occlusion_map_cell_pixels: 4,
@@ -725,11 +741,30 @@ impl DriverOptions {
                 );
             }
         }
-        if self.grid_variant != GridVariant::ZBuffer && !self.is_grid() {
+        if (self.grid_variant != GridVariant::ZBuffer
+            || self.grid_cell_pixels != DEFAULT_GRID_CELL_PIXELS)
+            && !self.is_grid()
+        {
+            let option = if self.grid_variant != GridVariant::ZBuffer {
+                WorkloadOption::GridVariant
+            } else {
+                WorkloadOption::GridCellPixels
+            };
             return fail(
-                WorkloadOption::GridVariant,
+                option,
                 "applies to the lazy-grid and busy-grid drivers only".into(),
             );
+        }
+        let collision = self.kind == DriverKind::Collision;
+        if !collision
+            && (self.collision_tiles != DEFAULT_COLLISION_TILES || self.collision_step.is_some())
+        {
+            let option = if self.collision_step.is_some() {
+                WorkloadOption::CollisionStep
+            } else {
+                WorkloadOption::CollisionTiles
+            };
+            return fail(option, "applies to the collision driver only".into());
         }
         Ok(())
     }

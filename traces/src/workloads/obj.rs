@@ -36,11 +36,17 @@ const VERTEX_LINE_BYTES: usize = 256;
 
 /// Counts the lines a reader has handed out, refuses overlong lines, and finds the first
 /// line the model's checks would refuse without its line: a vertex whose position is not a
-/// number within [`MAX_COORDINATE`] of the origin, a face of fewer than three corners (the
-/// loader keeps no line: found afterwards, such a vertex was named by its values alone, and
-/// such a face dropped without a word).
+/// number within [`MAX_COORDINATE`] of the origin, a face of fewer than three corners or
+/// naming a vertex not given (the loader keeps no line: found afterwards, such a vertex was
+/// named by its values alone, and such a face dropped without a word).
 struct LineCounter<R> {
     inner: R,
+    lines: Lines,
+}
+
+/// What [`LineCounter`] knows of the lines handed out so far.
+#[derive(Default)]
+struct Lines {
     /// Newlines consumed so far.
     newlines: u64,
     /// Bytes consumed since the last newline.
@@ -51,6 +57,11 @@ struct LineCounter<R> {
     line: Vec<u8>,
     /// The first line refused ([`line_problem`]): its number and why.
     bad_line: Option<(u64, String)>,
+    /// The last whole line's first bytes (the loader has read a line whole when it
+    /// refuses it), to show in the loader's errors.
+    previous: Vec<u8>,
+    /// Vertex lines so far: a face may name only those.
+    vertices: u64,
 }
 
 impl<R: BufRead> Read for LineCounter<R> {
@@ -65,7 +76,7 @@ impl<R: BufRead> Read for LineCounter<R> {
 
 impl<R: BufRead> BufRead for LineCounter<R> {
     fn fill_buf(&mut self) -> std::io::Result<&[u8]> {
-        if let Some((_, message)) = &self.refused {
+        if let Some((_, message)) = &self.lines.refused {
             return Err(std::io::Error::new(
                 std::io::ErrorKind::InvalidData,
                 message.clone(),
@@ -78,35 +89,86 @@ impl<R: BufRead> BufRead for LineCounter<R> {
         // The bytes are still buffered: look at them before letting them go.
         if let Ok(buffer) = self.inner.fill_buf() {
             for &byte in &buffer[..amount.min(buffer.len())] {
-                if byte == b'\n' {
-                    self.newlines += 1;
-                    // A line longer than the bytes kept is left to the model's check
-                    // (its numbers may run past them).
-                    if self.bad_line.is_none() && self.line_bytes <= VERTEX_LINE_BYTES {
-                        self.bad_line = line_problem(&self.line).map(|why| (self.newlines, why));
-                    }
-                    self.line_bytes = 0;
-                    self.line.clear();
-                } else {
-                    if self.line.len() < VERTEX_LINE_BYTES {
-                        self.line.push(byte);
-                    }
-                    self.line_bytes += 1;
-                    if self.line_bytes > MAX_LINE_BYTES && self.refused.is_none() {
-                        let message = format!("line longer than {MAX_LINE_BYTES} bytes");
-                        self.refused = Some((self.newlines + 1, message));
-                    }
-                }
+                self.lines.byte(byte);
             }
         }
         self.inner.consume(amount);
     }
 }
 
+impl Lines {
+    /// The next byte handed out.
+    fn byte(&mut self, byte: u8) {
+        if byte == b'\n' {
+            self.newlines += 1;
+            self.end_line(self.newlines);
+            self.line_bytes = 0;
+            std::mem::swap(&mut self.line, &mut self.previous);
+            self.line.clear();
+        } else {
+            if self.line.len() < VERTEX_LINE_BYTES {
+                self.line.push(byte);
+            }
+            self.line_bytes += 1;
+            if self.line_bytes > MAX_LINE_BYTES && self.refused.is_none() {
+                let message = format!("line longer than {MAX_LINE_BYTES} bytes");
+                self.refused = Some((self.newlines + 1, message));
+            }
+        }
+    }
+
+    /// Line `number` (the current one) is whole: judge it where no line was refused yet
+    /// and its bytes were all kept (a longer one is left to the loader: its numbers may run
+    /// past them), and count it if it is a vertex.
+    fn end_line(&mut self, number: u64) {
+        if self.bad_line.is_none() && self.line_bytes <= VERTEX_LINE_BYTES {
+            self.bad_line = line_problem(&self.line, self.vertices).map(|why| (number, why));
+        }
+        let first_word = self
+            .line
+            .split(u8::is_ascii_whitespace)
+            .find(|w| !w.is_empty());
+        if first_word == Some(b"v") {
+            self.vertices += 1;
+        }
+    }
+
+    /// The loader's error `e` on the line it stopped at, with that line and what such a
+    /// line should be.
+    fn loader_error(&self, e: &tobj::LoadError) -> (u64, String) {
+        if let Some(refused) = &self.refused {
+            return refused.clone();
+        }
+        let line = self.current_line();
+        // Read whole, the line is the previous one; cut short (at the end), the current one.
+        let text = match self.line_bytes {
+            0 => &self.previous,
+            _ => &self.line,
+        };
+        let text = String::from_utf8_lossy(text);
+        let expected = match e {
+            tobj::LoadError::PositionParseError => {
+                "a vertex is `v X Y Z` (W and a colour optional), numbers"
+            }
+            tobj::LoadError::NormalParseError => "a normal is `vn X Y Z`, numbers",
+            tobj::LoadError::TexcoordParseError => {
+                "a texture coordinate is `vt U` (V and W optional), numbers"
+            }
+            tobj::LoadError::FaceParseError => {
+                "a face is `f` and three or more corners `V`, `V/T`, `V//N` or `V/T/N`, each a vertex's number (from 1, or from -1 back from the last)"
+            }
+            _ => return (line, format!("{e} in `{}`", text.trim())),
+        };
+        (line, format!("{e} in `{}`: {expected}", text.trim()))
+    }
+}
+
 /// Why the line is refused, when it is a vertex whose position is not a number within
-/// [`MAX_COORDINATE`] of the origin or a face of fewer than three corners (any other line,
-/// or one whose numbers do not parse, is the loader's to judge).
-fn line_problem(line: &[u8]) -> Option<String> {
+/// [`MAX_COORDINATE`] of the origin, or a face of fewer than three corners or one naming a
+/// vertex not among the `vertices` before it (any other line, or one whose numbers do not
+/// parse, is the loader's to judge; it had found a face's vertex out of range only at the
+/// object's end, naming neither the face nor the vertex).
+fn line_problem(line: &[u8], vertices: u64) -> Option<String> {
     let text = std::str::from_utf8(line).ok()?;
     let mut words = text.split_whitespace();
     match words.next() {
@@ -120,20 +182,28 @@ fn line_problem(line: &[u8]) -> Option<String> {
             })
         }
         Some("f") => {
-            let corners = words.count();
-            (corners < 3).then(|| {
-                format!(
+            let corners: Vec<&str> = words.collect();
+            if corners.len() < 3 {
+                return Some(format!(
                     "face `{}` has {}: a face has three or more",
                     text.trim(),
-                    counted(corners as u64, "corner", "corners")
-                )
-            })
+                    counted(corners.len() as u64, "corner", "corners")
+                ));
+            }
+            let named = |corner: &&str| corner.split('/').next()?.parse::<i64>().ok();
+            let outside = |&vertex: &i64| vertex == 0 || vertex.unsigned_abs() > vertices;
+            let vertex = corners.iter().filter_map(named).find(outside)?;
+            Some(format!(
+                "face `{}` names vertex {vertex}, where {} given before it (a face's vertices count from 1, or from -1 back from the last)",
+                text.trim(),
+                counted(vertices, "vertex is", "vertices are"),
+            ))
         }
         _ => None,
     }
 }
 
-impl<R> LineCounter<R> {
+impl Lines {
     /// The line being read when parsing stopped (1-based).
     fn current_line(&self) -> u64 {
         if self.line_bytes > 0 {
@@ -163,11 +233,7 @@ pub fn load_obj(
     };
     let mut counter = LineCounter {
         inner: reader,
-        newlines: 0,
-        line_bytes: 0,
-        refused: None,
-        line: Vec::new(),
-        bad_line: None,
+        lines: Lines::default(),
     };
     let load_options = tobj::LoadOptions {
         triangulate: true,
@@ -179,18 +245,20 @@ pub fn load_obj(
         Err(tobj::LoadError::OpenFileFailed)
     })
     .map_err(|e| {
-        let (line, message) = counter
-            .refused
-            .clone()
-            .unwrap_or_else(|| (counter.current_line(), format!("{e}")));
+        let lines = &counter.lines;
+        // A line refused before the loader's error came is the first fault.
+        let (line, message) = match lines.bad_line.clone() {
+            Some(bad) if lines.refused.is_none() => bad,
+            _ => lines.loader_error(&e),
+        };
         error(line, message)
     })?;
-    if counter.bad_line.is_none() && counter.line_bytes <= VERTEX_LINE_BYTES {
+    let lines = &mut counter.lines;
+    if lines.line_bytes > 0 {
         // The last line, without its newline.
-        let last = counter.newlines + 1;
-        counter.bad_line = line_problem(&counter.line).map(|why| (last, why));
+        lines.end_line(lines.newlines + 1);
     }
-    if let Some((line, why)) = counter.bad_line {
+    if let Some((line, why)) = lines.bad_line.take() {
         return Err(error(line, why));
     }
     let limit = options.max_triangles_per_object.max(1) as usize;
@@ -320,15 +388,36 @@ mod tests {
                 .map(|e| e.to_string())
                 .unwrap_or_default()
         };
+        // The loader's errors name the line as written and what such a line should be.
         assert_eq!(
             error("v 0 0 0\nv 1 0 0\nv x 1 0\n"),
-            "bad.obj:3: position parse error"
+            "bad.obj:3: position parse error in `v x 1 0`: a vertex is `v X Y Z` (W and a colour optional), numbers"
         );
-        assert!(
-            error("v 0 0 0\nf 1 2 3\n").starts_with("bad.obj:2: "),
-            "{}",
-            error("v 0 0 0\nf 1 2 3\n")
+        assert_eq!(
+            error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 x 3\n"),
+            "bad.obj:4: face parse error in `f 1 x 3`: a face is `f` and three or more corners `V`, `V/T`, `V//N` or `V/T/N`, each a vertex's number (from 1, or from -1 back from the last)"
         );
+        // A face naming a vertex not given before it, on its line, with the vertex and the
+        // count (the loader had said only "face vertex index out of bounds", at the end).
+        assert_eq!(
+            error("v 0 0 0\nf 1 2 3\n"),
+            "bad.obj:2: face `f 1 2 3` names vertex 2, where 1 vertex is given before it (a face's vertices count from 1, or from -1 back from the last)"
+        );
+        for (model, line, vertex) in [
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2//2 -4\n", 4, "-4"),
+            ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\nv 1 1 1\n", 4, "0"),
+            ("v 0 0 0\nv 1 0 0\nf 1 2 3\nv 0 1 0", 3, "3"),
+        ] {
+            let said = error(model);
+            let expected = format!("bad.obj:{line}: face `");
+            assert!(said.starts_with(&expected), "{model:?}: {said}");
+            assert!(
+                said.contains(&format!("names vertex {vertex}, where")),
+                "{said}"
+            );
+        }
+        // Negative numbers count back from the last vertex given: -3 is the first of three.
+        assert_eq!(error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n"), "");
         assert_eq!(
             error("# nothing\n"),
             "bad.obj: no faces: the model has no triangles to draw (a face has three corners or more)"
@@ -360,9 +449,9 @@ mod tests {
         let long_one = format!("1{}e-250", "0".repeat(250));
         let model = format!("v 0 0 0\nv 1 0 0\nv 0 0 {long_one}\nf 1 2 3\n");
         assert_eq!(error(&model), "");
-        assert_eq!(line_problem(b"v 1e9 -1e9 0"), None);
+        assert_eq!(line_problem(b"v 1e9 -1e9 0", 0), None);
         assert_eq!(
-            line_problem(b" v 1e9 -1.1e9 0 ").as_deref(),
+            line_problem(b" v 1e9 -1.1e9 0 ", 0).as_deref(),
             Some("vertex `v 1e9 -1.1e9 0` is not a number within 1e9 of the origin")
         );
         // A face of fewer than three corners is named by its line (the loader had dropped
@@ -372,10 +461,10 @@ mod tests {
             "bad.obj:4: face `f 1 2` has 2 corners: a face has three or more"
         );
         assert_eq!(
-            line_problem(b"f 7").as_deref(),
+            line_problem(b"f 7", 7).as_deref(),
             Some("face `f 7` has 1 corner: a face has three or more")
         );
-        assert_eq!(line_problem(b"f 1/1 2/2 3/3 4/4"), None);
+        assert_eq!(line_problem(b"f 1/1 2/2 3/3 4/4", 4), None);
         let tiny_and_far = "v 9e8 9e8 9e8\nv 9e8 9e8 9e8\nv 9e8 9e8 9e8\nf 1 2 3\n";
         assert!(
             error(tiny_and_far).contains("too small"),

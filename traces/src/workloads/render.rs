@@ -82,7 +82,8 @@ impl<'s, S: EventSink, O: CommandObserver> Renderer<'s, S, O> {
     pub(crate) fn new(golden: GoldenModel, sink: &'s mut S, observer: &'s mut O) -> Self {
         let crate::state::RenderState { width, height, .. } = *golden.state();
         Renderer {
-            golden,
+            // Its queries' answers are read as they come, and no draw is conditioned.
+            golden: golden.without_conditions(),
             sink: CountingSink {
                 inner: sink,
                 fragments: 0,
