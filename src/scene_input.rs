@@ -1,7 +1,7 @@
 //! Resolving a SCENE argument: a built-in name or a scene file, read as a stream.
 
 use anyhow::Context;
-use occsim_traces::builtin::{self, BuiltinChoices};
+use occsim_traces::builtin::{self, BuiltinChoices, BuiltinError};
 use occsim_traces::scene::{Command, SceneReader};
 use std::io::{BufRead, BufReader, Cursor, Read};
 
@@ -18,8 +18,11 @@ pub struct SceneInput {
 /// path to a scene file (which takes no choice: its first line sets its viewport).
 /// A progress bar over its bytes is drawn on a terminal while it is read (`count`, `trace gen`).
 pub fn open_scene(scene: &str, choices: &BuiltinChoices) -> anyhow::Result<SceneInput> {
-    let text =
-        builtin::scene_text_with(scene, choices).with_context(|| format!("scene `{scene}`"))?;
+    // Named by its flag, as a walkthrough's are.
+    let text = builtin::scene_text_with(scene, choices).map_err(|e| match e {
+        BuiltinError::OutOfRange { .. } => anyhow::anyhow!("--{e} (the built-in {scene} scene)"),
+        BuiltinError::NotAChoice { choice, .. } => anyhow::anyhow!("--{choice}: {e}"),
+    })?;
     if let (None, Some((choice, _))) = (&text, choices.given().next()) {
         anyhow::bail!(
             "--{choice}: scene file `{scene}` is made as it is written (--width, --height, --frames and --seed choose a walkthrough's, or the built-in demo's or random scene's)"

@@ -209,19 +209,19 @@ fn built_in_scenes_take_their_choices_and_refuse_the_rest() {
     for (args, says) in [
         (
             &["hardcases", "--width", "64"][..],
-            "hardcases scene has no width",
+            "--width: the built-in hardcases scene has no width",
         ),
         (
             &["random", "--frames", "2"][..],
-            "random scene has no frames",
+            "--frames: the built-in random scene has no frames",
         ),
         (
             &["demo", "--frames", "65"][..],
-            "frames 65: expected 1 to 64",
+            "--frames 65: expected 1 to 64 (the built-in demo scene)",
         ),
         (
             &["demo", "--height", "0"][..],
-            "height 0: expected 1 to 16384",
+            "--height 0: expected 1 to 16384",
         ),
         (
             &[hard_file.as_str(), "--seed", "3"][..],

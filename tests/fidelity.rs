@@ -185,11 +185,17 @@ fn bad_levels_fail_clearly() {
         ),
         (
             &["--fidelity", "functional", "--effects", "all"],
-            "the functional level has none",
+            "--effects: the functional level has no effect models",
         ),
         (
             &["--fidelity", "analytic", "--effects", "auto"],
-            "the analytic level has none",
+            "--effects: the analytic level has no effect models",
+        ),
+        // The rtl level builds every model: `all` says so (the IR's rtl test gives it),
+        // `auto` had been passed over.
+        (
+            &["--fidelity", "rtl", "--effects", "auto"],
+            "--effects: the rtl level builds every effect model (--effects all)",
         ),
     ] {
         let error = support::cli::stderr_of_failure(&[&["replay", &trace][..], args].concat());
@@ -625,12 +631,22 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
         ),
         (
             format!("{}[[trace]]\nname = \"w\"\nclass = \"w\"\nwalk = \"--driver nosuch\"\n", demo("width = 64")),
-            "trace `w`: walk `--driver nosuch`: unknown driver `nosuch`".to_string(),
+            "trace `w`: walk `--driver nosuch` at the full scale: unknown driver `nosuch`".to_string(),
         ),
         // A flag the walk does not have, in one line (clap's usage of `occsim` had followed).
         (
             format!("{}[[trace]]\nname = \"w\"\nclass = \"w\"\nwalk = \"--bogus 3\"\n", demo("width = 64")),
-            "walk `--bogus 3`: unexpected argument '--bogus' found; tip:".to_string(),
+            "walk `--bogus 3` at the full scale: unexpected argument '--bogus' found; tip:".to_string(),
+        ),
+        // A walk's options and its size at each scale, checked as the file is read (they had
+        // been found only when the trace came to be made, after the traces before it).
+        (
+            format!("{}[[trace]]\nname = \"w\"\nclass = \"w\"\nwalk = \"--driver frustum --collision-tiles 3\"\n", demo("width = 64")),
+            "walk `--driver frustum --collision-tiles 3` at the full scale: --collision-tiles applies to the collision driver only".to_string(),
+        ),
+        (
+            format!("{}[[trace]]\nname = \"w\"\nclass = \"w\"\nwalk = \"--driver frustum\"\nsmall = {{ frames = 2000000 }}\n", demo("width = 64")),
+            "at the small scale: --frames 2000000 out of range".to_string(),
         ),
     ] {
         let file = dir.join("meaningless.toml");

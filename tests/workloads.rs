@@ -119,6 +119,12 @@ fn culling_compare_takes_arch_and_set() {
             "{twice}"
         );
     }
+    // Threshold 1 is the hom row itself: two rows of one name.
+    let again = stderr_of_failure(&[&walk[..], &["--opacity-threshold", "0.9,1"]].concat());
+    assert!(
+        again.contains("--opacity-threshold 1: the hom row"),
+        "{again}"
+    );
     let wrong = stderr_of_failure(&[&walk[..], &["--arch", "o2", "--set", "boards=2"]].concat());
     assert!(
         wrong.contains("--arch o2") && wrong.contains("boards"),

@@ -8,7 +8,7 @@
 use super::fidelity::{
     distribution, percent, ErrorDistribution, Ladder, LevelRow, ERROR_FLOOR_PERCENT,
 };
-use super::workload_args::{in_one_line, parse_workload_flags, write_workload_trace};
+use super::workload_args::{in_one_line, parse_workload_flags, write_workload_trace, WorkloadArgs};
 use anyhow::Context;
 use occsim_sim::levels::Fidelity;
 use occsim_sim::Arch;
@@ -18,7 +18,6 @@ use occsim_traces::builtin::{self, BuiltinChoices};
 use occsim_traces::raster::RasterProfile;
 use occsim_traces::retile::TileGrid;
 use occsim_traces::rng::Fnv1a;
-use occsim_traces::state::MAX_VIEWPORT_SIDE;
 use occsim_traces::trace::TraceReader;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -110,20 +109,6 @@ struct Size {
 }
 
 impl Size {
-    /// A walk's sides within the viewport's and its frames at least 1 (its own flags bound
-    /// the rest).
-    fn check_walk(&self) -> Result<(), String> {
-        for (key, side) in [("width", self.width), ("height", self.height)] {
-            if let Some(side) = side.filter(|side| !(1..=MAX_VIEWPORT_SIDE).contains(side)) {
-                return Err(format!("{key} = {side}: expected 1..={MAX_VIEWPORT_SIDE}"));
-            }
-        }
-        match self.frames {
-            Some(0) => Err("frames = 0: expected at least 1".into()),
-            _ => Ok(()),
-        }
-    }
-
     /// As a built-in scene's choices.
     fn choices(&self) -> BuiltinChoices {
         BuiltinChoices {
@@ -241,24 +226,18 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
                 builtin::NAMES.join(", ")
             );
         }
-        for (scale, size) in [("full", recipe.full), ("small", recipe.small)] {
-            let checked = match &recipe.scene {
-                Some(scene) => size.choices().check(scene).map_err(|e| e.to_string()),
-                None => size.check_walk(),
+        // Each scale's trace as it will be made: its size, and a walk's flags and options.
+        for scale in [Scale::Full, Scale::Small] {
+            let checked = match (&recipe.scene, &recipe.walk) {
+                (Some(scene), _) => (recipe.size(scale).choices().check(scene))
+                    .map_err(|e| format!("{}: {e}", scale.name())),
+                (None, Some(walk)) => recipe
+                    .walk_args(scale)
+                    .map(|_| ())
+                    .map_err(|e| format!("walk `{walk}` at the {} scale: {e}", scale.name())),
+                (None, None) => Ok(()),
             };
-            checked
-                .map_err(|e| anyhow::anyhow!("{name}: trace `{}`: {scale}: {e}", recipe.name))?;
-        }
-        if let Some(walk) = &recipe.walk {
-            let flags: Vec<&str> = walk.split_whitespace().collect();
-            let walk_error = |e: &dyn std::fmt::Display| {
-                anyhow::anyhow!("{name}: trace `{}`: walk `{walk}`: {e}", recipe.name)
-            };
-            let args = parse_workload_flags(&flags).map_err(|e| walk_error(&in_one_line(&e)))?;
-            args.driver
-                .driver
-                .parse::<occsim_traces::workloads::DriverKind>()
-                .map_err(|e| walk_error(&e))?;
+            checked.map_err(|e| anyhow::anyhow!("{name}: trace `{}`: {e}", recipe.name))?;
         }
     }
     Ok(CorpusFile {
@@ -268,6 +247,27 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
 }
 
 impl Recipe {
+    /// A walk recipe's flags at `scale` (its size appended), parsed and checked as `trace
+    /// gen` checks them: the walk's viewport and frames, the driver and its options.
+    fn walk_args(&self, scale: Scale) -> Result<WorkloadArgs, String> {
+        let walk = self.walk.as_deref().unwrap_or_default();
+        let mut flags: Vec<String> = walk.split_whitespace().map(str::to_owned).collect();
+        let size = self.size(scale);
+        for (flag, value) in [
+            ("--width", size.width),
+            ("--height", size.height),
+            ("--frames", size.frames),
+        ] {
+            if let Some(value) = value {
+                flags.extend([flag.to_owned(), value.to_string()]);
+            }
+        }
+        let args = parse_workload_flags(&flags).map_err(|e| in_one_line(&e))?;
+        (args.scene.walk().validate()).map_err(|e| super::workload_args::flagged(e).to_string())?;
+        args.driver.options().map_err(|e| e.to_string())?;
+        Ok(args)
+    }
+
     fn size(&self, scale: Scale) -> Size {
         match scale {
             Scale::Small => self.small,
@@ -281,11 +281,7 @@ impl Recipe {
         let recipe = serde_json::to_string(self).unwrap_or_default();
         let version = occsim_traces::trace::FORMAT_VERSION;
         let digest = Fnv1a::of(format!("{recipe}{scale:?}{version}").as_bytes());
-        let scale = match scale {
-            Scale::Small => "small",
-            Scale::Full => "full",
-        };
-        dir.join(format!("{}-{scale}-{digest:016x}.occt", self.name))
+        dir.join(format!("{}-{}-{digest:016x}.occt", self.name, scale.name()))
     }
 
     /// Make the trace at `output` (atomically).
@@ -293,18 +289,8 @@ impl Recipe {
         let size = self.size(scale);
         let context = || format!("corpus trace `{}`", self.name);
         if let Some(walk) = &self.walk {
-            let mut flags: Vec<String> = walk.split_whitespace().map(str::to_owned).collect();
-            for (flag, value) in [
-                ("--width", size.width),
-                ("--height", size.height),
-                ("--frames", size.frames),
-            ] {
-                if let Some(value) = value {
-                    flags.extend([flag.to_owned(), value.to_string()]);
-                }
-            }
-            let args = parse_workload_flags(&flags)
-                .map_err(|e| anyhow::anyhow!("walk `{walk}`: {}", in_one_line(&e)))
+            let args = (self.walk_args(scale))
+                .map_err(|e| anyhow::anyhow!("walk `{walk}`: {e}"))
                 .with_context(context)?;
             write_workload_trace(&args, output, |_, _| Ok(())).with_context(context)?;
             return Ok(());

@@ -162,6 +162,12 @@ pub fn run(args: CompareArgs) -> anyhow::Result<()> {
             anyhow::bail!("{flag}: {twice} is named twice");
         }
     }
+    // The conservative hom driver (threshold 1) is a row of its own already.
+    if args.opacity_threshold.contains(&1.0) {
+        anyhow::bail!(
+            "--opacity-threshold 1: the hom row is the conservative threshold already; give approximate ones below 1"
+        );
+    }
     let machines = args.machines()?;
     let variants = match args.bands {
         true => band_corners(&args, &machines)?,

@@ -28,7 +28,7 @@ pub struct FidelityArg {
     #[arg(long, value_name = "LEVEL", default_value = "cycle")]
     pub fidelity: Fidelity,
     /// Effect models of the cycle and sampled levels: auto (only those the trace can
-    /// observe: same results and cycles; the default) or all.
+    /// observe: same results and cycles; the default) or all (what the rtl level builds).
     #[arg(long, value_name = "auto|all")]
     pub effects: Option<EffectsChoice>,
     /// At the analytic and sampled levels, decode every fragment even where the trace's
@@ -47,13 +47,16 @@ impl FidelityArg {
             !self.no_index || matches!(level, Fidelity::Analytic | Fidelity::Sampled { .. }),
             "--no-index applies to the analytic and sampled levels, which read the trace's index (the {level} level decodes every fragment)"
         );
+        // The rtl level builds every model: `all` is what it does, `auto` it cannot do.
+        let rtl_builds_all = level == Fidelity::Rtl && self.effects == Some(EffectsChoice::All);
         match self.effects {
-            // The rtl level builds every model whatever is chosen.
-            Some(_) if matches!(level, Fidelity::Functional | Fidelity::Analytic) => {
-                anyhow::bail!(
-                    "--effects chooses the cycle, sampled and rtl levels' effect models; the {level} level has none"
-                )
-            }
+            Some(_) if !level.builds_effects() && !rtl_builds_all => anyhow::bail!(
+                "--effects: the {level} level {}",
+                match level {
+                    Fidelity::Rtl => "builds every effect model (--effects all)",
+                    _ => "has no effect models (the cycle and sampled levels choose theirs)",
+                }
+            ),
             chosen => Ok(chosen.unwrap_or(EffectsChoice::Auto)),
         }
     }

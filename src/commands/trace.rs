@@ -29,8 +29,9 @@ pub enum TraceCommand {
 #[derive(clap::Args)]
 pub struct GenArgs {
     /// A scene file, or a built-in scene: demo (which takes --width, --height, --frames and
-    /// --seed), random (--width, --height and --seed) or hardcases. Leave it out to make a
-    /// walkthrough of --scene (city, forest, obj:PATH) driven by --driver instead.
+    /// --seed; 1280x1024, 4 frames and seed 1998 unless given), random (--width, --height
+    /// and --seed; seed 1 unless given) or hardcases. Leave it out to make a walkthrough of
+    /// --scene (city, forest, obj:PATH) driven by --driver instead.
     #[arg(value_name = "SCENE", conflicts_with_all = super::workload_args::WALK_ONLY)]
     pub scene_file: Option<String>,
     /// The trace file to write (written atomically).

@@ -6,6 +6,7 @@ use anyhow::Context;
 use occsim_sweep::output::write_atomically_with;
 use occsim_traces::builtin::BuiltinChoices;
 use occsim_traces::trace::{TraceHeader, TraceSummary};
+use occsim_traces::words::counted;
 use occsim_traces::workloads::{
     city, forest, generate_observed, load_obj, traffic, CameraPath, CityOptions, CommandObserver,
     DriverKind, DriverOptions, ForestOptions, FrameStats, GenerateError, ObjOptions,
@@ -21,7 +22,7 @@ pub struct SceneArgs {
     /// or `obj:PATH` for a Wavefront OBJ model.
     #[arg(long, default_value = "city")]
     pub scene: String,
-    /// Frames of the walkthrough (default 8; the built-in demo's default 4).
+    /// Frames of the walkthrough (default 8).
     #[arg(long)]
     pub frames: Option<u32>,
     /// Viewport width in pixels (default 1280).
@@ -30,8 +31,7 @@ pub struct SceneArgs {
     /// Viewport height in pixels (default 1024).
     #[arg(long)]
     pub height: Option<u32>,
-    /// Seed of the city's, forest's or built-in demo's layout (default 1998), or of the
-    /// built-in random triangles (default 1).
+    /// Seed of the city's or forest's layout (default 1998).
     #[arg(long)]
     pub seed: Option<u64>,
     /// City and traffic: blocks along each side (default 6, at most 32; triangles grow with
@@ -295,12 +295,12 @@ impl SceneArgs {
     pub fn describe(&self, scene: &WorkloadScene) -> String {
         let walk = self.walk();
         format!(
-            "{} ({} objects, {} triangles, seed {}) {} frames at {}x{}",
+            "{} ({}, {}, seed {}) {} at {}x{}",
             self.scene,
-            scene.object_count(),
-            scene.triangle_count(),
+            counted(scene.object_count() as u64, "object", "objects"),
+            counted(scene.triangle_count(), "triangle", "triangles"),
             self.seed(),
-            walk.frames,
+            counted(walk.frames.into(), "frame", "frames"),
             walk.width,
             walk.height
         )
@@ -434,12 +434,19 @@ where
 /// named a usage of `occsim` it does not have).
 pub fn in_one_line(error: &clap::Error) -> String {
     let text = error.to_string();
-    let said: Vec<&str> = (text.lines().map(str::trim))
-        .filter(|line| !line.is_empty())
+    let said = (text.lines().map(str::trim))
+        .filter(|line| !line.is_empty() && !line.starts_with("For more information"))
         .take_while(|line| !line.starts_with("Usage:"))
-        .map(|line| line.strip_prefix("error: ").unwrap_or(line))
-        .collect();
-    said.join("; ")
+        .map(|line| line.strip_prefix("error: ").unwrap_or(line));
+    let mut one = String::new();
+    for line in said {
+        if !one.is_empty() {
+            // A line ending in a colon introduces the next ("not provided: --camera-to").
+            one.push_str(if one.ends_with(':') { " " } else { "; " });
+        }
+        one.push_str(line);
+    }
+    one
 }
 
 /// `trace gen` for a workload: walk the scene with the driver, writing the golden model's
@@ -537,6 +544,42 @@ mod tests {
             Ok(Err(error)) => format!("{error:#}"),
             Err(error) => error,
         }
+    }
+
+    /// Every flag a walkthrough takes is in [`WALK_ONLY`] but those a built-in scene takes
+    /// too, so that a flag added later is refused beside a SCENE, not passed over.
+    #[test]
+    fn walk_only_names_every_walkthrough_flag_a_scene_does_not_take() {
+        use clap::Args;
+        let command = WorkloadArgs::augment_args(clap::Command::new("walk"));
+        let shared = ["frames", "width", "height", "seed", "profile"];
+        let ids: Vec<String> = (command.get_arguments())
+            .map(|arg| arg.get_id().to_string())
+            .collect();
+        for id in &ids {
+            let walk_only = WALK_ONLY.contains(&id.as_str());
+            assert_eq!(walk_only, !shared.contains(&id.as_str()), "{id}");
+        }
+        assert_eq!(WALK_ONLY.len() + shared.len(), ids.len(), "{ids:?}");
+    }
+
+    #[test]
+    fn a_flag_error_reads_in_one_line() {
+        let said = |flags: &[&str]| in_one_line(&parse_workload_flags(flags).err().unwrap());
+        assert_eq!(
+            said(&["--bogus"]),
+            "unexpected argument '--bogus' found; tip: a similar argument exists: '--blocks'"
+        );
+        let digit = said(&["--frames", "x"]);
+        assert_eq!(
+            digit,
+            "invalid value 'x' for '--frames <FRAMES>': invalid digit found in string"
+        );
+        let missing = said(&["--camera-from", "1,2,3"]);
+        assert!(
+            missing.ends_with("were not provided: --camera-to <CAMERA_TO>"),
+            "{missing}"
+        );
     }
 
     #[test]

@@ -80,7 +80,7 @@ impl BuiltinChoices {
             let refused = match (scene, choice) {
                 (Some("demo"), _) | (Some("random"), "width" | "height" | "seed") => None,
                 (Some("random"), _) => Some(" (it is one image)"),
-                _ => Some(" (its coordinates are written for its own 64x64 viewport)"),
+                _ => Some(" (it is one hand-written image, 64x64)"),
             };
             if let (Some(why), Some(scene)) = (refused, scene) {
                 return Err(BuiltinError::NotAChoice { scene, choice, why });

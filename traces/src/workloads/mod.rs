@@ -613,7 +613,7 @@ impl DriverOptions {
         if self.query_delay_frames > 0 {
             label += &format!("/d{}", self.query_delay_frames);
         }
-        if self.grid_cell_pixels != 32 && self.is_grid() {
+        if self.grid_cell_pixels != DEFAULT_GRID_CELL_PIXELS && self.is_grid() {
             label += &format!("/c{}", self.grid_cell_pixels);
         }
         if self.grid_variant == GridVariant::OcclusionBuffer {

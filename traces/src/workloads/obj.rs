@@ -60,8 +60,12 @@ struct Lines {
     /// The last whole line's first bytes (the loader has read a line whole when it
     /// refuses it), to show in the loader's errors.
     previous: Vec<u8>,
-    /// Vertex lines so far: a face may name only those.
+    /// Vertex lines so far: a face's negative numbers count back from the last of them.
     vertices: u64,
+    /// The first face naming the highest vertex number so far: its line, its text and that
+    /// number (the loader finds a vertex past the file's only at an object's end, and names
+    /// neither the face nor the vertex).
+    furthest: Option<(u64, String, i64)>,
 }
 
 impl<R: BufRead> Read for LineCounter<R> {
@@ -121,25 +125,71 @@ impl Lines {
     /// and its bytes were all kept (a longer one is left to the loader: its numbers may run
     /// past them), and count it if it is a vertex.
     fn end_line(&mut self, number: u64) {
-        if self.bad_line.is_none() && self.line_bytes <= VERTEX_LINE_BYTES {
+        let whole = self.line_bytes <= VERTEX_LINE_BYTES;
+        if self.bad_line.is_none() && whole {
             self.bad_line = line_problem(&self.line, self.vertices).map(|why| (number, why));
         }
         let first_word = self
             .line
             .split(u8::is_ascii_whitespace)
             .find(|w| !w.is_empty());
-        if first_word == Some(b"v") {
-            self.vertices += 1;
+        match first_word {
+            Some(b"v") => self.vertices += 1,
+            Some(b"f") if whole => self.note_face(number),
+            _ => {}
+        }
+    }
+
+    /// Face line `number` is whole: keep it if it names a higher vertex than any before.
+    fn note_face(&mut self, number: u64) {
+        let text = String::from_utf8_lossy(&self.line);
+        let Some(highest) = face_vertices(&text).max() else {
+            return;
+        };
+        if self
+            .furthest
+            .as_ref()
+            .is_none_or(|&(_, _, most)| highest > most)
+        {
+            self.furthest = Some((number, text.trim().to_owned(), highest));
+        }
+    }
+
+    /// The first fault found, with its line where it has one: the line refused first (a
+    /// problem line, or an overlong one), else the loader's error `e`.
+    fn first_fault(&self, e: &tobj::LoadError) -> (Option<u64>, String) {
+        let found = [self.bad_line.clone(), self.refused.clone()];
+        if let Some((line, why)) = found.into_iter().flatten().min_by_key(|(line, _)| *line) {
+            return (Some(line), why);
+        }
+        match (e, &self.furthest) {
+            (tobj::LoadError::FaceVertexOutOfBounds, Some((line, face, vertex)))
+                if *vertex as u64 > self.vertices =>
+            {
+                let given = counted(self.vertices, "vertex is", "vertices are");
+                let why = format!("face `{face}` names vertex {vertex}, where {given} given");
+                (Some(*line), why)
+            }
+            _ => self.loader_error(e),
         }
     }
 
     /// The loader's error `e` on the line it stopped at, with that line and what such a
     /// line should be.
-    fn loader_error(&self, e: &tobj::LoadError) -> (u64, String) {
-        if let Some(refused) = &self.refused {
-            return refused.clone();
+    fn loader_error(&self, e: &tobj::LoadError) -> (Option<u64>, String) {
+        use tobj::LoadError::*;
+        if let FaceVertexOutOfBounds
+        | FaceTexCoordOutOfBounds
+        | FaceNormalOutOfBounds
+        | FaceColorOutOfBounds = e
+        {
+            // Found at an object's end, not on the line read last: no line is named.
+            return (
+                None,
+                format!("{e} (in an object ending at line {})", self.current_line()),
+            );
         }
-        let line = self.current_line();
+        let line = Some(self.current_line());
         // Read whole, the line is the previous one; cut short (at the end), the current one.
         let text = match self.line_bytes {
             0 => &self.previous,
@@ -157,17 +207,24 @@ impl Lines {
             tobj::LoadError::FaceParseError => {
                 "a face is `f` and three or more corners `V`, `V/T`, `V//N` or `V/T/N`, each a vertex's number (from 1, or from -1 back from the last)"
             }
-            _ => return (line, format!("{e} in `{}`", text.trim())),
+            _ => return (line, e.to_string()),
         };
         (line, format!("{e} in `{}`: {expected}", text.trim()))
     }
 }
 
+/// The vertex numbers a face line's corners name (`V`, `V/T`, `V//N`, `V/T/N`), those that
+/// parse.
+fn face_vertices(text: &str) -> impl Iterator<Item = i64> + '_ {
+    let corners = text.split_whitespace().skip(1);
+    corners.filter_map(|corner| corner.split('/').next()?.parse().ok())
+}
+
 /// Why the line is refused, when it is a vertex whose position is not a number within
-/// [`MAX_COORDINATE`] of the origin, or a face of fewer than three corners or one naming a
-/// vertex not among the `vertices` before it (any other line, or one whose numbers do not
-/// parse, is the loader's to judge; it had found a face's vertex out of range only at the
-/// object's end, naming neither the face nor the vertex).
+/// [`MAX_COORDINATE`] of the origin, or a face of fewer than three corners, naming vertex 0,
+/// or counting back (negative) past the `vertices` before it (any other line, or one whose
+/// numbers do not parse, is the loader's to judge; a vertex number past the file's, which
+/// may come after the face, is judged at the end: [`Lines::furthest`]).
 fn line_problem(line: &[u8], vertices: u64) -> Option<String> {
     let text = std::str::from_utf8(line).ok()?;
     let mut words = text.split_whitespace();
@@ -190,11 +247,11 @@ fn line_problem(line: &[u8], vertices: u64) -> Option<String> {
                     counted(corners.len() as u64, "corner", "corners")
                 ));
             }
-            let named = |corner: &&str| corner.split('/').next()?.parse::<i64>().ok();
-            let outside = |&vertex: &i64| vertex == 0 || vertex.unsigned_abs() > vertices;
-            let vertex = corners.iter().filter_map(named).find(outside)?;
+            let outside =
+                |&vertex: &i64| vertex == 0 || (vertex < 0 && vertex.unsigned_abs() > vertices);
+            let vertex = face_vertices(text).find(outside)?;
             Some(format!(
-                "face `{}` names vertex {vertex}, where {} given before it (a face's vertices count from 1, or from -1 back from the last)",
+                "face `{}` names vertex {vertex}, where {} given before it (a face's vertices count from 1, or from -1 back from the last given)",
                 text.trim(),
                 counted(vertices, "vertex is", "vertices are"),
             ))
@@ -244,14 +301,9 @@ pub fn load_obj(
     let (models, _materials) = tobj::load_obj_buf(&mut counter, &load_options, |_| {
         Err(tobj::LoadError::OpenFileFailed)
     })
-    .map_err(|e| {
-        let lines = &counter.lines;
-        // A line refused before the loader's error came is the first fault.
-        let (line, message) = match lines.bad_line.clone() {
-            Some(bad) if lines.refused.is_none() => bad,
-            _ => lines.loader_error(&e),
-        };
-        error(line, message)
+    .map_err(|e| match counter.lines.first_fault(&e) {
+        (Some(line), message) => error(line, message),
+        (None, message) => model_error(message),
     })?;
     let lines = &mut counter.lines;
     if lines.line_bytes > 0 {
@@ -397,16 +449,18 @@ mod tests {
             error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 x 3\n"),
             "bad.obj:4: face parse error in `f 1 x 3`: a face is `f` and three or more corners `V`, `V/T`, `V//N` or `V/T/N`, each a vertex's number (from 1, or from -1 back from the last)"
         );
-        // A face naming a vertex not given before it, on its line, with the vertex and the
-        // count (the loader had said only "face vertex index out of bounds", at the end).
+        // A face naming a vertex past the file's, on its line, with the vertex and the count
+        // (the loader had said only "face vertex index out of bounds", at the object's end):
+        // the first face naming the highest.
         assert_eq!(
-            error("v 0 0 0\nf 1 2 3\n"),
-            "bad.obj:2: face `f 1 2 3` names vertex 2, where 1 vertex is given before it (a face's vertices count from 1, or from -1 back from the last)"
+            error("v 0 0 0\nf 1 2 3\nf 1 2 4\nf 1 4 2\nv 1 0 0\n# end\n"),
+            "bad.obj:3: face `f 1 2 4` names vertex 4, where 2 vertices are given"
         );
+        // Counting back (negative) past the vertices before the face, or naming vertex 0, on
+        // the face's line as it is read.
         for (model, line, vertex) in [
             ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/1 2//2 -4\n", 4, "-4"),
             ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\nv 1 1 1\n", 4, "0"),
-            ("v 0 0 0\nv 1 0 0\nf 1 2 3\nv 0 1 0", 3, "3"),
         ] {
             let said = error(model);
             let expected = format!("bad.obj:{line}: face `");
@@ -416,8 +470,15 @@ mod tests {
                 "{said}"
             );
         }
-        // Negative numbers count back from the last vertex given: -3 is the first of three.
+        // Negative numbers count back from the last vertex given (-3 is the first of three),
+        // and a face may come before the vertices it names, as the loader takes it.
         assert_eq!(error("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n"), "");
+        assert_eq!(error("f 1 2 3\nv 0 0 0\nv 1 0 0\nv 0 1 0\n"), "");
+        // An error the loader finds at an object's end is not pinned on the last line read.
+        assert_eq!(
+            error("v 0 0 0 1 0 0\nv 10 0 0\nv 0 10 0\nf 1 2 3\nv 5 5 5\n# the end\n"),
+            "bad.obj: face vertex color index out of bounds (in an object ending at line 6)"
+        );
         assert_eq!(
             error("# nothing\n"),
             "bad.obj: no faces: the model has no triangles to draw (a face has three corners or more)"
