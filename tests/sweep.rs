@@ -65,6 +65,48 @@ fn results_do_not_depend_on_jobs_or_shards() {
     assert!(stderr.contains("engines=2,counter_bits=8"), "{stderr}");
 }
 
+/// A sweep's lines belong to its machine: resuming or merging results made on another
+/// base architecture is refused, as another trace's are (a resume with `--arch ir4` had
+/// continued a file made with `--arch ir2`, one CSV holding both machines' points).
+#[test]
+fn results_of_another_machine_are_not_joined() {
+    let dir = scratch("machine");
+    let trace = dir.join("hard.occt");
+    ok(&["trace", "gen", "hardcases", "-o", s(&trace)]);
+    let sweep = |arch: &str, out: &Path, extra: &[&str]| -> Vec<String> {
+        let args = ["sweep", s(&trace), "--arch", arch, "--set", "engines=1,2"];
+        let args = [&args[..], &["--out", s(out)], extra].concat();
+        args.into_iter().map(str::to_owned).collect()
+    };
+    let ok = |args: Vec<String>| ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let occsim = |args: Vec<String>| occsim(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let ir2 = dir.join("ir2.jsonl");
+    ok(sweep("ir2", &ir2, &["--shard", "1/2"]));
+    let resumed = occsim(sweep("ir4", &ir2, &["--resume", "--shard", "1/2"]));
+    assert!(!resumed.status.success());
+    let stderr = String::from_utf8_lossy(&resumed.stderr);
+    assert!(stderr.contains("on another machine"), "{stderr}");
+    // A shard of each machine: the merge refuses the second.
+    let ir4 = dir.join("ir4.jsonl");
+    ok(sweep("ir4", &ir4, &["--shard", "2/2"]));
+    let merged = dir.join("merged.jsonl");
+    let merge = occsim(
+        ["sweep", "merge", s(&merged), s(&ir2), s(&ir4)]
+            .map(str::to_owned)
+            .to_vec(),
+    );
+    assert!(!merge.status.success());
+    let stderr = String::from_utf8_lossy(&merge.stderr);
+    assert!(stderr.contains("on another machine"), "{stderr}");
+    assert!(!merged.exists());
+    // The same machine's shards merge.
+    let same = dir.join("ir2-rest.jsonl");
+    ok(sweep("ir2", &same, &["--shard", "2/2"]));
+    ok(["sweep", "merge", s(&merged), s(&ir2), s(&same)]
+        .map(str::to_owned)
+        .to_vec());
+}
+
 /// README's rule: a results file is replaced only with `--force`, by `sweep` (which
 /// otherwise continues it with `--resume` or refuses) and by `sweep merge` alike.
 #[test]
@@ -260,6 +302,15 @@ fn bad_axes_are_rejected_by_name() {
         ("engines=0", "'engines' = 0"),
         ("counter_bits=wide", "counter_bits"),
         ("engines", "expected key=v1,v2"),
+        // One value written two ways would be one point run twice under two keys.
+        (
+            "engines=4,04",
+            "bad --set engines=04: the same value as '4' (4) given before it",
+        ),
+        (
+            "clock_mhz=1e2,100",
+            "bad --set clock_mhz=100: the same value as '1e2' (100.0) given before it",
+        ),
     ] {
         let output = occsim(&["sweep", s(&trace), "--set", set, "--out", s(&out)]);
         assert!(!output.status.success(), "{set} accepted");
@@ -290,6 +341,24 @@ fn bad_axes_are_rejected_by_name() {
         );
         assert!(!out.exists(), "{flag}: points ran");
     }
+    // An x axis of names or flags cannot be drawn: refused before any point runs (a sweep
+    // over blending=false,true had run both points and written its results first).
+    let args = [
+        "sweep",
+        s(&trace),
+        "--set",
+        "blending=false,true",
+        "--out",
+        s(&out),
+    ];
+    let output = occsim(&[&args[..], &["--plot", s(&plot)]].concat());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        !output.status.success()
+            && stderr.contains("cannot plot against 'blending': value 'false' is not a number"),
+        "{stderr}"
+    );
+    assert!(!out.exists(), "blending: points ran");
     // A chart at the results file's path or its CSV view's is refused before any point runs
     // (it had replaced the results, the run ending with status 0).
     for plot in [out.clone(), out.with_extension("csv")] {

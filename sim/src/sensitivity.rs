@@ -136,12 +136,14 @@ pub struct Variant {
 pub enum SensitivityError {
     /// A base value outside its parameter's plausible range: the band would not be a band
     /// around it.
-    #[error("parameter '{key}' = {value} lies outside its plausible range {low}..{high}; a band is taken around values inside it")]
+    #[error("parameter '{key}' = {value} lies outside its plausible {}; a band is taken around values inside it", plausible(low, high, *choice))]
     OutsideRange {
         key: &'static str,
         value: String,
         low: String,
         high: String,
+        /// A choice's plausible values are the two named, not a range between them.
+        choice: bool,
     },
     #[error(transparent)]
     Arch(#[from] ArchError),
@@ -195,6 +197,15 @@ pub struct Study {
     varied: Vec<(&'static Param, Value, Value)>,
 }
 
+/// A parameter's plausible values as a message names them: `range 2..6`, or for a choice
+/// `choices columns and morton` (blocks, the third, had read as lying inside `columns..morton`).
+fn plausible(low: &str, high: &str, choice: bool) -> String {
+    match choice {
+        true => format!("choices {low} and {high}"),
+        false => format!("range {low}..{high}"),
+    }
+}
+
 fn span<const N: usize>(values: [f64; N]) -> (f64, f64) {
     values
         .iter()
@@ -220,6 +231,7 @@ impl Study {
                     value: value.to_string(),
                     low: low.to_string(),
                     high: high.to_string(),
+                    choice: matches!(value, Value::Choice(_)),
                 });
             }
             if !fixed.contains(&param.key) {
@@ -421,6 +433,16 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+        // A choice's plausible values are named as two, not a range.
+        let mut ir = Arch::builtin("ir4").unwrap();
+        ir.set("interleave=blocks").unwrap();
+        let error = Study::new(&ir, &[]).unwrap_err().to_string();
+        assert!(
+            error.contains(
+                "'interleave' = \"blocks\" lies outside its plausible choices \"columns\" and \"morton\""
+            ),
+            "{error}"
+        );
         // A sweep's own axis is not varied, but its values are still checked.
         assert!(Study::new(&arch, &["page_hit_latency_cycles"]).is_err());
     }

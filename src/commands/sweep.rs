@@ -410,10 +410,18 @@ pub fn run(args: SweepArgs) -> Result<()> {
     if args.run.bands {
         digest += ":bands";
     }
+    // And so does another machine under the grid's values: a resumed sweep or a merge had
+    // taken lines made on ir2 into one on ir4, or on an arch file's machine into the
+    // built-in's, under one CSV.
+    let machine = serde_json::to_string(&base.report_entries())?;
+    let machine = occsim_traces::rng::Fnv1a::of(machine.as_bytes());
+    digest += &format!(":arch={machine:016x}");
     let validate = |key: &str, value: &str| {
-        base.clone()
-            .set_value(key, value)
-            .map_err(|e| e.to_string())
+        let mut arch = base.clone();
+        arch.set_value(key, value).map_err(|e| e.to_string())?;
+        Ok(arch
+            .get(key)
+            .map_or_else(|| value.to_owned(), |read| read.to_string()))
     };
     let replayer = super::sensitivity::Replayer {
         trace: &trace,
@@ -530,6 +538,7 @@ fn check_plot(plot: &PlotArgs, grid: &Grid, bands: bool) -> Result<()> {
             swept.join(", ")
         );
     }
+    occsim_sweep::plot_axis(grid.axes(), plot.plot_x.as_deref()).map_err(in_cli_words)?;
     Ok(())
 }
 
@@ -821,9 +830,9 @@ mod tests {
     #[test]
     fn run_with_rejects_keys_the_machine_does_not_know() {
         let args = parse(&["t.trace", "--out", "unused.jsonl", "--set", "engnies=1,2"]).unwrap();
-        let machine_keys = |key: &str, _: &str| -> std::result::Result<(), String> {
+        let machine_keys = |key: &str, value: &str| -> std::result::Result<String, String> {
             match key {
-                "boards" | "engines" => Ok(()),
+                "boards" | "engines" => Ok(value.to_owned()),
                 _ => Err(format!(
                     "unknown parameter '{key}' (known: boards, engines)"
                 )),

@@ -66,16 +66,7 @@ pub fn metric_chart(
     x_key: Option<&str>,
     subject: &str,
 ) -> Result<LineChart> {
-    let x_axis = match x_key {
-        Some(key) => axes
-            .iter()
-            .find(|a| a.key == key)
-            .ok_or_else(|| SweepError::NotSwept {
-                key: key.to_owned(),
-                swept: axes.iter().map(|a| a.key.clone()).collect(),
-            })?,
-        None => axes.last().ok_or(SweepError::NothingSwept)?,
-    };
+    let x_axis = plot_axis(axes, x_key)?;
     let x_values = numeric_values(x_axis)?;
     if !lines.iter().any(|s| s.line.metrics.contains_key(metric)) {
         let known: std::collections::BTreeSet<&str> = lines
@@ -142,6 +133,25 @@ pub fn metric_chart(
         x_ticks: Some(x_values),
         series,
     })
+}
+
+/// The axis a chart of `axes` is drawn against: `x_key`, else the last; refused unless it
+/// is swept and every value of it a number. Known before any point runs, so a sweep checks
+/// it first (a sweep over `blending=false,true` with `--plot` had run every point, written
+/// its results and then failed on the chart).
+pub fn plot_axis<'a>(axes: &'a [Axis], x_key: Option<&str>) -> Result<&'a Axis> {
+    let x_axis = match x_key {
+        Some(key) => axes
+            .iter()
+            .find(|a| a.key == key)
+            .ok_or_else(|| SweepError::NotSwept {
+                key: key.to_owned(),
+                swept: axes.iter().map(|a| a.key.clone()).collect(),
+            })?,
+        None => axes.last().ok_or(SweepError::NothingSwept)?,
+    };
+    numeric_values(x_axis)?;
+    Ok(x_axis)
 }
 
 /// The axis values as numbers (the chart's x ticks), or an error naming a non-numeric one.

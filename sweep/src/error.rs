@@ -287,7 +287,7 @@ pub fn whose_results(found: &str, expected: &str) -> &'static str {
         digest.splitn(3, ':').take(2).collect()
     }
     if trace(found) == trace(expected) {
-        "the same trace replayed otherwise (another tile grid, level or band study)"
+        "the same trace replayed otherwise (on another machine, or another tile grid, level or band study)"
     } else {
         "another trace"
     }

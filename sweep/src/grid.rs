@@ -13,7 +13,10 @@ pub const MAX_GRID_POINTS: usize = 1_000_000;
 
 /// Caller-supplied check of one `key=value` pair (the machine configuration knows which keys
 /// exist and which values are legal). Returns a message for the user on rejection.
-pub type AxisValidator<'a> = &'a dyn Fn(&str, &str) -> std::result::Result<(), String>;
+/// Checks one `key=value` of an axis: the value as the parameter reads it (`4` for `04`,
+/// `100.0` for `1e2`), so that one value written twice two ways is found, or why it is
+/// refused.
+pub type AxisValidator<'a> = &'a dyn Fn(&str, &str) -> std::result::Result<String, String>;
 
 /// One swept parameter: its key and the values to try, in the order given.
 #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -189,12 +192,23 @@ impl Grid {
             .map(|spec| parse_axis(spec))
             .collect::<Result<Vec<_>>>()?;
         for axis in &axes {
+            let mut read: Vec<(String, &str)> = Vec::new();
             for value in &axis.values {
-                validate(&axis.key, value).map_err(|why| SweepError::RejectedValue {
-                    key: axis.key.clone(),
-                    value: value.clone(),
-                    why,
-                })?;
+                let as_read =
+                    validate(&axis.key, value).map_err(|why| SweepError::RejectedValue {
+                        key: axis.key.clone(),
+                        value: value.clone(),
+                        why,
+                    })?;
+                // One point run twice under two names (`engines=4,04`, `clock_mhz=1e2,100`).
+                if let Some((_, first)) = read.iter().find(|(seen, _)| *seen == as_read) {
+                    return Err(SweepError::RejectedValue {
+                        key: axis.key.clone(),
+                        value: value.clone(),
+                        why: format!("the same value as '{first}' ({as_read}) given before it"),
+                    });
+                }
+                read.push((as_read, value));
             }
         }
         Grid::from_axes(axes)
@@ -275,8 +289,8 @@ impl Grid {
 mod tests {
     use super::*;
 
-    fn accept_all(_: &str, _: &str) -> std::result::Result<(), String> {
-        Ok(())
+    fn accept_all(_: &str, value: &str) -> std::result::Result<String, String> {
+        Ok(value.to_owned())
     }
 
     fn grid(specs: &[&str]) -> Result<Grid> {
@@ -338,9 +352,9 @@ mod tests {
     #[test]
     fn validator_rejections_name_the_key_and_value() {
         let specs = vec!["boards=1,3".to_string()];
-        let only_powers_of_two = |key: &str, value: &str| -> std::result::Result<(), String> {
+        let only_powers_of_two = |key: &str, value: &str| -> std::result::Result<String, String> {
             match (key, value) {
-                ("boards", "1" | "2" | "4") => Ok(()),
+                ("boards", "1" | "2" | "4") => Ok(value.to_owned()),
                 ("boards", _) => Err("boards must be 1, 2 or 4".to_string()),
                 _ => Err(format!("unknown key '{key}'")),
             }

@@ -27,7 +27,7 @@ pub mod progress;
 mod record;
 mod runner;
 
-pub use chart::metric_chart;
+pub use chart::{metric_chart, plot_axis};
 pub use error::{kept_points, whose_results, BoxError, Joining, SweepError};
 pub use grid::{Axis, AxisValidator, Grid, Point, Shard, MAX_GRID_POINTS};
 pub use merge::{list_keys, merge_pending, merge_results, MergeReport};

@@ -21,8 +21,8 @@ fn chain(error: &dyn std::error::Error) -> String {
     text
 }
 
-fn accept_all(_: &str, _: &str) -> std::result::Result<(), String> {
-    Ok(())
+fn accept_all(_: &str, value: &str) -> std::result::Result<String, String> {
+    Ok(value.to_owned())
 }
 
 fn grid(specs: &[&str]) -> Grid {
@@ -529,7 +529,7 @@ fn resume_refuses_results_of_another_trace_or_shard() {
     let err = chain(&run_sweep(&o, &fake_machine).unwrap_err());
     assert!(
         err.contains(
-            "belong to the same trace replayed otherwise (another tile grid, level or band study)"
+            "belong to the same trace replayed otherwise (on another machine, or another tile grid, level or band study)"
         ),
         "{err}"
     );
