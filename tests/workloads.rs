@@ -208,6 +208,17 @@ fn culling_compare_bands_hold_every_frame_time_and_leave_nothing_behind() {
             at,
             "the same corners for every driver"
         );
+        // Each corner says what it changes, so that it can be run again with --set (the
+        // JSON had given its frame time alone).
+        let variants = time["variants"].as_array().unwrap();
+        assert_eq!(variants.len(), at, "{time}");
+        for corner in variants {
+            let corner = corner.as_str().unwrap();
+            let first = corner.split(", ").next().unwrap();
+            let (key, _) = first.split_once('=').unwrap();
+            let known = (o2["parameters"].as_array().unwrap().iter()).any(|p| p["key"] == key);
+            assert!(known, "{corner}: `{key}` is no o2 parameter");
+        }
     }
     assert!(
         corners.unwrap() >= 2,

@@ -203,7 +203,7 @@ const BAND_REFERENCE_DRIVER: &str = "hierarchical";
 fn band_corners(
     args: &CompareArgs,
     machines: &[(String, occsim_sim::Arch)],
-) -> anyhow::Result<Vec<Vec<occsim_sim::Arch>>> {
+) -> anyhow::Result<Vec<Vec<Corner>>> {
     let scratch = ScratchDir::create("occsim-bands")?;
     let trace = scratch.path().join("reference-walk.occt");
     let mut walk = parse_workload_flags(["--driver", BAND_REFERENCE_DRIVER])?;
@@ -224,7 +224,12 @@ fn band_corners(
             corners
                 .corners
                 .iter()
-                .map(|changes| Ok(Study::apply(arch, changes)?))
+                .map(|changes| {
+                    let said: Vec<String> = (changes.iter())
+                        .map(|(key, value)| format!("{key}={value}"))
+                        .collect();
+                    Ok((said.join(", "), Study::apply(arch, changes)?))
+                })
                 .collect()
         })
         .collect()
@@ -236,10 +241,14 @@ const CYCLE_MACHINES: [&str; 2] = ["o2", "ir4"];
 /// A sim machine as a per-frame timing model: each frame replays on a fresh machine (frames
 /// are self-contained: each begins with a clear and the whole render state), and on a fresh
 /// machine for each of its variants (the corners of `--bands`).
+/// A corner of a machine's sensitivity study: what it changes (`key=value, ...`) and the
+/// architecture so changed.
+type Corner = (String, occsim_sim::Arch);
+
 struct MachineFrames {
     name: String,
     arch: occsim_sim::Arch,
-    variants: Vec<occsim_sim::Arch>,
+    variants: Vec<Corner>,
     /// During a frame: the machine, then one a variant.
     machines: Vec<occsim_sim::MachineModel>,
     /// Moves a step each frame timed.
@@ -250,7 +259,7 @@ impl MachineFrames {
     fn new(
         name: String,
         arch: occsim_sim::Arch,
-        variants: Vec<occsim_sim::Arch>,
+        variants: Vec<Corner>,
         progress: occsim_sweep::progress::ProgressBar,
     ) -> MachineFrames {
         MachineFrames {
@@ -300,9 +309,13 @@ impl FrameCycleModel for MachineFrames {
         self.name.clone()
     }
 
+    fn variants(&self) -> Vec<String> {
+        self.variants.iter().map(|(said, _)| said.clone()).collect()
+    }
+
     fn begin_frame(&mut self, width: u32, height: u32) -> Result<(), ModelError> {
         self.machines = std::iter::once(&self.arch)
-            .chain(&self.variants)
+            .chain(self.variants.iter().map(|(_, arch)| arch))
             .map(|arch| occsim_sim::MachineModel::new(arch, width, height))
             .collect::<Result<_, _>>()
             .map_err(|e| self.failed(Some(e)))?;
@@ -789,7 +802,10 @@ mod tests {
         let machine = MachineFrames::new(
             "o2".into(),
             o2.clone(),
-            vec![o2, slow_host],
+            vec![
+                (String::new(), o2),
+                ("geometry_host_cycles_per_vertex=200".into(), slow_host),
+            ],
             occsim_sweep::progress::ProgressBar::hidden(),
         );
         let mut models: Vec<Box<dyn FrameCycleModel>> = vec![Box::new(machine)];
@@ -804,6 +820,7 @@ mod tests {
             assert_eq!(at[0], time.ms_per_frame, "{}", d.driver);
             assert!(at[1] > time.ms_per_frame, "{}: {at:?}", d.driver);
             assert_eq!(time.ms_per_frame_band, Some((at[0], at[1])), "{}", d.driver);
+            assert_eq!(time.variants[1], "geometry_host_cycles_per_vertex=200");
         }
     }
 

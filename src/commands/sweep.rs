@@ -69,8 +69,9 @@ pub struct SweepRunArgs {
     /// A swept parameter and its values; repeat for more axes (the first is outermost).
     #[arg(long = "set", value_name = "KEY=V1,V2,...")]
     pub set: Vec<String>,
-    /// Worker threads [default: available parallelism]. Results do not depend on it.
-    #[arg(long)]
+    /// Worker threads, at least 1 [default: available parallelism]. Results do not depend
+    /// on it.
+    #[arg(long, value_parser = at_least_one_job)]
     pub jobs: Option<NonZeroUsize>,
     /// Run only every N-th point, starting at the K-th (1-based), e.g. for a job array.
     #[arg(long, value_name = "K/N", value_parser = parse_shard)]
@@ -158,7 +159,15 @@ fn parse_shard(spec: &str) -> std::result::Result<Shard, String> {
 }
 
 /// What to do about results of another sweep found when resuming.
-const RESUME_ADVICE: &str = "choose another --out, or remove the file to start over";
+/// `--jobs N`: a whole number of at least 1, refused in the words `sensitivity` and `culling
+/// compare` use (the parser's own had been "number would be zero for non-zero type").
+fn at_least_one_job(text: &str) -> std::result::Result<NonZeroUsize, String> {
+    let jobs: usize = text.trim().parse().map_err(|e| format!("{e}"))?;
+    NonZeroUsize::new(jobs).ok_or_else(|| "give at least 1".to_string())
+}
+
+const RESUME_ADVICE: &str =
+    "choose another --out, or pass --force instead of --resume to start over in this file";
 
 /// A sweep engine error in the command line's words: where the engine says what happened,
 /// this adds the flag that does something about it. Every other error passes unchanged.
@@ -774,7 +783,8 @@ mod tests {
                 joining: Joining::Resume,
             }),
             "r.jsonl:1: results are for the grid 'engines=1,2', but this sweep has the grid \
-             'engines=4'; choose another --out, or remove the file to start over"
+             'engines=4'; choose another --out, or pass --force instead of --resume to start \
+             over in this file"
         );
         assert_eq!(
             words(SweepError::SweepPointFailed {
@@ -845,6 +855,21 @@ mod tests {
         assert_eq!(
             err,
             "bad --set engnies=1: unknown parameter 'engnies' (known: boards, engines)"
+        );
+    }
+
+    #[test]
+    fn jobs_are_at_least_one() {
+        assert_eq!(at_least_one_job("0"), Err("give at least 1".to_string()));
+        assert_eq!(at_least_one_job("3"), Ok(NonZeroUsize::new(3).unwrap()));
+        let error = parse(&["t.occt", "--out", "r.jsonl", "--jobs", "0"])
+            .err()
+            .unwrap();
+        assert!(
+            error
+                .to_string()
+                .contains("'0' for '--jobs <JOBS>': give at least 1"),
+            "{error}"
         );
     }
 

@@ -17,6 +17,10 @@ const LOG_Y_RATIO: f64 = 1000.0;
 
 /// The unit of a metric, from its name's ending (`_cycles`, `_seconds`, `_per_second`, ...).
 pub fn metric_unit(metric: &str) -> Option<&'static str> {
+    // A band's ends are in their metric's unit (they had been drawn without one).
+    let metric = (metric.strip_suffix("_band_low"))
+        .or_else(|| metric.strip_suffix("_band_high"))
+        .unwrap_or(metric);
     let units = [
         ("frames_per_second", "frames/s"),
         ("fragments_per_cycle", "fragments/cycle"),
@@ -24,6 +28,7 @@ pub fn metric_unit(metric: &str) -> Option<&'static str> {
         ("_cycles", "cycles"),
         ("_seconds", "s"),
         ("_percent", "%"),
+        ("_ms", "ms"),
         ("fragments", "fragments"),
         ("queries", "queries"),
     ];

@@ -555,6 +555,9 @@ fn metrics_get_their_units_from_their_names() {
         ("fragments_per_cycle", Some("fragments/cycle")),
         ("simulated_seconds", Some("s")),
         ("queries", Some("queries")),
+        ("frame_ms", Some("ms")),
+        ("total_cycles_band_high", Some("cycles")),
+        ("frame_ms_band_low", Some("ms")),
         ("tiles", None),
     ] {
         assert_eq!(crate::chart::metric_unit(metric), unit, "{metric}");

@@ -38,6 +38,11 @@ pub trait FrameCycleModel {
     fn event(&mut self, event: &Event) -> Result<(), ModelError>;
     /// The frame's time for its events since `begin_frame`.
     fn end_frame(&mut self) -> Result<FrameCost, ModelError>;
+    /// What each of the machine's variants changes from it (`key=value, ...`), in the
+    /// order of [`FrameCost::variant_seconds`]; none without variants.
+    fn variants(&self) -> Vec<String> {
+        Vec::new()
+    }
 }
 
 /// What one frame cost on a machine: its cycles and seconds, and where the host's time went
@@ -77,10 +82,14 @@ pub struct MachineFrameTime {
     /// architectures for every driver, so drivers compare variant by variant).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub ms_per_frame_at_variants: Vec<f64>,
+    /// What each variant changes from the machine, in the same order (`key=value, ...`), so
+    /// that a corner can be run again (the JSON had given its frame time alone).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub variants: Vec<String>,
 }
 
 impl MachineFrameTime {
-    fn of(machine: String, frames: &[FrameCost]) -> MachineFrameTime {
+    fn of(machine: String, variants: Vec<String>, frames: &[FrameCost]) -> MachineFrameTime {
         let n = frames.len().max(1) as f64;
         let mean = |f: &dyn Fn(&FrameCost) -> u64| frames.iter().map(f).sum::<u64>() as f64 / n;
         let seconds: f64 = frames.iter().map(|f| f.seconds).sum();
@@ -99,6 +108,7 @@ impl MachineFrameTime {
             pipe_wait_cycles: mean(&|f| f.pipe_wait),
             ms_per_frame_band: None,
             ms_per_frame_at_variants: mean_ms_at_variants(frames),
+            variants,
         }
         .with_band()
     }
@@ -278,10 +288,10 @@ pub fn compare(
             })
             .collect();
         let mut report = driver_report(options, scene, walk, &stats, &full, cycles);
-        report.frame_time = names
-            .into_iter()
+        let variants = splitter.models.iter().map(|m| m.variants());
+        report.frame_time = (names.into_iter().zip(variants))
             .zip(&splitter.cycles)
-            .map(|(name, per_frame)| MachineFrameTime::of(name, per_frame))
+            .map(|((name, variants), per_frame)| MachineFrameTime::of(name, variants, per_frame))
             .collect();
         drivers.push(report);
     }
@@ -367,7 +377,7 @@ mod tests {
             frame(0.010, vec![0.005, 0.020]),
             frame(0.030, vec![0.045, 0.010]),
         ];
-        let time = MachineFrameTime::of("m".into(), &frames);
+        let time = MachineFrameTime::of("m".into(), Vec::new(), &frames);
         let (low, high) = time.ms_per_frame_band.unwrap();
         assert!(
             (low - 15.0).abs() < 1e-9 && (high - 25.0).abs() < 1e-9,
@@ -383,7 +393,7 @@ mod tests {
 
     #[test]
     fn without_variants_there_is_no_band() {
-        let time = MachineFrameTime::of("m".into(), &[frame(0.010, Vec::new())]);
+        let time = MachineFrameTime::of("m".into(), Vec::new(), &[frame(0.010, Vec::new())]);
         assert_eq!(time.ms_per_frame_band, None);
     }
 }
