@@ -22,7 +22,7 @@ pub struct SceneArgs {
     /// or `obj:PATH` for a Wavefront OBJ model.
     #[arg(long, default_value = "city")]
     pub scene: String,
-    /// Frames of the walkthrough (default 8).
+    /// Frames of the walkthrough (default 8, at most 1,000,000).
     #[arg(long)]
     pub frames: Option<u32>,
     /// Viewport width in pixels (default 1280).
