@@ -263,8 +263,7 @@ impl Recipe {
             }
         }
         let args = parse_workload_flags(&flags).map_err(|e| in_one_line(&e))?;
-        (args.scene.walk().validate()).map_err(|e| super::workload_args::flagged(e).to_string())?;
-        args.driver.options().map_err(|e| e.to_string())?;
+        args.checked().map_err(|e| e.to_string())?;
         Ok(args)
     }
 

@@ -56,7 +56,7 @@ pub struct CompareArgs {
     #[arg(long)]
     pub bands: bool,
     /// Replays run at once while the --bands study looks for its corners.
-    #[arg(long, default_value_t = super::sensitivity::default_jobs())]
+    #[arg(long, default_value_t = super::sensitivity::default_jobs(), value_parser = super::at_least_one_job)]
     pub jobs: usize,
 }
 
@@ -151,7 +151,6 @@ fn seed_drivers(args: &CompareArgs, list: &mut Vec<DriverOptions>) {
 /// `culling compare` timed on the machines its flags name (with `--bands`, each machine with
 /// its corners).
 pub fn run(args: CompareArgs) -> anyhow::Result<()> {
-    anyhow::ensure!(args.jobs >= 1, "--jobs: give at least 1");
     // A driver a threshold: one given twice would be two rows, and two JSON drivers, of one
     // name.
     for (flag, thresholds) in [

@@ -53,7 +53,7 @@ pub struct LatencyArgs {
     #[arg(long)]
     pub bands: bool,
     /// Replays run at once.
-    #[arg(long, default_value_t = super::sensitivity::default_jobs())]
+    #[arg(long, default_value_t = super::sensitivity::default_jobs(), value_parser = super::at_least_one_job)]
     pub jobs: usize,
 }
 
@@ -163,7 +163,6 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
         key: "engines".into(),
         values: args.engines.iter().map(u64::to_string).collect(),
     }])?;
-    anyhow::ensure!(args.jobs >= 1, "--jobs: give at least 1");
     let replayer = Replayer {
         trace: &args.trace,
         retile: args.retile,

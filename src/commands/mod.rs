@@ -15,6 +15,16 @@ pub mod timeline;
 pub mod trace;
 pub mod workload_args;
 
+/// `--jobs N` of every command that runs replays at once (`sweep`, `sensitivity`, `latency`,
+/// `culling compare`): a whole number of at least 1, refused as the flag is read (each
+/// command had checked it in words of its own, `sweep`'s parser in its own).
+pub fn at_least_one_job(text: &str) -> Result<usize, String> {
+    match text.trim().parse::<usize>().map_err(|e| e.to_string())? {
+        0 => Err("give at least 1".to_string()),
+        jobs => Ok(jobs),
+    }
+}
+
 /// The first of `items` that repeats an earlier one: in a list given on the command line
 /// where each must come once (`latency --engines`, `culling compare`'s machines).
 pub fn first_repeated<T: PartialEq>(items: &[T]) -> Option<&T> {

@@ -38,7 +38,7 @@ pub struct SensitivityArgs {
     pub fidelity: Fidelity,
     /// Replays run at once, at most 4 a core and one a variant (the output is the same for
     /// any number).
-    #[arg(long, default_value_t = default_jobs())]
+    #[arg(long, default_value_t = default_jobs(), value_parser = super::at_least_one_job)]
     pub jobs: usize,
     /// Print the bands as JSON: per result `metric`, `default`, `low`, `high` and the
     /// parameters that move it, the most first.
@@ -248,7 +248,6 @@ pub fn run(args: SensitivityArgs) -> anyhow::Result<()> {
         args.fidelity != Fidelity::Functional,
         "sensitivity needs a level with time: analytic, sampled:K, cycle or rtl, not functional"
     );
-    anyhow::ensure!(args.jobs >= 1, "--jobs: give at least 1");
     let (base, arch_name) = args.arch.resolve_with_engines(args.engines)?;
     let replayer = Replayer {
         trace: &args.trace,

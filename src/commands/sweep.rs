@@ -71,8 +71,8 @@ pub struct SweepRunArgs {
     pub set: Vec<String>,
     /// Worker threads, at least 1 [default: available parallelism]. Results do not depend
     /// on it.
-    #[arg(long, value_parser = at_least_one_job)]
-    pub jobs: Option<NonZeroUsize>,
+    #[arg(long, value_parser = super::at_least_one_job)]
+    pub jobs: Option<usize>,
     /// Run only every N-th point, starting at the K-th (1-based), e.g. for a job array.
     #[arg(long, value_name = "K/N", value_parser = parse_shard)]
     pub shard: Option<Shard>,
@@ -159,13 +159,6 @@ fn parse_shard(spec: &str) -> std::result::Result<Shard, String> {
 }
 
 /// What to do about results of another sweep found when resuming.
-/// `--jobs N`: a whole number of at least 1, refused in the words `sensitivity` and `culling
-/// compare` use (the parser's own had been "number would be zero for non-zero type").
-fn at_least_one_job(text: &str) -> std::result::Result<NonZeroUsize, String> {
-    let jobs: usize = text.trim().parse().map_err(|e| format!("{e}"))?;
-    NonZeroUsize::new(jobs).ok_or_else(|| "give at least 1".to_string())
-}
-
 const RESUME_ADVICE: &str =
     "choose another --out, or pass --force instead of --resume to start over in this file";
 
@@ -267,7 +260,7 @@ pub fn run_with(
             counted(grid.len() as u64, "point", "points")
         );
     }
-    let requested = run.jobs.map_or(cores, NonZeroUsize::get);
+    let requested = run.jobs.unwrap_or(cores);
     let jobs = capped_jobs(requested, points, cores);
     if jobs < requested && run.jobs.is_some() {
         eprintln!(
@@ -439,7 +432,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
         jobs: args
             .run
             .jobs
-            .map_or_else(super::sensitivity::default_jobs, NonZeroUsize::get),
+            .unwrap_or_else(super::sensitivity::default_jobs),
     };
     let corners = match args.run.bands {
         true => {
@@ -860,8 +853,9 @@ mod tests {
 
     #[test]
     fn jobs_are_at_least_one() {
+        use crate::commands::at_least_one_job;
         assert_eq!(at_least_one_job("0"), Err("give at least 1".to_string()));
-        assert_eq!(at_least_one_job("3"), Ok(NonZeroUsize::new(3).unwrap()));
+        assert_eq!(at_least_one_job("3"), Ok(3));
         let error = parse(&["t.occt", "--out", "r.jsonl", "--jobs", "0"])
             .err()
             .unwrap();

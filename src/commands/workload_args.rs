@@ -394,12 +394,18 @@ pub fn flagged(error: WorkloadError) -> anyhow::Error {
 impl WorkloadArgs {
     /// The scene (camera on its path), the driver and the walk these arguments ask for.
     pub fn resolve(&self) -> anyhow::Result<(WorkloadScene, DriverOptions, Walk)> {
-        // Before the scene is built and a trace's header takes the viewport: the flags named.
-        let walk = self.scene.walk();
-        walk.validate().map_err(flagged)?;
-        let driver = self.driver.options()?;
+        let (driver, walk) = self.checked()?;
         let scene = self.scene.load_scene()?;
         Ok((scene, driver, walk))
+    }
+
+    /// The driver and the walk, checked (the walk's viewport and frames, the driver and its
+    /// options, each error naming its flag) without building the scene: before the scene is
+    /// built and a trace's header takes the viewport, and as a corpus file is read.
+    pub fn checked(&self) -> anyhow::Result<(DriverOptions, Walk)> {
+        let walk = self.scene.walk();
+        walk.validate().map_err(flagged)?;
+        Ok((self.driver.options()?, walk))
     }
 
     /// Whether the walk is the collision driver's (whose frames each print a test).
