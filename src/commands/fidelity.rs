@@ -47,17 +47,15 @@ impl FidelityArg {
             !self.no_index || matches!(level, Fidelity::Analytic | Fidelity::Sampled { .. }),
             "--no-index applies to the analytic and sampled levels, which read the trace's index (the {level} level decodes every fragment)"
         );
-        // The rtl level builds every model: `all` is what it does, `auto` it cannot do.
-        let rtl_builds_all = level == Fidelity::Rtl && self.effects == Some(EffectsChoice::All);
-        match self.effects {
-            Some(_) if !level.builds_effects() && !rtl_builds_all => anyhow::bail!(
-                "--effects: the {level} level {}",
-                match level {
-                    Fidelity::Rtl => "builds every effect model (--effects all)",
-                    _ => "has no effect models (the cycle and sampled levels choose theirs)",
-                }
+        match (level, self.effects) {
+            // The rtl level builds every model: `all` is what it does, `auto` it cannot do.
+            (Fidelity::Rtl, Some(EffectsChoice::Auto)) => {
+                anyhow::bail!("--effects: the rtl level builds every effect model (--effects all)")
+            }
+            (Fidelity::Functional | Fidelity::Analytic, Some(_)) => anyhow::bail!(
+                "--effects: the {level} level has no effect models (the cycle and sampled levels choose theirs)"
             ),
-            chosen => Ok(chosen.unwrap_or(EffectsChoice::Auto)),
+            (_, chosen) => Ok(chosen.unwrap_or(EffectsChoice::Auto)),
         }
     }
 }
