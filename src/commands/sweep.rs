@@ -227,6 +227,10 @@ pub fn in_cli_words(error: SweepError) -> anyhow::Error {
              with --resume on it to fill the gaps)"
         ),
         SweepError::NothingSwept => anyhow!("cannot plot: no parameter is swept (add --set)"),
+        SweepError::NotSwept { key, swept } => anyhow!(
+            "--plot-x {key}: not a swept parameter (swept: {})",
+            swept.join(", ")
+        ),
         not_numeric @ SweepError::NonNumericAxis { .. } => {
             anyhow!("{not_numeric} (choose another --plot-x)")
         }
@@ -532,14 +536,6 @@ fn check_plot(plot: &PlotArgs, grid: &Grid, bands: bool) -> Result<()> {
         "--metric {metric}: not a metric a sweep records (one of {})",
         METRICS.join(", ")
     );
-    if let Some(x) = &plot.plot_x {
-        let swept: Vec<&str> = grid.axes().iter().map(|axis| axis.key.as_str()).collect();
-        anyhow::ensure!(
-            swept.contains(&x.as_str()),
-            "--plot-x {x}: not a swept parameter (swept: {})",
-            swept.join(", ")
-        );
-    }
     occsim_sweep::plot_axis(grid.axes(), plot.plot_x.as_deref()).map_err(in_cli_words)?;
     Ok(())
 }

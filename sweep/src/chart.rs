@@ -71,8 +71,7 @@ pub fn metric_chart(
     x_key: Option<&str>,
     subject: &str,
 ) -> Result<LineChart> {
-    let x_axis = plot_axis(axes, x_key)?;
-    let x_values = numeric_values(x_axis)?;
+    let (x_axis, x_values) = plot_axis(axes, x_key)?;
     if !lines.iter().any(|s| s.line.metrics.contains_key(metric)) {
         let known: std::collections::BTreeSet<&str> = lines
             .iter()
@@ -140,11 +139,11 @@ pub fn metric_chart(
     })
 }
 
-/// The axis a chart of `axes` is drawn against: `x_key`, else the last; refused unless it
-/// is swept and every value of it a number. Known before any point runs, so a sweep checks
-/// it first (a sweep over `blending=false,true` with `--plot` had run every point, written
-/// its results and then failed on the chart).
-pub fn plot_axis<'a>(axes: &'a [Axis], x_key: Option<&str>) -> Result<&'a Axis> {
+/// The axis a chart of `axes` is drawn against, `x_key` else the last, with its values as
+/// numbers; refused unless it is swept and every value of it a number. Known before any
+/// point runs, so a sweep checks it first (a sweep over `blending=false,true` with `--plot`
+/// had run every point, written its results and then failed on the chart).
+pub fn plot_axis<'a>(axes: &'a [Axis], x_key: Option<&str>) -> Result<(&'a Axis, Vec<f64>)> {
     let x_axis = match x_key {
         Some(key) => axes
             .iter()
@@ -155,8 +154,7 @@ pub fn plot_axis<'a>(axes: &'a [Axis], x_key: Option<&str>) -> Result<&'a Axis> 
             })?,
         None => axes.last().ok_or(SweepError::NothingSwept)?,
     };
-    numeric_values(x_axis)?;
-    Ok(x_axis)
+    Ok((x_axis, numeric_values(x_axis)?))
 }
 
 /// The axis values as numbers (the chart's x ticks), or an error naming a non-numeric one.
