@@ -41,53 +41,113 @@ struct Code {
 }
 
 fn split_code(text: &str) -> Code {
+    split(text, Tests::Kept)
+}
+
+/// Whether [`split`] keeps the items under `#[cfg(test)]`.
+#[derive(Clone, Copy, PartialEq)]
+enum Tests {
+    Kept,
+    Dropped,
+}
+
+/// The part of a library file that is not its tests: [`split_code`] without every item
+/// under `#[cfg(test)]` (a unit-test module, and a test-only method inside an `impl`,
+/// wherever it is in the file).
+fn without_tests(text: &str) -> Code {
+    split(text, Tests::Dropped)
+}
+
+/// A test-only item being skipped: its bracket depth, and whether its body's brace opened.
+#[derive(Clone, Copy)]
+struct Skipping {
+    depth: u32,
+    opened: bool,
+}
+
+impl Skipping {
+    /// Take one character of code; whether the item ends with it (at the `;` of an item
+    /// without a body, or the brace that closes its body).
+    fn ends_at(&mut self, c: char) -> bool {
+        match c {
+            '(' | '[' => self.depth += 1,
+            '{' => (self.depth, self.opened) = (self.depth + 1, true),
+            ')' | ']' | '}' => {
+                self.depth = self.depth.saturating_sub(1);
+                return c == '}' && self.depth == 0 && self.opened;
+            }
+            ';' => return self.depth == 0,
+            _ => {}
+        }
+        false
+    }
+}
+
+fn split(text: &str, tests: Tests) -> Code {
     let bytes = text.as_bytes();
     let (mut code, mut strings) = (String::with_capacity(text.len()), Vec::new());
+    let mut skipping: Option<Skipping> = None;
     let mut i = 0;
     while i < bytes.len() {
         let rest = &text[i..];
-        if rest.starts_with("//") {
+        let literal = if rest.starts_with("//") {
             let end = rest.find('\n').unwrap_or(rest.len());
             i += end;
+            None
         } else if rest.starts_with("/*") {
             let end = rest.find("*/").map_or(rest.len(), |e| e + 2);
             i += end;
+            None
         } else if rest.starts_with("r#\"") || rest.starts_with("r\"") {
             let hashes = rest[1..].bytes().take_while(|&b| b == b'#').count();
             let open = 2 + hashes;
             let close = format!("\"{}", "#".repeat(hashes));
             let end = rest[open..].find(&close).map_or(rest.len(), |e| open + e);
-            strings.push(rest[open..end].to_owned());
-            code.push_str("\"\"");
             i += (end + close.len()).min(rest.len());
+            Some((Some(rest[open..end].to_owned()), "\"\""))
         } else if bytes[i] == b'"' {
             let mut j = i + 1;
             while j < bytes.len() && bytes[j] != b'"' {
                 j += if bytes[j] == b'\\' { 2 } else { 1 };
             }
-            strings.push(text[i + 1..j.min(bytes.len())].to_owned());
-            code.push_str("\"\"");
+            let string = text[i + 1..j.min(bytes.len())].to_owned();
             i = j + 1;
+            Some((Some(string), "\"\""))
         } else if bytes[i] == b'\''
             && rest.len() > 2
             && (rest.as_bytes()[2] == b'\'' || rest.as_bytes()[1] == b'\\')
         {
             // A char literal ('x' or '\n'); a lifetime has no closing quote.
             let end = rest[1..].find('\'').map_or(1, |e| e + 2);
-            code.push_str("' '");
             i += end;
+            Some((None, "' '"))
+        } else if tests == Tests::Dropped && skipping.is_none() && rest.starts_with("#[cfg(test)]")
+        {
+            skipping = Some(Skipping {
+                depth: 0,
+                opened: false,
+            });
+            i += "#[cfg(test)]".len();
+            continue;
         } else {
             let c = rest.chars().next().expect("not at the end");
-            code.push(c);
             i += c.len_utf8();
+            match &mut skipping {
+                Some(item) => {
+                    if item.ends_at(c) {
+                        skipping = None;
+                    }
+                }
+                None => code.push(c),
+            }
+            continue;
+        };
+        if let (Some((string, blank)), None) = (literal, skipping) {
+            strings.extend(string);
+            code.push_str(blank);
         }
     }
     Code { code, strings }
-}
-
-/// The part of a library file that is not its unit tests.
-fn without_tests(text: &str) -> &str {
-    text.find("#[cfg(test)]").map_or(text, |at| &text[..at])
 }
 
 /// The module path of `file` in a crate whose root directory is `src`.
@@ -213,7 +273,7 @@ fn sim_modules_import_one_another_without_a_circle() {
     for file in &files {
         let text = std::fs::read_to_string(file).expect("readable source");
         let from = module_of(&src, file);
-        let code = split_code(without_tests(&text)).code;
+        let code = without_tests(&text).code;
         for path in crate_paths(&code, &from) {
             // The longest prefix that is a module: the module the path's item lives in.
             let target = (0..=path.len())
@@ -317,7 +377,7 @@ fn library_error_messages_name_no_command_line_flag() {
     for krate in ["sim/src", "traces/src", "rtl-model/src", "sweep/src"] {
         for file in sources(&root().join(krate)) {
             let text = std::fs::read_to_string(&file).expect("readable source");
-            for string in split_code(without_tests(&text)).strings {
+            for string in without_tests(&text).strings {
                 let flag = string.match_indices("--").find(|(at, _)| {
                     string[at + 2..]
                         .chars()
@@ -334,21 +394,36 @@ fn library_error_messages_name_no_command_line_flag() {
     }
 }
 
+/// Whether `map` names the module of `file` by its file, `name.rs` (its directory `name/`
+/// for a `mod.rs`), not merely by a word that happens to be its name (the `city` scene had
+/// stood for `builtin/city.rs`).
+fn names_module(map: &str, file: &Path) -> bool {
+    let stem = file.file_stem().expect("a file").to_string_lossy();
+    let name = match stem.as_ref() {
+        "mod" => file
+            .parent()
+            .and_then(Path::file_name)
+            .expect("a directory")
+            .to_string_lossy(),
+        _ => stem.clone(),
+    };
+    let mention = match stem.as_ref() {
+        "mod" => format!("{name}/"),
+        _ => format!("{name}.rs"),
+    };
+    map.contains(&mention)
+}
+
 #[test]
 fn every_module_is_in_the_code_map() {
     let map = std::fs::read_to_string(root().join("ARCHITECTURE.md")).expect("ARCHITECTURE.md");
-    let words: BTreeSet<&str> = map
-        .split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
-        .collect();
     let mut missing = Vec::new();
     for krate in ["src", "sim/src", "traces/src", "rtl-model/src", "sweep/src"] {
         let src = root().join(krate);
         for file in sources(&src) {
             let module = module_of(&src, &file);
-            if let Some(name) = module.last() {
-                if !words.contains(name.as_str()) {
-                    missing.push(format!("{krate}/{}", module.join("/")));
-                }
+            if !module.is_empty() && !names_module(&map, &file) {
+                missing.push(format!("{krate}/{}", module.join("/")));
             }
         }
     }
@@ -356,6 +431,19 @@ fn every_module_is_in_the_code_map() {
         missing.is_empty(),
         "modules ARCHITECTURE.md does not name: {missing:?}"
     );
+}
+
+#[test]
+fn a_module_is_named_by_its_file_not_by_a_word() {
+    let city = Path::new("traces/src/builtin/city.rs");
+    assert!(!names_module("the `city` scene; a city block", city));
+    assert!(names_module("`city.rs`: the demo's city block", city));
+    let fifo = Path::new("sim/src/blocks/fifo.rs");
+    assert!(!names_module("the blocks: `fifo`, ...", fifo));
+    assert!(names_module("the blocks: `fifo.rs`, ...", fifo));
+    let levels = Path::new("sim/src/levels/mod.rs");
+    assert!(names_module("- `levels/`: the fidelity levels", levels));
+    assert!(!names_module("the levels of detail", levels));
 }
 
 #[test]
@@ -406,4 +494,21 @@ fn every_source_path_the_docs_name_exists() {
         }
     }
     assert!(missing.is_empty(), "paths that do not exist: {missing:?}");
+}
+
+#[test]
+fn only_the_items_under_cfg_test_are_dropped() {
+    // A test-only method inside an impl, then the file's code goes on: its string stays
+    // (the old cut at the first `#[cfg(test)]` lost it), the tests' strings do not.
+    let text = "impl A {\n    #[cfg(test)]\n    fn peek(&self) -> [u8; 2] { [b'{', 1] }\n    fn f() { g(\"kept\") }\n}\n#[cfg(test)]\nconst T: [u8; 2] = [0; 2];\n#[cfg(test)]\nmod tests {\n    fn t() { assert!(x, \"dropped {}\", 1) }\n}\nfn after() { h(\"also kept\") }\n";
+    let code = without_tests(text);
+    assert_eq!(code.strings, vec!["kept", "also kept"]);
+    assert!(!code.code.contains("peek") && !code.code.contains("mod tests"));
+    assert!(!code.code.contains("const T"));
+    assert!(code.code.contains("fn f()") && code.code.contains("fn after()"));
+    // split_code keeps them all.
+    assert_eq!(
+        split_code(text).strings,
+        vec!["kept", "dropped {}", "also kept"]
+    );
 }

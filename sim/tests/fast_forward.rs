@@ -4,6 +4,7 @@
 //! and retiled, give the same report, bit for bit, with `--effects all` (the exact
 //! reference, fragment by fragment) and `--effects auto` (fast-forward on).
 
+use occsim_sim::arch::Machine;
 use occsim_sim::effects::EffectsChoice;
 use occsim_sim::replay::{replay, ReplayOptions};
 use occsim_sim::{Arch, Fidelity, LevelResult};
@@ -111,8 +112,17 @@ fn hardcases_give_identical_reports_on_every_machine_plain_and_retiled() {
     let trace = scene_trace(HARDCASES);
     let grid: TileGrid = "4x4".parse().unwrap();
     for arch in archs() {
-        check_equal("hardcases", &trace, &arch, None);
-        check_equal("hardcases retiled 4x4", &trace, &arch, Some(grid));
+        let plain = check_equal("hardcases", &trace, &arch, None);
+        let retiled = check_equal("hardcases retiled 4x4", &trace, &arch, Some(grid));
+        // The rule is the O2's (the InfiniteReality takes every fragment one by one): there
+        // it must have held somewhere, or the equality above proves nothing of it. (Retiled,
+        // none had: the retiling adapter passed spans on as their fragments.)
+        if arch.machine() == Machine::O2 {
+            assert!(
+                plain > 0 && retiled > 0,
+                "{plain} and {retiled} fast-forwarded"
+            );
+        }
     }
 }
 
@@ -122,8 +132,14 @@ fn the_random_scene_gives_identical_reports_plain_and_retiled() {
     let trace = scene_trace(&random_scene(&RandomOptions::default()));
     let grid: TileGrid = "4x4".parse().unwrap();
     for arch in [arch("o2", 4), arch("ir4", 4)] {
-        check_equal("random", &trace, &arch, None);
-        check_equal("random retiled 4x4", &trace, &arch, Some(grid));
+        let plain = check_equal("random", &trace, &arch, None);
+        let retiled = check_equal("random retiled 4x4", &trace, &arch, Some(grid));
+        if arch.machine() == Machine::O2 {
+            assert!(
+                plain > 0 && retiled > 0,
+                "{plain} and {retiled} fast-forwarded"
+            );
+        }
     }
 }
 

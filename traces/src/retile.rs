@@ -6,7 +6,7 @@
 //! after its `QueryEnd` as a trace stores it. Other queries (samples, any, verbose) keep
 //! their tiles; their recomputed results equal the stored ones.
 
-use crate::event::Event;
+use crate::event::{Event, Span};
 use crate::golden::{EventSink, FunctionalModel};
 use crate::query::{QueryMode, Tile, MAX_TILES};
 use std::str::FromStr;
@@ -162,6 +162,16 @@ impl<S: EventSink> EventSink for Retile<S> {
             }
         }
     }
+
+    /// A span whole, to the functional model and on to `inner` (a trace reader's spans lie
+    /// in the viewport). Passed on as its fragments one by one, as the default does, a
+    /// retiled replay took every fragment one by one, and the O2's cycle model, which
+    /// fast-forwards whole spans, fast-forwarded none.
+    #[inline]
+    fn span(&mut self, span: Span) -> Result<(), S::Error> {
+        self.golden.span(span);
+        self.inner.span(span)
+    }
 }
 
 /// `events` of a `width` x `height` trace, retiled to `grid`.
@@ -274,6 +284,61 @@ mod tests {
         };
         // Hand-worked: tile 0 holds x = 0; tile 1 holds x = 3 twice, and both pass: brief
         // queries never write depth.
+        assert_eq!((result.tiles[0].nohc, result.tiles[0].phc), (1, 1));
+        assert_eq!((result.tiles[1].nohc, result.tiles[1].phc), (2, 2));
+    }
+
+    /// A sink that keeps what reached it whole: the spans' lengths, and the other events.
+    #[derive(Default)]
+    struct Spans {
+        spans: Vec<usize>,
+        events: Vec<Event>,
+    }
+
+    impl EventSink for Spans {
+        type Error = std::convert::Infallible;
+        fn event(&mut self, event: &Event) -> Result<(), Self::Error> {
+            self.events.push(event.clone());
+            Ok(())
+        }
+        fn span(&mut self, span: Span) -> Result<(), Self::Error> {
+            self.spans.push(span.depths.len());
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn a_span_passes_on_whole_and_counts_as_its_fragments() {
+        let spec = QuerySpec {
+            id: 1,
+            mode: QueryMode::Brief,
+            buffer_entries: 8,
+            tiles: vec![Rect::new(0, 0, 4, 2)],
+        };
+        let grid = TileGrid {
+            columns: 2,
+            rows: 1,
+        };
+        let mut retile = Retile::new(grid, 4, 2, Spans::default()).unwrap();
+        retile.event(&Event::QueryBegin(spec)).unwrap();
+        // Pixels 1..4 of row 0: one in tile 0 (x < 2), two in tile 1.
+        let depths = [5, 6, 7];
+        retile
+            .span(Span {
+                x: 1,
+                y: 0,
+                depths: &depths,
+            })
+            .unwrap();
+        retile.event(&Event::QueryEnd).unwrap();
+        let sink = retile.into_inner();
+        // Whole, so that a machine behind may take it in bulk (the O2 fast-forwards spans).
+        assert_eq!(sink.spans, [3]);
+        let Some(Event::QueryResult(result)) = sink.events.last() else {
+            panic!("a result after the end: {:?}", sink.events)
+        };
+        // Hand-worked: the depth test passes on the cleared buffer, brief queries draw
+        // nothing: tile 0 counts x = 1 (1 of 1), tile 1 counts x = 2 and 3 (2 of 2).
         assert_eq!((result.tiles[0].nohc, result.tiles[0].phc), (1, 1));
         assert_eq!((result.tiles[1].nohc, result.tiles[1].phc), (2, 2));
     }
