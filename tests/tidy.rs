@@ -512,3 +512,70 @@ fn only_the_items_under_cfg_test_are_dropped() {
         vec!["kept", "dropped {}", "also kept"]
     );
 }
+
+/// The workspace's own crates a crate's `Cargo.toml` depends on (its `[dependencies]`).
+fn own_dependencies(manifest: &str) -> BTreeSet<String> {
+    let text = std::fs::read_to_string(root().join(manifest)).expect("a manifest");
+    let table: toml::Table = text.parse().expect("TOML");
+    table
+        .get("dependencies")
+        .and_then(|d| d.as_table())
+        .map(|d| {
+            d.keys()
+                .filter(|k| k.starts_with("occsim"))
+                .cloned()
+                .collect()
+        })
+        .unwrap_or_default()
+}
+
+#[test]
+fn data_flows_one_way_between_the_crates() {
+    // scene -> rasterizer -> trace (occsim-traces) -> machine model (occsim-sim, over
+    // occsim-rtl) -> report (the binary); the sweep engine knows no machine.
+    let expected: [(&str, &[&str]); 5] = [
+        ("traces/Cargo.toml", &[]),
+        ("rtl-model/Cargo.toml", &[]),
+        ("sim/Cargo.toml", &["occsim-rtl", "occsim-traces"]),
+        ("sweep/Cargo.toml", &["occsim-traces"]),
+        (
+            "Cargo.toml",
+            &["occsim-rtl", "occsim-sim", "occsim-sweep", "occsim-traces"],
+        ),
+    ];
+    for (manifest, crates) in expected {
+        let crates: BTreeSet<String> = crates.iter().map(|c| c.to_string()).collect();
+        assert_eq!(own_dependencies(manifest), crates, "{manifest}");
+    }
+}
+
+#[test]
+fn glam_stays_out_of_the_rasterizer_and_the_models() {
+    // Vector math for scenes, cameras and drivers only: the rasterizer's and the models'
+    // arithmetic is stated exactly, in integers and f32 as llvmpipe's is.
+    let allowed = [
+        "traces/src/geometry.rs",
+        "traces/src/builtin/",
+        "traces/src/workloads/",
+    ];
+    let mut found = Vec::new();
+    for krate in ["src", "sim/src", "traces/src", "rtl-model/src", "sweep/src"] {
+        for file in sources(&root().join(krate)) {
+            let text = std::fs::read_to_string(&file).expect("readable source");
+            let code = split_code(&text).code;
+            let uses_glam = code
+                .split(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                .any(|word| word == "glam");
+            let path = file.strip_prefix(root()).expect("in the workspace");
+            let path = path.to_string_lossy();
+            if uses_glam && !allowed.iter().any(|a| path.starts_with(a)) {
+                found.push(path.into_owned());
+            }
+        }
+    }
+    assert!(found.is_empty(), "glam used outside its places: {found:?}");
+    for manifest in ["sim/Cargo.toml", "rtl-model/Cargo.toml", "sweep/Cargo.toml"] {
+        let text = std::fs::read_to_string(root().join(manifest)).expect("a manifest");
+        assert!(!text.contains("glam"), "{manifest} depends on glam");
+    }
+}
