@@ -98,20 +98,51 @@ fn the_same_options_give_the_same_events() {
     }
 }
 
-#[test]
-fn every_frame_starts_with_one_clear() {
-    let scene = small_forest();
-    let mut events: Vec<Event> = Vec::new();
-    generate(
-        &scene,
-        &DriverOptions::new(DriverKind::LazyGrid),
-        &WALK,
-        &mut events,
+/// Whether `event` sets one piece of the render state.
+fn sets_state(event: &Event) -> bool {
+    matches!(
+        event,
+        Event::DepthFunc(_)
+            | Event::DepthMask(_)
+            | Event::DepthTest(_)
+            | Event::Cull(_)
+            | Event::Scissor(_)
     )
-    .unwrap();
-    assert_eq!(events.first(), Some(&Event::Clear));
-    let clears = events.iter().filter(|e| matches!(e, Event::Clear)).count();
-    assert_eq!(clears, WALK.frames as usize);
+}
+
+#[test]
+fn every_frame_starts_with_one_clear_and_the_whole_state() {
+    // Every driver, on the forest and on the city: a frame is the events up to its `Swap`.
+    for (scene, name) in [(small_forest(), "forest"), (small_city(), "city")] {
+        for kind in DriverKind::ALL {
+            let mut events: Vec<Event> = Vec::new();
+            generate(&scene, &DriverOptions::new(kind), &WALK, &mut events).unwrap();
+            let label = format!("{} on the {name}", kind.name());
+            assert_eq!(events.last(), Some(&Event::Swap), "{label}");
+            let frames: Vec<&[Event]> = events[..events.len() - 1]
+                .split(|e| matches!(e, Event::Swap))
+                .collect();
+            assert_eq!(frames.len(), WALK.frames as usize, "{label}");
+            for (frame, events) in frames.iter().enumerate() {
+                let clears = events.iter().filter(|e| matches!(e, Event::Clear)).count();
+                assert_eq!(clears, 1, "{label}, frame {frame}");
+                assert_eq!(
+                    events.first(),
+                    Some(&Event::Clear),
+                    "{label}, frame {frame}"
+                );
+                // Then each of the five pieces of state, once, before anything else.
+                let state: Vec<std::mem::Discriminant<Event>> = events[1..]
+                    .iter()
+                    .take_while(|e| sets_state(e))
+                    .map(std::mem::discriminant)
+                    .collect();
+                let kinds: std::collections::BTreeSet<String> =
+                    state.iter().map(|d| format!("{d:?}")).collect();
+                assert_eq!((state.len(), kinds.len()), (5, 5), "{label}, frame {frame}");
+            }
+        }
+    }
 }
 
 /// Per frame, each object's visible pixels in the full render.
