@@ -262,7 +262,7 @@ parameters! {
     pub struct O2Arch {
         clock_mhz: f64 = 66.67, [0.001, 100_000.0], "MHz", "rendering engine clock; one pipeline cycle",
             V "Linux crime.h: the CRIME rendering engine at 66.67 MHz";
-        primitive_setup_cycles: u64 = 4, [0, 1 << 20], "cycles", "rasterizer cycles spent setting up each primitive before its first fragment",
+        primitive_setup_cycles: u64 = 4, [0, 1 << 20], "cycles/primitive", "rasterizer cycles spent setting up each primitive before its first fragment",
             I [2, 16] "not published; edge and depth slopes of one triangle, a few cycles in a fixed-function setup unit";
         fifo_raster_to_depth_entries: usize = 16, [1, 1 << 16], "fragments", "FIFO between rasterizer and depth/stencil pipeline",
             I [4, 64] "not published; enough to cover the page-miss latency at one fragment a cycle, at most what an on-chip FIFO of the era held";
@@ -276,7 +276,7 @@ parameters! {
             V "Linux gbefb.c: 64 KB tiles, 128x128 pixels at 32 bpp";
         framebuffer_tile_height_pixels: u32 = 128, [1, 1 << 14], "pixels", "height of one depth buffer tile (one memory page)",
             V "Linux gbefb.c: 64 KB tiles, 128x128 pixels at 32 bpp";
-        depth_bits_per_pixel: u32 = 32, [8, 256], "bits", "depth+stencil bits stored per pixel",
+        depth_bits_per_pixel: u32 = 32, [8, 256], "bits/pixel", "depth+stencil bits stored per pixel",
             V2 "24-bit depth and 8-bit stencil in one 32-bit word";
         depth_write_buffer_entries: usize = 16, [1, 1 << 16], "writes", "depth writes buffered between depth test and memory port",
             I [4, 64] "not published; sized like the prefetch buffer it mirrors";
@@ -284,11 +284,11 @@ parameters! {
             I [2, 32] "the paper's OccU sits after the depth test without a stated buffer; a short FIFO absorbs its k-cycle engines";
     }
     group occu: OccuArch; {
-        memory_port_bits_per_cycle: u32 = 256, [32, 1 << 14], "bits", "the one main-memory port shared by depth reads and writes, colour writes, clears, OccU Control, the display refresh and the host",
+        memory_port_bits_per_cycle: u32 = 256, [32, 1 << 14], "bits/cycle", "the one main-memory port shared by depth reads and writes, colour writes, clears, OccU Control, the display refresh and the host",
             V "SGI O2 documents: a 256-bit word per 66 MHz cycle, up to 2.13 GB/s";
         memory_banks: u32 = 2, [1, 64], "banks", "memory banks, each with one open row; 64 KB tile p lies in bank p mod banks, and a depth read is a page hit when its bank's open row is its tile (1: one open row, the last read's)",
             I [1, 4] "SDRAM parts of the era had 2 (16 Mbit) or 4 (64 Mbit) internal banks; how the O2 spread its tiles over them is not published";
-        colour_bits_per_pixel: u32 = 32, [0, 256], "bits", "colour written per drawn fragment (one that passes outside an occlusion render mode) and per cleared pixel (0: no colour traffic)",
+        colour_bits_per_pixel: u32 = 32, [0, 256], "bits/pixel", "colour written per drawn fragment (one that passes outside an occlusion render mode) and per cleared pixel (0: no colour traffic)",
             V "Linux gbefb.c: 32 bpp framebuffer tiles";
         blending: bool = false, "bool", "every drawn fragment blends: its colour is read (a read-modify-write) before it is written",
             I [false, true] "traces carry no blend state; opaque drawing is the common case, transparency blends";
@@ -298,7 +298,7 @@ parameters! {
             V2 "O2 displays at 1280x1024";
         display_height_pixels: u32 = 1024, [0, 1 << 14], "pixels", "scanned-out display height",
             V2 "O2 displays at 1280x1024";
-        display_bits_per_pixel: u32 = 32, [0, 256], "bits", "bits the display engine reads per displayed pixel",
+        display_bits_per_pixel: u32 = 32, [0, 256], "bits/pixel", "bits the display engine reads per displayed pixel",
             V2 "32 bpp true colour";
         display_refresh_hz: f64 = 75.0, [0.0, 1000.0], "Hz", "display refresh rate: the whole display is read this many times a second",
             V2 "O2 monitors at 72-76 Hz";
@@ -308,25 +308,25 @@ parameters! {
             I [4, 64] "not published; the display engine's scan-out FIFO of a few hundred bytes to 2 KB (16 cycles: 512 bytes, 128 pixels at 32 bpp) and a few queued CPU misses";
         host_clock_mhz: f64 = 180.0, [0.001, 100_000.0], "MHz", "host CPU clock: the O2's R5000",
             V2 "O2 configurations: R5000 at 180-350 MHz, R10000 at 150-400 MHz";
-        host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited",
+        host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles/node", "culling traversal per hierarchy node or grid cell visited",
             I [100, 1000] "a pointer chase and a loop over children, cache misses dominate";
-        host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles", "one bounding box tested against the view frustum",
+        host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles/box", "one bounding box tested against the view frustum",
             I [60, 300] "six planes against the box's nearest corner";
-        host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles", "one visibility decision taken from a query answer",
+        host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles/decision", "one visibility decision taken from a query answer",
             I [10, 100] "a compare and a branch, a cache miss at most";
-        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call: state validation and command setup",
+        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles/draw", "the GL driver's work per draw call: state validation and command setup",
             I [500, 10000] "GL drivers of the era spent a few to tens of microseconds a draw";
-        host_cycles_per_state_change: u64 = 150, [0, 1 << 24], "host cycles", "the GL driver's work per state change, clear, or query begin or end",
+        host_cycles_per_state_change: u64 = 150, [0, 1 << 24], "host cycles/command", "the GL driver's work per state change, clear, or query begin or end",
             I [50, 500] "one register write through the driver and its validation";
-        host_cycles_per_readback_pixel: u64 = 12, [0, 1 << 24], "host cycles", "reading back one framebuffer pixel from main memory and testing it for a change, the software occlusion test",
+        host_cycles_per_readback_pixel: u64 = 12, [0, 1 << 24], "host cycles/pixel", "reading back one framebuffer pixel from main memory and testing it for a change, the software occlusion test",
             I [5, 40] "a 32-bit read at the CPU's 100-300 MB/s from unified memory and a compare";
-        geometry_host_cycles_per_vertex: u64 = 80, [0, 1 << 24], "host cycles", "software transform of one vertex on the host CPU: 4x4 transform, clip codes, divide, viewport",
+        geometry_host_cycles_per_vertex: u64 = 80, [0, 1 << 24], "host cycles/vertex", "software transform of one vertex on the host CPU: 4x4 transform, clip codes, divide, viewport",
             I [40, 200] "the O2's CPU does all vertex processing (V2); about one multiply-add a cycle";
-        geometry_host_cycles_per_triangle: u64 = 120, [0, 1 << 24], "host cycles", "software setup of one submitted triangle on the host CPU before the rendering engine takes it",
+        geometry_host_cycles_per_triangle: u64 = 120, [0, 1 << 24], "host cycles/triangle", "software setup of one submitted triangle on the host CPU before the rendering engine takes it",
             I [60, 300] "slopes and command packing, like a few vertices' work";
         result_notify_latency_cycles: u64 = 8, [0, 1 << 24], "cycles", "from a query's last record word in memory to the host seeing it: one uncached poll read",
             I [5, 20] "one uncached read of unified memory";
-        result_read_cycles_per_word: u64 = 1, [0, 1 << 24], "cycles", "the host reading one result record word from main memory",
+        result_read_cycles_per_word: u64 = 1, [0, 1 << 24], "cycles/word", "the host reading one result record word from main memory",
             I [1, 4] "cache-line reads at 2.13 GB/s";
     }
 }
@@ -347,11 +347,11 @@ parameters! {
             I [2, 8] "not published; only the blocks and morton interleaves read it";
         block_height_pixels: u32 = 4, [1, 1 << 12], "pixels", "block height of the blocks and morton interleaves",
             I [2, 8] "not published; only the blocks and morton interleaves read it";
-        fragment_generator_fragments_per_cycle: u32 = 2, [1, 1024], "fragments", "fragments one board's Fragment Generator emits per cycle",
+        fragment_generator_fragments_per_cycle: u32 = 2, [1, 1024], "fragments/cycle", "fragments one board's Fragment Generator emits per cycle",
             I [1, 4] "710 Mpixel/s over 4 boards at 100 MHz is 1.8 a board a cycle (V: Montrym 1997)";
-        fragment_generator_setup_cycles: u64 = 4, [0, 1 << 20], "cycles", "cycles every Fragment Generator spends setting up each primitive",
+        fragment_generator_setup_cycles: u64 = 4, [0, 1 << 20], "cycles/primitive", "cycles every Fragment Generator spends setting up each primitive",
             I [2, 16] "not published; edge and parameter slopes of one triangle";
-        image_engine_cycles_per_fragment: u64 = 11, [1, 1 << 16], "cycles", "initiation interval of an Image Engine's pipelined depth stage: cycles between two fragments entering it",
+        image_engine_cycles_per_fragment: u64 = 11, [1, 1 << 16], "cycles/fragment", "initiation interval of an Image Engine's pipelined depth stage: cycles between two fragments entering it",
             I [6, 23] "710 Mpixel/s textured and multisample-antialiased with 4 boards (V: Montrym 1997) is 177.5 Mpixel/s a board (1 board 177.5, 2 boards 355: the boards split the screen), 2.22 Mpixel/s an Image Engine, 45 cycles a pixel at 100 MHz; texturing is done before the Image Engines, and a depth test is one a sample, so at 4 samples a pixel a single-sample depth-only fragment takes 45 / 4 = 11; 8 to 2 samples give 6..23";
         image_engine_latency_cycles: u64 = 16, [1, 1 << 16], "cycles", "latency of an Image Engine's depth stage: from a fragment entering it to its result at the Occlusion Unit (fragments in flight: ceil(latency / interval))",
             I [11, 45] "a read, compare and write of the Image Engine's own SDRAM: at least one interval, at most the 45 cycles of a whole antialiased pixel";
@@ -371,41 +371,41 @@ parameters! {
             I [4, 32] "a backplane crossing between boards, several board clocks";
         global_merge_read_latency_cycles: u64 = 100, [0, 1 << 20], "cycles", "software: cycles for the host to read one board's report over the bus",
             I [50, 500] "a PIO read over the system bus, 0.5-5 us";
-        local_merge_link_bits_per_cycle: u64 = 32, [0, 1 << 20], "bits", "tree or chain: width of one link between a board's Image Engines; a partial report (8 words a tile, and verbose hits) crosses it word by word (0: unlimited)",
+        local_merge_link_bits_per_cycle: u64 = 32, [0, 1 << 20], "bits/cycle", "tree or chain: width of one link between a board's Image Engines; a partial report (8 words a tile, and verbose hits) crosses it word by word (0: unlimited)",
             I [16, 128] "not published; a 32-bit word a cycle between neighbouring Image Engine chips, as their memory buses move pixels";
-        global_merge_link_bits_per_cycle: u64 = 64, [0, 1 << 20], "bits", "tree or chain: width of one board-to-board link the boards' merged reports cross word by word (0: unlimited)",
+        global_merge_link_bits_per_cycle: u64 = 64, [0, 1 << 20], "bits/cycle", "tree or chain: width of one board-to-board link the boards' merged reports cross word by word (0: unlimited)",
             I [32, 256] "not published; a backplane path of 400-3200 MB/s at the 100 MHz clock";
-        report_dma_bits_per_cycle: u64 = 16, [0, 1 << 20], "bits", "after a hardware global merge: the final report written to host memory by DMA, this many bits a cycle (0: unlimited)",
+        report_dma_bits_per_cycle: u64 = 16, [0, 1 << 20], "bits/cycle", "after a hardware global merge: the final report written to host memory by DMA, this many bits a cycle (0: unlimited)",
             I [16, 32] "the host bus: 200 MB/s (Onyx, V2) to 400 MB/s (Onyx2, V2) at the 100 MHz clock";
         host_clock_mhz: f64 = 195.0, [0.001, 100_000.0], "MHz", "host CPU clock: an Onyx2's R10000",
             V2 "195 MHz R10000 Onyx2 systems";
-        host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles", "culling traversal per hierarchy node or grid cell visited",
+        host_cycles_per_node: u64 = 200, [0, 1 << 24], "host cycles/node", "culling traversal per hierarchy node or grid cell visited",
             I [100, 1000] "a pointer chase and a loop over children";
-        host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles", "one bounding box tested against the view frustum",
+        host_cycles_per_box_test: u64 = 120, [0, 1 << 24], "host cycles/box", "one bounding box tested against the view frustum",
             I [60, 300] "six planes against the box's nearest corner";
-        host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles", "one visibility decision taken from a query answer",
+        host_cycles_per_decision: u64 = 20, [0, 1 << 24], "host cycles/decision", "one visibility decision taken from a query answer",
             I [10, 100] "a compare and a branch, a cache miss at most";
-        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles", "the GL driver's work per draw call",
+        host_cycles_per_draw: u64 = 2000, [0, 1 << 24], "host cycles/draw", "the GL driver's work per draw call",
             I [500, 10000] "GL drivers of the era spent a few to tens of microseconds a draw";
-        host_cycles_per_state_change: u64 = 150, [0, 1 << 24], "host cycles", "the GL driver's work per state change, clear, or query begin or end",
+        host_cycles_per_state_change: u64 = 150, [0, 1 << 24], "host cycles/command", "the GL driver's work per state change, clear, or query begin or end",
             I [50, 500] "one command through the driver and its validation";
-        host_cycles_per_readback_pixel: u64 = 40, [0, 1 << 24], "host cycles", "reading back one framebuffer pixel over the bus and testing it for a change, the software occlusion test",
+        host_cycles_per_readback_pixel: u64 = 40, [0, 1 << 24], "host cycles/pixel", "reading back one framebuffer pixel over the bus and testing it for a change, the software occlusion test",
             I [20, 100] "PIO reads from the raster boards";
         bus_megabytes_per_second: f64 = 200.0, [0.001, 1_000_000.0], "MB/s", "host-to-graphics bus the host writes vertices over",
             V2 "Onyx POWERpath-2 200 MB/s, Onyx2 400 MB/s";
-        bus_bytes_per_vertex: u64 = 24, [0, 1 << 16], "bytes", "one vertex over the bus: position and normal as 32-bit floats",
+        bus_bytes_per_vertex: u64 = 24, [0, 1 << 16], "bytes/vertex", "one vertex over the bus: position and normal as 32-bit floats",
             I [12, 48] "position alone to position, normal, colour and texture coordinates";
         geometry_engines: usize = 4, [1, 64], "engines", "Geometry Engines on the Geometry board, each taking whole batches",
             V2 "up to four Geometry Engines, MIMD";
         geometry_engine_clock_mhz: f64 = 90.0, [0.001, 100_000.0], "MHz", "Geometry Engine clock",
             V2 "Geometry Engines at 90 MHz";
-        geometry_engine_cycles_per_vertex: u64 = 51, [0, 1 << 24], "GE cycles", "one Geometry Engine transforming and lighting one vertex",
+        geometry_engine_cycles_per_vertex: u64 = 51, [0, 1 << 24], "GE cycles/vertex", "one Geometry Engine transforming and lighting one vertex",
             I [40, 80] "four engines at 90 MHz giving the 7 M lighted triangles/s of Montrym 1997 (V) at one new vertex a strip triangle; fewer lights or longer strips move it";
-        geometry_engine_cycles_per_triangle: u64 = 10, [0, 1 << 24], "GE cycles", "one Geometry Engine assembling, clipping and setting up one submitted triangle",
+        geometry_engine_cycles_per_triangle: u64 = 10, [0, 1 << 24], "GE cycles/triangle", "one Geometry Engine assembling, clipping and setting up one submitted triangle",
             I [5, 40] "not published; a few instructions a triangle beside the vertices' work";
         result_notify_latency_cycles: u64 = 100, [0, 1 << 24], "cycles", "from a query's result at the global merge to the host seeing it: an interrupt or a poll over the bus",
             I [50, 500] "about 1 us, 0.5-5 us for an interrupt or a poll";
-        result_read_cycles_per_word: u64 = 10, [0, 1 << 24], "cycles", "the host reading one result record word over the bus",
+        result_read_cycles_per_word: u64 = 10, [0, 1 << 24], "cycles/word", "the host reading one result record word over the bus",
             I [5, 50] "50-500 ns PIO reads";
     }
 }
