@@ -969,9 +969,9 @@ fn a_waveform_that_cannot_be_created_names_its_path() {
         "--vcd",
         missing.to_str().unwrap(),
     ]);
-    // It said only "VCD writer stopped".
+    // It said only "VCD writer stopped"; the path is checked before the replay now.
     assert!(
-        error.contains(&format!("cannot write the waveform {}", missing.display())),
+        error.contains(&format!("--vcd: cannot create {}", missing.display())),
         "{error}"
     );
 }
@@ -1307,4 +1307,85 @@ fn a_viewport_too_large_for_the_memory_limit_is_an_error_that_leaves_nothing() {
         left.sort();
         assert_eq!(left, ["huge.occt", "huge.scene"], "{args:?} left a file");
     }
+}
+
+#[test]
+fn every_output_path_is_checked_before_the_work() {
+    // Each refused before a cycle is simulated or a scene made: the VCD's path had been
+    // created only as the rtl replay began to write (seconds on the demo), two outputs at
+    // one path found once both were written, and the demo's -o once its scene was made.
+    let (dir, trace) = hardcases_trace("outputs-first");
+    let at = |name: &str| dir.join(name).to_str().unwrap().to_owned();
+    let missing = at("no-such-dir/x.vcd");
+    let error = stderr_of_failure(&["replay", &trace, "--fidelity", "rtl", "--vcd", &missing]);
+    assert!(error.contains("--vcd: cannot create"), "{error}");
+    let both = at("x.vcd");
+    let error = stderr_of_failure(&[
+        "replay",
+        &trace,
+        "--fidelity",
+        "rtl",
+        "--vcd",
+        &both,
+        "--fst",
+        &both,
+    ]);
+    assert!(
+        error.contains("--vcd, --fst") && error.contains("two of"),
+        "{error}"
+    );
+    let error = stderr_of_failure(&["replay", &trace, "--fidelity", "rtl", "--vcd", &trace]);
+    assert!(error.contains("--vcd"), "{error}");
+    let out = at("no-such-dir/demo.occt");
+    let start = std::time::Instant::now();
+    let error = stderr_of_failure(&["trace", "gen", "demo", "--frames", "64", "-o", &out]);
+    assert!(error.contains("-o: cannot create"), "{error}");
+    // Not a benchmark: the 64-frame demo takes a quarter of a minute to make.
+    assert!(start.elapsed().as_secs() < 5, "{:?}", start.elapsed());
+    let left: Vec<_> = std::fs::read_dir(&*dir).unwrap().collect();
+    assert_eq!(left.len(), 1, "{left:?}");
+}
+
+#[test]
+fn a_trace_that_is_no_regular_file_is_refused_at_once() {
+    // A pipe gives one pass: a second had found the trace "truncated inside the magic
+    // number", and a named FIFO's second open waited for another writer for ever.
+    let (dir, trace) = hardcases_trace("pipes");
+    let fifo = dir.join("trace.fifo");
+    let path = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+    // SAFETY: a valid C string; mkfifo only makes the node.
+    assert_eq!(unsafe { libc::mkfifo(path.as_ptr(), 0o600) }, 0);
+    let bytes = std::fs::read(&trace).unwrap();
+    let writer = {
+        let fifo = fifo.clone();
+        // Opening a FIFO for writing waits for a reader; a refused replay may never open
+        // it, so the writer opens it without waiting and gives up if no reader came.
+        std::thread::spawn(move || {
+            use std::io::Write;
+            use std::os::unix::fs::OpenOptionsExt;
+            for _ in 0..100 {
+                let open = std::fs::OpenOptions::new()
+                    .write(true)
+                    .custom_flags(libc::O_NONBLOCK)
+                    .open(&fifo);
+                if let Ok(mut file) = open {
+                    let _ = file.write_all(&bytes);
+                    return;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+        })
+    };
+    let name = fifo.to_str().unwrap();
+    for args in [
+        vec!["replay", name],
+        vec!["trace", "info", name],
+        vec!["fidelity", name, "--no-rtl"],
+    ] {
+        let error = stderr_of_failure(&args);
+        assert!(error.contains("not a regular file"), "{args:?}: {error}");
+    }
+    let error = stderr_of_failure(&["replay", "/dev/null"]);
+    assert!(error.contains("/dev/null: not a regular file"), "{error}");
+    writer.join().unwrap();
 }

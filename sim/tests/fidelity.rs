@@ -390,6 +390,34 @@ fn analytic_o2_writes_the_records_of_queries_that_end_together_one_after_another
 }
 
 #[test]
+fn every_level_refuses_a_query_past_the_ir_tile_registers() {
+    // A brief query of 128 x 128 one-pixel tiles on ir4: 16,384 tiles in each of 320
+    // Occlusion Units, 5,242,880 registers, past the model's 4,194,304. The machine had
+    // refused it while the analytic level timed it.
+    let arch = Arch::builtin("ir4").unwrap();
+    let tiles: Vec<Rect> = (0..128 * 128)
+        .map(|k| Rect::new(k % 128, k / 128, 1, 1))
+        .collect();
+    let spec = QuerySpec {
+        id: 7,
+        mode: QueryMode::Brief,
+        buffer_entries: 8,
+        tiles,
+    };
+    let events = [Event::QueryBegin(spec), Event::QueryEnd];
+    for level in ["analytic", "sampled:10", "cycle"] {
+        let level: Fidelity = level.parse().unwrap();
+        let error =
+            run_level(level, &arch, 128, 128, EffectsChoice::Auto, &events).expect_err("refused");
+        let text = error.to_string();
+        assert!(
+            text.contains("event 0: query 7 has 16384 tiles") && text.contains("tile registers"),
+            "{level}: {text}"
+        );
+    }
+}
+
+#[test]
 fn analytic_o2_keeps_the_backlog_its_fifos_hold_at_the_end_token() {
     // o2 without reserved port cycles (f = 0), depth test off, a brief query of 16 tiles
     // (4x4 each) over one primitive of 100 fragments: with 4 engines each fragment takes the

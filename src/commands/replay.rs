@@ -63,6 +63,7 @@ pub struct WaveformArgs {
 pub fn run(args: ReplayArgs) -> anyhow::Result<()> {
     // Before any output is made: none may replace the trace.
     occsim_sweep::output::note_input(&args.trace);
+    check_outputs(&args.waveform)?;
     let mut arch = args.arch.resolve()?;
     super::arch::set_engines(&mut arch, args.engines, &args.arch.set)?;
     let path = args.trace.display().to_string();
@@ -269,6 +270,7 @@ fn opener_with_progress(
     let mut passes = 0;
     move || {
         passes += 1;
+        super::trace::check_trace_file(path).map_err(|e| ReplayError::Open(e.into()))?;
         let file = std::fs::File::open(path)
             .with_context(|| format!("cannot open trace {}", path.display()))
             .map_err(|e| ReplayError::Open(e.into()))?;
@@ -346,6 +348,29 @@ fn timeline(
     let (file, sink) =
         super::timeline::TimelineFile::create(path, machine, clock_mhz, window.clone())?;
     Ok(Some((Timeline::new(sink, window), file)))
+}
+
+/// The waveforms and the timeline, each checked before the replay that makes them (a
+/// missing directory, a device, the trace itself) and at paths of their own: the VCD's had
+/// been created only as the replay began to write it, two outputs at one path found only
+/// once both were written.
+fn check_outputs(args: &WaveformArgs) -> anyhow::Result<()> {
+    let flags = [
+        (&args.vcd, "--vcd"),
+        (&args.fst, "--fst"),
+        (&args.timeline, "--timeline"),
+    ];
+    let given: Vec<(&std::path::Path, &str)> = (flags.iter())
+        .filter_map(|(path, flag)| path.as_deref().map(|path| (path, *flag)))
+        .collect();
+    for (path, flag) in &given {
+        super::check_output(Some(path), flag)?;
+    }
+    let paths: Vec<&std::path::Path> = given.iter().map(|(path, _)| *path).collect();
+    occsim_sweep::output::check_distinct(&paths).map_err(|error| {
+        let flags: Vec<&str> = given.iter().map(|(_, flag)| *flag).collect();
+        anyhow::Error::new(error).context(flags.join(", "))
+    })
 }
 
 /// Check the flags' combination; the waveform window if a VCD is asked for.

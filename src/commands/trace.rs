@@ -75,6 +75,9 @@ pub fn run(command: TraceCommand) -> anyhow::Result<()> {
 }
 
 fn generate(args: GenArgs) -> anyhow::Result<()> {
+    // Before the scene is made: the demo's is made by the golden model answering its
+    // queries, seconds at a large viewport, which a path that cannot be written had wasted.
+    super::check_output(Some(&args.output), "-o")?;
     let (summary, frames) = match &args.scene_file {
         Some(scene_file) => {
             let scene = &args.workload.scene;
@@ -206,8 +209,30 @@ pub(crate) fn generate_scene(
 /// sampled:10` 1.08x slower).
 pub const TRACE_READ_BUFFER_BYTES: usize = 1 << 16;
 
-/// Open a trace file for reading, naming it in every error.
+/// Refuse a trace that is no regular file (a pipe, a device): every command but `trace
+/// dump` reads a trace more than once (the levels' passes) or seeks in it (its summary),
+/// and a pipe gives one pass (a second read had found the trace "truncated inside the magic
+/// number"; a named FIFO's second open waited for another writer, for ever). A path that is
+/// missing or a directory is left to the open, whose error says so.
+pub fn check_trace_file(path: &Path) -> anyhow::Result<()> {
+    match std::fs::metadata(path) {
+        Ok(metadata) if !metadata.is_file() && !metadata.is_dir() => anyhow::bail!(
+            "{}: not a regular file (a pipe or a device): occsim reads a trace more than once; write it to a file first",
+            path.display()
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// Open a trace file for reading, naming it in every error ([`check_trace_file`]).
 pub fn open_trace(path: &Path) -> anyhow::Result<TraceReader<std::io::BufReader<std::fs::File>>> {
+    check_trace_file(path)?;
+    open_trace_once(path)
+}
+
+/// [`open_trace`] for a command that reads the trace once, from its start (`trace dump`):
+/// a pipe will do.
+fn open_trace_once(path: &Path) -> anyhow::Result<TraceReader<std::io::BufReader<std::fs::File>>> {
     let file = std::fs::File::open(path)
         .with_context(|| format!("cannot open trace {}", path.display()))?;
     occsim_sweep::output::note_input(path);
@@ -232,6 +257,7 @@ pub fn read_header_and_summary(
             .with_context(context)?;
         return Ok((header, summary));
     }
+    check_trace_file(path)?;
     let file = std::fs::File::open(path)
         .with_context(|| format!("cannot open trace {}", path.display()))?;
     occsim_sweep::output::note_input(path);
@@ -454,7 +480,7 @@ impl<W: Write> EventSink for Printer<W> {
 }
 
 fn dump(args: DumpArgs) -> anyhow::Result<()> {
-    let mut reader = open_trace(&args.trace)?;
+    let mut reader = open_trace_once(&args.trace)?;
     let stdout = std::io::stdout();
     let mut printer = Printer {
         out: std::io::BufWriter::new(stdout.lock()),
@@ -505,6 +531,7 @@ fn bytes_per_fragment(bytes: u64, fragments: u64) -> Option<f64> {
 /// Not cryptographic; it tells one trace from another, which is all resume and merge need.
 pub fn trace_digest(path: &Path) -> anyhow::Result<String> {
     use std::io::Read;
+    check_trace_file(path)?;
     let mut file = std::fs::File::open(path)
         .with_context(|| format!("cannot open trace {}", path.display()))?;
     occsim_sweep::output::note_input(path);

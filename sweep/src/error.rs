@@ -99,6 +99,11 @@ pub enum SweepError {
         path.display()
     )]
     BadDigest { path: PathBuf, line: usize },
+    #[error(
+        "{}:{line}: ends in a line that is neither a result nor the start of one: not a sweep's results file",
+        path.display()
+    )]
+    NotATornResult { path: PathBuf, line: usize },
     #[error("{}:{line}: not a sweep result line", path.display())]
     NotAResultLine {
         path: PathBuf,

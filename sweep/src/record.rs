@@ -106,6 +106,15 @@ pub struct StoredFile {
     pub torn_tail_dropped: bool,
 }
 
+/// Whether `bytes`, the unterminated end of a results file, is the start of a result line
+/// as [`SweepLine`] serialises, `{"format":"occsim-sweep/2",...` (or a part of that start).
+fn starts_like_a_result(bytes: &[u8]) -> bool {
+    let start = format!("{{\"format\":\"{FORMAT}\"");
+    let start = start.as_bytes();
+    let common = bytes.len().min(start.len());
+    bytes[..common] == start[..common]
+}
+
 /// Reads `path`. Only newline-terminated lines count: an unterminated last line is what an
 /// interrupted append leaves, so it is dropped (and reported). A complete line that does not
 /// parse is corruption, reported with file and line number.
@@ -136,7 +145,15 @@ pub fn read_results(path: &Path) -> Result<StoredFile> {
                     max: MAX_LINE_BYTES,
                 });
             }
-            // The file ends inside it: what an interrupted append leaves.
+            // The file ends inside it: what an interrupted append leaves, the start of a
+            // result line. Anything else is no torn result, and the file no results file
+            // (a one-line note without a newline had been dropped and the file replaced).
+            if !starts_like_a_result(&raw) {
+                return Err(SweepError::NotATornResult {
+                    path: path.to_path_buf(),
+                    line,
+                });
+            }
             torn_tail_dropped = true;
             break;
         }

@@ -643,3 +643,29 @@ fn a_results_file_without_newlines_is_refused_at_its_first_megabyte() {
         "{text}"
     );
 }
+
+#[test]
+fn an_unterminated_line_that_starts_no_result_is_no_torn_line() {
+    // A note without a newline, given to --resume as the results file, had been dropped as
+    // a torn line and the file replaced: now refused, naming it, and left as it was.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("notes.txt");
+    std::fs::write(&path, "my precious notes").unwrap();
+    let error = crate::record::read_results(&path).expect_err("refused");
+    let text = error.to_string();
+    assert!(
+        text.contains("notes.txt:1") && text.contains("not a sweep's results file"),
+        "{text}"
+    );
+    assert_eq!(read(&path), "my precious notes");
+    // The start of a result line, cut anywhere (an interrupted append), is a torn line.
+    for cut in [1, 5, 30] {
+        let start = format!("{{\"format\":\"{}\",\"point\":3,", crate::record::FORMAT);
+        std::fs::write(&path, &start[..cut]).unwrap();
+        let file = crate::record::read_results(&path).unwrap();
+        assert!(
+            file.torn_tail_dropped && file.lines.is_empty(),
+            "cut at {cut}"
+        );
+    }
+}

@@ -146,6 +146,11 @@ impl FunctionalCore {
         Ok(())
     }
 
+    /// The index in the stream of the next event it takes (for errors that name it).
+    pub fn next_event(&self) -> u64 {
+        self.events
+    }
+
     /// Apply one event; returns the totals of a query that ended with it: the stream's
     /// golden result's when the core trusts them.
     pub fn event(&mut self, event: &Event) -> Result<Option<QueryTotals>, SimError> {

@@ -89,6 +89,27 @@ use occsim_traces::{Event, Fragment, QueryMode, QueryResult, QuerySpec, Span, Ti
 /// Most tile registers (tiles x Image Engines) one query may load: bounds memory.
 pub const MAX_TILE_REGISTERS: usize = 1 << 22;
 
+/// Refuse the query `spec` (event `event`) whose tiles, loaded into each of
+/// `image_engines` Occlusion Units, need more than [`MAX_TILE_REGISTERS`]: at every level,
+/// so that none times a query the others refuse (the analytic level had timed a 20,480-tile
+/// query on ir4 that the machine refuses).
+pub fn check_tile_registers(
+    spec: &QuerySpec,
+    image_engines: usize,
+    event: u64,
+) -> Result<(), SimError> {
+    if spec.tiles.len().saturating_mul(image_engines) <= MAX_TILE_REGISTERS {
+        return Ok(());
+    }
+    Err(SimError::TileRegisters {
+        event,
+        id: spec.id,
+        tiles: spec.tiles.len(),
+        image_engines,
+        max: MAX_TILE_REGISTERS,
+    })
+}
+
 struct OpenQuery {
     spec: QuerySpec,
     /// Distinguishes queries, so each Image Engine loads a query's tiles once, lazily.
@@ -400,16 +421,7 @@ impl IrMachine {
 
     fn begin(&mut self, spec: &QuerySpec, event: u64) -> Result<(), SimError> {
         check_spec(spec.shape(), event, self.open.as_ref().map(|q| q.spec.id))?;
-        let registers = spec.tiles.len().saturating_mul(self.image_engines.len());
-        if registers > MAX_TILE_REGISTERS {
-            return Err(SimError::TileRegisters {
-                event,
-                id: spec.id,
-                tiles: spec.tiles.len(),
-                image_engines: self.image_engines.len(),
-                max: MAX_TILE_REGISTERS,
-            });
-        }
+        check_tile_registers(spec, self.image_engines.len(), event)?;
         self.generation += 1;
         self.open = Some(OpenQuery {
             spec: spec.clone(),

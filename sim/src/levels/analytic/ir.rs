@@ -1199,6 +1199,11 @@ pub(crate) struct IrBottleneck {
 }
 
 impl IrBottleneck {
+    /// Its Image Engines, over every board.
+    pub(super) fn image_engines(&self) -> usize {
+        self.arch.image_engines()
+    }
+
     /// The formulas of `arch` over a viewport `width` pixels wide.
     pub(super) fn new(arch: &IrArch, width: u32) -> IrBottleneck {
         let interleave = FramebufferInterleave::new(arch);

@@ -24,6 +24,7 @@ use crate::error::SimError;
 use crate::levels::functional::FunctionalCore;
 use crate::levels::level::{Fidelity, LevelResult};
 use crate::levels::predicted_loop::PredictedLoop;
+use crate::machines::ir::check_tile_registers;
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::state::RenderState;
 use occsim_traces::trace::{FragmentBand, FragmentStretch, IndexItem, TraceHeader};
@@ -148,14 +149,24 @@ impl Formulas {
     /// Count the other events that matter to the formulas (primitives, query begins, the
     /// O2's clears). A primitive is set up no earlier than `front` released it: the pipe
     /// front waits for the geometry stage, while the blocks behind it work on.
-    pub(crate) fn event(&mut self, event: &Event, front: &PredictedLoop) {
+    /// `index` is the event's in the stream, for errors.
+    pub(crate) fn event(
+        &mut self,
+        event: &Event,
+        front: &PredictedLoop,
+        index: u64,
+    ) -> Result<(), SimError> {
         match (self, event) {
             (formulas, Event::Primitive) => formulas.primitive(front.release_in_window()),
             (Formulas::O2(o2), Event::QueryBegin(spec)) => o2.begin(&spec.shape()),
             (Formulas::O2(o2), Event::Clear) => o2.clear(),
-            (Formulas::Ir(ir), Event::QueryBegin(spec)) => ir.begin(spec),
+            (Formulas::Ir(ir), Event::QueryBegin(spec)) => {
+                check_tile_registers(spec, ir.image_engines(), index)?;
+                ir.begin(spec)
+            }
             _ => {}
         }
+        Ok(())
     }
 
     /// The query `spec` ended with `result`, closing the window that began in the predicted
@@ -374,7 +385,7 @@ impl AnalyticModel {
         self.frames.event(event, || formulas.cut());
         self.formulas.idle(self.frames.take_idle());
         self.settle();
-        self.formulas.event(event, &self.frames);
+        (self.formulas).event(event, &self.frames, self.core.next_event())?;
         if let Some(totals) = self.core.event(event)? {
             self.end_query(&totals);
         }

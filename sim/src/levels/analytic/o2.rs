@@ -1937,16 +1937,26 @@ mod tests {
             first_ready: 0.0,
             pace: 1.0,
         };
-        let head = Head::new(0.0, 1, PortOrder::free_from(0.0, &formulas, 0.0), writes);
-        assert_eq!(head.latency(4), 6.0);
+        let head = Head::new(
+            0.0,
+            (0.0, 1),
+            PortOrder::free_from(0.0, &formulas, 0.0),
+            writes,
+        );
+        assert_eq!(head.latency(4).0, 6.0);
         // Without the colour reads the writes go in 0 to 3 (asked for a cycle apart, none
         // queued to pack with), the record in 4, available in 5.
         let opaque = LastWrites {
             colour_read_bits: 0,
             ..writes
         };
-        let head = Head::new(0.0, 1, PortOrder::free_from(0.0, &formulas, 0.0), opaque);
-        assert_eq!(head.latency(4), 5.0);
+        let head = Head::new(
+            0.0,
+            (0.0, 1),
+            PortOrder::free_from(0.0, &formulas, 0.0),
+            opaque,
+        );
+        assert_eq!(head.latency(4).0, 5.0);
     }
 
     /// The port's other clients at `f` = 1/4 with a slack of 1, owed nothing, and requests
@@ -2022,19 +2032,19 @@ mod tests {
         let formulas = O2Formulas::new(&unshared_o2(), 640, 480);
         let port = |free: f64| PortOrder::free_from(free, &formulas, 0.0);
         let followed = |writes: LastWrites| {
-            let mut head = Head::new(13.0, 1, port(0.0), writes);
+            let mut head = Head::new(13.0, (0.0, 1), port(0.0), writes);
             for k in 0..16 {
                 head.follow(4.0 + k as f64, k < 4);
             }
-            head.latency(16)
+            head.latency(16).0
         };
         assert_eq!(followed(writes), 16.0);
         assert_eq!(followed(LastWrites::default()), 13.0);
         // A port still 20 cycles behind at the token: every write and read after it.
-        let mut head = Head::new(13.0, 1, port(20.0), writes);
+        let mut head = Head::new(13.0, (0.0, 1), port(20.0), writes);
         head.follow(4.0, true);
         // W0 in 20, R0 in 21, then W1..W4 packed in 22, ..., W13..W15 in 25.
-        assert_eq!(head.latency(16), 25.0 + 2.0);
+        assert_eq!(head.latency(16).0, 25.0 + 2.0);
     }
 
     /// The query above (latency 13), then the next window's primitive (setup 4) and its
