@@ -1389,3 +1389,46 @@ fn a_trace_that_is_no_regular_file_is_refused_at_once() {
     assert!(error.contains("/dev/null: not a regular file"), "{error}");
     writer.join().unwrap();
 }
+
+/// `bytes` with the first block of `kind` claiming one item more than it holds, its
+/// checksum made again: a block only decoding finds wrong.
+fn with_a_block_claiming_one_more(bytes: &[u8], kind: u8) -> Vec<u8> {
+    // File header: magic (8), version (2), flags (2), JSON length (4), JSON, CRC (4); then
+    // blocks of a 20-byte header (kind, codec, 2 reserved, events, raw and stored lengths,
+    // CRC of the 16 bytes before it and the stored payload) and the payload.
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let mut at = 16 + json_len + 4;
+    loop {
+        let stored = u32::from_le_bytes(bytes[at + 12..at + 16].try_into().unwrap()) as usize;
+        if bytes[at] == kind {
+            let mut forged = bytes.to_vec();
+            let events = u32::from_le_bytes(bytes[at + 4..at + 8].try_into().unwrap());
+            forged[at + 4..at + 8].copy_from_slice(&(events + 1).to_le_bytes());
+            let mut crc = crc32fast::Hasher::new();
+            crc.update(&forged[at..at + 16]);
+            crc.update(&forged[at + 20..at + 20 + stored]);
+            forged[at + 16..at + 20].copy_from_slice(&crc.finalize().to_le_bytes());
+            return forged;
+        }
+        at += 20 + stored;
+    }
+}
+
+#[test]
+fn trace_info_scan_decodes_every_lane() {
+    // A band-index (kind 6) or window-index (kind 3) block that claims an item more than it
+    // holds, its checksum valid: `--scan` had read the events alone and said every block's
+    // payload was checked.
+    let (dir, trace) = hardcases_trace("scan-lanes");
+    let clean = std::fs::read(&trace).unwrap();
+    stdout_of(&["trace", "info", &trace, "--scan"]);
+    for (kind, lane) in [(6u8, "band"), (3, "window index")] {
+        let forged = dir.join(format!("forged-{kind}.occt"));
+        std::fs::write(&forged, with_a_block_claiming_one_more(&clean, kind)).unwrap();
+        let forged = forged.to_str().unwrap();
+        // The summary alone does not see it.
+        stdout_of(&["trace", "info", forged]);
+        let error = stderr_of_failure(&["trace", "info", forged, "--scan"]);
+        assert!(error.contains("claims"), "{lane}: {error}");
+    }
+}
