@@ -1335,7 +1335,25 @@ fn every_output_path_is_checked_before_the_work() {
         "{error}"
     );
     let error = stderr_of_failure(&["replay", &trace, "--fidelity", "rtl", "--vcd", &trace]);
-    assert!(error.contains("--vcd"), "{error}");
+    assert!(
+        error.contains("--vcd") && error.contains("overwrite its own input"),
+        "{error}"
+    );
+    // Of three outputs, the two that meet are named.
+    let other = at("y.fst");
+    let error = stderr_of_failure(&[
+        "replay",
+        &trace,
+        "--fidelity",
+        "rtl",
+        "--vcd",
+        &both,
+        "--fst",
+        &other,
+        "--timeline",
+        &both,
+    ]);
+    assert!(error.contains("--vcd, --timeline:"), "{error}");
     let out = at("no-such-dir/demo.occt");
     let start = std::time::Instant::now();
     let error = stderr_of_failure(&["trace", "gen", "demo", "--frames", "64", "-o", &out]);
@@ -1344,6 +1362,28 @@ fn every_output_path_is_checked_before_the_work() {
     assert!(start.elapsed().as_secs() < 5, "{:?}", start.elapsed());
     let left: Vec<_> = std::fs::read_dir(&*dir).unwrap().collect();
     assert_eq!(left.len(), 1, "{left:?}");
+}
+
+/// [`stderr_of_failure`], killing the command and failing if it runs `seconds` (it may
+/// wait for ever on a FIFO).
+fn stderr_of_failure_within(args: &[&str], seconds: u64) -> String {
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_occsim"))
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let start = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if start.elapsed().as_secs() >= seconds {
+            child.kill().unwrap();
+            panic!("occsim {args:?} still ran after {seconds} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let output = child.wait_with_output().unwrap();
+    assert!(!output.status.success(), "occsim {args:?} should fail");
+    String::from_utf8(output.stderr).expect("utf-8 output")
 }
 
 #[test]
@@ -1382,7 +1422,7 @@ fn a_trace_that_is_no_regular_file_is_refused_at_once() {
         vec!["trace", "info", name],
         vec!["fidelity", name, "--no-rtl"],
     ] {
-        let error = stderr_of_failure(&args);
+        let error = stderr_of_failure_within(&args, 20);
         assert!(error.contains("not a regular file"), "{args:?}: {error}");
     }
     let error = stderr_of_failure(&["replay", "/dev/null"]);

@@ -4,7 +4,9 @@
 //! - `sim` does no file IO;
 //! - `rtl-model` has no floating point;
 //! - library error messages name no command-line flag (the binary's words are the binary's);
-//! - every source module is named in ARCHITECTURE.md's code map.
+//! - every source module is named in ARCHITECTURE.md's code map, by its file;
+//! - data flows one way between the crates (each one's own dependencies);
+//! - glam stays in the scenes, cameras and drivers, out of the rasterizer and the models.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -52,8 +54,9 @@ enum Tests {
 }
 
 /// The part of a library file that is not its tests: [`split_code`] without every item
-/// under `#[cfg(test)]` (a unit-test module, and a test-only method inside an `impl`,
-/// wherever it is in the file).
+/// under `#[cfg(test)]` (a unit-test module, a test-only method inside an `impl`, field or
+/// match arm, wherever it is in the file). A file that a `#[cfg(test)] mod x;` names is
+/// still read whole, as any file is.
 fn without_tests(text: &str) -> Code {
     split(text, Tests::Dropped)
 }
@@ -65,21 +68,35 @@ struct Skipping {
     opened: bool,
 }
 
+/// Where a character leaves the test-only item being skipped.
+#[derive(PartialEq)]
+enum Skipped {
+    /// Inside it.
+    Within,
+    /// Its last character (the `;` of an item without a body, the brace that closes its
+    /// body, the `,` after a field, a variant or a match arm).
+    Last,
+    /// Past it: the closer of what holds it (a field's struct, an arm's match), code again.
+    Past,
+}
+
 impl Skipping {
-    /// Take one character of code; whether the item ends with it (at the `;` of an item
-    /// without a body, or the brace that closes its body).
-    fn ends_at(&mut self, c: char) -> bool {
+    /// Take one character of code.
+    fn take(&mut self, c: char) -> Skipped {
         match c {
             '(' | '[' => self.depth += 1,
             '{' => (self.depth, self.opened) = (self.depth + 1, true),
+            ')' | ']' | '}' if self.depth == 0 => return Skipped::Past,
             ')' | ']' | '}' => {
-                self.depth = self.depth.saturating_sub(1);
-                return c == '}' && self.depth == 0 && self.opened;
+                self.depth -= 1;
+                if c == '}' && self.depth == 0 && self.opened {
+                    return Skipped::Last;
+                }
             }
-            ';' => return self.depth == 0,
+            ';' | ',' if self.depth == 0 => return Skipped::Last,
             _ => {}
         }
-        false
+        Skipped::Within
     }
 }
 
@@ -133,11 +150,14 @@ fn split(text: &str, tests: Tests) -> Code {
             let c = rest.chars().next().expect("not at the end");
             i += c.len_utf8();
             match &mut skipping {
-                Some(item) => {
-                    if item.ends_at(c) {
+                Some(item) => match item.take(c) {
+                    Skipped::Within => {}
+                    Skipped::Last => skipping = None,
+                    Skipped::Past => {
                         skipping = None;
+                        code.push(c);
                     }
-                }
+                },
                 None => code.push(c),
             }
             continue;
@@ -411,7 +431,11 @@ fn names_module(map: &str, file: &Path) -> bool {
         "mod" => format!("{name}/"),
         _ => format!("{name}.rs"),
     };
-    map.contains(&mention)
+    // Not inside a longer name: `tests.rs` is no mention of `depth_tests.rs`.
+    map.match_indices(&mention).any(|(at, _)| {
+        let before = map[..at].chars().next_back();
+        !before.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_')
+    })
 }
 
 #[test]
@@ -444,6 +468,9 @@ fn a_module_is_named_by_its_file_not_by_a_word() {
     let levels = Path::new("sim/src/levels/mod.rs");
     assert!(names_module("- `levels/`: the fidelity levels", levels));
     assert!(!names_module("the levels of detail", levels));
+    let tests = Path::new("sweep/src/tests.rs");
+    assert!(!names_module("`depth_tests.rs`: ...", tests));
+    assert!(names_module("`tests.rs`: ...", tests));
 }
 
 #[test]
@@ -503,6 +530,16 @@ fn only_the_items_under_cfg_test_are_dropped() {
     let text = "impl A {\n    #[cfg(test)]\n    fn peek(&self) -> [u8; 2] { [b'{', 1] }\n    fn f() { g(\"kept\") }\n}\n#[cfg(test)]\nconst T: [u8; 2] = [0; 2];\n#[cfg(test)]\nmod tests {\n    fn t() { assert!(x, \"dropped {}\", 1) }\n}\nfn after() { h(\"also kept\") }\n";
     let code = without_tests(text);
     assert_eq!(code.strings, vec!["kept", "also kept"]);
+    // A test-only field ends at its comma, the last one at its struct's brace, which stays.
+    let fields = without_tests("struct S {\n    a: u8,\n    #[cfg(test)]\n    b: u8,\n    c: u8,\n}\nstruct T {\n    #[cfg(test)]\n    d: u8\n}\nfn g() { h(\"kept\") }\n");
+    assert!(
+        fields.code.contains("a: u8") && fields.code.contains("c: u8"),
+        "{}",
+        fields.code
+    );
+    assert!(!fields.code.contains("b: u8") && !fields.code.contains("d: u8"));
+    assert!(fields.code.contains("struct T {") && fields.code.contains("fn g()"));
+    assert_eq!(fields.strings, vec!["kept"]);
     assert!(!code.code.contains("peek") && !code.code.contains("mod tests"));
     assert!(!code.code.contains("const T"));
     assert!(code.code.contains("fn f()") && code.code.contains("fn after()"));

@@ -359,7 +359,7 @@ fn analytic_o2_writes_the_records_of_queries_that_end_together_one_after_another
     // each query's records (4 tiles of 8 words, 4 cycles of a 256-bit port) are ready in 4
     // (end 0, depth 1, OccU 2, ready 3, asking from 4), but the in-order port writes them
     // after the records of the queries before: query k's go in 4 + 4k .. 7 + 4k, its
-    // latency 8 + 4k (the formulas had given every one 8: the run 99% short).
+    // latency 8 + 4k (the formulas had given every one 8: the run 96% short).
     let mut arch = Arch::builtin("o2").unwrap();
     arch.set("display_refresh_hz=0").unwrap();
     arch.set("host_memory_share=0").unwrap();

@@ -366,11 +366,14 @@ fn check_outputs(args: &WaveformArgs) -> anyhow::Result<()> {
     for (path, flag) in &given {
         super::check_output(Some(path), flag)?;
     }
-    let paths: Vec<&std::path::Path> = given.iter().map(|(path, _)| *path).collect();
-    occsim_sweep::output::check_distinct(&paths).map_err(|error| {
-        let flags: Vec<&str> = given.iter().map(|(_, flag)| *flag).collect();
-        anyhow::Error::new(error).context(flags.join(", "))
-    })
+    // Pair by pair, so that an error names the two flags that meet.
+    for (k, (first, first_flag)) in given.iter().enumerate() {
+        for (second, second_flag) in &given[k + 1..] {
+            occsim_sweep::output::check_distinct(&[first, second])
+                .with_context(|| format!("{first_flag}, {second_flag}"))?;
+        }
+    }
+    Ok(())
 }
 
 /// Check the flags' combination; the waveform window if a VCD is asked for.

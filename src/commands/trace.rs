@@ -214,7 +214,7 @@ pub const TRACE_READ_BUFFER_BYTES: usize = 1 << 16;
 /// dump` reads a trace more than once (the levels' passes) or seeks in it (its summary),
 /// and a pipe gives one pass (a second read had found the trace "truncated inside the magic
 /// number"; a named FIFO's second open waited for another writer, for ever). A path that is
-/// missing or a directory is left to the open, whose error says so.
+/// missing is left to the open, a directory to the first read, whose errors say so.
 pub fn check_trace_file(path: &Path) -> anyhow::Result<()> {
     match std::fs::metadata(path) {
         Ok(metadata) if !metadata.is_file() && !metadata.is_dir() => anyhow::bail!(

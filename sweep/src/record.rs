@@ -107,10 +107,10 @@ pub struct StoredFile {
 }
 
 /// Whether `bytes`, the unterminated end of a results file, is the start of a result line
-/// as [`SweepLine`] serialises, `{"format":"occsim-sweep/2",...` (or a part of that start).
+/// as [`SweepLine`] serialises, `{"format":"occsim-sweep/...` (or a part of that start;
+/// of any version, so that an older file's torn line meets the format check).
 fn starts_like_a_result(bytes: &[u8]) -> bool {
-    let start = format!("{{\"format\":\"{FORMAT}\"");
-    let start = start.as_bytes();
+    let start = b"{\"format\":\"occsim-sweep/";
     let common = bytes.len().min(start.len());
     bytes[..common] == start[..common]
 }

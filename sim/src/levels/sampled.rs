@@ -1260,7 +1260,8 @@ impl SampledModel {
         self.formulas.idle(self.predicted.take_idle());
         self.settle();
         self.closed_loop |= event.is_closed_loop_record();
-        (self.formulas).event(event, &self.predicted, self.core.next_event())?;
+        self.formulas
+            .event(event, &self.predicted, self.core.next_event())?;
         if let Some(run) = &mut self.run {
             // A wait or conditional on a query that ended before the machine started is
             // answered where the predicted timeline answers it.

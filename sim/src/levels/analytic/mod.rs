@@ -385,7 +385,8 @@ impl AnalyticModel {
         self.frames.event(event, || formulas.cut());
         self.formulas.idle(self.frames.take_idle());
         self.settle();
-        (self.formulas).event(event, &self.frames, self.core.next_event())?;
+        self.formulas
+            .event(event, &self.frames, self.core.next_event())?;
         if let Some(totals) = self.core.event(event)? {
             self.end_query(&totals);
         }

@@ -249,13 +249,13 @@
 //! 97% of them to the cycle.
 //!
 //! Queries that end with no work between them: a query's records are asked for `4 +
-//! drain` after its token enters, and the in-order port writes them after the records of
-//! the query before where those are still being written then (`RecordsWritten`: its last
-//! record grant on the timeline and the other clients' debt after it). Its latency is then
-//! the port's, its window's last writes being the query before's, which its records went
-//! after; the reads of the fragments after its token that come sooner take the port's
-//! idle cycles before those records, the later ones queue behind its own, so nothing that
-//! follows moves it. (Without this, 2,000 empty queries in an open loop took 5 cycles,
+//! drain` after its token enters, and after a window of no work the in-order port writes
+//! them after the records of the query before where those are still being written then
+//! (`RecordsWritten`: its last record grant on the timeline and the other clients' debt
+//! after it). Its latency is then the port's, its window's last writes being the query
+//! before's, which its records went after; the reads of the fragments after its token are
+//! taken to find the port's idle cycles before those records (not followed: an
+//! approximation). (Without this, 2,000 empty queries in an open loop took 5 cycles,
 //! every latency 5, where the machine's records queue up to 2,596 cycles, latencies to
 //! 2,465: now 2,595 and 2,465; on the demo, whose brief queries over no fragment follow a
 //! query at once, five of them went from 16 cycles to 17 where the machine takes 17 to 21,
@@ -1044,7 +1044,8 @@ impl Head {
     /// cycles after the port's backlog at the end token (`port`) and `writes`.
     fn new(
         latency: f64,
-        (entry, record_cycles): (f64, u64),
+        entry: f64,
+        record_cycles: u64,
         port: PortOrder,
         writes: LastWrites,
     ) -> Head {
@@ -1432,14 +1433,14 @@ impl O2Bottleneck {
             drain = (drain - OCCU_BOUND_TOKEN_OVERLAP_CYCLES).max(0.0);
         }
         let latency = self.formulas.latency(records, drain, debt);
-        // The port is in order: the last query's records, still being written when this
-        // query's are ready (`4 + drain` after its token enters: queries that end with no
-        // work between them), go first.
+        // The port is in order: after a window of no work, the last query's records, still
+        // being written when this query's are ready (`4 + drain` after its token enters),
+        // go first.
         let entry = start + cycles + late;
         let ready = 4.0 + drain;
-        let behind = self
-            .records
-            .filter(|last| last.last_grant + 1.0 - entry > ready.max(port_backlog));
+        let behind = self.records.filter(|last| {
+            cycles == 0.0 && last.last_grant + 1.0 - entry > ready.max(port_backlog)
+        });
         // Behind them, the window's last writes are the last query's too, which its records
         // went after.
         let (port, writes) = match behind {
@@ -1453,15 +1454,14 @@ impl O2Bottleneck {
             ),
         };
         let record_cycles = self.formulas.record_port_cycles(records);
-        let head = Head::new(latency, (entry, record_cycles), port, writes);
+        let head = Head::new(latency, entry, record_cycles, port, writes);
         if behind.is_none() {
             self.head = Some(head);
             return WindowEnd { cycles, latency };
         }
         // Behind the last query's records its own are asked for before the port is through
-        // those: the reads of the fragments after its token that come sooner take the
-        // port's idle cycles before them, the later ones queue behind them. Nothing that
-        // follows moves it.
+        // those, and the reads of the fragments after its token are taken to find the
+        // port's idle cycles before them (not followed: an approximation).
         let (latency, written) = head.latency(self.formulas.head_fragments());
         self.records = Some(written);
         WindowEnd { cycles, latency }
@@ -1939,7 +1939,8 @@ mod tests {
         };
         let head = Head::new(
             0.0,
-            (0.0, 1),
+            0.0,
+            1,
             PortOrder::free_from(0.0, &formulas, 0.0),
             writes,
         );
@@ -1952,7 +1953,8 @@ mod tests {
         };
         let head = Head::new(
             0.0,
-            (0.0, 1),
+            0.0,
+            1,
             PortOrder::free_from(0.0, &formulas, 0.0),
             opaque,
         );
@@ -2032,7 +2034,7 @@ mod tests {
         let formulas = O2Formulas::new(&unshared_o2(), 640, 480);
         let port = |free: f64| PortOrder::free_from(free, &formulas, 0.0);
         let followed = |writes: LastWrites| {
-            let mut head = Head::new(13.0, (0.0, 1), port(0.0), writes);
+            let mut head = Head::new(13.0, 0.0, 1, port(0.0), writes);
             for k in 0..16 {
                 head.follow(4.0 + k as f64, k < 4);
             }
@@ -2041,7 +2043,7 @@ mod tests {
         assert_eq!(followed(writes), 16.0);
         assert_eq!(followed(LastWrites::default()), 13.0);
         // A port still 20 cycles behind at the token: every write and read after it.
-        let mut head = Head::new(13.0, (0.0, 1), port(20.0), writes);
+        let mut head = Head::new(13.0, 0.0, 1, port(20.0), writes);
         head.follow(4.0, true);
         // W0 in 20, R0 in 21, then W1..W4 packed in 22, ..., W13..W15 in 25.
         assert_eq!(head.latency(16).0, 25.0 + 2.0);
