@@ -339,7 +339,9 @@ fn trace_gen_info_dump_round_trip() {
     let (before, last) = scanned.trim_end().rsplit_once('\n').unwrap();
     assert_eq!(info.trim_end(), before);
     assert!(
-        last.starts_with("scanned     every block read"),
+        last.starts_with(
+            "scanned     every block's checksum checked; the events, the window index"
+        ),
         "{scanned}"
     );
     let json: serde_json::Value =
