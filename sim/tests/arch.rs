@@ -127,6 +127,25 @@ fn unknown_keys_name_the_close_ones() {
             .starts_with("line 5: unknown parameter 'extra'"),
         "{err}"
     );
+    // A top-level table that is not the machine's section, named as a section by its line;
+    // another machine's, said so (both had been "unknown parameter", with no line).
+    let err = Arch::from_toml("machine = \"o2\"\n[ir]\nboards = 2\n").unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "line 2: [ir] is no section of an o2 architecture (it has `machine` and one [o2] section): [ir] is the ir machine's"
+    );
+    let err = Arch::from_toml("machine = \"o2\"\n[o2]\nengines = 2\n[extra]\na = 1\n").unwrap_err();
+    assert!(
+        err.to_string()
+            .starts_with("line 4: [extra] is no section of an o2 architecture"),
+        "{err}"
+    );
+    let err = Arch::from_toml("machine = \"o2\"\nzzz = 3\n").unwrap_err();
+    assert!(
+        err.to_string()
+            .starts_with("line 2: unknown parameter 'zzz' at top level"),
+        "{err}"
+    );
     let err = Arch::from_toml("machine = \"o2\"\n[o2]\nengines = \"four\"\n").unwrap_err();
     assert!(
         err.to_string()
@@ -189,9 +208,10 @@ fn files_must_name_a_known_machine() {
         Arch::from_toml("machine = \"vgx\"\n"),
         Err(ArchError::UnknownMachine { .. })
     ));
+    // A parameter outside the machine's section, named by its line.
     assert!(matches!(
         Arch::from_toml("machine = \"o2\"\nengines = 2\n"),
-        Err(ArchError::UnknownKey { .. })
+        Err(ArchError::AtLine { line: 2, error }) if matches!(*error, ArchError::UnknownKey { .. })
     ));
     assert!(matches!(
         Arch::from_toml("machine = \"o2\"\n[o2\n"),

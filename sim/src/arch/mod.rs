@@ -468,6 +468,13 @@ pub enum ArchError {
     UnknownMachine { name: String, known: String },
     #[error("unknown parameter '{key}'{hint}")]
     UnknownKey { key: String, hint: String },
+    /// A table in an architecture file other than its machine's section.
+    #[error("[{section}] is no section of an {machine} architecture (it has `machine` and one [{machine}] section){hint}")]
+    UnknownSection {
+        section: String,
+        machine: &'static str,
+        hint: String,
+    },
     #[error("parameter '{key}' = {value}: expected {expected}")]
     BadValue {
         key: String,
@@ -561,14 +568,31 @@ impl Arch {
                         arch.values[index] = parsed;
                     }
                 }
-                _ => {
-                    return Err(ArchError::UnknownKey {
-                        key: key.clone(),
-                        hint: format!(
-                            " at top level (expected `machine` and a [{}] section)",
-                            machine.name()
-                        ),
-                    })
+                (section, value) => {
+                    let error = match value {
+                        toml::Value::Table(_) => ArchError::UnknownSection {
+                            section: section.to_owned(),
+                            machine: machine.name(),
+                            // The section of another machine: the file names the wrong one.
+                            hint: Machine::from_name(section).map_or(String::new(), |_| {
+                                format!(": [{section}] is the {section} machine's")
+                            }),
+                        },
+                        _ => ArchError::UnknownKey {
+                            key: key.clone(),
+                            hint: format!(
+                                " at top level (expected `machine` and a [{}] section)",
+                                machine.name()
+                            ),
+                        },
+                    };
+                    return Err(match line_of_key(text, section) {
+                        0 => error,
+                        line => ArchError::AtLine {
+                            line,
+                            error: Box::new(error),
+                        },
+                    });
                 }
             }
         }
