@@ -125,6 +125,9 @@ fn load_previous(
             // an interrupted or failing run leaves the old results as they were.
             return Ok((done, false));
         }
+        // A file that is no results file says so, rather than be taken for a sweep to
+        // resume (a file of notes had been "already holds results").
+        read_results(out)?;
         return Err(SweepError::AlreadyHoldsResults {
             path: out.to_path_buf(),
         });

@@ -669,3 +669,21 @@ fn an_unterminated_line_that_starts_no_result_is_no_torn_line() {
         );
     }
 }
+
+#[test]
+fn a_file_that_holds_no_results_is_not_taken_for_a_sweep_to_resume() {
+    // A fresh sweep whose --out is a file of notes: refused as what it is, not as "already
+    // holds results; resume that sweep", and left as it was.
+    let temp = test_dir("notes");
+    let g = twelve_points();
+    let out = temp.path().join("notes.txt");
+    std::fs::write(&out, "my precious notes\nsecond line\n").unwrap();
+    let error = run_sweep(&options(&g, &out, 1), &fake_machine)
+        .expect_err("refused")
+        .to_string();
+    assert!(
+        error.contains("notes.txt:1") && !error.contains("already holds results"),
+        "{error}"
+    );
+    assert_eq!(read(&out), "my precious notes\nsecond line\n");
+}
