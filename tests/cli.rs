@@ -1318,43 +1318,26 @@ fn every_output_path_is_checked_before_the_work() {
     // one path found once both were written, and the demo's -o once its scene was made.
     let (dir, trace) = hardcases_trace("outputs-first");
     let at = |name: &str| dir.join(name).to_str().unwrap().to_owned();
-    let missing = at("no-such-dir/x.vcd");
-    let error = stderr_of_failure(&["replay", &trace, "--fidelity", "rtl", "--vcd", &missing]);
+    let rtl_replay_failing = |outputs: &[&str]| {
+        let mut args = vec!["replay", trace.as_str(), "--fidelity", "rtl"];
+        args.extend_from_slice(outputs);
+        stderr_of_failure(&args)
+    };
+    let error = rtl_replay_failing(&["--vcd", &at("no-such-dir/x.vcd")]);
     assert!(error.contains("--vcd: cannot create"), "{error}");
     let both = at("x.vcd");
-    let error = stderr_of_failure(&[
-        "replay",
-        &trace,
-        "--fidelity",
-        "rtl",
-        "--vcd",
-        &both,
-        "--fst",
-        &both,
-    ]);
+    let error = rtl_replay_failing(&["--vcd", &both, "--fst", &both]);
     assert!(
         error.contains("--vcd, --fst") && error.contains("two of"),
         "{error}"
     );
-    let error = stderr_of_failure(&["replay", &trace, "--fidelity", "rtl", "--vcd", &trace]);
+    let error = rtl_replay_failing(&["--vcd", &trace]);
     assert!(
         error.contains("--vcd") && error.contains("overwrite its own input"),
         "{error}"
     );
     // Of three outputs, the two that meet are named.
-    let other = at("y.fst");
-    let error = stderr_of_failure(&[
-        "replay",
-        &trace,
-        "--fidelity",
-        "rtl",
-        "--vcd",
-        &both,
-        "--fst",
-        &other,
-        "--timeline",
-        &both,
-    ]);
+    let error = rtl_replay_failing(&["--vcd", &both, "--fst", &at("y.fst"), "--timeline", &both]);
     assert!(error.contains("--vcd, --timeline:"), "{error}");
     let out = at("no-such-dir/demo.occt");
     let start = std::time::Instant::now();

@@ -107,22 +107,27 @@ fn the_demo_fast_forwards_most_of_its_fragments_with_identical_reports() {
     check_equal("demo", &trace, &arch("ir4", 4), None);
 }
 
+/// [`check_equal`] on `trace` as it is and retiled 4x4. The fast-forward rule is the O2's
+/// (the InfiniteReality takes every fragment one by one): there it must have held somewhere
+/// either way, or the equality proves nothing of it. (Retiled, none had: the retiling
+/// adapter passed spans on as their fragments.)
+fn check_plain_and_retiled(name: &str, trace: &[u8], arch: &Arch) {
+    let grid: TileGrid = "4x4".parse().unwrap();
+    let plain = check_equal(name, trace, arch, None);
+    let retiled = check_equal(&format!("{name} retiled 4x4"), trace, arch, Some(grid));
+    if arch.machine() == Machine::O2 {
+        assert!(
+            plain > 0 && retiled > 0,
+            "{name}: {plain} and {retiled} fast-forwarded"
+        );
+    }
+}
+
 #[test]
 fn hardcases_give_identical_reports_on_every_machine_plain_and_retiled() {
     let trace = scene_trace(HARDCASES);
-    let grid: TileGrid = "4x4".parse().unwrap();
     for arch in archs() {
-        let plain = check_equal("hardcases", &trace, &arch, None);
-        let retiled = check_equal("hardcases retiled 4x4", &trace, &arch, Some(grid));
-        // The rule is the O2's (the InfiniteReality takes every fragment one by one): there
-        // it must have held somewhere, or the equality above proves nothing of it. (Retiled,
-        // none had: the retiling adapter passed spans on as their fragments.)
-        if arch.machine() == Machine::O2 {
-            assert!(
-                plain > 0 && retiled > 0,
-                "{plain} and {retiled} fast-forwarded"
-            );
-        }
+        check_plain_and_retiled("hardcases", &trace, &arch);
     }
 }
 
@@ -130,16 +135,8 @@ fn hardcases_give_identical_reports_on_every_machine_plain_and_retiled() {
 fn the_random_scene_gives_identical_reports_plain_and_retiled() {
     // 27.8 M fragments and 2,000 queries of every mode: one architecture a machine.
     let trace = scene_trace(&random_scene(&RandomOptions::default()));
-    let grid: TileGrid = "4x4".parse().unwrap();
     for arch in [arch("o2", 4), arch("ir4", 4)] {
-        let plain = check_equal("random", &trace, &arch, None);
-        let retiled = check_equal("random retiled 4x4", &trace, &arch, Some(grid));
-        if arch.machine() == Machine::O2 {
-            assert!(
-                plain > 0 && retiled > 0,
-                "{plain} and {retiled} fast-forwarded"
-            );
-        }
+        check_plain_and_retiled("random", &trace, &arch);
     }
 }
 

@@ -237,13 +237,13 @@ fn band_corners(
 /// The machines `culling compare` times every frame on by default.
 const CYCLE_MACHINES: [&str; 2] = ["o2", "ir4"];
 
-/// A sim machine as a per-frame timing model: each frame replays on a fresh machine (frames
-/// are self-contained: each begins with a clear and the whole render state), and on a fresh
-/// machine for each of its variants (the corners of `--bands`).
 /// A corner of a machine's sensitivity study: what it changes (`key=value, ...`) and the
 /// architecture so changed.
 type Corner = (String, occsim_sim::Arch);
 
+/// A sim machine as a per-frame timing model: each frame replays on a fresh machine (frames
+/// are self-contained: each begins with a clear and the whole render state), and on a fresh
+/// machine for each of its variants (the corners of `--bands`).
 struct MachineFrames {
     name: String,
     arch: occsim_sim::Arch,

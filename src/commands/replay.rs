@@ -270,10 +270,7 @@ fn opener_with_progress(
     let mut passes = 0;
     move || {
         passes += 1;
-        super::trace::check_trace_file(path).map_err(|e| ReplayError::Open(e.into()))?;
-        let file = std::fs::File::open(path)
-            .with_context(|| format!("cannot open trace {}", path.display()))
-            .map_err(|e| ReplayError::Open(e.into()))?;
+        let file = super::trace::open_trace_file(path).map_err(|e| ReplayError::Open(e.into()))?;
         let bar = occsim_sweep::progress::bytes_bar(size);
         let name = path
             .file_name()

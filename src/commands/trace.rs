@@ -215,7 +215,7 @@ pub const TRACE_READ_BUFFER_BYTES: usize = 1 << 16;
 /// and a pipe gives one pass (a second read had found the trace "truncated inside the magic
 /// number"; a named FIFO's second open waited for another writer, for ever). A path that is
 /// missing is left to the open, a directory to the first read, whose errors say so.
-pub fn check_trace_file(path: &Path) -> anyhow::Result<()> {
+fn check_trace_file(path: &Path) -> anyhow::Result<()> {
     match std::fs::metadata(path) {
         Ok(metadata) if !metadata.is_file() && !metadata.is_dir() => anyhow::bail!(
             "{}: not a regular file (a pipe or a device): occsim reads a trace more than once; write it to a file first",
@@ -225,23 +225,43 @@ pub fn check_trace_file(path: &Path) -> anyhow::Result<()> {
     }
 }
 
-/// Open a trace file for reading, naming it in every error ([`check_trace_file`]).
-pub fn open_trace(path: &Path) -> anyhow::Result<TraceReader<std::io::BufReader<std::fs::File>>> {
-    check_trace_file(path)?;
-    open_trace_once(path)
-}
-
-/// [`open_trace`] for a command that reads the trace once, from its start (`trace dump`):
-/// a pipe will do.
-fn open_trace_once(path: &Path) -> anyhow::Result<TraceReader<std::io::BufReader<std::fs::File>>> {
+/// The trace file at `path` opened, and noted as an input (no output may replace it), for
+/// a command that reads it once, from its start: a pipe will do.
+fn open_trace_file_once(path: &Path) -> anyhow::Result<std::fs::File> {
     let file = std::fs::File::open(path)
         .with_context(|| format!("cannot open trace {}", path.display()))?;
     occsim_sweep::output::note_input(path);
+    Ok(file)
+}
+
+/// [`open_trace_file_once`] for every command that reads a trace more than once or seeks in
+/// it ([`check_trace_file`]).
+pub fn open_trace_file(path: &Path) -> anyhow::Result<std::fs::File> {
+    check_trace_file(path)?;
+    open_trace_file_once(path)
+}
+
+/// `file`, the trace at `path`, as a reader, naming it in every error.
+fn trace_reader(
+    path: &Path,
+    file: std::fs::File,
+) -> anyhow::Result<TraceReader<std::io::BufReader<std::fs::File>>> {
     TraceReader::new(std::io::BufReader::with_capacity(
         TRACE_READ_BUFFER_BYTES,
         file,
     ))
     .with_context(|| format!("{}: not a readable occsim trace", path.display()))
+}
+
+/// Open a trace file for reading, naming it in every error ([`check_trace_file`]).
+pub fn open_trace(path: &Path) -> anyhow::Result<TraceReader<std::io::BufReader<std::fs::File>>> {
+    trace_reader(path, open_trace_file(path)?)
+}
+
+/// [`open_trace`] for a command that reads the trace once, from its start (`trace dump`):
+/// a pipe will do.
+fn open_trace_once(path: &Path) -> anyhow::Result<TraceReader<std::io::BufReader<std::fs::File>>> {
+    trace_reader(path, open_trace_file_once(path)?)
 }
 
 /// A trace's header and summary, by a seek to the summary (or a full scan).
@@ -259,10 +279,7 @@ pub fn read_header_and_summary(
         scan_indexes(path).with_context(context)?;
         return Ok((header, summary));
     }
-    check_trace_file(path)?;
-    let file = std::fs::File::open(path)
-        .with_context(|| format!("cannot open trace {}", path.display()))?;
-    occsim_sweep::output::note_input(path);
+    let file = open_trace_file(path)?;
     TraceReader::read_summary(std::io::BufReader::new(file)).with_context(context)
 }
 
@@ -553,10 +570,7 @@ fn bytes_per_fragment(bytes: u64, fragments: u64) -> Option<f64> {
 /// Not cryptographic; it tells one trace from another, which is all resume and merge need.
 pub fn trace_digest(path: &Path) -> anyhow::Result<String> {
     use std::io::Read;
-    check_trace_file(path)?;
-    let mut file = std::fs::File::open(path)
-        .with_context(|| format!("cannot open trace {}", path.display()))?;
-    occsim_sweep::output::note_input(path);
+    let mut file = open_trace_file(path)?;
     let mut hash = occsim_traces::rng::Fnv1a::default();
     let mut length: u64 = 0;
     let mut buffer = vec![0u8; 1 << 16];

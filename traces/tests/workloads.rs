@@ -3,6 +3,7 @@
 
 use occsim_traces::golden::Discard;
 use occsim_traces::raster::RasterProfile;
+use occsim_traces::state::RenderState;
 use occsim_traces::workloads::{
     city, collision_oracle, forest, full_render_visible_pixels, generate, load_obj, traffic,
     CameraPath, CityOptions, DriverKind, DriverOptions, ForestOptions, GridVariant, ObjOptions,
@@ -98,16 +99,10 @@ fn the_same_options_give_the_same_events() {
     }
 }
 
-/// Whether `event` sets one piece of the render state.
+/// Whether `event` sets one piece of the render state: what `RenderState::apply` takes,
+/// the one list of them.
 fn sets_state(event: &Event) -> bool {
-    matches!(
-        event,
-        Event::DepthFunc(_)
-            | Event::DepthMask(_)
-            | Event::DepthTest(_)
-            | Event::Cull(_)
-            | Event::Scissor(_)
-    )
+    RenderState::new(1, 1).apply(event)
 }
 
 #[test]

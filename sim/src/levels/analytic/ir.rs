@@ -92,6 +92,8 @@ use crate::arch::{Interleave, IrArch};
 use crate::blocks::interleave::FramebufferInterleave;
 use crate::blocks::merge_network::{MergeState, Partial, ReportShape};
 use crate::blocks::occlusion_engine::hit_room;
+use crate::error::SimError;
+use crate::machines::ir::check_tile_registers;
 use occsim_traces::golden::FunctionalModel;
 #[cfg(doc)]
 use occsim_traces::trace::BAND_ROWS;
@@ -1199,11 +1201,6 @@ pub(crate) struct IrBottleneck {
 }
 
 impl IrBottleneck {
-    /// Its Image Engines, over every board.
-    pub(super) fn image_engines(&self) -> usize {
-        self.arch.image_engines()
-    }
-
     /// The formulas of `arch` over a viewport `width` pixels wide.
     pub(super) fn new(arch: &IrArch, width: u32) -> IrBottleneck {
         let interleave = FramebufferInterleave::new(arch);
@@ -1231,7 +1228,10 @@ impl IrBottleneck {
         &self.merges
     }
 
-    pub(super) fn begin(&mut self, spec: &QuerySpec) {
+    /// The query `spec` (event `index`) begins: refused past the tile registers, as the
+    /// machine refuses it, before its verbose hits are given room in every Image Engine.
+    pub(super) fn begin(&mut self, spec: &QuerySpec, index: u64) -> Result<(), SimError> {
+        check_tile_registers(spec, self.arch.image_engines(), index)?;
         self.open = Some(OpenQuery {
             service: service_cycles(
                 spec.tiles.len(),
@@ -1248,6 +1248,7 @@ impl IrBottleneck {
                 _ => Vec::new(),
             },
         });
+        Ok(())
     }
 
     /// An Image Engine's cycles a fragment under the open query: `max(C, s)`.

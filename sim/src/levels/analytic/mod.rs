@@ -24,7 +24,6 @@ use crate::error::SimError;
 use crate::levels::functional::FunctionalCore;
 use crate::levels::level::{Fidelity, LevelResult};
 use crate::levels::predicted_loop::PredictedLoop;
-use crate::machines::ir::check_tile_registers;
 use occsim_traces::golden::FunctionalModel;
 use occsim_traces::state::RenderState;
 use occsim_traces::trace::{FragmentBand, FragmentStretch, IndexItem, TraceHeader};
@@ -160,10 +159,7 @@ impl Formulas {
             (formulas, Event::Primitive) => formulas.primitive(front.release_in_window()),
             (Formulas::O2(o2), Event::QueryBegin(spec)) => o2.begin(&spec.shape()),
             (Formulas::O2(o2), Event::Clear) => o2.clear(),
-            (Formulas::Ir(ir), Event::QueryBegin(spec)) => {
-                check_tile_registers(spec, ir.image_engines(), index)?;
-                ir.begin(spec)
-            }
+            (Formulas::Ir(ir), Event::QueryBegin(spec)) => ir.begin(spec, index)?,
             _ => {}
         }
         Ok(())
