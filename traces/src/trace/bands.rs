@@ -8,15 +8,21 @@
 //! the depth test's outcome changes and marked passing: the Image Engines' hits are the
 //! passing fragments' (a writer's functional model tells it which pass).
 //!
-//! A band record is `BAND count` and then each run as its `x`, `y` and `len` less the run
-//! before's (zigzag varints; the first run's relative to 0): a primitive's rows step by
-//! a pixel or two, so most take three bytes. Under a verbose query, a band with passing
+//! A band of one run a row on rows one after another, none passing (a primitive's rows: most
+//! bands), is a `ROW_BAND count x y len` record (varints: its first run) and then each
+//! next row's `x` and `len` less the row before's (zigzag varints, the row one more): a
+//! primitive's rows step by a pixel or two, so most take two bytes, read two at a time.
+//! (As `BAND` records, three bytes a row, each read on its own: the IR's analytic level
+//! spent a third of its time on the demo reading them; see [`BAND_ROWS`].) Any other band
+//! record is `BAND count` and then each run as its `x`, `y` and `len` less the run
+//! before's (zigzag varints; the first run's relative to 0). Under a verbose query, a band with passing
 //! runs is `BAND_PASSING count mask` and its runs, bit `k` of the varint `mask` set when
 //! run `k`'s fragments passed their depth test. A band's runs are those a
 //! [`FragmentBand::push_run`] would make: a run that continues the one before on its row is
 //! part of it, so no run starts where the one before ends on the same row.
 
 use super::codec::{put_uv, put_zz, tag};
+use std::ops::Range;
 
 /// Rows a band holds at most: a stretch of the IR formulas, which close one and advance
 /// their clocks there. A primitive's rows load its Image Engines unevenly (a narrow row
@@ -24,13 +30,17 @@ use super::codec::{put_uv, put_zz, tag};
 /// sum over the whole primitive averages away; a few FIFOs' worth of a narrow primitive's
 /// rows, so that the fluid still smooths what the FIFOs do. On the small corpus on ir1,
 /// ir2 and ir4 (`occsim fidelity --corpus --scale small --machines ir1,ir2,ir4 --no-rtl`),
-/// the worst class's analytic cycles error was 0.6% at 4 rows, 1.0% at 8, 1.7% at 16,
-/// 5.2% at 64 and 6.3% for whole primitives (the random scene's slivers); the sampled
-/// level's worst p95 latency error 0.9% at 1 row, 1.9% at 4, 2.1% at 8 and 16 (its bound
-/// is 3%). The analytic level, decoding the demo on ir4, took 184 ms at 4 rows, 112 ms at
-/// 8 and 90 ms at 16 (203 ms in stretches of 64 fragments, one by one): 8 holds every
-/// bound with room, at most of the saving.
-pub const BAND_ROWS: usize = 8;
+/// the worst class's analytic cycles error was 0.6% at 4 rows, 1.0% at 8, 2.0% at 16,
+/// 2.8% at 32, 5.2% at 64 and 6.3% for whole primitives (the random scene's slivers); the
+/// sampled level's worst p95 latency error 0.9% at 1 row, 1.9% at 4, 2.1% at 8, 1.9% at
+/// 16 and 5.9% at 32 (the hard cases; its bound is 3%), its worst cycles error 0.71% at
+/// 8 and 16 and 1.21% at 32 (bound 1%). The analytic level on the demo on ir4, from its
+/// band index, took 15.6 ms at 8 rows, 11.8 at 16 and 10.4 at 32 (in one process, best of
+/// 8, as `BAND` records; decoding the fragments, 184 ms at 4 rows, 112 at 8 and 90 at 16):
+/// 16 holds every bound, at most of the saving. (Closed at 8 rows and more where a row's
+/// length is more than twice the first's or less than half, up to 32: no quicker than 16,
+/// and the hard cases' sampled cycles 2.4% off.)
+pub const BAND_ROWS: usize = 16;
 
 /// Runs a band holds at most (a primitive's rows are one run each; fragments scattered on
 /// a row make a run each, and a band of them closes at this many).
@@ -61,6 +71,11 @@ pub struct FragmentBand {
     /// ir4 in 14.87 ms and the lazy-grid walk in 18.79, in one process, best of 9; so,
     /// 14.72 and 18.45).
     fragments: u64,
+    /// The least `x` of its runs and the greatest end (`x + len`), kept as they come (asked
+    /// for at every band's close: over its runs there, a fifth of the IR formulas' own time
+    /// on the demo); `u32::MAX` and 0 while it is empty.
+    first_column: u32,
+    end_column: u32,
 }
 
 impl RowRun {
@@ -87,7 +102,8 @@ enum Place {
 }
 
 /// Why [`FragmentBand::try_push`] refuses a run that fits the viewport.
-const PAST_ROOM: &str = "a band run that continues the one before, or past 16 runs or 8 rows";
+const PAST_ROOM: &str = "a band run that continues the one before, or past 16 runs or 16 rows";
+const _: () = assert!(BAND_ROWS == 16 && BAND_RUNS == 16, "PAST_ROOM names them");
 
 impl PartialEq for FragmentBand {
     fn eq(&self, other: &FragmentBand) -> bool {
@@ -115,6 +131,8 @@ impl FragmentBand {
         rows: 0,
         last_row: 0,
         fragments: 0,
+        first_column: u32::MAX,
+        end_column: 0,
     };
 
     /// Bytes a band record takes at most: a tag, its count, its passing runs' mask, and
@@ -128,6 +146,7 @@ impl FragmentBand {
     /// Empty it, its room kept as it is (a decoder refills one band record after record).
     pub(crate) fn clear(&mut self) {
         (self.count, self.rows, self.last_row, self.fragments) = (0, 0, 0, 0);
+        (self.first_column, self.end_column) = (u32::MAX, 0);
     }
 
     /// Its runs, in order.
@@ -147,6 +166,22 @@ impl FragmentBand {
 
     pub fn fragments(&self) -> u64 {
         self.fragments
+    }
+
+    /// The columns its runs span: from the least `x` to past the greatest end (`0..0`
+    /// while it is empty).
+    pub fn columns(&self) -> Range<usize> {
+        match self.count {
+            0 => 0..0,
+            _ => self.first_column as usize..self.end_column as usize,
+        }
+    }
+
+    /// Take `run`'s columns into its span.
+    #[inline(always)]
+    fn span_columns(&mut self, run: &RowRun) {
+        self.first_column = self.first_column.min(run.x as u32);
+        self.end_column = self.end_column.max(run.x as u32 + run.len);
     }
 
     /// Where `run` would go: joined to the last run (on its row, from its end, passing
@@ -170,6 +205,7 @@ impl FragmentBand {
     /// Put `run` where [`Self::place`] says it goes.
     #[inline(always)]
     fn put(&mut self, run: RowRun, place: Place) {
+        self.span_columns(&run);
         if place == Place::Joined {
             self.runs[self.count as usize - 1].len += run.len;
             self.fragments += run.len as u64;
@@ -208,7 +244,7 @@ impl FragmentBand {
 
     /// Add `run` as read from a trace in a viewport of `width` by `height`, or say why a
     /// writer's band would not hold it: a run empty or outside the viewport, one that
-    /// continues the run before (a writer joins them), one past 16 runs or 8 rows. (Each
+    /// continues the run before (a writer joins them), one past 16 runs or 16 rows. (Each
     /// question asked once: a band index holds every run of a trace.)
     #[inline]
     pub(crate) fn try_push(
@@ -230,8 +266,48 @@ impl FragmentBand {
         }
     }
 
+    /// Whether it is one run a row, on rows one after another, none passing: a primitive's
+    /// rows, most bands, which a `ROW_BAND` record holds.
+    fn is_one_run_a_row(&self) -> bool {
+        let runs = self.runs();
+        (runs.iter().enumerate())
+            .all(|(k, run)| !run.passes && run.y as usize == runs[0].y as usize + k)
+    }
+
+    /// Refill it with `count` rows (1 to [`BAND_ROWS`]) of one run each, none passing,
+    /// run `k` as `run_at(k)` gives it: on row `y + k` (the caller checks that each run
+    /// fits the viewport, and clears it where one does not).
+    #[inline(always)]
+    pub(crate) fn fill_one_run_a_row(
+        &mut self,
+        count: usize,
+        mut run_at: impl FnMut(usize) -> RowRun,
+    ) {
+        debug_assert!((1..=BAND_ROWS.min(BAND_RUNS)).contains(&count));
+        self.clear();
+        for k in 0..count {
+            let run = run_at(k);
+            self.runs[k] = run;
+            self.fragments += run.len as u64;
+            self.span_columns(&run);
+        }
+        (self.count, self.rows, self.last_row) = (count as u8, count as u8, count as u8 - 1);
+    }
+
     pub(crate) fn encode(&self, out: &mut Vec<u8>) {
         let passing = self.passing_mask();
+        if self.is_one_run_a_row() {
+            let first = self.runs[0];
+            out.extend([tag::ROW_BAND, self.count]);
+            put_uv(out, first.x as u64);
+            put_uv(out, first.y as u64);
+            put_uv(out, first.len as u64);
+            for pair in self.runs().windows(2) {
+                put_zz(out, pair[1].x as i64 - pair[0].x as i64);
+                put_zz(out, pair[1].len as i64 - pair[0].len as i64);
+            }
+            return;
+        }
         if passing == 0 {
             out.push(tag::BAND);
             out.push(self.count);
@@ -257,7 +333,7 @@ mod tests {
     use crate::query::{QueryMode, QuerySpec};
     use crate::state::Rect;
     use crate::trace::block::{BlockHeader, CODEC_STORED, KIND_BANDS, KIND_INDEX};
-    use crate::trace::index::tests::indexed;
+    use crate::trace::index::tests::{indexed, indexed_in};
     use crate::trace::{IndexItem, TraceReader};
 
     fn band_items(bytes: &[u8]) -> Result<Vec<IndexItem>, crate::trace::TraceError> {
@@ -281,11 +357,12 @@ mod tests {
 
     #[test]
     fn the_band_index_holds_the_events_and_each_run_of_fragments_in_bands() {
-        // A primitive of ten rows (x 2..5 on rows 0..9: 3 fragments each), then a query
-        // begin, then two scattered fragments on row 12: a band of rows 0..7, one of rows 8
-        // and 9 (cut at the ninth row), then the event, then a band of two runs.
+        // A primitive of eighteen rows (x 2..5 on rows 0..17: 3 fragments each), then a
+        // query begin, then two scattered fragments on row 20: a band of rows 0..15, one of
+        // rows 16 and 17 (cut at the seventeenth row), then the event, then a band of two
+        // runs.
         let mut events = vec![Event::Primitive];
-        for y in 0..10 {
+        for y in 0..18 {
             events.extend((2..5).map(|x| frag(x, y)));
         }
         let begin = Event::QueryBegin(QuerySpec {
@@ -295,7 +372,7 @@ mod tests {
             tiles: vec![Rect::new(0, 0, 16, 16)],
         });
         events.push(begin.clone());
-        events.extend([frag(1, 12), frag(9, 12), Event::QueryEnd]);
+        events.extend([frag(1, 20), frag(9, 20), Event::QueryEnd]);
         // Under a verbose query (the depth test off: every fragment passes), its runs are
         // marked passing.
         let verbose = Event::QueryBegin(QuerySpec {
@@ -304,8 +381,8 @@ mod tests {
             buffer_entries: 8,
             tiles: vec![Rect::new(0, 0, 16, 16)],
         });
-        events.extend([verbose.clone(), frag(3, 14), frag(4, 14), Event::QueryEnd]);
-        let items = band_items(&indexed(&events)).unwrap();
+        events.extend([verbose.clone(), frag(3, 22), frag(4, 22), Event::QueryEnd]);
+        let items = band_items(&indexed_in(&events, 32, 32)).unwrap();
         let band = |runs: &[(u16, u16, u32)]| {
             let mut band = FragmentBand::EMPTY;
             for &(x, y, len) in runs {
@@ -318,24 +395,24 @@ mod tests {
             items,
             [
                 IndexItem::Event(Event::Primitive),
-                band(&rows(0..8)),
-                band(&rows(8..10)),
+                band(&rows(0..16)),
+                band(&rows(16..18)),
                 IndexItem::Event(begin),
-                band(&[(1, 12, 1), (9, 12, 1)]),
+                band(&[(1, 20, 1), (9, 20, 1)]),
                 IndexItem::Event(Event::QueryEnd),
                 IndexItem::Event(verbose),
                 IndexItem::Band({
                     let mut passing = FragmentBand::EMPTY;
                     passing.push_run(RowRun {
                         passes: true,
-                        ..RowRun::at(3, 14, 2)
+                        ..RowRun::at(3, 22, 2)
                     });
                     passing
                 }),
                 IndexItem::Event(Event::QueryEnd),
             ]
         );
-        // Each band read back knows its fragments: 8 rows of 3, 2 rows of 3, 2 scattered,
+        // Each band read back knows its fragments: 16 rows of 3, 2 rows of 3, 2 scattered,
         // 2 passing.
         let fragments: Vec<u64> = (items.iter())
             .filter_map(|item| match item {
@@ -343,7 +420,7 @@ mod tests {
                 _ => None,
             })
             .collect();
-        assert_eq!(fragments, [24, 6, 2, 2]);
+        assert_eq!(fragments, [48, 6, 2, 2]);
     }
 
     #[test]
@@ -438,24 +515,101 @@ mod tests {
     }
 
     #[test]
-    fn a_band_takes_eight_rows_and_sixteen_runs_and_joins_a_row_s_pieces() {
+    fn a_primitive_s_rows_are_a_row_band_of_two_bytes_a_row_read_back_as_written() {
+        // Rows 3..6 at (x 2, len 3), (1, 5), (1, 4): the first run as varints, then each
+        // row's x and len less the row before's as zigzag varints (-1 is 1, 2 is 4, 0 is 0).
         let mut band = FragmentBand::EMPTY;
-        // Rows 10..18, one run each, the first fed in two pieces that join.
+        for (x, y, len) in [(2, 3, 3), (1, 4, 5), (1, 5, 4)] {
+            band.push(x, y, len);
+        }
+        let mut bytes = Vec::new();
+        band.encode(&mut bytes);
+        assert_eq!(bytes, [tag::ROW_BAND, 3, 2, 3, 3, 1, 4, 0, 1]);
+        // Written by a trace writer and read back: those rows, and rows whose steps take
+        // two bytes (x steps of 100 pixels: 200 zigzagged), read on the slower path.
+        let rows = [(2, 3, 3), (1, 4, 5), (1, 5, 4)];
+        let far = [(0, 10, 7), (100, 11, 7), (0, 12, 30), (150, 13, 1)];
+        let mut events = vec![Event::Primitive];
+        for &(x, y, len) in rows.iter().chain(&far) {
+            events.extend((x..x + len as u16).map(|x| frag(x, y)));
+        }
+        let items = band_items(&indexed_in(&events, 256, 32)).unwrap();
+        let mut expected = FragmentBand::EMPTY;
+        for &(x, y, len) in rows.iter().chain(&far) {
+            expected.push(x, y, len);
+        }
+        assert_eq!(
+            items,
+            [
+                IndexItem::Event(Event::Primitive),
+                IndexItem::Band(expected)
+            ]
+        );
+        let IndexItem::Band(read) = &items[1] else {
+            unreachable!()
+        };
+        assert_eq!((read.fragments(), read.columns()), (57, 0..151));
+    }
+
+    #[test]
+    fn a_row_band_no_writer_makes_is_refused_with_its_offset() {
+        let clean = indexed(&[Event::Primitive, frag(0, 0)]);
+        // In a viewport of 16 by 16; each payload a ROW_BAND record.
+        for (payload, why) in [
+            (&[0u8][..], "a row band of 0 rows"),
+            (&[17, 0, 0, 1][..], "a row band of 17 rows"),
+            // Rows 14..17, past the bottom row.
+            (&[3, 0, 14, 1, 0, 0, 0, 0][..], "outside the viewport"),
+            // A second row of length 0 (1 less 1), then one past the right edge.
+            (&[2, 0, 0, 1, 0, 1][..], "empty or outside"),
+            (&[2, 10, 0, 6, 0, 2][..], "empty or outside"),
+            // x 0 less 1, then a step of 2^16 (zigzag 2^17: three bytes).
+            (&[2, 0, 0, 1, 1, 0][..], "out of range"),
+            (&[2, 0, 0, 1, 0x80, 0x80, 0x08, 0][..], "out of range"),
+            // A first run from 2^16 on, and a record cut short.
+            (&[1, 0x80, 0x80, 0x04, 0, 1][..], "out of range"),
+            (&[3, 0, 0, 1, 0][..], "past the end"),
+        ] {
+            let payload = [&[tag::ROW_BAND][..], payload].concat();
+            let (bad, at) = with_block_first(clean.clone(), KIND_BANDS, &payload);
+            let error = band_items(&bad).unwrap_err().to_string();
+            assert!(
+                error.contains(why) && error.contains(&at.to_string()),
+                "{why}: {error}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_band_takes_sixteen_rows_and_sixteen_runs_and_joins_a_row_s_pieces() {
+        let mut band = FragmentBand::EMPTY;
+        // Rows 10..26, one run each, the first fed in two pieces that join.
         band.push(4, 10, 3);
         assert!(band.admits(7, 10));
         band.push(7, 10, 2);
         assert_eq!(band.runs(), [RowRun::at(4, 10, 5)]);
-        for y in 11..18 {
+        for y in 11..25 {
             assert!(band.admits(0, y));
             band.push(0, y, 1);
         }
-        // A ninth row does not fit; another run on the eighth does.
-        assert!(!band.admits(0, 18));
-        assert!(band.admits(5, 17));
-        band.push(5, 17, 2);
-        assert_eq!(band.last_row().len(), 2);
-        // 5 + 7 + 2 fragments.
-        assert_eq!(band.fragments(), 14);
+        // The sixteenth row fits, then holds the band's last run: a run on a seventeenth
+        // row does not fit, nor another on the sixteenth (sixteen runs).
+        band.push(1, 25, 2);
+        assert!(!band.admits(0, 26));
+        assert!(!band.admits(5, 25));
+        assert!(band.admits(3, 25), "continues the last run");
+        assert_eq!(band.last_row(), [RowRun::at(1, 25, 2)]);
+        // 5 + 14 + 2 fragments over columns 0..9 (the first row's 4..9).
+        assert_eq!(band.fragments(), 21);
+        assert_eq!(band.columns(), 0..9);
+        // Eight rows of two runs: sixteen runs, so no ninth row.
+        let mut two_a_row = FragmentBand::EMPTY;
+        for y in 0..8 {
+            two_a_row.push(0, y, 1);
+            two_a_row.push(4, y, 2);
+        }
+        assert!(!two_a_row.admits(0, 8));
+        assert_eq!((two_a_row.last_row().len(), two_a_row.columns()), (2, 0..6));
         // Scattered fragments on one row: sixteen runs, then no more.
         let mut scattered = FragmentBand::EMPTY;
         for k in 0..16 {
@@ -464,24 +618,28 @@ mod tests {
         }
         assert!(!scattered.admits(40, 0));
         assert!(scattered.admits(31, 0), "continues the last run");
+        assert_eq!(FragmentBand::EMPTY.columns(), 0..0);
     }
 
     #[test]
     fn runs_that_no_band_makes_are_refused() {
         let run = |x, y, len| RowRun::at(x, y, len);
+        // A viewport of 16 by 32.
         let read = |runs: &[RowRun]| {
             let mut band = FragmentBand::EMPTY;
-            runs.iter().try_for_each(|&r| band.try_push(r, 16, 16))
+            runs.iter().try_for_each(|&r| band.try_push(r, 16, 32))
         };
         assert_eq!(read(&[run(0, 0, 2), run(5, 0, 1)]), Ok(()));
         assert!(read(&[run(0, 0, 0)]).is_err());
         // Past the viewport's right edge (10 + 7 > 16) and its bottom row.
         assert!(read(&[run(10, 0, 7)]).is_err());
-        assert!(read(&[run(0, 16, 1)]).is_err());
+        assert!(read(&[run(0, 32, 1)]).is_err());
         // Continues the run before: a writer would have joined them.
         assert!(read(&[run(0, 0, 2), run(2, 0, 1)]).is_err());
-        let nine_rows: Vec<RowRun> = (0..9).map(|y| run(0, y, 1)).collect();
-        assert!(read(&nine_rows).is_err());
+        let sixteen_rows: Vec<RowRun> = (0..16).map(|y| run(0, y, 1)).collect();
+        assert_eq!(read(&sixteen_rows), Ok(()));
+        let seventeen_rows: Vec<RowRun> = (0..17).map(|y| run(0, y, 1)).collect();
+        assert!(read(&seventeen_rows).is_err());
         let seventeen_runs: Vec<RowRun> = (0..17).map(|k| run(2 * k % 16, k / 8, 1)).collect();
         assert!(read(&seventeen_runs).is_err());
     }

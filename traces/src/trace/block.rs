@@ -21,8 +21,10 @@ pub const END_MAGIC: [u8; 8] = *b"OCCTEND\n";
 /// ([`crate::trace::TraceReader::skim_queries`]); version 12 gives every stretch its drawn
 /// tail ([`crate::trace::FragmentStretch::drawn_tail`]); version 13 keeps a primitive's
 /// depth plane ([`crate::raster::PlaneDepths`]) where the rasterizer told it, and its spans
-/// whose depths the plane gives as plane spans, without their depths.
-pub const FORMAT_VERSION: u16 = 13;
+/// whose depths the plane gives as plane spans, without their depths; version 14 writes
+/// bands of up to 16 rows (8 before: [`crate::trace::BAND_ROWS`]), one run a row as row
+/// bands ([`crate::trace::bands`]).
+pub const FORMAT_VERSION: u16 = 14;
 /// The first version whose indexed traces hold a band index ([`crate::trace::bands`]).
 pub const BANDS_VERSION: u16 = 10;
 /// The first version whose window index holds every count the O2 formulas take

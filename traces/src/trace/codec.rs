@@ -3,7 +3,7 @@
 //! depths are coded as residuals from a prediction. All prediction state resets at every
 //! block start, so each block decodes on its own.
 
-use super::bands::{FragmentBand, RowRun, BAND_RUNS};
+use super::bands::{FragmentBand, RowRun, BAND_ROWS, BAND_RUNS};
 use super::dense_reads::{DenseRuns, ReadRun, DENSE_READ_COSTS};
 use super::header::StreamTally;
 use super::index::{
@@ -91,6 +91,11 @@ pub(crate) mod tag {
     /// pixels: its row and column less the last span's and its length less one, as a
     /// SPAN's, and no depths. Version 13 on.
     pub const PLANE_SPAN: u8 = 0x1C;
+    /// In band-index blocks only: a [`crate::trace::FragmentBand`] of one run a row on rows
+    /// one after another, none passing: its row count, its first run's `x`, `y` and `len`
+    /// as varints, then each next row's `x` and `len` less the row before's as zigzag
+    /// varints. Version 14 on.
+    pub const ROW_BAND: u8 = 0x1D;
 }
 
 /// Most fragments in one span: a row of the widest viewport.
@@ -909,6 +914,80 @@ fn decode_band(
     Ok(())
 }
 
+/// A row band's runs (its tag, `ROW_BAND`, read) into `out`, checked as
+/// [`decode_band`] checks a band's: one run a row from its first run's row on, each
+/// run's `x` and `len` stepped from the row before's.
+fn decode_row_band(
+    c: &mut Cursor,
+    (width, height): (u32, u32),
+    out: &mut FragmentBand,
+) -> Result<(), PayloadError> {
+    const MAX_ROWS: usize = if BAND_ROWS < BAND_RUNS {
+        BAND_ROWS
+    } else {
+        BAND_RUNS
+    };
+    let start = c.pos - 1;
+    let count = c.byte()? as usize;
+    if count == 0 || count > MAX_ROWS {
+        return Err(bad(
+            start,
+            format!("a row band of {count} rows (1 to {MAX_ROWS})"),
+        ));
+    }
+    let (x, y, len) = (c.uv()?, c.uv()?, c.uv()?);
+    // As in `decode_band`: below 2^16 each, so the steps below cannot overflow an i32.
+    if (x | y | len) >= 1 << 16 {
+        return Err(bad(start, "a band run's x, row or length out of range"));
+    }
+    if y as usize + count > height as usize {
+        return Err(bad(start, "a band run empty or outside the viewport"));
+    }
+    let (mut x, mut len) = (x as i32, len as i32);
+    // Each row's x and len ORed in (a negative one or one from 2^16 on is out of range),
+    // its end's greatest and its length's least kept: checked once, after the band.
+    let (mut ored, mut widest_end, mut shortest) = (0i32, 0i32, i32::MAX);
+    let mut row = |k: usize, dx: u64, dlen: u64| {
+        x += unzigzag(dx) as i32;
+        len += unzigzag(dlen) as i32;
+        ored |= x | len;
+        widest_end = widest_end.max(x + len);
+        shortest = shortest.min(len);
+        RowRun::at(x as u16, (y as usize + k) as u16, len as u32)
+    };
+    let steps = 2 * (count - 1);
+    let one_byte_each = (c.bytes.get(c.pos..c.pos + steps))
+        .filter(|bytes| bytes.iter().fold(0, |all, byte| all | byte) < 0x80);
+    if let Some(bytes) = one_byte_each {
+        // The usual band: every step one byte (below 64 pixels), read in one pass.
+        c.pos += steps;
+        out.fill_one_run_a_row(count, |k| match k {
+            0 => row(0, 0, 0),
+            _ => row(k, bytes[2 * k - 2] as u64, bytes[2 * k - 1] as u64),
+        });
+    } else {
+        let mut steps = [(0, 0); MAX_ROWS];
+        for step in &mut steps[1..count] {
+            let (dx, dlen) = (c.uv()?, c.uv()?);
+            // As in `decode_band`: a step of 2^16 or more is out of range.
+            if (dx | dlen) >= 1 << 17 {
+                return Err(bad(start, "a band run's x, row or length out of range"));
+            }
+            *step = (dx, dlen);
+        }
+        out.fill_one_run_a_row(count, |k| row(k, steps[k].0, steps[k].1));
+    }
+    let error = if ored as u32 >= 1 << 16 {
+        "a band run's x, row or length out of range"
+    } else if shortest == 0 || widest_end as u32 > width {
+        "a band run empty or outside the viewport"
+    } else {
+        return Ok(());
+    };
+    out.clear();
+    Err(bad(start, error))
+}
+
 #[inline]
 fn decode_stretch(c: &mut Cursor, out: &mut FragmentStretch) -> Result<(), PayloadError> {
     let start = c.pos - 1;
@@ -1225,7 +1304,7 @@ impl BlockDecoder {
         ctx: &mut DecodeContext,
     ) -> Result<Option<IndexItem>, PayloadError> {
         match t {
-            tag::STRETCH | tag::BAND | tag::BAND_PASSING
+            tag::STRETCH | tag::BAND | tag::BAND_PASSING | tag::ROW_BAND
                 if (t != tag::STRETCH) != self.in_bands =>
             {
                 Err(bad(
@@ -1241,7 +1320,7 @@ impl BlockDecoder {
                 self.stretch_record(payload, ctx, &mut stretch)?;
                 Ok(Some(IndexItem::Stretch(stretch)))
             }
-            tag::BAND | tag::BAND_PASSING => {
+            tag::BAND | tag::BAND_PASSING | tag::ROW_BAND => {
                 let mut band = FragmentBand::EMPTY;
                 self.band_record(payload, ctx, &mut band)?;
                 Ok(Some(IndexItem::Band(band)))
@@ -1283,7 +1362,10 @@ impl BlockDecoder {
         out: &mut FragmentBand,
     ) -> Result<(), PayloadError> {
         let mut c = Cursor::new(payload, self.pos + 1);
-        decode_band(&mut c, (ctx.width, ctx.height), out)?;
+        match payload[self.pos] {
+            tag::ROW_BAND => decode_row_band(&mut c, (ctx.width, ctx.height), out)?,
+            _ => decode_band(&mut c, (ctx.width, ctx.height), out)?,
+        }
         self.pos = c.pos;
         self.events += 1;
         tally_fragments(ctx, out.fragments());
@@ -1314,7 +1396,7 @@ impl BlockDecoder {
                     visit(&item).map_err(DrainError::Sink)?;
                     continue;
                 }
-                (tag::BAND | tag::BAND_PASSING, IndexItem::Band(band)) => {
+                (tag::BAND | tag::BAND_PASSING | tag::ROW_BAND, IndexItem::Band(band)) => {
                     self.band_record(payload, ctx, band)?;
                     visit(&item).map_err(DrainError::Sink)?;
                     continue;

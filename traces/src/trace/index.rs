@@ -384,13 +384,19 @@ pub(super) mod tests {
 
     /// `events` as a 16x16 trace with a window index (and so a band index) at `LAYOUT`.
     pub(in crate::trace) fn indexed(events: &[Event]) -> Vec<u8> {
+        indexed_in(events, 16, 16)
+    }
+
+    /// [`indexed`] in a viewport of `width` by `height`.
+    pub(in crate::trace) fn indexed_in(events: &[Event], width: u32, height: u32) -> Vec<u8> {
         let options = WriterOptions {
             window_index: Some(LAYOUT),
             ..WriterOptions::default()
         };
         let mut bytes = Vec::new();
         let mut writer =
-            TraceWriter::with_options(&mut bytes, &TraceHeader::new(16, 16), options).unwrap();
+            TraceWriter::with_options(&mut bytes, &TraceHeader::new(width, height), options)
+                .unwrap();
         for event in events {
             writer.write_event(event).unwrap();
         }

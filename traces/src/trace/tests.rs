@@ -341,14 +341,14 @@ fn wrong_magic_is_named() {
 
 #[test]
 fn unknown_version_is_named() {
-    for version in [0u8, 14] {
+    for version in [0u8, 15] {
         let mut bytes = write_default(&every_kind());
         bytes[8] = version;
         let error = TraceReader::new(&bytes[..]).err().unwrap();
         assert!(
             matches!(
                 error,
-                TraceError::UnsupportedVersion { offset: 8, version: v, known: 13 } if v == version as u16
+                TraceError::UnsupportedVersion { offset: 8, version: v, known: 14 } if v == version as u16
             ),
             "{error}"
         );
