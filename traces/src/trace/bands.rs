@@ -274,24 +274,33 @@ impl FragmentBand {
             .all(|(k, run)| !run.passes && run.y as usize == runs[0].y as usize + k)
     }
 
-    /// Refill it with `count` rows (1 to [`BAND_ROWS`]) of one run each, none passing,
-    /// run `k` as `run_at(k)` gives it: on row `y + k` (the caller checks that each run
-    /// fits the viewport, and clears it where one does not).
+    /// Refill it with rows of one run each from `first` on, none passing: each next row's
+    /// run is the one before's with its `x` and `len` stepped by `steps`' next pair, on
+    /// the row below (at most [`BAND_ROWS`] rows in all). Returns every run's `x` and `len`
+    /// ORed (negative, or from 2^16 on, where one is out of range: its runs are then not
+    /// what they say) and the least `len`: the caller checks them and [`Self::columns`]'
+    /// end against the viewport, and clears it where they fail.
     #[inline(always)]
-    pub(crate) fn fill_one_run_a_row(
-        &mut self,
-        count: usize,
-        mut run_at: impl FnMut(usize) -> RowRun,
-    ) {
-        debug_assert!((1..=BAND_ROWS.min(BAND_RUNS)).contains(&count));
-        self.clear();
-        for k in 0..count {
-            let run = run_at(k);
-            self.runs[k] = run;
-            self.fragments += run.len as u64;
-            self.span_columns(&run);
+    pub(crate) fn fill_stepped_rows(&mut self, first: RowRun, steps: &[(i32, i32)]) -> (i32, i32) {
+        debug_assert!(steps.len() < BAND_ROWS.min(BAND_RUNS));
+        let (mut x, mut len) = (first.x as i32, first.len as i32);
+        let (mut ored, mut shortest) = (x | len, len);
+        let (mut least_x, mut greatest_end, mut fragments) = (x, x + len, len as i64);
+        self.runs[0] = first;
+        for (k, &(dx, dlen)) in steps.iter().enumerate() {
+            (x, len) = (x + dx, len + dlen);
+            ored |= x | len;
+            shortest = shortest.min(len);
+            least_x = least_x.min(x);
+            greatest_end = greatest_end.max(x + len);
+            fragments += len as i64;
+            self.runs[k + 1] = RowRun::at(x as u16, first.y.wrapping_add(k as u16 + 1), len as u32);
         }
-        (self.count, self.rows, self.last_row) = (count as u8, count as u8, count as u8 - 1);
+        let count = steps.len() as u8 + 1;
+        (self.count, self.rows, self.last_row) = (count, count, count - 1);
+        self.fragments = fragments as u64;
+        (self.first_column, self.end_column) = (least_x as u32, greatest_end as u32);
+        (ored, shortest)
     }
 
     pub(crate) fn encode(&self, out: &mut Vec<u8>) {
