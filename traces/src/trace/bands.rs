@@ -12,8 +12,9 @@
 //! bands), is a `ROW_BAND count x y len` record (varints: its first run) and then each
 //! next row's `x` and `len` less the row before's (zigzag varints, the row one more): a
 //! primitive's rows step by a pixel or two, so most take two bytes, read two at a time.
-//! (As `BAND` records, three bytes a row, each read on its own: the IR's analytic level
-//! spent a third of its time on the demo reading them; see [`BAND_ROWS`].) Any other band
+//! (As `BAND` records, three bytes a row, each read on its own, reading the band index was
+//! about a third of the IR's analytic level's time on the demo and the lazy-grid walk,
+//! by `perf record`.) Any other band
 //! record is `BAND count` and then each run as its `x`, `y` and `len` less the run
 //! before's (zigzag varints; the first run's relative to 0). Under a verbose query, a band with passing
 //! runs is `BAND_PASSING count mask` and its runs, bit `k` of the varint `mask` set when
@@ -30,13 +31,14 @@ use std::ops::Range;
 /// sum over the whole primitive averages away; a few FIFOs' worth of a narrow primitive's
 /// rows, so that the fluid still smooths what the FIFOs do. On the small corpus on ir1,
 /// ir2 and ir4 (`occsim fidelity --corpus --scale small --machines ir1,ir2,ir4 --no-rtl`),
-/// the worst class's analytic cycles error was 0.6% at 4 rows, 1.0% at 8, 2.0% at 16,
-/// 2.8% at 32, 5.2% at 64 and 6.3% for whole primitives (the random scene's slivers); the
-/// sampled level's worst p95 latency error 0.9% at 1 row, 1.9% at 4, 2.1% at 8, 1.9% at
-/// 16 and 5.9% at 32 (the hard cases; its bound is 3%), its worst cycles error 0.71% at
-/// 8 and 16 and 1.21% at 32 (bound 1%). The analytic level on the demo on ir4, from its
-/// band index, took 15.6 ms at 8 rows, 11.8 at 16 and 10.4 at 32 (in one process, best of
-/// 8, as `BAND` records; decoding the fragments, 184 ms at 4 rows, 112 at 8 and 90 at 16):
+/// the worst class's analytic cycles error (the random scene's slivers) was, with today's
+/// formulas, 1.3% at 8 rows, 2.0% at 16 and 2.8% at 32 (`BAND_RUNS` raised to 32 for every 32-row figure here);
+/// with the fifteenth session's, 0.6% at 4, 1.0% at 8, 1.7% at 16, 5.2% at 64 and 6.3%
+/// for whole primitives. The sampled level's worst cycles error was 0.71% at 8 and 16 and
+/// 1.21% at 32, its worst p95 latency error 1.9% at 8 and 16 and 5.9% at 32 (the hard
+/// cases; its bounds are 1% and 3%). The analytic level on the demo on ir4, from its band
+/// index as `BAND` records, took 15.6 ms at 8 rows, 11.8 at 16 and 10.4 at 32 (in one
+/// process, best of 8; decoding the fragments, 184 ms at 4 rows, 112 at 8 and 90 at 16):
 /// 16 holds every bound, at most of the saving. (Closed at 8 rows and more where a row's
 /// length is more than twice the first's or less than half, up to 32: no quicker than 16,
 /// and the hard cases' sampled cycles 2.4% off.)
@@ -45,6 +47,14 @@ pub const BAND_ROWS: usize = 16;
 /// Runs a band holds at most (a primitive's rows are one run each; fragments scattered on
 /// a row make a run each, and a band of them closes at this many).
 pub const BAND_RUNS: usize = 16;
+
+/// Rows a row band holds at most: one run a row, so as many rows as a band holds and no
+/// more than its runs.
+pub(crate) const ROW_BAND_ROWS: usize = if BAND_ROWS < BAND_RUNS {
+    BAND_ROWS
+} else {
+    BAND_RUNS
+};
 
 /// A run of fragments at pixels `x..x + len` of row `y`; under a verbose query, `passes`
 /// says they passed their depth test (a run's fragments all pass or all fail: where that
@@ -270,8 +280,9 @@ impl FragmentBand {
     /// rows, most bands, which a `ROW_BAND` record holds.
     fn is_one_run_a_row(&self) -> bool {
         let runs = self.runs();
-        (runs.iter().enumerate())
-            .all(|(k, run)| !run.passes && run.y as usize == runs[0].y as usize + k)
+        !runs.is_empty()
+            && (runs.iter().enumerate())
+                .all(|(k, run)| !run.passes && run.y as usize == runs[0].y as usize + k)
     }
 
     /// Refill it with rows of one run each from `first` on, none passing: each next row's
@@ -282,7 +293,7 @@ impl FragmentBand {
     /// end against the viewport, and clears it where they fail.
     #[inline(always)]
     pub(crate) fn fill_stepped_rows(&mut self, first: RowRun, steps: &[(i32, i32)]) -> (i32, i32) {
-        debug_assert!(steps.len() < BAND_ROWS.min(BAND_RUNS));
+        debug_assert!(steps.len() < ROW_BAND_ROWS);
         let (mut x, mut len) = (first.x as i32, first.len as i32);
         let (mut ored, mut shortest) = (x | len, len);
         let (mut least_x, mut greatest_end, mut fragments) = (x, x + len, len as i64);
@@ -534,59 +545,92 @@ mod tests {
         let mut bytes = Vec::new();
         band.encode(&mut bytes);
         assert_eq!(bytes, [tag::ROW_BAND, 3, 2, 3, 3, 1, 4, 0, 1]);
-        // Written by a trace writer and read back: those rows, and rows whose steps take
-        // two bytes (x steps of 100 pixels: 200 zigzagged), read on the slower path.
+        // Written by a trace writer and read back: those rows (each step one byte, read on
+        // the quick path), then a second primitive whose rows step by 100 pixels and more
+        // (x 0, 100, 0, 150: 200, 199 and 300 zigzagged, two bytes each; lengths 7, 7, 30,
+        // 1: 0, 46 and 57), read on the slower path.
         let rows = [(2, 3, 3), (1, 4, 5), (1, 5, 4)];
         let far = [(0, 10, 7), (100, 11, 7), (0, 12, 30), (150, 13, 1)];
+        let mut far_band = FragmentBand::EMPTY;
+        for &(x, y, len) in &far {
+            far_band.push(x, y, len);
+        }
+        let mut far_bytes = Vec::new();
+        far_band.encode(&mut far_bytes);
+        let far_steps = [0xC8, 0x01, 0, 0xC7, 0x01, 46, 0xAC, 0x02, 57];
+        assert_eq!(
+            far_bytes,
+            [&[tag::ROW_BAND, 4, 0, 10, 7][..], &far_steps].concat()
+        );
         let mut events = vec![Event::Primitive];
-        for &(x, y, len) in rows.iter().chain(&far) {
-            events.extend((x..x + len as u16).map(|x| frag(x, y)));
+        for (k, primitive) in [&rows[..], &far].into_iter().enumerate() {
+            if k > 0 {
+                events.push(Event::Primitive);
+            }
+            for &(x, y, len) in primitive {
+                events.extend((x..x + len as u16).map(|x| frag(x, y)));
+            }
         }
         let items = band_items(&indexed_in(&events, 256, 32)).unwrap();
-        let mut expected = FragmentBand::EMPTY;
-        for &(x, y, len) in rows.iter().chain(&far) {
-            expected.push(x, y, len);
-        }
-        assert_eq!(
-            items,
-            [
-                IndexItem::Event(Event::Primitive),
-                IndexItem::Band(expected)
-            ]
-        );
-        let IndexItem::Band(read) = &items[1] else {
-            unreachable!()
-        };
-        assert_eq!((read.fragments(), read.columns()), (57, 0..151));
+        let bands: Vec<&FragmentBand> = (items.iter())
+            .filter_map(|item| match item {
+                IndexItem::Band(band) => Some(band),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(bands, [&band, &far_band]);
+        // What equality does not compare: 3 + 5 + 4 fragments over columns 1..6, and 7 + 7
+        // + 30 + 1 over columns 0..151.
+        let counted = |band: &FragmentBand| (band.fragments(), band.columns(), band.rows);
+        assert_eq!(counted(bands[0]), (12, 1..6, 3));
+        assert_eq!(counted(bands[1]), (45, 0..151, 4));
+        assert_eq!(bands[1].last_row(), [RowRun::at(150, 13, 1)]);
     }
 
     #[test]
     fn a_row_band_no_writer_makes_is_refused_with_its_offset() {
         let clean = indexed(&[Event::Primitive, frag(0, 0)]);
-        // In a viewport of 16 by 16; each payload a ROW_BAND record.
-        for (payload, why) in [
-            (&[0u8][..], "a row band of 0 rows"),
-            (&[17, 0, 0, 1][..], "a row band of 17 rows"),
+        // In a viewport of 16 by 16; each payload a ROW_BAND record, refused at the
+        // record's tag (decoded byte 0) or, for a varint, at its own first byte.
+        for (payload, why, at_byte) in [
+            (&[0u8][..], "a row band of 0 rows", 0),
+            (&[17, 0, 0, 1][..], "a row band of 17 rows", 0),
             // Rows 14..17, past the bottom row.
-            (&[3, 0, 14, 1, 0, 0, 0, 0][..], "outside the viewport"),
+            (&[3, 0, 14, 1, 0, 0, 0, 0][..], "outside the viewport", 0),
             // A second row of length 0 (1 less 1), then one past the right edge.
-            (&[2, 0, 0, 1, 0, 1][..], "empty or outside"),
-            (&[2, 10, 0, 6, 0, 2][..], "empty or outside"),
-            // x 0 less 1, then a step of 2^16 (zigzag 2^17: three bytes).
-            (&[2, 0, 0, 1, 1, 0][..], "out of range"),
-            (&[2, 0, 0, 1, 0x80, 0x80, 0x08, 0][..], "out of range"),
-            // A first run from 2^16 on, and a record cut short.
-            (&[1, 0x80, 0x80, 0x04, 0, 1][..], "out of range"),
-            (&[3, 0, 0, 1, 0][..], "past the end"),
+            (&[2, 0, 0, 1, 0, 1][..], "empty or outside", 0),
+            (&[2, 10, 0, 6, 0, 2][..], "empty or outside", 0),
+            // x 0 less 1; then x 0 less 1 and back by 1 (refused though the last row is
+            // in range); then a step of 2^16 (zigzag 2^17: three bytes).
+            (&[2, 0, 0, 1, 1, 0][..], "out of range", 0),
+            (&[3, 0, 0, 1, 1, 0, 2, 0][..], "out of range", 0),
+            (&[2, 0, 0, 1, 0x80, 0x80, 0x08, 0][..], "out of range", 0),
+            // A first run from 2^16 on, and one past 32 bits (2^32: five bytes, at byte 2).
+            (&[1, 0x80, 0x80, 0x04, 0, 1][..], "out of range", 0),
+            (&[1, 0x80, 0x80, 0x80, 0x80, 0x10, 0, 1][..], "exceeds", 2),
+            // Cut short: the second row's length step, byte 6, is missing.
+            (&[3, 0, 0, 1, 0][..], "past the end", 6),
         ] {
             let payload = [&[tag::ROW_BAND][..], payload].concat();
             let (bad, at) = with_block_first(clean.clone(), KIND_BANDS, &payload);
             let error = band_items(&bad).unwrap_err().to_string();
+            let expected = format!("byte {at}: corrupt block payload at decoded byte {at_byte}");
             assert!(
-                error.contains(why) && error.contains(&at.to_string()),
+                error.contains(why) && error.contains(&expected),
                 "{why}: {error}"
             );
         }
+        // A row band in a window-index block is refused as any band there.
+        let payload = [tag::ROW_BAND, 1, 0, 0, 1];
+        let (wrong, at) = with_block_first(clean, KIND_INDEX, &payload);
+        let mut reader = TraceReader::new(&wrong[..]).unwrap();
+        let error = reader
+            .for_each_index_item(|_| Ok::<(), ()>(()))
+            .err()
+            .map(|e| format!("{e:?}"))
+            .unwrap();
+        assert!(error.contains("a band in a window-index block"), "{error}");
+        assert!(error.contains(&at.to_string()), "{error}");
     }
 
     #[test]
@@ -602,7 +646,9 @@ mod tests {
             band.push(0, y, 1);
         }
         // The sixteenth row fits, then holds the band's last run: a run on a seventeenth
-        // row does not fit, nor another on the sixteenth (sixteen runs).
+        // row does not fit, nor another on the sixteenth (sixteen runs). (With as many runs
+        // as rows, a band's sixteen runs end it before its rows can: `rows_full` in `place`
+        // binds only were BAND_RUNS raised.)
         band.push(1, 25, 2);
         assert!(!band.admits(0, 26));
         assert!(!band.admits(5, 25));

@@ -3,7 +3,7 @@
 //! depths are coded as residuals from a prediction. All prediction state resets at every
 //! block start, so each block decodes on its own.
 
-use super::bands::{FragmentBand, RowRun, BAND_ROWS, BAND_RUNS};
+use super::bands::{FragmentBand, RowRun, BAND_RUNS, ROW_BAND_ROWS};
 use super::dense_reads::{DenseRuns, ReadRun, DENSE_READ_COSTS};
 use super::header::StreamTally;
 use super::index::{
@@ -857,7 +857,6 @@ fn plane_record(c: &mut Cursor) -> Result<PlaneDepths, PayloadError> {
     })
 }
 
-/// A stretch record into `out`, checked.
 /// A band record's runs (its tag, `BAND` or `BAND_PASSING`, read) into `out`, checked to
 /// be a band a writer makes in a viewport of `width` by `height`.
 fn decode_band(
@@ -915,18 +914,15 @@ fn decode_band(
 }
 
 /// A row band's runs (its tag, `ROW_BAND`, read) into `out`, checked as
-/// [`decode_band`] checks a band's: one run a row from its first run's row on, each
-/// run's `x` and `len` stepped from the row before's.
+/// [`decode_band`] checks a band's (but a first run's `x`, row or length past 32 bits, which
+/// is refused as that varint, at its own offset): one run a row from its first run's row
+/// on, each run's `x` and `len` stepped from the row before's.
 fn decode_row_band(
     c: &mut Cursor,
     (width, height): (u32, u32),
     out: &mut FragmentBand,
 ) -> Result<(), PayloadError> {
-    const MAX_ROWS: usize = if BAND_ROWS < BAND_RUNS {
-        BAND_ROWS
-    } else {
-        BAND_RUNS
-    };
+    const MAX_ROWS: usize = ROW_BAND_ROWS;
     let start = c.pos - 1;
     let count = c.byte()? as usize;
     if count == 0 || count > MAX_ROWS {

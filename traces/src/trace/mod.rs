@@ -1,15 +1,15 @@
 //! The `.occt` binary fragment trace format: a streaming [`TraceWriter`] and [`TraceReader`].
 //!
-//! # Layout (version 13; all integers little-endian; versions 1, without the closed loop's
+//! # Layout (version 14; all integers little-endian; versions 1, without the closed loop's
 //! records, 2, with verbose hits stored one by one, 3, without window-index blocks, 4,
 //! without depth-test blocks, 5, without the index's first reads, 6, without its densest
 //! runs of reads, 7, without the window table, 8, without the index's ending runs of
 //! reads, 9, without the band index, 10, with query records whose tiles a reader cannot
-//! pass over, 11, without the index's drawn tails, and 12, without plane spans, still
-//! read)
+//! pass over, 11, without the index's drawn tails, 12, without plane spans, and 13, with
+//! bands of at most 8 rows and no row bands, still read)
 //!
 //! ```text
-//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 13 | flags u16 = 0
+//! file header   magic "OCCT\r\n\x1a\n" (8) | version u16 = 14 | flags u16 = 0
 //!               | json_len u32 (<= 64 KiB) | header JSON (json_len) | CRC32 u32
 //!               (the CRC covers version .. end of JSON)
 //! event blocks  block header (20) | stored payload (stored_len), with window-index blocks

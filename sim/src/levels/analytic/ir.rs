@@ -66,7 +66,7 @@
 //! fragments: the IR's analytic level on the demo on ir4 went from 203 to 112 ms in
 //! process decoding the fragments (a band no wider than the units closed in one pass, 96
 //! ms; from the band index, 56 ms; its columns closed as vectors, 24 ms; since, in one
-//! process, 15.6 ms, and 10.0 in bands of 16 rows read as row bands). Where in a stretch an engine's last fragment
+//! process, 15.6 ms, and 9.5 in bands of 16 rows read as row bands). Where in a stretch an engine's last fragment
 //! came is known only in the last row (a row is one run: a column there has its board's
 //! columns right of it after it); an engine whose columns end higher up is taken to be
 //! through a pace after the last row's first fragment of its board, a little late.
@@ -1685,7 +1685,7 @@ mod tests {
     #[test]
     #[cfg(target_arch = "x86_64")]
     fn the_vector_heights_are_the_column_by_column_heights() {
-        // Random bands (up to 8 rows of up to 16 runs, some rows scattered, some columns
+        // Random bands (up to 16 rows of up to 16 runs, some rows scattered, some columns
         // shared by several rows, 1, 2 and 4 boards): summed eight columns at a time, each
         // column's height in slots, each board's fragments and the steps left zero must be
         // what the plain sum gives.
@@ -1697,7 +1697,7 @@ mod tests {
         for case in 0..3_000 {
             let board_shift = rng.below(3) as u32;
             let mut band = FragmentBand::EMPTY;
-            for y in 0..1 + rng.below(8) as u16 {
+            for y in 0..1 + rng.below(16) as u16 {
                 let mut x = rng.below(200) as u16;
                 while x < width - 40 && band.admits(x, y) && rng.below(3) > 0 {
                     let len = 1 + rng.below(30) as u32;
