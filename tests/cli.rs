@@ -326,6 +326,8 @@ fn trace_gen_info_dump_round_trip() {
     assert!(gen.starts_with(&format!("wrote {trace}: ")), "{gen}");
     let info = stdout_of(&["trace", "info", trace]);
     assert!(info.contains("viewport    64x64"), "{info}");
+    // Written by this build: format version 14 (`traces/src/trace/block.rs`).
+    assert!(info.contains("\nformat      version 14\n"), "{info}");
     assert!(
         info.contains("queries     28 (samples 23, any 1, brief 1, verbose 3)"),
         "{info}"
@@ -349,6 +351,7 @@ fn trace_gen_info_dump_round_trip() {
     assert_eq!(json["header"]["scene"], "hardcases");
     assert_eq!(json["summary"]["queries"], 28);
     assert_eq!(json["scanned"], false);
+    assert_eq!(json["format_version"], 14);
     let json: serde_json::Value =
         serde_json::from_str(&stdout_of(&["trace", "info", trace, "--json", "--scan"])).unwrap();
     assert_eq!(

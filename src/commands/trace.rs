@@ -303,8 +303,24 @@ fn scan_indexes(path: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// `trace info`'s format line: the version, and what an older one lacks that this build
+/// writes.
+fn format_version_line(version: u16) -> String {
+    use occsim_traces::trace::FORMAT_VERSION;
+    match version {
+        FORMAT_VERSION => format!("version {version}"),
+        _ => format!(
+            "version {version} (this build writes {FORMAT_VERSION}; `trace gen` again for \
+             every index it keeps)"
+        ),
+    }
+}
+
 fn info(args: InfoArgs) -> anyhow::Result<()> {
     let (header, summary) = read_header_and_summary(&args.trace, args.scan)?;
+    // Which format wrote it: an older version's indexes give the IR's analytic and sampled
+    // levels a little different figures (version 13's bands hold 8 rows, 14's 16).
+    let version = open_trace(&args.trace)?.format_version();
     let bytes = std::fs::metadata(&args.trace)?.len();
     let per_fragment = bytes_per_fragment(bytes, summary.fragments);
     if args.json {
@@ -312,6 +328,7 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
             "file": args.trace.display().to_string(),
             "bytes": bytes,
             "bytes_per_fragment": per_fragment,
+            "format_version": version,
             "header": header,
             "summary": summary,
             // As the table's `scanned` line: every block read and checked, not the summary
@@ -344,6 +361,7 @@ fn info(args: InfoArgs) -> anyhow::Result<()> {
     outln!("trace       {}", args.trace.display());
     outln!("scene       {}", header.scene);
     outln!("generator   {}", header.generator);
+    outln!("format      {}", format_version_line(version));
     outln!("viewport    {}x{}", header.width, header.height);
     outln!(
         "raster      {} profile, {} sub-pixel bits, {} depth, fill rule {}",
