@@ -8,40 +8,40 @@
 //! the depth test's outcome changes and marked passing: the Image Engines' hits are the
 //! passing fragments' (a writer's functional model tells it which pass).
 //!
-//! A band of one run a row on rows one after another, none passing (a primitive's rows: most
-//! bands), is a `ROW_BAND count x y len` record (varints: its first run) and then each
+//! A band of one run a row on rows one after another, none passing (a primitive's rows:
+//! most bands), is a `ROW_BAND count x y len` record (varints: its first run) and then each
 //! next row's `x` and `len` less the row before's (zigzag varints, the row one more): a
-//! primitive's rows step by a pixel or two, so most take two bytes, read two at a time.
-//! (As `BAND` records, three bytes a row, each read on its own, reading the band index was
-//! about a third of the IR's analytic level's time on the demo and the lazy-grid walk,
-//! by `perf record`.) Any other band
-//! record is `BAND count` and then each run as its `x`, `y` and `len` less the run
-//! before's (zigzag varints; the first run's relative to 0). Under a verbose query, a band with passing
-//! runs is `BAND_PASSING count mask` and its runs, bit `k` of the varint `mask` set when
-//! run `k`'s fragments passed their depth test. A band's runs are those a
-//! [`FragmentBand::push_run`] would make: a run that continues the one before on its row is
-//! part of it, so no run starts where the one before ends on the same row.
+//! primitive's rows step by a pixel or two, so most take two bytes, read two at a time. (As
+//! `BAND` records, three bytes a row, each read on its own, reading the band index was
+//! about a third of the IR's analytic level's time on the demo and the lazy-grid walk, by
+//! `perf record`.) Any other band record is `BAND count` and then each run as its `x`, `y`
+//! and `len` less the run before's (zigzag varints; the first run's relative to 0). Under a
+//! verbose query, a band with passing runs is `BAND_PASSING count mask` and its runs, bit
+//! `k` of the varint `mask` set when run `k`'s fragments passed their depth test. A band's
+//! runs are those a [`FragmentBand::push_run`] would make: a run that continues the one
+//! before on its row is part of it, so no run starts where the one before ends on the same
+//! row.
 
 use super::codec::{put_uv, put_zz, tag};
 use std::ops::Range;
 
 /// Rows a band holds at most: a stretch of the IR formulas, which close one and advance
 /// their clocks there. A primitive's rows load its Image Engines unevenly (a narrow row
-/// paces the generator at one engine's speed, a wide one at the generator's), which one
-/// sum over the whole primitive averages away; a few FIFOs' worth of a narrow primitive's
-/// rows, so that the fluid still smooths what the FIFOs do. On the small corpus on ir1,
-/// ir2 and ir4 (`occsim fidelity --corpus --scale small --machines ir1,ir2,ir4 --no-rtl`),
-/// the worst class's analytic cycles error (the random scene's slivers) was, with today's
-/// formulas, 1.3% at 8 rows, 2.0% at 16 and 2.8% at 32 (`BAND_RUNS` raised to 32 for every 32-row figure here);
-/// with the fifteenth session's, 0.6% at 4, 1.0% at 8, 1.7% at 16, 5.2% at 64 and 6.3%
-/// for whole primitives. The sampled level's worst cycles error was 0.71% at 8 and 16 and
-/// 1.21% at 32, its worst p95 latency error 1.9% at 8 and 16 and 5.9% at 32 (the hard
-/// cases; its bounds are 1% and 3%). The analytic level on the demo on ir4, from its band
-/// index as `BAND` records, took 15.6 ms at 8 rows, 11.8 at 16 and 10.4 at 32 (in one
-/// process, best of 8; decoding the fragments, 184 ms at 4 rows, 112 at 8 and 90 at 16):
-/// 16 holds every bound, at most of the saving. (Closed at 8 rows and more where a row's
-/// length is more than twice the first's or less than half, up to 32: no quicker than 16,
-/// and the hard cases' sampled cycles 2.4% off.)
+/// paces the generator at one engine's speed, a wide one at the generator's), which one sum
+/// over the whole primitive averages away; a few FIFOs' worth of a narrow primitive's rows,
+/// so that the fluid still smooths what the FIFOs do. On the small corpus on ir1, ir2 and
+/// ir4 (`occsim fidelity --corpus --scale small --machines ir1,ir2,ir4 --no-rtl`), the
+/// worst class's analytic cycles error (the random scene's slivers) was, with today's
+/// formulas, 1.3% at 8 rows, 2.0% at 16 and 2.8% at 32 (`BAND_RUNS` raised to 32 for every
+/// 32-row figure here); with the fifteenth session's, 0.6% at 4, 1.0% at 8, 1.7% at 16,
+/// 5.2% at 64 and 6.3% for whole primitives. The sampled level's worst cycles error was
+/// 0.71% at 8 and 16 and 1.21% at 32, its worst p95 latency error 1.9% at 8 and 16 and 5.9%
+/// at 32 (the hard cases; its bounds are 1% and 3%). The analytic level on the demo on ir4,
+/// from its band index as `BAND` records, took 15.6 ms at 8 rows, 11.8 at 16 and 10.4 at 32
+/// (in one process, best of 8; decoding the fragments, 184 ms at 4 rows, 112 at 8 and 90 at
+/// 16): 16 holds every bound, at most of the saving. (Closed at 8 rows and more where a
+/// row's length is more than twice the first's or less than half, up to 32: no quicker than
+/// 16, and the hard cases' sampled cycles 2.4% off.)
 pub const BAND_ROWS: usize = 16;
 
 /// Runs a band holds at most (a primitive's rows are one run each; fragments scattered on
