@@ -62,7 +62,7 @@ pub fn merge_partial(
 
 /// A partial report on its way through a merge: the cycle it is ready and the hits it holds
 /// per tile (empty without verbose hits; one bucket for a whole-report count).
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Partial {
     pub ready: u64,
     pub hits: Vec<u64>,
@@ -82,18 +82,15 @@ impl Partial {
         tiles * BRIEF_RECORD_ENTRIES as u64 + self.hits.iter().sum::<u64>()
     }
 
-    /// The hits of two reports merged: per tile the sum, kept within `room`.
-    fn merged_hits(&self, other: &Partial, room: u64) -> Vec<u64> {
-        let (long, short) = if self.hits.len() >= other.hits.len() {
-            (&self.hits, &other.hits)
-        } else {
-            (&other.hits, &self.hits)
-        };
-        let mut hits = long.clone();
-        for (h, s) in hits.iter_mut().zip(short) {
+    /// Merge `other`'s hits into these: per tile the sum, kept within `room`, a tile only
+    /// one of them holds as it is. In place: a verbose query's merges on ir4 had allocated
+    /// a list for every one of their 319 merges.
+    fn merge_hits(&mut self, other: &Partial, room: u64) {
+        let shared = self.hits.len().min(other.hits.len());
+        for (h, s) in self.hits.iter_mut().zip(&other.hits) {
             *h = (*h + s).min(room);
         }
-        hits
+        self.hits.extend_from_slice(&other.hits[shared..]);
     }
 }
 
@@ -259,28 +256,25 @@ pub fn merged_ready(
     }
     match network.kind {
         MergeKind::Tree => {
+            // Each level merged in place: pair `i` into slot `i` (slots before `2 i` are
+            // read already).
             let mut level = inputs.to_vec();
             let mut first_link = 0;
             while level.len() > 1 {
-                let next = level
-                    .chunks(2)
-                    .enumerate()
-                    .map(|(pair_index, pair)| match pair {
-                        [left, right] => {
-                            let link = first_link + 2 * pair_index;
-                            let left_in = links.cross(link, left.ready, crossing(left));
-                            let right_in = links.cross(link + 1, right.ready, crossing(right));
-                            Partial {
-                                ready: left_in.max(right_in) + network.hop_latency_cycles,
-                                hits: left.merged_hits(right, shape.room),
-                            }
-                        }
-                        [single] => single.clone(),
-                        _ => unreachable!("chunks of two"),
-                    })
-                    .collect();
+                let merged = level.len().div_ceil(2);
+                for i in 0..merged {
+                    let mut left = std::mem::take(&mut level[2 * i]);
+                    if let Some(right) = level.get(2 * i + 1) {
+                        let link = first_link + 2 * i;
+                        let left_in = links.cross(link, left.ready, crossing(&left));
+                        let right_in = links.cross(link + 1, right.ready, crossing(right));
+                        left.ready = left_in.max(right_in) + network.hop_latency_cycles;
+                        left.merge_hits(right, shape.room);
+                    }
+                    level[i] = left;
+                }
                 first_link += level.len();
-                level = next;
+                level.truncate(merged);
             }
             level.pop().unwrap_or(Partial::brief(0))
         }
@@ -291,10 +285,8 @@ pub fn merged_ready(
             };
             for (link, input) in inputs {
                 let arrived = links.cross(link, carried.ready, crossing(&carried));
-                carried = Partial {
-                    ready: input.ready.max(arrived + network.hop_latency_cycles),
-                    hits: carried.merged_hits(&input, shape.room),
-                };
+                carried.ready = input.ready.max(arrived + network.hop_latency_cycles);
+                carried.merge_hits(&input, shape.room);
             }
             carried
         }
@@ -304,7 +296,7 @@ pub fn merged_ready(
                 *host = (*host).max(input.ready)
                     + network.read_latency_cycles
                     + network.read_cycles_per_word * input.words(shape.tiles);
-                merged.hits = merged.merged_hits(input, shape.room);
+                merged.merge_hits(input, shape.room);
             }
             merged.ready = *host;
             merged
