@@ -634,6 +634,80 @@ mod tests {
     }
 
     #[test]
+    fn a_band_s_columns_and_fragments_are_its_runs_whatever_way_it_grew() {
+        // Random bands grown as a writer grows them (pieces that join, several runs a row,
+        // rows that step left and right), and the same runs as row bands where they are one
+        // a row: the kept span and count must be what the runs themselves give.
+        let mut rng = crate::rng::SplitMix64(21);
+        for case in 0..2_000 {
+            let mut band = FragmentBand::EMPTY;
+            let mut y = rng.below(100) as u16;
+            // Every other case a primitive's rows: one run a row, each on the next.
+            let one_a_row = case % 2 == 0;
+            'grow: for k in 0..1 + rng.below(40) {
+                let (x, len) = (rng.below(300) as u16, 1 + rng.below(40) as u32);
+                match if one_a_row {
+                    1 + u64::from(k == 0)
+                } else {
+                    rng.below(4)
+                } {
+                    // A piece that continues the last run, where there is one.
+                    0 => {
+                        if let Some(last) = band.runs().last().copied() {
+                            let piece = RowRun::at(last.x + last.len as u16, last.y, len);
+                            if band.admits_run(&piece) {
+                                band.push_run(piece);
+                            }
+                            continue;
+                        }
+                    }
+                    // A run on the next row.
+                    1 if !band.is_empty() => y += 1,
+                    _ => {}
+                }
+                let run = RowRun::at(x, y, len);
+                let last_end = (band.runs().last())
+                    .filter(|last| last.y == run.y)
+                    .map_or(0, |last| last.x as u32 + last.len + 1);
+                let run = RowRun::at(run.x.max(last_end as u16), run.y, run.len);
+                if !band.admits_run(&run) {
+                    break 'grow;
+                }
+                band.push_run(run);
+            }
+            let runs = band.runs();
+            let least = runs.iter().map(|run| run.x as usize).min();
+            let end = runs
+                .iter()
+                .map(|run| run.x as usize + run.len as usize)
+                .max();
+            let span = least.map_or(0..0, |least| least..end.unwrap());
+            let fragments: u64 = runs.iter().map(|run| run.len as u64).sum();
+            assert_eq!(
+                (band.columns(), band.fragments()),
+                (span.clone(), fragments),
+                "case {case}"
+            );
+            if band.is_one_run_a_row() {
+                let steps: Vec<(i32, i32)> = (runs.windows(2))
+                    .map(|pair| {
+                        let step = |a: u32, b: u32| b as i32 - a as i32;
+                        (
+                            step(pair[0].x as u32, pair[1].x as u32),
+                            step(pair[0].len, pair[1].len),
+                        )
+                    })
+                    .collect();
+                let mut stepped = FragmentBand::EMPTY;
+                let (ored, shortest) = stepped.fill_stepped_rows(runs[0], &steps);
+                assert_eq!(stepped, band, "case {case}");
+                assert_eq!((stepped.columns(), stepped.fragments()), (span, fragments));
+                assert!(ored < 1 << 16 && shortest > 0, "case {case}");
+            }
+        }
+    }
+
+    #[test]
     fn a_band_takes_sixteen_rows_and_sixteen_runs_and_joins_a_row_s_pieces() {
         let mut band = FragmentBand::EMPTY;
         // Rows 10..26, one run each, the first fed in two pieces that join.
