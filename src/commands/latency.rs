@@ -140,7 +140,7 @@ pub fn run(args: LatencyArgs) -> anyhow::Result<()> {
         // Every row sets its own count: the --set would be overridden without a word.
         bail!("--set {set}: latency replays once per --engines count; give the counts there");
     }
-    let (_, summary) = super::trace::read_header_and_summary(&args.trace, false)?;
+    let (_, summary, _) = super::trace::read_header_and_summary(&args.trace, false)?;
     anyhow::ensure!(
         summary.queries > 0,
         "{}: the trace has no query, so no latency to show (`occsim replay` times its cycles)",

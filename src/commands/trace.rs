@@ -264,23 +264,27 @@ fn open_trace_once(path: &Path) -> anyhow::Result<TraceReader<std::io::BufReader
     trace_reader(path, open_trace_file_once(path)?)
 }
 
-/// A trace's header and summary, by a seek to the summary (or a full scan).
+/// A trace's header, summary and format version, by a seek to the summary (or a full
+/// scan).
 pub fn read_header_and_summary(
     path: &Path,
     scan: bool,
-) -> anyhow::Result<(TraceHeader, TraceSummary)> {
+) -> anyhow::Result<(TraceHeader, TraceSummary, u16)> {
     let context = || format!("{}: cannot read trace", path.display());
     if scan {
         let mut reader = open_trace(path)?;
-        let header = reader.header().clone();
+        let (header, version) = (reader.header().clone(), reader.format_version());
         let summary = reader
             .read_into(&mut occsim_traces::golden::Discard)
             .with_context(context)?;
         scan_indexes(path).with_context(context)?;
-        return Ok((header, summary));
+        return Ok((header, summary, version));
     }
     let file = open_trace_file(path)?;
-    TraceReader::read_summary(std::io::BufReader::new(file)).with_context(context)
+    let reader = TraceReader::new(std::io::BufReader::new(file)).with_context(context)?;
+    let version = reader.format_version();
+    let (header, summary) = reader.into_summary().with_context(context)?;
+    Ok((header, summary, version))
 }
 
 /// Decode the trace's other lanes, each in a pass of its own: its window index, its band
@@ -317,10 +321,9 @@ fn format_version_line(version: u16) -> String {
 }
 
 fn info(args: InfoArgs) -> anyhow::Result<()> {
-    let (header, summary) = read_header_and_summary(&args.trace, args.scan)?;
-    // Which format wrote it: an older version's indexes give the IR's analytic and sampled
-    // levels a little different figures (version 13's bands hold 8 rows, 14's 16).
-    let version = open_trace(&args.trace)?.format_version();
+    // Which format wrote it, too: an older version's indexes give the IR's analytic and
+    // sampled levels a little different figures (version 13's bands hold 8 rows, 14's 16).
+    let (header, summary, version) = read_header_and_summary(&args.trace, args.scan)?;
     let bytes = std::fs::metadata(&args.trace)?.len();
     let per_fragment = bytes_per_fragment(bytes, summary.fragments);
     if args.json {

@@ -478,6 +478,20 @@ mod tests {
         (bytes, at)
     }
 
+    /// `clean` with a stored window-index block of `payload`, a band record, put first:
+    /// reading its window index refuses the band, at that block's offset.
+    fn assert_refused_in_the_window_index(clean: &[u8], payload: &[u8]) {
+        let (wrong, at) = with_block_first(clean.to_vec(), KIND_INDEX, payload);
+        let mut reader = TraceReader::new(&wrong[..]).unwrap();
+        let error = reader
+            .for_each_index_item(|_| Ok::<(), ()>(()))
+            .err()
+            .map(|e| format!("{e:?}"))
+            .unwrap();
+        assert!(error.contains("a band in a window-index block"), "{error}");
+        assert!(error.contains(&at.to_string()), "{error}");
+    }
+
     #[test]
     fn a_band_no_writer_makes_or_in_the_wrong_index_is_refused_with_its_offset() {
         let clean = indexed(&[Event::Primitive, frag(0, 0)]);
@@ -492,15 +506,7 @@ mod tests {
             band_items(&good).is_err(),
             "the summary counts one band block fewer"
         );
-        let (wrong, at) = with_block_first(clean.clone(), KIND_INDEX, &payload);
-        let mut reader = TraceReader::new(&wrong[..]).unwrap();
-        let error = reader
-            .for_each_index_item(|_| Ok::<(), ()>(()))
-            .err()
-            .map(|e| format!("{e:?}"))
-            .unwrap();
-        assert!(error.contains("a band in a window-index block"), "{error}");
-        assert!(error.contains(&at.to_string()), "{error}");
+        assert_refused_in_the_window_index(&clean, &payload);
         // Runs no writer makes: past the viewport (16 wide), continuing the run before, or
         // at an x, row or length no viewport has (below 0 or from 2^16 on: in one step of
         // 70,000, or in one of 65,530 from row 15).
@@ -622,15 +628,7 @@ mod tests {
         }
         // A row band in a window-index block is refused as any band there.
         let payload = [tag::ROW_BAND, 1, 0, 0, 1];
-        let (wrong, at) = with_block_first(clean, KIND_INDEX, &payload);
-        let mut reader = TraceReader::new(&wrong[..]).unwrap();
-        let error = reader
-            .for_each_index_item(|_| Ok::<(), ()>(()))
-            .err()
-            .map(|e| format!("{e:?}"))
-            .unwrap();
-        assert!(error.contains("a band in a window-index block"), "{error}");
-        assert!(error.contains(&at.to_string()), "{error}");
+        assert_refused_in_the_window_index(&clean, &payload);
     }
 
     #[test]

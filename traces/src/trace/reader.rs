@@ -848,7 +848,13 @@ fn features_disagree(header: &TraceHeader, summary: &TraceSummary) -> Option<Str
 impl<R: Read + Seek> TraceReader<R> {
     /// Read the header and the summary only, seeking to the summary through the trailer.
     pub fn read_summary(input: R) -> Result<(TraceHeader, TraceSummary), TraceError> {
-        let mut reader = TraceReader::new(input)?;
+        TraceReader::new(input)?.into_summary()
+    }
+
+    /// [`Self::read_summary`] from a reader just opened (its header read), for a caller
+    /// that asks it something first, such as [`Self::format_version`].
+    pub fn into_summary(self) -> Result<(TraceHeader, TraceSummary), TraceError> {
+        let mut reader = self;
         let header_end = reader.offset;
         let io = |offset: u64| move |io| TraceError::Io { offset, io };
         let end = reader
