@@ -292,13 +292,18 @@ impl FragmentBand {
     /// what they say) and the least `len`: the caller checks them and [`Self::columns`]'
     /// end against the viewport, and clears it where they fail.
     #[inline(always)]
-    pub(crate) fn fill_stepped_rows(&mut self, first: RowRun, steps: &[(i32, i32)]) -> (i32, i32) {
+    pub(crate) fn fill_stepped_rows(
+        &mut self,
+        first: RowRun,
+        steps: impl ExactSizeIterator<Item = (i32, i32)>,
+    ) -> (i32, i32) {
         debug_assert!(steps.len() < ROW_BAND_ROWS);
         let (mut x, mut len) = (first.x as i32, first.len as i32);
         let (mut ored, mut shortest) = (x | len, len);
         let (mut least_x, mut greatest_end, mut fragments) = (x, x + len, len as i64);
         self.runs[0] = first;
-        for (k, &(dx, dlen)) in steps.iter().enumerate() {
+        let count = steps.len() as u8 + 1;
+        for (k, (dx, dlen)) in steps.take(ROW_BAND_ROWS - 1).enumerate() {
             (x, len) = (x + dx, len + dlen);
             ored |= x | len;
             shortest = shortest.min(len);
@@ -307,7 +312,6 @@ impl FragmentBand {
             fragments += len as i64;
             self.runs[k + 1] = RowRun::at(x as u16, first.y.wrapping_add(k as u16 + 1), len as u32);
         }
-        let count = steps.len() as u8 + 1;
         (self.count, self.rows, self.last_row) = (count, count, count - 1);
         self.fragments = fragments as u64;
         (self.first_column, self.end_column) = (least_x as u32, greatest_end as u32);
@@ -697,7 +701,7 @@ mod tests {
                     })
                     .collect();
                 let mut stepped = FragmentBand::EMPTY;
-                let (ored, shortest) = stepped.fill_stepped_rows(runs[0], &steps);
+                let (ored, shortest) = stepped.fill_stepped_rows(runs[0], steps.iter().copied());
                 assert_eq!(stepped, band, "case {case}");
                 assert_eq!((stepped.columns(), stepped.fragments()), (span, fragments));
                 assert!(ored < 1 << 16 && shortest > 0, "case {case}");

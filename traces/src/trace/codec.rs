@@ -942,21 +942,21 @@ fn decode_row_band(
     if y as usize + count > height as usize {
         return Err(bad(start, "a band run empty or outside the viewport"));
     }
-    // Each next row's steps, then the rows stepped from the first (checked once, after).
-    let mut steps = [(0, 0); MAX_ROWS];
-    let steps = &mut steps[..count - 1];
-    let one_byte_each = (c.bytes.get(c.pos..c.pos + 2 * steps.len()))
+    // The rows stepped from the first, checked once, after.
+    let first = RowRun::at(x as u16, y as u16, len as u32);
+    let one_byte_each = (c.bytes.get(c.pos..c.pos + 2 * (count - 1)))
         .filter(|bytes| bytes.iter().fold(0, |all, byte| all | byte) < 0x80);
-    if let Some(bytes) = one_byte_each {
-        // The usual band: every step one byte (below 64 pixels), read in one pass.
+    let (ored, shortest) = if let Some(bytes) = one_byte_each {
+        // The usual band: every step one byte (below 64 pixels), stepped as it is read.
         c.pos += bytes.len();
-        for (step, pair) in steps.iter_mut().zip(bytes.chunks_exact(2)) {
-            *step = (
-                unzigzag(pair[0] as u64) as i32,
-                unzigzag(pair[1] as u64) as i32,
-            );
-        }
+        let step = |pair: &[u8]| {
+            let unzigzag = |byte: u8| unzigzag(byte as u64) as i32;
+            (unzigzag(pair[0]), unzigzag(pair[1]))
+        };
+        out.fill_stepped_rows(first, bytes.chunks_exact(2).map(step))
     } else {
+        let mut steps = [(0, 0); MAX_ROWS];
+        let steps = &mut steps[..count - 1];
         for step in steps.iter_mut() {
             let (dx, dlen) = (c.uv()?, c.uv()?);
             // As in `decode_band`: a step of 2^16 or more is out of range.
@@ -965,9 +965,8 @@ fn decode_row_band(
             }
             *step = (unzigzag(dx) as i32, unzigzag(dlen) as i32);
         }
-    }
-    let first = RowRun::at(x as u16, y as u16, len as u32);
-    let (ored, shortest) = out.fill_stepped_rows(first, steps);
+        out.fill_stepped_rows(first, steps.iter().copied())
+    };
     let error = if ored as u32 >= 1 << 16 {
         "a band run's x, row or length out of range"
     } else if shortest == 0 || out.columns().end as u32 > width {
