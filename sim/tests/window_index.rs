@@ -563,3 +563,41 @@ fn the_ir_analytic_level_decodes_an_older_trace_a_retiled_one_or_where_asked() {
     assert!(!analytic(&trace, &ir, true, Some(grid)).from_window_index);
     assert!(!analytic(&trace, &ir, false, None).from_window_index);
 }
+
+#[test]
+fn a_query_without_its_golden_result_is_an_error_at_every_level_that_reads_an_index() {
+    // The random triangles with their first query's golden result dropped: read from the
+    // window or band index, a query's result is its golden one, so the replay must say
+    // the result is missing (the sampled level had closed the query's window with no
+    // latency to give it, an index below zero).
+    let (_, _, (width, height), mut events) = traces().remove(2);
+    let first_result = events
+        .iter()
+        .position(|event| matches!(event, Event::QueryResult(_)))
+        .expect("a query result");
+    events.remove(first_result);
+    let trace = indexed_trace(width, height, &events);
+    for arch in [o2_with(&[]), ir_with("ir2", &[])] {
+        for level in [
+            Fidelity::Analytic,
+            Fidelity::Sampled { every: 2 },
+            Fidelity::Sampled { every: 10 },
+        ] {
+            let options = ReplayOptions::at(level);
+            let error = replay(|| Ok(TraceReader::new(&trace[..])?), &arch, options)
+                .err()
+                .unwrap_or_else(|| panic!("{level} on {:?}: replayed", arch.machine()));
+            let mut chain = error.to_string();
+            let mut source = std::error::Error::source(&error);
+            while let Some(cause) = source {
+                chain += &format!(": {cause}");
+                source = cause.source();
+            }
+            assert!(
+                chain.contains("without its golden result"),
+                "{level} on {:?}: {chain}",
+                arch.machine()
+            );
+        }
+    }
+}
