@@ -495,6 +495,25 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
         error.contains("typo.toml") && error.contains("engine"),
         "{error}"
     );
+    // A machine or engine count the file names twice would run, and be reported, twice.
+    for (lists, expected) in [
+        (
+            "machines = [\"o2\", \"o2\"]\nengines = [1]",
+            "`machines` names `o2` twice",
+        ),
+        (
+            "machines = [\"o2\"]\nengines = [4, 1, 4]",
+            "`engines` names 4 twice",
+        ),
+    ] {
+        let twice = dir.join("twice.toml");
+        let recipe = "[[trace]]\nname = \"h\"\nclass = \"h\"\nscene = \"hardcases\"\n";
+        std::fs::write(&twice, format!("{lists}\n{recipe}")).unwrap();
+        let file = twice.to_str().unwrap();
+        let error =
+            support::cli::stderr_of_failure(&["fidelity", "--corpus", "--corpus-file", file]);
+        assert!(error.contains(file) && error.contains(expected), "{error}");
+    }
     // Every --set applies to each machine, and a bad one is named.
     std::fs::write(
         dir.join("one.toml"),

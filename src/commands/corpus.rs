@@ -189,6 +189,13 @@ fn load(path: Option<&Path>) -> anyhow::Result<CorpusFile> {
         "{name}: `engines` names no engine count"
     );
     anyhow::ensure!(!file.trace.is_empty(), "{name}: no `[[trace]]` recipe");
+    // A run twice would be reported as two runs of its class, as the flags' repeats are.
+    if let Some(machine) = super::first_repeated(&file.machines) {
+        anyhow::bail!("{name}: `machines` names `{machine}` twice");
+    }
+    if let Some(engines) = super::first_repeated(&file.engines) {
+        anyhow::bail!("{name}: `engines` names {engines} twice");
+    }
     for (k, recipe) in file.trace.iter().enumerate() {
         // A recipe's name names its trace's file in --traces-dir: no path in it.
         anyhow::ensure!(
@@ -431,11 +438,7 @@ pub fn run(
     }
     bar.finish_and_clear();
     let rows = by_class(&runs);
-    if let Some(path) = plot {
-        price_of_accuracy(&rows, args.scale, ladder.reference())
-            .write_svg(path)
-            .with_context(|| format!("cannot write {}", path.display()))?;
-    }
+    // The table first: a plot that cannot be written after hours of runs loses no result.
     if json {
         outln!("{}", serde_json::to_string_pretty(&rows)?);
     } else {
@@ -449,6 +452,11 @@ pub fn run(
                 ladder.reference()
             )
         );
+    }
+    if let Some(path) = plot {
+        price_of_accuracy(&rows, args.scale, ladder.reference())
+            .write_svg(path)
+            .with_context(|| format!("cannot write {}", path.display()))?;
     }
     Ok(())
 }
