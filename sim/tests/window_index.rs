@@ -601,3 +601,28 @@ fn a_query_without_its_golden_result_is_an_error_at_every_level_that_reads_an_in
         }
     }
 }
+
+#[test]
+fn the_sampled_level_fed_event_by_event_equals_it_read_span_by_span() {
+    // A machine may start inside a span (a warm-up's first fragment in the middle of a
+    // row): where its pipe starts is the formulas' work before that fragment however the
+    // fragments come, so a run fed one event at a time is the run read from the file.
+    for (name, trace, (width, height), events) in traces() {
+        for arch in [o2_with(&[]), ir_with("ir2", &[])] {
+            for every in [2, 7] {
+                let spans = sampled(&trace, &arch, every, false);
+                let one_by_one = run_level(
+                    Fidelity::Sampled { every },
+                    &arch,
+                    width,
+                    height,
+                    EffectsChoice::Auto,
+                    &events,
+                )
+                .unwrap();
+                let what = format!("{name} on {:?} at sampled:{every}", arch.machine());
+                assert_eq!(spans, one_by_one, "{what}");
+            }
+        }
+    }
+}
