@@ -31,7 +31,7 @@ pub enum SimError {
     EndWithoutBegin { event: u64 },
     #[error("event {event}: golden result for query {id}, but no query just ended")]
     ResultWithoutQuery { event: u64, id: u32 },
-    #[error("the stream ends after a query's end without its golden result, which a replay from the window index takes as the query's result")]
+    #[error("a query's end is not followed by its golden result (before the next event or the stream's end), which a replay from the window index takes as the query's result")]
     MissingGolden,
     #[error("fragment {fragment} at ({x}, {y}): the trace's depth-test results contradict each other (no depth the pixel could hold gives them all)")]
     InconsistentDepthTests { fragment: u64, x: u16, y: u16 },

@@ -594,7 +594,7 @@ fn a_query_without_its_golden_result_is_an_error_at_every_level_that_reads_an_in
                 source = cause.source();
             }
             assert!(
-                chain.contains("without its golden result"),
+                chain.contains("is not followed by its golden result"),
                 "{level} on {:?}: {chain}",
                 arch.machine()
             );

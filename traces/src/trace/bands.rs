@@ -302,7 +302,8 @@ impl FragmentBand {
         let (mut ored, mut shortest) = (x | len, len);
         let (mut least_x, mut greatest_end, mut fragments) = (x, x + len, len as i64);
         self.runs[0] = first;
-        // At most the rows a band holds, whatever the caller gives (it checks the count).
+        // At most the rows a band holds, whatever the caller gives in a release build (the
+        // caller checks the count).
         let count = steps.len().min(ROW_BAND_ROWS - 1) as u8 + 1;
         for (k, (dx, dlen)) in steps.take(ROW_BAND_ROWS - 1).enumerate() {
             (x, len) = (x + dx, len + dlen);
