@@ -505,6 +505,12 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
             "machines = [\"o2\"]\nengines = [4, 1, 4]",
             "`engines` names 4 twice",
         ),
+        // Two names of one machine: `ir` is the InfiniteReality-like machine's defaults,
+        // its 4 boards `ir4`'s.
+        (
+            "machines = [\"ir\", \"ir4\"]\nengines = [1]",
+            "`ir` and `ir4` are the same machine",
+        ),
     ] {
         let twice = dir.join("twice.toml");
         let recipe = "[[trace]]\nname = \"h\"\nclass = \"h\"\nscene = \"hardcases\"\n";
@@ -550,6 +556,10 @@ fn a_bad_corpus_file_is_refused_with_its_name() {
             "no recipe is of class `nosuch` (its classes: demo, retiled-1x1-4x4,",
         ),
         (&["--machines", "o2,o2"], "--machines: `o2` is named twice"),
+        (
+            &["--machines", "ir2,ir,ir4"],
+            "--machines: `ir` and `ir4` are the same machine",
+        ),
         (&["--engines", "4,4"], "--engines: `4` is named twice"),
         (
             &["--classes", "random,random"],

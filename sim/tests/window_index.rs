@@ -269,18 +269,9 @@ fn machines_started_inside_warm_up_windows_agree_from_the_index_and_the_fragment
             let whole = sampled_warm(&trace, &arch, every, false, u64::MAX);
             moved += (whole.total_cycles != decoded.total_cycles) as u32;
             // The default warm-up, in memory and from the file.
-            let in_memory = run_level(
-                Fidelity::Sampled { every },
-                &arch,
-                width,
-                height,
-                EffectsChoice::Auto,
-                &events,
-            )
-            .unwrap();
+            let in_memory = sampled_in_memory(&arch, every, (width, height), &events);
             let from_file = sampled(&trace, &arch, every, false);
-            assert_eq!(in_memory.queries, from_file.queries, "{what}");
-            assert_eq!(in_memory.total_cycles, from_file.total_cycles, "{what}");
+            assert_eq!(in_memory, from_file, "{what}");
         }
     }
     // Short warm-ups do change what some windows measure: the machines did start late.
@@ -602,6 +593,17 @@ fn a_query_without_its_golden_result_is_an_error_at_every_level_that_reads_an_in
     }
 }
 
+/// The sampled level fed `events` one by one, as `run_level` feeds them from memory.
+fn sampled_in_memory(
+    arch: &Arch,
+    every: u32,
+    (width, height): (u32, u32),
+    events: &[Event],
+) -> LevelResult {
+    let level = Fidelity::Sampled { every };
+    run_level(level, arch, width, height, EffectsChoice::Auto, events).unwrap()
+}
+
 #[test]
 fn the_sampled_level_fed_event_by_event_equals_it_read_span_by_span() {
     // A machine may start inside a span (a warm-up's first fragment in the middle of a
@@ -611,15 +613,7 @@ fn the_sampled_level_fed_event_by_event_equals_it_read_span_by_span() {
         for arch in [o2_with(&[]), ir_with("ir2", &[])] {
             for every in [2, 7] {
                 let spans = sampled(&trace, &arch, every, false);
-                let one_by_one = run_level(
-                    Fidelity::Sampled { every },
-                    &arch,
-                    width,
-                    height,
-                    EffectsChoice::Auto,
-                    &events,
-                )
-                .unwrap();
+                let one_by_one = sampled_in_memory(&arch, every, (width, height), &events);
                 let what = format!("{name} on {:?} at sampled:{every}", arch.machine());
                 assert_eq!(spans, one_by_one, "{what}");
             }

@@ -378,6 +378,10 @@ pub fn run(
     for machine in machines {
         for &engines in &engine_counts {
             let arch = machine_with(machine, engines, sets).with_context(|| source.clone())?;
+            // Two names of one machine (`ir` is `ir4`) would run every run twice.
+            if let Some((other, ..)) = archs.iter().find(|(_, _, made)| *made == arch) {
+                anyhow::bail!("{source}: `{other}` and `{machine}` are the same machine");
+            }
             archs.push((machine, engines, arch));
         }
     }

@@ -38,8 +38,8 @@
 //!   demo runs on the O2, at 1, 4 and 16 engines, had their worst mean latency at
 //!   sampled:10 1.50% off and every query's own latency error 6.2% at the p95; now 0.91%
 //!   and 0%; the small 1x1-4x4 retiled demos' worst mean on the O2 2.69%, now 0.51%; no
-//!   other class moved.) A slowest window's cost and latency are measured like
-//!   any simulated window's.
+//!   other class moved.) A slowest window's cost and latency are measured like any
+//!   simulated window's.
 //! - A slowest window that is not systematic is simulated over its last fragments alone
 //!   (after its warm-up) when it can be cut (below): its latency is what is wanted, and its
 //!   cost past the cut is measured, the head's extrapolated.
@@ -882,9 +882,8 @@ impl SampledModel {
     /// The fragments at the end of sampled window `window` its machine simulates when the
     /// window is long: [`Self::tail_fragments`] for one of every K (whose cost calibrates the
     /// rest unless it is among the slowest too); none for one simulated only as one of the
-    /// slowest (unless every sampled window
-    /// is simulated whole), whose query's latency is what is wanted: its machine starts its
-    /// warm-up before the window's last fragments. (The demo at sampled:10 on the O2: 459 M
+    /// slowest (unless every sampled window is simulated whole), whose query's latency is
+    /// what is wanted: its machine starts its warm-up before the window's last fragments. (The demo at sampled:10 on the O2: 459 M
     /// instructions, against 549 M with the same tail for both.)
     fn tail_of(&self, window: u64) -> u64 {
         match self.is_systematic(window) || self.tail_fragments == u64::MAX {
